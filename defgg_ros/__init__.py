@@ -1,0 +1,1 @@
+"""defgg_ros: stiffness-aware grasp synthesis for a Franka Panda cell."""

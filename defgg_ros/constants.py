@@ -1,0 +1,68 @@
+"""Every number the paper (Le et al., Deformation-Aware Data-Driven Grasp
+Synthesis) or the Panda hardware fixes, in one place.
+
+Import from here; do not repeat these literals elsewhere.
+"""
+import math
+
+# --- Materials (paper, Sec. "Dataset": four moduli from 2e4 to 2e9 Pa) -----
+TRAINING_YOUNGS_MODULI_PA = (2e4, 2e5, 2e6, 2e9)
+POISSON_RATIO = 0.4
+# The stiffness encoding is continuous on a log scale over this range; any
+# modulus inside it is valid input (sensitivity analysis, multi-material).
+YOUNGS_MODULUS_MIN_PA = 1e3
+YOUNGS_MODULUS_MAX_PA = 1e10
+# Encoded value of background pixels; objects encode into [OBJECT_MIN, 1] so
+# the network can always tell "no object" from "very soft object".
+STIFFNESS_BACKGROUND = 0.0
+STIFFNESS_OBJECT_MIN = 0.1
+# PyBullet's FEM was unstable for E >= 2e7 Pa on these machines (see
+# docs/dataset.md); stiffer materials are simulated as rigid bodies.
+MAX_SOFT_BODY_YOUNGS_MODULUS_PA = 1e7
+
+# --- Grasp quality labels (paper: shake test) ------------------------------
+SHAKE_DIRECTIONS = 16
+SHAKE_ACCEL_LIMIT_MPS2 = 50.0
+SHAKE_POSITIVE_THRESHOLD_MPS2 = 25.0
+TWIST_ACCEL_LIMIT_RADPS2 = 500.0
+GRASP_CANDIDATES_PER_OBJECT = 200
+EVAL_GRASPS_PER_OBJECT = 5
+
+# --- Network I/O (GG-CNN representation) -----------------------------------
+NETWORK_INPUT_SIZE_PX = 300
+# Width maps are normalised by 150 px (paper: W in [0, 150] pixels).
+WIDTH_SCALE_PX = 150.0
+ANGLE_MIN_RAD = -math.pi / 2
+ANGLE_MAX_RAD = math.pi / 2
+
+# --- Franka Panda hand ------------------------------------------------------
+GRIPPER_MAX_WIDTH_M = 0.08
+FINGER_DEPTH_M = 0.018      # finger pad length along the approach axis
+FINGER_PAD_WIDTH_M = 0.02   # finger pad extent across the closing direction
+GRIPPER_MAX_FORCE_N = 70.0  # continuous grasp force of the Franka Hand
+
+# --- Pick-and-place sequence (paper, real-robot experiment) ----------------
+PREGRASP_HEIGHT_M = 0.025
+
+# --- Franka Panda arm limits (Franka's published datasheet) ----------------
+PANDA_JOINT_NAMES = tuple(f"panda_joint{i}" for i in range(1, 8))
+PANDA_FINGER_JOINT_NAMES = ("panda_finger_joint1", "panda_finger_joint2")
+PANDA_Q_MIN_RAD = (-2.8973, -1.7628, -2.8973, -3.0718, -2.8973, -0.0175, -2.8973)
+PANDA_Q_MAX_RAD = (2.8973, 1.7628, 2.8973, -0.0698, 2.8973, 3.7525, 2.8973)
+PANDA_QD_MAX_RADPS = (2.1750, 2.1750, 2.1750, 2.1750, 2.6100, 2.6100, 2.6100)
+PANDA_QDD_MAX_RADPS2 = (15.0, 7.5, 10.0, 12.5, 15.0, 20.0, 20.0)
+PANDA_QDDD_MAX_RADPS3 = (7500.0, 3750.0, 5000.0, 6250.0, 7500.0, 10000.0, 10000.0)
+# A comfortable "ready" configuration above the table.
+PANDA_READY_Q_RAD = (0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785)
+
+# --- Top-down depth camera (RealSense D435 depth stream, 640x480) ----------
+# Training scenes are rendered with the same focal length and height above
+# the table as the cell's camera, so a 300x300 crop means the same metric
+# field of view (~0.31 m at 0.40 m) in both.
+CAMERA_WIDTH_PX = 640
+CAMERA_HEIGHT_PX = 480
+CAMERA_FX_PX = 385.0
+CAMERA_FY_PX = 385.0
+CAMERA_HEIGHT_ABOVE_TABLE_M = 0.40
+CAMERA_NEAR_M = 0.05
+CAMERA_FAR_M = 2.0

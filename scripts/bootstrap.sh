@@ -1,0 +1,56 @@
+#!/usr/bin/env bash
+# One idempotent set-up step: .venv with pinned dependencies, the
+# defgg_interfaces package built into it, defgg_ros installed editable.
+# Each stage is skipped when the stamp of its inputs is unchanged, so a second
+# run takes seconds.
+set -euo pipefail
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+venv="$root/.venv"
+stamps="$venv/.defgg_stamps"
+py="${PYTHON:-python3.11}"
+
+say() { printf '[bootstrap] %s\n' "$*"; }
+stamp_of() { cat "$@" | sha256sum | cut -c1-16; }
+fresh() { [ -f "$stamps/$1" ] && [ "$(cat "$stamps/$1")" = "$2" ]; }
+mark() { mkdir -p "$stamps"; echo "$2" > "$stamps/$1"; }
+
+command -v "$py" >/dev/null || { echo "bootstrap: $py not found (Python 3.11 is required)" >&2; exit 1; }
+if [ ! -x "$venv/bin/python" ]; then
+  say "creating $venv"
+  "$py" -m venv "$venv"
+fi
+
+req_stamp=$(stamp_of "$root/requirements.lock")
+if ! fresh requirements "$req_stamp"; then
+  say "installing pinned dependencies (first run: a few minutes)"
+  "$venv/bin/python" -m pip install -q --upgrade pip
+  # torch==2.13.0 resolves to the CPU wheel on disk; see README.
+  "$venv/bin/python" -m pip install -q -r "$root/requirements.lock"
+  mark requirements "$req_stamp"
+fi
+
+# The rosidl wheels export two build-machine paths that do not exist here;
+# point them at this interpreter's headers and numpy (idempotent rewrite).
+"$venv/bin/python" "$root/scripts/fix_rosidl_paths.py" "$venv"
+
+msg_stamp=$(cd "$root" && stamp_of msg_defs/CMakeLists.txt msg_defs/package.xml msg_defs/*/*)
+if ! fresh interfaces "$msg_stamp" || ! "$venv/bin/python" -c "import defgg_interfaces.msg" 2>/dev/null; then
+  say "building msg_defs (defgg_interfaces) into the venv"
+  build="$venv/build/defgg_interfaces"
+  rm -rf "$build"; mkdir -p "$build"
+  AMENT_PREFIX_PATH="$venv" cmake -S "$root/msg_defs" -B "$build" \
+    -DCMAKE_PREFIX_PATH="$venv" -DCMAKE_INSTALL_PREFIX="$venv" \
+    -DPython3_EXECUTABLE="$venv/bin/python" -DBUILD_TESTING=OFF > "$build.log" 2>&1 \
+    || { tail -30 "$build.log"; exit 1; }
+  AMENT_PREFIX_PATH="$venv" make -C "$build" -j2 install >> "$build.log" 2>&1 \
+    || { tail -30 "$build.log"; exit 1; }
+  mark interfaces "$msg_stamp"
+fi
+
+pkg_stamp=$(cd "$root" && stamp_of setup.py setup.cfg package.xml)
+if ! fresh package "$pkg_stamp"; then
+  say "installing defgg_ros (editable)"
+  "$venv/bin/python" -m pip install -q --no-deps --no-build-isolation -e "$root"
+  mark package "$pkg_stamp"
+fi
+say "ready: $venv"

@@ -1,0 +1,55 @@
+"""defgg_ros: an ament_python package (colcon) that also installs with pip."""
+import glob
+import os
+
+from setuptools import find_packages, setup
+
+PACKAGE = "defgg_ros"
+
+
+def share(*patterns):
+    """Group files by folder for data_files under share/defgg_ros."""
+    groups = {}
+    for pattern in patterns:
+        for path in glob.glob(pattern, recursive=True):
+            if os.path.isfile(path):
+                groups.setdefault(os.path.dirname(path), []).append(path)
+    return [(os.path.join("share", PACKAGE, folder), files) for folder, files in sorted(groups.items())]
+
+
+NODES = {
+    "segmentation_node": "defgg_ros.nodes.segmentation_node:main",
+    "grasp_inference_node": "defgg_ros.nodes.grasp_inference_node:main",
+    "executor_node": "defgg_ros.nodes.executor_node:main",
+    "fake_panda_driver": "defgg_ros.nodes.fake_panda_driver_node:main",
+}
+TOOLS = {
+    "defgg-bringup": "defgg_ros.bringup.cli:main",
+    "defgg-demo": "defgg_ros.demo:main",
+    "defgg-train": "defgg_ros.train.cli:main",
+    "defgg-datagen": "defgg_ros.data.datagen_cli:main",
+    "defgg-eval": "defgg_ros.evaluation.cli:main",
+    "defgg-record": "defgg_ros.sessions.record:main",
+    "defgg-replay": "defgg_ros.sessions.replay:main",
+}
+
+setup(
+    name=PACKAGE,
+    version="0.1.0",
+    packages=find_packages(exclude=["test", "test.*"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
+        (f"share/{PACKAGE}", ["package.xml"]),
+    ]
+    + share("sim_bringup/**/*", "models/*"),
+    install_requires=["setuptools"],
+    zip_safe=False,
+    maintainer="defgg_ros maintainers",
+    maintainer_email="maintainers@defgg-ros.org",
+    description="Stiffness-aware grasp synthesis (Def-GG-CNN) for a Franka Panda cell.",
+    license="Apache-2.0",
+    tests_require=["pytest"],
+    entry_points={
+        "console_scripts": [f"{name} = {target}" for name, target in {**NODES, **TOOLS}.items()],
+    },
+)

@@ -1,0 +1,64 @@
+"""Shared test set-up: ROS isolation per test process, rclpy fixtures, waits.
+
+Each pytest process gets its own ROS_DOMAIN_ID and localhost-only discovery
+so parallel runs (and a cell running on the same machine) never cross-talk.
+"""
+import os
+import random
+import time
+
+import pytest
+
+# Must happen before rclpy initialises its context.
+os.environ["ROS_DOMAIN_ID"] = str(random.Random(os.getpid()).randint(1, 100))
+os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+
+
+@pytest.fixture
+def rclpy_context():
+    """An initialised rclpy context, shut down after the test."""
+    import rclpy
+    from rclpy.context import Context
+
+    context = Context()
+    rclpy.init(context=context)
+    try:
+        yield context
+    finally:
+        context.try_shutdown()
+
+
+@pytest.fixture
+def executor(rclpy_context):
+    """A MultiThreadedExecutor on the test's context; nodes added to it are destroyed after."""
+    from rclpy.executors import MultiThreadedExecutor
+
+    ex = MultiThreadedExecutor(num_threads=4, context=rclpy_context)
+    yield ex
+    for node in list(ex.get_nodes()):
+        ex.remove_node(node)
+        node.destroy_node()
+    ex.shutdown(timeout_sec=2.0)
+
+
+def spin_until(executor, done, timeout_s: float, what: str):
+    """Spin `executor` until `done` (a Future or a callable -> bool) is true.
+
+    Fails the test with `what` after `timeout_s` seconds; never sleeps.
+    Returns the future's result when `done` is a Future.
+    """
+    deadline = time.monotonic() + timeout_s
+    is_future = hasattr(done, "done") and hasattr(done, "result")
+    check = done.done if is_future else done
+    while not check():
+        remaining = deadline - time.monotonic()
+        if remaining <= 0:
+            pytest.fail(f"timed out after {timeout_s:.1f} s waiting for {what}")
+        executor.spin_once(timeout_sec=min(0.05, remaining))
+    return done.result() if is_future else True
+
+
+@pytest.fixture
+def spin():
+    """The spin_until helper as a fixture: spin(executor, done, timeout_s, what)."""
+    return spin_until
