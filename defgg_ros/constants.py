@@ -66,3 +66,12 @@ CAMERA_FY_PX = 385.0
 CAMERA_HEIGHT_ABOVE_TABLE_M = 0.40
 CAMERA_NEAR_M = 0.05
 CAMERA_FAR_M = 2.0
+
+# --- Franka Panda kinematics (Franka's datasheet / franka_ros defaults) ----
+# Default TCP of the Franka Hand: fingertip centre, 0.1034 m along link8's z;
+# the hand (and so the finger closing axis) is turned -45 deg about that z.
+PANDA_TCP_OFFSET_M = 0.1034
+PANDA_HAND_YAW_RAD = -math.pi / 4
+# Datasheet reach (joint 2 axis to the flange) of the Panda.
+PANDA_MAX_REACH_M = 0.855
+PANDA_SHOULDER_HEIGHT_M = 0.333  # joint 2 axis above panda_link0
