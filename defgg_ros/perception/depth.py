@@ -1,0 +1,86 @@
+"""Depth images in either ROS unit convention -> float32 metres (no rclpy).
+
+ROS cameras publish depth as 16UC1 millimetres (realsense, 0 = invalid) or
+32FC1 metres (REP 118; NaN/+-Inf = invalid). Everything downstream works in
+float32 metres with NaN for invalid pixels, so the two conventions cannot
+be mixed up later. A unit check catches the classic mistake of metres
+written into a 16UC1 image (values 0..2) or millimetres into 32FC1.
+"""
+import numpy as np
+
+from defgg_ros.constants import CAMERA_FAR_M, CAMERA_NEAR_M
+
+MILLIMETRES_PER_METRE = 1000.0
+# 32FC1 depth whose median is this many times the camera's far limit is not
+# metres (a 0.4 m table would read 400 in millimetres).
+IMPLAUSIBLE_FAR_FACTOR = 10.0
+
+DEPTH_ENCODINGS_MM = ("16UC1", "mono16")
+DEPTH_ENCODINGS_M = ("32FC1",)
+
+
+class DepthError(ValueError):
+    """A depth image that cannot be used (empty, no valid pixel, wrong unit...)."""
+
+
+def depth_to_metres(raw: np.ndarray, encoding: str) -> np.ndarray:
+    """Convert a raw HxW depth array in `encoding` to float32 metres, NaN = invalid.
+
+    Raises DepthError for an empty/non-2D image, no valid pixel, an unknown
+    encoding, or values whose magnitude shows the wrong unit.
+    """
+    array = np.asarray(raw)
+    if array.ndim != 2 or array.size == 0:
+        raise DepthError(f"depth must be a non-empty HxW image, got shape {array.shape}")
+    if encoding in DEPTH_ENCODINGS_MM:
+        depth_m = _from_millimetres(array)
+    elif encoding in DEPTH_ENCODINGS_M:
+        depth_m = _from_metres(array)
+    else:
+        raise DepthError(f"depth encoding must be one of {DEPTH_ENCODINGS_MM + DEPTH_ENCODINGS_M}, got {encoding!r}")
+    return depth_m
+
+
+def _from_millimetres(array: np.ndarray) -> np.ndarray:
+    if not np.issubdtype(array.dtype, np.integer):
+        raise DepthError(f"16UC1 depth must hold integers (mm), got dtype {array.dtype}")
+    valid = array > 0
+    if not np.any(valid):
+        raise DepthError("depth image has no valid pixel (all zero)")
+    median_mm = float(np.median(array[valid]))
+    if median_mm < CAMERA_NEAR_M * MILLIMETRES_PER_METRE:
+        raise DepthError(
+            f"16UC1 depth median is {median_mm:.0f}, below the camera's near limit of "
+            f"{CAMERA_NEAR_M * MILLIMETRES_PER_METRE:.0f} mm: the values look like metres; "
+            "send millimetres in 16UC1 or metres in 32FC1")
+    depth_m = array.astype(np.float32) / np.float32(MILLIMETRES_PER_METRE)
+    depth_m[~valid] = np.nan
+    return depth_m
+
+
+def _from_metres(array: np.ndarray) -> np.ndarray:
+    if not np.issubdtype(array.dtype, np.floating):
+        raise DepthError(f"32FC1 depth must hold floats (m), got dtype {array.dtype}")
+    depth_m = array.astype(np.float32, copy=True)
+    valid = np.isfinite(depth_m) & (depth_m > 0)
+    if not np.any(valid):
+        raise DepthError("depth image has no valid pixel (all NaN, Inf or <= 0)")
+    median_m = float(np.median(depth_m[valid]))
+    if median_m > CAMERA_FAR_M * IMPLAUSIBLE_FAR_FACTOR:
+        raise DepthError(
+            f"32FC1 depth median is {median_m:.1f} m, far beyond the camera's {CAMERA_FAR_M} m range: "
+            "the values look like millimetres; send metres in 32FC1 or millimetres in 16UC1")
+    depth_m[~valid] = np.nan
+    return depth_m
+
+
+def metres_to_millimetres_u16(depth_m: np.ndarray) -> np.ndarray:
+    """float metres (NaN/<=0 invalid) -> uint16 millimetres (0 invalid), rounded."""
+    depth = np.asarray(depth_m, dtype=np.float64)
+    valid = np.isfinite(depth) & (depth > 0)
+    out = np.zeros(depth.shape, dtype=np.uint16)
+    mm = np.rint(depth[valid] * MILLIMETRES_PER_METRE)
+    if mm.size and mm.max() > np.iinfo(np.uint16).max:
+        raise DepthError(f"depth {mm.max() / MILLIMETRES_PER_METRE:.1f} m does not fit 16-bit millimetres")
+    out[valid] = mm.astype(np.uint16)
+    return out

@@ -1,0 +1,125 @@
+"""Rigid transforms and the top-down grasp pose, in plain numpy (no rclpy).
+
+Naming: `aTb` is the 4x4 homogeneous placement of frame b expressed in frame
+a, so `aTc = aTb @ bTc`. Quaternions are (x, y, z, w) like ROS messages.
+"""
+import math
+
+import numpy as np
+
+# A quaternion whose norm is this far from 1 is a typo or a wrong order, not
+# rounding; reject it instead of silently normalising.
+QUATERNION_NORM_TOLERANCE = 1e-3
+
+
+class TransformError(ValueError):
+    """A transform, quaternion or camera matrix that is not usable."""
+
+
+def check_quaternion_xyzw(quaternion_xyzw) -> np.ndarray:
+    """Return a unit quaternion (x, y, z, w) or raise TransformError."""
+    q = np.asarray(quaternion_xyzw, dtype=np.float64).reshape(-1)
+    if q.shape != (4,) or not np.all(np.isfinite(q)):
+        raise TransformError(f"quaternion must be 4 finite numbers (x, y, z, w), got {quaternion_xyzw!r}")
+    norm = float(np.linalg.norm(q))
+    if abs(norm - 1.0) > QUATERNION_NORM_TOLERANCE:
+        raise TransformError(f"quaternion must have unit norm, got norm {norm:.6f} for {q.tolist()}")
+    return q / norm
+
+
+def quaternion_xyzw_to_matrix(quaternion_xyzw) -> np.ndarray:
+    """3x3 rotation matrix of a unit quaternion (x, y, z, w)."""
+    x, y, z, w = check_quaternion_xyzw(quaternion_xyzw)
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def matrix_to_quaternion_xyzw(rotation) -> np.ndarray:
+    """Unit quaternion (x, y, z, w, with w >= 0) of a 3x3 rotation matrix."""
+    r = np.asarray(rotation, dtype=np.float64)
+    if r.shape != (3, 3) or not np.all(np.isfinite(r)):
+        raise TransformError(f"rotation must be a finite 3x3 matrix, got shape {r.shape}")
+    if not np.allclose(r @ r.T, np.eye(3), atol=1e-6) or np.linalg.det(r) < 0:
+        raise TransformError("matrix is not a proper rotation (orthonormal, det +1)")
+    # Shepperd's method: pick the largest diagonal term for numerical stability.
+    trace = np.trace(r)
+    if trace > 0:
+        s = 2.0 * math.sqrt(trace + 1.0)
+        q = [(r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s, 0.25 * s]
+    else:
+        i = int(np.argmax(np.diag(r)))
+        j, k = (i + 1) % 3, (i + 2) % 3
+        s = 2.0 * math.sqrt(1.0 + r[i, i] - r[j, j] - r[k, k])
+        q = [0.0, 0.0, 0.0, (r[k, j] - r[j, k]) / s]
+        q[i] = 0.25 * s
+        q[j] = (r[j, i] + r[i, j]) / s
+        q[k] = (r[k, i] + r[i, k]) / s
+    q = np.asarray(q)
+    q /= np.linalg.norm(q)
+    return -q if q[3] < 0 else q
+
+
+def transform_from_xyz_quaternion(xyz_m, quaternion_xyzw) -> np.ndarray:
+    """4x4 transform from a translation (m) and a unit quaternion (x, y, z, w)."""
+    t = np.asarray(xyz_m, dtype=np.float64).reshape(-1)
+    if t.shape != (3,) or not np.all(np.isfinite(t)):
+        raise TransformError(f"translation must be 3 finite numbers (m), got {xyz_m!r}")
+    out = np.eye(4)
+    out[:3, :3] = quaternion_xyzw_to_matrix(quaternion_xyzw)
+    out[:3, 3] = t
+    return out
+
+
+def transform_from_list(values) -> np.ndarray:
+    """4x4 transform from the 7-number parameter form [x, y, z, qx, qy, qz, qw]."""
+    v = list(values)
+    if len(v) != 7:
+        raise TransformError(f"a transform parameter needs 7 numbers [x, y, z, qx, qy, qz, qw], got {len(v)}")
+    return transform_from_xyz_quaternion(v[:3], v[3:])
+
+
+def transform_to_xyz_quaternion(transform) -> tuple[np.ndarray, np.ndarray]:
+    """(translation m, quaternion xyzw) of a 4x4 transform."""
+    t = np.asarray(transform, dtype=np.float64)
+    if t.shape != (4, 4):
+        raise TransformError(f"transform must be 4x4, got shape {t.shape}")
+    return t[:3, 3].copy(), matrix_to_quaternion_xyzw(t[:3, :3])
+
+
+def rotation_about_z(angle_rad: float) -> np.ndarray:
+    c, s = math.cos(angle_rad), math.sin(angle_rad)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def top_down_grasp_in_camera(position_camera_m, angle_rad: float) -> np.ndarray:
+    """cameraTgrasp for a top-down grasp seen by the camera.
+
+    The grasp z axis is the camera's optical axis (pointing away from the
+    camera, i.e. the approach direction); x is the finger-closing direction,
+    which is the image direction at `angle_rad` from u towards v. Because the
+    optical frame has x = u and y = v, this is a pure rotation about z.
+    """
+    p = np.asarray(position_camera_m, dtype=np.float64).reshape(-1)
+    if p.shape != (3,) or not np.all(np.isfinite(p)):
+        raise TransformError(f"grasp position must be 3 finite numbers (m), got {position_camera_m!r}")
+    if not math.isfinite(angle_rad):
+        raise TransformError(f"grasp angle must be finite, got {angle_rad!r}")
+    out = np.eye(4)
+    out[:3, :3] = rotation_about_z(angle_rad)
+    out[:3, 3] = p
+    return out
+
+
+def check_camera_matrix(camera_k) -> np.ndarray:
+    """Return K as a 3x3 float64 array or raise TransformError."""
+    k = np.asarray(camera_k, dtype=np.float64)
+    if k.size == 9:
+        k = k.reshape(3, 3)
+    if k.shape != (3, 3) or not np.all(np.isfinite(k)):
+        raise TransformError(f"camera matrix K must be 9 finite numbers, got shape {k.shape}")
+    if k[0, 0] <= 0 or k[1, 1] <= 0:
+        raise TransformError(f"camera focal lengths must be > 0, got fx={k[0, 0]}, fy={k[1, 1]}")
+    return k
