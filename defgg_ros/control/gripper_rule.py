@@ -1,0 +1,96 @@
+"""How hard and how far to close the Franka Hand, chosen from Young's modulus.
+
+Why a rule at all: the same grasp force cannot serve a foam cube and a
+wooden block. A force that holds a rigid object by friction (tens of N)
+squashes a 2e4 Pa foam flat -- 40 N over two 20x18 mm pads is ~55 kPa, a
+strain well above 1 -- while a force gentle enough for the foam lets a
+rigid object slip under the transfer's accelerations. DefGraspSim (Huang et
+al.) grew the grasp force with the logarithm of the modulus for the same
+reason; we do the same: the force rises linearly in log10(E) from
+`SOFT_GRASP_FORCE_N` at the softest training modulus to `RIGID_GRASP_FORCE_N`
+at the stiffest and is clipped outside that range (and to the hand's
+continuous force). Soft objects are also closed more slowly, so the fingers
+stop on the object instead of driving through its first few millimetres.
+
+The closing width follows franka_gripper's grasp semantics: the command
+succeeds when the fingers stop inside [width - eps_inner, width + eps_outer].
+We accept anything between "not empty" (`MISSED_WIDTH_M`) and the opening
+we started from: a soft object legitimately ends up much narrower than the
+predicted width, and the sequence judges the outcome itself.
+"""
+import math
+from dataclasses import dataclass
+
+from defgg_ros.constants import (
+    GRIPPER_MAX_FORCE_N,
+    GRIPPER_MAX_WIDTH_M,
+    MAX_SOFT_BODY_YOUNGS_MODULUS_PA,
+    TRAINING_YOUNGS_MODULI_PA,
+    YOUNGS_MODULUS_MAX_PA,
+    YOUNGS_MODULUS_MIN_PA,
+)
+
+SOFT_MODULUS_PA = min(TRAINING_YOUNGS_MODULI_PA)
+RIGID_MODULUS_PA = max(TRAINING_YOUNGS_MODULI_PA)
+SOFT_GRASP_FORCE_N = 5.0
+# Holds a rigid ~0.5 kg object with friction 0.5 at 30 m/s^2 of transfer
+# acceleration, and stays well inside the hand's continuous rating.
+RIGID_GRASP_FORCE_N = min(40.0, GRIPPER_MAX_FORCE_N)
+# Closing speeds (opening rate, franka_gripper allows up to 0.1 m/s).
+SOFT_CLOSING_SPEED_MPS = 0.02
+RIGID_CLOSING_SPEED_MPS = 0.05
+OPENING_SPEED_MPS = 0.08
+# Open this much wider than the predicted grasp width before descending, so
+# pose and width errors do not put a finger on top of the object.
+PREGRASP_OPENING_MARGIN_M = 0.02
+# Fingers closed to less than this = nothing between them (missed/dropped).
+MISSED_WIDTH_M = 0.004
+
+
+class GripperRuleError(ValueError):
+    """A modulus or width the rule cannot work with."""
+
+
+@dataclass(frozen=True)
+class GraspCommand:
+    """A franka_gripper-style grasp plus the opening to take before it."""
+
+    pre_open_width_m: float
+    width_m: float
+    epsilon_inner_m: float
+    epsilon_outer_m: float
+    speed_mps: float
+    force_n: float
+
+
+def grasp_force_n(youngs_modulus_pa: float) -> float:
+    """Grasp force growing linearly with log10(E), clipped to [SOFT, RIGID] force."""
+    e = float(youngs_modulus_pa)
+    if not math.isfinite(e) or not YOUNGS_MODULUS_MIN_PA <= e <= YOUNGS_MODULUS_MAX_PA:
+        raise GripperRuleError(f"Young's modulus {e} Pa is outside [{YOUNGS_MODULUS_MIN_PA:g}, "
+                               f"{YOUNGS_MODULUS_MAX_PA:g}] Pa")
+    fraction = math.log10(e / SOFT_MODULUS_PA) / math.log10(RIGID_MODULUS_PA / SOFT_MODULUS_PA)
+    fraction = min(1.0, max(0.0, fraction))
+    return SOFT_GRASP_FORCE_N + fraction * (RIGID_GRASP_FORCE_N - SOFT_GRASP_FORCE_N)
+
+
+def grasp_command(youngs_modulus_pa: float, grasp_width_m: float) -> GraspCommand:
+    """The full gripper plan for a grasp of predicted opening `grasp_width_m` on a material E."""
+    w = float(grasp_width_m)
+    if not math.isfinite(w) or w <= 0.0:
+        raise GripperRuleError(f"grasp width must be a positive number of metres, got {w}")
+    if w > GRIPPER_MAX_WIDTH_M:
+        raise GripperRuleError(f"grasp width {w * 1000:.1f} mm exceeds the hand's maximum opening "
+                               f"{GRIPPER_MAX_WIDTH_M * 1000:.0f} mm")
+    force = grasp_force_n(youngs_modulus_pa)
+    soft = youngs_modulus_pa <= MAX_SOFT_BODY_YOUNGS_MODULUS_PA
+    pre_open = min(GRIPPER_MAX_WIDTH_M, w + PREGRASP_OPENING_MARGIN_M)
+    width = min(w, pre_open)
+    return GraspCommand(
+        pre_open_width_m=pre_open,
+        width_m=width,
+        epsilon_inner_m=max(0.0, width - MISSED_WIDTH_M),
+        epsilon_outer_m=pre_open - width,
+        speed_mps=SOFT_CLOSING_SPEED_MPS if soft else RIGID_CLOSING_SPEED_MPS,
+        force_n=force,
+    )

@@ -1,0 +1,107 @@
+"""Rigid transforms as plain 4x4 numpy arrays, and the top-down grasp pose.
+
+Poses are named `aMb` (placement of frame b in frame a), e.g. `base_M_tcp`.
+The grasp convention of the cell: the TCP z axis points DOWN (approach), the
+fingers close along x, so a top-down grasp is fully given by a position and
+a yaw about the vertical.
+"""
+import math
+
+import numpy as np
+
+# A quaternion further than this from unit norm is a corrupted message, not
+# rounding error; below it we normalise.
+QUATERNION_NORM_ATOL = 1e-3
+# How far the approach axis may tilt from straight down and still count as a
+# top-down grasp (the 4-DoF grasp representation has no tilt).
+TOP_DOWN_TILT_ATOL_RAD = math.radians(5.0)
+
+
+class PoseError(ValueError):
+    """A pose that cannot be used: non-finite, bad quaternion, not top-down."""
+
+
+def _finite(name: str, values) -> np.ndarray:
+    array = np.asarray(values, dtype=float)
+    if not np.all(np.isfinite(array)):
+        raise PoseError(f"{name} has non-finite values: {array.tolist()}")
+    return array
+
+
+def quaternion_to_matrix(quat_xyzw) -> np.ndarray:
+    """3x3 rotation of a quaternion (x, y, z, w); rejects non-unit ones."""
+    q = _finite("quaternion", quat_xyzw)
+    if q.shape != (4,):
+        raise PoseError(f"quaternion must have 4 values (x, y, z, w), got shape {q.shape}")
+    norm = float(np.linalg.norm(q))
+    if abs(norm - 1.0) > QUATERNION_NORM_ATOL:
+        raise PoseError(f"quaternion is not unit length (norm {norm:.6f})")
+    x, y, z, w = q / norm
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def matrix_to_quaternion(rotation) -> np.ndarray:
+    """Quaternion (x, y, z, w) with w >= 0 of a 3x3 rotation matrix."""
+    r = np.asarray(rotation, dtype=float)
+    # Shepperd's method: pick the largest diagonal term for numerical stability.
+    trace = np.trace(r)
+    if trace > 0:
+        s = 2.0 * math.sqrt(trace + 1.0)
+        q = [(r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s, 0.25 * s]
+    elif r[0, 0] > r[1, 1] and r[0, 0] > r[2, 2]:
+        s = 2.0 * math.sqrt(1.0 + r[0, 0] - r[1, 1] - r[2, 2])
+        q = [0.25 * s, (r[0, 1] + r[1, 0]) / s, (r[0, 2] + r[2, 0]) / s, (r[2, 1] - r[1, 2]) / s]
+    elif r[1, 1] > r[2, 2]:
+        s = 2.0 * math.sqrt(1.0 + r[1, 1] - r[0, 0] - r[2, 2])
+        q = [(r[0, 1] + r[1, 0]) / s, 0.25 * s, (r[1, 2] + r[2, 1]) / s, (r[0, 2] - r[2, 0]) / s]
+    else:
+        s = 2.0 * math.sqrt(1.0 + r[2, 2] - r[0, 0] - r[1, 1])
+        q = [(r[0, 2] + r[2, 0]) / s, (r[1, 2] + r[2, 1]) / s, 0.25 * s, (r[1, 0] - r[0, 1]) / s]
+    q = np.array(q)
+    return q if q[3] >= 0 else -q
+
+
+def pose_matrix(position_m, quat_xyzw) -> np.ndarray:
+    """4x4 homogeneous transform from a position and a quaternion (x, y, z, w)."""
+    p = _finite("position", position_m)
+    if p.shape != (3,):
+        raise PoseError(f"position must have 3 values, got shape {p.shape}")
+    m = np.eye(4)
+    m[:3, :3] = quaternion_to_matrix(quat_xyzw)
+    m[:3, 3] = p
+    return m
+
+
+def top_down_pose(position_m, yaw_rad: float) -> np.ndarray:
+    """base_M_tcp of a top-down grasp: z down, fingers closing along (cos yaw, sin yaw, 0)."""
+    p = _finite("position", position_m)
+    yaw = float(_finite("yaw", yaw_rad))
+    c, s = math.cos(yaw), math.sin(yaw)
+    m = np.eye(4)
+    # Columns are the TCP axes in the base frame: x = closing, z = down, y = z cross x.
+    m[:3, :3] = np.array([[c, s, 0.0], [s, -c, 0.0], [0.0, 0.0, -1.0]])
+    m[:3, 3] = p
+    return m
+
+
+def top_down_yaw(base_M_tcp) -> float:
+    """Yaw of a top-down pose; PoseError when its z axis is not (nearly) straight down."""
+    m = _finite("pose", base_M_tcp)
+    z_axis = m[:3, 2]
+    tilt = math.acos(max(-1.0, min(1.0, -float(z_axis[2]))))
+    if tilt > TOP_DOWN_TILT_ATOL_RAD:
+        raise PoseError(
+            f"grasp approach axis is tilted {math.degrees(tilt):.1f} deg from straight down "
+            f"(at most {math.degrees(TOP_DOWN_TILT_ATOL_RAD):.1f} deg for a top-down grasp)"
+        )
+    x_axis = m[:3, 0]
+    return math.atan2(float(x_axis[1]), float(x_axis[0]))
+
+
+def wrap_angle(angle_rad: float) -> float:
+    """Angle wrapped into [-pi, pi)."""
+    return (angle_rad + math.pi) % (2.0 * math.pi) - math.pi

@@ -1,0 +1,300 @@
+"""Jerk-limited joint trajectories with Ruckig, sampled for a JointTrajectory.
+
+Three kinds of motion, all planned offline (`Ruckig.calculate`) and sampled
+at a fixed period so every point can be checked against the limits before
+anything is sent to the robot:
+- `plan_joint_motion`: rest-to-rest (or from a moving state) point-to-point;
+- `plan_line`: a straight TCP line at fixed orientation (descend, lift):
+  dense warm-started IK along the line, then a 1-D Ruckig profile on the
+  arc length whose limits are derived from the joints' path derivatives;
+- `plan_stop`: the jerk-limited stop to zero velocity from any state
+  (Ruckig's velocity interface).
+"""
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from ruckig import ControlInterface, InputParameter, Result, Ruckig, Trajectory
+
+from defgg_ros.constants import (
+    PANDA_Q_MAX_RAD,
+    PANDA_Q_MIN_RAD,
+    PANDA_QD_MAX_RADPS,
+    PANDA_QDD_MAX_RADPS2,
+    PANDA_QDDD_MAX_RADPS3,
+)
+from defgg_ros.control.kinematics import MIN_TCP_HEIGHT_ABOVE_TABLE_M, KinematicsError, PandaKinematics
+
+# Fraction of Franka's published velocity/acceleration/jerk limits we plan
+# with: the datasheet values are the hardware's reflex limits, and the
+# tracking controller needs headroom above the plan.
+LIMITS_SAFETY_SCALE = 0.4
+# Joint trajectory sampling period (the driver interpolates between points).
+SAMPLE_DT_S = 0.02
+# Sampled values may exceed a limit by this relative amount (float rounding
+# and finite differences), nothing more.
+LIMIT_RTOL = 1e-6
+JOINT_ATOL = 1e-6  # rad, position limit slack in checks
+# Straight lines: IK grid spacing and the largest joint jump allowed between
+# neighbouring grid points (a larger one means a branch switch/singularity).
+LINE_GRID_STEP_M = 0.005
+LINE_MAX_JOINT_STEP_RAD = 0.1
+LINE_IK_ATOL_M = 1e-7
+LINE_IK_ATOL_RAD = 1e-6
+# The TCP may leave the commanded line by at most this much.
+LINE_DEVIATION_ATOL_M = 1e-4
+# Cartesian caps of line motions (guarded descent must be slow enough for
+# the contact check to stop the arm before it presses hard).
+DEFAULT_LINE_SPEED_MPS = 0.05
+LINE_MAX_ACCELERATION_MPS2 = 0.5
+LINE_MAX_JERK_MPS3 = 5.0
+# Frames that are allowed at/below the table: the base sits on it, and
+# panda_grasptarget is a virtual link of the URDF 1.6 mm below the TCP.
+TABLE_EXEMPT_FRAMES = frozenset({"universe", "panda_link0", "panda_grasptarget"})
+
+
+class TrajectoryError(KinematicsError):
+    """A motion that cannot be planned, or a plan that breaks a limit."""
+
+
+@dataclass(frozen=True)
+class JointLimits:
+    q_min_rad: np.ndarray
+    q_max_rad: np.ndarray
+    qd_max_radps: np.ndarray
+    qdd_max_radps2: np.ndarray
+    qddd_max_radps3: np.ndarray
+
+
+def panda_limits(scale: float = LIMITS_SAFETY_SCALE) -> JointLimits:
+    """Franka's limits with velocity/acceleration/jerk scaled by `scale` in (0, 1]."""
+    if not 0.0 < scale <= 1.0:
+        raise ValueError(f"limits scale must be in (0, 1], got {scale}")
+    return JointLimits(np.array(PANDA_Q_MIN_RAD), np.array(PANDA_Q_MAX_RAD),
+                       scale * np.array(PANDA_QD_MAX_RADPS), scale * np.array(PANDA_QDD_MAX_RADPS2),
+                       scale * np.array(PANDA_QDDD_MAX_RADPS3))
+
+
+@dataclass(frozen=True)
+class SampledTrajectory:
+    """Joint trajectory sampled in time; rows are samples, columns the 7 joints."""
+
+    times_s: np.ndarray
+    q_rad: np.ndarray
+    qd_radps: np.ndarray
+    qdd_radps2: np.ndarray
+
+    @property
+    def duration_s(self) -> float:
+        return float(self.times_s[-1])
+
+    @property
+    def final_q_rad(self) -> np.ndarray:
+        return self.q_rad[-1]
+
+    def state_at(self, t_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(q, qd, qdd) at time t, interpolated linearly between samples, held outside."""
+        t = min(max(t_s, 0.0), self.duration_s)
+        i = int(np.clip(np.searchsorted(self.times_s, t, side="right") - 1, 0, len(self.times_s) - 1))
+        if i == len(self.times_s) - 1:
+            return self.q_rad[i].copy(), self.qd_radps[i].copy(), self.qdd_radps2[i].copy()
+        w = (t - self.times_s[i]) / (self.times_s[i + 1] - self.times_s[i])
+        lerp = lambda a: (1 - w) * a[i] + w * a[i + 1]  # noqa: E731
+        return lerp(self.q_rad), lerp(self.qd_radps), lerp(self.qdd_radps2)
+
+
+def hold(q_rad) -> SampledTrajectory:
+    """A one-point trajectory: stay at q."""
+    q = np.asarray(q_rad, dtype=float).reshape(1, 7)
+    zeros = np.zeros_like(q)
+    return SampledTrajectory(np.zeros(1), q, zeros, zeros.copy())
+
+
+def _sample_times(duration_s: float, dt_s: float) -> np.ndarray:
+    if duration_s <= 0:
+        return np.zeros(1)
+    times = np.arange(0.0, duration_s, dt_s)
+    # End exactly at the duration without a sliver of an interval before it.
+    if len(times) > 1 and duration_s - times[-1] < 0.5 * dt_s:
+        times = times[:-1]
+    return np.append(times, duration_s)
+
+
+def _calculate(inp: InputParameter, what: str) -> Trajectory:
+    trajectory = Trajectory(inp.degrees_of_freedom)
+    result = Ruckig(inp.degrees_of_freedom).calculate(inp, trajectory)
+    if result not in (Result.Working, Result.Finished):
+        raise TrajectoryError(f"Ruckig could not plan the {what}: {result.name}")
+    return trajectory
+
+
+def _sample_ruckig(trajectory: Trajectory, dt_s: float) -> SampledTrajectory:
+    times = _sample_times(trajectory.duration, dt_s)
+    samples = [trajectory.at_time(float(t)) for t in times]
+    q, qd, qdd = (np.array([s[k] for s in samples], dtype=float) for k in range(3))
+    return SampledTrajectory(times, q, qd, qdd)
+
+
+def _joint_input(limits: JointLimits, q_start, qd_start, qdd_start) -> InputParameter:
+    inp = InputParameter(7)
+    inp.current_position = np.asarray(q_start, dtype=float).tolist()
+    # A state marginally outside the (scaled) limits is Ruckig-invalid; a
+    # measured state can be, so bring it inside.
+    inp.current_velocity = np.clip(qd_start, -limits.qd_max_radps, limits.qd_max_radps).tolist()
+    inp.current_acceleration = np.clip(qdd_start, -limits.qdd_max_radps2, limits.qdd_max_radps2).tolist()
+    inp.max_velocity = limits.qd_max_radps.tolist()
+    inp.max_acceleration = limits.qdd_max_radps2.tolist()
+    inp.max_jerk = limits.qddd_max_radps3.tolist()
+    return inp
+
+
+def plan_joint_motion(q_start, q_goal, limits: JointLimits, qd_start=None, qdd_start=None,
+                      dt_s: float = SAMPLE_DT_S) -> SampledTrajectory:
+    """Time-optimal jerk-limited motion from a state to rest at q_goal."""
+    q0, q1 = np.asarray(q_start, dtype=float), np.asarray(q_goal, dtype=float)
+    for name, q in (("start", q0), ("goal", q1)):
+        if q.shape != (7,) or not np.all(np.isfinite(q)):
+            raise TrajectoryError(f"joint motion {name} must be 7 finite values, got {q.tolist()}")
+        if np.any(q < limits.q_min_rad - JOINT_ATOL) or np.any(q > limits.q_max_rad + JOINT_ATOL):
+            raise TrajectoryError(f"joint motion {name} is outside the joint limits: {np.round(q, 4).tolist()}")
+    zeros = np.zeros(7)
+    inp = _joint_input(limits, q0, zeros if qd_start is None else qd_start, zeros if qdd_start is None else qdd_start)
+    inp.target_position = q1.tolist()
+    inp.target_velocity = zeros.tolist()
+    inp.target_acceleration = zeros.tolist()
+    return _sample_ruckig(_calculate(inp, "joint motion"), dt_s)
+
+
+def plan_stop(q_rad, qd_radps, qdd_radps2, limits: JointLimits, dt_s: float = SAMPLE_DT_S) -> SampledTrajectory:
+    """Jerk-limited stop: brings velocity and acceleration to zero as fast as the limits allow."""
+    inp = _joint_input(limits, q_rad, qd_radps, qdd_radps2)
+    inp.control_interface = ControlInterface.Velocity
+    inp.target_velocity = np.zeros(7).tolist()
+    inp.target_acceleration = np.zeros(7).tolist()
+    return _sample_ruckig(_calculate(inp, "stop"), dt_s)
+
+
+# --- straight TCP lines ------------------------------------------------------
+def _line_grid(kin: PandaKinematics, q_start: np.ndarray, start_M: np.ndarray, direction: np.ndarray,
+               length_m: float) -> tuple[np.ndarray, np.ndarray]:
+    n = max(4, math.ceil(length_m / LINE_GRID_STEP_M) + 1)
+    s_grid = np.linspace(0.0, length_m, n)
+    q_grid = [q_start]
+    for s in s_grid[1:]:
+        target = start_M.copy()
+        target[:3, 3] += s * direction
+        try:
+            q = kin.ik(target, q_grid[-1], restarts=0, pos_atol_m=LINE_IK_ATOL_M, rot_atol_rad=LINE_IK_ATOL_RAD).q_rad
+        except KinematicsError as error:
+            raise TrajectoryError(f"straight line leaves the reachable workspace after {s * 1000:.0f} mm: "
+                                  f"{error}") from error
+        step = float(np.max(np.abs(q - q_grid[-1])))
+        if step > LINE_MAX_JOINT_STEP_RAD:
+            raise TrajectoryError(f"straight line passes near a singularity or joint limit after {s * 1000:.0f} mm "
+                                  f"(joint jump {step:.3f} rad)")
+        q_grid.append(q)
+    return s_grid, np.array(q_grid)
+
+
+def _path_limits(s_grid: np.ndarray, q_grid: np.ndarray, limits: JointLimits,
+                 max_speed_mps: float) -> tuple[float, float, float]:
+    """Arc-length velocity/acceleration/jerk limits that keep every joint within its limits.
+
+    qd = q' v, qdd = q'' v^2 + q' a, qddd = q''' v^3 + 3 q'' v a + q' j (primes:
+    d/ds); each term gets its share of the joint's budget.
+    """
+    h = s_grid[1] - s_grid[0]
+    tiny = 1e-12
+    d1 = np.max(np.abs(np.diff(q_grid, 1, axis=0)), axis=0) / h + tiny
+    d2 = np.max(np.abs(np.diff(q_grid, 2, axis=0)), axis=0) / h**2 + tiny
+    d3 = np.max(np.abs(np.diff(q_grid, 3, axis=0)), axis=0) / h**3 + tiny
+    qd, qdd, qddd = limits.qd_max_radps, limits.qdd_max_radps2, limits.qddd_max_radps3
+    v = min(max_speed_mps, float(np.min(qd / d1)), float(np.min(np.sqrt(0.5 * qdd / d2))),
+            float(np.min(np.cbrt(qddd / 3.0 / d3))))
+    a = min(LINE_MAX_ACCELERATION_MPS2, float(np.min(0.5 * qdd / d1)), float(np.min(qddd / 3.0 / (3.0 * d2 * v))))
+    j = min(LINE_MAX_JERK_MPS3, float(np.min(qddd / 3.0 / d1)))
+    return v, a, j
+
+
+def _finite_differences(times: np.ndarray, values: np.ndarray) -> np.ndarray:
+    if len(times) < 3:
+        return np.zeros_like(values)
+    return np.gradient(values, times, axis=0)
+
+
+def plan_line(kin: PandaKinematics, q_start, displacement_m, limits: JointLimits,
+              max_speed_mps: float = DEFAULT_LINE_SPEED_MPS, dt_s: float = SAMPLE_DT_S) -> SampledTrajectory:
+    """Straight TCP line by `displacement_m` (base frame) at constant orientation, from rest to rest."""
+    q0 = np.asarray(q_start, dtype=float)
+    d = np.asarray(displacement_m, dtype=float)
+    if d.shape != (3,) or not np.all(np.isfinite(d)):
+        raise TrajectoryError(f"line displacement must be 3 finite values, got {d.tolist()}")
+    if not max_speed_mps > 0:
+        raise TrajectoryError(f"line speed must be positive, got {max_speed_mps}")
+    length = float(np.linalg.norm(d))
+    if length < LINE_IK_ATOL_M:
+        return hold(q0)
+    start_M = kin.fk(q0)
+    direction = d / length
+    s_grid, q_grid = _line_grid(kin, q0, start_M, direction, length)
+    v, a, j = _path_limits(s_grid, q_grid, limits, max_speed_mps)
+    inp = InputParameter(1)
+    inp.current_position, inp.target_position = [0.0], [length]
+    inp.max_velocity, inp.max_acceleration, inp.max_jerk = [v], [a], [j]
+    profile = _calculate(inp, "straight line")
+    times = _sample_times(profile.duration, dt_s)
+    q = [q0]
+    for t in times[1:]:
+        target = start_M.copy()
+        target[:3, 3] += profile.at_time(float(t))[0][0] * direction
+        q.append(kin.ik(target, q[-1], restarts=0, pos_atol_m=LINE_IK_ATOL_M, rot_atol_rad=LINE_IK_ATOL_RAD).q_rad)
+    q = np.array(q)
+    qd = _finite_differences(times, q)
+    qdd = _finite_differences(times, qd)
+    # The profile starts and ends at rest; finite differences blur that.
+    qd[[0, -1]] = 0.0
+    qdd[[0, -1]] = 0.0
+    return SampledTrajectory(times, q, qd, qdd)
+
+
+# --- checks ------------------------------------------------------------------
+@dataclass(frozen=True)
+class LimitReport:
+    """Largest |value| / limit over the trajectory, per quantity (<= 1 is within)."""
+
+    velocity_ratio: float
+    acceleration_ratio: float
+    jerk_ratio: float
+    min_tcp_height_m: float
+    min_link_height_m: float
+
+
+def check_trajectory(trajectory: SampledTrajectory, limits: JointLimits, kin: PandaKinematics,
+                     table_z_m: float) -> LimitReport:
+    """TrajectoryError if any sample breaks a joint limit or goes below the table; else the margins."""
+    q, qd, qdd, t = trajectory.q_rad, trajectory.qd_radps, trajectory.qdd_radps2, trajectory.times_s
+    if not (np.all(np.isfinite(q)) and np.all(np.isfinite(qd)) and np.all(np.isfinite(qdd))):
+        raise TrajectoryError("trajectory has non-finite samples")
+    below = q < limits.q_min_rad - JOINT_ATOL
+    above = q > limits.q_max_rad + JOINT_ATOL
+    if np.any(below | above):
+        k, joint = np.argwhere(below | above)[0]
+        raise TrajectoryError(f"joint {joint + 1} at {q[k, joint]:.4f} rad leaves its limits at t={t[k]:.2f} s")
+    qddd = np.diff(qdd, axis=0) / np.diff(t)[:, None] if len(t) > 1 else np.zeros((1, 7))
+    ratios = {}
+    for name, values, limit in (("velocity", qd, limits.qd_max_radps), ("acceleration", qdd, limits.qdd_max_radps2),
+                                ("jerk", qddd, limits.qddd_max_radps3)):
+        ratio = float(np.max(np.abs(values) / limit))
+        if ratio > 1.0 + LIMIT_RTOL:
+            raise TrajectoryError(f"{name} reaches {ratio:.3f} x its limit")
+        ratios[name] = ratio
+    tcp_min, link_min = math.inf, math.inf
+    for qk in q:
+        heights = kin.frame_heights_m(qk)
+        tcp_min = min(tcp_min, heights.pop("panda_tcp"))
+        link_min = min(link_min, min(z for name, z in heights.items() if name not in TABLE_EXEMPT_FRAMES))
+    if tcp_min < table_z_m + MIN_TCP_HEIGHT_ABOVE_TABLE_M - JOINT_ATOL:
+        raise TrajectoryError(f"TCP goes down to {tcp_min:.4f} m, below the table at {table_z_m:.3f} m + clearance")
+    if link_min < table_z_m + MIN_TCP_HEIGHT_ABOVE_TABLE_M:
+        raise TrajectoryError(f"a link of the arm goes down to {link_min:.4f} m, below the table at {table_z_m:.3f} m")
+    return LimitReport(ratios["velocity"], ratios["acceleration"], ratios["jerk"], tcp_min, link_min)
