@@ -1,0 +1,62 @@
+"""Exact-stamp synchroniser for a few streams (no rclpy, no message_filters).
+
+The segmentation node stamps its stiffness image with the depth frame's
+stamp, so depth, stiffness and camera_info of one frame share an exact
+stamp. Each stream keeps a small cache keyed by stamp (integer ns); when a
+stamp is present in every stream, that set is emitted and everything older
+is dropped (a newer complete set makes older partial ones useless).
+"""
+from collections import OrderedDict
+
+# Frames arrive at <= 30 Hz and the segmentation lags the depth by one
+# processing step, so a handful of stamps per stream is plenty.
+DEFAULT_CACHE_SIZE = 10
+
+
+class StampSynchronizer:
+    """add(stream, stamp_ns, item) -> {stream: item} when the stamp is complete, else None."""
+
+    def __init__(self, streams, cache_size: int = DEFAULT_CACHE_SIZE):
+        self._streams = tuple(streams)
+        if len(set(self._streams)) != len(self._streams) or not self._streams:
+            raise ValueError(f"streams must be distinct names, got {streams!r}")
+        if cache_size < 1:
+            raise ValueError(f"cache_size must be >= 1, got {cache_size}")
+        self._cache_size = int(cache_size)
+        self._caches = {name: OrderedDict() for name in self._streams}
+        self._last_emitted_ns = None
+        self.dropped = 0  # items evicted from a full cache or older than the last emitted set
+
+    @property
+    def streams(self) -> tuple:
+        return self._streams
+
+    def add(self, stream: str, stamp_ns: int, item):
+        if stream not in self._caches:
+            raise KeyError(f"unknown stream {stream!r}; known: {self._streams}")
+        stamp_ns = int(stamp_ns)
+        if self._last_emitted_ns is not None and stamp_ns <= self._last_emitted_ns:
+            self.dropped += 1  # late arrival of a frame already emitted or superseded
+            return None
+        cache = self._caches[stream]
+        cache[stamp_ns] = item
+        cache.move_to_end(stamp_ns)
+        while len(cache) > self._cache_size:
+            cache.popitem(last=False)
+            self.dropped += 1
+        if all(stamp_ns in c for c in self._caches.values()):
+            return self._emit(stamp_ns)
+        return None
+
+    def _emit(self, stamp_ns: int) -> dict:
+        matched = {name: self._caches[name][stamp_ns] for name in self._streams}
+        for cache in self._caches.values():
+            for old in [s for s in cache if s <= stamp_ns]:
+                del cache[old]
+                if old != stamp_ns:
+                    self.dropped += 1
+        self._last_emitted_ns = stamp_ns
+        return matched
+
+    def pending(self, stream: str) -> int:
+        return len(self._caches[stream])
