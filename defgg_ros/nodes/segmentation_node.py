@@ -1,0 +1,181 @@
+"""segmentation_node: depth (+camera_info) -> object mask + Young's modulus image.
+
+Thin adapter over defgg_ros.perception.stiffness_segmenter. Publishes, with
+the depth frame's header (so the inference node can match by exact stamp):
+- `stiffness_topic` (32FC1, Pa per pixel, 0 = background)
+- `mask_topic` (mono8 labels, 0 = background)
+and latches the assignments in force on `assignments_topic`. Assignments
+change through the `set_stiffness` service or the `default_youngs_modulus_pa`
+/ `objects_json` parameters. Bad frames are skipped with a throttled warning.
+"""
+import json
+import threading
+
+import numpy as np
+import rclpy
+from defgg_interfaces.msg import ObjectStiffness, StiffnessAssignment
+from defgg_interfaces.srv import SetStiffness
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import CameraInfo, Image
+
+from defgg_ros import topics
+from defgg_ros.nodes import qos
+from defgg_ros.nodes.conversions import (
+    ConversionError,
+    camera_info_to_k,
+    check_same_size,
+    depth_msg_to_metres,
+    numpy_to_image,
+)
+from defgg_ros.perception.segmentation import OBJECT_MIN_AREA_PX, OBJECT_MIN_HEIGHT_M
+from defgg_ros.perception.stiffness_assignment import check_entries_fit_image, make_entry
+from defgg_ros.perception.stiffness_segmenter import (
+    DEFAULT_YOUNGS_MODULUS_PA,
+    SegmenterConfig,
+    entries_from_json,
+    entries_to_dicts,
+    run_segmenter,
+)
+
+WARN_THROTTLE_S = 2.0
+
+PARAMETERS = {
+    "depth_topic": (topics.DEPTH_IMAGE, "Depth image in (16UC1 mm or 32FC1 m)."),
+    "camera_info_topic": (topics.DEPTH_CAMERA_INFO, "CameraInfo of the depth image (intrinsics K)."),
+    "stiffness_topic": (topics.STIFFNESS_IMAGE, "Out: 32FC1 Young's modulus per pixel (Pa), 0 = background."),
+    "mask_topic": (topics.OBJECT_MASK, "Out: mono8 object labels, 0 = background."),
+    "assignments_topic": (topics.STIFFNESS_ASSIGNMENTS, "Out (latched): the stiffness assignments in force."),
+    "set_stiffness_service": (topics.SET_STIFFNESS_SERVICE, "SetStiffness service name."),
+    "default_youngs_modulus_pa": (DEFAULT_YOUNGS_MODULUS_PA, "Modulus of objects no entry addresses (Pa, > 0)."),
+    "objects_json": ("[]", 'Entries as JSON: [{"name": "sponge", "youngs_modulus_pa": 2e4, '
+                           '"roi": [x, y, w, h], "region_only": false}]; roi [0,0,0,0] = whole image.'),
+    "min_object_height_m": (OBJECT_MIN_HEIGHT_M, "Pixels lower than this above the table are background (m)."),
+    "min_object_area_px": (OBJECT_MIN_AREA_PX, "Smaller connected components are dropped (pixels)."),
+    "background_depth_file": ("", "Optional .npy of an empty-scene depth in metres; '' = fit the table plane."),
+}
+
+
+class SegmentationNode(Node):
+    def __init__(self, **kwargs):
+        super().__init__("segmentation_node", **kwargs)
+        for name, (default, description) in PARAMETERS.items():
+            self.declare_parameter(name, default, ParameterDescriptor(description=description))
+        self._lock = threading.Lock()
+        self._config = self._config_from(self._params())  # invalid start-up parameters raise here
+        self._camera_k = None
+        self._image_size = None
+        self.frames_processed = 0
+        self.frames_rejected = 0
+        p = self._params()
+        self._stiffness_pub = self.create_publisher(Image, p["stiffness_topic"], qos.SENSOR_DATA)
+        self._mask_pub = self.create_publisher(Image, p["mask_topic"], qos.SENSOR_DATA)
+        self._assign_pub = self.create_publisher(StiffnessAssignment, p["assignments_topic"], qos.LATCHED)
+        self.create_subscription(CameraInfo, p["camera_info_topic"], self._on_camera_info, qos.SENSOR_DATA)
+        self.create_subscription(Image, p["depth_topic"], self._on_depth, qos.SENSOR_DATA)
+        self.create_service(SetStiffness, p["set_stiffness_service"], self._on_set_stiffness)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self._publish_assignments()
+
+    def _params(self) -> dict:
+        return {name: self.get_parameter(name).value for name in PARAMETERS}
+
+    @staticmethod
+    def _config_from(p: dict) -> SegmenterConfig:
+        background = None
+        if p["background_depth_file"]:
+            background = np.load(p["background_depth_file"], allow_pickle=False).astype(np.float32)
+        return SegmenterConfig(float(p["default_youngs_modulus_pa"]), entries_from_json(p["objects_json"]),
+                               float(p["min_object_height_m"]), int(p["min_object_area_px"]), background)
+
+    def _on_set_parameters(self, params) -> SetParametersResult:
+        merged = self._params()
+        merged.update({param.name: param.value for param in params})
+        try:
+            config = self._config_from(merged)
+        except (ValueError, OSError) as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        with self._lock:
+            self._config = config
+        self._publish_assignments()
+        return SetParametersResult(successful=True)
+
+    def _on_camera_info(self, msg: CameraInfo):
+        try:
+            self._camera_k = (camera_info_to_k(msg), msg)
+        except ConversionError as exc:
+            self._warn(f"ignoring camera_info: {exc}")
+
+    def _on_depth(self, msg: Image):
+        try:
+            if self._camera_k is None:
+                raise ConversionError(f"no camera_info received yet on {self._params()['camera_info_topic']}")
+            camera_k, info = self._camera_k
+            check_same_size("depth", msg, "camera_info", info)
+            depth_m = depth_msg_to_metres(msg)
+            with self._lock:
+                config = self._config
+            out = run_segmenter(config, depth_m, camera_k)
+        except ValueError as exc:
+            self.frames_rejected += 1
+            self._warn(f"skipping depth frame: {exc}")
+            return
+        self._image_size = (msg.width, msg.height)
+        self._stiffness_pub.publish(numpy_to_image(out.youngs_modulus_pa, "32FC1", msg.header))
+        self._mask_pub.publish(numpy_to_image(out.labels, "mono8", msg.header))
+        self.frames_processed += 1
+
+    def _on_set_stiffness(self, request, response):
+        try:
+            entries = tuple(make_entry(o.name, o.youngs_modulus_pa, (o.roi.x_offset, o.roi.y_offset,
+                                       o.roi.width, o.roi.height), o.region_only) for o in request.objects)
+            if self._image_size is not None:
+                check_entries_fit_image(entries, *self._image_size)
+            default = float(request.default_youngs_modulus_pa or self._config.default_youngs_modulus_pa)
+        except ValueError as exc:
+            response.success, response.message = False, str(exc)
+            return response
+        # Go through the parameters so `objects_json` always shows what is in force.
+        result = self.set_parameters_atomically([
+            Parameter("objects_json", value=json.dumps(entries_to_dicts(entries))),
+            Parameter("default_youngs_modulus_pa", value=default)])
+        response.success, response.message = result.successful, result.reason
+        if result.successful:
+            response.message = f"{len(entries)} stiffness entries, default {default:g} Pa"
+            self.get_logger().info(response.message)
+        return response
+
+    def _publish_assignments(self):
+        with self._lock:
+            config = self._config
+        msg = StiffnessAssignment(stamp=self.get_clock().now().to_msg(),
+                                  default_youngs_modulus_pa=config.default_youngs_modulus_pa)
+        for item in entries_to_dicts(config.entries):
+            entry = ObjectStiffness(name=item["name"], youngs_modulus_pa=item["youngs_modulus_pa"],
+                                    region_only=item["region_only"])
+            entry.roi.x_offset, entry.roi.y_offset, entry.roi.width, entry.roi.height = item["roi"]
+            msg.objects.append(entry)
+        self._assign_pub.publish(msg)
+
+    def _warn(self, text: str):
+        self.get_logger().warning(text, throttle_duration_sec=WARN_THROTTLE_S)
+
+
+def main(args=None):
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = SegmentationNode()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == "__main__":
+    main()
