@@ -157,3 +157,13 @@ def test_bad_parameter_update_is_rejected(harness):
     assert not result[0].successful and "> 0" in result[0].reason
     result = harness.seg_node.set_parameters([Parameter("objects_json", value="not json")])
     assert not result[0].successful and "JSON" in result[0].reason
+
+
+def test_shipped_yaml_config_loads(executor):
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[2] / "sim_bringup" / "config" / "segmentation_node.yaml"
+    node = SegmentationNode(context=executor.context, cli_args=["--ros-args", "--params-file", str(path)])
+    executor.add_node(node)
+    assert node.get_parameter("default_youngs_modulus_pa").value == 2e6
+    assert node.get_parameter("min_object_area_px").value == 60
