@@ -1,0 +1,43 @@
+"""Pinhole geometry between image pixels and the camera optical frame.
+
+Optical frame: x along image u (right), y along image v (down), z forward.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from defgg_ros.model.preprocess import InvalidInputError
+
+
+class InvalidCameraError(InvalidInputError):
+    """Camera intrinsics that are not a finite 3x3 pinhole matrix."""
+
+
+def check_camera_k(camera_k) -> np.ndarray:
+    k = np.asarray(camera_k, dtype=np.float64)
+    if k.shape == (9,):
+        k = k.reshape(3, 3)
+    if k.shape != (3, 3):
+        raise InvalidCameraError(f"camera_k must be 3x3, got shape {k.shape}")
+    if not np.all(np.isfinite(k)):
+        raise InvalidCameraError("camera_k contains NaN or infinite values")
+    if k[0, 0] <= 0 or k[1, 1] <= 0:
+        raise InvalidCameraError(f"focal lengths must be > 0, got fx={k[0, 0]}, fy={k[1, 1]}")
+    return k
+
+
+def width_px_to_m(width_px, depth_m, fx_px):
+    """Length of an image segment of `width_px` pixels at `depth_m` (fronto-parallel)."""
+    return np.asarray(width_px) * np.asarray(depth_m) / fx_px
+
+
+def width_m_to_px(width_m, depth_m, fx_px):
+    return np.asarray(width_m) * fx_px / np.asarray(depth_m)
+
+
+def pixel_to_camera(u_px, v_px, depth_m, camera_k) -> np.ndarray:
+    """3D point (m) in the optical frame of pixel (u, v) at depth z."""
+    k = check_camera_k(camera_k)
+    x = (u_px - k[0, 2]) * depth_m / k[0, 0]
+    y = (v_px - k[1, 2]) * depth_m / k[1, 1]
+    return np.array([x, y, depth_m], dtype=np.float64)
