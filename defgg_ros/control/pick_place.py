@@ -1,0 +1,377 @@
+"""The pick-and-place sequence of the paper's real-robot test, as a pure state machine.
+
+pre_grasp (PREGRASP_HEIGHT_M above the grasp, gripper opened) -> descend in a
+straight line until the grasp pose OR contact (external force above a
+threshold: jerk-limited stop there) -> close (force/width from the modulus,
+see gripper_rule) -> lift -> transfer (a joint motion at the planning limits:
+real accelerations on the grasp) -> place (straight down at the goal, open)
+-> retreat (straight up) -> done.
+
+No ROS and no wall clock inside: the owner feeds events (joint states,
+external force, gripper results) and calls `tick(sim_s, wall_s)`; the
+machine answers with commands (trajectories, gripper goals). Motion progress
+runs on the robot's clock (`sim_s`: sim time in simulation); the driver
+watchdog runs on `wall_s`, because a dead simulator stops sim time.
+Every way of ending carries a reason a person can read.
+"""
+
+import numpy as np
+
+from defgg_ros.control.gripper_rule import MISSED_WIDTH_M, OPENING_SPEED_MPS, grasp_command
+from defgg_ros.control.kinematics import KinematicsError, PandaKinematics, WorkspaceError, check_workspace
+from defgg_ros.control.poses import top_down_pose
+from defgg_ros.control.sequence_types import (
+    ArmState,
+    CancelGripper,
+    Feedback,
+    GraspGripper,
+    GraspTarget,
+    MoveGripper,
+    Outcome,
+    PlaceTarget,
+    SendTrajectory,
+    SequenceConfig,
+    _Motion,
+    _Observed,
+    _Pending,
+    _Plan,
+)
+from defgg_ros.control.trajectories import check_trajectory, panda_limits, plan_joint_motion, plan_line, plan_stop
+
+# The arm counts as still below this joint speed (ending a guarded stop).
+STILL_SPEED_RADPS = 0.02
+# Ending a sequence waits at most this long (robot clock) for the arm to stop.
+STOP_TIMEOUT_S = 3.0
+# Grasps predicted a little below the table top (depth noise on thin
+# objects) are raised to this height; further below is a bad grasp.
+GRASP_MIN_HEIGHT_ABOVE_TABLE_M = 0.005
+GRASP_BELOW_TABLE_TOLERANCE_M = 0.02
+
+
+class SequenceFailure(Exception):
+    """Ends the sequence with the message as the failure reason."""
+
+
+def _finite(name: str, values) -> np.ndarray:
+    array = np.asarray(values, dtype=float)
+    if not np.all(np.isfinite(array)):
+        raise SequenceFailure(f"{name} has non-finite values: {array.tolist()}")
+    return array
+
+
+class PickPlaceSequence:
+    """One pick-and-place run; create a new one per goal."""
+
+    def __init__(self, kin: PandaKinematics, config: SequenceConfig, grasp: GraspTarget, place: PlaceTarget):
+        config.validate()
+        self._kin, self._cfg, self._grasp, self._place = kin, config, grasp, place
+        self._limits = panda_limits(config.limits_scale)
+        self._obs = _Observed()
+        self._pending = _Pending()
+        self._motion: _Motion | None = None
+        self._plan: _Plan | None = None
+        self._phase = "idle"
+        self._placed_open_sent = False
+        self._stopping = False
+        self._start_s = 0.0
+        self.outcome = Outcome()
+        self.finished = False
+
+    # --- events -----------------------------------------------------------
+    def on_joint_state(self, state: ArmState, wall_s: float) -> None:
+        self._obs.state = state
+        self._obs.state_wall_s = wall_s
+
+    def on_force(self, force_xyz_n) -> None:
+        self._obs.force_n = np.asarray(force_xyz_n, dtype=float)
+
+    def on_gripper_result(self, success: bool, width_m: float, error: str = "") -> None:
+        if self._pending.gripper:
+            self._pending.gripper = False
+            self._pending.gripper_result = (bool(success), float(width_m), error)
+
+    @property
+    def phase(self) -> str:
+        return self._phase
+
+    def feedback(self, sim_s: float) -> Feedback:
+        state = self._obs.state
+        return Feedback(self._phase, self._progress(sim_s), state.gripper_width_m if state else float("nan"),
+                        float(np.linalg.norm(self._obs.force_n)))
+
+    # --- driving ----------------------------------------------------------
+    def start(self, sim_s: float, wall_s: float) -> list:
+        self._start_s = sim_s
+        return self._guarded(self._start, sim_s, wall_s)
+
+    def tick(self, sim_s: float, wall_s: float) -> list:
+        if self.finished:
+            return []
+        if self._stopping:
+            return self._tick_stopping(sim_s, wall_s)
+        handlers = {"pre_grasp": self._tick_pre_grasp, "descend": self._tick_descend, "close": self._tick_close,
+                    "lift": self._tick_lift, "transfer": self._tick_transfer, "place": self._tick_place,
+                    "retreat": self._tick_retreat}
+        return self._guarded(handlers[self._phase], sim_s, wall_s)
+
+    def cancel(self, sim_s: float, wall_s: float) -> list:
+        """Stop the arm (jerk-limited) and end as canceled once it is still."""
+        if self.finished or self._stopping:
+            return []
+        self.outcome.canceled = True
+        return self._fail(f"canceled during {self._phase}", sim_s)
+
+    def _guarded(self, handler, sim_s: float, wall_s: float) -> list:
+        try:
+            self._watchdog(wall_s)
+            return handler(sim_s)
+        except _DriverSilent as silent:
+            return self._fail(str(silent), sim_s, wait_for_stop=False)
+        except (SequenceFailure, KinematicsError, ValueError) as error:
+            return self._fail(str(error), sim_s)
+
+    def _watchdog(self, wall_s: float) -> None:
+        age = wall_s - self._obs.state_wall_s
+        if self._obs.state is None:
+            raise _DriverSilent("driver silent: no joint states received")
+        if age > self._cfg.watchdog_timeout_s:
+            raise _DriverSilent(f"driver silent: no joint states for {age:.1f} s "
+                                f"(watchdog {self._cfg.watchdog_timeout_s:.1f} s)")
+
+    # --- planning before the arm moves --------------------------------------
+    def _start(self, sim_s: float) -> list:
+        self._phase = "pre_grasp"
+        self._plan = self._make_plan(self._obs.state.q_rad)
+        commands = [MoveGripper(self._plan.gripper.pre_open_width_m, OPENING_SPEED_MPS)]
+        self._pending.gripper, self._pending.gripper_sent_s = True, sim_s
+        motion = plan_joint_motion(self._obs.state.q_rad, self._plan.pregrasp_q, self._limits,
+                                   dt_s=self._cfg.sample_dt_s)
+        return commands + self._send(motion, sim_s)
+
+    def _grasp_position(self) -> np.ndarray:
+        p = _finite("grasp position", self._grasp.position_m).copy()
+        floor = self._cfg.table_z_m + GRASP_MIN_HEIGHT_ABOVE_TABLE_M
+        if p[2] < self._cfg.table_z_m - GRASP_BELOW_TABLE_TOLERANCE_M:
+            raise WorkspaceError(f"grasp outside the workspace: {p[2]:.3f} m is below the table "
+                                 f"at {self._cfg.table_z_m:.3f} m")
+        p[2] = max(p[2], floor)
+        return p
+
+    def _make_plan(self, q_now: np.ndarray) -> _Plan:
+        grasp_p = self._grasp_position()
+        _finite("grasp yaw", self._grasp.yaw_rad)
+        pregrasp_p = grasp_p + [0.0, 0.0, self._cfg.pregrasp_height_m]
+        try:
+            check_workspace(grasp_p, self._cfg.table_z_m)
+            check_workspace(pregrasp_p, self._cfg.table_z_m)
+            pregrasp, yaw = self._kin.top_down_ik(pregrasp_p, self._grasp.yaw_rad, q_now)
+            grasp_M = top_down_pose(grasp_p, yaw)
+            self._kin.ik(grasp_M, pregrasp.q_rad)
+        except KinematicsError as error:
+            raise SequenceFailure(f"grasp outside the workspace: {error}") from error
+        place_p = _finite("place position", self._place.position_m)
+        approach_p = place_p + [0.0, 0.0, self._cfg.place_approach_height_m]
+        try:
+            check_workspace(place_p, self._cfg.table_z_m)
+            check_workspace(approach_p, self._cfg.table_z_m)
+            approach, place_yaw = self._kin.top_down_ik(approach_p, _finite("place yaw", self._place.yaw_rad),
+                                                        pregrasp.q_rad)
+            place_M = top_down_pose(place_p, place_yaw)
+            self._kin.ik(place_M, approach.q_rad)
+        except KinematicsError as error:
+            raise SequenceFailure(f"place pose unreachable: {error}") from error
+        gripper = grasp_command(self._grasp.youngs_modulus_pa, self._grasp.width_m)
+        return _Plan(pregrasp.q_rad, grasp_M, approach.q_rad, place_M, gripper)
+
+    # --- motions ------------------------------------------------------------
+    def _send(self, trajectory, sim_s: float, guarded_stop: bool = False) -> list:
+        if not guarded_stop:
+            check_trajectory(trajectory, self._limits, self._kin, self._cfg.table_z_m)
+        self._motion = _Motion(trajectory, sim_s, guarded_stop)
+        return [SendTrajectory(trajectory)]
+
+    def _line_to(self, target_p: np.ndarray, speed_mps: float, sim_s: float) -> list:
+        q = self._obs.state.q_rad
+        displacement = np.asarray(target_p, dtype=float) - self._kin.fk(q)[:3, 3]
+        return self._send(plan_line(self._kin, q, displacement, self._limits, speed_mps, self._cfg.sample_dt_s), sim_s)
+
+    def _line_up(self, height_m: float, sim_s: float) -> list:
+        target = self._kin.fk(self._obs.state.q_rad)[:3, 3] + [0.0, 0.0, height_m]
+        return self._line_to(target, self._cfg.line_speed_mps, sim_s)
+
+    def _stop_motion(self, sim_s: float) -> list:
+        """Jerk-limited stop from where the commanded motion is now."""
+        m = self._motion
+        q, qd, qdd = m.trajectory.state_at(sim_s - m.start_s)
+        return self._send(plan_stop(q, qd, qdd, self._limits, self._cfg.sample_dt_s), sim_s, guarded_stop=True)
+
+    def _arrived(self, sim_s: float) -> bool:
+        m, state = self._motion, self._obs.state
+        elapsed = sim_s - m.start_s
+        if elapsed < m.trajectory.duration_s:
+            return False
+        if m.guarded_stop:
+            still = float(np.max(np.abs(state.qd_radps))) < STILL_SPEED_RADPS
+            if not still and elapsed > m.trajectory.duration_s + self._cfg.settle_timeout_s:
+                raise SequenceFailure(f"arm did not come to rest during {self._phase}")
+            return still
+        error = float(np.max(np.abs(state.q_rad - m.trajectory.final_q_rad)))
+        if error <= self._cfg.arrival_joint_atol_rad:
+            return True
+        if elapsed > m.trajectory.duration_s + self._cfg.settle_timeout_s:
+            raise SequenceFailure(f"arm did not reach the {self._phase} target {self._cfg.settle_timeout_s:.1f} s "
+                                  f"after the trajectory ended (joint error {error:.3f} rad)")
+        return False
+
+    def _motion_active(self, sim_s: float) -> bool:
+        return self._motion is not None and sim_s - self._motion.start_s < self._motion.trajectory.duration_s
+
+    def _progress(self, sim_s: float) -> float:
+        if self._phase in ("close",) or (self._phase == "place" and self._placed_open_sent):
+            return 0.5 if self._pending.gripper else 1.0
+        if self._motion is None or self._motion.trajectory.duration_s <= 0:
+            return 0.0
+        return float(min(1.0, max(0.0, (sim_s - self._motion.start_s) / self._motion.trajectory.duration_s)))
+
+    # --- gripper ------------------------------------------------------------
+    def _gripper_result(self, sim_s: float, what: str):
+        """The finished gripper command's (success, width, error), or None while it runs."""
+        if self._pending.gripper:
+            if sim_s - self._pending.gripper_sent_s > self._cfg.gripper_timeout_s:
+                raise SequenceFailure(f"gripper did not finish {what} within {self._cfg.gripper_timeout_s:.1f} s")
+            return None
+        return self._pending.gripper_result
+
+    def _send_gripper(self, command, sim_s: float) -> list:
+        self._pending.gripper, self._pending.gripper_sent_s, self._pending.gripper_result = True, sim_s, None
+        return [command]
+
+    def _check_held(self) -> None:
+        width = self._obs.state.gripper_width_m
+        closed = self.outcome.gripper_width_closed_m
+        threshold = max(MISSED_WIDTH_M, self._cfg.slip_width_fraction * closed)
+        if width < threshold:
+            raise SequenceFailure(f"object dropped during {self._phase}: the gripper width fell from "
+                                  f"{closed * 1000:.1f} mm to {width * 1000:.1f} mm (slipped out)")
+
+    # --- phases ---------------------------------------------------------------
+    def _tick_pre_grasp(self, sim_s: float) -> list:
+        result = self._gripper_result(sim_s, "opening")
+        if result is not None and not result[0]:
+            raise SequenceFailure(f"gripper could not open to {self._plan.gripper.pre_open_width_m * 1000:.0f} mm: "
+                                  f"{result[2]}")
+        if result is None or not self._arrived(sim_s):
+            return []
+        self._phase = "descend"
+        self._obs.force_bias_n = self._obs.force_n.copy()
+        return self._line_to(self._plan.grasp_M[:3, 3], self._cfg.descent_speed_mps, sim_s)
+
+    def _tick_descend(self, sim_s: float) -> list:
+        force = float(np.linalg.norm(self._obs.force_n - self._obs.force_bias_n))
+        if not self._motion.guarded_stop and force > self._cfg.contact_force_threshold_n:
+            self.outcome.contact_detected = True
+            return self._stop_motion(sim_s)
+        if not self._arrived(sim_s):
+            return []
+        self.outcome.contact_height_m = float(self._kin.fk(self._obs.state.q_rad)[2, 3])
+        self._phase = "close"
+        return self._send_gripper(GraspGripper(self._plan.gripper), sim_s)
+
+    def _tick_close(self, sim_s: float) -> list:
+        result = self._gripper_result(sim_s, "the grasp")
+        if result is None:
+            return []
+        success, width, error = result
+        self.outcome.gripper_width_closed_m = width
+        self.outcome.gripper_force_n = self._plan.gripper.force_n
+        if width < MISSED_WIDTH_M:
+            raise SequenceFailure(f"missed: the fingers closed to {width * 1000:.1f} mm with nothing between them")
+        if not success:
+            raise SequenceFailure(f"gripper grasp failed: {error or 'no reason given'}")
+        self._phase = "lift"
+        return self._line_up(self._cfg.lift_height_m, sim_s)
+
+    def _tick_lift(self, sim_s: float) -> list:
+        self._check_held()
+        if not self._arrived(sim_s):
+            return []
+        self.outcome.held_after_lift = True
+        self._phase = "transfer"
+        q = self._obs.state.q_rad
+        approach_M = self._plan.place_M.copy()
+        approach_M[2, 3] += self._cfg.place_approach_height_m
+        try:  # seeded from here for a short motion; the pre-planned solution is the fallback
+            target = self._kin.ik(approach_M, q, restarts=0).q_rad
+        except KinematicsError:
+            target = self._plan.place_approach_q
+        return self._send(plan_joint_motion(q, target, self._limits, dt_s=self._cfg.sample_dt_s), sim_s)
+
+    def _tick_transfer(self, sim_s: float) -> list:
+        self._check_held()
+        if not self._arrived(sim_s):
+            return []
+        self.outcome.held_after_transfer = True
+        self._phase = "place"
+        return self._line_to(self._plan.place_M[:3, 3], self._cfg.line_speed_mps, sim_s)
+
+    def _tick_place(self, sim_s: float) -> list:
+        if not self._placed_open_sent:
+            if not self._arrived(sim_s):
+                return []
+            self._placed_open_sent = True
+            return self._send_gripper(MoveGripper(self._plan.gripper.pre_open_width_m, OPENING_SPEED_MPS), sim_s)
+        result = self._gripper_result(sim_s, "opening at the place pose")
+        if result is None:
+            return []
+        if not result[0]:
+            raise SequenceFailure(f"gripper could not release the object: {result[2] or 'no reason given'}")
+        self._phase = "retreat"
+        return self._line_up(self._cfg.place_approach_height_m, sim_s)
+
+    def _tick_retreat(self, sim_s: float) -> list:
+        if not self._arrived(sim_s):
+            return []
+        self._phase = "done"
+        self.outcome.success = True
+        self._finish(sim_s)
+        return []
+
+    # --- endings --------------------------------------------------------------
+    def _fail(self, reason: str, sim_s: float, wait_for_stop: bool = True) -> list:
+        self.outcome.failure_reason = reason
+        commands = [CancelGripper()] if self._pending.gripper else []
+        self._pending.gripper = False
+        if self._motion_active(sim_s):
+            commands += self._stop_motion(sim_s)
+        if wait_for_stop and self._motion is not None:
+            self._stopping = True
+        else:
+            self._finish(sim_s)
+        return commands
+
+    def _tick_stopping(self, sim_s: float, wall_s: float) -> list:
+        try:
+            self._watchdog(wall_s)
+        except _DriverSilent as silent:
+            self.outcome.failure_reason += f"; then {silent}"
+            self._finish(sim_s)
+            return []
+        m, state = self._motion, self._obs.state
+        elapsed = sim_s - m.start_s
+        still = state is not None and float(np.max(np.abs(state.qd_radps))) < STILL_SPEED_RADPS
+        if elapsed >= m.trajectory.duration_s and still:
+            self._finish(sim_s)
+        elif elapsed > m.trajectory.duration_s + STOP_TIMEOUT_S:
+            self.outcome.failure_reason += f" (arm still moving {STOP_TIMEOUT_S:.0f} s after the stop)"
+            self._finish(sim_s)
+        return []
+
+    def _finish(self, sim_s: float) -> None:
+        self.outcome.phase_reached = self._phase if self._phase != "idle" else "pre_grasp"
+        self.outcome.duration_s = max(0.0, sim_s - self._start_s)
+        self._stopping = False
+        self.finished = True
+
+
+class _DriverSilent(SequenceFailure):
+    """No joint states: there is nobody to wait for, end at once."""

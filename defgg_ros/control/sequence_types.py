@@ -1,0 +1,148 @@
+"""Data types of the pick-and-place sequence: configuration, targets, commands, outcome."""
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from defgg_ros.constants import PREGRASP_HEIGHT_M
+from defgg_ros.control.gripper_rule import GraspCommand
+from defgg_ros.control.trajectories import LIMITS_SAFETY_SCALE, SAMPLE_DT_S, SampledTrajectory
+
+PHASES = ("pre_grasp", "descend", "close", "lift", "transfer", "place", "retreat", "done")
+
+
+@dataclass(frozen=True)
+class SequenceConfig:
+    table_z_m: float = 0.0
+    limits_scale: float = LIMITS_SAFETY_SCALE
+    pregrasp_height_m: float = PREGRASP_HEIGHT_M
+    descent_speed_mps: float = 0.03
+    line_speed_mps: float = 0.1            # lift, place, retreat
+    lift_height_m: float = 0.15
+    place_approach_height_m: float = 0.10
+    contact_force_threshold_n: float = 10.0
+    watchdog_timeout_s: float = 1.0        # wall clock
+    arrival_joint_atol_rad: float = 0.02
+    settle_timeout_s: float = 3.0          # robot clock, after a trajectory's end
+    gripper_timeout_s: float = 10.0        # robot clock
+    # Held object: width may not fall below this fraction of the closed width.
+    slip_width_fraction: float = 0.5
+    sample_dt_s: float = SAMPLE_DT_S
+
+    def validate(self) -> None:
+        positive = ("pregrasp_height_m", "descent_speed_mps", "line_speed_mps", "lift_height_m",
+                    "place_approach_height_m", "contact_force_threshold_n", "watchdog_timeout_s",
+                    "arrival_joint_atol_rad", "settle_timeout_s", "gripper_timeout_s", "sample_dt_s")
+        for name in positive:
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be a positive number, got {value}")
+        if not 0.0 < self.limits_scale <= 1.0:
+            raise ValueError(f"limits_scale must be in (0, 1], got {self.limits_scale}")
+        if not 0.0 <= self.slip_width_fraction < 1.0:
+            raise ValueError(f"slip_width_fraction must be in [0, 1), got {self.slip_width_fraction}")
+
+
+@dataclass(frozen=True)
+class GraspTarget:
+    position_m: tuple          # TCP at the grasp, base frame
+    yaw_rad: float             # finger closing direction about the vertical
+    width_m: float
+    youngs_modulus_pa: float
+
+
+@dataclass(frozen=True)
+class PlaceTarget:
+    position_m: tuple          # TCP where the object is released, base frame
+    yaw_rad: float = 0.0
+
+
+@dataclass(frozen=True)
+class ArmState:
+    q_rad: np.ndarray
+    qd_radps: np.ndarray
+    gripper_width_m: float
+
+
+# --- commands for the owner to carry out ------------------------------------
+@dataclass(frozen=True)
+class SendTrajectory:
+    trajectory: SampledTrajectory
+
+
+@dataclass(frozen=True)
+class MoveGripper:
+    width_m: float
+    speed_mps: float
+
+
+@dataclass(frozen=True)
+class GraspGripper:
+    command: GraspCommand
+
+
+@dataclass(frozen=True)
+class CancelGripper:
+    pass
+
+
+@dataclass(frozen=True)
+class Feedback:
+    phase: str
+    phase_progress: float
+    gripper_width_m: float
+    external_force_n: float
+
+
+@dataclass
+class Outcome:
+    """The PickAndPlace result fields (minus grasp_used, which the owner knows)."""
+
+    success: bool = False
+    canceled: bool = False
+    failure_reason: str = ""
+    phase_reached: str = ""
+    contact_detected: bool = False
+    contact_height_m: float = float("nan")
+    gripper_width_closed_m: float = float("nan")
+    gripper_force_n: float = float("nan")
+    held_after_lift: bool = False
+    held_after_transfer: bool = False
+    duration_s: float = 0.0
+
+
+@dataclass
+class _Motion:
+    trajectory: SampledTrajectory
+    start_s: float
+    guarded_stop: bool = False   # ends when the arm is still, wherever that is
+
+
+@dataclass
+class _Plan:
+    """Everything computed before the arm moves, so unreachable goals fail early."""
+
+    pregrasp_q: np.ndarray
+    grasp_M: np.ndarray
+    place_approach_q: np.ndarray
+    place_M: np.ndarray
+    gripper: GraspCommand
+
+
+class SequenceFailure(Exception):
+    """Internal: ends the sequence with a reason."""
+
+
+@dataclass
+class _Pending:
+    gripper: bool = False
+    gripper_sent_s: float = 0.0
+    gripper_result: tuple | None = None
+
+
+@dataclass
+class _Observed:
+    state: ArmState | None = None
+    state_wall_s: float = -math.inf
+    force_n: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    force_bias_n: np.ndarray = field(default_factory=lambda: np.zeros(3))

@@ -1,0 +1,87 @@
+"""A fake-clock robot for driving PickPlaceSequence in tests.
+
+It plays the driver's part in the simplest physical way: the arm follows the
+commanded samples exactly, the fingers move at the commanded speed and stop
+on an object of a given width, the external force rises when the TCP goes
+below a contact height. Faults (silence, a slipping object) are switches.
+"""
+from dataclasses import dataclass
+
+import numpy as np
+
+from defgg_ros.constants import PANDA_READY_Q_RAD
+from defgg_ros.control.pick_place import PickPlaceSequence
+from defgg_ros.control.sequence_types import ArmState, CancelGripper, GraspGripper, MoveGripper, SendTrajectory
+
+TICK_S = 0.01
+CONTACT_STIFFNESS_N_PER_M = 5000.0
+
+
+@dataclass
+class World:
+    object_width_m: float | None = 0.05     # None: nothing between the fingers
+    contact_height_m: float = -1.0           # TCP z below which the hand touches something
+    silent: bool = False                     # driver stops publishing joint states
+    slip_at_phase: str | None = None         # object falls out when this phase starts
+
+
+class FakeRobot:
+    def __init__(self, kin, world: World, q0=PANDA_READY_Q_RAD, width_m: float = 0.0):
+        self.kin, self.world = kin, world
+        self.q = np.array(q0, dtype=float)
+        self.qd = np.zeros(7)
+        self.width_m = width_m
+        self.sim_s = 0.0
+        self.trajectory, self.trajectory_start_s = None, 0.0
+        self.gripper = None   # (kind, target_width, speed, sent_s)
+        self.sent = []        # every command, in order
+
+    def apply(self, commands, sequence: PickPlaceSequence):
+        for command in commands:
+            self.sent.append(command)
+            if isinstance(command, SendTrajectory):
+                self.trajectory, self.trajectory_start_s = command.trajectory, self.sim_s
+            elif isinstance(command, MoveGripper):
+                self.gripper = ("move", command.width_m, command.speed_mps)
+            elif isinstance(command, GraspGripper):
+                target = self.world.object_width_m or 0.0
+                self.gripper = ("grasp", target, command.command.speed_mps)
+            elif isinstance(command, CancelGripper):
+                self.gripper = None
+
+    def _step_gripper(self, sequence: PickPlaceSequence):
+        if self.gripper is None:
+            return
+        kind, target, speed = self.gripper
+        step = speed * TICK_S
+        remaining = target - self.width_m
+        self.width_m = target if abs(remaining) <= step else self.width_m + np.sign(remaining) * step
+        if self.width_m == target:
+            self.gripper = None
+            sequence.on_gripper_result(True, self.width_m, "")
+
+    def step(self, sequence: PickPlaceSequence):
+        self.sim_s += TICK_S
+        if self.trajectory is not None:
+            q, qd, _ = self.trajectory.state_at(self.sim_s - self.trajectory_start_s)
+            self.q, self.qd = q, qd
+        self._step_gripper(sequence)
+        if self.world.slip_at_phase == sequence.phase and self.gripper is None:
+            self.width_m = 0.0
+        tcp_z = self.kin.fk(self.q)[2, 3]
+        depth = max(0.0, self.world.contact_height_m - tcp_z)
+        sequence.on_force([0.0, 0.0, CONTACT_STIFFNESS_N_PER_M * depth])
+        if not self.world.silent:
+            sequence.on_joint_state(ArmState(self.q.copy(), self.qd.copy(), self.width_m), self.sim_s)
+        self.apply(sequence.tick(self.sim_s, self.sim_s), sequence)
+
+
+def run(sequence: PickPlaceSequence, robot: FakeRobot, max_s: float = 60.0, until=None):
+    """Start the sequence and step until it finishes (or `until(robot, sequence)` is true)."""
+    sequence.on_joint_state(ArmState(robot.q.copy(), robot.qd.copy(), robot.width_m), robot.sim_s)
+    robot.apply(sequence.start(robot.sim_s, robot.sim_s), sequence)
+    while not sequence.finished and robot.sim_s < max_s:
+        if until is not None and until(robot, sequence):
+            return
+        robot.step(sequence)
+    assert sequence.finished, f"sequence still in {sequence.phase} after {max_s} s"

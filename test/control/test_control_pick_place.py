@@ -1,0 +1,191 @@
+"""PickPlaceSequence on a fake clock: happy path and every way it can end badly."""
+import math
+
+import numpy as np
+import pytest
+from control_fake_robot import FakeRobot, World, run
+
+from defgg_ros.control.kinematics import PandaKinematics
+from defgg_ros.control.pick_place import PickPlaceSequence
+from defgg_ros.control.sequence_types import (
+    CancelGripper,
+    GraspGripper,
+    GraspTarget,
+    MoveGripper,
+    PlaceTarget,
+    SendTrajectory,
+    SequenceConfig,
+)
+
+GRASP = GraspTarget(position_m=(0.5, 0.05, 0.02), yaw_rad=0.4, width_m=0.05, youngs_modulus_pa=2e9)
+PLACE = PlaceTarget(position_m=(0.35, -0.45, 0.12))
+CONFIG = SequenceConfig(watchdog_timeout_s=0.5)
+
+
+@pytest.fixture(scope="module")
+def kin():
+    return PandaKinematics()
+
+
+def make(kin, grasp=GRASP, place=PLACE, config=CONFIG):
+    return PickPlaceSequence(kin, config, grasp, place)
+
+
+def phases_of(robot):
+    return [type(c).__name__ for c in robot.sent]
+
+
+def test_happy_path_reaches_every_phase_and_places(kin):
+    sequence, robot = make(kin), None
+    robot = FakeRobot(kin, World(object_width_m=0.045))
+    seen = []
+    run(sequence, robot, until=lambda r, s: seen.append(s.phase) and False)
+    out = sequence.outcome
+    assert out.success, out.failure_reason
+    assert out.failure_reason == ""
+    assert out.phase_reached == "done"
+    assert list(dict.fromkeys(seen)) == ["pre_grasp", "descend", "close", "lift", "transfer", "place", "retreat"]
+    assert not out.contact_detected
+    assert out.contact_height_m == pytest.approx(GRASP.position_m[2], abs=1e-3)
+    assert out.gripper_width_closed_m == pytest.approx(0.045)
+    assert out.gripper_force_n > 0
+    assert out.held_after_lift and out.held_after_transfer
+    # Released where asked, with the fingers opened again.
+    tcp = kin.fk(robot.q)[:3, 3]
+    assert tcp[:2] == pytest.approx(PLACE.position_m[:2], abs=1e-3)
+    assert tcp[2] == pytest.approx(PLACE.position_m[2] + CONFIG.place_approach_height_m, abs=1e-3)
+    assert isinstance(robot.sent[-2], MoveGripper) and robot.sent[-2].width_m > 0.045
+    assert out.duration_s > 0
+
+
+def test_pre_grasp_is_25_mm_above_the_grasp_with_fingers_closing_along_the_grasp_axis(kin):
+    sequence, robot = make(kin), FakeRobot(kin, World())
+    run(sequence, robot, until=lambda r, s: s.phase == "descend")
+    tcp = kin.fk(robot.q)
+    assert tcp[:3, 3] == pytest.approx(np.add(GRASP.position_m, [0, 0, 0.025]), abs=1e-3)
+    closing_axis = tcp[:3, 0]
+    assert abs(closing_axis @ [math.cos(GRASP.yaw_rad), math.sin(GRASP.yaw_rad), 0.0]) == pytest.approx(1.0, abs=1e-4)
+
+
+def test_contact_during_descent_stops_the_descent_there(kin):
+    surface_z = GRASP.position_m[2] + 0.012
+    sequence, robot = make(kin), FakeRobot(kin, World(contact_height_m=surface_z))
+    run(sequence, robot, until=lambda r, s: s.phase == "close")
+    out = sequence.outcome
+    assert out.contact_detected
+    # Stopped within a few mm of first touch: threshold / stiffness + stopping distance.
+    assert surface_z - 0.006 < out.contact_height_m < surface_z
+    assert any(isinstance(c, GraspGripper) for c in robot.sent)
+    assert np.max(np.abs(robot.qd)) < 0.02
+
+
+def test_missed_grasp_fails_with_a_reason(kin):
+    sequence, robot = make(kin), FakeRobot(kin, World(object_width_m=None))
+    run(sequence, robot)
+    out = sequence.outcome
+    assert not out.success and not out.canceled
+    assert out.phase_reached == "close"
+    assert "missed" in out.failure_reason
+    assert out.gripper_width_closed_m < 0.004
+
+
+@pytest.mark.parametrize("phase", ["lift", "transfer"])
+def test_slip_is_detected_in_the_phase_it_happens(kin, phase):
+    sequence, robot = make(kin), FakeRobot(kin, World(slip_at_phase=phase))
+    run(sequence, robot)
+    out = sequence.outcome
+    assert not out.success
+    assert out.phase_reached == phase
+    assert f"dropped during {phase}" in out.failure_reason
+    assert out.held_after_lift == (phase == "transfer")
+    assert not out.held_after_transfer
+
+
+def test_driver_silent_aborts_within_the_watchdog_time(kin):
+    sequence, robot = make(kin), FakeRobot(kin, World())
+    run(sequence, robot, until=lambda r, s: s.phase == "lift")
+    silent_since = robot.sim_s
+    robot.world.silent = True
+    run_until_finished(sequence, robot)
+    out = sequence.outcome
+    assert "driver silent" in out.failure_reason
+    assert out.phase_reached == "lift"
+    assert robot.sim_s - silent_since <= CONFIG.watchdog_timeout_s + 0.05
+
+
+def test_no_joint_states_at_all_fails_at_start(kin):
+    sequence = make(kin)
+    commands = sequence.start(0.0, 0.0)
+    assert sequence.finished and commands == []
+    assert "no joint states" in sequence.outcome.failure_reason
+
+
+def test_cancel_mid_transfer_stops_jerk_limited_and_leaves_the_arm_still(kin):
+    sequence, robot = make(kin), FakeRobot(kin, World())
+    run(sequence, robot, until=lambda r, s: s.phase == "transfer" and s.feedback(r.sim_s).phase_progress > 0.4)
+    assert np.max(np.abs(robot.qd)) > 0.1, "should be moving when canceled"
+    robot.apply(sequence.cancel(robot.sim_s, robot.sim_s), sequence)
+    stop = robot.sent[-1]
+    assert isinstance(stop, SendTrajectory) and stop.trajectory.duration_s > 0
+    assert np.allclose(stop.trajectory.qd_radps[-1], 0.0)
+    run_until_finished(sequence, robot)
+    out = sequence.outcome
+    assert out.canceled and not out.success
+    assert "canceled during transfer" in out.failure_reason
+    assert np.max(np.abs(robot.qd)) < 0.02
+
+
+def test_cancel_while_closing_cancels_the_gripper(kin):
+    sequence, robot = make(kin), FakeRobot(kin, World())
+    run(sequence, robot, until=lambda r, s: s.phase == "close")
+    commands = sequence.cancel(robot.sim_s, robot.sim_s)
+    assert any(isinstance(c, CancelGripper) for c in commands)
+    robot.apply(commands, sequence)
+    run_until_finished(sequence, robot)
+    assert sequence.outcome.canceled and sequence.outcome.phase_reached == "close"
+
+
+@pytest.mark.parametrize("grasp, place, reason", [
+    (GraspTarget((1.2, 0.0, 0.05), 0.0, 0.05, 2e9), PLACE, "grasp outside the workspace"),
+    (GraspTarget((0.5, 0.0, -0.2), 0.0, 0.05, 2e9), PLACE, "below the table"),
+    (GraspTarget((0.05, 0.0, 0.05), 0.0, 0.05, 2e9), PLACE, "too close"),
+    (GraspTarget((float("nan"), 0.0, 0.05), 0.0, 0.05, 2e9), PLACE, "non-finite"),
+    (GRASP, PlaceTarget((0.0, -1.5, 0.1)), "place pose unreachable"),
+    (GraspTarget((0.5, 0.0, 0.05), 0.0, 0.2, 2e9), PLACE, "maximum opening"),
+    (GraspTarget((0.5, 0.0, 0.05), 0.0, 0.05, -1.0), PLACE, "Young's modulus"),
+])
+def test_bad_goals_fail_before_the_arm_moves(kin, grasp, place, reason):
+    sequence, robot = make(kin, grasp, place), FakeRobot(kin, World())
+    run(sequence, robot)
+    assert not sequence.outcome.success
+    assert reason in sequence.outcome.failure_reason
+    assert not any(isinstance(c, SendTrajectory) for c in robot.sent)
+
+
+def test_arm_that_does_not_follow_fails_after_the_settle_timeout(kin):
+    sequence, robot = make(kin), FakeRobot(kin, World())
+    robot.trajectory = None
+    original_apply = robot.apply
+
+    def ignore_trajectories(commands, seq):
+        original_apply([c for c in commands if not isinstance(c, SendTrajectory)], seq)
+    robot.apply = ignore_trajectories
+    run(sequence, robot)
+    assert "did not reach the pre_grasp target" in sequence.outcome.failure_reason
+
+
+def test_feedback_reports_phase_width_and_force(kin):
+    sequence, robot = make(kin), FakeRobot(kin, World(contact_height_m=0.03))
+    run(sequence, robot, until=lambda r, s: s.phase == "close")
+    feedback = sequence.feedback(robot.sim_s)
+    assert feedback.phase == "close"
+    assert 0.0 <= feedback.phase_progress <= 1.0
+    assert feedback.gripper_width_m == pytest.approx(robot.width_m)
+    assert feedback.external_force_n > CONFIG.contact_force_threshold_n
+
+
+def run_until_finished(sequence, robot, max_s: float = 30.0):
+    end = robot.sim_s + max_s
+    while not sequence.finished and robot.sim_s < end:
+        robot.step(sequence)
+    assert sequence.finished
