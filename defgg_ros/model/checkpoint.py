@@ -12,6 +12,7 @@ model files stay small.
 from __future__ import annotations
 
 import hashlib
+import os
 from pathlib import Path
 
 import torch
@@ -65,6 +66,7 @@ def save_checkpoint(path, network: GGCNN, data_fingerprint: str, meta: dict | No
     payload = checkpoint_payload(network, data_fingerprint, meta)
     with atomic_path(path) as tmp:
         torch.save(payload, tmp)
+        os.chmod(tmp, 0o644)  # mkstemp creates 0600; models are shared files
     return path
 
 
