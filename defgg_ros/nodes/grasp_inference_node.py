@@ -1,0 +1,276 @@
+"""grasp_inference_node: depth + stiffness (+camera_info) -> Def-GG-CNN grasps.
+
+Thin adapter over defgg_ros.model.inference.GraspPredictor:
+- synchronises depth, the segmentation node's stiffness image and
+  camera_info by exact stamp (defgg_ros.perception.sync, no message_filters);
+- on each synchronised frame (if `publish_on_sync`) publishes the best grasp,
+  the quality map (32FC1, depth-sized, 0 outside the network's crop) and a
+  MarkerArray with the two finger boxes;
+- serves PlanGrasp: empty request depth -> the latest synchronised frame;
+  otherwise the request's depth + camera_info with either its stiffness
+  image or its `objects` (then the depth is segmented here exactly like the
+  segmentation node does). Every bad request gets success=false + reason.
+"""
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import rclpy
+from defgg_interfaces.msg import Grasp
+from defgg_interfaces.srv import PlanGrasp
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from sensor_msgs.msg import CameraInfo, Image
+from visualization_msgs.msg import Marker, MarkerArray
+
+from defgg_ros import topics
+from defgg_ros.constants import GRIPPER_MAX_WIDTH_M
+from defgg_ros.model.inference import GraspPredictor
+from defgg_ros.nodes import qos
+from defgg_ros.nodes.conversions import (
+    camera_info_to_k,
+    check_same_size,
+    depth_msg_to_metres,
+    grasp_to_msg,
+    numpy_to_image,
+    pose_from_transform,
+    stamp_to_ns,
+    stiffness_msg_to_pa,
+    transform_from_list,
+    transform_from_pose,
+)
+from defgg_ros.perception.grasp_planning import (
+    PlanningError,
+    check_top_k,
+    finger_boxes_in_grasp,
+    full_quality_image,
+    labels_from_stiffness,
+)
+from defgg_ros.perception.segmentation import OBJECT_MIN_AREA_PX, OBJECT_MIN_HEIGHT_M
+from defgg_ros.perception.stiffness_assignment import check_entries_fit_image, make_entry
+from defgg_ros.perception.stiffness_segmenter import DEFAULT_YOUNGS_MODULUS_PA, SegmenterConfig, run_segmenter
+from defgg_ros.perception.sync import DEFAULT_CACHE_SIZE, StampSynchronizer
+
+WARN_THROTTLE_S = 2.0
+MODEL_FILES = {True: "defgg_cnn.pt", False: "ggcnn_depth_only.pt"}
+# Camera 0.40 m above the table at (0.5, 0, 0) in panda_link0, looking down
+# (pi about x) — the cell's scene files use the same mount.
+DEFAULT_BASE_T_CAMERA = [0.5, 0.0, 0.40, 1.0, 0.0, 0.0, 0.0]
+
+PARAMETERS = {
+    "model_path": ("", "Checkpoint to load; '' = the shipped models/defgg_cnn.pt (or ggcnn_depth_only.pt)."),
+    "use_stiffness": (True, "true: Def-GG-CNN (depth + stiffness); false: the depth-only GG-CNN baseline."),
+    "num_threads": (1, "torch intra-op threads for the network (the cell's CPU is shared)."),
+    "base_T_camera": (DEFAULT_BASE_T_CAMERA, "Camera optical frame in the base frame: [x, y, z, qx, qy, qz, qw]."),
+    "base_frame": (topics.BASE_FRAME, "Frame of Grasp.pose_base and of the markers."),
+    "depth_topic": (topics.DEPTH_IMAGE, "Depth image in (16UC1 mm or 32FC1 m)."),
+    "camera_info_topic": (topics.DEPTH_CAMERA_INFO, "CameraInfo of the depth image."),
+    "stiffness_topic": (topics.STIFFNESS_IMAGE, "32FC1 Young's modulus image (Pa) with the depth's stamps."),
+    "best_grasp_topic": (topics.BEST_GRASP, "Out: the best grasp of each synchronised frame."),
+    "quality_topic": (topics.QUALITY_IMAGE, "Out: 32FC1 grasp quality map, depth-sized."),
+    "markers_topic": (topics.GRASP_MARKERS, "Out: MarkerArray, two finger boxes at the best grasp."),
+    "plan_grasp_service": (topics.PLAN_GRASP_SERVICE, "PlanGrasp service name."),
+    "publish_on_sync": (True, "Run the network on every synchronised frame and publish the outputs."),
+    "sync_cache_size": (DEFAULT_CACHE_SIZE, "Frames kept per stream while waiting for a stamp match."),
+    "default_youngs_modulus_pa": (DEFAULT_YOUNGS_MODULUS_PA,
+                                  "For request depth without stiffness: modulus of objects no entry addresses."),
+    "min_object_height_m": (OBJECT_MIN_HEIGHT_M, "Segmentation of request depth: min height above table (m)."),
+    "min_object_area_px": (OBJECT_MIN_AREA_PX, "Segmentation of request depth: min object area (px)."),
+}
+
+
+def default_model_path(use_stiffness: bool) -> Path:
+    """The shipped checkpoint: the source tree's models/ or the installed share/defgg_ros/models/."""
+    name = MODEL_FILES[bool(use_stiffness)]
+    candidates = [Path(__file__).resolve().parents[2] / "models" / name,
+                  Path(sys.prefix) / "share" / "defgg_ros" / "models" / name]
+    return next((c for c in candidates if c.is_file()), candidates[0])
+
+
+class Frame:
+    """One planning input: converted arrays plus the depth header."""
+
+    def __init__(self, header, depth_m, youngs_modulus_pa, camera_k, labels):
+        self.header, self.depth_m, self.youngs_modulus_pa = header, depth_m, youngs_modulus_pa
+        self.camera_k, self.labels = camera_k, labels
+
+
+class GraspInferenceNode(Node):
+    def __init__(self, **kwargs):
+        super().__init__("grasp_inference_node", **kwargs)
+        for name, (default, description) in PARAMETERS.items():
+            self.declare_parameter(name, default, ParameterDescriptor(description=description, read_only=True))
+        p = {name: self.get_parameter(name).value for name in PARAMETERS}
+        self._p = p
+        self._base_T_camera = transform_from_list(p["base_T_camera"])
+        model_path = Path(p["model_path"]) if p["model_path"] else default_model_path(p["use_stiffness"])
+        self.predictor = GraspPredictor.from_checkpoint(model_path, num_threads=int(p["num_threads"]))
+        if self.predictor.uses_stiffness != bool(p["use_stiffness"]):
+            raise ValueError(f"{model_path} is a {'depth+stiffness' if self.predictor.uses_stiffness else 'depth-only'}"
+                             f" network but use_stiffness is {p['use_stiffness']}")
+        self._segmenter = SegmenterConfig(float(p["default_youngs_modulus_pa"]), (),
+                                          float(p["min_object_height_m"]), int(p["min_object_area_px"]))
+        self._predict_lock = threading.Lock()
+        self._state_lock = threading.Lock()
+        self._sync = StampSynchronizer(("depth", "stiffness", "info"), int(p["sync_cache_size"]))
+        self._latest_frame = None
+        self._latest_info = None
+        self.synced_frames = 0
+        self._grasp_pub = self.create_publisher(Grasp, p["best_grasp_topic"], qos.STATE)
+        self._quality_pub = self.create_publisher(Image, p["quality_topic"], qos.SENSOR_DATA)
+        self._marker_pub = self.create_publisher(MarkerArray, p["markers_topic"], qos.STATE)
+        self.create_subscription(Image, p["depth_topic"], lambda m: self._on_stream("depth", m), qos.SENSOR_DATA)
+        self.create_subscription(Image, p["stiffness_topic"], lambda m: self._on_stream("stiffness", m),
+                                 qos.SENSOR_DATA)
+        self.create_subscription(CameraInfo, p["camera_info_topic"], lambda m: self._on_stream("info", m),
+                                 qos.SENSOR_DATA)
+        self.create_service(PlanGrasp, p["plan_grasp_service"], self._on_plan_grasp)
+        self.get_logger().info(f"loaded {model_path} (runtime {self.predictor.runtime}, "
+                               f"stiffness {'on' if self.predictor.uses_stiffness else 'off'})")
+
+    # --- streams ------------------------------------------------------------
+    def _on_stream(self, stream: str, msg):
+        with self._state_lock:
+            if stream == "info":
+                self._latest_info = msg
+            matched = self._sync.add(stream, stamp_to_ns(msg.header.stamp), msg)
+        if matched is None:
+            return
+        try:
+            frame = self._frame_from_images(matched["depth"], matched["info"], matched["stiffness"])
+        except ValueError as exc:
+            self._warn(f"skipping synchronised frame: {exc}")
+            return
+        with self._state_lock:
+            self._latest_frame = frame
+            self.synced_frames += 1
+        if self._p["publish_on_sync"]:
+            self._plan_and_publish(frame)
+
+    def _plan_and_publish(self, frame: Frame):
+        try:
+            prediction, grasps, _ = self._plan(frame, top_k=1)
+        except ValueError as exc:
+            self._warn(f"no grasp for frame: {exc}")
+            return
+        quality = full_quality_image(prediction.q, prediction.crop_offset_px, frame.depth_m.shape)
+        self._quality_pub.publish(numpy_to_image(quality, "32FC1", frame.header))
+        if grasps:
+            self._grasp_pub.publish(grasps[0])
+            self._marker_pub.publish(self._markers(grasps[0]))
+
+    # --- PlanGrasp ----------------------------------------------------------
+    def _on_plan_grasp(self, request, response):
+        try:
+            top_k = check_top_k(request.top_k)
+            frame = self._frame_from_request(request)
+            _, grasps, seconds = self._plan(frame, top_k)
+        except ValueError as exc:  # ConversionError, PlanningError, predictor and segmentation errors
+            response.success, response.message = False, str(exc) or type(exc).__name__
+            return response
+        except Exception as exc:  # noqa: BLE001 - a service must answer, whatever broke
+            self.get_logger().error(f"plan_grasp failed unexpectedly: {exc!r}")
+            response.success, response.message = False, f"internal error: {exc!r}"
+            return response
+        response.success = True
+        response.grasps = grasps
+        response.inference_time_s = seconds
+        best = grasps[0]
+        response.message = (f"{len(grasps)} grasp(s); best q={best.quality:.3f} at ({best.center_u_px:.0f}, "
+                            f"{best.center_v_px:.0f}) px, width {best.width_m * 1000:.1f} mm, object {best.object_id}")
+        return response
+
+    def _frame_from_request(self, request) -> Frame:
+        if request.depth.width == 0 or request.depth.height == 0:
+            if request.stiffness.width or request.objects:
+                raise PlanningError("stiffness or objects were given without a depth image")
+            with self._state_lock:
+                frame = self._latest_frame
+            if frame is None:
+                raise PlanningError("empty request depth and no synchronised depth + stiffness + camera_info "
+                                    "received yet; send depth and camera_info in the request")
+            return frame
+        info = request.camera_info
+        if info.width == 0 and info.height == 0:
+            raise PlanningError("request has depth but no camera_info")
+        if request.stiffness.width or request.stiffness.height:
+            if request.objects:
+                raise PlanningError("give either a stiffness image or objects, not both")
+            return self._frame_from_images(request.depth, info, request.stiffness)
+        return self._frame_from_objects(request.depth, info, request.objects)
+
+    def _frame_from_images(self, depth_msg, info_msg, stiffness_msg) -> Frame:
+        check_same_size("depth", depth_msg, "camera_info", info_msg)
+        check_same_size("depth", depth_msg, "stiffness", stiffness_msg)
+        camera_k = camera_info_to_k(info_msg)
+        depth_m = depth_msg_to_metres(depth_msg)
+        youngs_modulus_pa = stiffness_msg_to_pa(stiffness_msg)
+        return Frame(depth_msg.header, depth_m, youngs_modulus_pa, camera_k, labels_from_stiffness(youngs_modulus_pa))
+
+    def _frame_from_objects(self, depth_msg, info_msg, objects) -> Frame:
+        check_same_size("depth", depth_msg, "camera_info", info_msg)
+        camera_k = camera_info_to_k(info_msg)
+        depth_m = depth_msg_to_metres(depth_msg)
+        entries = tuple(make_entry(o.name, o.youngs_modulus_pa, (o.roi.x_offset, o.roi.y_offset, o.roi.width,
+                                   o.roi.height), o.region_only) for o in objects)
+        check_entries_fit_image(entries, depth_msg.width, depth_msg.height)
+        config = SegmenterConfig(self._segmenter.default_youngs_modulus_pa, entries,
+                                 self._segmenter.min_height_m, self._segmenter.min_area_px)
+        out = run_segmenter(config, depth_m, camera_k)
+        if not out.segmentation.object_ids:
+            raise PlanningError("no object found above the table in the request depth")
+        return Frame(depth_msg.header, depth_m, out.youngs_modulus_pa, camera_k, out.labels)
+
+    def _plan(self, frame: Frame, top_k: int):
+        if not np.any(frame.labels):
+            raise PlanningError("the stiffness image has no object pixel (all background)")
+        start = time.perf_counter()
+        with self._predict_lock:
+            prediction = self.predictor.predict(frame.depth_m, frame.youngs_modulus_pa, frame.camera_k,
+                                                object_mask=frame.labels, top_k=top_k)
+        seconds = time.perf_counter() - start
+        if not prediction.candidates:
+            raise PlanningError("the network found no grasp on the objects")
+        grasps = [grasp_to_msg(c, frame.header, self._base_T_camera, self._p["base_frame"])
+                  for c in prediction.candidates]
+        for candidate in prediction.candidates:
+            if candidate.width_m > GRIPPER_MAX_WIDTH_M:
+                self._warn(f"grasp width {candidate.width_m * 1000:.0f} mm clipped to the hand's "
+                           f"{GRIPPER_MAX_WIDTH_M * 1000:.0f} mm")
+        return prediction, grasps, seconds
+
+    # --- visualisation ------------------------------------------------------
+    def _markers(self, grasp: Grasp) -> MarkerArray:
+        base_T_grasp = transform_from_pose(grasp.pose_base.pose)
+        markers = MarkerArray()
+        for index, (grasp_T_finger, size) in enumerate(finger_boxes_in_grasp(grasp.width_m)):
+            marker = Marker(header=grasp.pose_base.header, ns="defgg_grasp", id=index, type=Marker.CUBE,
+                            action=Marker.ADD, pose=pose_from_transform(base_T_grasp @ grasp_T_finger))
+            marker.scale.x, marker.scale.y, marker.scale.z = size
+            marker.color.r, marker.color.g, marker.color.a = float(1.0 - grasp.quality), float(grasp.quality), 0.8
+            markers.markers.append(marker)
+        return markers
+
+    def _warn(self, text: str):
+        self.get_logger().warning(text, throttle_duration_sec=WARN_THROTTLE_S)
+
+
+def main(args=None):
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = GraspInferenceNode()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == "__main__":
+    main()
