@@ -1,0 +1,374 @@
+"""executor_node: the PickAndPlace action server, a thin adapter over the pure sequence.
+
+All decisions live in `defgg_ros.control.pick_place.PickPlaceSequence`; this
+node only translates: goals and grasps in, JointTrajectory messages and
+gripper action goals out, joint states / external wrench / gripper results
+back into the sequence, feedback and results to the client.
+
+Threads: the action's execute callback runs the control loop (wall-clock
+period, so the driver watchdog fires even when sim time has stopped) in a
+reentrant callback group on a MultiThreadedExecutor; subscriptions and
+action-client callbacks feed the sequence under one lock. One goal at a
+time: goals arriving while busy are rejected (the reason is logged).
+"""
+import math
+import threading
+import time
+
+import numpy as np
+import rclpy
+from builtin_interfaces.msg import Duration
+from defgg_interfaces.action import GripperGrasp, GripperMove, PickAndPlace
+from defgg_interfaces.srv import PlanGrasp
+from geometry_msgs.msg import WrenchStamped
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
+from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+from defgg_ros import topics
+from defgg_ros.constants import PANDA_FINGER_JOINT_NAMES, PANDA_JOINT_NAMES, PREGRASP_HEIGHT_M
+from defgg_ros.control.kinematics import PandaKinematics
+from defgg_ros.control.pick_place import PickPlaceSequence
+from defgg_ros.control.poses import PoseError, top_down_yaw
+from defgg_ros.control.sequence_types import (
+    ArmState,
+    CancelGripper,
+    GraspGripper,
+    GraspTarget,
+    MoveGripper,
+    PlaceTarget,
+    SendTrajectory,
+    SequenceConfig,
+)
+from defgg_ros.control.trajectories import LIMITS_SAFETY_SCALE, SAMPLE_DT_S
+from defgg_ros.nodes import qos
+from defgg_ros.nodes.conversions import ConversionError, transform_from_pose
+
+_DEFAULTS = SequenceConfig()
+PARAMETERS = {
+    "action_name": (topics.PICK_AND_PLACE_ACTION, "PickAndPlace action served here."),
+    "joint_states_topic": (topics.JOINT_STATES, "In: sensor_msgs/JointState of the arm and fingers."),
+    "joint_trajectory_topic": (topics.JOINT_TRAJECTORY, "Out: trajectory_msgs/JointTrajectory for the arm."),
+    "external_wrench_topic": (topics.EXTERNAL_WRENCH, "In: geometry_msgs/WrenchStamped, external force (N)."),
+    "gripper_move_action": (topics.GRIPPER_MOVE_ACTION, "GripperMove action of the hand driver."),
+    "gripper_grasp_action": (topics.GRIPPER_GRASP_ACTION, "GripperGrasp action of the hand driver."),
+    "plan_grasp_service": (topics.PLAN_GRASP_SERVICE, "PlanGrasp service used when a goal sets plan_grasp."),
+    "base_frame": (topics.BASE_FRAME, "Frame of grasp and place poses (the arm's base)."),
+    "place_position_m": ([0.35, -0.45, 0.12], "Default place pose (the bin): TCP position [x, y, z] in base (m)."),
+    "place_yaw_rad": (0.0, "Default place pose: finger closing direction about the vertical (rad)."),
+    "table_z_m": (_DEFAULTS.table_z_m, "Height of the table surface in the base frame (m)."),
+    "limits_scale": (LIMITS_SAFETY_SCALE, "Fraction (0, 1] of the Panda's velocity/acceleration/jerk limits."),
+    "pregrasp_height_m": (PREGRASP_HEIGHT_M, "Pre-grasp height above the grasp (m)."),
+    "descent_speed_mps": (_DEFAULTS.descent_speed_mps, "TCP speed of the guarded descent (m/s)."),
+    "line_speed_mps": (_DEFAULTS.line_speed_mps, "TCP speed of lift, place and retreat lines (m/s)."),
+    "lift_height_m": (_DEFAULTS.lift_height_m, "Lift height after closing (m)."),
+    "place_approach_height_m": (_DEFAULTS.place_approach_height_m, "Transfer ends this high above the place pose (m)."),
+    "contact_force_threshold_n": (_DEFAULTS.contact_force_threshold_n,
+                                  "External force change that counts as contact during the descent (N)."),
+    "watchdog_timeout_s": (_DEFAULTS.watchdog_timeout_s, "Abort when no joint states for this long (wall clock, s)."),
+    "arrival_joint_atol_rad": (_DEFAULTS.arrival_joint_atol_rad, "A motion has arrived within this joint error (rad)."),
+    "settle_timeout_s": (_DEFAULTS.settle_timeout_s, "Fail if not arrived this long after a trajectory ends (s)."),
+    "gripper_timeout_s": (_DEFAULTS.gripper_timeout_s, "Fail if a gripper command takes longer (robot clock, s)."),
+    "slip_width_fraction": (_DEFAULTS.slip_width_fraction,
+                            "Dropped if the held width falls below this fraction of the closed width."),
+    "trajectory_sample_dt_s": (SAMPLE_DT_S, "Time between JointTrajectory points (s)."),
+    "default_youngs_modulus_pa": (2e6, "Modulus for the gripper rule when a grasp carries none (Pa)."),
+    "control_period_s": (0.01, "Control loop period (wall clock, s)."),
+    "server_wait_s": (5.0, "How long to wait for the gripper actions / grasp service to appear (s)."),
+    "plan_grasp_timeout_s": (20.0, "How long a PlanGrasp call may take (s)."),
+}
+
+
+class GoalError(ValueError):
+    """A goal the executor cannot work with (the message says why)."""
+
+
+def trajectory_to_msg(trajectory, frame_id: str) -> JointTrajectory:
+    msg = JointTrajectory()
+    msg.header.frame_id = frame_id  # stamp zero: start on receipt
+    msg.joint_names = list(PANDA_JOINT_NAMES)
+    for t, q, qd, qdd in zip(trajectory.times_s, trajectory.q_rad, trajectory.qd_radps, trajectory.qdd_radps2):
+        sec = int(math.floor(t))
+        msg.points.append(JointTrajectoryPoint(
+            positions=q.tolist(), velocities=qd.tolist(), accelerations=qdd.tolist(),
+            time_from_start=Duration(sec=sec, nanosec=int(round((t - sec) * 1e9)) % 1_000_000_000)))
+    return msg
+
+
+def joint_state_to_arm(msg: JointState) -> ArmState:
+    index = {name: i for i, name in enumerate(msg.name)}
+    missing = [n for n in PANDA_JOINT_NAMES if n not in index]
+    if missing:
+        raise GoalError(f"joint state lacks {missing}")
+    q = np.array([msg.position[index[n]] for n in PANDA_JOINT_NAMES])
+    has_velocity = len(msg.velocity) == len(msg.name)
+    qd = np.array([msg.velocity[index[n]] for n in PANDA_JOINT_NAMES]) if has_velocity else np.zeros(7)
+    fingers = [msg.position[index[n]] for n in PANDA_FINGER_JOINT_NAMES if n in index]
+    width = float(sum(fingers)) if len(fingers) == 2 else float("nan")
+    return ArmState(q, qd, width)
+
+
+def grasp_target(grasp, base_frame: str, default_modulus_pa: float) -> GraspTarget:
+    frame = grasp.pose_base.header.frame_id
+    if frame not in ("", base_frame):
+        raise GoalError(f"grasp pose is in frame '{frame}', expected '{base_frame}'")
+    try:
+        base_M_tcp = transform_from_pose(grasp.pose_base.pose)
+        yaw = top_down_yaw(base_M_tcp)
+    except (ConversionError, PoseError) as error:
+        raise GoalError(f"bad grasp pose: {error}") from error
+    modulus = grasp.youngs_modulus_pa if grasp.youngs_modulus_pa > 0 else default_modulus_pa
+    return GraspTarget(tuple(base_M_tcp[:3, 3]), yaw, float(grasp.width_m), float(modulus))
+
+
+def place_target(pose_stamped, base_frame: str, default_position, default_yaw: float) -> PlaceTarget:
+    """Place pose of a goal; an empty frame_id means the configured bin.
+
+    The orientation is a top-down TCP orientation; an identity (or all-zero)
+    quaternion means 'position only' and keeps the default yaw.
+    """
+    frame = pose_stamped.header.frame_id
+    if frame == "":
+        return PlaceTarget(tuple(default_position), default_yaw)
+    if frame != base_frame:
+        raise GoalError(f"place pose is in frame '{frame}', expected '{base_frame}'")
+    p, o = pose_stamped.pose.position, pose_stamped.pose.orientation
+    position = (p.x, p.y, p.z)
+    if not all(math.isfinite(v) for v in position):
+        raise GoalError(f"place position has non-finite values: {position}")
+    if (o.x, o.y, o.z) == (0.0, 0.0, 0.0) and o.w in (0.0, 1.0):
+        return PlaceTarget(position, default_yaw)
+    try:
+        return PlaceTarget(position, top_down_yaw(transform_from_pose(pose_stamped.pose)))
+    except (ConversionError, PoseError) as error:
+        raise GoalError(f"bad place pose: {error}") from error
+
+
+class ExecutorNode(Node):
+    def __init__(self, **kwargs):
+        super().__init__("executor_node", **kwargs)
+        for name, (default, description) in PARAMETERS.items():
+            self.declare_parameter(name, default, ParameterDescriptor(description=description))
+        p = self._params()
+        self._config = self._sequence_config(p)  # invalid start-up parameters raise here
+        self._kin = PandaKinematics()
+        self._group = ReentrantCallbackGroup()
+        self._lock = threading.Lock()
+        self._shutdown = threading.Event()
+        self._busy = False
+        self._sequence: PickPlaceSequence | None = None
+        self._gripper_goal = None
+        self._last_state: tuple[ArmState, float] | None = None
+        self._last_force = np.zeros(3)
+        self._traj_pub = self.create_publisher(JointTrajectory, p["joint_trajectory_topic"], qos.COMMAND)
+        self.create_subscription(JointState, p["joint_states_topic"], self._on_joint_state, qos.STATE,
+                                 callback_group=self._group)
+        self.create_subscription(WrenchStamped, p["external_wrench_topic"], self._on_wrench, qos.STATE,
+                                 callback_group=self._group)
+        self._move_client = ActionClient(self, GripperMove, p["gripper_move_action"], callback_group=self._group)
+        self._grasp_client = ActionClient(self, GripperGrasp, p["gripper_grasp_action"], callback_group=self._group)
+        self._plan_client = self.create_client(PlanGrasp, p["plan_grasp_service"], callback_group=self._group)
+        self._server = ActionServer(self, PickAndPlace, p["action_name"], self._execute, callback_group=self._group,
+                                    goal_callback=self._on_goal, cancel_callback=lambda _: CancelResponse.ACCEPT)
+
+    def _params(self) -> dict:
+        return {name: self.get_parameter(name).value for name in PARAMETERS}
+
+    @staticmethod
+    def _sequence_config(p: dict) -> SequenceConfig:
+        if len(p["place_position_m"]) != 3:
+            raise ValueError(f"place_position_m must have 3 values, got {p['place_position_m']}")
+        config = SequenceConfig(
+            table_z_m=float(p["table_z_m"]), limits_scale=float(p["limits_scale"]),
+            pregrasp_height_m=float(p["pregrasp_height_m"]), descent_speed_mps=float(p["descent_speed_mps"]),
+            line_speed_mps=float(p["line_speed_mps"]), lift_height_m=float(p["lift_height_m"]),
+            place_approach_height_m=float(p["place_approach_height_m"]),
+            contact_force_threshold_n=float(p["contact_force_threshold_n"]),
+            watchdog_timeout_s=float(p["watchdog_timeout_s"]),
+            arrival_joint_atol_rad=float(p["arrival_joint_atol_rad"]),
+            settle_timeout_s=float(p["settle_timeout_s"]), gripper_timeout_s=float(p["gripper_timeout_s"]),
+            slip_width_fraction=float(p["slip_width_fraction"]), sample_dt_s=float(p["trajectory_sample_dt_s"]))
+        config.validate()
+        return config
+
+    def destroy_node(self):
+        self._shutdown.set()  # ends a running control loop
+        return super().destroy_node()
+
+    # --- inputs -------------------------------------------------------------
+    def _on_joint_state(self, msg: JointState):
+        try:
+            state = joint_state_to_arm(msg)
+        except (GoalError, IndexError) as error:
+            self.get_logger().warning(f"ignoring joint state: {error}", throttle_duration_sec=2.0)
+            return
+        with self._lock:
+            self._last_state = (state, time.monotonic())
+            if self._sequence is not None:
+                self._sequence.on_joint_state(state, self._last_state[1])
+
+    def _on_wrench(self, msg: WrenchStamped):
+        force = np.array([msg.wrench.force.x, msg.wrench.force.y, msg.wrench.force.z])
+        if not np.all(np.isfinite(force)):
+            return
+        with self._lock:
+            self._last_force = force
+            if self._sequence is not None:
+                self._sequence.on_force(force)
+
+    # --- goals --------------------------------------------------------------
+    def _on_goal(self, goal) -> GoalResponse:
+        with self._lock:
+            if self._busy:
+                self.get_logger().warning("rejecting pick-and-place goal: busy with another goal")
+                return GoalResponse.REJECT
+            self._busy = True
+        return GoalResponse.ACCEPT
+
+    def _execute(self, goal_handle):
+        started = time.monotonic()
+        result = PickAndPlace.Result()
+        try:
+            result.grasp_used = grasp = self._resolve_grasp(goal_handle.request)
+            p = self._params()
+            sequence = PickPlaceSequence(
+                self._kin, self._config, grasp_target(grasp, p["base_frame"], p["default_youngs_modulus_pa"]),
+                place_target(goal_handle.request.place_pose, p["base_frame"], p["place_position_m"],
+                             p["place_yaw_rad"]))
+            self._wait_for_gripper(p["server_wait_s"])
+            return self._run(goal_handle, sequence, result)
+        except (GoalError, ValueError) as error:
+            result.success, result.failure_reason, result.phase_reached = False, str(error), "pre_grasp"
+            result.duration_s = time.monotonic() - started
+            self.get_logger().warning(f"pick-and-place aborted: {error}")
+            goal_handle.abort()
+            return result
+        finally:
+            with self._lock:
+                self._sequence, self._busy = None, False
+
+    def _resolve_grasp(self, request):
+        if not request.plan_grasp:
+            return request.grasp
+        p = self._params()
+        if not self._plan_client.wait_for_service(timeout_sec=p["server_wait_s"]):
+            raise GoalError(f"grasp service {p['plan_grasp_service']} is not available")
+        done = threading.Event()
+        future = self._plan_client.call_async(PlanGrasp.Request(top_k=1))
+        future.add_done_callback(lambda _: done.set())
+        if not done.wait(p["plan_grasp_timeout_s"]):
+            self._plan_client.remove_pending_request(future)
+            raise GoalError(f"grasp service did not answer within {p['plan_grasp_timeout_s']:.0f} s")
+        response = future.result()
+        if not response.success or not response.grasps:
+            raise GoalError(f"grasp planning failed: {response.message or 'no grasp returned'}")
+        return response.grasps[0]
+
+    def _wait_for_gripper(self, timeout_s: float):
+        for client, name in ((self._move_client, "gripper_move_action"), (self._grasp_client, "gripper_grasp_action")):
+            if not client.wait_for_server(timeout_sec=timeout_s):
+                raise GoalError(f"gripper action {self._params()[name]} is not available")
+
+    # --- the control loop ---------------------------------------------------
+    def _clocks(self) -> tuple[float, float]:
+        return self.get_clock().now().nanoseconds * 1e-9, time.monotonic()
+
+    def _run(self, goal_handle, sequence: PickPlaceSequence, result):
+        period = float(self._params()["control_period_s"])
+        with self._lock:
+            self._sequence = sequence
+            if self._last_state is not None:
+                sequence.on_joint_state(*self._last_state)
+            sequence.on_force(self._last_force)
+            self._carry_out(sequence, sequence.start(*self._clocks()))
+        cancel_sent = False
+        while not sequence.finished:
+            if self._shutdown.wait(period):
+                raise GoalError("executor is shutting down")
+            with self._lock:
+                if goal_handle.is_cancel_requested and not cancel_sent:
+                    cancel_sent = True
+                    self._carry_out(sequence, sequence.cancel(*self._clocks()))
+                self._carry_out(sequence, sequence.tick(*self._clocks()))
+                feedback = sequence.feedback(self._clocks()[0])
+            goal_handle.publish_feedback(PickAndPlace.Feedback(
+                phase=feedback.phase, phase_progress=feedback.phase_progress,
+                gripper_width_m=feedback.gripper_width_m, external_force_n=feedback.external_force_n))
+        return self._finish(goal_handle, sequence.outcome, result)
+
+    def _finish(self, goal_handle, outcome, result):
+        for field in ("success", "failure_reason", "phase_reached", "contact_detected", "contact_height_m",
+                      "gripper_width_closed_m", "gripper_force_n", "held_after_lift", "held_after_transfer",
+                      "duration_s"):
+            setattr(result, field, getattr(outcome, field))
+        if outcome.success:
+            goal_handle.succeed()
+        elif outcome.canceled:
+            goal_handle.canceled()
+        else:
+            goal_handle.abort()
+        log = self.get_logger().info if outcome.success else self.get_logger().warning
+        log(f"pick-and-place {'done' if outcome.success else 'ended: ' + outcome.failure_reason} "
+            f"(phase {outcome.phase_reached}, {outcome.duration_s:.1f} s)")
+        return result
+
+    def _carry_out(self, sequence: PickPlaceSequence, commands):
+        """Execute the sequence's commands (called with the lock held)."""
+        for command in commands:
+            if isinstance(command, SendTrajectory):
+                self._traj_pub.publish(trajectory_to_msg(command.trajectory, self._params()["base_frame"]))
+            elif isinstance(command, MoveGripper):
+                goal = GripperMove.Goal(width=command.width_m, speed=command.speed_mps)
+                self._send_gripper(sequence, self._move_client, goal)
+            elif isinstance(command, GraspGripper):
+                c = command.command
+                goal = GripperGrasp.Goal(width=c.width_m, epsilon_inner=c.epsilon_inner_m,
+                                         epsilon_outer=c.epsilon_outer_m, speed=c.speed_mps, force=c.force_n)
+                self._send_gripper(sequence, self._grasp_client, goal)
+            elif isinstance(command, CancelGripper) and self._gripper_goal is not None:
+                self._gripper_goal.cancel_goal_async()
+                self._gripper_goal = None
+
+    def _send_gripper(self, sequence: PickPlaceSequence, client: ActionClient, goal):
+        def on_result(future):
+            result = future.result().result
+            with self._lock:
+                if self._sequence is sequence:  # a late result of an earlier goal must not leak in
+                    sequence.on_gripper_result(result.success, result.width, result.error)
+
+        def on_goal(future):
+            handle = future.result()
+            if not handle.accepted:
+                with self._lock:
+                    if self._sequence is sequence:
+                        sequence.on_gripper_result(False, float("nan"), "gripper goal rejected")
+                return
+            with self._lock:
+                self._gripper_goal = handle
+            handle.get_result_async().add_done_callback(on_result)
+
+        client.send_goal_async(goal).add_done_callback(on_goal)
+
+
+def main(args=None):
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = ExecutorNode()
+        executor = MultiThreadedExecutor(num_threads=4)
+        executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == "__main__":
+    main()
