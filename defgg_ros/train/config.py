@@ -1,0 +1,39 @@
+"""Training hyper-parameters in one dataclass (stored with every run)."""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+from defgg_ros.data.augment import AugmentConfig
+from defgg_ros.model.network import GGCNNConfig
+
+
+@dataclass
+class TrainConfig:
+    uses_stiffness: bool = True
+    architecture: str = GGCNNConfig.architecture
+    epochs: int = 30
+    batch_size: int = 8
+    learning_rate: float = 1e-3
+    # Augmented copies of each training scene per epoch (the paper grew 120
+    # object x modulus scenes to 5,400 images, i.e. 45 per scene, overall).
+    samples_per_scene: int = 8
+    seed: int = 0
+    val_fraction: float = 0.15
+    test_fraction: float = 0.15
+    augment: AugmentConfig = field(default_factory=AugmentConfig)
+    max_steps: int | None = None   # stop early (smoke tests); None = all epochs
+
+    def network_config(self) -> GGCNNConfig:
+        return GGCNNConfig(input_channels=2 if self.uses_stiffness else 1, architecture=self.architecture)
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["augment"]["zoom_range"] = list(self.augment.zoom_range)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict) -> TrainConfig:
+        d = dict(d)
+        aug = dict(d.pop("augment"))
+        aug["zoom_range"] = tuple(aug["zoom_range"])
+        return cls(augment=AugmentConfig(**aug), **d)

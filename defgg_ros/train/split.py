@@ -1,0 +1,35 @@
+"""Split scenes by OBJECT, never by image: every modulus and every augmented
+copy of an object lands in the same split, so validation and test objects
+are unseen shapes in training."""
+from __future__ import annotations
+
+import numpy as np
+
+SPLITS = ("train", "val", "test")
+
+
+def split_objects(object_names, val_fraction: float, test_fraction: float, seed: int) -> dict:
+    """{split: sorted object names}; val/test get at least one object each
+    when there are at least three objects."""
+    names = sorted(set(object_names))
+    if len(names) < 3:
+        raise ValueError(f"need at least 3 distinct objects to split train/val/test, got {len(names)}")
+    if not (0 < val_fraction < 1 and 0 < test_fraction < 1 and val_fraction + test_fraction < 1):
+        raise ValueError("val_fraction and test_fraction must be in (0, 1) and sum below 1")
+    order = np.random.default_rng(seed).permutation(len(names))
+    n_val = max(1, round(val_fraction * len(names)))
+    n_test = max(1, round(test_fraction * len(names)))
+    n_val = min(n_val, len(names) - 2)
+    n_test = min(n_test, len(names) - 1 - n_val)
+    shuffled = [names[i] for i in order]
+    return {"val": sorted(shuffled[:n_val]), "test": sorted(shuffled[n_val:n_val + n_test]),
+            "train": sorted(shuffled[n_val + n_test:])}
+
+
+def split_scenes(scene_objects: dict, object_split: dict) -> dict:
+    """scene_objects: {scene_id: object_name} -> {split: sorted scene ids}."""
+    where = {name: split for split, names in object_split.items() for name in names}
+    out = {split: [] for split in SPLITS}
+    for sid, name in sorted(scene_objects.items()):
+        out[where[name]].append(sid)
+    return out
