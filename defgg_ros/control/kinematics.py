@@ -180,13 +180,17 @@ class PandaKinematics:
         """
         seed = self.q_ready_rad if q_seed_rad is None else self._check_q(q_seed_rad)
         candidates, errors = [], []
-        for yaw in (wrap_angle(yaw_rad), wrap_angle(yaw_rad + math.pi)):
-            try:
-                result = self.ik(top_down_pose(position_m, yaw), seed)
-            except IKError as error:
-                errors.append(error)
-                continue
-            candidates.append((float(np.linalg.norm(result.q_rad - seed)), result, yaw))
+        # Random restarts are expensive: only when neither yaw converges from the seed.
+        for restarts in (0, IK_RESTARTS):
+            for yaw in (wrap_angle(yaw_rad), wrap_angle(yaw_rad + math.pi)):
+                try:
+                    result = self.ik(top_down_pose(position_m, yaw), seed, restarts=restarts)
+                except IKError as error:
+                    errors.append(error)
+                    continue
+                candidates.append((float(np.linalg.norm(result.q_rad - seed)), result, yaw))
+            if candidates:
+                break
         if not candidates:
             raise min(errors, key=lambda e: e.residual_m + e.residual_rad)
         _, result, yaw = min(candidates, key=lambda c: c[0])
