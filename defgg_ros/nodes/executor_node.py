@@ -242,14 +242,23 @@ class ExecutorNode(Node):
             self._wait_for_gripper(p["server_wait_s"])
             return self._run(goal_handle, sequence, result)
         except (GoalError, ValueError) as error:
-            result.success, result.failure_reason, result.phase_reached = False, str(error), "pre_grasp"
-            result.duration_s = time.monotonic() - started
-            self.get_logger().warning(f"pick-and-place aborted: {error}")
-            goal_handle.abort()
-            return result
+            return self._abort(goal_handle, result, str(error), started)
+        except Exception as error:  # noqa: BLE001 - a bug must not take the action server down
+            self.get_logger().error(f"pick-and-place failed unexpectedly: {error!r}")
+            with self._lock:
+                self._traj_pub.publish(JointTrajectory(joint_names=list(PANDA_JOINT_NAMES)))  # hold
+            return self._abort(goal_handle, result, f"internal error: {error!r}", started)
         finally:
             with self._lock:
                 self._sequence, self._busy = None, False
+
+    def _abort(self, goal_handle, result, reason: str, started: float):
+        result.success, result.failure_reason = False, reason
+        result.phase_reached = result.phase_reached or "pre_grasp"
+        result.duration_s = time.monotonic() - started
+        self.get_logger().warning(f"pick-and-place aborted: {reason}")
+        goal_handle.abort()
+        return result
 
     def _resolve_grasp(self, request):
         if not request.plan_grasp:
