@@ -182,11 +182,11 @@ class Trainer:
             loss.backward()
             self.optimizer.step()
             self.running["seconds"] += time.perf_counter() - t0
-            self.running["loss_sum"] += float(loss) * len(batch["x"])
+            self.running["loss_sum"] += float(loss.detach()) * len(batch["x"])
             self.running["images"] += len(batch["x"])
             self.batch += 1
             self.global_step += 1
-            bar.set_postfix(loss=f"{float(loss):.4f}")
+            bar.set_postfix(loss=f"{float(loss.detach()):.4f}")
             if self.checkpoint_every and self.global_step % self.checkpoint_every == 0:
                 self._save_state()
             if self._step_limit_reached():
