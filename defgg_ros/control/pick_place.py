@@ -36,7 +36,14 @@ from defgg_ros.control.sequence_types import (
     _Pending,
     _Plan,
 )
-from defgg_ros.control.trajectories import check_trajectory, panda_limits, plan_joint_motion, plan_line, plan_stop
+from defgg_ros.control.trajectories import (
+    check_trajectory,
+    panda_limits,
+    plan_joint_motion,
+    plan_joint_via,
+    plan_line,
+    plan_stop,
+)
 
 # The arm counts as still below this joint speed (ending a guarded stop).
 STILL_SPEED_RADPS = 0.02
@@ -297,14 +304,29 @@ class PickPlaceSequence:
             return []
         self.outcome.held_after_lift = True
         self._phase = "transfer"
-        q = self._obs.state.q_rad
+        return self._send(self._transfer_motion(self._obs.state.q_rad), sim_s)
+
+    def _transfer_motion(self, q: np.ndarray):
         approach_M = self._plan.place_M.copy()
         approach_M[2, 3] += self._cfg.place_approach_height_m
         try:  # seeded from here for a short motion; the pre-planned solution is the fallback
             target = self._kin.ik(approach_M, q, restarts=0).q_rad
         except KinematicsError:
             target = self._plan.place_approach_q
-        return self._send(plan_joint_motion(q, target, self._limits, dt_s=self._cfg.sample_dt_s), sim_s)
+        direct = plan_joint_motion(q, target, self._limits, dt_s=self._cfg.sample_dt_s)
+        if self._cfg.transfer_via_position_m is None:
+            return direct
+        try:
+            via_M = self._kin.fk(q)
+            via_M[:3, 3] = self._cfg.transfer_via_position_m
+            q_via = self._kin.ik(via_M, q, restarts=0).q_rad
+            through = plan_joint_via(q, q_via, target, self._limits, dt_s=self._cfg.sample_dt_s)
+            check_trajectory(through, self._limits, self._kin, self._cfg.table_z_m)
+            return through
+        except KinematicsError:
+            # A via the arm cannot pass from here (or that breaks a limit) must
+            # not cost the pick: go straight instead.
+            return direct
 
     def _tick_transfer(self, sim_s: float) -> list:
         self._check_held()

@@ -28,6 +28,10 @@ class SequenceConfig:
     # Held object: width may not fall below this fraction of the closed width.
     slip_width_fraction: float = 0.5
     sample_dt_s: float = SAMPLE_DT_S
+    # The transfer passes this TCP position (base frame) without stopping, so
+    # the held object sees a predefined path with real accelerations (the
+    # paper's real-robot test); None: straight joint motion to the place.
+    transfer_via_position_m: tuple | None = None
 
     def validate(self) -> None:
         positive = ("pregrasp_height_m", "descent_speed_mps", "line_speed_mps", "lift_height_m",
@@ -39,6 +43,9 @@ class SequenceConfig:
                 raise ValueError(f"{name} must be a positive number, got {value}")
         if not 0.0 < self.limits_scale <= 1.0:
             raise ValueError(f"limits_scale must be in (0, 1], got {self.limits_scale}")
+        via = self.transfer_via_position_m
+        if via is not None and (len(via) != 3 or not all(math.isfinite(v) for v in via)):
+            raise ValueError(f"transfer_via_position_m must be 3 finite numbers, got {via}")
         if not 0.0 <= self.slip_width_fraction < 1.0:
             raise ValueError(f"slip_width_fraction must be in [0, 1), got {self.slip_width_fraction}")
 

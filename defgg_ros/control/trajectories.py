@@ -35,6 +35,8 @@ SAMPLE_DT_S = 0.02
 # and finite differences), nothing more.
 LIMIT_RTOL = 1e-6
 JOINT_ATOL = 1e-6  # rad, position limit slack in checks
+# Passing a via point: the slowest joint goes through at this fraction of its velocity limit.
+VIA_SPEED_FRACTION = 0.5
 # Straight lines: IK grid spacing and the largest joint jump allowed between
 # neighbouring grid points (a larger one means a branch switch/singularity).
 LINE_GRID_STEP_M = 0.005
@@ -148,21 +150,61 @@ def _joint_input(limits: JointLimits, q_start, qd_start, qdd_start) -> InputPara
     return inp
 
 
+def _check_joints(name: str, q_rad, limits: JointLimits) -> np.ndarray:
+    q = np.asarray(q_rad, dtype=float)
+    if q.shape != (7,) or not np.all(np.isfinite(q)):
+        raise TrajectoryError(f"joint motion {name} must be 7 finite values, got {q.tolist()}")
+    if np.any(q < limits.q_min_rad - JOINT_ATOL) or np.any(q > limits.q_max_rad + JOINT_ATOL):
+        raise TrajectoryError(f"joint motion {name} is outside the joint limits: {np.round(q, 4).tolist()}")
+    return q
+
+
 def plan_joint_motion(q_start, q_goal, limits: JointLimits, qd_start=None, qdd_start=None,
                       dt_s: float = SAMPLE_DT_S) -> SampledTrajectory:
     """Time-optimal jerk-limited motion from a state to rest at q_goal."""
-    q0, q1 = np.asarray(q_start, dtype=float), np.asarray(q_goal, dtype=float)
-    for name, q in (("start", q0), ("goal", q1)):
-        if q.shape != (7,) or not np.all(np.isfinite(q)):
-            raise TrajectoryError(f"joint motion {name} must be 7 finite values, got {q.tolist()}")
-        if np.any(q < limits.q_min_rad - JOINT_ATOL) or np.any(q > limits.q_max_rad + JOINT_ATOL):
-            raise TrajectoryError(f"joint motion {name} is outside the joint limits: {np.round(q, 4).tolist()}")
+    q0 = _check_joints("start", q_start, limits)
+    q1 = _check_joints("goal", q_goal, limits)
     zeros = np.zeros(7)
     inp = _joint_input(limits, q0, zeros if qd_start is None else qd_start, zeros if qdd_start is None else qdd_start)
     inp.target_position = q1.tolist()
     inp.target_velocity = zeros.tolist()
     inp.target_acceleration = zeros.tolist()
     return _sample_ruckig(_calculate(inp, "joint motion"), dt_s)
+
+
+def _plan_to_state(q_start, qd_start, q_goal, qd_goal, limits: JointLimits) -> Trajectory:
+    inp = _joint_input(limits, q_start, qd_start, np.zeros(7))
+    inp.target_position = np.asarray(q_goal, dtype=float).tolist()
+    inp.target_velocity = np.asarray(qd_goal, dtype=float).tolist()
+    inp.target_acceleration = np.zeros(7).tolist()
+    return _calculate(inp, "joint motion through a via point")
+
+
+def via_velocity(q_start, q_via, q_goal, limits: JointLimits, fraction: float = VIA_SPEED_FRACTION) -> np.ndarray:
+    """Joint velocity to pass q_via with: along the overall motion, zero for joints that turn back there."""
+    q0, q1, q2 = (np.asarray(q, dtype=float) for q in (q_start, q_via, q_goal))
+    through = (q1 - q0) * (q2 - q1) > 0
+    total = q2 - q0
+    # Scaled so the joint needing the longest time at full speed passes at `fraction` of its limit.
+    reference_time_s = float(np.max(np.abs(total) / limits.qd_max_radps))
+    if reference_time_s <= 0:
+        return np.zeros(7)
+    return np.where(through, fraction * total / reference_time_s, 0.0)
+
+
+def plan_joint_via(q_start, q_via, q_goal, limits: JointLimits, dt_s: float = SAMPLE_DT_S,
+                   fraction: float = VIA_SPEED_FRACTION) -> SampledTrajectory:
+    """Rest -> through q_via without stopping -> rest at q_goal (two Ruckig segments joined at the via)."""
+    q_start, q_via, q_goal = (_check_joints(name, q, limits) for name, q in
+                              (("start", q_start), ("via", q_via), ("goal", q_goal)))
+    v_via = via_velocity(q_start, q_via, q_goal, limits, fraction)
+    first = _plan_to_state(q_start, np.zeros(7), q_via, v_via, limits)
+    second = _plan_to_state(q_via, v_via, q_goal, np.zeros(7), limits)
+    a, b = _sample_ruckig(first, dt_s), _sample_ruckig(second, dt_s)
+    # The via sample ends the first part and starts the second: keep it once.
+    return SampledTrajectory(np.concatenate([a.times_s, b.times_s[1:] + a.duration_s]),
+                             np.vstack([a.q_rad, b.q_rad[1:]]), np.vstack([a.qd_radps, b.qd_radps[1:]]),
+                             np.vstack([a.qdd_radps2, b.qdd_radps2[1:]]))
 
 
 def plan_stop(q_rad, qd_radps, qdd_radps2, limits: JointLimits, dt_s: float = SAMPLE_DT_S) -> SampledTrajectory:

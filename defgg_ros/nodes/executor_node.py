@@ -75,6 +75,8 @@ PARAMETERS = {
     "gripper_timeout_s": (_DEFAULTS.gripper_timeout_s, "Fail if a gripper command takes longer (robot clock, s)."),
     "slip_width_fraction": (_DEFAULTS.slip_width_fraction,
                             "Dropped if the held width falls below this fraction of the closed width."),
+    "use_transfer_via": (True, "Transfer through transfer_via_position_m without stopping (else a direct motion)."),
+    "transfer_via_position_m": ([0.45, -0.2, 0.3], "TCP position [x, y, z] in base the transfer passes (m)."),
     "trajectory_sample_dt_s": (SAMPLE_DT_S, "Time between JointTrajectory points (s)."),
     "default_youngs_modulus_pa": (2e6, "Modulus for the gripper rule when a grasp carries none (Pa)."),
     "control_period_s": (0.01, "Control loop period (wall clock, s)."),
@@ -182,6 +184,7 @@ class ExecutorNode(Node):
     def _sequence_config(p: dict) -> SequenceConfig:
         if len(p["place_position_m"]) != 3:
             raise ValueError(f"place_position_m must have 3 values, got {p['place_position_m']}")
+        via = tuple(float(v) for v in p["transfer_via_position_m"]) if p["use_transfer_via"] else None
         config = SequenceConfig(
             table_z_m=float(p["table_z_m"]), limits_scale=float(p["limits_scale"]),
             pregrasp_height_m=float(p["pregrasp_height_m"]), descent_speed_mps=float(p["descent_speed_mps"]),
@@ -191,7 +194,8 @@ class ExecutorNode(Node):
             watchdog_timeout_s=float(p["watchdog_timeout_s"]),
             arrival_joint_atol_rad=float(p["arrival_joint_atol_rad"]),
             settle_timeout_s=float(p["settle_timeout_s"]), gripper_timeout_s=float(p["gripper_timeout_s"]),
-            slip_width_fraction=float(p["slip_width_fraction"]), sample_dt_s=float(p["trajectory_sample_dt_s"]))
+            slip_width_fraction=float(p["slip_width_fraction"]), sample_dt_s=float(p["trajectory_sample_dt_s"]),
+            transfer_via_position_m=via)
         config.validate()
         return config
 

@@ -189,3 +189,19 @@ def run_until_finished(sequence, robot, max_s: float = 30.0):
     while not sequence.finished and robot.sim_s < end:
         robot.step(sequence)
     assert sequence.finished
+
+
+def test_transfer_passes_the_via_point_without_stopping(kin):
+    via = (0.45, -0.2, 0.3)
+    config = SequenceConfig(watchdog_timeout_s=0.5, transfer_via_position_m=via)
+    sequence, robot = make(kin, config=config), FakeRobot(kin, World())
+    closest = []
+
+    def watch(r, s):
+        if s.phase == "transfer":
+            closest.append((float(np.linalg.norm(kin.fk(r.q)[:3, 3] - via)), float(np.abs(r.qd).max())))
+        return False
+    run(sequence, robot, until=watch)
+    assert sequence.outcome.success, sequence.outcome.failure_reason
+    distance, speed = min(closest)
+    assert distance < 0.01 and speed > 0.2

@@ -15,8 +15,10 @@ from defgg_ros.control.trajectories import (
     hold,
     panda_limits,
     plan_joint_motion,
+    plan_joint_via,
     plan_line,
     plan_stop,
+    via_velocity,
 )
 
 KIN = PandaKinematics()
@@ -118,3 +120,29 @@ def test_bad_inputs():
         plan_joint_motion(KIN.q_ready_rad, np.full(7, 3.5), LIMITS)
     with pytest.raises(TrajectoryError, match="finite"):
         plan_joint_motion(KIN.q_ready_rad, np.full(7, np.nan), LIMITS)
+
+
+@settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(grasp=grasps, via=st.tuples(st.floats(0.3, 0.55), st.floats(-0.35, 0.0), st.floats(0.2, 0.35)))
+def test_transfer_through_a_via_point_passes_it_moving_and_respects_limits(grasp, via):
+    x, y, z, yaw = grasp
+    lifted, used_yaw = KIN.top_down_ik([x, y, z + 0.15], yaw, KIN.q_ready_rad)
+    q_via = KIN.top_down_ik(via, used_yaw, lifted.q_rad)[0].q_rad
+    q_goal = KIN.top_down_ik([0.35, -0.45, 0.22], used_yaw, q_via)[0].q_rad
+    through = plan_joint_via(lifted.q_rad, q_via, q_goal, LIMITS)
+    check_trajectory(through, LIMITS, KIN, TABLE_Z_M)
+    independent_limit_check(through, LIMITS)
+    closest = int(np.argmin(np.abs(through.q_rad - q_via).max(axis=1)))
+    assert np.abs(through.q_rad[closest] - q_via).max() < 1e-9
+    expected = via_velocity(lifted.q_rad, q_via, q_goal, LIMITS)
+    assert through.qd_radps[closest] == pytest.approx(expected, abs=1e-9)
+    assert through.final_q_rad == pytest.approx(q_goal, abs=1e-9)
+    assert np.allclose(through.qd_radps[-1], 0.0)
+
+
+def test_via_velocity_is_zero_for_joints_that_turn_back():
+    q0, q1, q2 = np.zeros(7), np.full(7, 0.5), np.array([1.0, 0.2, 1.0, 0.5, 1.0, 1.0, 1.0])
+    v = via_velocity(q0, q1, q2, LIMITS)
+    assert v[1] == 0.0 and v[3] == 0.0
+    assert np.all(v[[0, 2, 4, 5, 6]] > 0)
+    assert np.all(np.abs(v) <= 0.5 * LIMITS.qd_max_radps + 1e-12)
