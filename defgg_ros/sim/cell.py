@@ -1,0 +1,300 @@
+"""The simulated Panda cell: arm, hand, table, bin, objects and depth camera in PyBullet.
+
+This is the pure core of the fake driver (no rclpy): the node only moves
+commands in and states out. The world is a deformable one when the scene has
+soft objects (FEM settings from the FEM notes / `defgg_ros.sim`), otherwise a
+plain rigid world with a larger step. Sim time advances only in `advance()`.
+
+Frames: the world origin is `panda_link0`; the table top is z = 0.
+"""
+import shutil
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pybullet as p
+import pybullet_data
+
+from defgg_ros.constants import (
+    GRIPPER_MAX_WIDTH_M,
+    PANDA_FINGER_JOINT_NAMES,
+    PANDA_JOINT_NAMES,
+    PANDA_READY_Q_RAD,
+)
+from defgg_ros.sim import cell_objects, cell_soft
+from defgg_ros.sim.cell_camera import DepthCamera, DepthNoise, camera_matrix
+from defgg_ros.sim.cell_gripper import GripperController, GripperOutcome
+from defgg_ros.sim.cell_trajectory import TrajectoryTracker, make_waypoints
+from defgg_ros.sim.scene_spec import SceneSpec
+
+# Rigid-only scenes: 1 ms keeps 70 N finger contacts calm and runs faster than real time.
+RIGID_TIME_STEP_S = 1e-3
+# Joint torque limits of the Panda (Franka datasheet), N*m; fingers: N.
+ARM_MAX_TORQUE_NM = (87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0)
+# Position/velocity gains of PyBullet's motor constraint, tuned so the arm
+# tracks a Ruckig trajectory within ~1 mrad at 1 ms steps.
+ARM_POSITION_GAIN = 0.3
+ARM_VELOCITY_GAIN = 1.0
+FINGER_POSITION_GAIN = 0.2
+# Links whose contacts make up the external wrench: hand and both fingers.
+HAND_LINK_NAMES = ("panda_hand", "panda_leftfinger", "panda_rightfinger")
+TCP_LINK_NAME = "panda_grasptarget"
+# Objects settle this long on the table before the cell starts.
+SETTLE_TIME_S = 0.3
+# How often (sim time) soft objects are woken up / put to sleep.
+SOFT_ACTIVITY_PERIOD_S = 0.05
+
+
+@dataclass
+class CellSettings:
+    time_step_s: float | None = None     # None: chosen from the scene (softest object)
+    depth_noise: DepthNoise = field(default_factory=DepthNoise)
+    seed: int = 0
+    gui: bool = False
+    initial_q_rad: tuple = PANDA_READY_Q_RAD
+    # False: soft objects sleep as static meshes until the hand comes near
+    # (see cell_soft); True: always FEM (for benchmarks and render checks).
+    soft_always_active: bool = False
+
+
+@dataclass(frozen=True)
+class JointState:
+    names: tuple
+    positions: np.ndarray
+    velocities: np.ndarray
+    efforts: np.ndarray
+
+
+class SimCell:
+    """A Panda cell in its own PyBullet client."""
+
+    def __init__(self, scene: SceneSpec, settings: CellSettings | None = None):
+        self.scene = scene
+        self.settings = settings or CellSettings()
+        self.time_s = 0.0
+        self._wall_per_sim = []
+        self._gripper_token = 0
+        self._pending_token = None
+        self._outcomes = []
+        self._next_activity_check_s = 0.0
+        self._scratch = Path(tempfile.mkdtemp(prefix="defgg_cell_"))
+        self.client = p.connect(p.GUI if self.settings.gui else p.DIRECT)
+        try:
+            self._build()
+        except BaseException:
+            self.close()
+            raise
+
+    # ---- construction -------------------------------------------------
+    def _build(self):
+        c = self.client
+        self.time_step_s = self._time_step_s()
+        cell_objects.reset_world(c, deformable=self.scene.has_soft_objects, time_step_s=self.time_step_s)
+        p.setAdditionalSearchPath(pybullet_data.getDataPath(), physicsClientId=c)
+        self.robot = p.loadURDF("franka_panda/panda.urdf", [0, 0, 0], useFixedBase=True,
+                                flags=p.URDF_USE_SELF_COLLISION_EXCLUDE_PARENT, physicsClientId=c)
+        self._index_joints()
+        self.table_id = cell_objects.add_table(c, self.scene)
+        self.bin_ids = cell_objects.add_bin(c, self.scene.bin) if self.scene.bin else []
+        self._rigid = {i: cell_objects.add_rigid_object(c, spec)
+                       for i, spec in enumerate(self.scene.objects) if not spec.is_soft}
+        self._soft = {i: cell_soft.spawn_dormant(c, spec, self._scratch)
+                      for i, spec in enumerate(self.scene.objects) if spec.is_soft}
+        if self.settings.soft_always_active:
+            for obj in self._soft.values():
+                cell_soft.activate(c, obj)
+            self._set_time_step()
+        self._set_initial_state()
+        self.camera = DepthCamera(c, self.scene.base_xyz_camera_m, self.scene.base_quat_camera_xyzw,
+                                  self.settings.depth_noise, self.settings.seed)
+        self.camera_k = camera_matrix()
+        # Let objects come to rest on the table under the arm's hold.
+        self.advance(SETTLE_TIME_S)
+        self.time_s = 0.0
+
+    def _index_joints(self):
+        by_name, link_by_name = {}, {}
+        for j in range(p.getNumJoints(self.robot, physicsClientId=self.client)):
+            info = p.getJointInfo(self.robot, j, physicsClientId=self.client)
+            by_name[info[1].decode()] = j
+            link_by_name[info[12].decode()] = j
+        self.arm_joints = [by_name[n] for n in PANDA_JOINT_NAMES]
+        self.finger_joints = [by_name[n] for n in PANDA_FINGER_JOINT_NAMES]
+        self.hand_links = [link_by_name[n] for n in HAND_LINK_NAMES]
+        self.tcp_link = link_by_name[TCP_LINK_NAME]
+
+    def _set_initial_state(self):
+        c = self.client
+        q0 = np.asarray(self.settings.initial_q_rad, dtype=float)
+        for j, q in zip(self.arm_joints, q0):
+            p.resetJointState(self.robot, j, q, 0.0, physicsClientId=c)
+        for j in self.finger_joints:
+            p.resetJointState(self.robot, j, GRIPPER_MAX_WIDTH_M / 2, 0.0, physicsClientId=c)
+        # PyBullet ignores <mimic>: couple the fingers with a gear constraint
+        # (without it the fingers and the object slide sideways together).
+        gear = p.createConstraint(self.robot, self.finger_joints[0], self.robot, self.finger_joints[1],
+                                  p.JOINT_GEAR, [1, 0, 0], [0, 0, 0], [0, 0, 0], physicsClientId=c)
+        p.changeConstraint(gear, gearRatio=-1, erp=0.1, maxForce=200, physicsClientId=c)
+        for link in self.finger_joints:
+            p.changeDynamics(self.robot, link, lateralFriction=cell_objects.FRICTION, physicsClientId=c)
+        self.tracker = TrajectoryTracker(q0)
+        self.gripper = GripperController(GRIPPER_MAX_WIDTH_M)
+
+    def close(self):
+        if self.client is not None and p.isConnected(self.client):
+            p.disconnect(self.client)
+        self.client = None
+        shutil.rmtree(self._scratch, ignore_errors=True)
+
+    # ---- objects ----------------------------------------------------------
+    @property
+    def object_ids(self) -> list:
+        """Current PyBullet body id of every scene object, in scene order."""
+        return [self._rigid[i] if i in self._rigid else self._soft[i].body for i in range(len(self.scene.objects))]
+
+    def active_soft_objects(self) -> list:
+        """Names of the soft objects simulated as FEM bodies right now."""
+        return [o.spec.name for o in self._soft.values() if o.active]
+
+    def _time_step_s(self) -> float:
+        if self.settings.time_step_s:
+            return self.settings.time_step_s
+        active = [o.spec.youngs_modulus_pa for o in getattr(self, "_soft", {}).values() if o.active]
+        return min((cell_objects.soft_time_step_s(e) for e in active), default=RIGID_TIME_STEP_S)
+
+    def _set_time_step(self):
+        self.time_step_s = self._time_step_s()
+        p.setTimeStep(self.time_step_s, physicsClientId=self.client)
+
+    def _update_soft_activity(self):
+        if self.settings.soft_always_active or not self._soft or self.time_s < self._next_activity_check_s:
+            return
+        self._next_activity_check_s = self.time_s + SOFT_ACTIVITY_PERIOD_S
+        tcp, _ = self.tcp_pose()
+        if cell_soft.update_activity(self.client, list(self._soft.values()), self.robot, tcp, self._scratch):
+            self._set_time_step()
+
+    # ---- commands -------------------------------------------------------
+    def command_trajectory(self, points) -> None:
+        """Replace the active trajectory; points: (t_s, q, qd|None, qdd|None), panda_joint1..7 order.
+
+        Raises TrajectoryError on malformed points (the current motion goes on).
+        """
+        waypoints = make_waypoints(points, len(self.arm_joints))
+        self.tracker.replace(waypoints, self.time_s, self.arm_positions())
+
+    def gripper_move(self, width_m: float, speed_mps: float) -> int:
+        """Start a move; returns a token whose outcome `advance` reports later."""
+        return self._start_gripper(lambda: self.gripper.start_move(width_m, speed_mps, self.time_s))
+
+    def gripper_grasp(self, width_m, eps_inner_m, eps_outer_m, speed_mps, force_n) -> int:
+        return self._start_gripper(lambda: self.gripper.start_grasp(
+            width_m, eps_inner_m, eps_outer_m, speed_mps, force_n, self.time_s))
+
+    def _start_gripper(self, start) -> int:
+        previous = self._pending_token if self.gripper.busy else None
+        start()  # raises GripperCommandError before anything changes
+        if previous is not None:
+            # A new command replaces the running one, as on the real hand.
+            self._outcomes.append((previous, GripperOutcome(False, self.gripper_width_m(),
+                                                            "preempted by a newer gripper command")))
+        self._gripper_token += 1
+        self._pending_token = self._gripper_token
+        return self._gripper_token
+
+    # ---- simulation -------------------------------------------------------
+    def advance(self, duration_s: float) -> list:
+        """Step for duration_s of sim time; returns finished gripper commands [(token, GripperOutcome)]."""
+        wall0, sim0 = time.perf_counter(), self.time_s
+        end_s = self.time_s + duration_s - 0.5 * self.time_step_s
+        while self.time_s < end_s:
+            self._update_soft_activity()
+            self._step()
+        self._wall_per_sim.append((time.perf_counter() - wall0, self.time_s - sim0))
+        self._wall_per_sim = self._wall_per_sim[-200:]
+        done, self._outcomes = self._outcomes, []
+        return done
+
+    def _step(self):
+        c = self.client
+        q_des, qd_des = self.tracker.sample(self.time_s)
+        p.setJointMotorControlArray(self.robot, self.arm_joints, p.POSITION_CONTROL, targetPositions=q_des,
+                                    targetVelocities=qd_des, forces=ARM_MAX_TORQUE_NM,
+                                    positionGains=[ARM_POSITION_GAIN] * 7, velocityGains=[ARM_VELOCITY_GAIN] * 7,
+                                    physicsClientId=c)
+        motor = self.gripper.motor
+        for j in self.finger_joints:
+            p.setJointMotorControl2(self.robot, j, p.POSITION_CONTROL, targetPosition=motor.finger_target_m,
+                                    force=motor.finger_force_n, maxVelocity=motor.finger_speed_mps,
+                                    positionGain=FINGER_POSITION_GAIN, physicsClientId=c)
+        p.stepSimulation(physicsClientId=c)
+        self.time_s += self.time_step_s
+        outcome = self.gripper.update(self.time_s, self.gripper_width_m())
+        if outcome is not None and self._pending_token is not None:
+            self._outcomes.append((self._pending_token, outcome))
+            self._pending_token = None
+
+    def real_time_factor(self) -> float:
+        """Sim seconds per wall second over the recent advance() calls."""
+        wall = sum(w for w, _ in self._wall_per_sim)
+        sim = sum(s for _, s in self._wall_per_sim)
+        return sim / wall if wall > 0 else float("inf")
+
+    # ---- state ------------------------------------------------------------
+    def arm_positions(self) -> np.ndarray:
+        states = p.getJointStates(self.robot, self.arm_joints, physicsClientId=self.client)
+        return np.array([s[0] for s in states])
+
+    def gripper_width_m(self) -> float:
+        states = p.getJointStates(self.robot, self.finger_joints, physicsClientId=self.client)
+        return float(states[0][0] + states[1][0])
+
+    def joint_state(self) -> JointState:
+        joints = self.arm_joints + self.finger_joints
+        states = p.getJointStates(self.robot, joints, physicsClientId=self.client)
+        return JointState(PANDA_JOINT_NAMES + PANDA_FINGER_JOINT_NAMES,
+                          np.array([s[0] for s in states]), np.array([s[1] for s in states]),
+                          np.array([s[3] for s in states]))
+
+    def tcp_pose(self):
+        """(position xyz, quaternion xyzw) of the TCP link in the base frame."""
+        state = p.getLinkState(self.robot, self.tcp_link, computeForwardKinematics=True,
+                               physicsClientId=self.client)
+        return np.array(state[4]), np.array(state[5])
+
+    def external_wrench(self):
+        """(force N, torque N*m about the TCP), both in the base frame: contacts acting on hand + fingers."""
+        force, torque = np.zeros(3), np.zeros(3)
+        tcp, _ = self.tcp_pose()
+        active = [o.body for o in self._soft.values() if o.active]
+        for point, f in cell_objects.hand_contact_forces(self.client, self.robot, self.hand_links, active):
+            force += f
+            torque += np.cross(point - tcp, f)
+        return force, torque
+
+    def object_poses(self) -> list:
+        """[(xyz, quat_xyzw)] per scene object, in scene order (soft: node centroid, identity rotation)."""
+        poses = []
+        for i in range(len(self.scene.objects)):
+            if i in self._rigid:
+                pos, quat = p.getBasePositionAndOrientation(self._rigid[i], physicsClientId=self.client)
+                poses.append((np.array(pos), np.array(quat)))
+            else:
+                obj = self._soft[i]
+                nodes = cell_objects.soft_nodes_m(self.client, obj.body) if obj.active else obj.nodes_m
+                poses.append((nodes.mean(axis=0), np.array([0.0, 0.0, 0.0, 1.0])))
+        return poses
+
+    def render_depth(self, with_color: bool = False):
+        """(depth_m HxW float32 NaN = invalid, object index mask int32 (-1 none), rgb or None).
+
+        The mask holds the scene-object index (not the body id), so callers can
+        match pixels to the scene's objects.
+        """
+        depth_m, body_mask, rgb = self.camera.render(with_color)
+        object_mask = np.full(body_mask.shape, -1, dtype=np.int32)
+        for i, body in enumerate(self.object_ids):
+            object_mask[body_mask == body] = i
+        return depth_m, object_mask, rgb

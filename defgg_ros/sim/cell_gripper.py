@@ -1,0 +1,135 @@
+"""The Franka Hand's move and grasp commands as a small state machine.
+
+Shaped like franka_gripper: `move` drives the fingers to a width and fails
+when they are blocked before it; `grasp` closes with a force limit until the
+fingers stop and succeeds when they stopped inside [width - epsilon_inner,
+width + epsilon_outer]. The machine reads the measured opening each sim step
+and says what the finger motors should do; it has no PyBullet in it.
+"""
+from dataclasses import dataclass
+
+from defgg_ros.constants import GRIPPER_MAX_FORCE_N, GRIPPER_MAX_WIDTH_M
+
+# The fingers count as stopped when the opening changes slower than this...
+STALL_SPEED_MPS = 0.002
+# ...for this long (sim time); shorter windows ended grasps on soft objects
+# while they were still being squeezed.
+STALL_TIME_S = 0.15
+# A move has arrived when the opening is this close to its target.
+MOVE_TOLERANCE_M = 0.002
+# Franka's gripper rejects speeds above 0.1 m/s (opening rate).
+GRIPPER_MAX_SPEED_MPS = 0.1
+# Force pressing the fingers along for a `move` (franka_gripper uses its own).
+MOVE_FORCE_N = GRIPPER_MAX_FORCE_N
+# A command that has not finished after this much sim time fails.
+GRIPPER_TIMEOUT_S = 5.0
+
+
+class GripperCommandError(ValueError):
+    """A move/grasp goal with an impossible width, speed or force."""
+
+
+@dataclass(frozen=True)
+class GripperOutcome:
+    success: bool
+    width_m: float
+    error: str = ""
+
+
+@dataclass(frozen=True)
+class MotorCommand:
+    finger_target_m: float     # per finger (opening / 2)
+    finger_speed_mps: float    # per finger
+    finger_force_n: float
+
+
+def _check(width_m, speed_mps, force_n=None):
+    if not 0.0 <= width_m <= GRIPPER_MAX_WIDTH_M + 1e-9:
+        raise GripperCommandError(f"width {width_m} m outside [0, {GRIPPER_MAX_WIDTH_M}] m")
+    if not 0.0 < speed_mps <= GRIPPER_MAX_SPEED_MPS + 1e-9:
+        raise GripperCommandError(f"speed {speed_mps} m/s outside (0, {GRIPPER_MAX_SPEED_MPS}] m/s")
+    if force_n is not None and not 0.0 < force_n <= GRIPPER_MAX_FORCE_N + 1e-9:
+        raise GripperCommandError(f"force {force_n} N outside (0, {GRIPPER_MAX_FORCE_N}] N")
+
+
+class GripperController:
+    """One active command at a time; a new command pre-empts the old one."""
+
+    def __init__(self, initial_width_m: float):
+        self._motor = MotorCommand(initial_width_m / 2, GRIPPER_MAX_SPEED_MPS / 2, MOVE_FORCE_N)
+        self._kind = None
+        self._goal = None
+        self._started_s = 0.0
+        self._last_moving_s = 0.0
+        self._last_width_m = initial_width_m
+        self._last_time_s = None
+
+    @property
+    def motor(self) -> MotorCommand:
+        return self._motor
+
+    @property
+    def busy(self) -> bool:
+        return self._kind is not None
+
+    def start_move(self, width_m: float, speed_mps: float, now_s: float) -> None:
+        _check(width_m, speed_mps)
+        self._begin("move", (width_m,), now_s)
+        self._motor = MotorCommand(width_m / 2, speed_mps / 2, MOVE_FORCE_N)
+
+    def start_grasp(self, width_m: float, eps_inner_m: float, eps_outer_m: float, speed_mps: float,
+                    force_n: float, now_s: float) -> None:
+        _check(width_m, speed_mps, force_n)
+        if eps_inner_m < 0 or eps_outer_m < 0:
+            raise GripperCommandError(f"epsilons must be >= 0, got {eps_inner_m}, {eps_outer_m}")
+        self._begin("grasp", (width_m, eps_inner_m, eps_outer_m), now_s)
+        # Drive towards closed; the force limit is what holds the object.
+        self._motor = MotorCommand(0.0, speed_mps / 2, force_n)
+
+    def preempt(self) -> GripperOutcome | None:
+        """Abort the active command (a new goal replaced it)."""
+        if self._kind is None:
+            return None
+        self._kind = None
+        return GripperOutcome(False, self._last_width_m, "preempted by a newer gripper command")
+
+    def _begin(self, kind, goal, now_s):
+        self._kind, self._goal = kind, goal
+        self._started_s = self._last_moving_s = now_s
+
+    def update(self, now_s: float, width_m: float) -> GripperOutcome | None:
+        """Feed the measured opening; returns the outcome when the command ends."""
+        if self._last_time_s is not None and now_s > self._last_time_s:
+            speed = abs(width_m - self._last_width_m) / (now_s - self._last_time_s)
+            if speed > STALL_SPEED_MPS:
+                self._last_moving_s = now_s
+        self._last_width_m, self._last_time_s = width_m, now_s
+        if self._kind is None:
+            return None
+        stalled = now_s - self._last_moving_s >= STALL_TIME_S
+        timed_out = now_s - self._started_s >= GRIPPER_TIMEOUT_S
+        outcome = self._move_outcome(width_m, stalled) if self._kind == "move" else \
+            self._grasp_outcome(width_m, stalled)
+        if outcome is None and timed_out:
+            outcome = GripperOutcome(False, width_m, f"{self._kind} timed out after {GRIPPER_TIMEOUT_S} s")
+        if outcome is not None:
+            self._kind = None
+        return outcome
+
+    def _move_outcome(self, width_m, stalled):
+        (target,) = self._goal
+        if abs(width_m - target) <= MOVE_TOLERANCE_M:
+            return GripperOutcome(True, width_m)
+        if stalled:
+            return GripperOutcome(False, width_m, f"fingers blocked at {width_m * 1000:.1f} mm "
+                                                  f"before reaching {target * 1000:.1f} mm")
+        return None
+
+    def _grasp_outcome(self, width_m, stalled):
+        if not stalled:
+            return None
+        target, eps_in, eps_out = self._goal
+        if target - eps_in <= width_m <= target + eps_out:
+            return GripperOutcome(True, width_m)
+        return GripperOutcome(False, width_m, f"fingers stopped at {width_m * 1000:.1f} mm, outside "
+                                              f"[{(target - eps_in) * 1000:.1f}, {(target + eps_out) * 1000:.1f}] mm")

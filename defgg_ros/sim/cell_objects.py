@@ -1,0 +1,162 @@
+"""Bodies of the simulated cell: world reset, table, bin, scene objects, hand contacts.
+
+Soft objects are FEM bodies with the settings that were stable on this
+machine (../shared/notes/pybullet-fem-facts.md): Neo-Hookean, damping 0.01,
+margin 2 mm, friction 0.8, face contact; their tetrahedral meshes come from
+the FEM library (`defgg_ros.sim.meshes`, `defgg_ros.sim.shapes`). Objects
+stiffer than MAX_SOFT_BODY_YOUNGS_MODULUS_PA are rigid bodies (FEM at
+E >= 2e7 Pa flung objects and forced the fingers open in the probe).
+"""
+import numpy as np
+import pybullet as p
+
+from defgg_ros.sim.scene_spec import BinSpec, ObjectSpec, SceneSpec
+
+FRICTION = 0.8
+GRAVITY_MPS2 = 9.81
+SPARSE_SDF_VOXEL_M = 0.01
+NEO_HOOKEAN_DAMPING = 0.01
+SOFT_COLLISION_MARGIN_M = 0.002
+# Stable steps measured in the FEM probe: 5e-4 s up to 2e5 Pa, 2.5e-4 s at 2e6 Pa
+# (the default 1/240 s blew up at every modulus once the gripper touched).
+SOFT_TIME_STEPS_S = ((2e5, 5e-4), (float("inf"), 2.5e-4))
+TABLE_RGBA = (0.55, 0.45, 0.35, 1.0)
+BIN_RGBA = (0.3, 0.3, 0.35, 1.0)
+# Dropped from slightly above the table so nothing starts in penetration.
+SPAWN_GAP_M = 0.002
+
+
+class SoftBodyError(RuntimeError):
+    """PyBullet refused or broke a soft body."""
+
+
+def soft_time_step_s(youngs_modulus_pa: float) -> float:
+    for e_max, step in SOFT_TIME_STEPS_S:
+        if youngs_modulus_pa <= e_max:
+            return step
+    raise AssertionError("unreachable")
+
+
+def time_step_for_scene(scene: SceneSpec, rigid_step_s: float) -> float:
+    """The smallest step any soft object needs, or rigid_step_s without soft objects."""
+    steps = [soft_time_step_s(o.youngs_modulus_pa) for o in scene.objects if o.is_soft]
+    return min(steps, default=rigid_step_s)
+
+
+def reset_world(client: int, deformable: bool, time_step_s: float) -> None:
+    if deformable:
+        p.resetSimulation(p.RESET_USE_DEFORMABLE_WORLD, physicsClientId=client)
+        p.setPhysicsEngineParameter(sparseSdfVoxelSize=SPARSE_SDF_VOXEL_M, physicsClientId=client)
+    else:
+        p.resetSimulation(physicsClientId=client)
+    # Gravity is zero after a (deformable) reset: set it afterwards.
+    p.setGravity(0, 0, -GRAVITY_MPS2, physicsClientId=client)
+    p.setTimeStep(time_step_s, physicsClientId=client)
+
+
+def _static_box(client, half_extents, position, rgba):
+    col = p.createCollisionShape(p.GEOM_BOX, halfExtents=half_extents, physicsClientId=client)
+    vis = p.createVisualShape(p.GEOM_BOX, halfExtents=half_extents, rgbaColor=rgba, physicsClientId=client)
+    body = p.createMultiBody(0, col, vis, position, physicsClientId=client)
+    p.changeDynamics(body, -1, lateralFriction=FRICTION, physicsClientId=client)
+    return body
+
+
+def add_table(client: int, scene: SceneSpec) -> int:
+    sx, sy, thickness = scene.table_size_m
+    cx, cy = scene.table_center_xy_m
+    return _static_box(client, [sx / 2, sy / 2, thickness / 2], [cx, cy, -thickness / 2], TABLE_RGBA)
+
+
+def add_bin(client: int, spec: BinSpec) -> list:
+    """Four static walls around spec.center_xy_m on the table (the table is the bin floor)."""
+    (cx, cy), (ix, iy, h), t = spec.center_xy_m, spec.inner_size_m, spec.wall_thickness_m
+    walls = [([t / 2, iy / 2 + t, h / 2], [cx + s * (ix + t) / 2, cy, h / 2]) for s in (-1, 1)]
+    walls += [([ix / 2, t / 2, h / 2], [cx, cy + s * (iy + t) / 2, h / 2]) for s in (-1, 1)]
+    return [_static_box(client, half, pos, BIN_RGBA) for half, pos in walls]
+
+
+def _surface_mesh(spec: ObjectSpec):
+    from defgg_ros.sim import meshes, shapes
+
+    if spec.shape == "box":
+        return shapes.box(*spec.size_m)
+    if spec.shape == "cylinder":
+        return shapes.cylinder(*spec.size_m)
+    mesh = meshes.load_user_mesh(spec.mesh_path)
+    mesh.apply_scale(spec.size_m)
+    return mesh
+
+
+def add_rigid_object(client: int, spec: ObjectSpec) -> int:
+    """A dynamic rigid body resting on the table at its scene pose."""
+    orientation = p.getQuaternionFromEuler([0, 0, spec.yaw_rad])
+    position = [spec.position_xy_m[0], spec.position_xy_m[1], spec.height_m / 2 + SPAWN_GAP_M]
+    col, vis = _rigid_shapes(client, spec)
+    body = p.createMultiBody(spec.mass_kg, col, vis, position, orientation, physicsClientId=client)
+    p.changeDynamics(body, -1, lateralFriction=FRICTION, rollingFriction=1e-4, spinningFriction=1e-3,
+                     physicsClientId=client)
+    return body
+
+
+def _rigid_shapes(client, spec: ObjectSpec):
+    if spec.shape == "box":
+        half = [s / 2 for s in spec.size_m]
+        return (p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=client),
+                p.createVisualShape(p.GEOM_BOX, halfExtents=half, physicsClientId=client))
+    if spec.shape == "cylinder":
+        radius, height = spec.size_m[0] / 2, spec.size_m[1]
+        return (p.createCollisionShape(p.GEOM_CYLINDER, radius=radius, height=height, physicsClientId=client),
+                p.createVisualShape(p.GEOM_CYLINDER, radius=radius, length=height, physicsClientId=client))
+    from defgg_ros.sim import meshes
+
+    tet = meshes.tetrahedralize(centred_surface_mesh(spec))
+    convex = meshes.convex_decomposition(tet)
+    return (p.createCollisionShape(p.GEOM_MESH, fileName=str(convex), physicsClientId=client),
+            p.createVisualShape(p.GEOM_MESH, fileName=str(tet.obj_path), physicsClientId=client))
+
+
+def centred_surface_mesh(spec: ObjectSpec):
+    """The object's closed surface, centred on its bounding box (metres)."""
+    mesh = _surface_mesh(spec).copy()
+    lo, hi = mesh.bounds
+    mesh.apply_translation(-(lo + hi) / 2)
+    return mesh
+
+
+def load_soft_body(client: int, spec: ObjectSpec, tet, position, orientation) -> int:
+    """The FEM body of a tet mesh with the probe's stable settings (Neo-Hookean, damping 0.01)."""
+    e_pa, nu = spec.youngs_modulus_pa, spec.poisson_ratio
+    body = p.loadSoftBody(
+        str(tet.vtk_path), basePosition=position, baseOrientation=orientation, scale=1.0, mass=spec.mass_kg,
+        useNeoHookean=1, NeoHookeanMu=e_pa / (2 * (1 + nu)), NeoHookeanLambda=e_pa * nu / ((1 + nu) * (1 - 2 * nu)),
+        NeoHookeanDamping=NEO_HOOKEAN_DAMPING, collisionMargin=SOFT_COLLISION_MARGIN_M, frictionCoeff=FRICTION,
+        useFaceContact=1, useSelfCollision=0, physicsClientId=client)
+    if body < 0:
+        raise SoftBodyError(f"PyBullet could not load the soft body of {spec.name!r} ({tet.vtk_path})")
+    return body
+
+
+def soft_nodes_m(client: int, body: int) -> np.ndarray:
+    _, vertices = p.getMeshData(body, -1, flags=p.MESH_DATA_SIMULATION_MESH, physicsClientId=client)
+    return np.asarray(vertices, dtype=float)
+
+
+def _force_on_a(c):
+    # contactNormalOnB points from B to A: the normal force pushes A along it.
+    return (c[9] * np.asarray(c[7]) + c[10] * np.asarray(c[11]) + c[12] * np.asarray(c[13]))
+
+
+def hand_contact_forces(client: int, robot: int, hand_links: list, active_soft_bodies: list) -> list:
+    """[(contact point on the robot, force on the robot)] for contacts on the hand and finger links."""
+    out = []
+    for link in hand_links:
+        for c in p.getContactPoints(bodyA=robot, linkIndexA=link, physicsClientId=client):
+            if c[2] != robot:
+                out.append((np.asarray(c[5]), _force_on_a(c)))
+    # Soft-body contacts are only reported with the soft body as A.
+    for body in active_soft_bodies:
+        for c in p.getContactPoints(bodyA=body, bodyB=robot, physicsClientId=client):
+            if c[4] in hand_links:
+                out.append((np.asarray(c[6]), -_force_on_a(c)))
+    return out

@@ -1,0 +1,139 @@
+"""Joint trajectory tracking in sim time, like ros2_control's joint_trajectory_controller.
+
+A trajectory is a list of waypoints (time from start, positions[, velocities
+[, accelerations]]). Between waypoints it is interpolated: linear when only
+positions are given, cubic Hermite with velocities, quintic with velocities
+and accelerations. When the first waypoint lies after the start time the
+segment from the state at the start is interpolated too. After the last
+waypoint the last position is held. Pure numpy; no rclpy, no PyBullet.
+"""
+from dataclasses import dataclass
+
+import numpy as np
+
+
+class TrajectoryError(ValueError):
+    """A commanded trajectory is malformed (sizes, times, non-finite values)."""
+
+
+@dataclass(frozen=True)
+class Waypoint:
+    time_from_start_s: float
+    positions: np.ndarray
+    velocities: np.ndarray | None = None
+    accelerations: np.ndarray | None = None
+
+
+def _check_vector(values, n_joints: int, what: str):
+    if values is None or len(values) == 0:
+        return None
+    arr = np.asarray(values, dtype=float)
+    if arr.shape != (n_joints,):
+        raise TrajectoryError(f"{what} has {arr.size} values, expected {n_joints}")
+    if not np.all(np.isfinite(arr)):
+        raise TrajectoryError(f"{what} holds non-finite values: {arr.tolist()}")
+    return arr
+
+
+def make_waypoints(points, n_joints: int) -> list:
+    """Validate (time_s, positions, velocities, accelerations) tuples into Waypoints."""
+    out = []
+    last_t = -np.inf
+    for i, (t_s, q, qd, qdd) in enumerate(points):
+        if not np.isfinite(t_s) or t_s < 0:
+            raise TrajectoryError(f"point {i}: time_from_start {t_s} must be finite and >= 0")
+        if t_s <= last_t:
+            raise TrajectoryError(f"point {i}: time_from_start {t_s} s is not after the previous {last_t} s")
+        positions = _check_vector(q, n_joints, f"point {i} positions")
+        if positions is None:
+            raise TrajectoryError(f"point {i} has no positions")
+        out.append(Waypoint(float(t_s), positions, _check_vector(qd, n_joints, f"point {i} velocities"),
+                            _check_vector(qdd, n_joints, f"point {i} accelerations")))
+        last_t = t_s
+    return out
+
+
+def _segment(t, t0, t1, a: Waypoint, b: Waypoint):
+    """Position and velocity at t within the segment a -> b (times t0 < t1)."""
+    dt = t1 - t0
+    s = np.clip((t - t0) / dt, 0.0, 1.0)
+    if a.velocities is None or b.velocities is None:
+        q = a.positions + s * (b.positions - a.positions)
+        return q, (b.positions - a.positions) / dt
+    if a.accelerations is None or b.accelerations is None:
+        return _hermite3(s, dt, a.positions, a.velocities, b.positions, b.velocities)
+    return _hermite5(s, dt, a, b)
+
+
+def _hermite3(s, dt, q0, v0, q1, v1):
+    h00, h10, h01, h11 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s, -2 * s**3 + 3 * s**2, s**3 - s**2
+    d00, d10, d01, d11 = 6 * s**2 - 6 * s, 3 * s**2 - 4 * s + 1, -6 * s**2 + 6 * s, 3 * s**2 - 2 * s
+    q = h00 * q0 + h10 * dt * v0 + h01 * q1 + h11 * dt * v1
+    qd = (d00 * q0 + d10 * dt * v0 + d01 * q1 + d11 * dt * v1) / dt
+    return q, qd
+
+
+def _hermite5(s, dt, a: Waypoint, b: Waypoint):
+    # Quintic with matching position, velocity and acceleration at both ends,
+    # in the normalised time s: coefficients of q(s) = sum c_k s^k.
+    q0, v0, a0 = a.positions, a.velocities * dt, a.accelerations * dt**2
+    q1, v1, a1 = b.positions, b.velocities * dt, b.accelerations * dt**2
+    c0, c1, c2 = q0, v0, a0 / 2
+    c3 = 10 * (q1 - q0) - 6 * v0 - 4 * v1 - 1.5 * a0 + 0.5 * a1
+    c4 = -15 * (q1 - q0) + 8 * v0 + 7 * v1 + 1.5 * a0 - a1
+    c5 = 6 * (q1 - q0) - 3 * v0 - 3 * v1 - 0.5 * a0 + 0.5 * a1
+    q = c0 + s * (c1 + s * (c2 + s * (c3 + s * (c4 + s * c5))))
+    qd = c1 + s * (2 * c2 + s * (3 * c3 + s * (4 * c4 + s * 5 * c5)))
+    return q, qd / dt
+
+
+class TrajectoryTracker:
+    """Desired joint state over sim time for the active trajectory."""
+
+    def __init__(self, initial_q):
+        self._hold_q = np.asarray(initial_q, dtype=float).copy()
+        self._n = self._hold_q.size
+        self._start_s = 0.0
+        self._points: list = []
+
+    @property
+    def n_joints(self) -> int:
+        return self._n
+
+    def hold(self, q) -> None:
+        """Stop following any trajectory and hold q."""
+        self._hold_q = np.asarray(q, dtype=float).copy()
+        self._points = []
+
+    def replace(self, waypoints: list, start_time_s: float, current_q) -> None:
+        """Follow a new trajectory from start_time_s; an empty one holds current_q."""
+        if not waypoints:
+            self.hold(current_q)
+            return
+        first = waypoints[0]
+        if first.time_from_start_s > 0:
+            # Like joint_trajectory_controller: blend from where the arm is now.
+            start = Waypoint(0.0, np.asarray(current_q, dtype=float).copy(),
+                             np.zeros(self._n) if first.velocities is not None else None,
+                             np.zeros(self._n) if first.accelerations is not None else None)
+            waypoints = [start] + list(waypoints)
+        self._points = list(waypoints)
+        self._start_s = float(start_time_s)
+        self._hold_q = self._points[-1].positions.copy()
+
+    def is_active(self, time_s: float) -> bool:
+        return bool(self._points) and time_s - self._start_s < self._points[-1].time_from_start_s
+
+    def sample(self, time_s: float):
+        """(positions, velocities) desired at sim time time_s."""
+        if not self._points:
+            return self._hold_q.copy(), np.zeros(self._n)
+        t = time_s - self._start_s
+        pts = self._points
+        if t <= pts[0].time_from_start_s:
+            return pts[0].positions.copy(), np.zeros(self._n)
+        if t >= pts[-1].time_from_start_s:
+            return pts[-1].positions.copy(), np.zeros(self._n)
+        times = np.array([p.time_from_start_s for p in pts])
+        i = int(np.searchsorted(times, t, side="right")) - 1
+        return _segment(t, times[i], times[i + 1], pts[i], pts[i + 1])

@@ -1,0 +1,53 @@
+"""The gripper state machine (pure): move/grasp outcomes from measured openings."""
+import pytest
+
+from defgg_ros.sim.cell_gripper import STALL_TIME_S, GripperCommandError, GripperController
+
+
+def _feed(ctrl, widths, t0=0.0, dt=0.01):
+    t = t0
+    for w in widths:
+        t += dt
+        out = ctrl.update(t, w)
+        if out is not None:
+            return out
+    return None
+
+
+def test_move_arrives():
+    ctrl = GripperController(0.08)
+    ctrl.start_move(0.04, 0.05, 0.0)
+    assert ctrl.motor.finger_target_m == pytest.approx(0.02)
+    out = _feed(ctrl, [0.08 - 0.0005 * i for i in range(100)])
+    assert out.success and out.width_m == pytest.approx(0.04, abs=0.002)
+    assert not ctrl.busy
+
+
+def test_move_blocked_fails_with_the_width():
+    ctrl = GripperController(0.08)
+    ctrl.start_move(0.0, 0.05, 0.0)
+    out = _feed(ctrl, [0.08 - 0.001 * i for i in range(30)] + [0.05] * 100)
+    assert not out.success and "blocked at 50.0 mm" in out.error
+
+
+def test_grasp_succeeds_inside_the_band_and_fails_outside():
+    n_stall = int(STALL_TIME_S / 0.01) + 5
+    ctrl = GripperController(0.08)
+    ctrl.start_grasp(0.05, 0.005, 0.005, 0.05, 20.0, 0.0)
+    assert ctrl.motor.finger_target_m == 0.0 and ctrl.motor.finger_force_n == 20.0
+    out = _feed(ctrl, [0.08 - 0.001 * i for i in range(28)] + [0.052] * n_stall)
+    assert out.success and out.width_m == pytest.approx(0.052)
+    ctrl.start_grasp(0.05, 0.005, 0.005, 0.05, 20.0, 10.0)
+    out = _feed(ctrl, [0.052 - 0.001 * i for i in range(52)] + [0.0] * n_stall, t0=10.0)
+    assert not out.success and "outside" in out.error
+
+
+@pytest.mark.parametrize("args", [(0.09, 0.05), (-0.01, 0.05), (0.04, 0.0), (0.04, 0.5)])
+def test_bad_move_goals_raise(args):
+    with pytest.raises(GripperCommandError):
+        GripperController(0.08).start_move(*args, 0.0)
+
+
+def test_bad_grasp_force_raises():
+    with pytest.raises(GripperCommandError, match="force"):
+        GripperController(0.08).start_grasp(0.04, 0.005, 0.005, 0.05, 500.0, 0.0)

@@ -1,0 +1,70 @@
+"""Scene files: every shipped scene parses; bad scenes fail with a message that names the problem."""
+from pathlib import Path
+
+import pytest
+
+from defgg_ros.constants import MAX_SOFT_BODY_YOUNGS_MODULUS_PA
+from defgg_ros.sim.scene_spec import SceneError, load_scene, parse_scene
+
+SCENES = Path(__file__).resolve().parents[2] / "sim_bringup" / "scenes"
+
+
+def _scene(**obj):
+    base = {"name": "a", "shape": "box", "size_m": [0.05, 0.05, 0.05], "position_xy_m": [0.5, 0.0],
+            "youngs_modulus_pa": 2e9}
+    base.update(obj)
+    return {"objects": [base]}
+
+
+@pytest.mark.parametrize("path", sorted(SCENES.glob("*.yaml")), ids=lambda p: p.name)
+def test_shipped_scenes_parse(path):
+    scene = load_scene(path)
+    assert scene.objects
+    for obj in scene.objects:
+        assert obj.is_soft == (obj.youngs_modulus_pa <= MAX_SOFT_BODY_YOUNGS_MODULUS_PA)
+
+
+def test_demo_scene_spans_soft_to_rigid():
+    moduli = sorted(o.youngs_modulus_pa for o in load_scene(SCENES / "demo.yaml").objects)
+    assert len(moduli) >= 4 and moduli[0] <= 2e4 and moduli[-1] >= 2e9
+    assert len(set(moduli)) >= 3
+
+
+@pytest.mark.parametrize("change, words", [
+    ({"shape": "blob"}, "shape"),
+    ({"size_m": [0.05, -0.01, 0.05]}, "size_m"),
+    ({"size_m": [0.05, 0.05]}, "size_m"),
+    ({"youngs_modulus_pa": 0}, "youngs_modulus_pa"),
+    ({"youngs_modulus_pa": float("nan")}, "youngs_modulus_pa"),
+    ({"youngs_modulus_pa": "soft"}, "youngs_modulus_pa"),
+    ({"position_xy_m": None}, "position_xy_m"),
+    ({"name": ""}, "name"),
+    ({"mass_kg": 0}, "mass_kg"),
+    ({"poisson_ratio": 0.5}, "poisson_ratio"),
+])
+def test_bad_object_fields_are_named(change, words):
+    with pytest.raises(SceneError, match=words):
+        parse_scene(_scene(**change))
+
+
+def test_non_unit_camera_quaternion_is_rejected():
+    raw = _scene()
+    raw["base_T_camera"] = {"xyz": [0.5, 0, 0.4], "quat_xyzw": [1, 1, 0, 0]}
+    with pytest.raises(SceneError, match="unit quaternion"):
+        parse_scene(raw)
+
+
+def test_duplicate_names_are_rejected():
+    raw = _scene()
+    raw["objects"].append(dict(raw["objects"][0]))
+    with pytest.raises(SceneError, match="unique"):
+        parse_scene(raw)
+
+
+def test_missing_file_and_bad_yaml(tmp_path):
+    with pytest.raises(SceneError, match="does not exist"):
+        load_scene(tmp_path / "nope.yaml")
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("objects: [\n")
+    with pytest.raises(SceneError, match="YAML"):
+        load_scene(bad)

@@ -1,0 +1,67 @@
+"""Trajectory interpolation in sim time (pure numpy)."""
+import numpy as np
+import pytest
+
+from defgg_ros.sim.cell_trajectory import TrajectoryError, TrajectoryTracker, make_waypoints
+
+Q0 = np.zeros(7)
+Q1 = np.linspace(0.1, 0.7, 7)
+
+
+def test_linear_interpolation_and_hold_after_the_end():
+    tracker = TrajectoryTracker(Q0)
+    tracker.replace(make_waypoints([(0.0, Q0, None, None), (2.0, Q1, None, None)], 7), 10.0, Q0)
+    q, qd = tracker.sample(11.0)
+    np.testing.assert_allclose(q, Q1 / 2)
+    np.testing.assert_allclose(qd, Q1 / 2)
+    q, qd = tracker.sample(13.0)
+    np.testing.assert_allclose(q, Q1)
+    np.testing.assert_allclose(qd, 0.0)
+    assert tracker.is_active(11.9) and not tracker.is_active(12.1)
+
+
+def test_cubic_matches_endpoint_velocities():
+    v1 = np.full(7, 0.3)
+    tracker = TrajectoryTracker(Q0)
+    tracker.replace(make_waypoints([(0.0, Q0, np.zeros(7), None), (1.0, Q1, v1, None)], 7), 0.0, Q0)
+    q, qd = tracker.sample(1.0 - 1e-9)
+    np.testing.assert_allclose(q, Q1, atol=1e-6)
+    np.testing.assert_allclose(qd, v1, atol=1e-6)
+    _, qd0 = tracker.sample(1e-9)
+    np.testing.assert_allclose(qd0, 0.0, atol=1e-6)
+
+
+def test_quintic_is_smooth_and_hits_the_midpoint_of_a_symmetric_move():
+    z = np.zeros(7)
+    tracker = TrajectoryTracker(Q0)
+    tracker.replace(make_waypoints([(0.0, Q0, z, z), (2.0, Q1, z, z)], 7), 0.0, Q0)
+    q, _ = tracker.sample(1.0)
+    np.testing.assert_allclose(q, Q1 / 2, atol=1e-9)
+
+
+def test_first_point_in_the_future_blends_from_the_current_state():
+    current = np.full(7, -0.2)
+    tracker = TrajectoryTracker(Q0)
+    tracker.replace(make_waypoints([(1.0, Q1, None, None)], 7), 5.0, current)
+    np.testing.assert_allclose(tracker.sample(5.0)[0], current)
+    np.testing.assert_allclose(tracker.sample(5.5)[0], (current + Q1) / 2)
+
+
+def test_empty_trajectory_holds_the_current_position():
+    tracker = TrajectoryTracker(Q0)
+    tracker.replace(make_waypoints([(1.0, Q1, None, None)], 7), 0.0, Q0)
+    tracker.replace([], 0.4, np.full(7, 0.05))
+    np.testing.assert_allclose(tracker.sample(3.0)[0], 0.05)
+
+
+@pytest.mark.parametrize("points, words", [
+    ([(0.0, Q0[:6], None, None)], "expected 7"),
+    ([(0.0, [np.nan] * 7, None, None)], "non-finite"),
+    ([(1.0, Q0, None, None), (1.0, Q1, None, None)], "not after"),
+    ([(-1.0, Q0, None, None)], ">= 0"),
+    ([(0.0, [], None, None)], "no positions"),
+    ([(0.0, Q0, [0.0] * 3, None)], "velocities"),
+])
+def test_malformed_points_raise(points, words):
+    with pytest.raises(TrajectoryError, match=words):
+        make_waypoints(points, 7)
