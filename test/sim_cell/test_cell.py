@@ -1,0 +1,173 @@
+"""The simulated cell with real PyBullet (no ROS): arm, gripper, camera, contacts, soft objects."""
+from pathlib import Path
+
+import numpy as np
+import pybullet as p
+import pytest
+
+from defgg_ros.constants import CAMERA_HEIGHT_ABOVE_TABLE_M, PANDA_READY_Q_RAD
+from defgg_ros.sim.cell import CellSettings, SimCell
+from defgg_ros.sim.cell_trajectory import TrajectoryError
+from defgg_ros.sim.scene_spec import load_scene
+
+SCENES = Path(__file__).resolve().parents[2] / "sim_bringup" / "scenes"
+JOINT_ATOL_RAD = 0.01
+
+
+@pytest.fixture
+def rigid_cell():
+    cell = SimCell(load_scene(SCENES / "rigid_box.yaml"))
+    yield cell
+    cell.close()
+
+
+@pytest.fixture
+def soft_cell():
+    cell = SimCell(load_scene(SCENES / "soft_box.yaml"))
+    yield cell
+    cell.close()
+
+
+def top_down_ik(cell, xyz, yaw_rad=0.0):
+    """Joint positions putting the TCP at xyz pointing down (PyBullet's own IK on the cell's arm)."""
+    quat = p.getQuaternionFromEuler([np.pi, 0.0, yaw_rad])
+    q = p.calculateInverseKinematics(cell.robot, cell.tcp_link, list(xyz), quat, maxNumIterations=200,
+                                     residualThreshold=1e-5, physicsClientId=cell.client)
+    return np.array(q[:7])
+
+
+def run_until(cell, predicate, max_sim_s, chunk_s=0.01):
+    outcomes = []
+    t_end = cell.time_s + max_sim_s
+    while cell.time_s < t_end:
+        outcomes += cell.advance(chunk_s)
+        if predicate(outcomes):
+            return outcomes
+    return outcomes
+
+
+def test_trajectory_tracking_reaches_the_commanded_joints(rigid_cell):
+    q_goal = np.array(PANDA_READY_Q_RAD) + [0.3, 0.2, -0.2, 0.3, 0.2, -0.2, 0.3]
+    q_mid = (np.array(PANDA_READY_Q_RAD) + q_goal) / 2
+    rigid_cell.command_trajectory([(0.6, q_mid, None, None), (1.2, q_goal, None, None)])
+    rigid_cell.advance(0.6)
+    assert np.abs(rigid_cell.arm_positions() - q_mid).max() < JOINT_ATOL_RAD
+    rigid_cell.advance(0.8)
+    state = rigid_cell.joint_state()
+    assert np.abs(state.positions[:7] - q_goal).max() < JOINT_ATOL_RAD
+    assert np.abs(state.velocities[:7]).max() < 0.05
+    assert state.names[0] == "panda_joint1" and state.names[-1] == "panda_finger_joint2"
+
+
+def test_new_trajectory_replaces_the_old_one_and_empty_holds(rigid_cell):
+    q0 = rigid_cell.arm_positions()
+    rigid_cell.command_trajectory([(2.0, q0 + 0.5, None, None)])
+    rigid_cell.advance(0.5)
+    rigid_cell.command_trajectory([])          # stop: hold where the arm is now
+    held = rigid_cell.arm_positions()
+    rigid_cell.advance(1.0)
+    assert np.abs(rigid_cell.arm_positions() - held).max() < JOINT_ATOL_RAD
+    with pytest.raises(TrajectoryError):
+        rigid_cell.command_trajectory([(1.0, [0.0] * 6, None, None)])
+
+
+def test_gripper_grasp_on_a_rigid_box_stops_at_its_width_and_lifts_it(rigid_cell):
+    box_xyz, _ = rigid_cell.object_poses()[0]
+    box_width_m = rigid_cell.scene.objects[0].size_m[0]
+    yaw = rigid_cell.scene.objects[0].yaw_rad
+    above, at = box_xyz + [0, 0, 0.15], box_xyz
+    rigid_cell.command_trajectory([(1.5, top_down_ik(rigid_cell, above, yaw), None, None),
+                                   (2.5, top_down_ik(rigid_cell, at, yaw), None, None)])
+    rigid_cell.advance(2.8)
+    token = rigid_cell.gripper_grasp(box_width_m, 0.005, 0.005, 0.05, 30.0)
+    outcomes = run_until(rigid_cell, lambda o: o, 3.0)
+    assert outcomes and outcomes[0][0] == token
+    result = outcomes[0][1]
+    assert result.success, result.error
+    assert result.width_m == pytest.approx(box_width_m, abs=0.004)
+    rigid_cell.command_trajectory([(1.0, top_down_ik(rigid_cell, above, yaw), None, None)])
+    rigid_cell.advance(1.3)
+    assert rigid_cell.object_poses()[0][0][2] > box_xyz[2] + 0.1, "box not lifted with the hand"
+
+
+def test_grasp_on_nothing_fails_and_move_reports_back(rigid_cell):
+    token = rigid_cell.gripper_grasp(0.05, 0.005, 0.005, 0.1, 20.0)
+    (tok, result), = run_until(rigid_cell, lambda o: o, 3.0)
+    assert tok == token and not result.success and "outside" in result.error
+    token = rigid_cell.gripper_move(0.06, 0.1)
+    (tok, result), = run_until(rigid_cell, lambda o: o, 3.0)
+    assert tok == token and result.success and result.width_m == pytest.approx(0.06, abs=0.002)
+
+
+def test_external_wrench_rises_on_contact_with_the_table(rigid_cell):
+    free_force, _ = rigid_cell.external_wrench()
+    assert np.linalg.norm(free_force) == 0.0
+    # Aim the fingertips 2 cm into the table, away from the box.
+    target = top_down_ik(rigid_cell, [0.35, 0.2, -0.02])
+    rigid_cell.command_trajectory([(2.0, target, None, None)])
+    peak = 0.0
+    for _ in range(250):
+        rigid_cell.advance(0.01)
+        force, _ = rigid_cell.external_wrench()
+        peak = max(peak, force[2])
+    assert peak > 5.0, f"table pushes up on the fingers: peak Fz {peak:.2f} N"
+
+
+def test_camera_sees_the_box_where_it_is(rigid_cell):
+    depth_m, mask, _ = rigid_cell.render_depth()
+    assert depth_m.shape == (480, 640)
+    box = mask == 0
+    assert box.sum() > 500
+    table_depth = np.nanmedian(depth_m[mask < 0])
+    assert table_depth == pytest.approx(CAMERA_HEIGHT_ABOVE_TABLE_M, abs=0.002)
+    top_m = CAMERA_HEIGHT_ABOVE_TABLE_M - rigid_cell.scene.objects[0].height_m
+    assert np.nanmedian(depth_m[box]) == pytest.approx(top_m, abs=0.003)
+    # Project the box's position with K: it lands on the box pixels.
+    xyz, _ = rigid_cell.object_poses()[0]
+    cam = np.array(rigid_cell.scene.base_xyz_camera_m)
+    x_opt, y_opt, z_opt = xyz[0] - cam[0], -(xyz[1] - cam[1]), cam[2] - xyz[2]
+    k = rigid_cell.camera_k
+    u, v = k[0, 0] * x_opt / z_opt + k[0, 2], k[1, 1] * y_opt / z_opt + k[1, 2]
+    assert box[int(round(v)), int(round(u))]
+
+
+def test_a_soft_object_appears_in_the_rendered_depth():
+    cell = SimCell(load_scene(SCENES / "soft_box.yaml"), CellSettings(soft_always_active=True))
+    try:
+        assert cell.active_soft_objects() == ["foam_block"]
+        cell.advance(0.2)
+        depth_m, mask, _ = cell.render_depth()
+        soft = mask == 0
+        assert soft.sum() > 500
+        assert np.nanmedian(depth_m[soft]) == pytest.approx(CAMERA_HEIGHT_ABOVE_TABLE_M - 0.05, abs=0.006)
+    finally:
+        cell.close()
+
+
+def test_soft_object_wakes_near_the_hand_and_sleeps_when_left(soft_cell):
+    assert soft_cell.active_soft_objects() == []
+    xyz, _ = soft_cell.object_poses()[0]
+    near = top_down_ik(soft_cell, xyz + [0, 0, 0.06])
+    soft_cell.command_trajectory([(1.5, near, None, None)])
+    soft_cell.advance(1.6)
+    assert soft_cell.active_soft_objects() == ["foam_block"]
+    assert soft_cell.time_step_s == pytest.approx(5e-4)
+    soft_cell.command_trajectory([(1.0, np.array(PANDA_READY_Q_RAD), None, None)])
+    soft_cell.advance(1.5)
+    assert soft_cell.active_soft_objects() == []
+    after, _ = soft_cell.object_poses()[0]
+    assert np.linalg.norm(after - xyz) < 0.005, "waking and sleeping must not move the object"
+
+
+def test_noise_drops_pixels_only_when_asked():
+    from defgg_ros.sim.cell_camera import DepthNoise
+
+    scene = load_scene(SCENES / "rigid_box.yaml")
+    cell = SimCell(scene, CellSettings(depth_noise=DepthNoise(0.004, 0.02, True)))
+    try:
+        depth_m, _, _ = cell.render_depth()
+        invalid = np.isnan(depth_m).mean()
+        assert 0.015 < invalid < 0.1
+        assert np.nanstd(depth_m[200:280, 500:600]) > 1e-4
+    finally:
+        cell.close()
