@@ -1,0 +1,143 @@
+"""Session bags: rosbag2 (metadata.yaml + one .mcap file, zstd-compressed chunks).
+
+Written with rosbags (no rosbag2 on these machines) so `ros2 bag info/play`
+and Foxglove read them on a real install. Messages go in as CDR bytes (what
+rclpy's raw subscriptions and `serialize_message` give) and come out as raw
+bytes plus a lazy decoder. The session metadata (JSON) is stored twice: in
+metadata.yaml's custom_data (for `ros2 bag info`) and as the first message on
+/defgg/session/metadata (for players and Foxglove). Every read problem —
+missing, truncated, corrupt — becomes a SessionBagError with the path and
+the reason. No rclpy here.
+"""
+import json
+import os
+import shutil
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
+from rosbags.rosbag2 import Reader, Writer
+from rosbags.rosbag2.enums import CompressionFormat, CompressionMode, StoragePlugin
+
+from defgg_ros.sessions import session_topics as st
+from defgg_ros.sessions.interfaces import session_typestore
+
+CUSTOM_DATA_KEY = "defgg_session"
+BAG_VERSION = 9
+
+
+class SessionBagError(RuntimeError):
+    """A session bag that cannot be written or read (the message says which and why)."""
+
+
+@dataclass(frozen=True)
+class BagMessage:
+    topic: str
+    msgtype: str
+    log_time_ns: int
+    raw: bytes
+
+    def decode(self):
+        """The message as a rosbags dataclass (same field names as the rclpy message)."""
+        return session_typestore().deserialize_cdr(self.raw, self.msgtype)
+
+
+def _qos(latched: bool) -> Qos:
+    zero = QosTime(0, 0)
+    return Qos(QosHistory.KEEP_LAST, 1 if latched else 10, QosReliability.RELIABLE,
+               QosDurability.TRANSIENT_LOCAL if latched else QosDurability.VOLATILE,
+               zero, zero, QosLiveliness.AUTOMATIC, zero, False)
+
+
+def serialize_string(text: str) -> bytes:
+    store = session_typestore()
+    return bytes(store.serialize_cdr(store.types["std_msgs/msg/String"](data=text), "std_msgs/msg/String"))
+
+
+class SessionWriter:
+    """Write a session bag into a temporary folder; `close()` renames it into place.
+
+    A crash or an exception leaves no half-written bag at `path`.
+    """
+
+    def __init__(self, path, metadata: dict, log_time_ns: int, overwrite: bool = False):
+        self.path = Path(path)
+        if self.path.exists() and not overwrite:
+            raise SessionBagError(f"{self.path} exists already (use a new path, or --update to replace a session)")
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._overwrite = overwrite
+        self._scratch = Path(tempfile.mkdtemp(prefix=f".{self.path.name}.", dir=self.path.parent))
+        self._tmp_bag = self._scratch / self.path.name
+        self._writer = Writer(self._tmp_bag, version=BAG_VERSION, storage_plugin=StoragePlugin.MCAP)
+        # STORAGE mode = compressed MCAP chunks (zstd), what rosbag2's mcap plugin calls a storage preset.
+        self._writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
+        self._writer.set_custom_data(CUSTOM_DATA_KEY, json.dumps(metadata, sort_keys=True))
+        self._writer.open()
+        self._connections = {}
+        self.counts = {}
+        self.write(st.METADATA, serialize_string(json.dumps(metadata, sort_keys=True)), log_time_ns)
+
+    def write(self, topic: str, raw: bytes, log_time_ns: int, msgtype: str | None = None) -> None:
+        msgtype = msgtype or st.TOPIC_TYPES.get(topic)
+        if msgtype is None:
+            raise SessionBagError(f"no message type known for topic {topic!r}; pass msgtype")
+        if topic not in self._connections:
+            self._connections[topic] = self._writer.add_connection(
+                topic, msgtype, typestore=session_typestore(),
+                offered_qos_profiles=[_qos(topic in st.LATCHED_TOPICS)])
+        self._writer.write(self._connections[topic], int(log_time_ns), bytes(raw))
+        self.counts[topic] = self.counts.get(topic, 0) + 1
+
+    def close(self) -> Path:
+        self._writer.close()
+        if self.path.exists():  # only with overwrite: swap folders, old one removed after
+            old = self._scratch / "previous"
+            os.rename(self.path, old)
+        os.rename(self._tmp_bag, self.path)
+        shutil.rmtree(self._scratch, ignore_errors=True)
+        return self.path
+
+    def abort(self) -> None:
+        try:
+            self._writer.close()
+        except Exception:  # noqa: BLE001 - already failing; the scratch folder goes anyway
+            pass
+        shutil.rmtree(self._scratch, ignore_errors=True)
+
+
+def read_bag(path) -> tuple[dict, list[BagMessage]]:
+    """(metadata dict, all messages in log-time order) of a session bag."""
+    path = Path(path)
+    if not path.exists():
+        raise SessionBagError(f"session {path} does not exist")
+    if not (path / "metadata.yaml").is_file():
+        raise SessionBagError(f"{path} is not a rosbag2 folder (no metadata.yaml)")
+    try:
+        with Reader(path) as reader:
+            expected = reader.message_count
+            messages = [BagMessage(c.topic, c.msgtype, t, bytes(raw))
+                        for c, t, raw in reader.messages()]
+    except SessionBagError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - rosbags raises many types for damaged files
+        raise SessionBagError(f"{path}: cannot read the bag ({type(exc).__name__}: {exc}); "
+                              "it is truncated or corrupt — re-record it") from None
+    if len(messages) != expected:
+        raise SessionBagError(f"{path}: metadata.yaml announces {expected} messages but the storage holds "
+                              f"{len(messages)}; the bag is truncated — re-record it")
+    messages.sort(key=lambda m: m.log_time_ns)
+    return _metadata(path, messages), messages
+
+
+def _metadata(path: Path, messages: list[BagMessage]) -> dict:
+    first = next((m for m in messages if m.topic == st.METADATA), None)
+    if first is None:
+        raise SessionBagError(f"{path}: no {st.METADATA} message; this is not a defgg session bag")
+    try:
+        metadata = json.loads(first.decode().data)
+    except Exception as exc:  # noqa: BLE001 - damaged CDR or JSON
+        raise SessionBagError(f"{path}: session metadata unreadable ({exc})") from None
+    if not isinstance(metadata, dict):
+        raise SessionBagError(f"{path}: session metadata must be a JSON object")
+    return metadata

@@ -1,0 +1,103 @@
+"""Start the cell's nodes as child processes for a replay, and stop them again.
+
+Each node runs as `python -m defgg_ros.nodes.<node>` with its deployed YAML
+(`sim_bringup/config/<node>.yaml`) plus a per-run override YAML, logs to a
+file in the run folder (shown when it dies), and in its own process group so
+stopping it never touches anything else. No readiness sleeping here: callers
+wait for the nodes' services/actions and call `check_alive()` meanwhile.
+"""
+import os
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import yaml
+
+CONFIG_DIR = Path(__file__).resolve().parents[2] / "sim_bringup" / "config"
+STOP_TIMEOUT_S = 10.0
+LOG_TAIL_LINES = 15
+
+
+class GraphError(RuntimeError):
+    """A node of the replay graph failed to start or died."""
+
+
+@dataclass
+class NodeSpec:
+    name: str                                      # ROS node name = config file stem
+    module: str                                    # python -m target
+    parameters: dict = field(default_factory=dict)  # overrides of the YAML
+    remaps: dict = field(default_factory=dict)      # topic remaps (from -> to)
+    use_config: bool = True
+
+
+def config_file(name: str) -> Path | None:
+    """The deployed YAML of a node: the source tree's or the installed share/defgg_ros one."""
+    for root in (CONFIG_DIR, Path(sys.prefix) / "share" / "defgg_ros" / "sim_bringup" / "config"):
+        if (root / f"{name}.yaml").is_file():
+            return root / f"{name}.yaml"
+    return None
+
+
+def node_command(spec: NodeSpec, run_dir: Path) -> list[str]:
+    cmd = [sys.executable, "-m", spec.module, "--ros-args"]
+    deployed = config_file(spec.name) if spec.use_config else None
+    if deployed is not None:
+        cmd += ["--params-file", str(deployed)]
+    if spec.parameters:
+        overrides = run_dir / f"{spec.name}.overrides.yaml"
+        overrides.write_text(yaml.safe_dump({spec.name: {"ros__parameters": spec.parameters}}), encoding="utf-8")
+        cmd += ["--params-file", str(overrides)]
+    for source, target in spec.remaps.items():
+        cmd += ["-r", f"{source}:={target}"]
+    return cmd
+
+
+class NodeGraph:
+    def __init__(self, run_dir):
+        self.run_dir = Path(run_dir)
+        self.run_dir.mkdir(parents=True, exist_ok=True)
+        self.processes = {}
+
+    def start(self, spec: NodeSpec) -> None:
+        log = open(self.run_dir / f"{spec.name}.log", "wb")
+        try:
+            self.processes[spec.name] = subprocess.Popen(
+                node_command(spec, self.run_dir), stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                start_new_session=True)
+        finally:
+            log.close()
+
+    def log_tail(self, name: str) -> str:
+        path = self.run_dir / f"{name}.log"
+        lines = path.read_text(encoding="utf-8", errors="replace").splitlines() if path.exists() else []
+        return "\n".join(f"    [{name}] {line}" for line in lines[-LOG_TAIL_LINES:])
+
+    def check_alive(self) -> None:
+        for name, process in self.processes.items():
+            code = process.poll()
+            if code is not None:
+                raise GraphError(f"node {name} exited with code {code} during the replay; its last log lines:\n"
+                                 f"{self.log_tail(name)}")
+
+    def stop_all(self) -> None:
+        """SIGINT every node (rclpy shuts down cleanly), then SIGKILL what is left after a timeout."""
+        for process in self.processes.values():
+            if process.poll() is None:
+                os.killpg(process.pid, signal.SIGINT)
+        deadline = time.monotonic() + STOP_TIMEOUT_S
+        for process in self.processes.values():
+            try:
+                process.wait(timeout=max(0.1, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                os.killpg(process.pid, signal.SIGKILL)
+                process.wait()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.stop_all()

@@ -1,0 +1,180 @@
+"""Play a session into the live graph and collect what the graph answers.
+
+SessionPlayer publishes the recorded camera frames (raw CDR, original
+stamps) and waits for the inference node's grasp on each stamp; `replay`
+walks the session's events in order — stiffness assignments through
+SetStiffness, frames, PlanGrasp calls, PickAndPlace goals — and returns one
+report Row per frame/call/pick.
+"""
+import threading
+import time
+from dataclasses import dataclass
+
+from defgg_interfaces.action import PickAndPlace
+from defgg_interfaces.msg import Grasp, StiffnessAssignment
+from defgg_interfaces.srv import PlanGrasp
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
+from sensor_msgs.msg import CameraInfo, Image
+
+from defgg_ros import topics
+from defgg_ros.nodes import qos
+from defgg_ros.sessions.compare import GraspSummary, PickOutcome, Tolerances, grasp_problems, pick_problems
+from defgg_ros.sessions.report import Row, diff_text
+from defgg_ros.sessions.session import Frame, Session, stamp_ns
+
+# Re-send a frame this often while waiting: camera topics are best effort, a frame can be lost.
+RESEND_PERIOD_S = 1.5
+# Reliable publisher (matches the nodes' best-effort camera subscriptions and delivers when it can).
+FRAME_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=5, reliability=ReliabilityPolicy.RELIABLE,
+                       durability=DurabilityPolicy.VOLATILE)
+
+
+@dataclass
+class ReplayOptions:
+    tolerances: Tolerances
+    pick: bool = True
+    grasp_timeout_s: float = 30.0      # a frame whose grasp is expected
+    no_grasp_wait_s: float = 5.0       # a frame recorded without a grasp: how long to make sure
+    plan_timeout_s: float = 30.0
+    pick_timeout_s: float = 300.0
+
+
+class SessionPlayer(Node):
+    def __init__(self, node_name="defgg_session_player", **kwargs):
+        super().__init__(node_name, **kwargs)
+        self._depth_pub = self.create_publisher(Image, topics.DEPTH_IMAGE, FRAME_QOS)
+        self._info_pub = self.create_publisher(CameraInfo, topics.DEPTH_CAMERA_INFO, FRAME_QOS)
+        self._color_pub = self.create_publisher(Image, topics.COLOR_IMAGE, FRAME_QOS)
+        self._grasps = {}
+        self._changed = threading.Condition()
+        self.create_subscription(Grasp, topics.BEST_GRASP, self._on_grasp, qos.STATE)
+
+    def _on_grasp(self, msg: Grasp):
+        with self._changed:
+            self._grasps[stamp_ns(msg.header.stamp)] = msg
+            self._changed.notify_all()
+
+    def _send(self, frame: Frame):
+        self._info_pub.publish(frame.camera_info.raw)
+        if frame.color is not None:
+            self._color_pub.publish(frame.color.raw)
+        self._depth_pub.publish(frame.depth.raw)
+
+    def feed_frame(self, frame: Frame, wait_s: float, alive=lambda: None):
+        """Publish a recorded frame until the graph's grasp for its stamp arrives; None after wait_s."""
+        deadline = time.monotonic() + wait_s
+        with self._changed:
+            self._grasps.pop(frame.stamp_ns, None)
+        while True:
+            self._send(frame)
+            resend_at = min(deadline, time.monotonic() + RESEND_PERIOD_S)
+            with self._changed:
+                got = self._changed.wait_for(lambda: frame.stamp_ns in self._grasps, resend_at - time.monotonic())
+                if got:
+                    return self._grasps[frame.stamp_ns]
+            alive()
+            if time.monotonic() >= deadline:
+                return None
+
+
+def _summary(grasp) -> GraspSummary | None:
+    return GraspSummary.of(grasp) if grasp is not None else None
+
+
+def _brief(summary) -> str:
+    return summary.brief() if summary is not None else "none"
+
+
+class Replay:
+    """One pass over a session's events against a live graph."""
+
+    def __init__(self, session: Session, player: SessionPlayer, client, options: ReplayOptions,
+                 alive=lambda: None, log=print, recorder=None):
+        self.session, self.player, self.client, self.options = session, player, client, options
+        self.alive, self.log, self.recorder = alive, log, recorder
+        self.rows = []
+        self.uncompared_frames = 0
+        self.grasps_by_stamp = {}      # replayed grasp per frame stamp (frames and plan calls)
+        self.last_fed_stamp = None
+        self.frames_by_stamp = {f.stamp_ns: f for f in session.frames}
+
+    def run(self) -> list[Row]:
+        for event in self.session.events:
+            getattr(self, f"_{event.kind}")(event.payload)
+            self.alive()
+        return self.rows
+
+    def _assignment(self, message):
+        assignment = deserialize_message(message.raw, StiffnessAssignment)
+        self.client.set_stiffness(assignment.objects, assignment.default_youngs_modulus_pa)
+
+    def _feed(self, frame: Frame):
+        wait_s = self.options.grasp_timeout_s if frame.best_grasp is not None else self.options.no_grasp_wait_s
+        self.log(f"  feeding frame {frame.index} (stamp {frame.stamp_ns / 1e9:.3f} s)")
+        if self.recorder is not None:  # --update: the frame goes into the new bag as sent
+            camera = [(m.topic, m.raw) for m in (frame.camera_info, frame.color, frame.depth) if m is not None]
+            self.recorder.write_frame(frame.stamp_ns, camera)
+        actual = self.player.feed_frame(frame, wait_s, self.alive)
+        self.last_fed_stamp = frame.stamp_ns
+        if actual is not None:
+            self.grasps_by_stamp[frame.stamp_ns] = actual
+        return actual
+
+    def _ensure_fed(self, stamp):
+        """Make the frame with this stamp the latest one the inference node has seen."""
+        if stamp in self.frames_by_stamp and stamp != self.last_fed_stamp:
+            self._feed(self.frames_by_stamp[stamp])
+
+    def _frame(self, frame: Frame):
+        if frame.best_grasp is None:
+            # A live cell drops frames it is too busy for: no grasp recorded says nothing about the
+            # network's answer, so such a frame is not compared (and only fed when a call used it).
+            self.uncompared_frames += 1
+            return
+        expected = _summary(frame.best_grasp.decode())
+        actual = _summary(self._feed(frame))
+        item = f"frame {frame.index} @{frame.stamp_ns / 1e9:.3f}s"
+        self.rows.append(Row(item, _brief(expected), _brief(actual), diff_text(expected, actual),
+                             grasp_problems(expected, actual, self.options.tolerances)))
+
+    def _plan(self, call):
+        request = deserialize_message(call.request.raw, PlanGrasp.Request)
+        recorded = call.response.decode() if call.response is not None else None
+        if recorded is not None and recorded.grasps and request.depth.width == 0:
+            self._ensure_fed(stamp_ns(recorded.grasps[0].header.stamp))  # the call planned on the latest frame
+        response = self.client.plan(request, self.options.plan_timeout_s)
+        expected = _summary(recorded.grasps[0]) if recorded is not None and recorded.grasps else None
+        actual = _summary(response.grasps[0]) if response.grasps else None
+        problems = grasp_problems(expected, actual, self.options.tolerances)
+        if recorded is not None and bool(recorded.success) != bool(response.success):
+            problems.insert(0, f"success {response.success} (recorded {recorded.success}): {response.message}")
+        if response.grasps:
+            self.grasps_by_stamp[stamp_ns(response.grasps[0].header.stamp)] = response.grasps[0]
+        self.rows.append(Row(f"plan {call.index}", _brief(expected), _brief(actual), diff_text(expected, actual),
+                             problems))
+
+    def _pick(self, pick):
+        recorded = PickOutcome.of(pick.result.decode()) if pick.result is not None else None
+        if not self.options.pick:
+            self.rows.append(Row(f"pick {pick.index}", recorded.brief() if recorded else "none", "skipped"))
+            return
+        goal = deserialize_message(pick.goal.raw, PickAndPlace.Goal)
+        self._prepare_goal(goal, pick)
+        self.log(f"  pick {pick.index}: executing in the simulated cell ...")
+        result = self.client.pick(goal, self.options.pick_timeout_s)
+        actual = PickOutcome.of(result)
+        self.rows.append(Row(f"pick {pick.index}", recorded.brief() if recorded else "none", actual.brief(), "",
+                             pick_problems(recorded, actual)))
+
+    def _prepare_goal(self, goal, pick):
+        """Make the goal use this replay's grasp, not the recorded one."""
+        if goal.plan_grasp:
+            # The executor plans on the latest frame: make it the frame the recorded pick planned on.
+            if pick.result is not None:
+                self._ensure_fed(stamp_ns(pick.result.decode().grasp_used.header.stamp))
+            return
+        stamp = stamp_ns(goal.grasp.header.stamp)
+        if stamp in self.grasps_by_stamp:
+            goal.grasp = self.grasps_by_stamp[stamp]

@@ -1,0 +1,173 @@
+"""defgg-record: record a session of the running cell into a rosbag2 (MCAP, zstd) bag.
+
+Records the camera (depth + camera_info + colour, decimated to one frame per
+--depth-period-s plus every frame a grasp was planned on), /joint_states
+(decimated), the stiffness assignments, the best grasps, the fake driver's
+scene, and metadata (scene file, model fingerprint, node parameters,
+software version). Two ways to use it:
+
+  passive (e.g. `defgg-bringup --record PATH`): record until Ctrl-C / --duration-s;
+  driving: --plan N calls PlanGrasp N times on fresh frames (and --pick I,J
+  sends PickAndPlace goals with those calls' best grasps), recording every
+  request/response and goal/feedback/result: this is how the sessions in
+  sim_bringup/sessions/ were made.
+
+Replay with `defgg-replay PATH`.
+"""
+import argparse
+import signal
+import sys
+import threading
+import time
+from pathlib import Path
+
+import rclpy
+from defgg_interfaces.action import PickAndPlace
+from defgg_interfaces.srv import PlanGrasp
+from rclpy.context import Context
+from rclpy.executors import MultiThreadedExecutor
+from rclpy.node import Node
+
+from defgg_ros import topics
+from defgg_ros.sessions import metadata as md
+from defgg_ros.sessions.bag import SessionBagError, SessionWriter
+from defgg_ros.sessions.client import CellCallError, CellClient
+from defgg_ros.sessions.compare import GraspSummary, PickOutcome, Tolerances
+from defgg_ros.sessions.params import CELL_NODES, fetch_parameters
+from defgg_ros.sessions.recorder_node import SessionRecorder
+from defgg_ros.sessions.selector import DEFAULT_DEPTH_PERIOD_S, DEFAULT_JOINT_STATE_PERIOD_S, FrameSelector
+
+FRESH_FRAME_TIMEOUT_S = 60.0
+
+
+def _model_path(args, parameters: dict) -> tuple[Path, bool]:
+    inference = parameters.get("grasp_inference_node") or {}
+    use_stiffness = bool(inference.get("use_stiffness", True))
+    if args.model:
+        return Path(args.model), use_stiffness
+    if inference.get("model_path"):
+        return Path(inference["model_path"]), use_stiffness
+    from defgg_ros.nodes.grasp_inference_node import default_model_path
+    return default_model_path(use_stiffness), use_stiffness
+
+
+def _pick_indices(text: str | None, n_plans: int) -> set:
+    if not text:
+        return set()
+    try:
+        indices = {int(v) for v in text.split(",")}
+    except ValueError:
+        raise SystemExit(f"defgg-record: --pick needs plan indices like 0,2; got {text!r}") from None
+    if any(not 0 <= i < n_plans for i in indices):
+        raise SystemExit(f"defgg-record: --pick indices must be in 0..{n_plans - 1} (see --plan)")
+    return indices
+
+
+def drive(recorder, client, args, log=print) -> None:
+    """--plan/--pick: call the cell like a user would, on fresh frames, and record it."""
+    picks = _pick_indices(args.pick, args.plan)
+    for i in range(args.plan):
+        if not recorder.wait_for_grasps(args.frames_between, FRESH_FRAME_TIMEOUT_S):
+            raise CellCallError(f"no new grasp on {topics.BEST_GRASP} within {FRESH_FRAME_TIMEOUT_S:g} s "
+                                "(is the camera publishing and the inference node running?)")
+        response = client.plan(PlanGrasp.Request(top_k=args.top_k))
+        best = GraspSummary.of(response.grasps[0]).brief() if response.grasps else "none"
+        log(f"  plan {i}: {'ok' if response.success else 'FAILED'} {best} {response.message}")
+        if i in picks and response.success:
+            result = client.pick(PickAndPlace.Goal(plan_grasp=False, grasp=response.grasps[0]))
+            log(f"  pick {i}: {PickOutcome.of(result).brief()}")
+
+
+def record(args, log=print) -> Path:
+    context = Context()
+    rclpy.init(context=context)
+    executor = MultiThreadedExecutor(num_threads=4, context=context)
+    threading.Thread(target=executor.spin, daemon=True).start()
+    writer = None
+    try:
+        probe = Node("defgg_session_probe", context=context)
+        executor.add_node(probe)
+        if args.plan:  # driving: the cell must be up before its parameters can be read
+            CellClient(probe).wait_for_servers(args.wait_s, pick=bool(args.pick))
+        parameters = {n: p for n in CELL_NODES if (p := fetch_parameters(probe, n, args.param_timeout_s))}
+        log(f"parameters recorded from: {', '.join(parameters) or 'no running cell node'}")
+        model_path, use_stiffness = _model_path(args, parameters)
+        tolerances = Tolerances(args.position_tol_mm, args.angle_tol_deg, args.width_tol_mm)
+        meta = md.make_metadata(Path(args.out).name, source=args.source or ("sim" if args.scene else "real"),
+                                scene_path=args.scene, model_path=model_path, use_stiffness=use_stiffness,
+                                parameters=parameters, pick=bool(args.pick), tolerances=tolerances, note=args.note)
+        writer = SessionWriter(args.out, meta, time.time_ns())
+        recorder = SessionRecorder(writer, FrameSelector(topics.DEPTH_IMAGE, args.depth_period_s,
+                                                         args.joint_state_period_s),
+                                   record_color=not args.no_color, context=context)
+        executor.add_node(recorder)
+        try:
+            if args.plan:
+                drive(recorder, CellClient(recorder, recorder), args, log)
+            else:
+                log(f"recording into {args.out} " + (f"for {args.duration_s:g} s" if args.duration_s
+                                                     else "until Ctrl-C"))
+                threading.Event().wait(args.duration_s or None)
+        except KeyboardInterrupt:
+            log("stopping (Ctrl-C)")
+        path = recorder.finish()
+        writer = None
+        log(f"wrote {path}: " + ", ".join(f"{t} x{n}" for t, n in sorted(recorder.counts.items())))
+        return path
+    finally:
+        if writer is not None:
+            writer.abort()
+        executor.shutdown()
+        context.try_shutdown()
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="defgg-record", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("out", help="bag folder to create (must not exist)")
+    parser.add_argument("--scene", help="scene YAML the cell runs (sim): embedded so picks can be replayed")
+    parser.add_argument("--source", choices=("sim", "real"), help="where it was recorded (default: sim with --scene)")
+    parser.add_argument("--model", help="checkpoint the inference node runs (default: asked from the node)")
+    parser.add_argument("--note", default="", help="free text stored in the metadata")
+    parser.add_argument("--duration-s", type=float, default=0.0, help="passive mode: stop after this long (0: Ctrl-C)")
+    parser.add_argument("--plan", type=int, default=0,
+                        help="driving mode: PlanGrasp calls to make, one per fresh frame")
+    parser.add_argument("--pick", help="driving mode: comma-separated plan indices to pick with (PickAndPlace)")
+    parser.add_argument("--top-k", type=int, default=3, help="grasps per PlanGrasp call")
+    parser.add_argument("--frames-between", type=int, default=1,
+                        help="fresh grasps to wait for before each PlanGrasp call (lets the scene settle)")
+    parser.add_argument("--depth-period-s", type=float, default=DEFAULT_DEPTH_PERIOD_S,
+                        help="keep one depth frame per this period (planned-on frames are always kept)")
+    parser.add_argument("--joint-state-period-s", type=float, default=DEFAULT_JOINT_STATE_PERIOD_S,
+                        help="keep one /joint_states message per this period")
+    parser.add_argument("--no-color", action="store_true", help="do not record the colour image")
+    parser.add_argument("--position-tol-mm", type=float, default=Tolerances.position_mm,
+                        help="replay tolerance stored in the session: grasp position (mm)")
+    parser.add_argument("--angle-tol-deg", type=float, default=Tolerances.angle_deg,
+                        help="replay tolerance: grasp angle (deg)")
+    parser.add_argument("--width-tol-mm", type=float, default=Tolerances.width_mm,
+                        help="replay tolerance: grasp width (mm)")
+    parser.add_argument("--wait-s", type=float, default=60.0, help="driving mode: wait this long for the servers")
+    parser.add_argument("--param-timeout-s", type=float, default=2.0,
+                        help="how long to wait for each node's parameter service")
+    return parser
+
+
+def _interrupt(*_):
+    raise KeyboardInterrupt
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    # SIGTERM (e.g. from the bringup) ends the recording cleanly, like Ctrl-C.
+    signal.signal(signal.SIGTERM, _interrupt)
+    try:
+        record(args)
+    except (SessionBagError, md.MetadataError, CellCallError, ValueError) as exc:
+        print(f"defgg-record: error: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

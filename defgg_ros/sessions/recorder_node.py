@@ -1,0 +1,135 @@
+"""SessionRecorder: an rclpy node that writes the cell's topics into a session bag.
+
+Thin adapter: raw (CDR) subscriptions -> FrameSelector -> SessionWriter. Also
+records the service calls and action goals made through SessionClient
+(`record_plan`, `record_pick_*`), which a topic subscription cannot see.
+"""
+import threading
+import time
+
+from defgg_interfaces.msg import Grasp, StiffnessAssignment
+from rclpy.node import Node
+from rclpy.serialization import serialize_message
+from sensor_msgs.msg import CameraInfo, Image, JointState
+from std_msgs.msg import String
+
+from defgg_ros import topics
+from defgg_ros.nodes import qos
+from defgg_ros.sessions import session_topics as st
+from defgg_ros.sessions.selector import FrameSelector, StampError, header_stamp_ns
+
+
+def stamp_ns_of(msg) -> int:
+    return int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
+
+
+class SessionRecorder(Node):
+    def __init__(self, writer, selector: FrameSelector, record_camera: bool = True, record_color: bool = True,
+                 node_name="defgg_session_recorder", **kwargs):
+        super().__init__(node_name, **kwargs)
+        self._writer = writer
+        self._selector = selector
+        self._lock = threading.Lock()
+        self.closed = False
+        self.errors = []
+        self.latest_grasp_stamp_ns = None       # newest best grasp seen (the recorder waits on it)
+        self.grasp_count = 0
+        self._grasp_seen = threading.Condition()
+        stamped = [(Image, topics.DEPTH_IMAGE, qos.SENSOR_DATA),
+                   (CameraInfo, topics.DEPTH_CAMERA_INFO, qos.SENSOR_DATA)]
+        if record_color:
+            stamped.append((Image, topics.COLOR_IMAGE, qos.SENSOR_DATA))
+        # A replay writes the frames it sends itself (write_frame): no subscription can lose one.
+        for msg_type, topic, profile in stamped if record_camera else ():
+            self.create_subscription(msg_type, topic, self._stamped_callback(topic), profile, raw=True)
+        self.create_subscription(Grasp, topics.BEST_GRASP, self._on_best_grasp, qos.STATE, raw=True)
+        self.create_subscription(JointState, topics.JOINT_STATES, self._on_joint_state, qos.SENSOR_DATA, raw=True)
+        for msg_type, topic in ((StiffnessAssignment, topics.STIFFNESS_ASSIGNMENTS), (String, st.DRIVER_SCENE)):
+            self.create_subscription(msg_type, topic, self._plain_callback(topic), qos.LATCHED, raw=True)
+
+    # --- writing -------------------------------------------------------------
+    def _write_all(self, items) -> None:
+        with self._lock:
+            if self.closed:
+                return
+            for topic, raw, log_time_ns in items:
+                self._writer.write(topic, raw, log_time_ns)
+
+    def _stamped_callback(self, topic):
+        def callback(raw: bytes):
+            try:
+                with self._lock:
+                    items = self._selector.offer_stamped(topic, raw, time.time_ns())
+            except StampError as exc:
+                self.errors.append(f"{topic}: {exc}")
+                return
+            self._write_all(items)
+        return callback
+
+    def _plain_callback(self, topic):
+        return lambda raw: self._write_all([(topic, raw, time.time_ns())])
+
+    def _on_best_grasp(self, raw: bytes):
+        self._stamped_callback(topics.BEST_GRASP)(raw)
+        with self._grasp_seen:
+            self.latest_grasp_stamp_ns = header_stamp_ns(raw)
+            self.grasp_count += 1
+            self._grasp_seen.notify_all()
+
+    def wait_for_grasps(self, count: int, timeout_s: float) -> bool:
+        """Wait until `count` more best grasps were published (fresh frames went through the cell)."""
+        with self._grasp_seen:
+            target = self.grasp_count + count
+            return self._grasp_seen.wait_for(lambda: self.grasp_count >= target, timeout_s)
+
+    def _on_joint_state(self, raw: bytes):
+        with self._lock:
+            items = self._selector.offer_joint_state(topics.JOINT_STATES, raw, time.time_ns())
+        self._write_all(items)
+
+    def keep_stamp(self, stamp_ns: int) -> None:
+        """Something refers to this depth stamp: make sure its frame is in the bag."""
+        with self._lock:
+            items = self._selector.keep(stamp_ns)
+        self._write_all(items)
+
+    def write_frame(self, stamp_ns: int, camera_messages) -> None:
+        """Write a frame sent by a player ([(topic, raw)]); its grasp is then recorded when it comes."""
+        self.keep_stamp(stamp_ns)
+        now = time.time_ns()
+        with self._lock:
+            items = self._selector.mark_written([(topic, raw, now) for topic, raw in camera_messages])
+        self._write_all(items)
+
+    # --- client-side records ------------------------------------------------
+    def record_plan(self, request, response, request_time_ns: int) -> None:
+        items = [(st.PLAN_REQUEST, serialize_message(request), request_time_ns)]
+        if response is not None:
+            for grasp in response.grasps[:1]:
+                self.keep_stamp(stamp_ns_of(grasp))
+            items.append((st.PLAN_RESPONSE, serialize_message(response), time.time_ns()))
+        self._write_all(items)
+
+    def record_pick_goal(self, goal, log_time_ns: int) -> None:
+        if not goal.plan_grasp:
+            self.keep_stamp(stamp_ns_of(goal.grasp))
+        self._write_all([(st.PICK_GOAL, serialize_message(goal), log_time_ns)])
+
+    def record_pick_feedback(self, feedback) -> None:
+        self._write_all([(st.PICK_FEEDBACK, serialize_message(feedback), time.time_ns())])
+
+    def record_pick_result(self, result) -> None:
+        if result.grasp_used.header.stamp.sec or result.grasp_used.header.stamp.nanosec:
+            self.keep_stamp(stamp_ns_of(result.grasp_used))
+        self._write_all([(st.PICK_RESULT, serialize_message(result), time.time_ns())])
+
+    @property
+    def counts(self) -> dict:
+        """Messages written per topic so far."""
+        return dict(self._writer.counts)
+
+    def finish(self):
+        """Stop writing (later callbacks are dropped) and close the bag into place."""
+        with self._lock:
+            self.closed = True
+            return self._writer.close()

@@ -1,0 +1,163 @@
+"""defgg-replay: play recorded sessions into a fresh simulated cell and compare with the recording.
+
+For each session: start segmentation + grasp inference (and, when the
+session has picks, the fake Panda driver on the recorded scene + the
+executor), feed the recorded depth frames and stiffness assignments, replay
+the PlanGrasp calls and PickAndPlace goals, and compare grasps (position mm,
+angle deg, width mm) and pick outcomes with the recording. Prints a diff
+table per session. Exit codes: 0 all matched, 1 regression, 2 a session or
+the cell could not be replayed (bad bag, node died, timeout).
+"""
+import argparse
+import sys
+import tempfile
+import threading
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import MultiThreadedExecutor
+
+from defgg_ros import topics
+from defgg_ros.sessions import metadata as md
+from defgg_ros.sessions.bag import SessionBagError, SessionWriter
+from defgg_ros.sessions.client import CellCallError, CellClient
+from defgg_ros.sessions.compare import Tolerances
+from defgg_ros.sessions.graph import GraphError, NodeGraph
+from defgg_ros.sessions.player import Replay, ReplayOptions, SessionPlayer
+from defgg_ros.sessions.recorder_node import SessionRecorder
+from defgg_ros.sessions.replay_graph import graph_specs, resolve_model
+from defgg_ros.sessions.report import format_table, regression_message
+from defgg_ros.sessions.selector import FrameSelector
+from defgg_ros.sessions.session import load_session
+
+EXIT_OK, EXIT_REGRESSION, EXIT_ERROR = 0, 1, 2
+STARTUP_TIMEOUT_S = 90.0
+
+
+def find_sessions(paths) -> list[Path]:
+    """Bag folders given directly, or every bag folder inside a given folder (sorted)."""
+    found = []
+    for raw in paths:
+        path = Path(raw)
+        if (path / "metadata.yaml").is_file() or not path.is_dir():
+            found.append(path)  # a bag, or a missing path that load_session reports
+        else:
+            bags = sorted(p for p in path.iterdir() if (p / "metadata.yaml").is_file())
+            if not bags:
+                raise SessionBagError(f"{path} holds no session bags (folders with metadata.yaml)")
+            found += bags
+    return found
+
+
+def _spin_in_thread(executor):
+    thread = threading.Thread(target=executor.spin, daemon=True)
+    thread.start()
+    return thread
+
+
+def replay_one(path: Path, args, log=print) -> tuple[int, str]:
+    """Replay one session; (exit code, message)."""
+    session = load_session(path)
+    meta = session.metadata
+    tolerances = _tolerances(args, md.tolerances_of(meta))
+    pick = md.pick_enabled(meta) and not args.no_pick and bool(session.picks)
+    model = resolve_model(meta, args.model, args.use_stiffness)
+    log(f"session {path.name}: {len(session.frames)} frame(s), {len(session.of_kind('plan'))} plan call(s), "
+        f"{len(session.picks)} pick(s){'' if pick else ' (picks skipped)'}; {model.describe(meta)}")
+    run_dir = Path(args.run_dir or tempfile.mkdtemp(prefix=f"defgg_replay_{path.name}_"))
+    context = Context()
+    rclpy.init(context=context)
+    executor = MultiThreadedExecutor(num_threads=4, context=context)
+    writer = recorder = None
+    try:
+        with NodeGraph(run_dir) as graph:
+            for spec in graph_specs(meta, model, pick, run_dir):
+                graph.start(spec)
+            player = SessionPlayer(context=context)
+            executor.add_node(player)
+            if args.update:
+                new_meta = md.updated_metadata(meta, model.path, model.use_stiffness, tolerances)
+                writer = SessionWriter(path, new_meta, time.time_ns(), overwrite=True)
+                recorder = SessionRecorder(writer, FrameSelector(topics.DEPTH_IMAGE), record_camera=False,
+                                           context=context)
+                executor.add_node(recorder)
+            client = CellClient(player, recorder)
+            _spin_in_thread(executor)
+            client.wait_for_servers(STARTUP_TIMEOUT_S, pick, graph.check_alive)
+            options = ReplayOptions(tolerances, pick=pick, grasp_timeout_s=args.timeout_s,
+                                    pick_timeout_s=args.pick_timeout_s)
+            replay = Replay(session, player, client, options, graph.check_alive, log, recorder)
+            rows = replay.run()
+            if recorder is not None:
+                recorder.finish()
+                writer = None
+    finally:
+        if writer is not None:
+            writer.abort()
+        executor.shutdown()
+        context.try_shutdown()
+    if replay.uncompared_frames:
+        log(f"({replay.uncompared_frames} frame(s) had no recorded grasp — the live cell skipped them — "
+            "and were not compared)")
+    log(format_table(f"\n{path.name} (tolerances: {tolerances.position_mm:g} mm, {tolerances.angle_deg:g} deg, "
+                     f"{tolerances.width_mm:g} mm)", rows))
+    if args.update:
+        return EXIT_OK, f"{path.name}: expectations re-recorded into {path}"
+    message = regression_message(path.name, rows)
+    return (EXIT_REGRESSION, message) if message else (EXIT_OK, f"{path.name}: all {len(rows)} item(s) match")
+
+
+def _tolerances(args, recorded: Tolerances) -> Tolerances:
+    changes = {k: v for k, v in (("position_mm", args.position_tol_mm), ("angle_deg", args.angle_tol_deg),
+                                 ("width_mm", args.width_tol_mm)) if v is not None}
+    return replace(recorded, **changes)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="defgg-replay", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("sessions", nargs="+", help="session bag folders, or folders of them "
+                                                    "(e.g. sim_bringup/sessions)")
+    parser.add_argument("--update", action="store_true",
+                        help="re-record the expectations on purpose: replace each session with this replay's "
+                             "grasps and pick outcomes (inputs unchanged)")
+    parser.add_argument("--no-pick", action="store_true", help="skip the picks (no simulator); compare grasps only")
+    parser.add_argument("--model", help="checkpoint to replay with instead of the shipped model the session names")
+    parser.add_argument("--use-stiffness", choices=("true", "false"),
+                        help="stiffness input on/off (default: from --model's checkpoint, else as recorded)")
+    parser.add_argument("--position-tol-mm", type=float, help="grasp position tolerance (default: as recorded)")
+    parser.add_argument("--angle-tol-deg", type=float, help="grasp angle tolerance (default: as recorded)")
+    parser.add_argument("--width-tol-mm", type=float, help="grasp width tolerance (default: as recorded)")
+    parser.add_argument("--timeout-s", type=float, default=30.0, help="how long to wait for a frame's grasp (s)")
+    parser.add_argument("--pick-timeout-s", type=float, default=300.0, help="how long a pick may take (s)")
+    parser.add_argument("--run-dir", help="folder for the nodes' logs (default: a new temporary folder)")
+    return parser
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    worst = EXIT_OK
+    try:
+        paths = find_sessions(args.sessions)
+    except SessionBagError as exc:
+        print(f"defgg-replay: error: {exc}", file=sys.stderr)
+        return EXIT_ERROR
+    messages = []
+    for path in paths:
+        try:
+            code, message = replay_one(path, args)
+        except (SessionBagError, md.MetadataError, GraphError, CellCallError, ValueError) as exc:
+            code, message = EXIT_ERROR, f"{path.name}: cannot replay: {exc}"
+        messages.append(message)
+        worst = max(worst, code)
+    print()
+    for message in messages:
+        print(message, file=sys.stderr if worst else sys.stdout)
+    return worst
+
+
+if __name__ == "__main__":
+    sys.exit(main())

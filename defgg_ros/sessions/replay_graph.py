@@ -1,0 +1,88 @@
+"""Which nodes a replay starts, with which parameters, and which model it runs.
+
+The replay runs the *current* code and shipped model on the recorded
+inputs; recorded node parameters that shape the result (camera extrinsic,
+segmentation thresholds) are applied so a session recorded with non-default
+settings still replays like it was recorded.
+"""
+from dataclasses import dataclass
+from pathlib import Path
+
+from defgg_ros import topics
+from defgg_ros.sessions import metadata as md
+from defgg_ros.sessions.graph import NodeSpec
+
+MODELS_DIR = Path(__file__).resolve().parents[2] / "models"
+# Recorded parameters re-applied in the replay (topic names are not: the player uses the defaults).
+REPLAYED_PARAMETERS = {
+    "segmentation_node": ("default_youngs_modulus_pa", "min_object_height_m", "min_object_area_px"),
+    "grasp_inference_node": ("base_T_camera", "base_frame", "default_youngs_modulus_pa", "min_object_height_m",
+                             "min_object_area_px"),
+}
+# The fake driver renders its own camera; in a replay the recorded frames are the camera.
+DRIVER_CAMERA_REMAPS = {
+    topics.DEPTH_IMAGE: "/defgg_replay/unused/depth",
+    topics.DEPTH_CAMERA_INFO: "/defgg_replay/unused/depth_camera_info",
+    topics.COLOR_IMAGE: "/defgg_replay/unused/color",
+}
+
+
+@dataclass(frozen=True)
+class ModelChoice:
+    path: Path
+    use_stiffness: bool
+    sha256: str
+
+    def describe(self, metadata: dict) -> str:
+        recorded = (metadata.get("model") or {}).get("sha256", "")
+        same = "same as recorded" if recorded == self.sha256 else f"CHANGED, recorded {recorded[:12] or '?'}"
+        return (f"model {self.path.name} ({'depth+stiffness' if self.use_stiffness else 'depth only'}, "
+                f"sha256 {self.sha256[:12]}, {same})")
+
+
+def _checkpoint_uses_stiffness(path: Path) -> bool:
+    from defgg_ros.model.checkpoint import load_checkpoint  # torch: only when a model is given explicitly
+
+    return int(load_checkpoint(path)["network_config"]["input_channels"]) == 2
+
+
+def resolve_model(metadata: dict, model_arg: str | None, use_stiffness_arg: str | None) -> ModelChoice:
+    """--model/--use-stiffness, else the shipped file the session names (models/<file>)."""
+    recorded = metadata.get("model") or {}
+    if model_arg:
+        path = Path(model_arg)
+        if not path.is_file():
+            raise md.MetadataError(f"--model {path} does not exist")
+        use_stiffness = _checkpoint_uses_stiffness(path) if use_stiffness_arg is None else use_stiffness_arg == "true"
+    else:
+        if not recorded.get("file"):
+            raise md.MetadataError("the session names no model file; pass --model")
+        path = MODELS_DIR / recorded["file"]
+        if not path.is_file():
+            raise md.MetadataError(f"the session's model {recorded['file']} is not in {MODELS_DIR}; pass --model")
+        use_stiffness = bool(recorded.get("use_stiffness", True)) if use_stiffness_arg is None \
+            else use_stiffness_arg == "true"
+    return ModelChoice(path, use_stiffness, md.file_sha256(path))
+
+
+def _recorded(metadata: dict, node: str) -> dict:
+    values = (metadata.get("parameters") or {}).get(node) or {}
+    return {k: values[k] for k in REPLAYED_PARAMETERS.get(node, ()) if k in values}
+
+
+def graph_specs(metadata: dict, model: ModelChoice, pick: bool, run_dir: Path) -> list[NodeSpec]:
+    specs = [
+        NodeSpec("segmentation_node", "defgg_ros.nodes.segmentation_node", _recorded(metadata, "segmentation_node")),
+        NodeSpec("grasp_inference_node", "defgg_ros.nodes.grasp_inference_node",
+                 {**_recorded(metadata, "grasp_inference_node"), "model_path": str(model.path.resolve()),
+                  "use_stiffness": model.use_stiffness, "publish_on_sync": True, "num_threads": 1}),
+    ]
+    if pick:
+        scene_file = Path(run_dir) / "scene.yaml"
+        scene_file.write_text(md.scene_yaml(metadata), encoding="utf-8")
+        specs += [
+            NodeSpec("fake_panda_driver", "defgg_ros.nodes.fake_panda_driver_node",
+                     {"scene_file": str(scene_file)}, dict(DRIVER_CAMERA_REMAPS)),
+            NodeSpec("executor_node", "defgg_ros.nodes.executor_node", {"use_sim_time": True}),
+        ]
+    return specs

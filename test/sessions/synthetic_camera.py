@@ -1,0 +1,37 @@
+"""A stand-in depth camera for session tests: analytic depth frames of boxes on a table.
+
+Publishes depth (16UC1 mm) + camera_info with the same, increasing stamps at
+a fixed wall-clock rate, like realsense2_camera would (the real depth
+renderer is the fake driver, which needs PyBullet and seconds per frame).
+"""
+import numpy as np
+from rclpy.node import Node
+from sensor_msgs.msg import CameraInfo, Image
+from std_msgs.msg import Header
+
+from defgg_ros import topics
+from defgg_ros.nodes import qos
+from defgg_ros.nodes.conversions import depth_metres_to_msg, make_camera_info, ns_to_stamp
+from defgg_ros.perception.synthetic_scene import SceneObject, SyntheticScene, render
+
+SCENE = SyntheticScene(objects=(SceneObject((0.05, 0.02), 0.05, (0.05, 0.05), 0.3),
+                                SceneObject((-0.08, -0.03), 0.04, (0.04, 0.07), -0.5)))
+
+
+class SyntheticCamera(Node):
+    def __init__(self, period_s: float = 0.2, scene: SyntheticScene = SCENE, **kwargs):
+        super().__init__("synthetic_camera", **kwargs)
+        depth_m, _ = render(scene)
+        self._depth = depth_m
+        self._k = scene.camera_k
+        self._depth_pub = self.create_publisher(Image, topics.DEPTH_IMAGE, qos.SENSOR_DATA)
+        self._info_pub = self.create_publisher(CameraInfo, topics.DEPTH_CAMERA_INFO, qos.SENSOR_DATA)
+        self.frames = 0
+        self.create_timer(period_s, self._publish)
+
+    def _publish(self):
+        self.frames += 1
+        header = Header(stamp=ns_to_stamp(1_000_000_000 + self.frames * 100_000_000),
+                        frame_id=topics.CAMERA_OPTICAL_FRAME)
+        self._info_pub.publish(make_camera_info(self._k, self._depth.shape[1], self._depth.shape[0], header))
+        self._depth_pub.publish(depth_metres_to_msg(np.asarray(self._depth), "16UC1", header))
