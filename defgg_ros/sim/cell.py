@@ -177,13 +177,15 @@ class SimCell:
             self._set_time_step()
 
     # ---- commands -------------------------------------------------------
-    def command_trajectory(self, points) -> None:
+    def command_trajectory(self, points, start_time_s: float | None = None) -> None:
         """Replace the active trajectory; points: (t_s, q, qd|None, qdd|None), panda_joint1..7 order.
 
-        Raises TrajectoryError on malformed points (the current motion goes on).
+        Times count from start_time_s (sim time; default now). Raises
+        TrajectoryError on malformed points (the current motion goes on).
         """
         waypoints = make_waypoints(points, len(self.arm_joints))
-        self.tracker.replace(waypoints, self.time_s, self.arm_positions())
+        start_s = self.time_s if start_time_s is None else float(start_time_s)
+        self.tracker.replace(waypoints, start_s, self.arm_positions())
 
     def gripper_move(self, width_m: float, speed_mps: float) -> int:
         """Start a move; returns a token whose outcome `advance` reports later."""

@@ -1,0 +1,340 @@
+"""fake_panda_driver: the simulated Panda + RealSense cell as ROS interfaces.
+
+A thin adapter over `defgg_ros.sim.cell.SimCell` (PyBullet). It speaks the
+same names as the real cell (franka_ros2 + realsense2_camera, see
+defgg_ros/topics.py): joint states, joint trajectory controller topic,
+gripper move/grasp actions, external wrench, depth + camera_info; plus sim
+time on /clock and ground truth (/fake_panda/object_poses, /fake_panda/scene).
+
+Threads: one sim thread owns PyBullet, advances sim time in control periods
+and publishes; ROS callbacks (trajectory, gripper goals) hand commands to it
+under a lock. The sim thread never reads the ROS clock, because it is the
+clock. It is throttled to at most `max_real_time_factor`.
+"""
+import json
+import threading
+import time
+from pathlib import Path
+
+import rclpy
+from defgg_interfaces.action import GripperGrasp, GripperMove
+from geometry_msgs.msg import Pose, PoseArray, WrenchStamped
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.node import Node
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import CameraInfo, Image, JointState
+from std_msgs.msg import Header, String
+from std_srvs.srv import Trigger
+from trajectory_msgs.msg import JointTrajectory
+
+from defgg_ros import topics
+from defgg_ros.constants import CAMERA_HEIGHT_PX, CAMERA_WIDTH_PX, PANDA_JOINT_NAMES
+from defgg_ros.nodes import qos
+from defgg_ros.nodes.conversions import depth_metres_to_msg, make_camera_info, numpy_to_image
+from defgg_ros.sim.cell import CellSettings, SimCell
+from defgg_ros.sim.cell_camera import DepthNoise
+from defgg_ros.sim.cell_gripper import GripperCommandError
+from defgg_ros.sim.cell_trajectory import TrajectoryError
+from defgg_ros.sim.scene_spec import SceneError, load_scene
+
+SCENE_TOPIC = "/fake_panda/scene"
+OBJECT_POSES_TOPIC = "/fake_panda/object_poses"
+CAPTURE_SERVICE = "/fake_panda/capture_depth"
+# A trajectory stamp further than this from sim time is a wall-clock stamp
+# from a node without use_sim_time: start it now instead of never/at once.
+MAX_STAMP_OFFSET_S = 1.0
+
+
+def default_scene_file() -> str:
+    """sim_bringup/scenes/demo.yaml of the source tree, else of the installed share folder."""
+    source = Path(__file__).resolve().parents[2] / "sim_bringup" / "scenes" / "demo.yaml"
+    if source.is_file():
+        return str(source)
+    try:
+        from ament_index_python.packages import get_package_share_directory
+
+        return str(Path(get_package_share_directory("defgg_ros")) / "sim_bringup" / "scenes" / "demo.yaml")
+    except Exception:  # ament index absent (pip install): keep the source path in the error
+        return str(source)
+
+
+PARAMETERS = {
+    "scene_file": ("", "Scene YAML (sim_bringup/scenes/*.yaml); '' = the demo scene."),
+    "gui": (False, "Open PyBullet's GUI window (default: headless DIRECT)."),
+    "joint_state_rate_hz": (100.0, "Joint states, wrench and /clock per second of sim time (control period)."),
+    "depth_rate_hz": (2.0, "Depth + camera_info renders per second of sim time (TinyRenderer ~0.1-0.2 s each)."),
+    "object_pose_rate_hz": (10.0, "Ground-truth object poses per second of sim time."),
+    "publish_color": (False, "Also publish an rgb8 colour image with each depth frame."),
+    "max_real_time_factor": (1.0, "Run at most this much faster than real time; 0 = as fast as possible."),
+    "depth_noise_coeff_per_m": (0.0, "Depth noise sigma = coeff * z^2 (m); 0 = noiseless. ~0.004 is D435-like."),
+    "depth_dropout_fraction": (0.0, "Fraction of depth pixels randomly invalid (0 in the message)."),
+    "depth_drop_edges": (False, "Invalidate pixels at depth jumps (stereo occlusion shadows)."),
+    "seed": (0, "Seed of the depth noise."),
+    "soft_always_active": (False, "Simulate soft objects as FEM all the time (default: only near the hand)."),
+    "rtf_log_period_s": (10.0, "Log the real-time factor this often (wall clock, s)."),
+    "base_frame": (topics.BASE_FRAME, "Frame of the robot base (world origin)."),
+    "camera_frame": (topics.CAMERA_OPTICAL_FRAME, "Frame id of depth images and camera_info."),
+    "joint_states_topic": (topics.JOINT_STATES, "Out: sensor_msgs/JointState."),
+    "joint_trajectory_topic": (topics.JOINT_TRAJECTORY, "In: trajectory_msgs/JointTrajectory for panda_joint1..7."),
+    "gripper_move_action": (topics.GRIPPER_MOVE_ACTION, "GripperMove action server."),
+    "gripper_grasp_action": (topics.GRIPPER_GRASP_ACTION, "GripperGrasp action server."),
+    "external_wrench_topic": (topics.EXTERNAL_WRENCH, "Out: WrenchStamped on hand + fingers, base frame."),
+    "depth_topic": (topics.DEPTH_IMAGE, "Out: 16UC1 depth in mm (0 = invalid)."),
+    "camera_info_topic": (topics.DEPTH_CAMERA_INFO, "Out: camera_info of the depth image."),
+    "color_topic": (topics.COLOR_IMAGE, "Out: rgb8 colour image (publish_color)."),
+}
+
+
+class FakePandaDriver(Node):
+    def __init__(self, **kwargs):
+        super().__init__("fake_panda_driver", **kwargs)
+        for name, (default, description) in PARAMETERS.items():
+            self.declare_parameter(name, default, ParameterDescriptor(description=description))
+        self.cfg = {name: self.get_parameter(name).value for name in PARAMETERS}
+        self._check_parameters()
+        scene_path = self.cfg["scene_file"] or default_scene_file()
+        settings = CellSettings(
+            depth_noise=DepthNoise(self.cfg["depth_noise_coeff_per_m"], self.cfg["depth_dropout_fraction"],
+                                   self.cfg["depth_drop_edges"]),
+            seed=int(self.cfg["seed"]), gui=bool(self.cfg["gui"]),
+            soft_always_active=bool(self.cfg["soft_always_active"]))
+        self.cell = SimCell(load_scene(scene_path), settings)
+        self.get_logger().info(
+            f"scene {scene_path}: {len(self.cell.scene.objects)} objects "
+            f"({sum(o.is_soft for o in self.cell.scene.objects)} soft), "
+            f"{'deformable' if self.cell.scene.has_soft_objects else 'rigid'} world, "
+            f"step {self.cell.time_step_s * 1e3:.2f} ms, {'GUI' if settings.gui else 'headless'}")
+        self._lock = threading.Lock()
+        self._waiters = {}           # gripper token -> [threading.Event, GripperOutcome | None]
+        self._capture_requested = False
+        self._running = True
+        self._create_interfaces()
+        self._thread = threading.Thread(target=self._sim_loop, name="sim", daemon=True)
+        self._thread.start()
+
+    def _check_parameters(self):
+        for name in ("joint_state_rate_hz", "depth_rate_hz", "object_pose_rate_hz"):
+            if not self.cfg[name] > 0:
+                raise ValueError(f"parameter {name} must be > 0, got {self.cfg[name]}")
+        if self.cfg["max_real_time_factor"] < 0:
+            raise ValueError(f"max_real_time_factor must be >= 0, got {self.cfg['max_real_time_factor']}")
+
+    def _create_interfaces(self):
+        cfg, group = self.cfg, ReentrantCallbackGroup()
+        self.pub_clock = self.create_publisher(Clock, "/clock", qos.STATE)
+        self.pub_joints = self.create_publisher(JointState, cfg["joint_states_topic"], qos.STATE)
+        self.pub_wrench = self.create_publisher(WrenchStamped, cfg["external_wrench_topic"], qos.STATE)
+        self.pub_depth = self.create_publisher(Image, cfg["depth_topic"], qos.SENSOR_DATA)
+        self.pub_info = self.create_publisher(CameraInfo, cfg["camera_info_topic"], qos.SENSOR_DATA)
+        self.pub_color = self.create_publisher(Image, cfg["color_topic"], qos.SENSOR_DATA)
+        self.pub_poses = self.create_publisher(PoseArray, OBJECT_POSES_TOPIC, qos.STATE)
+        self.pub_scene = self.create_publisher(String, SCENE_TOPIC, qos.LATCHED)
+        self.pub_scene.publish(String(data=json.dumps(self._scene_description())))
+        self.create_subscription(JointTrajectory, cfg["joint_trajectory_topic"], self._on_trajectory, qos.COMMAND,
+                                 callback_group=group)
+        self.create_service(Trigger, CAPTURE_SERVICE, self._on_capture, callback_group=group)
+        for action_type, name, execute in ((GripperMove, cfg["gripper_move_action"], self._execute_move),
+                                           (GripperGrasp, cfg["gripper_grasp_action"], self._execute_grasp)):
+            ActionServer(self, action_type, name, execute_callback=execute, callback_group=group,
+                         goal_callback=lambda _goal: GoalResponse.ACCEPT,
+                         cancel_callback=lambda _goal: CancelResponse.ACCEPT)
+
+    def _scene_description(self) -> dict:
+        scene = self.cell.scene.to_json_dict()
+        scene["objects_simulated_as"] = ["soft" if o.is_soft else "rigid" for o in self.cell.scene.objects]
+        scene["camera_k"] = self.cell.camera_k.tolist()
+        scene["base_frame"] = self.cfg["base_frame"]
+        return scene
+
+    # ---- commands (ROS threads) ------------------------------------------
+    def _on_trajectory(self, msg: JointTrajectory):
+        try:
+            points = self._trajectory_points(msg)
+            with self._lock:
+                self.cell.command_trajectory(points, self._start_time_s(msg.header.stamp))
+        except (TrajectoryError, ValueError) as exc:
+            self.get_logger().error(f"rejected joint trajectory: {exc}")
+
+    def _trajectory_points(self, msg: JointTrajectory) -> list:
+        if not msg.points:
+            return []
+        names = list(msg.joint_names)
+        missing = [n for n in PANDA_JOINT_NAMES if n not in names]
+        if missing:
+            raise TrajectoryError(f"joint_names lack {missing} (got {names})")
+        order = [names.index(n) for n in PANDA_JOINT_NAMES]
+
+        def pick(values):
+            return [values[i] for i in order] if len(values) == len(names) else None
+
+        return [(pt.time_from_start.sec + pt.time_from_start.nanosec * 1e-9, pick(pt.positions),
+                 pick(pt.velocities), pick(pt.accelerations)) for pt in msg.points]
+
+    def _start_time_s(self, stamp) -> float:
+        stamp_s = stamp.sec + stamp.nanosec * 1e-9
+        if stamp_s == 0.0:
+            return self.cell.time_s
+        if abs(stamp_s - self.cell.time_s) > MAX_STAMP_OFFSET_S:
+            self.get_logger().warning(
+                f"trajectory stamp {stamp_s:.3f} s is far from sim time {self.cell.time_s:.3f} s "
+                "(is the sender running with use_sim_time?): starting it now", throttle_duration_sec=5.0)
+            return self.cell.time_s
+        return stamp_s
+
+    def _on_capture(self, _request, response):
+        self._capture_requested = True
+        response.success, response.message = True, "a depth frame will be rendered in the next control period"
+        return response
+
+    def _execute_move(self, goal_handle):
+        g = goal_handle.request
+        return self._run_gripper(goal_handle, GripperMove.Result, GripperMove.Feedback,
+                                 lambda: self.cell.gripper_move(g.width, g.speed))
+
+    def _execute_grasp(self, goal_handle):
+        g = goal_handle.request
+        return self._run_gripper(goal_handle, GripperGrasp.Result, GripperGrasp.Feedback,
+                                 lambda: self.cell.gripper_grasp(g.width, g.epsilon_inner, g.epsilon_outer,
+                                                                 g.speed, g.force))
+
+    def _run_gripper(self, goal_handle, result_type, feedback_type, start):
+        result = result_type()
+        try:
+            with self._lock:
+                token = start()
+                waiter = self._waiters[token] = [threading.Event(), None]
+        except GripperCommandError as exc:
+            result.success, result.error = False, str(exc)
+            result.width = self.cell.gripper_width_m()
+            goal_handle.abort()
+            return result
+        while not waiter[0].wait(0.05):
+            if goal_handle.is_cancel_requested or not self._running:
+                with self._lock:  # stop where the fingers are
+                    self.cell.gripper_move(min(self.cell.gripper_width_m(), 0.08), 0.1)
+                result.success, result.error = False, "canceled"
+                result.width = self.cell.gripper_width_m()
+                goal_handle.canceled()
+                return result
+            goal_handle.publish_feedback(feedback_type(current_width=self.cell.gripper_width_m()))
+        outcome = waiter[1]
+        result.success, result.error, result.width = outcome.success, outcome.error, outcome.width_m
+        if outcome.success:
+            goal_handle.succeed()
+        else:
+            goal_handle.abort()
+        return result
+
+    # ---- the sim thread ------------------------------------------------------
+    def _sim_loop(self):
+        period_s = 1.0 / self.cfg["joint_state_rate_hz"]
+        next_depth_s = next_pose_s = 0.0
+        wall0, sim0 = time.monotonic(), self.cell.time_s
+        next_log = wall0 + self.cfg["rtf_log_period_s"]
+        while self._running:
+            with self._lock:
+                outcomes = self.cell.advance(period_s)
+                now_s = self.cell.time_s
+                joints, (force, torque) = self.cell.joint_state(), self.cell.external_wrench()
+                render = now_s >= next_depth_s or self._capture_requested
+                frame = self.cell.render_depth(self.cfg["publish_color"]) if render else None
+                poses = self.cell.object_poses() if now_s >= next_pose_s else None
+            self._finish_gripper(outcomes)
+            self._publish_state(now_s, joints, force, torque)
+            if frame is not None:
+                self._capture_requested = False
+                next_depth_s = now_s + 1.0 / self.cfg["depth_rate_hz"]
+                self._publish_frame(now_s, *frame)
+            if poses is not None:
+                next_pose_s = now_s + 1.0 / self.cfg["object_pose_rate_hz"]
+                self._publish_poses(now_s, poses)
+            self._throttle(wall0, now_s - sim0)
+            if time.monotonic() >= next_log:
+                next_log = time.monotonic() + self.cfg["rtf_log_period_s"]
+                self._log_rtf(now_s)
+
+    def _throttle(self, wall0, sim_elapsed_s):
+        rtf = self.cfg["max_real_time_factor"]
+        if rtf > 0:
+            ahead_s = wall0 + sim_elapsed_s / rtf - time.monotonic()
+            if ahead_s > 0:
+                time.sleep(ahead_s)  # pacing the simulation to wall time, not waiting for a message
+
+    def _log_rtf(self, now_s):
+        active = self.cell.active_soft_objects()
+        self.get_logger().info(f"sim time {now_s:.1f} s, real-time factor {self.cell.real_time_factor():.2f}"
+                               f"{', FEM active: ' + ', '.join(active) if active else ''}")
+
+    def _finish_gripper(self, outcomes):
+        for token, outcome in outcomes:
+            waiter = self._waiters.pop(token, None)
+            if waiter is not None:
+                waiter[1] = outcome
+                waiter[0].set()
+
+    def _stamp(self, now_s, frame_id):
+        header = Header(frame_id=frame_id)
+        header.stamp.sec = int(now_s)
+        header.stamp.nanosec = int(round((now_s - int(now_s)) * 1e9)) % 1_000_000_000
+        return header
+
+    def _publish_state(self, now_s, joints, force, torque):
+        header = self._stamp(now_s, self.cfg["base_frame"])
+        self.pub_clock.publish(Clock(clock=header.stamp))
+        self.pub_joints.publish(JointState(header=header, name=list(joints.names),
+                                           position=joints.positions.tolist(), velocity=joints.velocities.tolist(),
+                                           effort=joints.efforts.tolist()))
+        wrench = WrenchStamped(header=header)
+        wrench.wrench.force.x, wrench.wrench.force.y, wrench.wrench.force.z = (float(v) for v in force)
+        wrench.wrench.torque.x, wrench.wrench.torque.y, wrench.wrench.torque.z = (float(v) for v in torque)
+        self.pub_wrench.publish(wrench)
+
+    def _publish_frame(self, now_s, depth_m, _object_mask, rgb):
+        header = self._stamp(now_s, self.cfg["camera_frame"])
+        self.pub_depth.publish(depth_metres_to_msg(depth_m, "16UC1", header))
+        self.pub_info.publish(make_camera_info(self.cell.camera_k, CAMERA_WIDTH_PX, CAMERA_HEIGHT_PX, header))
+        if rgb is not None:
+            self.pub_color.publish(numpy_to_image(rgb, "rgb8", header))
+
+    def _publish_poses(self, now_s, poses):
+        msg = PoseArray(header=self._stamp(now_s, self.cfg["base_frame"]))
+        for xyz, quat in poses:
+            pose = Pose()
+            pose.position.x, pose.position.y, pose.position.z = (float(v) for v in xyz)
+            pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w = (float(v) for v in quat)
+            msg.poses.append(pose)
+        self.pub_poses.publish(msg)
+
+    def shutdown(self):
+        self._running = False
+        if self._thread.is_alive():
+            self._thread.join(timeout=5.0)
+        with self._lock:
+            self.cell.close()
+
+
+def main(args=None):
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = FakePandaDriver()
+        executor = MultiThreadedExecutor(num_threads=4)
+        executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except (SceneError, ValueError) as exc:
+        print(f"fake_panda_driver: {exc}", flush=True)
+        raise SystemExit(2) from None
+    finally:
+        if node is not None:
+            node.shutdown()
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == "__main__":
+    main()
