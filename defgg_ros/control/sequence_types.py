@@ -21,7 +21,7 @@ class SequenceConfig:
     lift_height_m: float = 0.15
     place_approach_height_m: float = 0.10
     contact_force_threshold_n: float = 10.0
-    watchdog_timeout_s: float = 1.0        # wall clock
+    watchdog_timeout_s: float = 2.0        # wall clock
     arrival_joint_atol_rad: float = 0.02
     settle_timeout_s: float = 3.0          # robot clock, after a trajectory's end
     gripper_timeout_s: float = 10.0        # robot clock

@@ -1,0 +1,157 @@
+"""executor_node against the real fake_panda_driver (PyBullet) over DDS, on sim time.
+
+A rigid 5 cm box (sim_bringup/scenes/rigid_box.yaml) is picked and placed in
+the bin; a cancel during the descent leaves the arm stopped above the grasp;
+a driver that dies mid-trajectory aborts the goal within the watchdog time,
+and a restarted driver is served again.
+"""
+from pathlib import Path
+
+import numpy as np
+import pytest
+from defgg_interfaces.action import PickAndPlace
+from defgg_interfaces.msg import Grasp
+from geometry_msgs.msg import PoseArray
+from rclpy.action import ActionClient
+from rclpy.executors import MultiThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import JointState
+
+from defgg_ros import topics
+from defgg_ros.control.kinematics import PandaKinematics
+from defgg_ros.control.poses import matrix_to_quaternion, top_down_pose
+from defgg_ros.nodes import qos
+from defgg_ros.nodes.executor_node import ExecutorNode
+
+SCENE = Path(__file__).resolve().parents[2] / "sim_bringup" / "scenes" / "rigid_box.yaml"
+BOX_XY_M, BOX_YAW_RAD, BOX_SIZE_M = (0.5, 0.05), 0.3, 0.05   # as in rigid_box.yaml
+BIN_XY_M, BIN_INNER_M = (0.35, -0.45), 0.2
+WATCHDOG_S = 2.0
+TIMEOUT_S = 90.0
+KIN = PandaKinematics()
+
+
+def box_grasp() -> Grasp:
+    """Top-down grasp across the box, at half its height, fingers along one face normal."""
+    xyz = (BOX_XY_M[0], BOX_XY_M[1], BOX_SIZE_M / 2)
+    msg = Grasp()
+    msg.pose_base.header.frame_id = topics.BASE_FRAME
+    pose = msg.pose_base.pose
+    pose.position.x, pose.position.y, pose.position.z = xyz
+    qx, qy, qz, qw = matrix_to_quaternion(top_down_pose(xyz, BOX_YAW_RAD)[:3, :3])
+    pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w = qx, qy, qz, qw
+    msg.width_m, msg.youngs_modulus_pa = 0.07, 2e9
+    return msg
+
+
+@pytest.fixture
+def cell(rclpy_context):
+    from defgg_ros.nodes.fake_panda_driver_node import FakePandaDriver
+
+    ex = MultiThreadedExecutor(num_threads=8, context=rclpy_context)
+    drivers = []
+
+    def start_driver():
+        driver = FakePandaDriver(context=rclpy_context, parameter_overrides=[
+            Parameter("scene_file", value=str(SCENE)), Parameter("max_real_time_factor", value=0.0),
+            # No camera needed here; a render holds the sim thread for 0.1-1 s.
+            Parameter("depth_rate_hz", value=0.01)])
+        ex.add_node(driver)
+        drivers.append(driver)
+        return driver
+
+    def kill_driver(driver):
+        driver.shutdown()
+        ex.remove_node(driver)
+        driver.destroy_node()
+        drivers.remove(driver)
+
+    start_driver()
+    executor_node = ExecutorNode(context=rclpy_context, parameter_overrides=[
+        Parameter("use_sim_time", value=True), Parameter("watchdog_timeout_s", value=WATCHDOG_S),
+        Parameter("server_wait_s", value=10.0)])
+    probe = Node("executor_e2e_probe", context=rclpy_context)
+    seen = {"joints": [], "poses": []}
+    probe.create_subscription(JointState, topics.JOINT_STATES, seen["joints"].append, qos.STATE)
+    probe.create_subscription(PoseArray, "/fake_panda/object_poses", seen["poses"].append, qos.STATE)
+    client = ActionClient(probe, PickAndPlace, topics.PICK_AND_PLACE_ACTION)
+    ex.add_node(executor_node)
+    ex.add_node(probe)
+    yield ex, executor_node, client, seen, start_driver, kill_driver
+    for driver in list(drivers):
+        driver.shutdown()
+    for node in list(ex.get_nodes()):
+        ex.remove_node(node)
+        node.destroy_node()
+    ex.shutdown(timeout_sec=2.0)
+
+
+def send(ex, spin, client, goal, feedback=None):
+    assert client.wait_for_server(timeout_sec=10.0)
+    return spin(ex, client.send_goal_async(goal, feedback_callback=feedback), 10.0, "goal response")
+
+
+def fresh_state(ex, spin, executor_node):
+    before = executor_node._last_state[1] if executor_node._last_state else -1.0
+    spin(ex, lambda: executor_node._last_state is not None and executor_node._last_state[1] > before,
+         TIMEOUT_S, "joint states from the driver")
+
+
+def test_pick_of_a_rigid_box_into_the_bin(cell, spin):
+    ex, executor_node, client, seen, _, _ = cell
+    fresh_state(ex, spin, executor_node)
+    handle = send(ex, spin, client, PickAndPlace.Goal(grasp=box_grasp()))
+    assert handle.accepted
+    result = spin(ex, handle.get_result_async(), TIMEOUT_S, "pick-and-place result").result
+    assert result.success, result.failure_reason
+    assert result.phase_reached == "done"
+    assert result.held_after_lift and result.held_after_transfer
+    # The fingers stopped on the 5 cm box (a little less: contact penetration).
+    assert result.gripper_width_closed_m == pytest.approx(BOX_SIZE_M, abs=0.005)
+    # The box ends up inside the bin, resting on its floor.
+    spin(ex, lambda: seen["poses"] and abs(seen["poses"][-1].poses[0].position.z - BOX_SIZE_M / 2) < 0.01,
+         TIMEOUT_S, "the box to come to rest")
+    box = seen["poses"][-1].poses[0].position
+    assert abs(box.x - BIN_XY_M[0]) < BIN_INNER_M / 2 and abs(box.y - BIN_XY_M[1]) < BIN_INNER_M / 2
+
+
+def test_cancel_mid_descent_stops_the_arm(cell, spin):
+    ex, executor_node, client, seen, _, _ = cell
+    fresh_state(ex, spin, executor_node)
+    feedback = []
+    handle = send(ex, spin, client, PickAndPlace.Goal(grasp=box_grasp()),
+                  feedback=lambda f: feedback.append(f.feedback))
+    spin(ex, lambda: feedback and feedback[-1].phase == "descend" and feedback[-1].phase_progress > 0.3,
+         TIMEOUT_S, "the descent to be under way")
+    spin(ex, handle.cancel_goal_async(), 10.0, "cancel response")
+    response = spin(ex, handle.get_result_async(), TIMEOUT_S, "canceled result")
+    assert response.status == 5  # STATUS_CANCELED
+    assert "canceled during descend" in response.result.failure_reason
+    last = seen["joints"][-1]
+    assert np.max(np.abs(last.velocity[:7])) < 0.02
+    # Stopped part-way: above the grasp height, below the pre-grasp height.
+    tcp_z = KIN.fk(np.array(last.position[:7]))[2, 3]
+    assert BOX_SIZE_M / 2 + 0.001 < tcp_z < BOX_SIZE_M / 2 + 0.025
+
+
+def test_driver_killed_mid_trajectory_aborts_then_serves_again(cell, spin):
+    ex, executor_node, client, seen, start_driver, kill_driver = cell
+    fresh_state(ex, spin, executor_node)
+    feedback = []
+    handle = send(ex, spin, client, PickAndPlace.Goal(grasp=box_grasp()),
+                  feedback=lambda f: feedback.append(f.feedback))
+    spin(ex, lambda: feedback and feedback[-1].phase == "pre_grasp" and feedback[-1].phase_progress > 0.2,
+         TIMEOUT_S, "the arm moving to the pre-grasp")
+    kill_driver(next(n for n in ex.get_nodes() if n.get_name() == "fake_panda_driver"))
+    response = spin(ex, handle.get_result_async(), WATCHDOG_S + 3.0, "abort after the driver died")
+    assert response.status == 6  # STATUS_ABORTED
+    assert "driver silent" in response.result.failure_reason
+    start_driver()
+    fresh_state(ex, spin, executor_node)
+    feedback.clear()
+    again = send(ex, spin, client, PickAndPlace.Goal(grasp=box_grasp()), feedback=lambda f: feedback.append(f.feedback))
+    assert again.accepted
+    spin(ex, lambda: feedback and feedback[-1].phase_progress > 0.1, TIMEOUT_S, "the new goal moving the arm")
+    spin(ex, again.cancel_goal_async(), 10.0, "cancel response")
+    assert spin(ex, again.get_result_async(), TIMEOUT_S, "canceled result").status == 5
