@@ -20,6 +20,7 @@ import rclpy
 from defgg_interfaces.action import GripperGrasp, GripperMove
 from geometry_msgs.msg import Pose, PoseArray, WrenchStamped
 from rcl_interfaces.msg import ParameterDescriptor
+from rclpy._rclpy_pybind11 import RCLError
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
@@ -233,8 +234,9 @@ class FakePandaDriver(Node):
         period_s = 1.0 / self.cfg["joint_state_rate_hz"]
         next_depth_s = next_pose_s = 0.0
         wall0, sim0 = time.monotonic(), self.cell.time_s
-        next_log = wall0 + self.cfg["rtf_log_period_s"]
-        while self._running:
+        self._log_mark = (wall0, sim0)
+        next_log = wall0 + min(2.0, self.cfg["rtf_log_period_s"])  # a first figure soon after start-up
+        while self._running and self.context.ok():
             with self._lock:
                 outcomes = self.cell.advance(period_s)
                 now_s = self.cell.time_s
@@ -243,14 +245,21 @@ class FakePandaDriver(Node):
                 frame = self.cell.render_depth(self.cfg["publish_color"]) if render else None
                 poses = self.cell.object_poses() if now_s >= next_pose_s else None
             self._finish_gripper(outcomes)
-            self._publish_state(now_s, joints, force, torque)
             if frame is not None:
                 self._capture_requested = False
                 next_depth_s = now_s + 1.0 / self.cfg["depth_rate_hz"]
-                self._publish_frame(now_s, *frame)
             if poses is not None:
                 next_pose_s = now_s + 1.0 / self.cfg["object_pose_rate_hz"]
-                self._publish_poses(now_s, poses)
+            try:
+                self._publish_state(now_s, joints, force, torque)
+                if frame is not None:
+                    self._publish_frame(now_s, *frame)
+                if poses is not None:
+                    self._publish_poses(now_s, poses)
+            except RCLError:
+                if self.context.ok():
+                    raise
+                break  # Ctrl-C shut the context down under us: stop quietly
             self._throttle(wall0, now_s - sim0)
             if time.monotonic() >= next_log:
                 next_log = time.monotonic() + self.cfg["rtf_log_period_s"]
@@ -264,8 +273,14 @@ class FakePandaDriver(Node):
                 time.sleep(ahead_s)  # pacing the simulation to wall time, not waiting for a message
 
     def _log_rtf(self, now_s):
+        """Real-time factor since the last log, and what the simulation alone could do (capacity)."""
+        wall_then, sim_then = self._log_mark
+        wall_now = time.monotonic()
+        self._log_mark = (wall_now, now_s)
+        rtf = (now_s - sim_then) / max(wall_now - wall_then, 1e-9)
         active = self.cell.active_soft_objects()
-        self.get_logger().info(f"sim time {now_s:.1f} s, real-time factor {self.cell.real_time_factor():.2f}"
+        self.get_logger().info(f"sim time {now_s:.1f} s, real-time factor {rtf:.2f} "
+                               f"(simulation capacity {self.cell.real_time_factor():.2f})"
                                f"{', FEM active: ' + ', '.join(active) if active else ''}")
 
     def _finish_gripper(self, outcomes):

@@ -1,0 +1,108 @@
+"""defgg-bringup: start the cell's nodes as separate processes and supervise them.
+
+    defgg-bringup                       # simulated cell: driver, segmentation, inference, executor
+    defgg-bringup --set real_cell       # the three non-simulated nodes (real robot + camera drivers run apart)
+    defgg-bringup --scene sim_bringup/scenes/soft_box.yaml --gui
+
+Waits until every node is ready (its service/action/topic is in the ROS
+graph), forwards their logs as '[node] ...', and stops them all on Ctrl-C /
+SIGTERM or as soon as one dies (naming it; exit code 1).
+"""
+import argparse
+import signal
+import sys
+import threading
+
+from defgg_ros.bringup.node_set import NodeSetError, load_node_set
+from defgg_ros.bringup.supervisor import DEFAULT_READY_TIMEOUT_S, Bringup, BringupError
+
+DRIVER = "fake_panda_driver"
+
+
+def parse_args(argv=None):
+    parser = argparse.ArgumentParser(prog="defgg-bringup", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--set", default="sim_cell",
+                        help="node set: a name in sim_bringup/config (sim_cell, real_cell) or a YAML path")
+    parser.add_argument("--scene", help="scene YAML for the simulated driver (default: its parameter file's)")
+    parser.add_argument("--gui", action="store_true", help="open PyBullet's GUI (the driver is headless by default)")
+    parser.add_argument("-p", "--param", action="append", default=[], metavar="NODE:NAME:=VALUE",
+                        help="override one node parameter, e.g. -p fake_panda_driver:max_real_time_factor:=0")
+    parser.add_argument("--ready-timeout", type=float, default=DEFAULT_READY_TIMEOUT_S,
+                        help="seconds to wait for every node to become ready")
+    parser.add_argument("--record", metavar="PATH",
+                        help="also record the session to this bag folder (runs defgg-record alongside)")
+    return parser.parse_args(argv)
+
+
+def parse_overrides(args) -> dict:
+    overrides = {}
+    for item in args.param:
+        node, sep, rest = item.partition(":")
+        name, sep2, value = rest.partition(":=")
+        if not (sep and sep2 and node and name):
+            raise NodeSetError(f"--param {item!r}: expected NODE:NAME:=VALUE")
+        overrides.setdefault(node, {})[name] = _yaml_scalar(value)
+    if args.scene:
+        overrides.setdefault(DRIVER, {})["scene_file"] = args.scene
+    if args.gui:
+        overrides.setdefault(DRIVER, {})["gui"] = True
+    return overrides
+
+
+def _yaml_scalar(text):
+    import yaml
+
+    return yaml.safe_load(text) if text else ""
+
+
+def record_hook(path: str, scene: str | None) -> dict:
+    """The recorder as one more supervised process (its CLI: defgg_ros/sessions/record.py)."""
+    argv = [sys.executable, "-c", "from defgg_ros.sessions.record import main; main()", path]
+    if scene:
+        argv += ["--scene", scene]
+    return {"recorder": argv}
+
+
+def supervise(bringup: Bringup, stop_requested: threading.Event) -> int:
+    """Until Ctrl-C/SIGTERM (exit 0) or a node dies (exit 1)."""
+    while not stop_requested.wait(0.2):
+        dead = bringup.failed_node()
+        if dead is not None:
+            print(f"defgg-bringup: {dead.describe()}; stopping the others", file=sys.stderr, flush=True)
+            return 1
+    print("defgg-bringup: stop requested; stopping the nodes", flush=True)
+    return 0
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    stop_requested = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop_requested.set())
+    try:
+        node_set = load_node_set(args.set)
+        extra = record_hook(args.record, args.scene) if args.record else {}
+        bringup = Bringup(node_set, parse_overrides(args), extra)
+    except (NodeSetError, BringupError) as exc:
+        print(f"defgg-bringup: {exc}", file=sys.stderr)
+        return 2
+    code = 1
+    try:
+        bringup.start()
+        started = ", ".join(f"{name} (pid {proc.pid})" for name, proc in bringup.processes.items())
+        print(f"defgg-bringup: started {started}; waiting until ready", flush=True)
+        took = bringup.wait_ready(args.ready_timeout, stop_requested)
+        print(f"defgg-bringup: cell ready in {took:.1f} s ({node_set.name})", flush=True)
+        code = supervise(bringup, stop_requested)
+    except BringupError as exc:
+        print(f"defgg-bringup: {exc}", file=sys.stderr, flush=True)
+        code = 0 if stop_requested.is_set() else 1
+    finally:
+        codes = bringup.stop()
+        print("defgg-bringup: stopped " + ", ".join(f"{n} ({c})" for n, c in codes.items()), flush=True)
+    return code
+
+
+if __name__ == "__main__":
+    sys.exit(main())

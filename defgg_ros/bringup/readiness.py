@@ -1,0 +1,56 @@
+"""Is a node ready? Ask the ROS graph from a small probe node (its own rclpy context)."""
+import time
+
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+
+from defgg_ros.bringup.node_set import ReadyCheck
+
+# Graph queries are cheap; spinning the probe between them lets discovery progress.
+PROBE_SPIN_S = 0.1
+
+
+class ReadinessProbe:
+    def __init__(self):
+        self._context = Context()
+        rclpy.init(context=self._context)
+        self.node = Node("defgg_bringup_probe", context=self._context)
+        self._executor = SingleThreadedExecutor(context=self._context)
+        self._executor.add_node(self.node)
+
+    def is_ready(self, check: ReadyCheck) -> bool:
+        if check.kind == "topic":
+            return self.node.count_publishers(check.name) > 0
+        services = {name for name, _ in self.node.get_service_names_and_types()}
+        if check.kind == "service":
+            return check.name in services
+        return f"{check.name}/_action/send_goal" in services
+
+    def spin_once(self):
+        # Nothing is subscribed: this only waits for graph events, bounded.
+        self._executor.spin_once(timeout_sec=PROBE_SPIN_S)
+
+    def wait(self, checks: dict, alive, timeout_s: float) -> list:
+        """Wait until every check (name -> ReadyCheck) passes; returns the names still not ready.
+
+        `alive()` returns the name of a process that died (or None): the wait
+        stops at once then, so a crash is not reported as a time-out.
+        """
+        pending = dict(checks)
+        deadline = time.monotonic() + timeout_s
+        while pending and time.monotonic() < deadline:
+            if alive() is not None:
+                break
+            for name, check in list(pending.items()):
+                if self.is_ready(check):
+                    del pending[name]
+            if pending:
+                self.spin_once()
+        return list(pending)
+
+    def close(self):
+        self._executor.shutdown(timeout_sec=1.0)
+        self.node.destroy_node()
+        self._context.try_shutdown()
