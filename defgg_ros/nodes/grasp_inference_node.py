@@ -11,6 +11,7 @@ Thin adapter over defgg_ros.model.inference.GraspPredictor:
   image or its `objects` (then the depth is segmented here exactly like the
   segmentation node does). Every bad request gets success=false + reason.
 """
+import dataclasses
 import sys
 import threading
 import time
@@ -49,7 +50,7 @@ from defgg_ros.perception.grasp_planning import (
     full_quality_image,
     labels_from_stiffness,
 )
-from defgg_ros.perception.segmentation import OBJECT_MIN_AREA_PX, OBJECT_MIN_HEIGHT_M
+from defgg_ros.perception.segmentation import OBJECT_MAX_HEIGHT_M, OBJECT_MIN_AREA_PX, OBJECT_MIN_HEIGHT_M
 from defgg_ros.perception.stiffness_assignment import check_entries_fit_image, make_entry
 from defgg_ros.perception.stiffness_segmenter import DEFAULT_YOUNGS_MODULUS_PA, SegmenterConfig, run_segmenter
 from defgg_ros.perception.sync import DEFAULT_CACHE_SIZE, StampSynchronizer
@@ -78,6 +79,7 @@ PARAMETERS = {
     "default_youngs_modulus_pa": (DEFAULT_YOUNGS_MODULUS_PA,
                                   "For request depth without stiffness: modulus of objects no entry addresses."),
     "min_object_height_m": (OBJECT_MIN_HEIGHT_M, "Segmentation of request depth: min height above table (m)."),
+    "max_object_height_m": (OBJECT_MAX_HEIGHT_M, "Segmentation of request depth: max height above table (m)."),
     "min_object_area_px": (OBJECT_MIN_AREA_PX, "Segmentation of request depth: min object area (px)."),
 }
 
@@ -112,7 +114,8 @@ class GraspInferenceNode(Node):
             raise ValueError(f"{model_path} is a {'depth+stiffness' if self.predictor.uses_stiffness else 'depth-only'}"
                              f" network but use_stiffness is {p['use_stiffness']}")
         self._segmenter = SegmenterConfig(float(p["default_youngs_modulus_pa"]), (),
-                                          float(p["min_object_height_m"]), int(p["min_object_area_px"]))
+                                          float(p["min_object_height_m"]), int(p["min_object_area_px"]),
+                                          max_height_m=float(p["max_object_height_m"]))
         self._predict_lock = threading.Lock()
         self._state_lock = threading.Lock()
         self._sync = StampSynchronizer(("depth", "stiffness", "info"), int(p["sync_cache_size"]))
@@ -217,8 +220,7 @@ class GraspInferenceNode(Node):
         entries = tuple(make_entry(o.name, o.youngs_modulus_pa, (o.roi.x_offset, o.roi.y_offset, o.roi.width,
                                    o.roi.height), o.region_only) for o in objects)
         check_entries_fit_image(entries, depth_msg.width, depth_msg.height)
-        config = SegmenterConfig(self._segmenter.default_youngs_modulus_pa, entries,
-                                 self._segmenter.min_height_m, self._segmenter.min_area_px)
+        config = dataclasses.replace(self._segmenter, entries=entries)
         out = run_segmenter(config, depth_m, camera_k)
         if not out.segmentation.object_ids:
             raise PlanningError("no object found above the table in the request depth")

@@ -30,7 +30,7 @@ from defgg_ros.nodes.conversions import (
     depth_msg_to_metres,
     numpy_to_image,
 )
-from defgg_ros.perception.segmentation import OBJECT_MIN_AREA_PX, OBJECT_MIN_HEIGHT_M
+from defgg_ros.perception.segmentation import OBJECT_MAX_HEIGHT_M, OBJECT_MIN_AREA_PX, OBJECT_MIN_HEIGHT_M
 from defgg_ros.perception.stiffness_assignment import check_entries_fit_image, make_entry
 from defgg_ros.perception.stiffness_segmenter import (
     DEFAULT_YOUNGS_MODULUS_PA,
@@ -53,6 +53,7 @@ PARAMETERS = {
     "objects_json": ("[]", 'Entries as JSON: [{"name": "sponge", "youngs_modulus_pa": 2e4, '
                            '"roi": [x, y, w, h], "region_only": false}]; roi [0,0,0,0] = whole image.'),
     "min_object_height_m": (OBJECT_MIN_HEIGHT_M, "Pixels lower than this above the table are background (m)."),
+    "max_object_height_m": (OBJECT_MAX_HEIGHT_M, "Pixels higher than this above the table (the robot) are ignored."),
     "min_object_area_px": (OBJECT_MIN_AREA_PX, "Smaller connected components are dropped (pixels)."),
     "background_depth_file": ("", "Optional .npy of an empty-scene depth in metres; '' = fit the table plane."),
 }
@@ -88,7 +89,8 @@ class SegmentationNode(Node):
         if p["background_depth_file"]:
             background = np.load(p["background_depth_file"], allow_pickle=False).astype(np.float32)
         return SegmenterConfig(float(p["default_youngs_modulus_pa"]), entries_from_json(p["objects_json"]),
-                               float(p["min_object_height_m"]), int(p["min_object_area_px"]), background)
+                               float(p["min_object_height_m"]), int(p["min_object_area_px"]), background,
+                               float(p["max_object_height_m"]))
 
     def _on_set_parameters(self, params) -> SetParametersResult:
         merged = self._params()

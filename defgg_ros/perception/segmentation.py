@@ -11,9 +11,9 @@ Background model. Two options, chosen per call:
    (bins, clutter fixed to the cell); it needs a capture with no objects
    and a camera that has not moved since.
 
-Objects are the connected components of pixels higher than
-OBJECT_MIN_HEIGHT_M above the background with at least OBJECT_MIN_AREA_PX
-pixels. Labels are 1..N in raster order of the components (0 = background).
+Objects are the connected components of pixels between OBJECT_MIN_HEIGHT_M
+and OBJECT_MAX_HEIGHT_M above the background with at least
+OBJECT_MIN_AREA_PX pixels. Labels are 1..N in raster order of the components (0 = background).
 """
 from dataclasses import dataclass
 
@@ -32,6 +32,10 @@ PLANE_RANSAC_SAMPLE_POINTS = 4000
 PLANE_MIN_INLIER_FRACTION = 0.2
 # Something thinner than this above the table is noise or a sheet of paper.
 OBJECT_MIN_HEIGHT_M = 0.005
+# Anything higher above the table than this is not a graspable object but the
+# robot's own hand/arm passing through the view (the camera is 0.40 m above
+# the table; the paper's objects are well under 0.2 m tall).
+OBJECT_MAX_HEIGHT_M = 0.25
 # Smaller blobs are speckle, not a graspable object (a 2 cm object at 0.4 m
 # covers ~400 px with fx = 385).
 OBJECT_MIN_AREA_PX = 60
@@ -147,11 +151,13 @@ def height_above_plane(depth_m: np.ndarray, camera_k, plane: Plane) -> np.ndarra
 
 def segment_objects(depth_m: np.ndarray, camera_k, background_depth_m: np.ndarray | None = None,
                     min_height_m: float = OBJECT_MIN_HEIGHT_M,
-                    min_area_px: int = OBJECT_MIN_AREA_PX) -> SegmentationResult:
+                    min_area_px: int = OBJECT_MIN_AREA_PX,
+                    max_height_m: float = OBJECT_MAX_HEIGHT_M) -> SegmentationResult:
     """Object labels above the table for a float32 depth image in metres (NaN/0 = invalid)."""
     valid = _check_depth(depth_m)
-    if not (np.isfinite(min_height_m) and min_height_m > 0 and min_area_px >= 1):
-        raise SegmentationError(f"thresholds must be > 0, got min_height_m={min_height_m}, min_area_px={min_area_px}")
+    if not (np.isfinite(min_height_m) and 0 < min_height_m < max_height_m and min_area_px >= 1):
+        raise SegmentationError(f"thresholds must satisfy 0 < min_height_m < max_height_m and min_area_px >= 1, got "
+                                f"{min_height_m}, {max_height_m}, {min_area_px}")
     plane = None
     if background_depth_m is None:
         stride = PLANE_FIT_STRIDE_PX
@@ -161,7 +167,7 @@ def segment_objects(depth_m: np.ndarray, camera_k, background_depth_m: np.ndarra
     else:
         height = _height_from_background(depth_m, background_depth_m, valid)
     with np.errstate(invalid="ignore"):  # NaN (unknown height) compares False: background
-        foreground = height > min_height_m
+        foreground = (height > min_height_m) & (height < max_height_m)
     labels, centroids, areas = _components(foreground, min_area_px)
     ids = tuple(sorted(centroids))
     return SegmentationResult(labels, height, ids, centroids, areas, plane)

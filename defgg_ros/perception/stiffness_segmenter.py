@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from defgg_ros.perception.segmentation import (
+    OBJECT_MAX_HEIGHT_M,
     OBJECT_MIN_AREA_PX,
     OBJECT_MIN_HEIGHT_M,
     SegmentationResult,
@@ -35,11 +36,12 @@ class SegmenterConfig:
     min_height_m: float = OBJECT_MIN_HEIGHT_M
     min_area_px: int = OBJECT_MIN_AREA_PX
     background_depth_m: np.ndarray | None = field(default=None, compare=False)
+    max_height_m: float = OBJECT_MAX_HEIGHT_M
 
     def __post_init__(self):
         check_plausible_modulus(self.default_youngs_modulus_pa, "default Young's modulus")
-        if not (np.isfinite(self.min_height_m) and self.min_height_m > 0):
-            raise ValueError(f"min_height_m must be > 0, got {self.min_height_m}")
+        if not (np.isfinite(self.min_height_m) and 0 < self.min_height_m < self.max_height_m):
+            raise ValueError(f"need 0 < min_height_m < max_height_m, got {self.min_height_m}, {self.max_height_m}")
         if int(self.min_area_px) < 1:
             raise ValueError(f"min_area_px must be >= 1, got {self.min_area_px}")
 
@@ -55,7 +57,7 @@ class SegmenterOutput:
 def run_segmenter(config: SegmenterConfig, depth_m: np.ndarray, camera_k) -> SegmenterOutput:
     """Segment float32 metres depth and paint the moduli; raises ValueError subclasses."""
     result = segment_objects(depth_m, camera_k, config.background_depth_m,
-                             config.min_height_m, int(config.min_area_px))
+                             config.min_height_m, int(config.min_area_px), config.max_height_m)
     image, per_object = assign_stiffness(result.labels, result.centroids_px, config.entries,
                                          config.default_youngs_modulus_pa)
     return SegmenterOutput(image, result.labels, result, per_object)

@@ -155,3 +155,13 @@ def test_bad_roi_and_region_rules():
         check_entries_fit_image([make_entry("x", 2e5, (700, 10, 5, 5))], 640, 480)
     with pytest.raises(InvalidYoungsModulus, match="default"):
         assign_stiffness(np.zeros((2, 2), np.uint8), {}, [], 0.0)
+
+
+def test_things_too_high_above_the_table_are_the_robot_not_objects():
+    hand = SceneObject(center_xy_m=(0.05, -0.12), height_m=0.30, size_xy_m=(0.06, 0.03))
+    depth, truth = render(SyntheticScene(objects=SCENE.objects + (hand,)))
+    result = seg.segment_objects(depth, K)
+    assert len(result.object_ids) == 3 and not np.any(result.labels[truth == 4])
+    assert len(seg.segment_objects(depth, K, max_height_m=0.35).object_ids) == 4
+    with pytest.raises(seg.SegmentationError, match="min_height_m < max_height_m"):
+        seg.segment_objects(depth, K, min_height_m=0.3, max_height_m=0.2)
