@@ -53,6 +53,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--epochs", type=int, default=DEFAULTS.epochs, help="number of epochs (default %(default)s)")
     p.add_argument("--batch-size", type=int, default=DEFAULTS.batch_size, help="images per step and process")
     p.add_argument("--lr", type=float, default=DEFAULTS.learning_rate, help="Adam learning rate")
+    p.add_argument("--positive-weight", type=float, default=DEFAULTS.positive_weight,
+                   help="loss weight of positive-grasp pixels vs background; 1 = GG-CNN's plain MSE "
+                        "(default %(default)s)")
     p.add_argument("--samples-per-scene", type=int, default=DEFAULTS.samples_per_scene,
                    help="augmented copies of each training scene per epoch (default %(default)s)")
     p.add_argument("--seed", type=int, default=DEFAULTS.seed, help="seed of init, order, augmentation and split")
@@ -74,7 +77,8 @@ def config_from_args(args) -> TrainConfig:
     augment = AugmentConfig(max_rotation_rad=0.0, zoom_range=(1.0, 1.0), max_shift_px=0.0) \
         if args.no_augment else AugmentConfig()
     return TrainConfig(uses_stiffness=not args.no_stiffness, architecture=args.architecture, epochs=args.epochs,
-                       batch_size=args.batch_size, learning_rate=args.lr, samples_per_scene=args.samples_per_scene,
+                       batch_size=args.batch_size, learning_rate=args.lr,
+                       positive_weight=args.positive_weight, samples_per_scene=args.samples_per_scene,
                        seed=args.seed, val_fraction=args.val_fraction, test_fraction=args.test_fraction,
                        augment=augment, max_steps=args.max_steps)
 

@@ -9,7 +9,6 @@ from collections import defaultdict
 
 import numpy as np
 import torch
-import torch.nn.functional as F
 
 from defgg_ros.constants import FINGER_PAD_WIDTH_M
 from defgg_ros.data.format import GraspRect
@@ -19,9 +18,20 @@ from defgg_ros.grasping.rectangles import rectangle_match
 from defgg_ros.model.preprocess import network_input
 
 
-def grasp_loss(outputs: torch.Tensor, targets: torch.Tensor) -> dict:
-    """GG-CNN loss: mean squared error of each output map, summed."""
-    per_map = {name: F.mse_loss(outputs[:, i], targets[:, i]) for i, name in enumerate(("q", "cos", "sin", "width"))}
+def grasp_loss(outputs: torch.Tensor, targets: torch.Tensor, positive_weight: float = 1.0) -> dict:
+    """GG-CNN loss: mean squared error of each output map, summed.
+
+    positive_weight > 1 weighs pixels inside positive rectangles (target
+    Q > 0) that much more than background pixels; 1.0 is GG-CNN's plain MSE.
+    """
+    if positive_weight == 1.0:
+        weight = None
+    else:
+        weight = 1.0 + (positive_weight - 1.0) * (targets[:, :1] > 0).to(outputs.dtype)
+    per_map = {}
+    for i, name in enumerate(("q", "cos", "sin", "width")):
+        err = (outputs[:, i:i + 1] - targets[:, i:i + 1]) ** 2
+        per_map[name] = err.mean() if weight is None else (weight * err).mean()
     return {"loss": sum(per_map.values()), **per_map}
 
 
@@ -56,13 +66,13 @@ def _by_e(item):
     return float(item[0])
 
 
-def dataset_loss(model: torch.nn.Module, dataset, batch_size: int = 8) -> float:
+def dataset_loss(model: torch.nn.Module, dataset, batch_size: int = 8, positive_weight: float = 1.0) -> float:
     model.eval()
     total, n = 0.0, 0
     loader = torch.utils.data.DataLoader(dataset, batch_size=batch_size, shuffle=False)
     with torch.inference_mode():
         for batch in loader:
-            total += float(grasp_loss(model(batch["x"]), batch["y"])["loss"]) * len(batch["x"])
+            total += float(grasp_loss(model(batch["x"]), batch["y"], positive_weight)["loss"]) * len(batch["x"])
             n += len(batch["x"])
     return total / max(n, 1)
 

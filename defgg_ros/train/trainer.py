@@ -177,7 +177,7 @@ class Trainer:
                    unit="batch", disable=not self.show_progress, dynamic_ncols=True)
         for batch in bar:
             t0 = time.perf_counter()
-            loss = grasp_loss(model(batch["x"]), batch["y"])["loss"]
+            loss = grasp_loss(model(batch["x"]), batch["y"], self.config.positive_weight)["loss"]
             self.optimizer.zero_grad(set_to_none=True)
             loss.backward()
             self.optimizer.step()
@@ -211,7 +211,8 @@ class Trainer:
                 "epoch": self.epoch, "step": self.global_step,
                 "train_loss": running["loss_sum"] / max(running["images"], 1),
                 "train_images_per_s": running["images"] / max(running["seconds"], 1e-9),
-                "val_loss": dataset_loss(self.model, self.val_set), "val_accuracy": val["accuracy"],
+                "val_loss": dataset_loss(self.model, self.val_set, positive_weight=self.config.positive_weight),
+                "val_accuracy": val["accuracy"],
                 "val_per_modulus": val["per_modulus"]})
             self._write_epoch_outputs()
         self._save_state()

@@ -1,0 +1,56 @@
+"""Checkpoint every epoch/step, kill, resume: same weights as an uninterrupted run."""
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import torch
+
+from defgg_ros.model.checkpoint import load_checkpoint
+from defgg_ros.model.inference import GraspPredictor
+from defgg_ros.train.cli import main
+
+ARGS = ["--epochs", "4", "--batch-size", "2", "--samples-per-scene", "1", "--seed", "5", "--no-progress",
+        "--val-fraction", "0.3", "--test-fraction", "0.3"]
+
+
+def _weights(run):
+    return load_checkpoint(run / "model.pt")["weights_sha256"]
+
+
+def test_killed_run_resumes_to_the_same_result(tiny_dataset, tmp_path):
+    torch.set_num_threads(1)
+    assert main(["--data", str(tiny_dataset), "--out", str(tmp_path / "straight"), *ARGS]) == 0
+
+    killed = tmp_path / "killed"
+    cmd = [sys.executable, "-m", "defgg_ros.train.cli", "--data", str(tiny_dataset), "--out", str(killed),
+           "--checkpoint-every", "1", *ARGS]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env={**os.environ})
+    deadline = time.monotonic() + 120
+    while not (killed / "state.pt").exists():
+        assert proc.poll() is None, proc.stderr.read().decode()
+        assert time.monotonic() < deadline, "no state file written"
+        time.sleep(0.05)  # polling a file written by another process; nothing to wait on instead
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    state = torch.load(killed / "state.pt", weights_only=True)
+    assert state["epoch"] < 4, "the run finished before it could be killed"
+
+    assert main(["--data", str(tiny_dataset), "--out", str(killed), "--resume", *ARGS]) == 0
+    assert _weights(killed) == _weights(tmp_path / "straight")
+    metrics = json.loads((killed / "metrics.json").read_text())
+    assert [h["epoch"] for h in metrics["history"]] == [1, 2, 3, 4]
+    for name in ("best.pt", "curves.png", "stiffness_response.png"):
+        assert (killed / name).stat().st_size > 0
+    assert GraspPredictor.from_checkpoint(killed / "best.pt").uses_stiffness
+
+
+def test_resume_refuses_changed_hyper_parameters(tiny_dataset, tmp_path, capsys):
+    run = tmp_path / "run"
+    assert main(["--data", str(tiny_dataset), "--out", str(run), *ARGS, "--max-steps", "1"]) == 0
+    assert main(["--data", str(tiny_dataset), "--out", str(run), "--resume", *ARGS, "--lr", "0.1"]) == 2
+    assert "learning_rate" in capsys.readouterr().err
+    assert main(["--data", str(tiny_dataset), "--out", str(run), "--resume", *ARGS, "--max-steps", "2"]) == 0
+    assert torch.load(run / "state.pt", weights_only=True)["global_step"] == 2
