@@ -75,3 +75,11 @@ PANDA_HAND_YAW_RAD = -math.pi / 4
 # Datasheet reach (joint 2 axis to the flange) of the Panda.
 PANDA_MAX_REACH_M = 0.855
 PANDA_SHOULDER_HEIGHT_M = 0.333  # joint 2 axis above panda_link0
+
+# --- Franka Hand geometry for simulation (from Franka's hand/finger meshes) -
+# The hand frame used in simulation has its origin at the TCP (between the
+# finger pads), x along the closing direction, z up (away from the object).
+PANDA_HAND_PALM_SIZE_M = (0.204, 0.063, 0.066)  # along closing, across, height
+PANDA_FINGER_LENGTH_M = 0.054        # finger from palm to tip
+PANDA_FINGER_THICKNESS_M = 0.014     # finger pad thickness along the closing direction
+PANDA_FINGERTIP_BELOW_TCP_M = 0.007  # fingertip end below the TCP (tip at 0.112, TCP at 0.105)

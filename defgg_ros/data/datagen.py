@@ -1,0 +1,263 @@
+"""The dataset generator: plan (scenes, candidates, trials), run trials in parallel, write.
+
+Only the main process writes (DatasetWriter appends one fsync'd JSON line per
+finished trial), workers only simulate; so a killed run loses only the
+trials in flight and a rerun skips every trial id already on disk.
+
+Order: trials run in passes. Pass k runs candidates [k*pass_size,
+(k+1)*pass_size) of EVERY scene (object x E) before pass k+1 starts, so a
+partial dataset covers all objects and moduli evenly and can be trained on
+at any time.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import time
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from defgg_ros.atomic import write_json_atomic
+from defgg_ros.constants import GRASP_CANDIDATES_PER_OBJECT, TRAINING_YOUNGS_MODULI_PA
+from defgg_ros.data.format import DatasetWriter, GraspRect, Scene, TrialRecord, scene_id_for
+
+CANDIDATE_FILE_VERSION = 1
+
+
+@dataclass
+class DatagenConfig:
+    out: Path
+    object_set: str = "train"
+    objects: tuple = ()                 # restrict to these names (empty = whole set)
+    moduli_pa: tuple = TRAINING_YOUNGS_MODULI_PA
+    grasps_per_scene: int = 40
+    pass_size: int = 8
+    n_candidates: int = GRASP_CANDIDATES_PER_OBJECT
+    seed: int = 0
+    workers: int = 1
+    ray_address: str | None = None
+    settings: dict = field(default_factory=dict)   # TrialSettings overrides
+    card_every: int = 20                           # regenerate the card every N finished trials
+
+    def header(self) -> dict:
+        d = asdict(self)
+        d.pop("out")
+        d.pop("workers")
+        d.pop("ray_address")
+        d.pop("card_every")
+        d["moduli_pa"] = list(self.moduli_pa)
+        d["objects"] = list(self.objects)
+        return d
+
+
+@dataclass(frozen=True)
+class TrialJob:
+    trial_id: str
+    scene_id: str
+    object_name: str
+    youngs_modulus_pa: float
+    candidate_index: int
+    grasp: dict              # WorldGrasp fields
+    rect: dict               # GraspRect fields
+    seed: int
+    settings: dict
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def object_seed(seed: int, name: str) -> int:
+    return int(hashlib.sha256(f"{seed}:{name}".encode()).hexdigest()[:8], 16)
+
+
+def trial_id_for(scene_id: str, candidate_index: int) -> str:
+    return f"{scene_id}__g{candidate_index:03d}"
+
+
+def load_or_sample_candidates(root: Path, shape, cfg: DatagenConfig) -> list:
+    """Collision-free antipodal candidates of one object, cached in <root>/candidates/<name>.json."""
+    from defgg_ros.sim.sampler import grasp_rect, sample_grasps
+
+    path = root / "candidates" / f"{shape.name}.json"
+    seed = object_seed(cfg.seed, shape.name)
+    key = {"version": CANDIDATE_FILE_VERSION, "seed": seed, "n_candidates": cfg.n_candidates,
+           "keep": cfg.grasps_per_scene, "mesh": [t.content_hash for t in shape.tet_parts]}
+    if path.exists():
+        cached = json.loads(path.read_text(encoding="utf-8"))
+        if cached.get("key") == key:
+            return cached["candidates"]
+    found = sample_grasps(shape.surface(), seed, cfg.n_candidates, keep=cfg.grasps_per_scene)
+    cands = [{"grasp": {"position_m": list(c.grasp.position_m), "yaw_rad": c.grasp.yaw_rad,
+                        "width_m": c.grasp.width_m},
+              "rect": asdict(grasp_rect(c.grasp))} for c in found]
+    write_json_atomic(path, {"key": key, "candidates": cands})
+    return cands
+
+
+def render_scene(shape, youngs_modulus_pa: float, seed: int) -> Scene:
+    """Render depth, stiffness and mask of the object resting at the origin (yaw 0)."""
+    from defgg_ros.sim import camera, objects, world
+
+    client = world.connect()
+    try:
+        spec = objects.ObjectSpec(shape, youngs_modulus_pa)
+        world.create_world(client, spec.part_moduli_pa())
+        loaded = objects.load_object(client, spec)
+        images = camera.render_object_images(client, loaded)
+    finally:
+        import pybullet as p
+
+        p.disconnect(client)
+    meta = {"object_name": shape.name, "object_set": shape.set_name, "youngs_modulus_pa": youngs_modulus_pa,
+            "poisson_ratio": spec.poisson_ratio, "seed": seed, "soft": [pt.soft for pt in loaded.parts],
+            "mass_kg": loaded.mass_kg, "tet_nodes": [len(t.nodes_m) for t in shape.tet_parts],
+            "mesh_hash": [t.content_hash for t in shape.tet_parts], "object_pose": "origin, yaw 0"}
+    return Scene(scene_id_for(shape.name, youngs_modulus_pa), meta=meta, **images)
+
+
+def plan(cfg: DatagenConfig, writer: DatasetWriter, progress=None) -> list:
+    """Render missing scenes, sample candidates, and return pending TrialJobs in pass order."""
+    from defgg_ros.sim.objects import object_set
+
+    shapes = [s for s in object_set(cfg.object_set) if not cfg.objects or s.name in cfg.objects]
+    missing = set(cfg.objects) - {s.name for s in shapes}
+    if missing:
+        raise ValueError(f"objects not in set {cfg.object_set!r}: {sorted(missing)}")
+    per_scene = {}
+    for shape in shapes:
+        cands = load_or_sample_candidates(writer.root, shape, cfg)
+        for e in cfg.moduli_pa:
+            sid = scene_id_for(shape.name, e)
+            if not writer.has_scene(sid):
+                writer.write_scene(render_scene(shape, e, cfg.seed))
+            done = writer.finished_trial_ids(sid)
+            per_scene[(shape.name, e)] = (sid, cands, done)
+        if progress:
+            progress(shape.name)
+    jobs = []
+    n_passes = math.ceil(cfg.grasps_per_scene / cfg.pass_size)
+    for k in range(n_passes):
+        for (name, e), (sid, cands, done) in per_scene.items():
+            for i in range(k * cfg.pass_size, min((k + 1) * cfg.pass_size, len(cands), cfg.grasps_per_scene)):
+                tid = trial_id_for(sid, i)
+                if tid not in done:
+                    jobs.append(TrialJob(tid, sid, name, e, i, cands[i]["grasp"], cands[i]["rect"],
+                                         object_seed(cfg.seed, tid), cfg.settings))
+    return jobs
+
+
+def run_trial_job(job: dict) -> dict:
+    """Simulate one trial (worker side); returns a TrialRecord as JSON."""
+    from defgg_ros.sim import objects, world
+    from defgg_ros.sim.trial import TrialSettings, WorldGrasp, run_grasp_trial
+
+    job = TrialJob(**job)
+    settings = replace(TrialSettings.fast(), **job.settings)
+    spec = objects.ObjectSpec(objects.get_shape(job.object_name), job.youngs_modulus_pa)
+    grasp = WorldGrasp(tuple(job.grasp["position_m"]), job.grasp["yaw_rad"], job.grasp["width_m"])
+    outcome = run_grasp_trial(spec, grasp, ("shake",), settings, client=_worker_client(world))
+    sim = dict(outcome.sim, shake_measured=outcome.shake_measured, sim_steps=outcome.sim_steps)
+    record = TrialRecord(
+        trial_id=job.trial_id, scene_id=job.scene_id, object_name=job.object_name,
+        youngs_modulus_pa=job.youngs_modulus_pa, candidate_index=job.candidate_index,
+        rect=GraspRect(**job.rect), position_m=list(grasp.position_m), yaw_rad=grasp.yaw_rad,
+        width_m=grasp.width_m, status=outcome.status, shake_accels_mps2=outcome.shake_accels_mps2,
+        grasp_force_n=outcome.grasp_force_n, seed=job.seed, cpu_s=outcome.cpu_s, sim=sim, note=outcome.note)
+    return record.to_json()
+
+
+_CLIENT = None
+
+
+def _worker_client(world):
+    """One DIRECT physics server per worker process, reused by its trials."""
+    global _CLIENT
+    if _CLIENT is None:
+        _CLIENT = world.connect()
+    return _CLIENT
+
+
+def _json_safe(x):
+    if isinstance(x, dict):
+        return {k: _json_safe(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [_json_safe(v) for v in x]
+    if isinstance(x, np.generic):
+        return x.item()
+    return x
+
+
+def execute(jobs: list, cfg: DatagenConfig, on_result) -> None:
+    """Run jobs locally (process pool) or on Ray; call on_result(record_json) in the main process."""
+    payloads = [j.to_dict() for j in jobs]
+    if cfg.ray_address:
+        _execute_ray(payloads, cfg, on_result)
+    elif cfg.workers <= 1:
+        for job in payloads:
+            on_result(run_trial_job(job))
+    else:
+        import multiprocessing as mp
+
+        with mp.get_context("spawn").Pool(cfg.workers, maxtasksperchild=50) as pool:
+            for result in pool.imap_unordered(run_trial_job, payloads, chunksize=1):
+                on_result(result)
+
+
+def _execute_ray(payloads, cfg, on_result) -> None:
+    import ray
+
+    started_here = not ray.is_initialized()
+    if started_here:
+        if cfg.ray_address == "local":
+            ray.init(num_cpus=max(1, cfg.workers), include_dashboard=False, log_to_driver=False)
+        else:
+            ray.init(address=cfg.ray_address, log_to_driver=False)
+    remote = ray.remote(num_cpus=1)(run_trial_job)
+    window = max(2, 2 * cfg.workers)
+    pending, queue = [], list(payloads)
+    try:
+        while queue or pending:
+            while queue and len(pending) < window:
+                pending.append(remote.remote(queue.pop(0)))
+            ready, pending = ray.wait(pending, num_returns=1)
+            for ref in ready:
+                on_result(ray.get(ref))
+    finally:
+        if started_here:
+            ray.shutdown()
+
+
+def generate(cfg: DatagenConfig, progress_bar=True) -> dict:
+    """Plan + execute; returns counts. Safe to rerun: finished trials are skipped."""
+    from tqdm import tqdm
+
+    from defgg_ros.data.card import write_card
+
+    writer = DatasetWriter(cfg.out, cfg.header())
+    t_plan = tqdm(desc="planning (objects)", unit="obj", disable=not progress_bar)
+    jobs = plan(cfg, writer, progress=lambda name: t_plan.update(1))
+    t_plan.close()
+    counts = {"planned_pending": len(jobs), "done": 0, "labelled": 0, "failed": 0}
+    bar = tqdm(total=len(jobs), desc="trials", unit="trial", disable=not progress_bar, smoothing=0.05)
+    t0 = time.monotonic()
+
+    def on_result(record_json):
+        record = TrialRecord.from_json(_json_safe(record_json))
+        writer.append_trial(record)
+        counts["done"] += 1
+        counts["labelled" if record.label is not None else "failed"] += 1
+        per_hour = counts["done"] / max(1e-9, time.monotonic() - t0) * 3600
+        bar.set_postfix(trials_per_h=f"{per_hour:.0f}", labelled=counts["labelled"], failed=counts["failed"])
+        bar.update(1)
+        if counts["done"] % cfg.card_every == 0:
+            write_card(cfg.out, cfg)
+
+    try:
+        execute(jobs, cfg, on_result)
+    finally:
+        bar.close()
+        write_card(cfg.out, cfg)
+    return counts

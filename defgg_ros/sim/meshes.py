@@ -1,0 +1,214 @@
+"""Surface mesh -> coarse tetrahedral mesh (fTetWild), cached on disk by content hash.
+
+The tet mesh is the one geometry of an object: its nodes are the FEM soft
+body, its boundary triangles are the rigid body's collision shape, the
+rendered surface and the grasp sampler's surface. So a soft and a rigid
+version of the same object have the same shape.
+
+Why coarse: a soft body in contact costs ~12x its free-space step and the
+cost grows with the node count (129 nodes ~6 ms/step, 500 nodes ~25 ms/step,
+measured in ../shared/notes/pybullet-fem-facts.md). We aim at
+TARGET_MAX_NODES nodes and coarsen until we get there.
+"""
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import os
+import sys
+import types
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from defgg_ros.atomic import atomic_path
+
+TARGET_MAX_NODES = 220
+# (edge length factor, envelope epsilon) tried in order until the mesh has
+# <= TARGET_MAX_NODES nodes. The envelope (relative to the bbox diagonal)
+# bounds the node count more than the edge length does: 5e-3 kept ~400
+# nodes on wavy blobs, 1e-2 (~0.8 mm on an 8 cm object) ~220-250.
+COARSENING_STEPS = ((0.12, 5e-3), (0.15, 1e-2), (0.2, 1.5e-2), (0.25, 2e-2))
+MESH_CACHE_ENV = "DEFGG_MESH_CACHE"
+MESH_FORMAT_VERSION = "tet-v1"
+
+
+class MeshError(ValueError):
+    """A surface mesh that cannot become a valid tetrahedral mesh."""
+
+
+@dataclass
+class TetMesh:
+    """Nodes (N,3, metres), positively oriented tets (M,4) and boundary triangles (K,3)."""
+    nodes_m: np.ndarray
+    tets: np.ndarray
+    surface_faces: np.ndarray
+    content_hash: str
+    vtk_path: Path
+    obj_path: Path
+
+    def surface(self) -> trimesh.Trimesh:
+        used = np.unique(self.surface_faces)
+        remap = np.full(len(self.nodes_m), -1)
+        remap[used] = np.arange(len(used))
+        return trimesh.Trimesh(self.nodes_m[used], remap[self.surface_faces], process=False)
+
+    @property
+    def volume_m3(self) -> float:
+        return float(tet_volumes(self.nodes_m, self.tets).sum())
+
+
+def cache_dir() -> Path:
+    default = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "defgg_ros" / "meshes"
+    path = Path(os.environ.get(MESH_CACHE_ENV, default))
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def _import_pytetwild():
+    # pytetwild imports pyvista at import time (undeclared dependency, see the
+    # FEM notes); pyvista is installed here, but do not crash if it is not.
+    try:
+        import pyvista  # noqa: F401
+    except ImportError:
+        sys.modules.setdefault("pyvista", types.ModuleType("pyvista"))
+    import pytetwild
+
+    return pytetwild
+
+
+def tet_volumes(nodes, tets) -> np.ndarray:
+    a, b, c, d = (nodes[tets[:, i]] for i in range(4))
+    return np.einsum("ij,ij->i", np.cross(b - a, c - a), d - a) / 6.0
+
+
+def surface_hash(vertices, faces) -> str:
+    h = hashlib.sha256(MESH_FORMAT_VERSION.encode())
+    h.update(np.ascontiguousarray(np.round(vertices, 7), dtype=np.float64).tobytes())
+    h.update(np.ascontiguousarray(faces, dtype=np.int64).tobytes())
+    h.update(repr((TARGET_MAX_NODES, COARSENING_STEPS)).encode())
+    return h.hexdigest()[:20]
+
+
+def boundary_faces(nodes, tets) -> np.ndarray:
+    """Triangles that belong to exactly one tet, oriented outwards."""
+    local = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])  # outward for positive tets
+    faces = tets[:, local].reshape(-1, 3)
+    key = np.sort(faces, axis=1)
+    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    return faces[counts[inverse.ravel()] == 1]
+
+
+def tetrahedralize(mesh: trimesh.Trimesh) -> TetMesh:
+    """Tetrahedralize (or load from the cache) a closed surface mesh in metres."""
+    if len(mesh.faces) == 0 or not np.all(np.isfinite(mesh.vertices)):
+        raise MeshError("empty mesh or non-finite vertices")
+    digest = surface_hash(mesh.vertices, mesh.faces)
+    folder = cache_dir()
+    npz_path = folder / f"{digest}.npz"
+    if not npz_path.exists():
+        nodes, tets = _run_ftetwild(mesh)
+        with atomic_path(npz_path) as tmp, open(tmp, "wb") as f:
+            np.savez(f, nodes_m=nodes, tets=tets)
+    with np.load(npz_path, allow_pickle=False) as z:
+        nodes, tets = z["nodes_m"], z["tets"]
+    vtk_path, obj_path = folder / f"{digest}.vtk", folder / f"{digest}.obj"
+    surface = boundary_faces(nodes, tets)
+    if not vtk_path.exists():
+        with atomic_path(vtk_path) as tmp:
+            write_vtk(tmp, nodes, tets)
+    if not obj_path.exists():
+        with atomic_path(obj_path) as tmp:
+            write_obj(tmp, nodes, surface)
+    return TetMesh(nodes, tets, surface, digest, vtk_path, obj_path)
+
+
+def _run_ftetwild(mesh):
+    pytetwild = _import_pytetwild()
+    verts = np.asarray(mesh.vertices, dtype=np.float64)
+    faces = np.asarray(mesh.faces, dtype=np.int32)
+    nodes = tets = None
+    for fac, eps in COARSENING_STEPS:
+        nodes, tets = pytetwild.tetrahedralize(verts, faces, edge_length_fac=fac, coarsen=True,
+                                               epsilon=eps, num_threads=1, quiet=True)
+        if len(nodes) <= TARGET_MAX_NODES:
+            break
+    if tets is None or len(tets) == 0:
+        raise MeshError("fTetWild produced no tetrahedra (is the surface closed?)")
+    nodes = np.asarray(nodes, dtype=np.float64)
+    tets = np.asarray(tets, dtype=np.int64)
+    # fTetWild returns negatively oriented tets (FEM notes): flip them.
+    vol = tet_volumes(nodes, tets)
+    tets[vol < 0] = tets[vol < 0][:, [0, 2, 1, 3]]
+    used = np.unique(tets)
+    remap = np.full(len(nodes), -1)
+    remap[used] = np.arange(len(used))
+    return nodes[used], remap[tets]
+
+
+def write_vtk(path, nodes, tets) -> None:
+    """Legacy ASCII VTK, one point / one cell per line (what loadSoftBody reads)."""
+    lines = ["# vtk DataFile Version 2.0", "defgg tet mesh", "ASCII", "DATASET UNSTRUCTURED_GRID",
+             f"POINTS {len(nodes)} double"]
+    lines += [f"{x:.8f} {y:.8f} {z:.8f}" for x, y, z in nodes]
+    lines.append(f"CELLS {len(tets)} {5 * len(tets)}")
+    lines += [f"4 {a} {b} {c} {d}" for a, b, c, d in tets]
+    lines.append(f"CELL_TYPES {len(tets)}")
+    lines += ["10"] * len(tets)
+    Path(path).write_text("\n".join(lines) + "\n", encoding="ascii")
+
+
+def write_obj(path, vertices, faces) -> None:
+    lines = [f"v {x:.8f} {y:.8f} {z:.8f}" for x, y, z in vertices]
+    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in faces]
+    Path(path).write_text("\n".join(lines) + "\n", encoding="ascii")
+
+
+def convex_decomposition(tet: TetMesh) -> Path:
+    """V-HACD convex pieces of the surface (dynamic rigid bodies need convex shapes), cached."""
+    import pybullet as p
+
+    out = tet.obj_path.with_name(f"{tet.content_hash}_vhacd.obj")
+    if not out.exists():
+        log = tet.obj_path.with_name(f"{tet.content_hash}_vhacd.log")
+        with atomic_path(out) as tmp:
+            # pybullet.vhacd needs the file name to end in .obj
+            tmp_obj = Path(str(tmp) + ".obj")
+            with _stdout_silenced():  # V-HACD prints its progress from C
+                p.vhacd(str(tet.obj_path), str(tmp_obj), str(log), resolution=200000, maxNumVerticesPerCH=32)
+            os.replace(tmp_obj, tmp)
+        log.unlink(missing_ok=True)
+    return out
+
+
+@contextlib.contextmanager
+def _stdout_silenced():
+    sys.stdout.flush()
+    saved = os.dup(1)
+    with open(os.devnull, "w") as null:
+        os.dup2(null.fileno(), 1)
+    try:
+        yield
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+
+
+def load_user_mesh(path, scale: float = 1.0) -> trimesh.Trimesh:
+    """Load a user's .obj/.stl surface mesh; raise MeshError when unusable."""
+    path = Path(path)
+    if path.suffix.lower() not in (".obj", ".stl"):
+        raise MeshError(f"{path}: only .obj and .stl meshes are supported")
+    try:
+        mesh = trimesh.load(path, force="mesh", process=True)
+    except Exception as exc:  # trimesh raises many types on bad files
+        raise MeshError(f"{path}: cannot read mesh ({type(exc).__name__}: {exc})") from None
+    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+        raise MeshError(f"{path}: no triangles")
+    mesh.apply_scale(scale)
+    extent = np.ptp(mesh.vertices, axis=0).max()
+    if not 0.005 <= extent <= 0.5:
+        raise MeshError(f"{path}: extent {extent:.3f} m after scale {scale}; expected metres of a graspable object")
+    return mesh

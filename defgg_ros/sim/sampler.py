@@ -1,0 +1,171 @@
+"""Antipodal top-down grasp candidates with a hand/table collision filter.
+
+Sampling: surface points with a near-horizontal normal; a horizontal ray
+from each through the object finds the exit point; the pair is antipodal
+when both normals lie inside a cone around the closing axis (narrower than
+the friction cone of mu = 0.8, 38.7 deg, for margin). Filter: the Panda
+hand's boxes (hand.hand_boxes, opened wider by OPENING_CLEARANCE_M) at the
+grasp and along the vertical approach must not touch the object or the
+table. The collision check is PyBullet's own (static concave triangle mesh
+vs boxes), so it judges the same geometry the trial simulates.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pybullet as p
+import trimesh
+
+from defgg_ros.constants import (
+    FINGER_PAD_WIDTH_M,
+    GRASP_CANDIDATES_PER_OBJECT,
+    GRIPPER_MAX_WIDTH_M,
+    PANDA_FINGERTIP_BELOW_TCP_M,
+    PREGRASP_HEIGHT_M,
+)
+from defgg_ros.data.format import GraspRect
+from defgg_ros.sim import hand as hand_mod
+from defgg_ros.sim.camera import TopDownCamera
+from defgg_ros.sim.trial import OPENING_CLEARANCE_M, WorldGrasp
+
+ANTIPODAL_CONE_RAD = math.radians(30.0)
+MAX_NORMAL_TILT_RAD = math.radians(50.0)   # contact normal vs horizontal
+MIN_WIDTH_M = 0.005
+TABLE_CLEARANCE_M = 0.003                  # fingertips stay this far above the table
+COLLISION_TOLERANCE_M = 0.0005
+APPROACH_STEP_M = 0.01
+MAX_SAMPLE_ROUNDS = 20
+
+
+@dataclass(frozen=True)
+class Candidate:
+    grasp: WorldGrasp          # in the object frame (object at the origin, yaw 0)
+    contacts_m: tuple          # the two contact points
+
+
+def _ray_hits(origin, direction, tris):
+    """Distances t > 0 and face indices where the ray crosses triangles (Moller-Trumbore, vectorised)."""
+    v0, v1, v2 = tris[:, 0], tris[:, 1], tris[:, 2]
+    e1, e2 = v1 - v0, v2 - v0
+    h = np.cross(direction, e2)
+    a = np.einsum("ij,ij->i", e1, h)
+    ok = np.abs(a) > 1e-12
+    f = np.where(ok, 1.0 / np.where(ok, a, 1.0), 0.0)
+    s = origin - v0
+    u = f * np.einsum("ij,ij->i", s, h)
+    q = np.cross(s, e1)
+    v = f * (q @ direction)
+    t = f * np.einsum("ij,ij->i", e2, q)
+    hit = ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 1e-6)
+    idx = np.nonzero(hit)[0]
+    order = np.argsort(t[idx])
+    return t[idx][order], idx[order]
+
+
+def antipodal_pairs(mesh: trimesh.Trimesh, n_points: int, rng) -> list:
+    """Up to n_points antipodal candidates on a closed surface (object frame)."""
+    points, faces = trimesh.sample.sample_surface(mesh, n_points, seed=int(rng.integers(2**31)))
+    normals = mesh.face_normals[faces]
+    tris = mesh.triangles
+    out = []
+    for p1, n1 in zip(points, normals):
+        horiz = np.array([n1[0], n1[1], 0.0])
+        if np.linalg.norm(horiz) < math.cos(MAX_NORMAL_TILT_RAD):
+            continue
+        axis = -horiz / np.linalg.norm(horiz)          # into the object, horizontal
+        t, idx = _ray_hits(p1 + axis * 1e-5, axis, tris)
+        exits = [(ti, fi) for ti, fi in zip(t, idx) if mesh.face_normals[fi] @ axis > 0]
+        if not exits:
+            continue
+        t2, f2 = exits[0]
+        n2 = mesh.face_normals[f2]
+        if math.acos(np.clip(n2 @ axis, -1, 1)) > ANTIPODAL_CONE_RAD:
+            continue
+        if math.acos(np.clip(-n1 @ axis, -1, 1)) > ANTIPODAL_CONE_RAD:
+            continue
+        if not MIN_WIDTH_M <= t2 <= GRIPPER_MAX_WIDTH_M - OPENING_CLEARANCE_M / 2:
+            continue
+        p2 = p1 + axis * t2
+        centre = (p1 + p2) / 2
+        z = max(centre[2], PANDA_FINGERTIP_BELOW_TCP_M + TABLE_CLEARANCE_M)
+        yaw = math.atan2(axis[1], axis[0])
+        out.append(Candidate(WorldGrasp((float(centre[0]), float(centre[1]), float(z)), yaw, float(t2)),
+                             (tuple(p1), tuple(p2))))
+    return out
+
+
+class CollisionChecker:
+    """The hand's boxes vs one object's surface and the table, in a private DIRECT server."""
+
+    def __init__(self, surface: trimesh.Trimesh):
+        self.client = p.connect(p.DIRECT)
+        c = self.client
+        col = p.createCollisionShape(p.GEOM_MESH, vertices=surface.vertices.tolist(),
+                                     indices=surface.faces.ravel().tolist(), flags=p.GEOM_FORCE_CONCAVE_TRIMESH,
+                                     physicsClientId=c)
+        self.object_id = p.createMultiBody(0, col, physicsClientId=c)
+        table = p.createCollisionShape(p.GEOM_BOX, halfExtents=[0.5, 0.5, 0.02], physicsClientId=c)
+        self.table_id = p.createMultiBody(0, table, basePosition=[0, 0, -0.02], physicsClientId=c)
+        self.box_ids = []
+        for _, half in hand_mod.hand_boxes(0.0):
+            shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=c)
+            self.box_ids.append(p.createMultiBody(0, shape, physicsClientId=c))
+        self.top_z_m = float(surface.vertices[:, 2].max())
+
+    def close(self):
+        p.disconnect(self.client)
+
+    def hand_collides(self, grasp: WorldGrasp) -> bool:
+        opening = min(grasp.width_m + OPENING_CLEARANCE_M, GRIPPER_MAX_WIDTH_M)
+        lift = np.arange(0.0, max(0.0, self.top_z_m + PREGRASP_HEIGHT_M - grasp.position_m[2]) + 1e-9,
+                         APPROACH_STEP_M)
+        for dz in lift:  # at the grasp and along the top-down approach
+            pose = hand_mod.world_T_hand(np.add(grasp.position_m, [0, 0, dz]), grasp.yaw_rad)
+            if self._boxes_collide(pose, opening):
+                return True
+        return False
+
+    def _boxes_collide(self, world_T_tcp, opening_m) -> bool:
+        c = self.client
+        quat = p.getQuaternionFromEuler([0, 0, math.atan2(world_T_tcp[1, 0], world_T_tcp[0, 0])])
+        for body, (centre, _) in zip(self.box_ids, hand_mod.hand_boxes(opening_m)):
+            pos = world_T_tcp[:3, :3] @ centre + world_T_tcp[:3, 3]
+            p.resetBasePositionAndOrientation(body, pos.tolist(), quat, physicsClientId=c)
+            for other in (self.object_id, self.table_id):
+                if p.getClosestPoints(body, other, COLLISION_TOLERANCE_M, physicsClientId=c):
+                    return True
+        return False
+
+
+def sample_grasps(surface: trimesh.Trimesh, seed: int, n_candidates: int = GRASP_CANDIDATES_PER_OBJECT,
+                  keep: int | None = None) -> list:
+    """~n_candidates antipodal candidates, collision-filtered; at most `keep`, in a seeded order."""
+    rng = np.random.default_rng(seed)
+    candidates = []
+    for _ in range(MAX_SAMPLE_ROUNDS):
+        candidates += antipodal_pairs(surface, 4 * n_candidates, rng)
+        if len(candidates) >= n_candidates:
+            break
+    candidates = candidates[:n_candidates]
+    checker = CollisionChecker(surface)
+    try:
+        free = [c for c in candidates if not checker.hand_collides(c.grasp)]
+    finally:
+        checker.close()
+    order = rng.permutation(len(free))
+    free = [free[i] for i in order]
+    return free[:keep] if keep else free
+
+
+def grasp_rect(grasp: WorldGrasp, camera: TopDownCamera | None = None) -> GraspRect:
+    """Image rectangle of a world grasp: angle from u towards v in [-pi/2, pi/2], sizes in px."""
+    camera = camera or TopDownCamera()
+    uv = camera.world_to_pixel([grasp.position_m])[0]
+    depth = camera.base_T_camera[2, 3] - grasp.position_m[2]
+    # image v runs along -y, so a world yaw maps to angle -yaw in the image
+    angle = -grasp.yaw_rad
+    angle = (angle + math.pi / 2) % math.pi - math.pi / 2
+    return GraspRect(float(uv[0]), float(uv[1]), float(angle), float(camera.metres_to_pixels(grasp.width_m, depth)),
+                     float(camera.metres_to_pixels(FINGER_PAD_WIDTH_M, depth)))

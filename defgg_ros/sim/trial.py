@@ -1,0 +1,298 @@
+"""One grasp trial: close, lift, shake test (16 directions) and twist test.
+
+Protocol (paper + DefGraspSim): the hand closes with a force that grows with
+log10(E) (grasp_force_n), lifts, then for each direction the acceleration is
+ramped until the object is no longer held or the limit is reached; the held
+value is recorded per direction. Positive when the mean is >=
+SHAKE_POSITIVE_THRESHOLD_MPS2 (TrialRecord.label).
+
+The shake uses the gravity trick measured in the FEM notes: the hand stays
+still and gravity is set to g - a*d, which matched moving the hand within
+0.1 m/s^2. The twist really rotates the hand (a non-uniform field cannot be
+faked by gravity). The grasp+lift state is shared by all directions:
+saveState does not cover soft nodes, so LoadedObject.restore_state resets
+the nodes with resetMeshData and zeroes their velocities.
+
+Speed-ups (TrialSettings.fast(), validated against TrialSettings.naive() in
+bench/bench_datagen.py): stop a direction as soon as the object is lost;
+stop the remaining directions once the label is decided (mean can no longer
+reach, or can no longer miss, the threshold). Skipped directions are stored
+as the bound that decided the label (50 when it could not reach, 0 when it
+could not miss) and flagged in `shake_measured`.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from defgg_ros.constants import (
+    GRIPPER_MAX_FORCE_N,
+    GRIPPER_MAX_WIDTH_M,
+    SHAKE_ACCEL_LIMIT_MPS2,
+    SHAKE_DIRECTIONS,
+    SHAKE_POSITIVE_THRESHOLD_MPS2,
+    TWIST_ACCEL_LIMIT_RADPS2,
+)
+from defgg_ros.data.format import STATUS_EXPLODED, STATUS_LIFT_FAILED, STATUS_OK, STATUS_TIMEOUT
+from defgg_ros.sim import hand as hand_mod
+from defgg_ros.sim import objects, world
+from defgg_ros.sim.hand import world_T_hand
+
+# Grasp force rule (per finger): 2 N at E = 2e4 Pa plus 0.5 N per decade of E,
+# as DefGraspSim grew the force with log E: soft objects are squeezed
+# gently, stiff ones firmly. 2 N was the probe's force (stable at every E).
+FORCE_AT_SOFTEST_N = 2.0
+FORCE_PER_DECADE_N = 0.5
+FORCE_REFERENCE_E_PA = 2e4
+OPENING_CLEARANCE_M = 0.01      # fingers open this much wider than the grasp width (5 mm a side)
+LOSS_DISTANCE_M = 0.02          # object moved this far relative to the hand = no longer held
+TWIST_AXES = ((1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1))
+
+
+def grasp_force_n(youngs_modulus_pa: float) -> float:
+    decades = math.log10(max(youngs_modulus_pa, FORCE_REFERENCE_E_PA) / FORCE_REFERENCE_E_PA)
+    return float(min(FORCE_AT_SOFTEST_N + FORCE_PER_DECADE_N * decades, GRIPPER_MAX_FORCE_N))
+
+
+def shake_directions(n: int = SHAKE_DIRECTIONS) -> np.ndarray:
+    """n unit vectors spread over the sphere (Fibonacci lattice), in an order that
+    interleaves them so any prefix covers the sphere evenly (early stops stay fair)."""
+    i = np.arange(n) + 0.5
+    z = 1 - 2 * i / n
+    phi = math.pi * (1 + 5**0.5) * i
+    dirs = np.c_[np.sqrt(1 - z * z) * np.cos(phi), np.sqrt(1 - z * z) * np.sin(phi), z]
+    order = np.argsort([int(f"{k:04b}"[::-1], 2) if n == 16 else k for k in range(n)])
+    return dirs[order]
+
+
+@dataclass(frozen=True)
+class WorldGrasp:
+    """Top-down grasp in the world frame: TCP position (m), yaw of the closing direction, width (m)."""
+    position_m: tuple
+    yaw_rad: float
+    width_m: float
+
+    def __post_init__(self):
+        if not np.all(np.isfinite(self.position_m)) or len(self.position_m) != 3:
+            raise ValueError(f"grasp position must be 3 finite numbers, got {self.position_m}")
+        if not 0.0 < self.width_m <= GRIPPER_MAX_WIDTH_M:
+            raise ValueError(f"grasp width {self.width_m} m outside (0, {GRIPPER_MAX_WIDTH_M}]")
+
+
+@dataclass(frozen=True)
+class TrialSettings:
+    close_speed_mps: float = 0.1
+    close_settle_s: float = 0.1
+    settle_before_s: float = 0.02
+    lift_height_m: float = 0.03
+    lift_time_s: float = 0.3
+    hold_time_s: float = 0.1
+    shake_ramp_time_s: float = 0.5
+    twist_ramp_time_s: float = 0.5
+    check_every_s: float = 0.005
+    stop_direction_when_lost: bool = True
+    stop_when_label_decided: bool = True
+    max_cpu_s: float = 900.0
+    time_step_s: float | None = None   # None: world.time_step_for(E), the probe's stable steps
+
+    @classmethod
+    def naive(cls) -> TrialSettings:
+        """The probe's protocol: every direction ramps to the end, all 16 run."""
+        return cls(stop_direction_when_lost=False, stop_when_label_decided=False)
+
+    @classmethod
+    def fast(cls) -> TrialSettings:
+        return cls()
+
+
+@dataclass
+class TrialOutcome:
+    status: str
+    shake_accels_mps2: list | None = None
+    shake_measured: list | None = None
+    twist_accels_radps2: list | None = None
+    grasp_force_n: float = 0.0
+    cpu_s: float = 0.0
+    sim_steps: int = 0
+    note: str = ""
+    sim: dict = field(default_factory=dict)
+
+    @property
+    def shake_mean_mps2(self) -> float | None:
+        return None if not self.shake_accels_mps2 else float(np.mean(self.shake_accels_mps2))
+
+
+class _Abort(Exception):
+    def __init__(self, status, note):
+        super().__init__(note)
+        self.status, self.note = status, note
+
+
+class _Trial:
+    def __init__(self, client, spec, grasp, settings, object_xy_m, object_yaw_rad):
+        self.client, self.spec, self.grasp, self.settings = client, spec, grasp, settings
+        self.world = world.create_world(client, spec.part_moduli_pa(), settings.time_step_s)
+        self.obj = objects.load_object(client, spec, object_xy_m, object_yaw_rad)
+        self.force_n = grasp_force_n(min(spec.part_moduli_pa()))
+        self.steps = 0
+        self.t0 = time.process_time()
+        self.check_steps = max(1, round(settings.check_every_s / self.world.time_step_s))
+
+    def step(self, n):
+        for _ in range(n):
+            self.world.step()
+        self.steps += n
+        if not self.obj.is_finite():
+            raise _Abort(STATUS_EXPLODED, "object nodes non-finite or runaway")
+        if time.process_time() - self.t0 > self.settings.max_cpu_s:
+            raise _Abort(STATUS_TIMEOUT, f"trial exceeded {self.settings.max_cpu_s} s CPU")
+
+    def seconds(self, t_s):
+        return max(1, round(t_s / self.world.time_step_s))
+
+    def grasp_and_lift(self):
+        s = self.settings
+        self.step(self.seconds(s.settle_before_s))
+        opening = min(self.grasp.width_m + OPENING_CLEARANCE_M, GRIPPER_MAX_WIDTH_M)
+        self.tcp = world_T_hand(self.grasp.position_m, self.grasp.yaw_rad)
+        self.hand = hand_mod.create_hand(self.client, self.tcp, opening)
+        self.hand.close(self.force_n, s.close_speed_mps)
+        self.step(self.seconds(opening / 2 / s.close_speed_mps + s.close_settle_s))
+        if self.hand.finger_opening_m() < 1e-3:
+            raise _Abort(STATUS_LIFT_FAILED, "fingers closed on nothing")
+        n_lift = self.seconds(s.lift_time_s)
+        for k in range(0, n_lift, self.check_steps):
+            frac = min(1.0, (k + self.check_steps) / n_lift)
+            target = self.tcp.copy()
+            target[2, 3] += s.lift_height_m * 0.5 * (1 - math.cos(math.pi * frac))
+            self.hand.move_to(target)
+            self.step(self.check_steps)
+        self.step(self.seconds(s.hold_time_s))
+        self.lifted_tcp = target
+        self.ref_offset = self.object_in_hand()
+        if not self.held():
+            raise _Abort(STATUS_LIFT_FAILED, "object not held after lift")
+        self.saved = (self.obj.save_state(), self.hand.save_state())
+
+    def held(self) -> bool:
+        if not any(sum(self.hand.finger_contacts(b)) for b in self.obj.body_ids):
+            return False
+        return float(np.linalg.norm(self.object_in_hand() - self.ref_offset)) < LOSS_DISTANCE_M
+
+    def object_in_hand(self) -> np.ndarray:
+        """Object centroid in the hand frame (so the twist's rotation is not mistaken for a loss)."""
+        pose = self.hand.pose()
+        return pose[:3, :3].T @ (self.obj.centroid_m() - pose[:3, 3])
+
+    def restore(self):
+        self.obj.restore_state(self.saved[0])
+        self.hand.restore_state(self.saved[1])
+        self.hand.move_to(self.lifted_tcp)
+        self.world.set_gravity((0, 0, -world.GRAVITY_MPS2))
+
+    def ramp(self, limit, ramp_time_s, apply) -> float:
+        """Ramp 0..limit over ramp_time_s calling apply(value); return the last held value."""
+        n = self.seconds(ramp_time_s)
+        held_value, lost = limit, False
+        for k in range(0, n, self.check_steps):
+            value = limit * min(1.0, (k + self.check_steps) / n)
+            apply(value, self.check_steps)
+            if not lost and not self.held():
+                lost, held_value = True, max(0.0, value - limit * self.check_steps / n)
+                if self.settings.stop_direction_when_lost:
+                    break
+        return held_value
+
+    def shake(self):
+        g = np.array([0, 0, -world.GRAVITY_MPS2])
+        dirs = shake_directions()
+        values, measured = [], []
+        need = SHAKE_POSITIVE_THRESHOLD_MPS2 * len(dirs)
+        for d in dirs:
+            self.restore()
+
+            def apply(a, n, d=d):
+                self.world.set_gravity(g - a * d)
+                self.step(n)
+
+            values.append(self.ramp(SHAKE_ACCEL_LIMIT_MPS2, self.settings.shake_ramp_time_s, apply))
+            measured.append(True)
+            left = len(dirs) - len(values)
+            if self.settings.stop_when_label_decided and left:
+                if sum(values) >= need:
+                    values += [0.0] * left       # held accelerations are >= 0: positive is certain
+                elif sum(values) + SHAKE_ACCEL_LIMIT_MPS2 * left < need:
+                    values += [SHAKE_ACCEL_LIMIT_MPS2] * left   # cannot reach the threshold
+                measured += [False] * (len(values) - len(measured))
+                if len(values) == len(dirs):
+                    break
+        self.world.set_gravity(g)
+        return values, measured
+
+    def twist(self):
+        values = []
+        for axis in TWIST_AXES:
+            self.restore()
+            state = {"omega": 0.0, "theta": 0.0}
+            axis_w = self.lifted_tcp[:3, :3] @ np.asarray(axis, dtype=float)
+
+            def apply(alpha, n, axis_w=axis_w, state=state):
+                dt = n * self.world.time_step_s
+                state["omega"] += alpha * dt
+                state["theta"] += state["omega"] * dt
+                target = self.lifted_tcp.copy()
+                target[:3, :3] = _axis_angle(axis_w, state["theta"]) @ self.lifted_tcp[:3, :3]
+                self.hand.move_to(target)
+                self.step(n)
+
+            values.append(self.ramp(TWIST_ACCEL_LIMIT_RADPS2, self.settings.twist_ramp_time_s, apply))
+        return values
+
+
+def _axis_angle(axis, angle):
+    axis = axis / np.linalg.norm(axis)
+    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return np.eye(3) + math.sin(angle) * k + (1 - math.cos(angle)) * k @ k
+
+
+def run_grasp_trial(spec: objects.ObjectSpec, grasp: WorldGrasp, tests=("shake",),
+                    settings: TrialSettings | None = None, client: int | None = None,
+                    object_xy_m=(0.0, 0.0), object_yaw_rad: float = 0.0) -> TrialOutcome:
+    """Grasp `spec` (resting on the table at object_xy_m, object_yaw_rad) with `grasp`, lift, run `tests`.
+
+    tests: any of "shake", "twist". Returns a TrialOutcome whose status is
+    ok, lift_failed (a valid negative), exploded or timeout (simulation
+    failures, never labels). Uses `client` (a DIRECT server) or its own.
+    """
+    settings = settings or TrialSettings()
+    unknown = set(tests) - {"shake", "twist"}
+    if unknown:
+        raise ValueError(f"unknown tests {sorted(unknown)}; known: shake, twist")
+    own = client is None
+    client = world.connect() if own else client
+    t0 = time.process_time()
+    trial = None
+    out = TrialOutcome(status=STATUS_OK, sim={"settings": asdict(settings)})
+    try:
+        trial = _Trial(client, spec, grasp, settings, object_xy_m, object_yaw_rad)
+        out.grasp_force_n = trial.force_n
+        out.sim.update(time_step_s=trial.world.time_step_s,
+                       soft=[pt.soft for pt in trial.obj.parts], mass_kg=trial.obj.mass_kg)
+        trial.grasp_and_lift()
+        if "shake" in tests:
+            out.shake_accels_mps2, out.shake_measured = trial.shake()
+        if "twist" in tests:
+            out.twist_accels_radps2 = trial.twist()
+    except _Abort as abort:
+        out.status, out.note = abort.status, abort.note
+    finally:
+        out.cpu_s = time.process_time() - t0
+        out.sim_steps = trial.steps if trial else 0
+        if own:
+            import pybullet as p
+
+            p.disconnect(client)
+    return out
