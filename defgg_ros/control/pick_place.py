@@ -155,19 +155,22 @@ class PickPlaceSequence:
                                    dt_s=self._cfg.sample_dt_s)
         return commands + self._send(motion, sim_s)
 
-    def _grasp_position(self) -> np.ndarray:
-        p = _finite("grasp position", self._grasp.position_m).copy()
+    def _grasp_positions(self) -> tuple[np.ndarray, np.ndarray]:
+        """(pre-grasp, grasp) TCP positions: PREGRASP above the surface point, the grasp below it."""
+        surface = _finite("grasp position", self._grasp.position_m).copy()
         floor = self._cfg.table_z_m + GRASP_MIN_HEIGHT_ABOVE_TABLE_M
-        if p[2] < self._cfg.table_z_m - GRASP_BELOW_TABLE_TOLERANCE_M:
-            raise WorkspaceError(f"grasp outside the workspace: {p[2]:.3f} m is below the table "
+        if surface[2] < self._cfg.table_z_m - GRASP_BELOW_TABLE_TOLERANCE_M:
+            raise WorkspaceError(f"grasp outside the workspace: {surface[2]:.3f} m is below the table "
                                  f"at {self._cfg.table_z_m:.3f} m")
-        p[2] = max(p[2], floor)
-        return p
+        grasp = surface.copy()
+        grasp[2] = max(surface[2] - self._cfg.grasp_depth_below_surface_m, floor)
+        pregrasp = surface.copy()
+        pregrasp[2] = max(surface[2], floor) + self._cfg.pregrasp_height_m
+        return pregrasp, grasp
 
     def _make_plan(self, q_now: np.ndarray) -> _Plan:
-        grasp_p = self._grasp_position()
+        pregrasp_p, grasp_p = self._grasp_positions()
         _finite("grasp yaw", self._grasp.yaw_rad)
-        pregrasp_p = grasp_p + [0.0, 0.0, self._cfg.pregrasp_height_m]
         try:
             check_workspace(grasp_p, self._cfg.table_z_m)
             check_workspace(pregrasp_p, self._cfg.table_z_m)

@@ -4,7 +4,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from defgg_ros.constants import PREGRASP_HEIGHT_M
+from defgg_ros.constants import FINGER_DEPTH_M, PREGRASP_HEIGHT_M
 from defgg_ros.control.gripper_rule import GraspCommand
 from defgg_ros.control.trajectories import LIMITS_SAFETY_SCALE, SAMPLE_DT_S, SampledTrajectory
 
@@ -16,6 +16,10 @@ class SequenceConfig:
     table_z_m: float = 0.0
     limits_scale: float = LIMITS_SAFETY_SCALE
     pregrasp_height_m: float = PREGRASP_HEIGHT_M
+    # The network's grasp point lies on the visible surface; the fingertips
+    # go this far below it so the pads overlap the object (never below the
+    # table: see GRASP_MIN_HEIGHT_ABOVE_TABLE_M).
+    grasp_depth_below_surface_m: float = FINGER_DEPTH_M
     descent_speed_mps: float = 0.03
     line_speed_mps: float = 0.1            # lift, place, retreat
     lift_height_m: float = 0.15
@@ -46,6 +50,8 @@ class SequenceConfig:
         via = self.transfer_via_position_m
         if via is not None and (len(via) != 3 or not all(math.isfinite(v) for v in via)):
             raise ValueError(f"transfer_via_position_m must be 3 finite numbers, got {via}")
+        if not (math.isfinite(self.grasp_depth_below_surface_m) and self.grasp_depth_below_surface_m >= 0):
+            raise ValueError(f"grasp_depth_below_surface_m must be >= 0, got {self.grasp_depth_below_surface_m}")
         if not 0.0 <= self.slip_width_fraction < 1.0:
             raise ValueError(f"slip_width_fraction must be in [0, 1), got {self.slip_width_fraction}")
 

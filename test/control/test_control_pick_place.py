@@ -17,9 +17,11 @@ from defgg_ros.control.sequence_types import (
     SequenceConfig,
 )
 
-GRASP = GraspTarget(position_m=(0.5, 0.05, 0.02), yaw_rad=0.4, width_m=0.05, youngs_modulus_pa=2e9)
+# The network's grasp point is on the object's top surface, here a 5 cm tall object.
+GRASP = GraspTarget(position_m=(0.5, 0.05, 0.05), yaw_rad=0.4, width_m=0.05, youngs_modulus_pa=2e9)
 PLACE = PlaceTarget(position_m=(0.35, -0.45, 0.12))
 CONFIG = SequenceConfig(watchdog_timeout_s=0.5)
+GRASP_TCP_Z_M = GRASP.position_m[2] - CONFIG.grasp_depth_below_surface_m
 
 
 @pytest.fixture(scope="module")
@@ -46,7 +48,7 @@ def test_happy_path_reaches_every_phase_and_places(kin):
     assert out.phase_reached == "done"
     assert list(dict.fromkeys(seen)) == ["pre_grasp", "descend", "close", "lift", "transfer", "place", "retreat"]
     assert not out.contact_detected
-    assert out.contact_height_m == pytest.approx(GRASP.position_m[2], abs=1e-3)
+    assert out.contact_height_m == pytest.approx(GRASP_TCP_Z_M, abs=1e-3)
     assert out.gripper_width_closed_m == pytest.approx(0.045)
     assert out.gripper_force_n > 0
     assert out.held_after_lift and out.held_after_transfer
@@ -58,7 +60,7 @@ def test_happy_path_reaches_every_phase_and_places(kin):
     assert out.duration_s > 0
 
 
-def test_pre_grasp_is_25_mm_above_the_grasp_with_fingers_closing_along_the_grasp_axis(kin):
+def test_pre_grasp_is_25_mm_above_the_grasp_point_with_fingers_closing_along_the_grasp_axis(kin):
     sequence, robot = make(kin), FakeRobot(kin, World())
     run(sequence, robot, until=lambda r, s: s.phase == "descend")
     tcp = kin.fk(robot.q)
@@ -68,7 +70,7 @@ def test_pre_grasp_is_25_mm_above_the_grasp_with_fingers_closing_along_the_grasp
 
 
 def test_contact_during_descent_stops_the_descent_there(kin):
-    surface_z = GRASP.position_m[2] + 0.012
+    surface_z = GRASP_TCP_Z_M + 0.012
     sequence, robot = make(kin), FakeRobot(kin, World(contact_height_m=surface_z))
     run(sequence, robot, until=lambda r, s: s.phase == "close")
     out = sequence.outcome
@@ -175,7 +177,7 @@ def test_arm_that_does_not_follow_fails_after_the_settle_timeout(kin):
 
 
 def test_feedback_reports_phase_width_and_force(kin):
-    sequence, robot = make(kin), FakeRobot(kin, World(contact_height_m=0.03))
+    sequence, robot = make(kin), FakeRobot(kin, World(contact_height_m=GRASP_TCP_Z_M + 0.01))
     run(sequence, robot, until=lambda r, s: s.phase == "close")
     feedback = sequence.feedback(robot.sim_s)
     assert feedback.phase == "close"
@@ -205,3 +207,12 @@ def test_transfer_passes_the_via_point_without_stopping(kin):
     assert sequence.outcome.success, sequence.outcome.failure_reason
     distance, speed = min(closest)
     assert distance < 0.01 and speed > 0.2
+
+
+def test_grasp_on_a_thin_object_stops_above_the_table(kin):
+    thin = GraspTarget(position_m=(0.5, 0.05, 0.008), yaw_rad=0.0, width_m=0.03, youngs_modulus_pa=2e5)
+    sequence, robot = make(kin, grasp=thin), FakeRobot(kin, World(object_width_m=0.02))
+    run(sequence, robot, until=lambda r, s: s.phase == "close")
+    assert sequence.outcome.contact_height_m == pytest.approx(0.005, abs=1e-4)
+    tcp_heights = [kin.fk(q)[2, 3] for c in robot.sent if isinstance(c, SendTrajectory) for q in c.trajectory.q_rad]
+    assert min(tcp_heights) >= 0.005 - 1e-4
