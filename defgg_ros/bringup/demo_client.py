@@ -1,0 +1,140 @@
+"""The demo's ROS side: one client node that talks to the running cell.
+
+Every call spins the node's own executor in the calling thread until its
+answer is there (bounded by a timeout; DemoError says what did not answer).
+Spinning where the request is sent avoids rclpy's race in which an action
+goal response arriving before the client registered the request is dropped
+("Ignoring unexpected goal response"), seen with a background spin thread.
+"""
+import json
+import time
+
+import rclpy
+from defgg_interfaces.action import PickAndPlace
+from defgg_interfaces.srv import PlanGrasp, SetStiffness
+from geometry_msgs.msg import PoseArray
+from rclpy.action import ActionClient
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from sensor_msgs.msg import CameraInfo, Image
+from std_msgs.msg import String
+
+from defgg_ros import topics
+from defgg_ros.nodes import qos
+from defgg_ros.nodes.conversions import stamp_to_ns
+from defgg_ros.nodes.fake_panda_driver_node import OBJECT_POSES_TOPIC, SCENE_TOPIC
+
+
+class DemoError(RuntimeError):
+    """The cell did not answer as expected."""
+
+
+class DemoClient:
+    def __init__(self):
+        self._context = Context()
+        rclpy.init(context=self._context)
+        self.node = Node("defgg_demo", context=self._context)
+        self._scene = None
+        self._poses = None
+        self._depth = {}            # stamp ns -> (Image, wall time received)
+        self._info = {}             # stamp ns -> CameraInfo
+        n = self.node
+        n.create_subscription(String, SCENE_TOPIC, self._on_scene, qos.LATCHED)
+        n.create_subscription(PoseArray, OBJECT_POSES_TOPIC, self._on_poses, qos.STATE)
+        n.create_subscription(Image, topics.DEPTH_IMAGE, self._on_depth, qos.SENSOR_DATA)
+        n.create_subscription(CameraInfo, topics.DEPTH_CAMERA_INFO, self._on_info, qos.SENSOR_DATA)
+        self.set_stiffness_client = n.create_client(SetStiffness, topics.SET_STIFFNESS_SERVICE)
+        self.plan_client = n.create_client(PlanGrasp, topics.PLAN_GRASP_SERVICE)
+        self.pick_client = ActionClient(n, PickAndPlace, topics.PICK_AND_PLACE_ACTION)
+        self._executor = SingleThreadedExecutor(context=self._context)
+        self._executor.add_node(n)
+
+    # ---- subscriptions -----------------------------------------------------
+    def _store(self, setter):
+        setter()
+
+    def _on_scene(self, msg):
+        self._store(lambda: setattr(self, "_scene", json.loads(msg.data)))
+
+    def _on_poses(self, msg):
+        poses = [(p.position.x, p.position.y, p.position.z) for p in msg.poses]
+        self._store(lambda: setattr(self, "_poses", (poses, time.monotonic())))
+
+    def _on_depth(self, msg):
+        def put():
+            self._depth[stamp_to_ns(msg.header.stamp)] = (msg, time.monotonic())
+            for old in sorted(self._depth)[:-5]:
+                del self._depth[old]
+        self._store(put)
+
+    def _on_info(self, msg):
+        def put():
+            self._info[stamp_to_ns(msg.header.stamp)] = msg
+            for old in sorted(self._info)[:-5]:
+                del self._info[old]
+        self._store(put)
+
+    def _wait(self, predicate, timeout_s, what):
+        deadline = time.monotonic() + timeout_s
+        while not predicate():
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                raise DemoError(f"timed out after {timeout_s:.0f} s waiting for {what}")
+            self._executor.spin_once(timeout_sec=min(0.1, remaining))
+
+    def _wait_future(self, future, timeout_s, what):
+        self._wait(future.done, timeout_s, what)
+        return future.result()
+
+    # ---- queries -----------------------------------------------------------
+    def scene(self, timeout_s=30.0) -> dict:
+        self._wait(lambda: self._scene is not None, timeout_s, f"the scene on {SCENE_TOPIC}")
+        return self._scene
+
+    def object_positions(self, timeout_s=30.0) -> list:
+        """Ground-truth object positions (base frame) from a message received after this call."""
+        asked = time.monotonic()
+        self._wait(lambda: self._poses is not None and self._poses[1] > asked, timeout_s,
+                   f"object poses on {OBJECT_POSES_TOPIC}")
+        return list(self._poses[0])
+
+    def fresh_frame(self, after_wall_s: float, timeout_s=60.0):
+        """(depth Image, CameraInfo) of one stamp, received after `after_wall_s` (time.monotonic())."""
+        def ready():
+            return any(t > after_wall_s and s in self._info for s, (_, t) in self._depth.items())
+
+        self._wait(ready, timeout_s, f"a new depth frame + camera_info on {topics.DEPTH_IMAGE}")
+        stamp = max(s for s, (_, t) in self._depth.items() if t > after_wall_s and s in self._info)
+        return self._depth[stamp][0], self._info[stamp]
+
+    # ---- calls -----------------------------------------------------------------
+    def _call(self, client, request, timeout_s, what):
+        self._wait(client.service_is_ready, timeout_s, f"the {what} service")
+        return self._wait_future(client.call_async(request), timeout_s, f"the answer of {what}")
+
+    def set_stiffness(self, objects, default_youngs_modulus_pa=0.0, timeout_s=30.0):
+        request = SetStiffness.Request(objects=objects, default_youngs_modulus_pa=default_youngs_modulus_pa)
+        return self._call(self.set_stiffness_client, request, timeout_s, "SetStiffness")
+
+    def plan_grasp(self, request: PlanGrasp.Request, timeout_s=60.0):
+        return self._call(self.plan_client, request, timeout_s, "PlanGrasp")
+
+    def pick(self, goal: PickAndPlace.Goal, on_feedback=None, timeout_s=600.0):
+        """Send a PickAndPlace goal and wait for its result (PickAndPlace.Result)."""
+        self._wait(self.pick_client.server_is_ready, 30.0, "the PickAndPlace action server")
+        callback = (lambda msg: on_feedback(msg.feedback)) if on_feedback else None
+        handle = self._wait_future(self.pick_client.send_goal_async(goal, feedback_callback=callback), 30.0,
+                                   "the PickAndPlace goal response")
+        if not handle.accepted:
+            raise DemoError("PickAndPlace goal rejected (executor busy?)")
+        try:
+            return self._wait_future(handle.get_result_async(), timeout_s, "the PickAndPlace result").result
+        except DemoError:
+            handle.cancel_goal_async()
+            raise
+
+    def close(self):
+        self._executor.shutdown(timeout_sec=2.0)
+        self.node.destroy_node()
+        self._context.try_shutdown()

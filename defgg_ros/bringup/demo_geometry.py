@@ -1,0 +1,73 @@
+"""Pure geometry of the demo: objects of the scene in the camera image, grasps on objects, the bin.
+
+No rclpy. Poses come from the fake driver's ground truth, the camera from
+the scene file (`base_T_camera`), intrinsics from camera_info.
+"""
+import numpy as np
+
+from defgg_ros.perception.geometry import transform_from_xyz_quaternion
+
+# Margin around an object's projected footprint for its stiffness ROI (px).
+ROI_MARGIN_PX = 6
+# A grasp belongs to an object when its centre is within the object's half
+# diagonal plus this margin of the object's centre (m).
+GRASP_ON_OBJECT_MARGIN_M = 0.01
+
+
+def base_T_camera(scene_dict: dict) -> np.ndarray:
+    return transform_from_xyz_quaternion(scene_dict["base_xyz_camera_m"], scene_dict["base_quat_camera_xyzw"])
+
+
+def project_base_points(points_base_m, base_t_camera: np.ndarray, camera_k: np.ndarray) -> np.ndarray:
+    """(N, 3) base-frame points -> (N, 2) pixel (u, v)."""
+    pts = np.atleast_2d(np.asarray(points_base_m, dtype=float))
+    camera_t_base = np.linalg.inv(base_t_camera)
+    pts_cam = pts @ camera_t_base[:3, :3].T + camera_t_base[:3, 3]
+    if np.any(pts_cam[:, 2] <= 0):
+        raise ValueError("a point lies behind the camera")
+    uv = pts_cam[:, :2] / pts_cam[:, 2:3]
+    return uv * [camera_k[0, 0], camera_k[1, 1]] + [camera_k[0, 2], camera_k[1, 2]]
+
+
+def half_extent_m(obj: dict) -> float:
+    """Largest horizontal half-extent of a scene object (box: half diagonal; cylinder: radius)."""
+    size = obj["size_m"]
+    if obj["shape"] == "cylinder":
+        return size[0] / 2
+    return float(np.hypot(size[0], size[1]) / 2)
+
+
+def object_roi(obj: dict, position_base_m, base_t_camera, camera_k, image_wh) -> tuple:
+    """(x, y, w, h) pixel box around the object's top footprint, clipped to the image."""
+    r = half_extent_m(obj)
+    top_z = position_base_m[2] + obj["size_m"][-1] / 2
+    corners = [[position_base_m[0] + dx, position_base_m[1] + dy, top_z] for dx in (-r, r) for dy in (-r, r)]
+    uv = project_base_points(corners, base_t_camera, camera_k)
+    lo = np.floor(uv.min(axis=0)) - ROI_MARGIN_PX
+    hi = np.ceil(uv.max(axis=0)) + ROI_MARGIN_PX
+    lo = np.clip(lo, 0, np.array(image_wh) - 1).astype(int)
+    hi = np.clip(hi, 0, np.array(image_wh)).astype(int)
+    return int(lo[0]), int(lo[1]), int(hi[0] - lo[0]), int(hi[1] - lo[1])
+
+
+def label_of_object(labels: np.ndarray, uv) -> int:
+    """Segmentation label of the object seen at pixel uv (nearest labelled pixel; 0 when none)."""
+    ys, xs = np.nonzero(labels)
+    if xs.size == 0:
+        return 0
+    i = int(np.argmin((xs - uv[0]) ** 2 + (ys - uv[1]) ** 2))
+    return int(labels[ys[i], xs[i]])
+
+
+def grasp_is_on_object(grasp_xy_m, obj: dict, position_base_m) -> bool:
+    distance = np.hypot(grasp_xy_m[0] - position_base_m[0], grasp_xy_m[1] - position_base_m[1])
+    return bool(distance <= half_extent_m(obj) + GRASP_ON_OBJECT_MARGIN_M)
+
+
+def in_bin(position_base_m, bin_dict: dict | None) -> bool:
+    """Is a point inside the bin's walls (horizontally) and below their top?"""
+    if not bin_dict:
+        return False
+    (cx, cy), (ix, iy, h) = bin_dict["center_xy_m"], bin_dict["inner_size_m"]
+    x, y, z = position_base_m
+    return bool(abs(x - cx) <= ix / 2 and abs(y - cy) <= iy / 2 and z <= h)

@@ -1,0 +1,231 @@
+"""defgg-demo (`make demo`): pick every object of the demo scene with Def-GG-CNN grasps in the simulated cell.
+
+Brings up the simulated cell (fake Panda + camera, segmentation, grasp
+inference, executor) headless, assigns each object its Young's modulus
+(SetStiffness, from the scene's ground truth), then per object: a fresh
+depth frame -> PlanGrasp restricted to that object -> PickAndPlace into the
+bin. Prints a table (E, grasp width, quality, phase reached, held after
+transfer, in the bin) and writes summary.json, grasps.png (depth, stiffness,
+quality map and chosen grasp per object) and cell.log (every node's log) to
+--out.
+"""
+import argparse
+import sys
+import time
+from datetime import UTC, datetime
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from defgg_ros.bringup.demo_geometry import base_T_camera, in_bin, label_of_object, object_roi, project_base_points
+from defgg_ros.bringup.demo_report import FramePanels, PickRow, format_table, save_figure, write_summary
+from defgg_ros.bringup.node_set import NodeSetError, load_node_set
+from defgg_ros.bringup.supervisor import Bringup, BringupError
+
+ROOT = Path(__file__).resolve().parents[1]
+DEFAULT_SCENE = ROOT / "sim_bringup" / "scenes" / "demo.yaml"
+DEFAULT_MODEL = ROOT / "models" / "defgg_cnn.pt"
+DRIVER, INFERENCE = "fake_panda_driver", "grasp_inference_node"
+
+
+def parse_args(argv=None):
+    parser = argparse.ArgumentParser(prog="defgg-demo", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--scene", default=str(DEFAULT_SCENE), help="scene YAML (default: the demo scene)")
+    parser.add_argument("--model", default=str(DEFAULT_MODEL), help="Def-GG-CNN checkpoint for the inference node")
+    parser.add_argument("--out", help="output folder (default: runs/demo/<UTC timestamp>)")
+    parser.add_argument("--objects", help="comma-separated object names to pick (default: all, in scene order)")
+    parser.add_argument("--gui", action="store_true", help="show PyBullet's GUI (default: headless)")
+    parser.add_argument("--max-rtf", type=float, default=0.0,
+                        help="cap on the simulation's real-time factor (default 0: as fast as the CPU allows)")
+    parser.add_argument("--ready-timeout", type=float, default=180.0, help="seconds for the cell to come up")
+    parser.add_argument("--pick-timeout", type=float, default=900.0, help="wall seconds allowed per pick")
+    return parser.parse_args(argv)
+
+
+def _out_dir(args) -> Path:
+    if args.out:
+        return Path(args.out)
+    return ROOT / "runs" / "demo" / datetime.now(UTC).strftime("%Y%m%d-%H%M%S")
+
+
+def _stiffness_msgs(scene, positions, k, image_wh, names):
+    """ObjectStiffness entries (whole objects, ROI around each) for the named objects."""
+    from defgg_interfaces.msg import ObjectStiffness
+    from sensor_msgs.msg import RegionOfInterest
+
+    b_t_c = base_T_camera(scene)
+    out = []
+    for obj, pos in zip(scene["objects"], positions):
+        if obj["name"] not in names:
+            continue
+        x, y, w, h = object_roi(obj, pos, b_t_c, k, image_wh)
+        out.append(ObjectStiffness(name=obj["name"], youngs_modulus_pa=float(obj["youngs_modulus_pa"]),
+                                   roi=RegionOfInterest(x_offset=x, y_offset=y, width=w, height=h)))
+    return out
+
+
+class DemoRun:
+    """One demo: the client, the local predictor (for the quality pictures) and the results."""
+
+    def __init__(self, client, model_path, bringup):
+        from defgg_ros.model.inference import GraspPredictor
+
+        self.client = client
+        self.bringup = bringup
+        self.predictor = GraspPredictor.from_checkpoint(model_path, num_threads=1)
+        self.scene = client.scene()
+        self.rows, self.panels = [], []
+
+    def assign_stiffness(self, names):
+        from defgg_ros.nodes.conversions import camera_info_to_k
+
+        depth, info = self.client.fresh_frame(0.0)
+        k = camera_info_to_k(info)
+        entries = _stiffness_msgs(self.scene, self.client.object_positions(), k, (info.width, info.height), names)
+        response = self.client.set_stiffness(entries)
+        if not response.success:
+            raise BringupError(f"SetStiffness refused the scene's moduli: {response.message}")
+
+    def pick(self, index: int, remaining: set, progress) -> PickRow:
+        obj = self.scene["objects"][index]
+        row = PickRow(obj["name"], float(obj["youngs_modulus_pa"]), self.scene["objects_simulated_as"][index])
+        started = time.monotonic()
+        try:
+            grasp = self._plan(index, remaining, row)
+            if grasp is not None:
+                self._execute(grasp, row, progress)
+        finally:
+            row.wall_duration_s = time.monotonic() - started
+            position = self.client.object_positions()[index]
+            row.in_bin = in_bin(position, self.scene.get("bin"))
+        return row
+
+    def _plan(self, index, remaining, row):
+        from defgg_interfaces.srv import PlanGrasp
+
+        from defgg_ros.nodes.conversions import camera_info_to_k, depth_msg_to_metres, numpy_to_image
+        from defgg_ros.perception.grasp_planning import full_quality_image
+        from defgg_ros.perception.stiffness_assignment import make_entry
+        from defgg_ros.perception.stiffness_segmenter import SegmenterConfig, run_segmenter
+
+        depth_msg, info = self.client.fresh_frame(time.monotonic())
+        depth_m, k = depth_msg_to_metres(depth_msg), camera_info_to_k(info)
+        positions = self.client.object_positions()
+        entries = tuple(make_entry(e.name, e.youngs_modulus_pa, (e.roi.x_offset, e.roi.y_offset, e.roi.width,
+                                                                  e.roi.height))
+                        for e in _stiffness_msgs(self.scene, positions, k, (info.width, info.height), remaining))
+        seg = run_segmenter(SegmenterConfig(entries=entries), depth_m, k)
+        uv = project_base_points([positions[index]], base_T_camera(self.scene), k)[0]
+        label = label_of_object(seg.labels, uv)
+        target = (seg.labels == label) if label else np.zeros(seg.labels.shape, dtype=bool)
+        # Only the target object carries stiffness: the network's grasps are confined to it, the
+        # other objects stay in the depth as obstacles.
+        stiffness_pa = np.where(target, seg.youngs_modulus_pa, 0.0).astype(np.float32)
+        panel = FramePanels(row.name, depth_m, stiffness_pa)
+        self.panels.append(panel)
+        if not label:
+            row.failure_reason = "object not found in the depth image"
+            return None
+        prediction = self.predictor.predict(depth_m, stiffness_pa, k, object_mask=target.astype(np.uint8), top_k=1)
+        panel.quality = full_quality_image(prediction.q, prediction.crop_offset_px, depth_m.shape)
+        request = PlanGrasp.Request(depth=depth_msg, camera_info=info, top_k=1,
+                                    stiffness=numpy_to_image(stiffness_pa, "32FC1", depth_msg.header))
+        response = self.client.plan_grasp(request)
+        if not response.success or not response.grasps:
+            row.failure_reason = f"PlanGrasp: {response.message}"
+            return None
+        grasp = response.grasps[0]
+        row.grasp_width_m, row.quality = grasp.width_m, grasp.quality
+        panel.grasp_uv_px = (grasp.center_u_px, grasp.center_v_px)
+        panel.grasp_angle_rad, panel.grasp_width_px = grasp.angle_rad, grasp.width_px
+        return grasp
+
+    def _execute(self, grasp, row, progress):
+        from defgg_interfaces.action import PickAndPlace
+
+        def on_feedback(feedback):
+            if feedback.phase != row.phase_reached:  # one progress line per phase, not per message
+                row.phase_reached = feedback.phase
+                progress.set_postfix_str(f"{row.name}: {feedback.phase}")
+
+        result = self.client.pick(PickAndPlace.Goal(plan_grasp=False, grasp=grasp), on_feedback)
+        row.success, row.phase_reached = result.success, result.phase_reached
+        row.held_after_transfer = result.held_after_transfer
+        row.failure_reason = result.failure_reason
+        row.sim_duration_s = result.duration_s
+
+
+def run_demo(args, out_dir: Path, log) -> int:
+    from defgg_ros.bringup.demo_client import DemoClient, DemoError
+
+    overrides = {DRIVER: {"scene_file": str(Path(args.scene).resolve()), "gui": bool(args.gui),
+                          "max_real_time_factor": float(args.max_rtf)},
+                 INFERENCE: {"model_path": str(Path(args.model).resolve())}}
+    bringup = Bringup(load_node_set("sim_cell"), overrides, out=log)
+    client = None
+    rows, panels = [], []
+    started = time.monotonic()
+    try:
+        bringup.start()
+        print(f"defgg-demo: starting the simulated cell ({Path(args.scene).name}); node logs in {log.name}")
+        print(f"defgg-demo: cell ready in {bringup.wait_ready(args.ready_timeout):.1f} s")
+        client = DemoClient()
+        run = DemoRun(client, args.model, bringup)
+        names = [o["name"] for o in run.scene["objects"]]
+        wanted = args.objects.split(",") if args.objects else names
+        unknown = set(wanted) - set(names)
+        if unknown:
+            raise DemoError(f"--objects {sorted(unknown)} not in the scene (has {names})")
+        run.assign_stiffness(set(names))
+        remaining = set(names)
+        with tqdm([names.index(n) for n in wanted], desc="picking", unit="object") as progress:
+            for index in progress:
+                dead = bringup.failed_node()
+                if dead is not None:
+                    raise BringupError(dead.describe())
+                rows.append(run.pick(index, remaining, progress))
+                if rows[-1].in_bin:
+                    remaining.discard(names[index])
+        panels = run.panels
+        code = 0
+    except (BringupError, DemoError, NodeSetError) as exc:
+        print(f"defgg-demo: {exc}", file=sys.stderr)
+        code = 1
+    finally:
+        if client is not None:
+            client.close()
+        bringup.stop()
+    _report(out_dir, rows, panels, args, time.monotonic() - started)
+    return code
+
+
+def _report(out_dir, rows, panels, args, wall_s):
+    if rows:
+        print(format_table(rows))
+    write_summary(out_dir / "summary.json", rows, {
+        "scene": str(Path(args.scene).resolve()), "model": str(Path(args.model).resolve()),
+        "wall_time_s": round(wall_s, 1), "finished_utc": datetime.now(UTC).isoformat()})
+    if panels:
+        save_figure(out_dir / "grasps.png", panels)
+    held = sum(r.held_after_transfer for r in rows)
+    binned = sum(r.in_bin for r in rows)
+    print(f"defgg-demo: {binned}/{len(rows)} objects in the bin, {held} held after transfer, "
+          f"{wall_s / 60:.1f} min; results in {out_dir}")
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    for path, what in ((args.scene, "scene"), (args.model, "model")):
+        if not Path(path).is_file():
+            print(f"defgg-demo: {what} file {path} does not exist", file=sys.stderr)
+            return 2
+    out_dir = _out_dir(args)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    with open(out_dir / "cell.log", "w", encoding="utf-8") as log:
+        return run_demo(args, out_dir, log)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
