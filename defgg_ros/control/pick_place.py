@@ -38,6 +38,7 @@ from defgg_ros.control.sequence_types import (
 )
 from defgg_ros.control.trajectories import (
     check_trajectory,
+    matched_state,
     panda_limits,
     plan_joint_motion,
     plan_joint_via,
@@ -210,9 +211,8 @@ class PickPlaceSequence:
         return self._line_to(target, self._cfg.line_speed_mps, sim_s)
 
     def _stop_motion(self, sim_s: float) -> list:
-        """Jerk-limited stop from where the commanded motion is now."""
-        m = self._motion
-        q, qd, qdd = m.trajectory.state_at(sim_s - m.start_s)
+        """Jerk-limited stop from where the arm is along the commanded motion."""
+        q, qd, qdd = matched_state(self._motion.trajectory, self._obs.state.q_rad)
         return self._send(plan_stop(q, qd, qdd, self._limits, self._cfg.sample_dt_s), sim_s, guarded_stop=True)
 
     def _arrived(self, sim_s: float) -> bool:

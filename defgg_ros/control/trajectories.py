@@ -105,6 +105,19 @@ class SampledTrajectory:
         return lerp(self.q_rad), lerp(self.qd_radps), lerp(self.qdd_radps2)
 
 
+def matched_state(trajectory: SampledTrajectory, q_measured_rad) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(q, qd, qdd) to continue from: the measured position with the commanded velocity and
+    acceleration of the sample nearest to it.
+
+    Matching by position rather than by clock keeps a stop continuous even
+    when the command reached the robot late (message latency, a simulator
+    running faster than real time).
+    """
+    q = np.asarray(q_measured_rad, dtype=float)
+    k = int(np.argmin(np.max(np.abs(trajectory.q_rad - q), axis=1)))
+    return q.copy(), trajectory.qd_radps[k].copy(), trajectory.qdd_radps2[k].copy()
+
+
 def hold(q_rad) -> SampledTrajectory:
     """A one-point trajectory: stay at q."""
     q = np.asarray(q_rad, dtype=float).reshape(1, 7)

@@ -13,6 +13,7 @@ from defgg_ros.control.trajectories import (
     TrajectoryError,
     check_trajectory,
     hold,
+    matched_state,
     panda_limits,
     plan_joint_motion,
     plan_joint_via,
@@ -146,3 +147,15 @@ def test_via_velocity_is_zero_for_joints_that_turn_back():
     assert v[1] == 0.0 and v[3] == 0.0
     assert np.all(v[[0, 2, 4, 5, 6]] > 0)
     assert np.all(np.abs(v) <= 0.5 * LIMITS.qd_max_radps + 1e-12)
+
+
+def test_matched_state_continues_from_the_measured_position_of_a_late_arm():
+    motion = plan_joint_motion(KIN.q_ready_rad, np.array(KIN.q_ready_rad) + 0.4, LIMITS)
+    # The arm is where the plan was 0.3 s ago (the command arrived late).
+    q_late, qd_late, qdd_late = motion.state_at(0.3)
+    q, qd, qdd = matched_state(motion, q_late)
+    assert q == pytest.approx(q_late)
+    assert qd == pytest.approx(qd_late, abs=0.05) and qdd == pytest.approx(qdd_late, abs=0.5)
+    stop = plan_stop(q, qd, qdd, LIMITS)
+    assert stop.q_rad[0] == pytest.approx(q_late)
+    independent_limit_check(stop, LIMITS)

@@ -33,8 +33,8 @@ KIN = PandaKinematics()
 
 
 def box_grasp() -> Grasp:
-    """Top-down grasp across the box, at half its height, fingers along one face normal."""
-    xyz = (BOX_XY_M[0], BOX_XY_M[1], BOX_SIZE_M / 2)
+    """Top-down grasp across the box on its top face (as Def-GG-CNN gives it), fingers along a face normal."""
+    xyz = (BOX_XY_M[0], BOX_XY_M[1], BOX_SIZE_M)
     msg = Grasp()
     msg.pose_base.header.frame_id = topics.BASE_FRAME
     pose = msg.pose_base.pose
@@ -130,9 +130,9 @@ def test_cancel_mid_descent_stops_the_arm(cell, spin):
     assert "canceled during descend" in response.result.failure_reason
     last = seen["joints"][-1]
     assert np.max(np.abs(last.velocity[:7])) < 0.02
-    # Stopped part-way: above the grasp height, below the pre-grasp height.
+    # Stopped part-way between the pre-grasp (25 mm above the top face) and the grasp (18 mm below it).
     tcp_z = KIN.fk(np.array(last.position[:7]))[2, 3]
-    assert BOX_SIZE_M / 2 + 0.001 < tcp_z < BOX_SIZE_M / 2 + 0.025
+    assert BOX_SIZE_M - 0.018 + 0.001 < tcp_z < BOX_SIZE_M + 0.025 - 0.001
 
 
 def test_driver_killed_mid_trajectory_aborts_then_serves_again(cell, spin):
