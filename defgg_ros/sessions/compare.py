@@ -99,8 +99,7 @@ class PickOutcome:
 
     def brief(self) -> str:
         text = f"{'success' if self.success else 'FAILED'} at {self.phase_reached or '-'}"
-        text += f", held {'yes' if self.held_after_transfer else 'no'}"
-        return text + (f" ({self.failure_reason})" if self.failure_reason else "")
+        return text + f", held {'yes' if self.held_after_transfer else 'no'}"
 
 
 def pick_problems(expected: PickOutcome | None, actual: PickOutcome | None) -> list[str]:

@@ -17,6 +17,9 @@ from pathlib import Path
 import yaml
 
 CONFIG_DIR = Path(__file__).resolve().parents[2] / "sim_bringup" / "config"
+# Large camera messages between processes need bigger shared-memory segments (see the file).
+FASTDDS_PROFILE = Path(__file__).resolve().with_name("fastdds_profile.xml")
+FASTDDS_PROFILE_VARIABLE = "FASTRTPS_DEFAULT_PROFILES_FILE"
 STOP_TIMEOUT_S = 10.0
 LOG_TAIL_LINES = 15
 
@@ -56,8 +59,24 @@ def node_command(spec: NodeSpec, run_dir: Path) -> list[str]:
     return cmd
 
 
+def use_large_message_transport() -> None:
+    """Make this process (before rclpy.init) and the nodes it starts use FASTDDS_PROFILE, unless set."""
+    os.environ.setdefault(FASTDDS_PROFILE_VARIABLE, str(FASTDDS_PROFILE))
+
+
+def _node_env(domain_id: int | None) -> dict:
+    env = dict(os.environ)
+    env.setdefault(FASTDDS_PROFILE_VARIABLE, str(FASTDDS_PROFILE))
+    # Logs go to a file: unbuffered, so a node's last words are there when it dies.
+    env.update(RCUTILS_LOGGING_BUFFERED_STREAM="0", PYTHONUNBUFFERED="1")
+    if domain_id is not None:
+        env.update(ROS_DOMAIN_ID=str(domain_id), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    return env
+
+
 class NodeGraph:
-    def __init__(self, run_dir):
+    def __init__(self, run_dir, domain_id: int | None = None):
+        self.domain_id = domain_id
         self.run_dir = Path(run_dir)
         self.run_dir.mkdir(parents=True, exist_ok=True)
         self.processes = {}
@@ -67,7 +86,7 @@ class NodeGraph:
         try:
             self.processes[spec.name] = subprocess.Popen(
                 node_command(spec, self.run_dir), stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                start_new_session=True)
+                start_new_session=True, env=_node_env(self.domain_id))
         finally:
             log.close()
 

@@ -23,19 +23,26 @@ from pathlib import Path
 
 import rclpy
 from defgg_interfaces.action import PickAndPlace
+from defgg_interfaces.msg import ObjectStiffness
 from defgg_interfaces.srv import PlanGrasp
 from rclpy.context import Context
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
+from sensor_msgs.msg import CameraInfo
 
 from defgg_ros import topics
+from defgg_ros.nodes import qos
+from defgg_ros.nodes.conversions import camera_info_to_k
 from defgg_ros.sessions import metadata as md
 from defgg_ros.sessions.bag import SessionBagError, SessionWriter
 from defgg_ros.sessions.client import CellCallError, CellClient
 from defgg_ros.sessions.compare import GraspSummary, PickOutcome, Tolerances
+from defgg_ros.sessions.graph import use_large_message_transport
 from defgg_ros.sessions.params import CELL_NODES, fetch_parameters
 from defgg_ros.sessions.recorder_node import SessionRecorder
+from defgg_ros.sessions.scene_stiffness import scene_stiffness_entries
 from defgg_ros.sessions.selector import DEFAULT_DEPTH_PERIOD_S, DEFAULT_JOINT_STATE_PERIOD_S, FrameSelector
+from defgg_ros.sim.scene_spec import SceneError, load_scene
 
 FRESH_FRAME_TIMEOUT_S = 60.0
 
@@ -63,9 +70,37 @@ def _pick_indices(text: str | None, n_plans: int) -> set:
     return indices
 
 
+def wait_camera_info(node, timeout_s: float) -> CameraInfo:
+    got = []
+    event = threading.Event()
+    sub = node.create_subscription(CameraInfo, topics.DEPTH_CAMERA_INFO,
+                                   lambda m: (got.append(m), event.set()), qos.SENSOR_DATA)
+    try:
+        if not event.wait(timeout_s):
+            raise CellCallError(f"no camera_info on {topics.DEPTH_CAMERA_INFO} within {timeout_s:g} s")
+        return got[0]
+    finally:
+        node.destroy_subscription(sub)
+
+
+def assign_scene_stiffness(recorder, client, scene_path, log=print) -> None:
+    """--stiffness-from-scene: enter every scene object's modulus (and parts) through SetStiffness."""
+    info = wait_camera_info(recorder, FRESH_FRAME_TIMEOUT_S)
+    entries = scene_stiffness_entries(load_scene(scene_path), camera_info_to_k(info), (info.width, info.height))
+    objects = []
+    for e in entries:
+        o = ObjectStiffness(name=e["name"], youngs_modulus_pa=e["youngs_modulus_pa"], region_only=e["region_only"])
+        o.roi.x_offset, o.roi.y_offset, o.roi.width, o.roi.height = e["roi"]
+        objects.append(o)
+    response = client.set_stiffness(objects, 0.0)
+    log(f"stiffness from the scene: {response.message}")
+
+
 def drive(recorder, client, args, log=print) -> None:
     """--plan/--pick: call the cell like a user would, on fresh frames, and record it."""
     picks = _pick_indices(args.pick, args.plan)
+    if args.stiffness_from_scene:
+        assign_scene_stiffness(recorder, client, args.scene, log)
     for i in range(args.plan):
         if not recorder.wait_for_grasps(args.frames_between, FRESH_FRAME_TIMEOUT_S):
             raise CellCallError(f"no new grasp on {topics.BEST_GRASP} within {FRESH_FRAME_TIMEOUT_S:g} s "
@@ -82,7 +117,8 @@ def record(args, log=print) -> Path:
     context = Context()
     rclpy.init(context=context)
     executor = MultiThreadedExecutor(num_threads=4, context=context)
-    threading.Thread(target=executor.spin, daemon=True).start()
+    spin_thread = threading.Thread(target=executor.spin, daemon=True)
+    spin_thread.start()
     writer = None
     try:
         probe = Node("defgg_session_probe", context=context)
@@ -118,6 +154,7 @@ def record(args, log=print) -> Path:
         if writer is not None:
             writer.abort()
         executor.shutdown()
+        spin_thread.join(timeout=10.0)  # before the context goes, or rcl aborts at exit
         context.try_shutdown()
 
 
@@ -133,6 +170,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--plan", type=int, default=0,
                         help="driving mode: PlanGrasp calls to make, one per fresh frame")
     parser.add_argument("--pick", help="driving mode: comma-separated plan indices to pick with (PickAndPlace)")
+    parser.add_argument("--stiffness-from-scene", action="store_true",
+                        help="driving mode: first enter the --scene objects' moduli (and parts) via SetStiffness")
     parser.add_argument("--top-k", type=int, default=3, help="grasps per PlanGrasp call")
     parser.add_argument("--frames-between", type=int, default=1,
                         help="fresh grasps to wait for before each PlanGrasp call (lets the scene settle)")
@@ -159,11 +198,14 @@ def _interrupt(*_):
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
+    if args.stiffness_from_scene and not args.scene:
+        raise SystemExit("defgg-record: --stiffness-from-scene needs --scene")
+    use_large_message_transport()
     # SIGTERM (e.g. from the bringup) ends the recording cleanly, like Ctrl-C.
     signal.signal(signal.SIGTERM, _interrupt)
     try:
         record(args)
-    except (SessionBagError, md.MetadataError, CellCallError, ValueError) as exc:
+    except (SessionBagError, md.MetadataError, CellCallError, SceneError, ValueError) as exc:
         print(f"defgg-record: error: {exc}", file=sys.stderr)
         return 2
     return 0

@@ -18,6 +18,9 @@ from defgg_ros.nodes import qos
 from defgg_ros.sessions import session_topics as st
 from defgg_ros.sessions.selector import FrameSelector, StampError, header_stamp_ns
 
+# Pick feedback kept at most this often within one phase (s).
+FEEDBACK_PERIOD_S = 0.5
+
 
 def stamp_ns_of(msg) -> int:
     return int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
@@ -35,6 +38,7 @@ class SessionRecorder(Node):
         self.latest_grasp_stamp_ns = None       # newest best grasp seen (the recorder waits on it)
         self.grasp_count = 0
         self._grasp_seen = threading.Condition()
+        self._last_feedback = ("", 0)
         stamped = [(Image, topics.DEPTH_IMAGE, qos.SENSOR_DATA),
                    (CameraInfo, topics.DEPTH_CAMERA_INFO, qos.SENSOR_DATA)]
         if record_color:
@@ -116,7 +120,12 @@ class SessionRecorder(Node):
         self._write_all([(st.PICK_GOAL, serialize_message(goal), log_time_ns)])
 
     def record_pick_feedback(self, feedback) -> None:
-        self._write_all([(st.PICK_FEEDBACK, serialize_message(feedback), time.time_ns())])
+        """Feedback comes at the executor's control rate (100 Hz): keep phase changes and FEEDBACK_PERIOD_S."""
+        now = time.time_ns()
+        if feedback.phase == self._last_feedback[0] and now - self._last_feedback[1] < FEEDBACK_PERIOD_S * 1e9:
+            return
+        self._last_feedback = (feedback.phase, now)
+        self._write_all([(st.PICK_FEEDBACK, serialize_message(feedback), now)])
 
     def record_pick_result(self, result) -> None:
         if result.grasp_used.header.stamp.sec or result.grasp_used.header.stamp.nanosec:

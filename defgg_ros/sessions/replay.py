@@ -9,6 +9,7 @@ table per session. Exit codes: 0 all matched, 1 regression, 2 a session or
 the cell could not be replayed (bad bag, node died, timeout).
 """
 import argparse
+import random
 import sys
 import tempfile
 import threading
@@ -25,7 +26,7 @@ from defgg_ros.sessions import metadata as md
 from defgg_ros.sessions.bag import SessionBagError, SessionWriter
 from defgg_ros.sessions.client import CellCallError, CellClient
 from defgg_ros.sessions.compare import Tolerances
-from defgg_ros.sessions.graph import GraphError, NodeGraph
+from defgg_ros.sessions.graph import GraphError, NodeGraph, use_large_message_transport
 from defgg_ros.sessions.player import Replay, ReplayOptions, SessionPlayer
 from defgg_ros.sessions.recorder_node import SessionRecorder
 from defgg_ros.sessions.replay_graph import graph_specs, resolve_model
@@ -35,6 +36,9 @@ from defgg_ros.sessions.session import load_session
 
 EXIT_OK, EXIT_REGRESSION, EXIT_ERROR = 0, 1, 2
 STARTUP_TIMEOUT_S = 90.0
+# The replay starts its own cell: a ROS domain of its own keeps other graphs on this machine
+# (a running cell, tests, other replays) from feeding it frames. Fast DDS ports limit ids to <= 232.
+PRIVATE_DOMAIN_RANGE = (120, 230)
 
 
 def find_sessions(paths) -> list[Path]:
@@ -58,6 +62,14 @@ def _spin_in_thread(executor):
     return thread
 
 
+def _stop(executor, thread, context) -> None:
+    """Stop spinning and wait for the spin thread before the context goes (else rcl aborts at exit)."""
+    executor.shutdown()
+    if thread is not None:
+        thread.join(timeout=10.0)
+    context.try_shutdown()
+
+
 def replay_one(path: Path, args, log=print) -> tuple[int, str]:
     """Replay one session; (exit code, message)."""
     session = load_session(path)
@@ -68,12 +80,13 @@ def replay_one(path: Path, args, log=print) -> tuple[int, str]:
     log(f"session {path.name}: {len(session.frames)} frame(s), {len(session.of_kind('plan'))} plan call(s), "
         f"{len(session.picks)} pick(s){'' if pick else ' (picks skipped)'}; {model.describe(meta)}")
     run_dir = Path(args.run_dir or tempfile.mkdtemp(prefix=f"defgg_replay_{path.name}_"))
+    domain_id = args.domain_id if args.domain_id is not None else random.randint(*PRIVATE_DOMAIN_RANGE)
     context = Context()
-    rclpy.init(context=context)
+    rclpy.init(context=context, domain_id=domain_id)
     executor = MultiThreadedExecutor(num_threads=4, context=context)
-    writer = recorder = None
+    writer = recorder = spin_thread = None
     try:
-        with NodeGraph(run_dir) as graph:
+        with NodeGraph(run_dir, domain_id) as graph:
             for spec in graph_specs(meta, model, pick, run_dir):
                 graph.start(spec)
             player = SessionPlayer(context=context)
@@ -85,8 +98,10 @@ def replay_one(path: Path, args, log=print) -> tuple[int, str]:
                                            context=context)
                 executor.add_node(recorder)
             client = CellClient(player, recorder)
-            _spin_in_thread(executor)
+            spin_thread = _spin_in_thread(executor)
+            started = time.monotonic()
             client.wait_for_servers(STARTUP_TIMEOUT_S, pick, graph.check_alive)
+            log(f"  cell ready after {time.monotonic() - started:.1f} s (node logs in {run_dir})")
             options = ReplayOptions(tolerances, pick=pick, grasp_timeout_s=args.timeout_s,
                                     pick_timeout_s=args.pick_timeout_s)
             replay = Replay(session, player, client, options, graph.check_alive, log, recorder)
@@ -97,8 +112,7 @@ def replay_one(path: Path, args, log=print) -> tuple[int, str]:
     finally:
         if writer is not None:
             writer.abort()
-        executor.shutdown()
-        context.try_shutdown()
+        _stop(executor, spin_thread, context)
     if replay.uncompared_frames:
         log(f"({replay.uncompared_frames} frame(s) had no recorded grasp — the live cell skipped them — "
             "and were not compared)")
@@ -133,12 +147,16 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--width-tol-mm", type=float, help="grasp width tolerance (default: as recorded)")
     parser.add_argument("--timeout-s", type=float, default=30.0, help="how long to wait for a frame's grasp (s)")
     parser.add_argument("--pick-timeout-s", type=float, default=300.0, help="how long a pick may take (s)")
+    parser.add_argument("--domain-id", type=int,
+                        help="ROS_DOMAIN_ID of the replay's private graph (default: random in "
+                             f"{PRIVATE_DOMAIN_RANGE[0]}..{PRIVATE_DOMAIN_RANGE[1]})")
     parser.add_argument("--run-dir", help="folder for the nodes' logs (default: a new temporary folder)")
     return parser
 
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
+    use_large_message_transport()
     worst = EXIT_OK
     try:
         paths = find_sessions(args.sessions)
