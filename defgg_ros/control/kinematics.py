@@ -102,6 +102,7 @@ class PandaKinematics:
         self.q_max_rad = np.array(PANDA_Q_MAX_RAD)
         self.q_ready_rad = np.array(PANDA_READY_Q_RAD)
         self._rng = np.random.default_rng(seed)
+        self._link_ids: dict = {}
 
     # --- forward kinematics -------------------------------------------------
     def _check_q(self, q_rad) -> np.ndarray:
@@ -118,12 +119,18 @@ class PandaKinematics:
         pin.framesForwardKinematics(self.model, self.data, q)
         return self.data.oMf[self.tcp_id].homogeneous.copy()
 
-    def frame_heights_m(self, q_rad) -> dict[str, float]:
-        """Base-frame z of every link frame and the TCP (for table clearance checks)."""
+    def lowest_heights_m(self, q_rad, exempt_frames=frozenset()) -> tuple[float, float]:
+        """(TCP z, lowest z of the other link frames not in exempt_frames) at q, in the base frame."""
         q = self._check_q(q_rad)
+        key = frozenset(exempt_frames)
+        ids = self._link_ids.get(key)
+        if ids is None:  # cached per exemption set: this runs for every trajectory sample
+            ids = [i for i, f in enumerate(self.model.frames)
+                   if f.type == pin.FrameType.BODY and f.name not in key and f.name != TCP_FRAME]
+            self._link_ids[key] = ids
         pin.framesForwardKinematics(self.model, self.data, q)
-        return {f.name: float(self.data.oMf[i].translation[2]) for i, f in enumerate(self.model.frames)
-                if f.type == pin.FrameType.BODY or f.name == TCP_FRAME}
+        frames = self.data.oMf
+        return float(frames[self.tcp_id].translation[2]), min(float(frames[i].translation[2]) for i in ids)
 
     def within_limits(self, q_rad, atol_rad: float = 1e-9) -> bool:
         q = self._check_q(q_rad)

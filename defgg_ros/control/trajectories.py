@@ -345,9 +345,8 @@ def check_trajectory(trajectory: SampledTrajectory, limits: JointLimits, kin: Pa
         ratios[name] = ratio
     tcp_min, link_min = math.inf, math.inf
     for qk in q:
-        heights = kin.frame_heights_m(qk)
-        tcp_min = min(tcp_min, heights.pop("panda_tcp"))
-        link_min = min(link_min, min(z for name, z in heights.items() if name not in TABLE_EXEMPT_FRAMES))
+        tcp_z, link_z = kin.lowest_heights_m(qk, TABLE_EXEMPT_FRAMES)
+        tcp_min, link_min = min(tcp_min, tcp_z), min(link_min, link_z)
     if tcp_min < table_z_m + MIN_TCP_HEIGHT_ABOVE_TABLE_M - JOINT_ATOL:
         raise TrajectoryError(f"TCP goes down to {tcp_min:.4f} m, below the table at {table_z_m:.3f} m + clearance")
     if link_min < table_z_m + MIN_TCP_HEIGHT_ABOVE_TABLE_M:
