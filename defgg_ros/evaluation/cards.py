@@ -1,0 +1,187 @@
+"""Shipped weights in models/ and their model cards, generated from files (never typed by hand).
+
+``ship_model`` copies a training run's best checkpoint to ``models/<name>.pt``
+and writes ``models/<name>.train.json``: the provenance of those weights
+(command, wall time, git commit, dataset root and fingerprint, the trials per
+object x modulus that were used, validation metrics). ``write_card`` renders
+``models/<name>.md`` from that file, the checkpoint itself and, when given, an
+evaluation folder's summary.json.
+"""
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+from collections import defaultdict
+from pathlib import Path
+
+import torch
+
+from defgg_ros.atomic import atomic_path, write_json_atomic, write_text_atomic
+from defgg_ros.data.format import read_trials
+from defgg_ros.model.checkpoint import load_checkpoint
+
+PROVENANCE_SUFFIX = ".train.json"
+
+
+class CardError(RuntimeError):
+    """A training run or model file that cannot be shipped or described."""
+
+
+def git_commit(repo_dir=".") -> str:
+    try:
+        out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=repo_dir, capture_output=True, text=True, check=True)
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "defgg_ros"], cwd=repo_dir,
+                               capture_output=True, text=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+    return out.stdout.strip() + (" (+ uncommitted changes in defgg_ros/)" if dirty else "")
+
+
+def trial_counts(data_root, manifest: dict) -> dict:
+    """{object: {E: {"trials", "labelled", "positive"}}} over the manifest's trials (what training saw)."""
+    counts = defaultdict(dict)
+    for sid, n in sorted(manifest.items()):
+        trials = read_trials(data_root, sid)[:n]
+        if not trials:
+            continue
+        t0 = trials[0]
+        labels = [t.label for t in trials]
+        counts[t0.object_name][f"{t0.youngs_modulus_pa:.0e}"] = {
+            "trials": len(trials), "labelled": sum(lbl is not None for lbl in labels),
+            "positive": sum(lbl is True for lbl in labels)}
+    return dict(counts)
+
+
+def training_provenance(run_dir, command: str, wall_s: float, commit: str) -> dict:
+    run_dir = Path(run_dir)
+    try:
+        metrics = json.loads((run_dir / "metrics.json").read_text())
+        state = torch.load(run_dir / "state.pt", map_location="cpu", weights_only=True)
+    except (OSError, ValueError, RuntimeError) as exc:
+        raise CardError(f"{run_dir}: not a finished defgg-train run ({exc})") from None
+    best_epoch = metrics.get("best_epoch")
+    best = next((h for h in metrics["history"] if h["epoch"] == best_epoch), metrics["history"][-1])
+    data_root = metrics["data"]["root"]
+    return {
+        "command": command, "wall_s": float(wall_s), "commit": commit, "run_dir": str(run_dir),
+        "data_root": data_root, "data_fingerprint": metrics["data"]["fingerprint"],
+        "n_trials": metrics["data"]["n_trials"], "object_split": metrics["data"]["object_split"],
+        "scenes": metrics["data"]["scenes"], "train_config": metrics["config"], "best_epoch": best_epoch,
+        "epochs_run": len(metrics["history"]), "val_best": best, "test": metrics.get("test"),
+        "stiffness_response": metrics.get("stiffness_response"),
+        "trial_counts": trial_counts(data_root, state["manifest"]), "manifest": state["manifest"],
+    }
+
+
+def ship_model(run_dir, name: str, models_dir, provenance: dict) -> Path:
+    """Copy run_dir/best.pt to models_dir/<name>.pt (verified, atomic) and write its provenance."""
+    src = Path(run_dir) / "best.pt"
+    load_checkpoint(src)   # refuses a corrupt or foreign file before it is shipped
+    dst = Path(models_dir) / f"{name}.pt"
+    with atomic_path(dst) as tmp:
+        shutil.copyfile(src, tmp)
+    dst.chmod(0o644)
+    payload = load_checkpoint(dst)
+    write_json_atomic(Path(models_dir) / f"{name}{PROVENANCE_SUFFIX}",
+                      {**provenance, "weights_sha256": payload["weights_sha256"]})
+    return dst
+
+
+def _pct(x) -> str:
+    return "–" if x is None else f"{100 * x:.1f} %"
+
+
+def render_card(name: str, models_dir, eval_summary: dict | None = None, eval_dir: str = "") -> str:
+    models_dir = Path(models_dir)
+    prov_path = models_dir / f"{name}{PROVENANCE_SUFFIX}"
+    if not prov_path.is_file():
+        raise CardError(f"{prov_path} missing: ship the model with `defgg-eval ship` first")
+    prov = json.loads(prov_path.read_text())
+    payload = load_checkpoint(models_dir / f"{name}.pt")
+    if payload["weights_sha256"] != prov["weights_sha256"]:
+        raise CardError(f"{name}.pt does not match its provenance file (weights changed since shipping)")
+    cfg = payload["network_config"]
+    uses_stiffness = cfg["input_channels"] == 2
+    lines = [f"# Model card: `{name}`", "",
+             "*Generated by `defgg-eval card`; do not edit by hand.*", "",
+             f"- **Model**: {'Def-GG-CNN (depth + stiffness)' if uses_stiffness else 'GG-CNN baseline (depth only)'}"
+             f", architecture `{cfg.get('architecture')}`, {cfg['input_channels']} input channel(s), "
+             f"input {cfg.get('input_size_px')} px; encodings {payload['input_normalization']}",
+             f"- **Weights**: `models/{name}.pt`, sha256 `{payload['weights_sha256']}`",
+             f"- **Produced by commit**: `{prov['commit']}`",
+             f"- **Training command**: `{prov['command']}`",
+             f"- **Training time**: {prov['wall_s'] / 60:.1f} min wall clock, {prov['epochs_run']} epochs, "
+             f"best epoch {prov['best_epoch']} (torch threads: 1)",
+             f"- **Training data**: `{prov['data_root']}` (growing dataset; this run froze "
+             f"{prov['n_trials']} trials), data fingerprint `{prov['data_fingerprint']}`; scenes per split "
+             f"{prov['scenes']}", ""]
+    lines += _data_section(prov)
+    lines += _validation_section(prov)
+    lines += _eval_section(name, eval_summary, eval_dir, payload["weights_sha256"][:16])
+    return "\n".join(lines) + "\n"
+
+
+def _data_section(prov) -> list:
+    split = prov["object_split"]
+    counts = prov["trial_counts"]
+    moduli = sorted({e for per in counts.values() for e in per}, key=float)
+    lines = ["## Training data", "",
+             f"Objects by split (split by object, seed {prov['train_config']['seed']}): "
+             + "; ".join(f"**{k}** ({len(v)}): {', '.join(sorted(v))}" for k, v in split.items()), "",
+             "Trials used per object and Young's modulus (positive / labelled):", "",
+             "| object | " + " | ".join(f"E = {e} Pa" for e in moduli) + " |", "|---" * (len(moduli) + 1) + "|"]
+    totals = defaultdict(lambda: [0, 0])
+    for obj in sorted(counts):
+        cells = []
+        for e in moduli:
+            c = counts[obj].get(e)
+            cells.append("–" if c is None else f"{c['positive']}/{c['labelled']}")
+            if c:
+                totals[e][0] += c["positive"]
+                totals[e][1] += c["labelled"]
+        lines.append(f"| {obj} | " + " | ".join(cells) + " |")
+    lines.append("| **total** | " + " | ".join(f"**{totals[e][0]}/{totals[e][1]}**" for e in moduli) + " |")
+    return lines + [""]
+
+
+def _validation_section(prov) -> list:
+    best = prov["val_best"]
+    lines = ["## Validation (held-out training-set objects, top-1 grasp rectangle metric)", "",
+             f"Overall: {_pct(best.get('val_accuracy'))}, validation loss {best.get('val_loss', float('nan')):.4f}.",
+             "", "| E (Pa) | scenes | rectangle accuracy |", "|---|---|---|"]
+    for e, m in best.get("val_per_modulus", {}).items():
+        lines.append(f"| {e} | {m['n']} | {_pct(m['accuracy'])} |")
+    if prov.get("test"):
+        lines += ["", f"Test objects: {_pct(prov['test'].get('accuracy'))} over {prov['test'].get('n')} scenes."]
+    if prov.get("stiffness_response"):
+        lines += ["", "Stiffness response (same depth, only the stiffness input changed): "
+                  + "; ".join(f"E={e}: mean |dQ| {v['mean_abs_dq']:.3f}, top-1 shift {v['mean_top1_shift_px']:.1f} px"
+                              for e, v in prov["stiffness_response"].items())]
+    return lines + [""]
+
+
+def _eval_section(name, summary, eval_dir, sha16: str) -> list:
+    lines = ["## Evaluation in the FEM simulator (held-out object sets)", ""]
+    if not summary or summary.get("models", {}).get(name, {}).get("sha") != sha16:
+        return lines + ["Not evaluated yet with these weights.", ""]
+    lines.append(f"From `{eval_dir}/summary.json` (see docs/results.md for the full tables and how complete "
+                 "each cell is). Success over all stiffnesses:")
+    lines += ["", "| task | object set | success | trials graded / planned |", "|---|---|---|---|"]
+    for task, cells in summary["tasks"].items():
+        for key, c in cells.items():
+            parts = key.split("|")
+            if len(parts) != 2 or parts[1] != name:
+                continue
+            rate = "–" if c["success_pct"] is None else f"{c['success_pct']:.1f} %"
+            lines.append(f"| {task} | {parts[0]} | {rate} | {c['graded']} / {c['expected']} |")
+    return lines + [""]
+
+
+def write_card(name: str, models_dir, eval_dir=None) -> Path:
+    summary = None
+    if eval_dir is not None and (Path(eval_dir) / "summary.json").is_file():
+        summary = json.loads((Path(eval_dir) / "summary.json").read_text())
+    path = Path(models_dir) / f"{name}.md"
+    write_text_atomic(path, render_card(name, models_dir, summary, str(eval_dir or "")))
+    return path

@@ -1,0 +1,268 @@
+"""defgg-eval: the paper's simulation experiments with the shipped models, and their reports.
+
+Examples::
+
+    # both models, held-out common + adversarial sets, 5 best grasps, shake + twist, 2 workers
+    defgg-eval run --out results/sim_v1 --workers 2
+    # a folder of meshes, moduli from DIR/moduli.yaml (or --moduli)
+    defgg-eval run --objects my_meshes/ --moduli 2e5 2e9 --out results/my_meshes
+    defgg-eval report --out results/sim_v1 --docs docs/results.md    # tables, plots, report
+    defgg-eval strategy --object common_toy_bone --out results/sim_v1
+    defgg-eval ship --run runs/defgg --name defgg_cnn --command "defgg-train ..." --wall-s 540
+    defgg-eval card --name defgg_cnn --eval results/sim_v1
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import shlex
+import sys
+from pathlib import Path
+
+from defgg_ros.atomic import write_json_atomic
+from defgg_ros.constants import EVAL_GRASPS_PER_OBJECT, TRAINING_YOUNGS_MODULI_PA
+from defgg_ros.evaluation import jobs as jobs_mod
+from defgg_ros.evaluation import report as report_mod
+from defgg_ros.evaluation import sources
+from defgg_ros.evaluation.tasks import TASKS
+
+DEFAULT_MODELS = ("defgg_cnn=models/defgg_cnn.pt", "ggcnn_depth_only=models/ggcnn_depth_only.pt")
+
+
+def _add_run(sub):
+    p = sub.add_parser(
+        "run", formatter_class=argparse.RawDescriptionHelpFormatter,
+        help="plan the models' grasps and run them in the FEM simulator (resumable)",
+        description="For each object and Young's modulus, render the scene with the training camera, take each "
+                    "model's N best grasps and run them in the PyBullet FEM simulator under the shake task (16 "
+                    "directions, success if held at 25 m/s^2 in all) and the twist task (success if held at 500 "
+                    "rad/s^2 about all 6 axes). Both models see the same objects, poses and seeds. Each finished "
+                    "trial is one fsync'd line of OUT/trials.jsonl: rerunning the same command skips finished "
+                    "trials, and a kill (even SIGKILL) loses only the trials in flight.",
+        epilog="Trial order is rank-major (every object's best grasp first), so a stopped run covers all cells "
+               "evenly; the tables say how many trials are behind each cell.")
+    p.add_argument("--out", required=True, help="evaluation folder (results, tables, figures)")
+    p.add_argument("--model", action="append", metavar="NAME=PATH", default=None,
+                   help=f"a model checkpoint to evaluate (repeatable; default: {' '.join(DEFAULT_MODELS)})")
+    p.add_argument("--sets", nargs="+", default=list(sources.EVAL_SETS), choices=sources.EVAL_SETS,
+                   help="held-out object sets of the simulator's library (default: %(default)s)")
+    p.add_argument("--only", nargs="+", metavar="OBJECT", help="restrict the named sets to these objects")
+    p.add_argument("--objects", metavar="DIR", help="evaluate every .obj/.stl in DIR instead of the named sets")
+    p.add_argument("--moduli-yaml", metavar="FILE", help="per-mesh moduli/scales for --objects "
+                   "(default: DIR/moduli.yaml if present; see defgg_ros/evaluation/sources.py)")
+    p.add_argument("--moduli", nargs="+", type=float, default=list(TRAINING_YOUNGS_MODULI_PA), metavar="PA",
+                   help="Young's moduli in Pa, the table rows (default: the paper's %(default)s)")
+    p.add_argument("--grasps", type=int, default=EVAL_GRASPS_PER_OBJECT,
+                   help="best grasps per object and modulus (default %(default)s, as in the paper)")
+    p.add_argument("--tasks", nargs="+", default=list(TASKS), choices=TASKS, help="default: %(default)s")
+    p.add_argument("--experiments", nargs="+", default=list(jobs_mod.EXPERIMENTS), choices=jobs_mod.EXPERIMENTS,
+                   help="main tables, stiffness-error sensitivity (stiffness models, shake), multi-material "
+                        "(default: %(default)s)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the object poses (default %(default)s)")
+    p.add_argument("--workers", type=int, default=1, help="simulator worker processes (default %(default)s)")
+    p.add_argument("--max-trials", type=int, default=None, help="stop after simulating this many trials")
+    p.add_argument("--report-every", type=int, default=10, metavar="N",
+                   help="rewrite the tables every N finished trials (default %(default)s)")
+    p.add_argument("--quick", action="store_true",
+                   help="smoke test only: 0.1 s acceleration ramps instead of 0.5 s (recorded in run.json and every "
+                        "trial; not the paper's protocol, never for reported numbers)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+
+
+def _add_others(sub):
+    p = sub.add_parser("report", help="rewrite tables, plots and summary.json (and the Markdown report)",
+                       description="Rewrite OUT/tables/*, OUT/summary.json and, with --docs, the Markdown report "
+                                   "from OUT/trials.jsonl and OUT/run.json. Safe while a run is going on.")
+    p.add_argument("--out", required=True, help="evaluation folder")
+    p.add_argument("--docs", metavar="FILE", help="also write the Markdown report (e.g. docs/results.md)")
+    p.add_argument("--notes", metavar="FILE", help="hand-written analysis to include in the report verbatim")
+
+    p = sub.add_parser("strategy", help="strategy figure: quality map and best grasp at a low and a high E")
+    p.add_argument("--out", required=True, help="evaluation folder (writes strategy.png and strategy.json)")
+    p.add_argument("--model", default=DEFAULT_MODELS[0], metavar="NAME=PATH", help="default: %(default)s")
+    p.add_argument("--object", default="common_toy_bone", help="object of the common/adversarial set")
+    p.add_argument("--moduli", nargs=2, type=float, default=[2e4, 2e9], metavar="PA", help="low and high E")
+    p.add_argument("--seed", type=int, default=0)
+
+    p = sub.add_parser("ship", help="copy a training run's best checkpoint to models/ with its provenance")
+    p.add_argument("--run", required=True, help="defgg-train --out folder (finished)")
+    p.add_argument("--name", required=True, help="model name, e.g. defgg_cnn -> models/defgg_cnn.pt")
+    p.add_argument("--command", required=True, help="the training command as run (recorded in the card)")
+    p.add_argument("--wall-s", type=float, required=True, help="training wall time in seconds")
+    p.add_argument("--commit", default=None, help="git commit of the training code (default: current HEAD)")
+    p.add_argument("--models-dir", default="models")
+
+    p = sub.add_parser("card", help="(re)write models/<name>.md from its provenance, weights and evaluation")
+    p.add_argument("--name", required=True, nargs="+")
+    p.add_argument("--eval", default=None, metavar="OUT", help="evaluation folder whose summary.json to include")
+    p.add_argument("--models-dir", default="models")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="defgg-eval", formatter_class=argparse.RawDescriptionHelpFormatter,
+                                     description=__doc__.split("\n\n")[0], epilog=__doc__.split("\n\n", 1)[1])
+    sub = parser.add_subparsers(dest="command", required=True)
+    _add_run(sub)
+    _add_others(sub)
+    return parser
+
+
+def parse_models(specs) -> dict:
+    out = {}
+    for spec in specs:
+        name, sep, path = spec.partition("=")
+        if not sep or not name or not path:
+            raise ValueError(f"--model expects NAME=PATH, got {spec!r}")
+        if name in out:
+            raise ValueError(f"model name {name!r} given twice")
+        out[name] = path
+    return out
+
+
+def load_predictors(model_paths: dict) -> dict:
+    import torch
+
+    from defgg_ros.model.inference import GraspPredictor
+
+    torch.set_num_threads(1)
+    return {name: GraspPredictor.from_checkpoint(path) for name, path in model_paths.items()}
+
+
+def eval_objects(args) -> list:
+    if args.objects:
+        return sources.mesh_folder(args.objects, args.moduli, args.moduli_yaml)
+    objs = []
+    for s in args.sets:
+        only = [o for o in args.only if o in {sh.name for sh in sources.sim_objects.object_set(s)}] \
+            if args.only else None
+        if args.only and not only:
+            continue
+        objs += sources.named_set(s, args.moduli, only)
+    if not objs:
+        raise sources.SourceError(f"no object of {args.sets} matches --only {args.only}")
+    return objs
+
+
+def build_views(args, predictors, objects) -> list:
+    models = list(predictors)
+    stiff = [m for m in models if predictors[m].uses_stiffness]
+    views = []
+    if "main" in args.experiments:
+        views += jobs_mod.main_views(models, objects)
+    if "sensitivity" in args.experiments:
+        common = [o for o in objects if o.set_name in ("common", "user")]
+        views += jobs_mod.sensitivity_views(stiff, common)
+    if "multimaterial" in args.experiments:
+        views += jobs_mod.multimaterial_views(models, objects)
+    return views
+
+
+def write_manifest(out_dir, args, model_paths, predictors, objects, argv, settings) -> None:
+    from dataclasses import asdict
+
+    from defgg_ros.evaluation.cards import git_commit
+
+    by_set = {}
+    for o in objects:
+        by_set.setdefault(o.set_name, []).append({"name": o.name, "moduli_pa": list(o.moduli_pa),
+                                                  "multi_material": o.multi_material})
+    manifest = {
+        "command": "defgg-eval " + " ".join(shlex.quote(a) for a in argv), "commit": git_commit(),
+        "models": {n: {"path": model_paths[n], "sha": p.fingerprint, "uses_stiffness": bool(p.uses_stiffness),
+                       "data_fingerprint": p.checkpoint_meta.get("data_fingerprint")} for n, p in predictors.items()},
+        "objects": by_set, "grasps_per_object": args.grasps, "tasks": list(args.tasks),
+        "experiments": list(args.experiments), "seed": args.seed,
+        "sensitivity_errors_pct": list(jobs_mod.SENSITIVITY_ERRORS_PCT),
+        "trial_settings": asdict(settings), "quick": bool(args.quick),
+    }
+    write_json_atomic(Path(out_dir) / report_mod.MANIFEST_FILE, manifest)
+
+
+def cmd_run(args, argv) -> int:
+    from defgg_ros.evaluation import runner
+
+    model_paths = parse_models(args.model or DEFAULT_MODELS)
+    predictors = load_predictors(model_paths)
+    objects = eval_objects(args)
+    settings = runner.quick_trial_settings() if args.quick else runner.eval_trial_settings()
+    write_manifest(args.out, args, model_paths, predictors, objects, argv, settings)
+    plan = runner.EvalPlan(objects, predictors, build_views(args, predictors, objects), args.grasps,
+                           tuple(args.tasks), args.seed, settings)
+    counts = runner.run_evaluation(plan, args.out, args.workers, not args.no_progress, args.max_trials,
+                                   on_progress=_reporter(args.out, args.report_every))
+    report_mod.write_outputs(args.out)
+    print(json.dumps(counts))
+    return 0
+
+
+def _reporter(out_dir, every: int):
+    def on_progress(n_done: int) -> None:
+        if every > 0 and n_done % every == 0:
+            report_mod.write_outputs(out_dir)
+    return on_progress
+
+
+def cmd_report(args) -> int:
+    from defgg_ros.evaluation import docs
+
+    summary = report_mod.write_outputs(args.out)
+    if args.docs:
+        docs.write_results_doc(args.out, args.docs, args.notes)
+    print(json.dumps({"records": summary["records"], "targets": summary["targets"]}, indent=1))
+    return 0
+
+
+def cmd_strategy(args) -> int:
+    from defgg_ros.evaluation import strategy
+    from defgg_ros.sim import world
+
+    (name, path), = parse_models([args.model]).items()
+    predictor = load_predictors({name: path})[name]
+    obj = next((o for s in sources.EVAL_SETS for o in sources.named_set(s) if o.name == args.object), None)
+    if obj is None:
+        raise sources.SourceError(f"no object {args.object!r} in the sets {sources.EVAL_SETS}")
+    client = world.connect()
+    panels, described = strategy.strategy_panels(predictor, obj, args.moduli, client, args.seed)
+    out = Path(args.out)
+    strategy.write_strategy_figure(panels, described, out / "strategy.png", obj.name, name)
+    write_json_atomic(out / "strategy.json", {"model": name, "model_sha": predictor.fingerprint,
+                                              "object": obj.name, "seed": args.seed, "best_grasps": described})
+    print(json.dumps({e: d[0] if d else None for e, d in described.items()}, indent=1))
+    return 0
+
+
+def cmd_ship(args) -> int:
+    from defgg_ros.evaluation import cards
+
+    prov = cards.training_provenance(args.run, args.command, args.wall_s, args.commit or cards.git_commit())
+    print(cards.ship_model(args.run, args.name, args.models_dir, prov))
+    return 0
+
+
+def cmd_card(args) -> int:
+    from defgg_ros.evaluation import cards
+
+    for name in args.name:
+        print(cards.write_card(name, args.models_dir, args.eval))
+    return 0
+
+
+def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    args = build_parser().parse_args(argv)
+    from defgg_ros.evaluation.cards import CardError
+    from defgg_ros.evaluation.report import ReportError
+    from defgg_ros.evaluation.store import ResultsError
+    from defgg_ros.model.checkpoint import CheckpointError
+
+    try:
+        if args.command == "run":
+            return cmd_run(args, argv)
+        return {"report": cmd_report, "strategy": cmd_strategy, "ship": cmd_ship, "card": cmd_card}[args.command](args)
+    except (sources.SourceError, ReportError, ResultsError, CardError, CheckpointError, ValueError) as exc:
+        print(f"defgg-eval: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,76 @@
+"""Figures of the evaluation (matplotlib, Agg backend, PNG written atomically)."""
+from __future__ import annotations
+
+import math
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from defgg_ros.atomic import atomic_path  # noqa: E402
+
+# The paper's sensitivity curve (Fig. "Grasp success versus error in stiffness"), drawn for reference.
+PAPER_SENSITIVITY = ((-60, 21), (-45, 36.42), (-30, 58), (-15, 69), (-5, 75), (0, 75.9), (5, 72.85), (15, 68.3),
+                     (30, 56.4), (45, 38.57), (60, 25.2))
+
+
+def _save(fig, path) -> None:
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", dpi=110, bbox_inches="tight")
+    plt.close(fig)
+
+
+def sensitivity_plot(cells: dict, path, label: str) -> None:
+    """Success over all stiffnesses vs stiffness input error; n per point annotated."""
+    fig, ax = plt.subplots(figsize=(5.5, 3.8))
+    xs = [e for e, c in cells.items() if c.rate_pct is not None]
+    ys = [cells[e].rate_pct for e in xs]
+    ax.plot(xs, ys, "s-", color="tab:blue", label=f"{label} (this simulator)")
+    for x, y in zip(xs, ys):
+        ax.annotate(f"n={cells[x].graded}", (x, y), textcoords="offset points", xytext=(0, 6), ha="center",
+                    fontsize=7)
+    px, py = zip(*PAPER_SENSITIVITY)
+    ax.plot(px, py, "--", color="grey", alpha=0.7, label="paper (Isaac Gym)")
+    ax.set_xlabel("error of stiffness input [%]")
+    ax.set_ylabel("shake success over all stiffnesses [%]")
+    ax.set_xlim(-65, 65)
+    ax.set_ylim(0, 100)
+    ax.grid(True, linestyle="--", alpha=0.5)
+    ax.legend(loc="lower center", fontsize=8)
+    _save(fig, path)
+
+
+def grasp_segment(center_uv, angle_rad: float, width_px: float) -> np.ndarray:
+    """2x2 end points (u, v) of the closing line of a grasp in the image."""
+    d = np.array([math.cos(angle_rad), math.sin(angle_rad)]) * width_px / 2
+    c = np.asarray(center_uv, dtype=float)
+    return np.stack([c - d, c + d])
+
+
+def strategy_figure(panels: list, path, title: str) -> None:
+    """One row per panel: stiffness input, quality map with the best grasps, depth with the best grasp.
+
+    panels: dicts with "label", "stiffness" (encoded, HxW), "depth_m", "q" (HxW, crop coordinates),
+    "grasps" (list of (u, v, angle, width_px) in crop coordinates, best first).
+    """
+    fig, axes = plt.subplots(len(panels), 3, figsize=(10, 3.3 * len(panels)), squeeze=False)
+    for row, panel in zip(axes, panels):
+        row[0].imshow(panel["stiffness"], cmap="viridis", vmin=0, vmax=1)
+        row[0].set_title(f"{panel['label']}: stiffness input", fontsize=9)
+        row[1].imshow(panel["q"], cmap="magma", vmin=0, vmax=1)
+        row[1].set_title("quality map Q, top grasps", fontsize=9)
+        row[2].imshow(panel["depth_m"], cmap="gray_r")
+        row[2].set_title("depth, best grasp", fontsize=9)
+        for i, (u, v, a, w) in enumerate(panel["grasps"]):
+            seg = grasp_segment((u, v), a, w)
+            color = "cyan" if i == 0 else "white"
+            row[1].plot(seg[:, 0], seg[:, 1], "-", color=color, lw=2 if i == 0 else 1)
+            if i == 0:
+                row[2].plot(seg[:, 0], seg[:, 1], "-o", color="red", lw=2, ms=3)
+        for ax in row:
+            ax.set_xticks([])
+            ax.set_yticks([])
+    fig.suptitle(title, fontsize=10)
+    _save(fig, path)

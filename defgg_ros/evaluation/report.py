@@ -1,0 +1,144 @@
+"""Write every output of an evaluation folder from its results file and manifest.
+
+<out>/run.json           manifest (models + weights sha, objects, moduli, grasps, tasks, command, commit)
+<out>/trials.jsonl       one record per trial (the only source of every number below)
+<out>/tables/<task>.md|.csv, sensitivity.md|.csv|.png, multimaterial.md|.csv
+<out>/summary.json       headline numbers + completeness, read by the model cards and docs
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from defgg_ros.atomic import write_json_atomic, write_text_atomic
+from defgg_ros.constants import TRAINING_YOUNGS_MODULI_PA
+from defgg_ros.evaluation import figures, tables
+from defgg_ros.evaluation.store import RESULTS_FILE, read_results
+
+MANIFEST_FILE = "run.json"
+SUMMARY_FILE = "summary.json"
+TABLES_DIR = "tables"
+# Issue targets (shake task, all stiffnesses).
+TARGET_MARGIN_COMMON_PTS = 15.0
+TARGET_COMMON_SUCCESS_PCT = 75.0
+
+
+class ReportError(RuntimeError):
+    """An evaluation folder without a manifest or results."""
+
+
+def read_manifest(out_dir) -> dict:
+    path = Path(out_dir) / MANIFEST_FILE
+    if not path.is_file():
+        raise ReportError(f"{path} missing: run `defgg-eval run --out {out_dir}` first")
+    return json.loads(path.read_text(encoding="utf-8"))
+
+
+def _models(manifest) -> tuple:
+    names = list(manifest["models"])
+    shas = {n: manifest["models"][n]["sha"] for n in names}
+    labels = {n: ("with stiffness" if manifest["models"][n]["uses_stiffness"] else "no stiffness") + f" ({n})"
+              for n in names}
+    return names, shas, labels
+
+
+def _moduli(manifest) -> list:
+    moduli = sorted({e for objs in manifest["objects"].values() for o in objs for e in o["moduli_pa"]})
+    return moduli or list(TRAINING_YOUNGS_MODULI_PA)
+
+
+def _expected_main(manifest) -> dict:
+    out = {}
+    for s, objs in manifest["objects"].items():
+        for o in objs:
+            for e in o["moduli_pa"]:
+                out[(s, e)] = out.get((s, e), 0) + manifest["grasps_per_object"]
+    return out
+
+
+def write_outputs(out_dir) -> dict:
+    """(Re)write tables, plots and summary.json of `out_dir`; returns the summary."""
+    out_dir = Path(out_dir)
+    manifest = read_manifest(out_dir)
+    models, shas, labels = _models(manifest)
+    records = tables.current(read_results(out_dir / RESULTS_FILE), shas)
+    sets = list(manifest["objects"])
+    moduli = _moduli(manifest)
+    tdir = out_dir / TABLES_DIR
+    summary = {"models": manifest["models"], "tasks": {}, "records": len(records),
+               "simulated": sum(1 for r in records if r.get("reused_from") is None and r.get("sim_key")),
+               "sim_cpu_h": sum(r.get("cpu_s") or 0 for r in records if r.get("reused_from") is None) / 3600}
+    expected = _expected_main(manifest)
+    for task in manifest["tasks"]:
+        cells = tables.main_table(records, task, sets, models, moduli, expected)
+        write_text_atomic(tdir / f"{task}.md", tables.main_table_markdown(cells, task, sets, models, moduli, labels))
+        write_text_atomic(tdir / f"{task}.csv", tables.main_table_csv(cells, task, sets, models, moduli))
+        summary["tasks"][task] = {f"{s}|{m}": _cell_json(cells[(tables.ALL_STIFFNESSES, s, m)])
+                                  for s in sets for m in models}
+        summary["tasks"][task].update({f"{s}|{m}|{e:g}": _cell_json(cells[(e, s, m)])
+                                       for s in sets for m in models for e in moduli})
+    if "shake" in manifest["tasks"]:
+        cells = tables.main_table(records, "shake", sets, models, moduli, expected, field="success_mean")
+        title = ("**Shake task, training-label criterion** (mean held acceleration over the 16 directions >= 25 "
+                 "m/s^2): success rate in %")
+        write_text_atomic(tdir / "shake_mean.md",
+                          tables.main_table_markdown(cells, "shake", sets, models, moduli, labels, title))
+        write_text_atomic(tdir / "shake_mean.csv", tables.main_table_csv(cells, "shake_mean", sets, models, moduli))
+        summary["shake_mean"] = {f"{s}|{m}": _cell_json(cells[(tables.ALL_STIFFNESSES, s, m)])
+                                 for s in sets for m in models}
+    if "sensitivity" in manifest["experiments"]:
+        summary["sensitivity"] = _write_sensitivity(records, manifest, models, labels, tdir)
+    if "multimaterial" in manifest["experiments"]:
+        rows = tables.multimaterial_rows(records, manifest["grasps_per_object"])
+        write_text_atomic(tdir / "multimaterial.md", tables.multimaterial_markdown(rows, labels))
+        write_text_atomic(tdir / "multimaterial.csv", tables.multimaterial_csv(rows))
+    summary["targets"] = targets(summary, manifest)
+    write_json_atomic(out_dir / SUMMARY_FILE, summary)
+    return summary
+
+
+def _write_sensitivity(records, manifest, models, labels, tdir) -> dict:
+    stiff = [m for m in models if manifest["models"][m]["uses_stiffness"]]
+    object_set = "common" if "common" in manifest["objects"] else next(iter(manifest["objects"]))
+    n_rows = sum(len(o["moduli_pa"]) for o in manifest["objects"][object_set])
+    out = {}
+    for m in stiff:
+        cells = tables.sensitivity_cells(records, m, object_set, n_rows * manifest["grasps_per_object"])
+        suffix = "" if len(stiff) == 1 else f"_{m}"
+        write_text_atomic(tdir / f"sensitivity{suffix}.md", tables.sensitivity_markdown(cells, labels[m], object_set))
+        write_text_atomic(tdir / f"sensitivity{suffix}.csv", tables.sensitivity_csv(cells, m, object_set))
+        figures.sensitivity_plot(cells, tdir / f"sensitivity{suffix}.png", labels[m])
+        out[m] = {f"{e:g}": _cell_json(c) for e, c in cells.items()}
+    return out
+
+
+def _cell_json(c: tables.Cell) -> dict:
+    return {"success_pct": c.rate_pct, "successes": c.success, "graded": c.graded, "sim_failed": c.sim_failed,
+            "expected": c.expected}
+
+
+def targets(summary: dict, manifest: dict) -> list:
+    """The issue's targets, each with its numbers and whether the data is complete enough to judge."""
+    shake = summary["tasks"].get("shake")
+    models = manifest["models"]
+    stiff = [m for m in models if models[m]["uses_stiffness"]]
+    base = [m for m in models if not models[m]["uses_stiffness"]]
+    if not shake or not stiff or not base:
+        return []
+    out = []
+    for s in manifest["objects"]:
+        a, b = shake.get(f"{s}|{stiff[0]}"), shake.get(f"{s}|{base[0]}")
+        if not a or not b or a["success_pct"] is None or b["success_pct"] is None:
+            out.append({"set": s, "status": "no data"})
+            continue
+        margin = a["success_pct"] - b["success_pct"]
+        need = TARGET_MARGIN_COMMON_PTS if s == "common" else 0.0
+        item = {"set": s, "with_stiffness_pct": a["success_pct"], "no_stiffness_pct": b["success_pct"],
+                "margin_pts": margin, "required_margin_pts": need, "margin_met": margin > need,
+                "complete": a["graded"] + a["sim_failed"] >= a["expected"] and b["graded"] + b["sim_failed"] >= b[
+                    "expected"], "trials": [a["graded"], b["graded"]], "expected": [a["expected"], b["expected"]]}
+        if s == "common":
+            item["required_success_pct"] = TARGET_COMMON_SUCCESS_PCT
+            item["success_met"] = a["success_pct"] >= TARGET_COMMON_SUCCESS_PCT
+        out.append(item)
+    return out

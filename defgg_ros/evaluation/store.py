@@ -1,0 +1,115 @@
+"""The results file of an evaluation: one JSON line per finished trial.
+
+Why JSON lines: each finished trial is one fsync'd append
+(``defgg_ros.atomic.append_jsonl``), so a SIGKILL loses at most the trials in
+flight. A kill during the append can leave a torn last line; ``ResultStore``
+truncates it before appending again (otherwise the next record would be glued
+to it and the file would become unreadable). Only the parent process writes,
+and it skips keys that are already present, so a rerun duplicates nothing.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from defgg_ros.atomic import append_jsonl, read_jsonl
+
+RESULTS_FILE = "trials.jsonl"
+RECORD_VERSION = 1
+
+
+class ResultsError(RuntimeError):
+    """A results file that cannot be trusted (corrupt line, duplicate key, wrong version)."""
+
+
+def repair_torn_tail(path) -> int:
+    """Drop an incomplete last line (no trailing newline). Returns the bytes removed."""
+    path = Path(path)
+    if not path.exists() or path.stat().st_size == 0:
+        return 0
+    with open(path, "rb+") as f:
+        f.seek(0, os.SEEK_END)
+        size = f.tell()
+        f.seek(size - 1)
+        if f.read(1) == b"\n":
+            return 0
+        # Walk back to the last newline; everything after it is the torn record.
+        pos = size - 1
+        chunk = 4096
+        while pos > 0:
+            start = max(0, pos - chunk)
+            f.seek(start)
+            data = f.read(pos - start)
+            idx = data.rfind(b"\n")
+            if idx >= 0:
+                keep = start + idx + 1
+                break
+            pos = start
+        else:
+            keep = 0
+        f.truncate(keep)
+        f.flush()
+        os.fsync(f.fileno())
+        return size - keep
+
+
+class ResultStore:
+    """Append-only trial records keyed by ``record["key"]``."""
+
+    def __init__(self, out_dir):
+        self.out_dir = Path(out_dir)
+        self.path = self.out_dir / RESULTS_FILE
+        self.out_dir.mkdir(parents=True, exist_ok=True)
+        self.torn_bytes_removed = repair_torn_tail(self.path)
+        self._records = {}
+        for i, rec in enumerate(read_results(self.path)):
+            self._records[rec["key"]] = rec
+            if len(self._records) != i + 1:
+                raise ResultsError(f"{self.path}: duplicate trial key {rec['key']!r}")
+
+    def __contains__(self, key: str) -> bool:
+        return key in self._records
+
+    def __len__(self) -> int:
+        return len(self._records)
+
+    def get(self, key: str) -> dict | None:
+        return self._records.get(key)
+
+    def records(self) -> list:
+        return list(self._records.values())
+
+    def by_sim_key(self) -> dict:
+        """sim_key -> first record that really ran that simulation (for reuse)."""
+        out = {}
+        for rec in self._records.values():
+            if rec.get("reused_from") is None and rec.get("sim_key"):
+                out.setdefault(rec["sim_key"], rec)
+        return out
+
+    def append(self, record: dict) -> bool:
+        """Append a finished trial; False (and nothing written) if its key is already stored."""
+        key = record.get("key")
+        if not key:
+            raise ResultsError("a trial record needs a non-empty 'key'")
+        if key in self._records:
+            return False
+        record = {**record, "record_version": RECORD_VERSION}
+        append_jsonl(self.path, record)
+        self._records[key] = record
+        return True
+
+
+def read_results(path) -> list:
+    """All complete records of a results file (a torn last line is skipped)."""
+    try:
+        records = read_jsonl(path)
+    except ValueError as exc:
+        raise ResultsError(str(exc)) from None
+    for i, rec in enumerate(records):
+        if not isinstance(rec, dict) or "key" not in rec:
+            raise ResultsError(f"{path}: record {i + 1} has no 'key'")
+        if rec.get("record_version", RECORD_VERSION) != RECORD_VERSION:
+            raise ResultsError(f"{path}: record {i + 1} has version {rec.get('record_version')}, "
+                               f"this code reads {RECORD_VERSION}")
+    return records
