@@ -209,7 +209,7 @@ class Trainer:
             val = rectangle_accuracy(self.model, self.val_set.samples, self.config.uses_stiffness)
             self.history.append({
                 "epoch": self.epoch, "step": self.global_step,
-                "train_loss": running["loss_sum"] / max(running["images"], 1),
+                "train_loss": running["loss_sum"] / max(running["images"], 1), "train_images": running["images"],
                 "train_images_per_s": running["images"] / max(running["seconds"], 1e-9),
                 "val_loss": dataset_loss(self.model, self.val_set, positive_weight=self.config.positive_weight),
                 "val_accuracy": val["accuracy"],
