@@ -96,10 +96,11 @@ def trajectory_to_msg(trajectory, frame_id: str) -> JointTrajectory:
     msg.header.frame_id = frame_id  # stamp zero: start on receipt
     msg.joint_names = list(PANDA_JOINT_NAMES)
     for t, q, qd, qdd in zip(trajectory.times_s, trajectory.q_rad, trajectory.qd_radps, trajectory.qdd_radps2):
-        sec = int(math.floor(t))
+        # Split whole nanoseconds, so rounding can never carry into a wrong second.
+        sec, nanosec = divmod(int(round(float(t) * 1e9)), 1_000_000_000)
         msg.points.append(JointTrajectoryPoint(
             positions=q.tolist(), velocities=qd.tolist(), accelerations=qdd.tolist(),
-            time_from_start=Duration(sec=sec, nanosec=int(round((t - sec) * 1e9)) % 1_000_000_000)))
+            time_from_start=Duration(sec=sec, nanosec=nanosec)))
     return msg
 
 
