@@ -27,6 +27,10 @@ DRIVER_CAMERA_REMAPS = {
 }
 
 
+# Its renders are unused (remapped away): render rarely, and run as fast as the machine allows.
+DRIVER_REPLAY_PARAMETERS = {"depth_rate_hz": 0.2, "max_real_time_factor": 0.0, "publish_color": False}
+
+
 @dataclass(frozen=True)
 class ModelChoice:
     path: Path
@@ -82,7 +86,7 @@ def graph_specs(metadata: dict, model: ModelChoice, pick: bool, run_dir: Path) -
         scene_file.write_text(md.scene_yaml(metadata), encoding="utf-8")
         specs += [
             NodeSpec("fake_panda_driver", "defgg_ros.nodes.fake_panda_driver_node",
-                     {"scene_file": str(scene_file)}, dict(DRIVER_CAMERA_REMAPS)),
+                     {"scene_file": str(scene_file), **DRIVER_REPLAY_PARAMETERS}, dict(DRIVER_CAMERA_REMAPS)),
             NodeSpec("executor_node", "defgg_ros.nodes.executor_node", {"use_sim_time": True}),
         ]
     return specs
