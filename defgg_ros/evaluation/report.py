@@ -77,15 +77,6 @@ def write_outputs(out_dir) -> dict:
                                   for s in sets for m in models}
         summary["tasks"][task].update({f"{s}|{m}|{e:g}": _cell_json(cells[(e, s, m)])
                                        for s in sets for m in models for e in moduli})
-    if "shake" in manifest["tasks"]:
-        cells = tables.main_table(records, "shake", sets, models, moduli, expected, field="success_mean")
-        title = ("**Shake task, training-label criterion** (mean held acceleration over the 16 directions >= 25 "
-                 "m/s^2): success rate in %")
-        write_text_atomic(tdir / "shake_mean.md",
-                          tables.main_table_markdown(cells, "shake", sets, models, moduli, labels, title))
-        write_text_atomic(tdir / "shake_mean.csv", tables.main_table_csv(cells, "shake_mean", sets, models, moduli))
-        summary["shake_mean"] = {f"{s}|{m}": _cell_json(cells[(tables.ALL_STIFFNESSES, s, m)])
-                                 for s in sets for m in models}
     if "sensitivity" in manifest["experiments"]:
         summary["sensitivity"] = _write_sensitivity(records, manifest, models, labels, tdir)
     if "multimaterial" in manifest["experiments"]:

@@ -23,7 +23,7 @@ class Cell:
     success: int = 0
     sim_failed: int = 0
     expected: int = 0
-    field: str = "success"     # or "success_mean" (the training label's criterion, shake only)
+    field: str = "success"     # record field that holds the grasp outcome
 
     def add(self, rec: dict) -> None:
         if rec.get(self.field) is None:

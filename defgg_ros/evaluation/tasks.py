@@ -11,9 +11,10 @@ procedure and withstands the task's acceleration limit:
   the object is held up to TWIST_ACCEL_LIMIT_RADPS2 (500 rad/s^2) about
   every axis.
 
-The training label's criterion (mean held acceleration over the directions
->= 25 m/s^2) is also recorded for the shake task (``shake_mean_success``) and
-tabulated apart, because it is what the networks were trained to predict.
+The training label is weaker (mean held acceleration over the directions
+>= 25 m/s^2 with a ramp to 50 m/s^2); the task needs every direction, so the
+evaluation ramps to 25 m/s^2 and stops at the first direction that fails
+(runner.eval_trial_settings).
 
 A lift failure is a failed grasp. Simulation failures (explosion, time-out)
 are not grasp outcomes: ``success`` is None and tables count them apart.
@@ -55,13 +56,3 @@ def task_success(task: str, status: str, accels: list | None) -> bool | None:
     limit = SHAKE_POSITIVE_THRESHOLD_MPS2 if task == "shake" else TWIST_ACCEL_LIMIT_RADPS2
     return bool(min(accels) >= limit * (1 - LIMIT_TOLERANCE))
 
-
-def shake_mean_success(status: str, accels: list | None) -> bool | None:
-    """The training label's criterion: mean held acceleration >= 25 m/s^2 (None if the sim failed)."""
-    if status == STATUS_LIFT_FAILED:
-        return False
-    if status != STATUS_OK:
-        return None
-    if not accels:
-        raise TaskError("shake trial with status ok but no accelerations recorded")
-    return bool(sum(accels) / len(accels) >= SHAKE_POSITIVE_THRESHOLD_MPS2)

@@ -64,7 +64,8 @@ def shake_directions(n: int = SHAKE_DIRECTIONS) -> np.ndarray:
     z = 1 - 2 * i / n
     phi = math.pi * (1 + 5**0.5) * i
     dirs = np.c_[np.sqrt(1 - z * z) * np.cos(phi), np.sqrt(1 - z * z) * np.sin(phi), z]
-    order = np.argsort([int(f"{k:04b}"[::-1], 2) if n == 16 else k for k in range(n)])
+    bits = max(1, (n - 1).bit_length())
+    order = [k for k in (int(f"{i:0{bits}b}"[::-1], 2) for i in range(2**bits)) if k < n]  # bit reversal
     return dirs[order]
 
 
@@ -96,7 +97,14 @@ class TrialSettings:
     stop_direction_when_lost: bool = True
     stop_when_label_decided: bool = True
     max_cpu_s: float = 900.0
+    # Evaluation tasks (defgg_ros/evaluation): ramp the shake only to this limit, and stop
+    # the remaining directions/axes once one is held below *_fail_below_* (the task has
+    # failed). Skipped ones are stored as 0 and flagged unmeasured. None = off (generator).
+    shake_limit_mps2: float = SHAKE_ACCEL_LIMIT_MPS2
+    shake_fail_below_mps2: float | None = None
+    twist_fail_below_radps2: float | None = None
     time_step_s: float | None = None   # None: world.time_step_for(E), the probe's stable steps
+    shake_directions: int = SHAKE_DIRECTIONS   # fewer only in tests
 
     @classmethod
     def naive(cls) -> TrialSettings:
@@ -114,6 +122,7 @@ class TrialOutcome:
     shake_accels_mps2: list | None = None
     shake_measured: list | None = None
     twist_accels_radps2: list | None = None
+    twist_measured: list | None = None
     grasp_force_n: float = 0.0
     cpu_s: float = 0.0
     sim_steps: int = 0
@@ -208,7 +217,7 @@ class _Trial:
 
     def shake(self):
         g = np.array([0, 0, -world.GRAVITY_MPS2])
-        dirs = shake_directions()
+        dirs = shake_directions(self.settings.shake_directions)
         values, measured = [], []
         need = SHAKE_POSITIVE_THRESHOLD_MPS2 * len(dirs)
         for d in dirs:
@@ -218,9 +227,14 @@ class _Trial:
                 self.world.set_gravity(g - a * d)
                 self.step(n)
 
-            values.append(self.ramp(SHAKE_ACCEL_LIMIT_MPS2, self.settings.shake_ramp_time_s, apply))
+            values.append(self.ramp(self.settings.shake_limit_mps2, self.settings.shake_ramp_time_s, apply))
             measured.append(True)
             left = len(dirs) - len(values)
+            fail_below = self.settings.shake_fail_below_mps2
+            if fail_below is not None and values[-1] < fail_below and left:
+                values += [0.0] * left
+                measured += [False] * left
+                break
             if self.settings.stop_when_label_decided and left:
                 if sum(values) >= need:
                     values += [0.0] * left       # held accelerations are >= 0: positive is certain
@@ -249,7 +263,12 @@ class _Trial:
                 self.step(n)
 
             values.append(self.ramp(TWIST_ACCEL_LIMIT_RADPS2, self.settings.twist_ramp_time_s, apply))
-        return values
+            fail_below = self.settings.twist_fail_below_radps2
+            if fail_below is not None and values[-1] < fail_below:
+                break
+        # Axes skipped after a failure: 0, flagged in twist_measured.
+        return values + [0.0] * (len(TWIST_AXES) - len(values)), [True] * len(values) + [False] * (
+            len(TWIST_AXES) - len(values))
 
 
 def _axis_angle(axis, angle):
@@ -285,7 +304,7 @@ def run_grasp_trial(spec: objects.ObjectSpec, grasp: WorldGrasp, tests=("shake",
         if "shake" in tests:
             out.shake_accels_mps2, out.shake_measured = trial.shake()
         if "twist" in tests:
-            out.twist_accels_radps2 = trial.twist()
+            out.twist_accels_radps2, out.twist_measured = trial.twist()
     except _Abort as abort:
         out.status, out.note = abort.status, abort.note
     finally:
