@@ -34,7 +34,7 @@ def _grasp_from_ground_truth(obj, position):
     grasp = Grasp()
     grasp.pose_base.header.frame_id = "panda_link0"
     grasp.pose_base.pose.position.x, grasp.pose_base.pose.position.y = float(position[0]), float(position[1])
-    grasp.pose_base.pose.position.z = float(obj["size_m"][2] / 2)
+    grasp.pose_base.pose.position.z = float(obj["size_m"][2])  # the visible top surface
     q = matrix_to_quaternion_xyzw(rotation)
     o = grasp.pose_base.pose.orientation
     o.x, o.y, o.z, o.w = (float(v) for v in q)

@@ -19,11 +19,12 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import String
+from std_srvs.srv import Trigger
 
 from defgg_ros import topics
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import stamp_to_ns
-from defgg_ros.nodes.fake_panda_driver_node import OBJECT_POSES_TOPIC, SCENE_TOPIC
+from defgg_ros.nodes.fake_panda_driver_node import CAPTURE_SERVICE, IMAGE_QOS, OBJECT_POSES_TOPIC, SCENE_TOPIC
 
 
 class DemoError(RuntimeError):
@@ -42,8 +43,10 @@ class DemoClient:
         n = self.node
         n.create_subscription(String, SCENE_TOPIC, self._on_scene, qos.LATCHED)
         n.create_subscription(PoseArray, OBJECT_POSES_TOPIC, self._on_poses, qos.STATE)
-        n.create_subscription(Image, topics.DEPTH_IMAGE, self._on_depth, qos.SENSOR_DATA)
-        n.create_subscription(CameraInfo, topics.DEPTH_CAMERA_INFO, self._on_info, qos.SENSOR_DATA)
+        # Reliable: the driver publishes camera frames reliably and the demo must not lose one.
+        n.create_subscription(Image, topics.DEPTH_IMAGE, self._on_depth, IMAGE_QOS)
+        n.create_subscription(CameraInfo, topics.DEPTH_CAMERA_INFO, self._on_info, IMAGE_QOS)
+        self.capture_client = n.create_client(Trigger, CAPTURE_SERVICE)
         self.set_stiffness_client = n.create_client(SetStiffness, topics.SET_STIFFNESS_SERVICE)
         self.plan_client = n.create_client(PlanGrasp, topics.PLAN_GRASP_SERVICE)
         self.pick_client = ActionClient(n, PickAndPlace, topics.PICK_AND_PLACE_ACTION)
@@ -100,7 +103,12 @@ class DemoClient:
         return list(self._poses[0])
 
     def fresh_frame(self, after_wall_s: float, timeout_s=60.0):
-        """(depth Image, CameraInfo) of one stamp, received after `after_wall_s` (time.monotonic())."""
+        """(depth Image, CameraInfo) of one stamp, received after `after_wall_s` (time.monotonic()).
+
+        Asks the driver to render now (its periodic frames come every 0.5 s of
+        sim time, which is many wall seconds while soft objects are simulated).
+        """
+        self._call(self.capture_client, Trigger.Request(), timeout_s, "capture_depth")
         def ready():
             return any(t > after_wall_s and s in self._info for s, (_, t) in self._depth.items())
 

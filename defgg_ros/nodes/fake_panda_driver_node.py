@@ -25,6 +25,7 @@ from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, Image, JointState
 from std_msgs.msg import Header, String
@@ -44,6 +45,11 @@ from defgg_ros.sim.scene_spec import SceneError, load_scene
 SCENE_TOPIC = "/fake_panda/scene"
 OBJECT_POSES_TOPIC = "/fake_panda/object_poses"
 CAPTURE_SERVICE = "/fake_panda/capture_depth"
+# Camera frames are published reliably (like realsense2_camera): best-effort
+# subscribers (the cell's nodes, qos.SENSOR_DATA) still match, and a client
+# that must not miss a frame (the demo, recorders) can subscribe reliably.
+IMAGE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=2, reliability=ReliabilityPolicy.RELIABLE,
+                       durability=DurabilityPolicy.VOLATILE)
 # A trajectory stamp further than this from sim time is a wall-clock stamp
 # from a node without use_sim_time: start it now instead of never/at once.
 MAX_STAMP_OFFSET_S = 1.0
@@ -128,9 +134,9 @@ class FakePandaDriver(Node):
         self.pub_clock = self.create_publisher(Clock, "/clock", qos.STATE)
         self.pub_joints = self.create_publisher(JointState, cfg["joint_states_topic"], qos.STATE)
         self.pub_wrench = self.create_publisher(WrenchStamped, cfg["external_wrench_topic"], qos.STATE)
-        self.pub_depth = self.create_publisher(Image, cfg["depth_topic"], qos.SENSOR_DATA)
-        self.pub_info = self.create_publisher(CameraInfo, cfg["camera_info_topic"], qos.SENSOR_DATA)
-        self.pub_color = self.create_publisher(Image, cfg["color_topic"], qos.SENSOR_DATA)
+        self.pub_depth = self.create_publisher(Image, cfg["depth_topic"], IMAGE_QOS)
+        self.pub_info = self.create_publisher(CameraInfo, cfg["camera_info_topic"], IMAGE_QOS)
+        self.pub_color = self.create_publisher(Image, cfg["color_topic"], IMAGE_QOS)
         self.pub_poses = self.create_publisher(PoseArray, OBJECT_POSES_TOPIC, qos.STATE)
         self.pub_scene = self.create_publisher(String, SCENE_TOPIC, qos.LATCHED)
         self.pub_scene.publish(String(data=json.dumps(self._scene_description())))

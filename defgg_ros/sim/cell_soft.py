@@ -20,7 +20,7 @@ from defgg_ros.sim import cell_grid_mesh, cell_objects, meshes
 from defgg_ros.sim.scene_spec import ObjectSpec
 
 ACTIVATE_DISTANCE_M = 0.06    # TCP to the object's bounding box
-DEACTIVATE_DISTANCE_M = 0.12  # hysteresis: well clear of the hand
+DEACTIVATE_DISTANCE_M = 0.08  # hysteresis; small enough that working on a neighbour 16 cm away lets it sleep
 REST_MOTION_M = 5e-4          # max node travel between two checks to count as at rest
 
 
