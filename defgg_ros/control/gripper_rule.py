@@ -1,16 +1,16 @@
 """How hard and how far to close the Franka Hand, chosen from Young's modulus.
 
 Why a rule at all: the same grasp force cannot serve a foam cube and a
-wooden block. A force that holds a rigid object by friction (tens of N)
-squashes a 2e4 Pa foam flat -- 40 N over two 20x18 mm pads is ~55 kPa, a
-strain well above 1 -- while a force gentle enough for the foam lets a
-rigid object slip under the transfer's accelerations. DefGraspSim (Huang et
-al.) grew the grasp force with the logarithm of the modulus for the same
-reason; we do the same: the force rises linearly in log10(E) from
-`SOFT_GRASP_FORCE_N` at the softest training modulus to `RIGID_GRASP_FORCE_N`
-at the stiffest and is clipped outside that range (and to the hand's
-continuous force). Soft objects are also closed more slowly, so the fingers
-stop on the object instead of driving through its first few millimetres.
+wooden block -- a force that holds a rigid object by friction squashes a
+2e4 Pa foam, and one gentle enough for the foam lets a stiff object slip.
+DefGraspSim (Huang et al.) grew the grasp force with the logarithm of the
+modulus; so did our dataset generator, and the executor uses *that same
+function* (`defgg_ros.sim.trial.grasp_force_n`, the force of the training
+labels), because Def-GG-CNN's quality is the probability that a grasp holds
+when closed with that force: executing with another force would execute a
+different grasp than the one the network rated. The force is clipped to the
+hand's continuous rating. Soft objects are also closed more slowly, so the
+fingers stop on the object instead of driving through its first millimetres.
 
 The closing width follows franka_gripper's grasp semantics: the command
 succeeds when the fingers stop inside [width - eps_inner, width + eps_outer].
@@ -25,17 +25,13 @@ from defgg_ros.constants import (
     GRIPPER_MAX_FORCE_N,
     GRIPPER_MAX_WIDTH_M,
     MAX_SOFT_BODY_YOUNGS_MODULUS_PA,
-    TRAINING_YOUNGS_MODULI_PA,
     YOUNGS_MODULUS_MAX_PA,
     YOUNGS_MODULUS_MIN_PA,
 )
 
-SOFT_MODULUS_PA = min(TRAINING_YOUNGS_MODULI_PA)
-RIGID_MODULUS_PA = max(TRAINING_YOUNGS_MODULI_PA)
-SOFT_GRASP_FORCE_N = 5.0
-# Holds a rigid ~0.5 kg object with friction 0.5 at 30 m/s^2 of transfer
-# acceleration, and stays well inside the hand's continuous rating.
-RIGID_GRASP_FORCE_N = min(40.0, GRIPPER_MAX_FORCE_N)
+# Defined by the dataset generator: the force its labels were made with.
+from defgg_ros.sim.trial import grasp_force_n as label_grasp_force_n
+
 # Closing speeds (opening rate, franka_gripper allows up to 0.1 m/s).
 SOFT_CLOSING_SPEED_MPS = 0.02
 RIGID_CLOSING_SPEED_MPS = 0.05
@@ -64,14 +60,12 @@ class GraspCommand:
 
 
 def grasp_force_n(youngs_modulus_pa: float) -> float:
-    """Grasp force growing linearly with log10(E), clipped to [SOFT, RIGID] force."""
+    """The training labels' grasp force (grows with log10 E), within the hand's rating."""
     e = float(youngs_modulus_pa)
     if not math.isfinite(e) or not YOUNGS_MODULUS_MIN_PA <= e <= YOUNGS_MODULUS_MAX_PA:
         raise GripperRuleError(f"Young's modulus {e} Pa is outside [{YOUNGS_MODULUS_MIN_PA:g}, "
                                f"{YOUNGS_MODULUS_MAX_PA:g}] Pa")
-    fraction = math.log10(e / SOFT_MODULUS_PA) / math.log10(RIGID_MODULUS_PA / SOFT_MODULUS_PA)
-    fraction = min(1.0, max(0.0, fraction))
-    return SOFT_GRASP_FORCE_N + fraction * (RIGID_GRASP_FORCE_N - SOFT_GRASP_FORCE_N)
+    return min(float(label_grasp_force_n(e)), GRIPPER_MAX_FORCE_N)
 
 
 def grasp_command(youngs_modulus_pa: float, grasp_width_m: float) -> GraspCommand:

@@ -6,25 +6,22 @@ import pytest
 from defgg_ros.constants import GRIPPER_MAX_FORCE_N, GRIPPER_MAX_WIDTH_M, TRAINING_YOUNGS_MODULI_PA
 from defgg_ros.control.gripper_rule import (
     MISSED_WIDTH_M,
-    RIGID_GRASP_FORCE_N,
-    SOFT_GRASP_FORCE_N,
     GripperRuleError,
     grasp_command,
     grasp_force_n,
 )
+from defgg_ros.sim.trial import grasp_force_n as label_force_n
 
 
-def test_force_grows_with_log_modulus_and_is_clipped():
+def test_force_is_the_training_labels_force_growing_with_log_modulus():
     forces = [grasp_force_n(e) for e in TRAINING_YOUNGS_MODULI_PA]
     assert forces == sorted(forces) and len(set(forces)) == len(forces)
-    assert forces[0] == pytest.approx(SOFT_GRASP_FORCE_N)
-    assert forces[-1] == pytest.approx(RIGID_GRASP_FORCE_N)
-    assert grasp_force_n(1e3) == pytest.approx(SOFT_GRASP_FORCE_N)
-    assert grasp_force_n(1e10) == pytest.approx(RIGID_GRASP_FORCE_N)
-    assert RIGID_GRASP_FORCE_N <= GRIPPER_MAX_FORCE_N
+    assert forces == [label_force_n(e) for e in TRAINING_YOUNGS_MODULI_PA]
+    assert all(0 < f <= GRIPPER_MAX_FORCE_N for f in forces)
     # Linear in log10(E): the geometric midpoint gets the mean force.
     midpoint = math.sqrt(2e4 * 2e9)
-    assert grasp_force_n(midpoint) == pytest.approx(0.5 * (SOFT_GRASP_FORCE_N + RIGID_GRASP_FORCE_N))
+    assert grasp_force_n(midpoint) == pytest.approx(0.5 * (forces[0] + forces[-1]))
+    assert grasp_command(2e4, 0.04).force_n == pytest.approx(forces[0])
 
 
 def test_command_window_accepts_anything_but_empty_fingers():
