@@ -124,8 +124,14 @@ class Replay:
 
     def _ensure_fed(self, stamp):
         """Make the frame with this stamp the latest one the inference node has seen."""
-        if stamp in self.frames_by_stamp and stamp != self.last_fed_stamp:
-            self._feed(self.frames_by_stamp[stamp])
+        if stamp not in self.frames_by_stamp or stamp == self.last_fed_stamp:
+            return
+        if self.last_fed_stamp is not None and stamp < self.last_fed_stamp:
+            # The inference node's synchroniser drops stamps older than the newest it matched.
+            self.log(f"  note: a call used frame @{stamp / 1e9:.3f}s, older than the last one fed; "
+                     "it is compared against the last frame")
+            return
+        self._feed(self.frames_by_stamp[stamp])
 
     def _frame(self, frame: Frame):
         if frame.best_grasp is None:

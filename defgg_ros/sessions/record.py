@@ -202,12 +202,14 @@ def main(argv=None) -> int:
         raise SystemExit("defgg-record: --stiffness-from-scene needs --scene")
     use_large_message_transport()
     # SIGTERM (e.g. from the bringup) ends the recording cleanly, like Ctrl-C.
-    signal.signal(signal.SIGTERM, _interrupt)
+    previous = signal.signal(signal.SIGTERM, _interrupt)
     try:
         record(args)
     except (SessionBagError, md.MetadataError, CellCallError, SceneError, ValueError) as exc:
         print(f"defgg-record: error: {exc}", file=sys.stderr)
         return 2
+    finally:
+        signal.signal(signal.SIGTERM, previous)
     return 0
 
 

@@ -1,0 +1,94 @@
+"""Session bags: MCAP + metadata round trip, atomic writing, and clear errors on damaged bags."""
+import shutil
+
+import pytest
+import yaml
+from session_bag_helpers import metadata, write_small_session
+
+from defgg_ros import topics
+from defgg_ros.sessions import session_topics as st
+from defgg_ros.sessions.bag import SessionBagError, SessionWriter, read_bag
+from defgg_ros.sessions.session import load_session
+
+
+def test_round_trip_is_mcap_with_zstd_chunks_and_metadata_twice(tmp_path):
+    path = write_small_session(tmp_path / "s")
+    info = yaml.safe_load((path / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    assert info["storage_identifier"] == "mcap"
+    assert "defgg_session" in info["custom_data"]
+    mcap = (path / info["relative_file_paths"][0]).read_bytes()
+    assert mcap.startswith(b"\x89MCAP0\r\n") and b"zstd" in mcap
+    meta, messages = read_bag(path)
+    assert meta["format"] == "defgg_session/1" and meta["model"]["file"] == "defgg_cnn.pt"
+    assert len(meta["model"]["sha256"]) == 64 and meta["software"]["defgg_ros"]
+    assert [m.topic for m in messages].count(topics.DEPTH_IMAGE) == 3
+    grasp = next(m for m in messages if m.topic == st.PLAN_RESPONSE).decode().grasps[0]
+    assert grasp.header.stamp.sec == 3 and grasp.width_m == pytest.approx(0.03)
+
+
+def test_session_timeline_pairs_frames_grasps_and_calls(tmp_path):
+    session = load_session(write_small_session(tmp_path / "s"))
+    assert [e.kind for e in session.events] == ["assignment", "frame", "frame", "frame", "plan"]
+    assert [f.stamp_ns for f in session.frames] == [1e9, 2e9, 3e9]
+    assert session.frames[2].best_grasp.decode().pose_base.pose.position.x == pytest.approx(0.52)
+    assert session.of_kind("plan")[0].response is not None
+
+
+def test_writer_refuses_to_overwrite_and_abort_leaves_nothing(tmp_path):
+    path = write_small_session(tmp_path / "s")
+    with pytest.raises(SessionBagError, match="exists already"):
+        SessionWriter(path, metadata(), 0)
+    writer = SessionWriter(tmp_path / "t", metadata(), 0)
+    writer.write(topics.BEST_GRASP, b"\x00\x01\x00\x00" + bytes(200), 1)
+    writer.abort()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s"]
+
+
+def test_unknown_topic_needs_a_type(tmp_path):
+    writer = SessionWriter(tmp_path / "t", metadata(), 0)
+    with pytest.raises(SessionBagError, match="no message type known"):
+        writer.write("/made/up", b"", 1)
+    writer.abort()
+
+
+def _mcap(path):
+    return next(path.glob("*.mcap"))
+
+
+@pytest.mark.parametrize("damage, message", [
+    ("truncate", "truncated or corrupt"),
+    ("garble", "truncated or corrupt"),
+    ("no_yaml", "not a rosbag2 folder"),
+    ("missing", "does not exist"),
+])
+def test_damaged_bags_give_a_clear_error(tmp_path, damage, message):
+    path = write_small_session(tmp_path / "s")
+    mcap = _mcap(path)
+    data = mcap.read_bytes()
+    if damage == "truncate":
+        mcap.write_bytes(data[: len(data) // 2])
+    elif damage == "garble":
+        mcap.write_bytes(data[:40] + bytes(len(data) - 80) + data[-40:])
+    elif damage == "no_yaml":
+        (path / "metadata.yaml").unlink()
+    else:
+        shutil.rmtree(path)
+    with pytest.raises(SessionBagError, match=message):
+        load_session(path)
+
+
+def test_a_bag_without_session_metadata_is_rejected(tmp_path):
+    writer = SessionWriter(tmp_path / "s", metadata(), 0)
+    path = writer.close()
+    # Rewrite the bag without its metadata message: a foreign rosbag2 bag.
+    _, messages = read_bag(path)
+    other = tmp_path / "other"
+    from rosbags.rosbag2 import Writer
+    from rosbags.rosbag2.enums import StoragePlugin
+
+    from defgg_ros.sessions.interfaces import session_typestore
+    with Writer(other, version=9, storage_plugin=StoragePlugin.MCAP) as w:
+        w.add_connection(topics.BEST_GRASP, "defgg_interfaces/msg/Grasp", typestore=session_typestore())
+    assert messages and messages[0].topic == st.METADATA
+    with pytest.raises(SessionBagError, match="not a defgg session bag"):
+        load_session(other)
