@@ -9,6 +9,7 @@ Examples::
     defgg-eval report --out results/sim_v1 --docs docs/results.md    # tables, plots, report
     defgg-eval strategy --object common_toy_bone --out results/sim_v1
     defgg-eval ship --run runs/defgg --name defgg_cnn --command "defgg-train ..." --wall-s 540
+    defgg-eval snapshot --name defgg_cnn --out models/train_data_fem_v1.tar.gz
     defgg-eval card --name defgg_cnn --eval results/sim_v1
 """
 from __future__ import annotations
@@ -87,9 +88,15 @@ def _add_others(sub):
     p = sub.add_parser("ship", help="copy a training run's best checkpoint to models/ with its provenance")
     p.add_argument("--run", required=True, help="defgg-train --out folder (finished)")
     p.add_argument("--name", required=True, help="model name, e.g. defgg_cnn -> models/defgg_cnn.pt")
-    p.add_argument("--command", required=True, help="the training command as run (recorded in the card)")
+    p.add_argument("--command", dest="train_command", required=True,
+                   help="the training command as run (recorded in the card)")
     p.add_argument("--wall-s", type=float, required=True, help="training wall time in seconds")
     p.add_argument("--commit", default=None, help="git commit of the training code (default: current HEAD)")
+    p.add_argument("--models-dir", default="models")
+
+    p = sub.add_parser("snapshot", help="freeze a shipped model's training data (dataset cut to its manifest)")
+    p.add_argument("--name", required=True, help="shipped model whose models/<name>.train.json to use")
+    p.add_argument("--out", required=True, help="archive to write, e.g. models/train_data_fem_v1.tar.gz")
     p.add_argument("--models-dir", default="models")
 
     p = sub.add_parser("card", help="(re)write models/<name>.md from its provenance, weights and evaluation")
@@ -234,8 +241,17 @@ def cmd_strategy(args) -> int:
 def cmd_ship(args) -> int:
     from defgg_ros.evaluation import cards
 
-    prov = cards.training_provenance(args.run, args.command, args.wall_s, args.commit or cards.git_commit())
+    prov = cards.training_provenance(args.run, args.train_command, args.wall_s, args.commit or cards.git_commit())
     print(cards.ship_model(args.run, args.name, args.models_dir, prov))
+    return 0
+
+
+def cmd_snapshot(args) -> int:
+    from defgg_ros.evaluation import cards, snapshot
+
+    prov = json.loads((Path(args.models_dir) / f"{args.name}{cards.PROVENANCE_SUFFIX}").read_text())
+    path = snapshot.write_snapshot(prov["data_root"], prov["manifest"], prov["data_fingerprint"], args.out)
+    print(f"{path} ({path.stat().st_size / 1e6:.2f} MB, fingerprint {prov['data_fingerprint']} verified)")
     return 0
 
 
@@ -252,14 +268,18 @@ def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     from defgg_ros.evaluation.cards import CardError
     from defgg_ros.evaluation.report import ReportError
+    from defgg_ros.evaluation.snapshot import SnapshotError
     from defgg_ros.evaluation.store import ResultsError
     from defgg_ros.model.checkpoint import CheckpointError
 
     try:
         if args.command == "run":
             return cmd_run(args, argv)
-        return {"report": cmd_report, "strategy": cmd_strategy, "ship": cmd_ship, "card": cmd_card}[args.command](args)
-    except (sources.SourceError, ReportError, ResultsError, CardError, CheckpointError, ValueError) as exc:
+        commands = {"report": cmd_report, "strategy": cmd_strategy, "ship": cmd_ship, "card": cmd_card,
+                    "snapshot": cmd_snapshot}
+        return commands[args.command](args)
+    except (sources.SourceError, ReportError, ResultsError, CardError, CheckpointError, SnapshotError, OSError,
+            ValueError) as exc:
         print(f"defgg-eval: error: {exc}", file=sys.stderr)
         return 2
 

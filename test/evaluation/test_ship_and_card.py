@@ -1,0 +1,57 @@
+"""Shipping a (tiny, real) training run: weights copied and verified, provenance, snapshot, generated card."""
+import json
+
+import pytest
+
+from defgg_ros.data.synthetic import write_synthetic_dataset
+from defgg_ros.evaluation import cli
+from defgg_ros.evaluation.cards import CardError, render_card
+from defgg_ros.evaluation.snapshot import verify_snapshot
+from defgg_ros.train.cli import main as train_main
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory):
+    root = tmp_path_factory.mktemp("ship")
+    data, run = root / "data", root / "run"
+    write_synthetic_dataset(data, n_objects=7, trials_per_scene=6)
+    argv = ["--data", str(data), "--out", str(run), "--epochs", "1", "--max-steps", "2", "--samples-per-scene", "1",
+            "--no-progress"]
+    assert train_main(argv) == 0
+    return root, data, run, "defgg-train " + " ".join(argv)
+
+
+def test_ship_snapshot_and_card(trained):
+    root, data, run, command = trained
+    models = root / "models"
+    assert cli.main(["ship", "--run", str(run), "--name", "m", "--command", command, "--wall-s", "12",
+                     "--commit", "abc123", "--models-dir", str(models)]) == 0
+    prov = json.loads((models / "m.train.json").read_text())
+    assert prov["commit"] == "abc123" and prov["n_trials"] == sum(prov["manifest"].values()) > 0
+    counts = prov["trial_counts"]
+    assert sum(c["trials"] for per in counts.values() for c in per.values()) == prov["n_trials"]
+    # the generator keeps appending trials after training: the snapshot holds exactly what the run used
+    for path in (data / "trials").glob("*.jsonl"):
+        rec = json.loads(path.read_text().splitlines()[0])
+        rec["trial_id"] += "_later"
+        with path.open("a") as f:
+            f.write(json.dumps(rec) + "\n")
+    archive = root / "data.tar.gz"
+    assert cli.main(["snapshot", "--name", "m", "--out", str(archive), "--models-dir", str(models)]) == 0
+    assert verify_snapshot(archive, prov["manifest"]) == prov["data_fingerprint"]
+    assert cli.main(["card", "--name", "m", "--models-dir", str(models)]) == 0
+    card = (models / "m.md").read_text()
+    for needle in (prov["data_fingerprint"], "abc123", command, "Validation", "Not evaluated yet"):
+        assert needle in card
+
+
+def test_card_refuses_weights_that_changed_after_shipping(trained, tmp_path):
+    root, data, run, command = trained
+    assert cli.main(["ship", "--run", str(run), "--name", "m", "--command", command, "--wall-s", "1",
+                     "--models-dir", str(tmp_path)]) == 0
+    prov_path = tmp_path / "m.train.json"
+    prov = json.loads(prov_path.read_text())
+    prov["weights_sha256"] = "0" * 64
+    prov_path.write_text(json.dumps(prov))
+    with pytest.raises(CardError, match="does not match"):
+        render_card("m", tmp_path)

@@ -1,0 +1,45 @@
+"""Aggregation into the paper's tables: counts, sim failures apart, old weights ignored, targets."""
+import json
+
+from defgg_ros.atomic import write_json_atomic
+from defgg_ros.evaluation import report
+from defgg_ros.evaluation.store import ResultStore
+
+
+def _rec(i, model, sha, e, success, task="shake", experiment="main", err=0.0, obj="a"):
+    return {"key": f"k{i}", "experiment": experiment, "model": model, "model_sha": sha, "object": obj,
+            "object_set": "common", "youngs_modulus_pa": e, "input_error_pct": err, "task": task,
+            "success": success, "reused_from": None, "sim_key": f"s{i}", "cpu_s": 10.0, "input": "true"}
+
+
+def _manifest(out):
+    write_json_atomic(out / "run.json", {
+        "command": "defgg-eval run", "commit": "x", "seed": 0, "grasps_per_object": 2, "tasks": ["shake"],
+        "experiments": ["main", "sensitivity"],
+        "models": {"stiff": {"sha": "S", "uses_stiffness": True, "path": "p"},
+                   "base": {"sha": "B", "uses_stiffness": False, "path": "q"}},
+        "objects": {"common": [{"name": "a", "moduli_pa": [2e4, 2e9]}, {"name": "b", "moduli_pa": [2e4, 2e9]}]}})
+
+
+def test_tables_count_trials_and_judge_targets(tmp_path):
+    _manifest(tmp_path)
+    store = ResultStore(tmp_path)
+    recs = [_rec(0, "stiff", "S", 2e4, True), _rec(1, "stiff", "S", 2e4, True), _rec(2, "stiff", "S", 2e9, None),
+            _rec(3, "base", "B", 2e4, False), _rec(4, "base", "B", 2e9, True),
+            _rec(5, "base", "OLD", 2e9, True),                       # trial of older weights: ignored
+            _rec(6, "stiff", "S", 2e4, False, experiment="sensitivity", err=-60.0)]
+    for r in recs:
+        store.append(r)
+    summary = report.write_outputs(tmp_path)
+    shake = summary["tasks"]["shake"]
+    assert shake["common|stiff"] == {"success_pct": 100.0, "successes": 2, "graded": 2, "sim_failed": 1,
+                                     "expected": 8}
+    assert shake["common|base"]["graded"] == 2 and shake["common|base"]["success_pct"] == 50.0
+    md = (tmp_path / "tables" / "shake.md").read_text()
+    assert "100.0 (2/2; 3 of 8 run; 1 sim-failed)" in md
+    sens = summary["sensitivity"]["stiff"]
+    assert sens["0"]["graded"] == 2 and sens["-60"]["successes"] == 0 and sens["-60"]["graded"] == 1
+    assert (tmp_path / "tables" / "sensitivity.png").stat().st_size > 1000
+    (target,) = summary["targets"]
+    assert target["margin_pts"] == 50.0 and target["margin_met"] and not target["complete"]
+    assert json.loads((tmp_path / "summary.json").read_text())["records"] == 6
