@@ -59,13 +59,15 @@ def _add_run(sub):
     p.add_argument("--experiments", nargs="+", default=list(jobs_mod.EXPERIMENTS), choices=jobs_mod.EXPERIMENTS,
                    help="main tables, stiffness-error sensitivity (stiffness models, shake), multi-material "
                         "(default: %(default)s)")
+    p.add_argument("--multimaterial-moduli", nargs="+", type=float, default=list(jobs_mod.MULTIMATERIAL_SOFT_PART_PA),
+                   metavar="PA", help="true moduli of the soft part of two-part objects (default %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="seed of the object poses (default %(default)s)")
     p.add_argument("--workers", type=int, default=1, help="simulator worker processes (default %(default)s)")
     p.add_argument("--max-trials", type=int, default=None, help="stop after simulating this many trials")
     p.add_argument("--report-every", type=int, default=10, metavar="N",
                    help="rewrite the tables every N finished trials (default %(default)s)")
     p.add_argument("--quick", action="store_true",
-                   help="smoke test only: 0.1 s acceleration ramps instead of 0.5 s (recorded in run.json and every "
+                   help="smoke test only: 5x faster acceleration ramps, shorter lift (recorded in run.json and every "
                         "trial; not the paper's protocol, never for reported numbers)")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
 
@@ -160,7 +162,7 @@ def build_views(args, predictors, objects) -> list:
         common = [o for o in objects if o.set_name in ("common", "user")]
         views += jobs_mod.sensitivity_views(stiff, common)
     if "multimaterial" in args.experiments:
-        views += jobs_mod.multimaterial_views(models, objects)
+        views += jobs_mod.multimaterial_views(models, objects, sources.check_moduli(args.multimaterial_moduli))
     return views
 
 
@@ -180,9 +182,37 @@ def write_manifest(out_dir, args, model_paths, predictors, objects, argv, settin
         "objects": by_set, "grasps_per_object": args.grasps, "tasks": list(args.tasks),
         "experiments": list(args.experiments), "seed": args.seed,
         "sensitivity_errors_pct": list(jobs_mod.SENSITIVITY_ERRORS_PCT),
+        "multimaterial_moduli_pa": list(args.multimaterial_moduli),
         "trial_settings": asdict(settings), "quick": bool(args.quick),
     }
-    write_json_atomic(Path(out_dir) / report_mod.MANIFEST_FILE, manifest)
+    write_json_atomic(Path(out_dir) / report_mod.MANIFEST_FILE, merge_manifest(out_dir, manifest))
+
+
+def merge_manifest(out_dir, manifest: dict) -> dict:
+    """Several runs into one folder (e.g. multi-material first, then the main tables) with the same models:
+    the folder's manifest is their union, so the report covers everything they ran."""
+    path = Path(out_dir) / report_mod.MANIFEST_FILE
+    if not path.is_file():
+        return {**manifest, "commands": [manifest["command"]]}
+    old = json.loads(path.read_text(encoding="utf-8"))
+    same_models = {n: m["sha"] for n, m in old.get("models", {}).items()} == \
+        {n: m["sha"] for n, m in manifest["models"].items()}
+    if not same_models or old.get("grasps_per_object") != manifest["grasps_per_object"] \
+            or old.get("seed") != manifest["seed"] or old.get("trial_settings") != manifest["trial_settings"]:
+        return {**manifest, "commands": [manifest["command"]]}     # a different evaluation: start the manifest anew
+    objects = {s: {o["name"]: o for o in objs} for s, objs in old["objects"].items()}
+    for s, objs in manifest["objects"].items():
+        for o in objs:
+            prev = objects.setdefault(s, {}).get(o["name"])
+            moduli = sorted(set(o["moduli_pa"]) | set(prev["moduli_pa"] if prev else []))
+            objects[s][o["name"]] = {**o, "moduli_pa": moduli}
+    return {**manifest, "objects": {s: list(objs.values()) for s, objs in objects.items()},
+            "tasks": [t for t in TASKS if t in set(old["tasks"]) | set(manifest["tasks"])],
+            "experiments": [e for e in jobs_mod.EXPERIMENTS if e in set(old["experiments"]) | set(
+                manifest["experiments"])],
+            "multimaterial_moduli_pa": sorted(set(old.get("multimaterial_moduli_pa", [])) | set(
+                manifest["multimaterial_moduli_pa"])),
+            "commands": list(dict.fromkeys(old.get("commands", [old["command"]]) + [manifest["command"]]))}
 
 
 def cmd_run(args, argv) -> int:

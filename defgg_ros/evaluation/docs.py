@@ -56,7 +56,8 @@ def results_markdown(out_dir, doc_path, notes_path=None) -> str:
         + (f" --notes {notes_path}" if notes_path else "") + "` from the files in "
         f"`{out_dir}/`; do not edit by hand.*", "",
         "## How to reproduce", "",
-        f"1. Evaluation (resumable; rerun the same command to continue): `{manifest['command']}`",
+        "1. Evaluation (resumable; rerun the same commands to continue): "
+        + "; ".join(f"`{c}`" for c in manifest.get("commands", [manifest["command"]])),
         f"2. Tables, plots and this report: `defgg-eval report --out {out_dir} --docs {doc_path}`",
         f"3. Strategy figure: `defgg-eval strategy --out {out_dir}`",
         "4. Models and their training: see the model cards `models/defgg_cnn.md` and "

@@ -103,8 +103,10 @@ def trial_jobs(views, model_shas: dict, grasps_per_view: int, tasks, seed: int) 
     jobs = []
     for experiment in EXPERIMENTS:
         exp_views = [v for v in views if v.experiment == experiment]
+        # The paper's sensitivity analysis is on the shake task only.
+        exp_tasks = [t for t in tasks if t == "shake"] if experiment == "sensitivity" else tasks
         for rank in range(grasps_per_view):
-            for task in tasks:
+            for task in exp_tasks:
                 for v in exp_views:
                     jobs.append(TrialJob(v.trial_key(model_shas[v.model], rank, task, seed), v, rank, task))
     return jobs
