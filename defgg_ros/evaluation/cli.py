@@ -69,6 +69,9 @@ def _add_run(sub):
     p.add_argument("--quick", action="store_true",
                    help="smoke test only: 5x faster acceleration ramps, shorter lift (recorded in run.json and every "
                         "trial; not the paper's protocol, never for reported numbers)")
+    p.add_argument("--plan-only", action="store_true",
+                   help="only render and plan every view's grasps into OUT/plans.json (no simulation; cheap), "
+                        "for the diagnostics of the report")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
@@ -79,6 +82,7 @@ def _add_others(sub):
     p.add_argument("--out", required=True, help="evaluation folder")
     p.add_argument("--docs", metavar="FILE", help="also write the Markdown report (e.g. docs/results.md)")
     p.add_argument("--notes", metavar="FILE", help="hand-written analysis to include in the report verbatim")
+    p.add_argument("--data", metavar="DIR", help="training dataset: add label diagnostics (OUT/diagnostics.json)")
 
     p = sub.add_parser("strategy", help="strategy figure: quality map and best grasp at a low and a high E")
     p.add_argument("--out", required=True, help="evaluation folder (writes strategy.png and strategy.json)")
@@ -225,6 +229,10 @@ def cmd_run(args, argv) -> int:
     write_manifest(args.out, args, model_paths, predictors, objects, argv, settings)
     plan = runner.EvalPlan(objects, predictors, build_views(args, predictors, objects), args.grasps,
                            tuple(args.tasks), args.seed, settings)
+    if args.plan_only:
+        path = runner.write_plans(plan, args.out, not args.no_progress)
+        print(path)
+        return 0
     counts = runner.run_evaluation(plan, args.out, args.workers, not args.no_progress, args.max_trials,
                                    on_progress=_reporter(args.out, args.report_every))
     report_mod.write_outputs(args.out)
@@ -243,10 +251,31 @@ def cmd_report(args) -> int:
     from defgg_ros.evaluation import docs
 
     summary = report_mod.write_outputs(args.out)
+    write_diagnostics(args.out, args.data)
     if args.docs:
         docs.write_results_doc(args.out, args.docs, args.notes)
     print(json.dumps({"records": summary["records"], "targets": summary["targets"]}, indent=1))
     return 0
+
+
+def write_diagnostics(out_dir, data_root) -> None:
+    """OUT/diagnostics.json + .md from the training labels (if --data) and OUT/plans.json (if present)."""
+    from defgg_ros.evaluation import diagnose
+    from defgg_ros.evaluation.runner import PLANS_FILE
+
+    out_dir = Path(out_dir)
+    path = out_dir / "diagnostics.json"
+    old = json.loads(path.read_text()) if path.is_file() else {}
+    labels = diagnose.label_stats(data_root) if data_root else old.get("labels")
+    plans_path = out_dir / PLANS_FILE
+    shifts = diagnose.plan_shifts(json.loads(plans_path.read_text())) if plans_path.is_file() else None
+    if labels is None and shifts is None:
+        return
+    write_json_atomic(path, {"labels": labels, "data_root": str(data_root or old.get("data_root")),
+                             "plan_shifts": shifts})
+    from defgg_ros.atomic import write_text_atomic
+
+    write_text_atomic(out_dir / "diagnostics.md", diagnose.diagnostics_markdown(labels, shifts))
 
 
 def cmd_strategy(args) -> int:

@@ -99,6 +99,9 @@ def results_markdown(out_dir, doc_path, notes_path=None) -> str:
     mm = _read(tdir / "multimaterial.md")
     if mm:
         lines += ["## Multi-material object", "", mm, ""]
+    diag = _read(out_dir / "diagnostics.md")
+    if diag:
+        lines += ["## Diagnostics: do the labels and the plans depend on the stiffness?", "", diag, ""]
     notes = _read(notes_path) if notes_path else None
     if notes:
         lines += ["## Analysis (written by the engineer, from the numbers above)", "", notes.strip(), ""]

@@ -85,6 +85,31 @@ def plan_views(plan: EvalPlan, views, client: int, show_progress: bool = True) -
     return out
 
 
+PLANS_FILE = "plans.json"
+
+
+def write_plans(plan: EvalPlan, out_dir, show_progress: bool = True):
+    """Render and plan every view (no simulation) into out_dir/plans.json; return its path."""
+    from pathlib import Path
+
+    import pybullet as p
+
+    from defgg_ros.atomic import write_json_atomic
+    from defgg_ros.sim import world
+
+    client = world.connect()
+    try:
+        grasps = plan_views(plan, plan.views, client, show_progress)
+    finally:
+        p.disconnect(client)
+    shas = plan.model_shas()
+    entries = [{"view": v.to_json(), "model_sha": shas[v.model], "grasps": [g.to_json() for g in gs]}
+               for v, gs in grasps.items()]
+    path = Path(out_dir) / PLANS_FILE
+    write_json_atomic(path, entries)
+    return path
+
+
 def _base_record(job, plan: EvalPlan, obj, grasp) -> dict:
     v = job.view
     spec = obj.spec(v.youngs_modulus_pa, v.part0_youngs_modulus_pa)

@@ -1,0 +1,108 @@
+"""Why the models do (not) differ: numbers from the training labels and from the planned grasps.
+
+1. Labels (the dataset): per modulus, how many trials are labelled and
+   positive; and, because the generator tries the SAME candidate grasps of an
+   object at every modulus, how often a candidate's label changes with E.
+   If labels hardly depend on E, no network can learn to use stiffness.
+2. Plans (an evaluation's trial records): how far each model's best grasp
+   moves between moduli on the same object. The depth-only model cannot
+   move it (its input is the same); the stiffness-aware model moves it only
+   if it learned to.
+"""
+from __future__ import annotations
+
+import itertools
+import math
+from collections import defaultdict
+
+import numpy as np
+
+from defgg_ros.data.format import list_scene_ids, read_trials
+
+
+def label_stats(data_root) -> dict:
+    """Counts per modulus and label agreement of the same candidate across moduli."""
+    per_e = defaultdict(lambda: {"trials": 0, "labelled": 0, "positive": 0, "sim_failed": 0})
+    by_candidate = defaultdict(dict)          # (object, candidate) -> {E: label}
+    shake_means = defaultdict(list)
+    for sid in list_scene_ids(data_root):
+        for t in read_trials(data_root, sid):
+            e = f"{t.youngs_modulus_pa:.0e}"
+            s = per_e[e]
+            s["trials"] += 1
+            if t.label is None:
+                s["sim_failed"] += 1
+                continue
+            s["labelled"] += 1
+            s["positive"] += int(t.label)
+            by_candidate[(t.object_name, t.candidate_index)][e] = t.label
+            if t.shake_mean_mps2 is not None:
+                shake_means[e].append(t.shake_mean_mps2)
+    pairs = defaultdict(lambda: [0, 0])       # (E1, E2) -> [same label, compared]
+    for labels in by_candidate.values():
+        for e1, e2 in itertools.combinations(sorted(labels, key=float), 2):
+            pairs[(e1, e2)][0] += int(labels[e1] == labels[e2])
+            pairs[(e1, e2)][1] += 1
+    return {
+        "per_modulus": {e: {**v, "positive_rate": v["positive"] / v["labelled"] if v["labelled"] else None,
+                            "mean_shake_mps2": float(np.mean(shake_means[e])) if shake_means[e] else None}
+                        for e, v in sorted(per_e.items(), key=lambda kv: float(kv[0]))},
+        "objects": len({o for o, _ in by_candidate}),
+        "candidates_with_several_moduli": sum(1 for v in by_candidate.values() if len(v) > 1),
+        "label_agreement": {f"{a} vs {b}": {"same": s, "compared": n, "rate": s / n if n else None}
+                            for (a, b), (s, n) in sorted(pairs.items())},
+    }
+
+
+def plan_shifts(plans) -> dict:
+    """Per model: mean distance (mm) between its rank-0 grasp at each modulus and at the stiffest one.
+
+    plans: entries of plans.json ({"view": View.to_json(), "grasps": [PlannedGrasp.to_json(), ...]}).
+    """
+    best = defaultdict(dict)                  # (model, object) -> {E: grasp}
+    for entry in plans:
+        v = entry["view"]
+        if v["experiment"] == "main" and entry["grasps"]:
+            best[(v["model"], v["object_name"])][v["youngs_modulus_pa"]] = entry["grasps"][0]
+    out = defaultdict(lambda: defaultdict(list))
+    for (model, _), grasps in best.items():
+        ref_e = max(grasps)
+        ref = grasps[ref_e]
+        for e, g in grasps.items():
+            if e == ref_e:
+                continue
+            d_mm = 1000 * math.dist(g["position_m"][:2], ref["position_m"][:2])
+            out[model][f"{e:.0e}"].append((d_mm, abs(g["width_m"] - ref["width_m"]) * 1000))
+    return {m: {e: {"objects": len(v), "mean_shift_mm": float(np.mean([d for d, _ in v])),
+                    "moved_over_5mm": sum(d > 5 for d, _ in v),
+                    "mean_width_change_mm": float(np.mean([w for _, w in v]))}
+                for e, v in sorted(per.items(), key=lambda kv: float(kv[0]))} for m, per in out.items()}
+
+
+def diagnostics_markdown(labels: dict | None, shifts: dict | None) -> str:
+    lines = []
+    if labels:
+        lines += ["**Training labels by modulus** (dataset as it is now)", "",
+                  "| E (Pa) | trials | labelled | positive | positive rate | mean held shake accel. (m/s^2) |",
+                  "|---|---|---|---|---|---|"]
+        for e, v in labels["per_modulus"].items():
+            rate = "–" if v["positive_rate"] is None else f"{100 * v['positive_rate']:.1f} %"
+            acc = "–" if v["mean_shake_mps2"] is None else f"{v['mean_shake_mps2']:.1f}"
+            lines.append(f"| {e} | {v['trials']} | {v['labelled']} | {v['positive']} | {rate} | {acc} |")
+        lines += ["", f"{labels['objects']} objects with labels; {labels['candidates_with_several_moduli']} candidate "
+                  "grasps were tried at more than one modulus. Same grasp, same label at two moduli:", "",
+                  "| moduli | same label | compared | agreement |", "|---|---|---|---|"]
+        for k, v in labels["label_agreement"].items():
+            rate = "–" if v["rate"] is None else f"{100 * v['rate']:.1f} %"
+            lines.append(f"| {k} | {v['same']} | {v['compared']} | {rate} |")
+        lines.append("")
+    if shifts:
+        lines += ["**How far the best grasp moves with the modulus** (rank-0 grasp vs the one at the stiffest "
+                  "modulus, same object)", "", "| model | E (Pa) | objects | mean shift (mm) | moved > 5 mm | "
+                  "mean width change (mm) |", "|---|---|---|---|---|---|"]
+        for m, per in shifts.items():
+            for e, v in per.items():
+                lines.append(f"| {m} | {e} | {v['objects']} | {v['mean_shift_mm']:.1f} | {v['moved_over_5mm']} | "
+                             f"{v['mean_width_change_mm']:.1f} |")
+        lines.append("")
+    return "\n".join(lines)
