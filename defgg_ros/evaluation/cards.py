@@ -126,8 +126,20 @@ def _data_section(prov) -> list:
     split = prov["object_split"]
     counts = prov["trial_counts"]
     moduli = sorted({e for per in counts.values() for e in per}, key=float)
-    lines = ["## Training data", "",
-             f"Objects by split (split by object, seed {prov['train_config']['seed']}): "
+    header = {}
+    header_path = Path(prov["data_root"]) / "dataset.json"
+    if header_path.is_file():
+        header = json.loads(header_path.read_text()).get("generator", {})
+    lines = ["## Training data", ""]
+    if prov.get("data_source"):
+        lines += [f"Source: {prov['data_source']}.", ""]
+    if prov.get("data_archive"):
+        lines += [f"Shipped: `{prov['data_archive']}` holds exactly these trials (fingerprint verified when it was "
+                  f"written). Reproduce the training: `mkdir -p runs/frozen && tar xzf {prov['data_archive']} -C "
+                  f"runs/frozen`, then the training command above with `--data runs/frozen/train_data`.", ""]
+    if header:
+        lines += [f"Generator settings (`dataset.json`, written by `defgg-datagen`): `{json.dumps(header)}`", ""]
+    lines += [f"Objects by split (split by object, seed {prov['train_config']['seed']}): "
              + "; ".join(f"**{k}** ({len(v)}): {', '.join(sorted(v))}" for k, v in split.items()), "",
              "Trials used per object and Young's modulus (positive / labelled):", "",
              "| object | " + " | ".join(f"E = {e} Pa" for e in moduli) + " |", "|---" * (len(moduli) + 1) + "|"]

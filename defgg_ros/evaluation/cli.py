@@ -9,6 +9,7 @@ Examples::
     defgg-eval report --out results/sim_v1 --docs docs/results.md    # tables, plots, report
     defgg-eval strategy --object common_toy_bone --out results/sim_v1
     defgg-eval ship --run runs/defgg --name defgg_cnn --command "defgg-train ..." --wall-s 540
+    defgg-eval freeze --data datasets/fem_v1 --archive models/train_data_fem_v1.tar.gz --extract-to runs/frozen
     defgg-eval snapshot --name defgg_cnn --out models/train_data_fem_v1.tar.gz
     defgg-eval card --name defgg_cnn --eval results/sim_v1
 """
@@ -98,7 +99,17 @@ def _add_others(sub):
                    help="the training command as run (recorded in the card)")
     p.add_argument("--wall-s", type=float, required=True, help="training wall time in seconds")
     p.add_argument("--commit", default=None, help="git commit of the training code (default: current HEAD)")
+    p.add_argument("--data-source", default="", help="where the (frozen) training data came from, for the card")
+    p.add_argument("--data-archive", default="", help="the shipped archive of the training data, for the card")
     p.add_argument("--models-dir", default="models")
+
+    p = sub.add_parser("freeze", help="freeze a growing dataset before training both models on identical data",
+                       description="Cut the dataset to its complete trial records now, write it as a .tar.gz "
+                                   "(verified fingerprint) and extract it for training; both models are then "
+                                   "trained on the extracted copy, so they see exactly the same trials.")
+    p.add_argument("--data", required=True, help="growing dataset root (defgg-datagen --out)")
+    p.add_argument("--archive", required=True, help="archive to write, e.g. models/train_data_fem_v1.tar.gz")
+    p.add_argument("--extract-to", required=True, help="folder to extract the frozen copy into (e.g. runs/)")
 
     p = sub.add_parser("snapshot", help="freeze a shipped model's training data (dataset cut to its manifest)")
     p.add_argument("--name", required=True, help="shipped model whose models/<name>.train.json to use")
@@ -301,6 +312,7 @@ def cmd_ship(args) -> int:
     from defgg_ros.evaluation import cards
 
     prov = cards.training_provenance(args.run, args.train_command, args.wall_s, args.commit or cards.git_commit())
+    prov.update(data_source=args.data_source, data_archive=args.data_archive)
     print(cards.ship_model(args.run, args.name, args.models_dir, prov))
     return 0
 
@@ -311,6 +323,23 @@ def cmd_snapshot(args) -> int:
     prov = json.loads((Path(args.models_dir) / f"{args.name}{cards.PROVENANCE_SUFFIX}").read_text())
     path = snapshot.write_snapshot(prov["data_root"], prov["manifest"], prov["data_fingerprint"], args.out)
     print(f"{path} ({path.stat().st_size / 1e6:.2f} MB, fingerprint {prov['data_fingerprint']} verified)")
+    return 0
+
+
+def cmd_freeze(args) -> int:
+    import tarfile
+
+    from defgg_ros.data.dataset import build_manifest, manifest_fingerprint
+    from defgg_ros.evaluation import snapshot
+
+    manifest = build_manifest(args.data)
+    fingerprint = manifest_fingerprint(args.data, manifest)
+    path = snapshot.write_snapshot(args.data, manifest, fingerprint, args.archive)
+    with tarfile.open(path, "r:gz") as tar:
+        tar.extractall(args.extract_to, filter="data")
+    root = Path(args.extract_to) / "train_data"
+    print(json.dumps({"archive": str(path), "size_mb": round(path.stat().st_size / 1e6, 3), "data": str(root),
+                      "trials": sum(manifest.values()), "scenes": len(manifest), "fingerprint": fingerprint}))
     return 0
 
 
@@ -335,7 +364,7 @@ def main(argv=None) -> int:
         if args.command == "run":
             return cmd_run(args, argv)
         commands = {"report": cmd_report, "strategy": cmd_strategy, "ship": cmd_ship, "card": cmd_card,
-                    "snapshot": cmd_snapshot}
+                    "snapshot": cmd_snapshot, "freeze": cmd_freeze}
         return commands[args.command](args)
     except (sources.SourceError, ReportError, ResultsError, CardError, CheckpointError, SnapshotError, OSError,
             ValueError) as exc:

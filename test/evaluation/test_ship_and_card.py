@@ -15,8 +15,11 @@ def trained(tmp_path_factory):
     root = tmp_path_factory.mktemp("ship")
     data, run = root / "data", root / "run"
     write_synthetic_dataset(data, n_objects=7, trials_per_scene=6)
-    argv = ["--data", str(data), "--out", str(run), "--epochs", "1", "--max-steps", "2", "--samples-per-scene", "1",
-            "--no-progress"]
+    # freeze the (growing) dataset, then train on the frozen copy
+    assert cli.main(["freeze", "--data", str(data), "--archive", str(root / "frozen.tar.gz"), "--extract-to",
+                     str(root / "frozen")]) == 0
+    argv = ["--data", str(root / "frozen" / "train_data"), "--out", str(run), "--epochs", "1", "--max-steps", "2",
+            "--samples-per-scene", "1", "--no-progress"]
     assert train_main(argv) == 0
     return root, data, run, "defgg-train " + " ".join(argv)
 
@@ -25,7 +28,8 @@ def test_ship_snapshot_and_card(trained):
     root, data, run, command = trained
     models = root / "models"
     assert cli.main(["ship", "--run", str(run), "--name", "m", "--command", command, "--wall-s", "12",
-                     "--commit", "abc123", "--models-dir", str(models)]) == 0
+                     "--commit", "abc123", "--models-dir", str(models), "--data-archive",
+                     str(root / "frozen.tar.gz")]) == 0
     prov = json.loads((models / "m.train.json").read_text())
     assert prov["commit"] == "abc123" and prov["n_trials"] == sum(prov["manifest"].values()) > 0
     counts = prov["trial_counts"]
@@ -36,12 +40,13 @@ def test_ship_snapshot_and_card(trained):
         rec["trial_id"] += "_later"
         with path.open("a") as f:
             f.write(json.dumps(rec) + "\n")
+    assert verify_snapshot(root / "frozen.tar.gz", prov["manifest"]) == prov["data_fingerprint"]
     archive = root / "data.tar.gz"
     assert cli.main(["snapshot", "--name", "m", "--out", str(archive), "--models-dir", str(models)]) == 0
     assert verify_snapshot(archive, prov["manifest"]) == prov["data_fingerprint"]
     assert cli.main(["card", "--name", "m", "--models-dir", str(models)]) == 0
     card = (models / "m.md").read_text()
-    for needle in (prov["data_fingerprint"], "abc123", command, "Validation", "Not evaluated yet"):
+    for needle in (prov["data_fingerprint"], "abc123", command, "Validation", "Not evaluated yet", "frozen.tar.gz"):
         assert needle in card
 
 
