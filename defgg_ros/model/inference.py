@@ -12,7 +12,6 @@ the maps are returned in that window's coordinates with its offset.
 """
 from __future__ import annotations
 
-import logging
 from dataclasses import dataclass
 
 import numpy as np
@@ -20,7 +19,7 @@ import torch
 
 from defgg_ros.grasping.config import DEFAULT_POSTPROCESS, PostProcessConfig
 from defgg_ros.grasping.geometry import check_camera_k, pixel_to_camera, width_px_to_m
-from defgg_ros.grasping.postprocess import GraspMaps, grasps_from_maps, maps_from_network
+from defgg_ros.grasping.postprocess import grasps_from_maps, maps_from_network
 from defgg_ros.model.checkpoint import CheckpointError, load_checkpoint, network_from_checkpoint
 from defgg_ros.model.preprocess import (
     InvalidInputError,
@@ -35,7 +34,6 @@ from defgg_ros.stiffness import InvalidYoungsModulus
 
 __all__ = ["GraspPredictor", "GraspPrediction", "GraspCandidate", "CheckpointError",
            "InvalidInputError", "InvalidYoungsModulus"]
-_log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -106,6 +104,12 @@ class GraspPredictor:
             return self._forward(x)[0].numpy()
 
     def predict(self, depth_m, youngs_modulus_pa, camera_k, object_mask=None, top_k: int = 1) -> GraspPrediction:
+        """Ranked grasps for one scene (see the module docstring and docs/model.md).
+
+        Raises ValueError subclasses (InvalidInputError, InvalidYoungsModulus)
+        for bad shapes, sizes, depth without valid pixels, NaN/negative moduli,
+        non-finite intrinsics or an empty mask.
+        """
         depth_full = check_depth_image(depth_m)
         moduli = _check_moduli(youngs_modulus_pa, depth_full.shape)
         k = check_camera_k(camera_k)
@@ -162,6 +166,3 @@ def _check_mask(object_mask, shape):
         raise InvalidInputError("object_mask has no object pixel (all zero)")
     return mask.astype(np.int32, copy=False)
 
-
-def maps_to_grasp_maps(prediction: GraspPrediction) -> GraspMaps:
-    return GraspMaps(q=prediction.q, angle_rad=prediction.angle_rad, width_px=prediction.width_px)
