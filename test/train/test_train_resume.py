@@ -12,7 +12,7 @@ from defgg_ros.model.checkpoint import load_checkpoint
 from defgg_ros.model.inference import GraspPredictor
 from defgg_ros.train.cli import main
 
-ARGS = ["--epochs", "4", "--batch-size", "2", "--samples-per-scene", "1", "--seed", "5", "--no-progress",
+ARGS = ["--epochs", "3", "--batch-size", "2", "--samples-per-scene", "1", "--seed", "5", "--no-progress",
         "--val-fraction", "0.3", "--test-fraction", "0.3"]
 
 
@@ -36,12 +36,12 @@ def test_killed_run_resumes_to_the_same_result(tiny_dataset, tmp_path):
     proc.send_signal(signal.SIGKILL)
     proc.wait()
     state = torch.load(killed / "state.pt", weights_only=True)
-    assert state["epoch"] < 4, "the run finished before it could be killed"
+    assert state["epoch"] < 3, "the run finished before it could be killed"
 
     assert main(["--data", str(tiny_dataset), "--out", str(killed), "--resume", *ARGS]) == 0
     assert _weights(killed) == _weights(tmp_path / "straight")
     metrics = json.loads((killed / "metrics.json").read_text())
-    assert [h["epoch"] for h in metrics["history"]] == [1, 2, 3, 4]
+    assert [h["epoch"] for h in metrics["history"]] == [1, 2, 3]
     for name in ("best.pt", "curves.png", "stiffness_response.png"):
         assert (killed / name).stat().st_size > 0
     assert GraspPredictor.from_checkpoint(killed / "best.pt").uses_stiffness
@@ -52,5 +52,3 @@ def test_resume_refuses_changed_hyper_parameters(tiny_dataset, tmp_path, capsys)
     assert main(["--data", str(tiny_dataset), "--out", str(run), *ARGS, "--max-steps", "1"]) == 0
     assert main(["--data", str(tiny_dataset), "--out", str(run), "--resume", *ARGS, "--lr", "0.1"]) == 2
     assert "learning_rate" in capsys.readouterr().err
-    assert main(["--data", str(tiny_dataset), "--out", str(run), "--resume", *ARGS, "--max-steps", "2"]) == 0
-    assert torch.load(run / "state.pt", weights_only=True)["global_step"] == 2
