@@ -16,7 +16,17 @@ import threading
 import time
 
 import numpy as np
-from bench_plan_grasp import Cell, messages, prime_latest_frame, rss_mb, scene, start_node, wait_for_node
+from bench_plan_grasp import (
+    Cell,
+    make_executor,
+    messages,
+    prime_latest_frame,
+    rss_mb,
+    scene,
+    start_node,
+    stop_node,
+    wait_for_node,
+)
 
 from defgg_ros.nodes.grasp_inference_node import default_model_path
 
@@ -32,6 +42,8 @@ def parse_args(argv=None):
                                                                     "as dropped")
     parser.add_argument("--model", default=str(default_model_path(True)), help="checkpoint")
     parser.add_argument("--threads", type=int, default=1, help="torch threads in the node")
+    parser.add_argument("--client-executor", choices=("events", "single"), default="events",
+                        help="executor spinning the client nodes")
     return parser.parse_args(argv)
 
 
@@ -94,7 +106,6 @@ def main(argv=None):
     import rclpy
     from defgg_interfaces.srv import PlanGrasp
     from rclpy.context import Context
-    from rclpy.executors import MultiThreadedExecutor
     from tqdm import tqdm
 
     depth_m, moduli_pa, _, camera_k = scene()
@@ -102,13 +113,13 @@ def main(argv=None):
     context = Context()
     rclpy.init(context=context)
     try:
-        primer = Cell(context, "bench_load_primer")
+        primer = Cell(context, "bench_load_primer", args.client_executor)
         wait_for_node(primer, proc)
         frame_msgs = messages(depth_m, moduli_pa, camera_k)
         prime_latest_frame(primer, frame_msgs)
         image_request = PlanGrasp.Request(depth=frame_msgs[0], stiffness=frame_msgs[1], camera_info=frame_msgs[2])
         requests = (PlanGrasp.Request(), image_request, args.image_fraction)
-        executor = MultiThreadedExecutor(num_threads=2, context=context)
+        executor = make_executor(args.client_executor, context)
         clients = []
         for index in range(args.clients):
             node = rclpy.create_node(f"bench_load_client_{index}", context=context)
@@ -124,8 +135,7 @@ def main(argv=None):
             load, seconds = run_round(executor, clients, requests, args, rng)
             report(round_index, load, seconds, args, rss_mb(proc.pid))
     finally:
-        proc.terminate()
-        proc.wait(timeout=30)
+        stop_node(proc)
         context.try_shutdown()
 
 
