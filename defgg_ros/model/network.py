@@ -6,16 +6,18 @@ Two architectures share one config dataclass:
   5x5/16 s2, 3x3/8 s2, then transposed convs 3x3/8, 5x5/16, 9x9/32 mirrored
   and 2x2 one-channel heads (62,420 parameters with one input channel).
 * ``"ggcnn_bilinear"`` (the default): the same encoder, but the decoder works
-  at 1/3 resolution and ends in 1x1 heads followed by bilinear upsampling to
-  300x300, the idea GG-CNN2 uses. Why (measured by bench/bench_inference.py on
-  this machine, 2 threads, 300x300): ~80 % of the reference's multiply-adds
-  sit in the last 9x9 transposed conv that writes 32 channels at full
-  resolution, while the outputs are Gaussian-smoothed (sigma 2 px) before
-  peaks are picked anyway; decoding at 100x100 and upsampling 4 channels makes
-  the forward several times faster with the same rectangle metric on the
-  synthetic validation set. GG-CNN2's dilated trunk is the other direction
-  (more accuracy, ~1.5x slower than GG-CNN on CPU), which the 15 ms service
-  budget does not allow.
+  at 1/6 and 1/3 resolution and ends in 1x1 heads followed by bilinear
+  upsampling to 300x300, the idea GG-CNN2 uses.
+
+Why (bench/bench_inference.py, see bench/README.md): the reference's last
+9x9 transposed conv writes 32 channels at full resolution, ~415 M of its
+~530 M multiply-adds, and its forward peaks at ~130 MB of activations (ours
+~16 MB), while the outputs are Gaussian-smoothed (sigma 2 px) before peaks
+are picked anyway. Decoding at 100x100 and upsampling the 4 output maps is
+4-14x faster in the same benchmark run; the rectangle metric of both
+architectures trained on the same data is compared in docs/model.md.
+GG-CNN2's dilated trunk spends more compute for accuracy (not measured here);
+the cell's grasp service budget (p99 <= 15 ms) pointed the other way.
 
 Outputs are raw (linear) maps, as in GG-CNN: quality Q, cos 2phi, sin 2phi
 and width / WIDTH_SCALE_PX. Post-processing clips them to their ranges.
