@@ -65,8 +65,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="ggcnn_bilinear (fast decoder, default) or ggcnn (the reference GG-CNN)")
     p.add_argument("--no-augment", action="store_true", help="disable random rotations, zooms and shifts")
     p.add_argument("--max-steps", type=int, default=None, help="stop after this many optimizer steps (smoke runs)")
-    p.add_argument("--checkpoint-every", type=int, default=0, metavar="STEPS",
-                   help="also save the resume state every STEPS steps (default: at the end of each epoch)")
+    p.add_argument("--checkpoint-every", type=int, default=25, metavar="STEPS",
+                   help="also save the resume state every STEPS optimizer steps, so a kill mid-epoch loses at "
+                        "most that much work; 0 = only at the end of each epoch (default %(default)s)")
     p.add_argument("--threads", type=int, default=1, help="torch CPU threads per process (default %(default)s)")
     p.add_argument("--workers", type=int, default=0, help="data-loading worker processes (default %(default)s)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
