@@ -291,6 +291,11 @@ def _quat(pose):
 def _load_soft(client, tet, mass_kg, youngs_modulus_pa, poisson_ratio, world_T_object) -> int:
     mu = youngs_modulus_pa / (2 * (1 + poisson_ratio))
     lam = youngs_modulus_pa * poisson_ratio / ((1 + poisson_ratio) * (1 - 2 * poisson_ratio))
+    with meshes._stdout_silenced():  # loadSoftBody prints node/tet counts from C
+        return _load_soft_quiet(client, tet, mass_kg, mu, lam, world_T_object)
+
+
+def _load_soft_quiet(client, tet, mass_kg, mu, lam, world_T_object) -> int:
     return p.loadSoftBody(
         str(tet.vtk_path), basePosition=world_T_object[:3, 3].tolist(), baseOrientation=_quat(world_T_object),
         mass=mass_kg, useNeoHookean=1, NeoHookeanMu=mu, NeoHookeanLambda=lam,

@@ -92,12 +92,13 @@ def tube_along(points_m, radii_m, sections=10) -> trimesh.Trimesh:
     radii = np.broadcast_to(np.asarray(radii_m, dtype=float), (len(pts),))
     tangents = np.gradient(pts, axis=0)
     tangents /= np.linalg.norm(tangents, axis=1, keepdims=True)
-    ref = np.array([0.0, 0.0, 1.0])
+    # parallel transport of the ring frame: no flips where the tangent turns
+    a = np.cross(tangents[0], [0.0, 0.0, 1.0])
+    if np.linalg.norm(a) < 1e-6:
+        a = np.cross(tangents[0], [1.0, 0.0, 0.0])
     rings = []
     for p, t, r in zip(pts, tangents, radii):
-        a = np.cross(t, ref)
-        if np.linalg.norm(a) < 1e-6:
-            a = np.cross(t, [1.0, 0.0, 0.0])
+        a = a - (a @ t) * t
         a /= np.linalg.norm(a)
         b = np.cross(t, a)
         ang = 2 * math.pi * np.arange(sections) / sections
@@ -110,7 +111,7 @@ def tube_along(points_m, radii_m, sections=10) -> trimesh.Trimesh:
         for i in range(s):
             j = (i + 1) % s
             a0, a1, b0, b1 = k * s + i, k * s + j, (k + 1) * s + i, (k + 1) * s + j
-            faces += [[a0, b0, b1], [a0, b1, a1]]
+            faces += [[a0, b1, b0], [a0, a1, b1]]
     for i in range(s):
         j = (i + 1) % s
         faces += [[start, j, i], [end, (n_rings - 1) * s + i, (n_rings - 1) * s + j]]

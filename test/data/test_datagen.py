@@ -1,0 +1,107 @@
+"""The generator: kill-and-restart gives the same trial set without duplicates; pass order; Ray path.
+
+Rigid objects (E = 2e9) keep these runs to seconds; the trial machinery is
+the same for soft ones (test/sim/test_trial.py).
+"""
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections import Counter
+
+import pytest
+
+from defgg_ros.atomic import read_jsonl
+from defgg_ros.data import datagen
+from defgg_ros.data.format import DatasetWriter, list_scene_ids, read_scene, read_trials
+
+OBJECTS = ("box_small", "cube")
+QUICK = {"close_settle_s": 0.05, "lift_time_s": 0.15, "hold_time_s": 0.05, "shake_ramp_time_s": 0.3}
+
+
+@pytest.fixture(scope="module")
+def mesh_cache(tmp_path_factory):
+    path = tmp_path_factory.mktemp("mesh_cache")
+    old = os.environ.get("DEFGG_MESH_CACHE")
+    os.environ["DEFGG_MESH_CACHE"] = str(path)
+    yield path
+    if old is None:
+        os.environ.pop("DEFGG_MESH_CACHE", None)
+    else:
+        os.environ["DEFGG_MESH_CACHE"] = old
+
+
+def _cli(out, grasps=4):
+    return [sys.executable, "-m", "defgg_ros.data.datagen_cli", "--out", str(out), "--objects", *OBJECTS,
+            "--moduli", "2e9", "--grasps-per-scene", str(grasps), "--pass-size", "2", "--no-progress",
+            "--settings", json.dumps(QUICK)]
+
+
+def _trial_ids(out):
+    ids = []
+    for path in sorted((out / "trials").glob("*.jsonl")):
+        ids += [r["trial_id"] for r in read_jsonl(path)]
+    return ids
+
+
+def _wait_for_first_trial(proc, out, timeout_s=300):
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if _trial_ids(out) if (out / "trials").exists() else []:
+            return
+        if proc.poll() is not None:
+            pytest.fail(f"generator ended before writing a trial: {proc.stderr.read()}")
+        time.sleep(0.2)  # polling a subprocess's files; there is no event to wait on
+    pytest.fail("no trial written in time")
+
+
+def test_killed_and_restarted_run_has_every_trial_once(tmp_path, mesh_cache):
+    out = tmp_path / "ds"
+    env = dict(os.environ, DEFGG_MESH_CACHE=str(mesh_cache))
+    proc = subprocess.Popen(_cli(out), env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    _wait_for_first_trial(proc, out)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    partial = _trial_ids(out)
+    assert 1 <= len(partial) < 8
+    done = subprocess.run(_cli(out), env=env, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    ids = _trial_ids(out)
+    assert not [i for i, n in Counter(ids).items() if n > 1], "duplicate trials after restart"
+    expected = {f"{o}__E2e+09__g{i:03d}" for o in OBJECTS for i in range(4)}
+    assert set(ids) == expected
+    assert set(partial) <= set(ids)
+    for sid in list_scene_ids(out):
+        scene = read_scene(out / "scenes" / f"{sid}.npz")
+        assert scene.depth_m.shape == (300, 300) and scene.object_mask.max() == 1
+        assert all(t.label is not None for t in read_trials(out, sid))
+    assert "trials finished: 8 of 8" in (out / "card.md").read_text()
+    # a rerun of a finished dataset does nothing
+    again = subprocess.run(_cli(out), env=env, capture_output=True, text=True, timeout=600)
+    assert again.returncode == 0 and json.loads(again.stdout.strip().splitlines()[-1])["done"] == 0
+
+    # growing the dataset adds trials pass by pass over all scenes
+    cfg = datagen.DatagenConfig(out=out, objects=OBJECTS, moduli_pa=(2e9,), grasps_per_scene=8, pass_size=2,
+                                settings=QUICK)
+    jobs = datagen.plan(cfg, DatasetWriter(out, cfg.header()))
+    assert [j.candidate_index for j in jobs] == [4, 5, 4, 5, 6, 7, 6, 7][: len(jobs)]
+
+
+def test_ray_path_gives_the_local_results(tmp_path, mesh_cache):
+    pytest.importorskip("ray")
+    settings = dict(QUICK)
+    local_cfg = datagen.DatagenConfig(out=tmp_path / "local", objects=("cube",), moduli_pa=(2e9,),
+                                      grasps_per_scene=2, pass_size=2, settings=settings)
+    ray_cfg = datagen.DatagenConfig(out=tmp_path / "ray", objects=("cube",), moduli_pa=(2e9,),
+                                    grasps_per_scene=2, pass_size=2, settings=settings, workers=2,
+                                    ray_address="local")
+    datagen.generate(local_cfg, progress_bar=False)
+    counts = datagen.generate(ray_cfg, progress_bar=False)
+    assert counts["done"] == 2
+    sid = "cube__E2e+09"
+    by_id = {t.trial_id: t for t in read_trials(tmp_path / "local", sid)}
+    for t in read_trials(tmp_path / "ray", sid):
+        assert t.label == by_id[t.trial_id].label
+        assert t.shake_accels_mps2 == pytest.approx(by_id[t.trial_id].shake_accels_mps2, abs=0.5)

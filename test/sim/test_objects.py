@@ -1,0 +1,102 @@
+"""Object library, tet meshes and their cache, materials, user meshes."""
+import numpy as np
+import pytest
+import trimesh
+
+from defgg_ros.sim import meshes, objects, shapes
+
+
+def test_sets_have_the_papers_sizes_and_are_disjoint():
+    train = {s.name for s in objects.object_set("train")}
+    common = {s.name for s in objects.object_set("common")}
+    adversarial = {s.name for s in objects.object_set("adversarial")}
+    assert len(train) == 30
+    assert len([n for n in train if n.startswith("egad_")]) == 12
+    assert len([n for n in train if n.startswith("ycb_")]) == 5
+    assert len(common) == 7 and len(adversarial) >= 20
+    assert not (train & common) and not (train & adversarial) and not (common & adversarial)
+    multi = [s for s in objects.object_set("common") if len(s.build()) == 2]
+    assert [s.name for s in multi] == ["mallet_mm"]
+
+
+def test_unknown_set_is_a_clear_error():
+    with pytest.raises(objects.UnknownObject, match="unknown object set"):
+        objects.object_set("test")
+
+
+def test_tet_mesh_is_coarse_valid_and_cached(monkeypatch):
+    box = shapes.box(0.05, 0.03, 0.04)
+    tet = meshes.tetrahedralize(box)
+    assert len(tet.nodes_m) <= meshes.TARGET_MAX_NODES
+    assert np.all(meshes.tet_volumes(tet.nodes_m, tet.tets) > 0)        # positively oriented
+    assert tet.volume_m3 == pytest.approx(0.05 * 0.03 * 0.04, rel=0.01)
+    assert tet.surface().is_watertight
+    assert tet.vtk_path.read_text().startswith("# vtk DataFile")
+
+    def must_not_run(_):
+        raise AssertionError("fTetWild ran again although the mesh is cached")
+
+    monkeypatch.setattr(meshes, "_run_ftetwild", must_not_run)
+    again = meshes.tetrahedralize(shapes.box(0.05, 0.03, 0.04))
+    assert again.content_hash == tet.content_hash
+    np.testing.assert_array_equal(again.tets, tet.tets)
+
+
+def test_shapes_rest_on_the_table_and_fit_the_gripper():
+    shape = objects.get_shape("ycb_mug")
+    nodes = np.vstack([t.nodes_m for t in shape.tet_parts])
+    assert nodes[:, 2].min() == pytest.approx(0.0, abs=1e-6)
+    assert abs(nodes[:, 0].max() + nodes[:, 0].min()) < 1e-6
+
+
+def test_user_mesh_loads_and_bad_files_raise(tmp_path):
+    path = tmp_path / "part.stl"
+    shapes.box(40, 30, 20).export(path)          # millimetres, as CAD exports do
+    shape = objects.shape_from_mesh_file(path, scale=0.001)
+    assert shape.name == "part"
+    assert shape.union_tet.volume_m3 == pytest.approx(0.04 * 0.03 * 0.02, rel=0.02)
+    with pytest.raises(meshes.MeshError, match="extent"):
+        meshes.load_user_mesh(path)               # 40 m without the scale
+    (tmp_path / "junk.obj").write_text("this is not a mesh\n")
+    with pytest.raises(meshes.MeshError):
+        meshes.load_user_mesh(tmp_path / "junk.obj")
+    with pytest.raises(meshes.MeshError, match="only .obj and .stl"):
+        meshes.load_user_mesh(tmp_path / "x.ply")
+
+
+def test_materials_are_validated():
+    shape = objects.get_shape("cube")
+    with pytest.raises(ValueError):
+        objects.ObjectSpec(shape, -2e4)
+    with pytest.raises(ValueError, match="Poisson"):
+        objects.ObjectSpec(shape, 2e4, poisson_ratio=0.5)
+    with pytest.raises(objects.UnsupportedMaterial, match="one part"):
+        objects.ObjectSpec(shape, 2e4, part_youngs_modulus_pa=2e5).part_moduli_pa()
+
+
+def test_two_soft_parts_of_different_modulus_are_refused(client):
+    from defgg_ros.sim import world
+
+    spec = objects.ObjectSpec(objects.get_shape("mallet_mm"), 2e5, part_youngs_modulus_pa=2e4)
+    world.create_world(client, spec.part_moduli_pa())
+    with pytest.raises(objects.UnsupportedMaterial, match="one material"):
+        objects.load_object(client, spec)
+
+
+def test_soft_and_rigid_bodies_by_modulus(client):
+    from defgg_ros.sim import world
+
+    shape = objects.get_shape("box_small")
+    for e, soft in ((2e4, True), (2e9, False)):
+        world.create_world(client, [e])
+        loaded = objects.load_object(client, objects.ObjectSpec(shape, e))
+        assert [pt.soft for pt in loaded.parts] == [soft]
+        assert loaded.mass_kg == pytest.approx(0.05 * 0.03 * 0.04 * objects.DEFAULT_DENSITY_KG_M3, rel=0.02)
+
+
+def test_concatenated_pieces_become_one_volume():
+    tube = shapes.tube_along(shapes.arc_points(0.08, 0.0), 0.01)
+    ball = shapes.sphere(0.03).apply_translation((0.04, 0, 0))
+    tet = meshes.tetrahedralize(trimesh.util.concatenate([tube, ball]))
+    assert tet.surface().is_watertight
+    assert tet.volume_m3 < tube.volume + ball.volume  # the overlap is counted once

@@ -1,0 +1,87 @@
+"""Antipodal sampler: kept grasps do not collide (checked independently), rectangles follow format.py."""
+import math
+
+import numpy as np
+import pytest
+
+from defgg_ros.constants import GRIPPER_MAX_WIDTH_M
+from defgg_ros.sim import hand, objects, sampler
+from defgg_ros.sim.camera import TopDownCamera
+from defgg_ros.sim.trial import OPENING_CLEARANCE_M, WorldGrasp
+
+
+def _inside(mesh, points):
+    """Point-in-mesh by ray parity along +x (independent of PyBullet's collision check)."""
+    tris = mesh.triangles
+    return np.array([len(sampler._ray_hits(pt, np.array([1.0, 0.0, 0.0]), tris)[0]) % 2 == 1 for pt in points])
+
+
+def _hand_points(grasp, spacing=0.004):
+    opening = min(grasp.width_m + OPENING_CLEARANCE_M, GRIPPER_MAX_WIDTH_M)
+    pose = hand.world_T_hand(grasp.position_m, grasp.yaw_rad)
+    pts = []
+    for centre, half in hand.hand_boxes(opening):
+        axes = [np.linspace(c - h, c + h, max(2, int(2 * h / spacing) + 1)) for c, h in zip(centre, half)]
+        grid = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+        pts.append(grid @ pose[:3, :3].T + pose[:3, 3])
+    return np.vstack(pts)
+
+
+def _collides(mesh, grasp):
+    pts = _hand_points(grasp)
+    return pts[:, 2].min() < 0.0 or _inside(mesh, pts).any()
+
+
+@pytest.mark.parametrize("name", ["box_small", "ycb_mug"])
+def test_kept_grasps_do_not_collide_and_are_antipodal(name):
+    surface = objects.get_shape(name).surface()
+    kept = sampler.sample_grasps(surface, seed=1, n_candidates=60, keep=20)
+    assert len(kept) >= 5
+    for cand in kept:
+        assert not _collides(surface, cand.grasp), cand
+        p1, p2 = map(np.asarray, cand.contacts_m)
+        assert np.linalg.norm(p2 - p1) == pytest.approx(cand.grasp.width_m, abs=1e-6)
+        axis = np.array([math.cos(cand.grasp.yaw_rad), math.sin(cand.grasp.yaw_rad), 0.0])
+        assert np.allclose((p2 - p1) / np.linalg.norm(p2 - p1), axis, atol=1e-6)
+
+
+def test_the_filter_removes_colliding_candidates():
+    surface = objects.get_shape("ycb_mug").surface()
+    raw = sampler.antipodal_pairs(surface, 300, np.random.default_rng(3))
+    checker = sampler.CollisionChecker(surface)
+    try:
+        rejected = [c for c in raw if checker.hand_collides(c.grasp)]
+    finally:
+        checker.close()
+    assert rejected, "the mug's walls and handle must reject some grasps"
+    # most rejected grasps really put the hand into the mug or the table
+    really = sum(_collides(surface, c.grasp) for c in rejected[:20])
+    assert really >= 0.5 * min(20, len(rejected))
+
+
+def test_sampling_is_deterministic_per_seed():
+    surface = objects.get_shape("cube").surface()
+    a = sampler.sample_grasps(surface, seed=7, n_candidates=30, keep=10)
+    b = sampler.sample_grasps(surface, seed=7, n_candidates=30, keep=10)
+    assert [c.grasp for c in a] == [c.grasp for c in b]
+
+
+@pytest.mark.parametrize("yaw, angle", [(0.0, 0.0), (math.pi / 4, -math.pi / 4), (math.pi / 2, -math.pi / 2),
+                                        (3 * math.pi / 4, math.pi / 4), (math.pi, 0.0)])
+def test_rectangle_angle_convention(yaw, angle):
+    rect = sampler.grasp_rect(WorldGrasp((0.0, 0.0, 0.02), yaw, 0.04))
+    assert math.cos(2 * rect.angle_rad) == pytest.approx(math.cos(2 * angle), abs=1e-9)
+    assert math.sin(2 * rect.angle_rad) == pytest.approx(math.sin(2 * angle), abs=1e-9)
+    assert -math.pi / 2 <= rect.angle_rad <= math.pi / 2
+
+
+def test_rectangle_centre_and_size_in_pixels():
+    cam = TopDownCamera()
+    grasp = WorldGrasp((0.03, -0.02, 0.02), 0.3, 0.05)
+    rect = sampler.grasp_rect(grasp, cam)
+    assert (rect.center_u_px, rect.center_v_px) == pytest.approx(tuple(cam.world_to_pixel([grasp.position_m])[0]))
+    assert rect.width_px == pytest.approx(0.05 * cam.fx_px / 0.38)
+    # the rectangle's width axis in the image runs along the world closing direction
+    ends = cam.world_to_pixel([[0.03 + 0.025 * math.cos(0.3), -0.02 + 0.025 * math.sin(0.3), 0.02]])[0]
+    along = np.array([math.cos(rect.angle_rad), math.sin(rect.angle_rad)])
+    assert abs(along @ (ends - [rect.center_u_px, rect.center_v_px])) == pytest.approx(rect.width_px / 2, rel=1e-6)

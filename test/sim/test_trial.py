@@ -1,0 +1,98 @@
+"""Grasp trials in real PyBullet FEM: stability, physics ordering, restore, twist, failures.
+
+Kept short with fewer directions, quicker phases and a short ramp; the
+settings are the same for both moduli where results are compared.
+"""
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from defgg_ros.data.format import STATUS_LIFT_FAILED, STATUS_OK
+from defgg_ros.sim import objects, trial, world
+from defgg_ros.sim.trial import TrialSettings, WorldGrasp, run_grasp_trial
+
+QUICK = dataclasses.replace(TrialSettings.fast(), close_settle_s=0.05, lift_time_s=0.15, hold_time_s=0.05,
+                            shake_ramp_time_s=0.3, twist_ramp_time_s=0.3, stop_when_label_decided=False)
+# Across the 3 cm side of the 5 x 3 x 4 cm box, 1.5 cm off-centre along its length
+# (off-centre grasps separate soft from stiff most clearly, FEM notes).
+OFF_CENTRE = WorldGrasp((0.015, 0.0, 0.02), math.pi / 2, 0.03)
+
+
+def box(e):
+    return objects.ObjectSpec(objects.get_shape("box_small"), e)
+
+
+def test_rigid_box_all_16_directions_and_twist():
+    out = run_grasp_trial(box(2e9), OFF_CENTRE, ("shake", "twist"), QUICK)
+    assert out.status == STATUS_OK, out.note
+    assert len(out.shake_accels_mps2) == 16 and all(out.shake_measured)
+    assert all(0.0 <= a <= 50.0 for a in out.shake_accels_mps2)
+    assert len(out.twist_accels_radps2) == 6 and all(0.0 <= a <= 500.0 for a in out.twist_accels_radps2)
+    assert out.sim["soft"] == [False]
+
+
+def test_soft_box_is_held_less_than_a_stiff_one():
+    """The physics the network must learn: same grasp, same settings, softer = lower held acceleration."""
+    settings = dataclasses.replace(QUICK, shake_directions=4)
+    soft = run_grasp_trial(box(2e4), OFF_CENTRE, ("shake",), settings)
+    stiff = run_grasp_trial(box(2e6), OFF_CENTRE, ("shake",), settings)
+    for out in (soft, stiff):
+        assert out.status == STATUS_OK, out.note       # grasped, lifted, shaken, no explosion
+        assert out.sim["soft"] == [True]
+    assert soft.shake_mean_mps2 < stiff.shake_mean_mps2 - 2.0, (soft.shake_accels_mps2, stiff.shake_accels_mps2)
+
+
+def test_restore_between_directions_restores_the_soft_body(client):
+    run = trial._Trial(client, box(2e4), OFF_CENTRE, QUICK, (0.0, 0.0), 0.0)
+    run.grasp_and_lift()
+    saved_nodes = run.saved[0][run.obj.soft_body_ids[0]][1]
+    d = trial.shake_directions(1)[0]
+    g = np.array([0, 0, -world.GRAVITY_MPS2])
+
+    def shake_a_bit():
+        run.restore()
+        assert np.array_equal(run.obj.node_positions(run.obj.soft_body_ids[0]), saved_nodes)
+        for k in range(20):
+            run.world.set_gravity(g - 2.0 * k * d)
+            run.step(10)
+        return run.obj.node_positions(run.obj.soft_body_ids[0])
+
+    first, second = shake_a_bit(), shake_a_bit()
+    assert np.abs(first - saved_nodes).max() > 1e-4            # the shake did move the nodes
+    np.testing.assert_allclose(second, first, atol=1e-6)        # and the restore undid it exactly
+
+
+def test_grasp_beside_the_object_is_a_failed_lift_not_a_crash():
+    out = run_grasp_trial(box(2e9), WorldGrasp((0.15, 0.0, 0.02), 0.0, 0.03), ("shake",), QUICK)
+    assert out.status == STATUS_LIFT_FAILED and out.shake_accels_mps2 is None
+
+
+def test_explosions_are_detected(client):
+    world.create_world(client, [2e4])
+    loaded = objects.load_object(client, box(2e4))
+    assert loaded.is_finite()
+    nodes = loaded.node_positions(loaded.soft_body_ids[0])
+    nodes[0] = [5.0, 0.0, 0.0]                                  # one runaway node
+    import pybullet as p
+
+    p.resetMeshData(loaded.soft_body_ids[0], vertices=nodes.tolist(), physicsClientId=client)
+    assert not loaded.is_finite()
+
+
+def test_label_early_stop_keeps_the_label():
+    """Deciding the label early must give the label of the full run (rigid: cheap, deterministic)."""
+    full = run_grasp_trial(box(2e9), OFF_CENTRE, ("shake",), QUICK)
+    early = run_grasp_trial(box(2e9), OFF_CENTRE, ("shake",), dataclasses.replace(QUICK, stop_when_label_decided=True))
+    assert (full.shake_mean_mps2 >= 25.0) == (early.shake_mean_mps2 >= 25.0)
+    assert not all(early.shake_measured) and early.sim_steps < full.sim_steps
+    n = sum(early.shake_measured)
+    assert early.shake_accels_mps2[:n] == pytest.approx(full.shake_accels_mps2[:n], abs=1.0)
+
+
+def test_bad_grasps_and_tests_are_refused():
+    with pytest.raises(ValueError, match="width"):
+        WorldGrasp((0, 0, 0.02), 0.0, 0.2)
+    with pytest.raises(ValueError, match="unknown tests"):
+        run_grasp_trial(box(2e9), OFF_CENTRE, ("wiggle",))
