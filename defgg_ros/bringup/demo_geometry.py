@@ -9,6 +9,9 @@ from defgg_ros.perception.geometry import transform_from_xyz_quaternion
 
 # Margin around an object's projected footprint for its stiffness ROI (px).
 ROI_MARGIN_PX = 6
+# Objects placed in the bin may rest on each other: count anything this far
+# above the walls' top, inside them, as in the bin.
+BIN_STACK_MARGIN_M = 0.1
 # A grasp belongs to an object when its centre is within the object's half
 # diagonal plus this margin of the object's centre (m).
 GRASP_ON_OBJECT_MARGIN_M = 0.01
@@ -65,9 +68,9 @@ def grasp_is_on_object(grasp_xy_m, obj: dict, position_base_m) -> bool:
 
 
 def in_bin(position_base_m, bin_dict: dict | None) -> bool:
-    """Is a point inside the bin's walls (horizontally) and below their top?"""
+    """Is a point inside the bin's walls (horizontally), not higher than a stack of objects in it?"""
     if not bin_dict:
         return False
     (cx, cy), (ix, iy, h) = bin_dict["center_xy_m"], bin_dict["inner_size_m"]
     x, y, z = position_base_m
-    return bool(abs(x - cx) <= ix / 2 and abs(y - cy) <= iy / 2 and z <= h)
+    return bool(abs(x - cx) <= ix / 2 and abs(y - cy) <= iy / 2 and z <= h + BIN_STACK_MARGIN_M)
