@@ -1,4 +1,6 @@
 """Read a running node's parameters (for the session metadata) through its parameter services."""
+from concurrent.futures import ThreadPoolExecutor
+
 from rcl_interfaces.srv import GetParameters, ListParameters
 from rclpy.parameter import parameter_value_to_python
 
@@ -25,6 +27,13 @@ def fetch_parameters(node, node_name: str, timeout_s: float = 3.0) -> dict | Non
     finally:
         node.destroy_client(list_client)
         node.destroy_client(get_client)
+
+
+def fetch_all(node, node_names=CELL_NODES, timeout_s: float = 3.0) -> dict:
+    """{node: parameters} of those of `node_names` that answer; asked in parallel (absent ones cost one timeout)."""
+    with ThreadPoolExecutor(max_workers=len(node_names)) as pool:
+        results = pool.map(lambda name: (name, fetch_parameters(node, name, timeout_s)), node_names)
+        return {name: params for name, params in results if params is not None}
 
 
 def _plain(value):

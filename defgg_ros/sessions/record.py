@@ -38,7 +38,7 @@ from defgg_ros.sessions.bag import SessionBagError, SessionWriter
 from defgg_ros.sessions.client import CellCallError, CellClient
 from defgg_ros.sessions.compare import GraspSummary, PickOutcome, Tolerances
 from defgg_ros.sessions.graph import use_large_message_transport
-from defgg_ros.sessions.params import CELL_NODES, fetch_parameters
+from defgg_ros.sessions.params import CELL_NODES, fetch_all
 from defgg_ros.sessions.recorder_node import SessionRecorder
 from defgg_ros.sessions.scene_stiffness import scene_stiffness_entries
 from defgg_ros.sessions.selector import DEFAULT_DEPTH_PERIOD_S, DEFAULT_JOINT_STATE_PERIOD_S, FrameSelector
@@ -125,7 +125,7 @@ def record(args, log=print) -> Path:
         executor.add_node(probe)
         if args.plan:  # driving: the cell must be up before its parameters can be read
             CellClient(probe).wait_for_servers(args.wait_s, pick=bool(args.pick))
-        parameters = {n: p for n in CELL_NODES if (p := fetch_parameters(probe, n, args.param_timeout_s))}
+        parameters = fetch_all(probe, CELL_NODES, args.param_timeout_s)
         log(f"parameters recorded from: {', '.join(parameters) or 'no running cell node'}")
         model_path, use_stiffness = _model_path(args, parameters)
         tolerances = Tolerances(args.position_tol_mm, args.angle_tol_deg, args.width_tol_mm)

@@ -75,6 +75,12 @@ class SessionRecorder(Node):
 
     def _on_best_grasp(self, raw: bytes):
         self._stamped_callback(topics.BEST_GRASP)(raw)
+        with self._lock:
+            # Count only grasps on frames this recorder holds: a grasp on a frame published before it
+            # subscribed says the cell is busy, not that a recordable frame went through.
+            recordable = self._selector.has_frame(header_stamp_ns(raw))
+        if not recordable:
+            return
         with self._grasp_seen:
             self.latest_grasp_stamp_ns = header_stamp_ns(raw)
             self.grasp_count += 1
@@ -94,7 +100,11 @@ class SessionRecorder(Node):
     def keep_stamp(self, stamp_ns: int) -> None:
         """Something refers to this depth stamp: make sure its frame is in the bag."""
         with self._lock:
+            found = self._selector.has_frame(stamp_ns)
             items = self._selector.keep(stamp_ns)
+        if not found:
+            self.errors.append(f"frame @{stamp_ns / 1e9:.3f}s was used by the cell but never reached the recorder")
+            self.get_logger().warning(self.errors[-1])
         self._write_all(items)
 
     def write_frame(self, stamp_ns: int, camera_messages) -> None:

@@ -34,6 +34,15 @@ def header_stamp_ns(raw: bytes) -> int:
     return sec * 1_000_000_000 + nanosec
 
 
+def restamp(raw: bytes, stamp_ns: int) -> bytes:
+    """The same message with another header stamp (CDR bytes patched in place of a copy)."""
+    header_stamp_ns(raw)  # validates length
+    order = "<" if raw[1] & 1 else ">"
+    out = bytearray(raw)
+    struct.pack_into(order + "iI", out, 4, stamp_ns // 1_000_000_000, stamp_ns % 1_000_000_000)
+    return bytes(out)
+
+
 class FrameSelector:
     """Decide what to write; every method returns [(topic, raw, log_time_ns)] to write now."""
 
@@ -64,6 +73,10 @@ class FrameSelector:
         self._pending.setdefault(stamp, {})[topic] = item  # a re-sent message replaces the waiting one
         _trim(self._pending)
         return []
+
+    def has_frame(self, stamp: int) -> bool:
+        """Is the depth frame of this stamp written or still in the buffer (so `keep` can save it)?"""
+        return (self.depth_topic, stamp) in self._written or self.depth_topic in self._pending.get(stamp, {})
 
     def keep(self, stamp: int) -> list:
         """Keep a stamp (e.g. a grasp was planned on it): flush what waits for it."""

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from defgg_ros import topics
 from defgg_ros.sessions import session_topics as st
 from defgg_ros.sessions.bag import BagMessage, SessionBagError, read_bag
+from defgg_ros.sessions.selector import restamp
 
 FORMAT = "defgg_session/1"
 
@@ -83,6 +84,20 @@ def _pair_in_order(messages: list, first_topic: str, second_topic: str) -> list:
     return [(a, seconds[i] if i < len(seconds) else None) for i, a in enumerate(firsts)]
 
 
+def _camera_info_for(path, infos: dict, depth: BagMessage, stamp: int) -> BagMessage:
+    """The frame's camera_info; when it was lost (best effort), the nearest one restamped.
+
+    The inference node matches depth and camera_info by exact stamp, and a
+    camera's intrinsics do not change between frames.
+    """
+    if stamp in infos:
+        return infos[stamp]
+    if not infos:
+        raise SessionBagError(f"{path}: depth frame at stamp {stamp} ns and no camera_info in the session")
+    nearest = infos[min(infos, key=lambda s: abs(s - stamp))]
+    return BagMessage(nearest.topic, nearest.msgtype, depth.log_time_ns, restamp(nearest.raw, stamp))
+
+
 def _frames(path, messages: list) -> list:
     infos = _by_stamp(messages, topics.DEPTH_CAMERA_INFO)
     colors = _by_stamp(messages, topics.COLOR_IMAGE)
@@ -95,9 +110,8 @@ def _frames(path, messages: list) -> list:
         if stamp in seen:  # a frame sent twice (a retried publish) is one frame
             continue
         seen.add(stamp)
-        if stamp not in infos:
-            raise SessionBagError(f"{path}: depth frame at stamp {stamp} ns has no camera_info with that stamp")
-        frame = Frame(len(events), stamp, m, infos[stamp], colors.get(stamp), grasps.get(stamp))
+        info = _camera_info_for(path, infos, m, stamp)
+        frame = Frame(len(events), stamp, m, info, colors.get(stamp), grasps.get(stamp))
         events.append(Event("frame", m.log_time_ns, frame))
     return events
 
@@ -114,6 +128,10 @@ def build_session(path, metadata: dict, messages: list) -> Session:
         end = result.log_time_ns if result else float("inf")
         feedback = [m for m in messages if m.topic == st.PICK_FEEDBACK and goal.log_time_ns <= m.log_time_ns <= end]
         events.append(Event("pick", goal.log_time_ns, Pick(i, goal, result, feedback)))
+    # The first assignment is the latched state the recorder got on joining: it was in force
+    # before anything else in the session, even if it arrived after the first frame.
+    if events and events[0].kind == "assignment":
+        events[0].log_time_ns = min(m.log_time_ns for m in messages)
     # Stable sort: at equal times assignments come before frames before calls (the list order above).
     events.sort(key=lambda e: e.log_time_ns)
     return Session(str(path), metadata, events, messages)

@@ -92,3 +92,15 @@ def test_a_bag_without_session_metadata_is_rejected(tmp_path):
     assert messages and messages[0].topic == st.METADATA
     with pytest.raises(SessionBagError, match="not a defgg session bag"):
         load_session(other)
+
+
+def test_a_frame_whose_camera_info_was_lost_gets_the_nearest_one_restamped(tmp_path):
+    path = write_small_session(tmp_path / "s")
+    meta, messages = read_bag(path)
+    lost = [m for m in messages if not (m.topic == topics.DEPTH_CAMERA_INFO and m.decode().header.stamp.sec == 2)]
+    writer = SessionWriter(tmp_path / "lossy", meta, 0)
+    for m in lost[1:]:
+        writer.write(m.topic, m.raw, m.log_time_ns, m.msgtype)
+    frame = load_session(writer.close()).frames[1]
+    info = frame.camera_info.decode()
+    assert info.header.stamp.sec == 2 and info.k[0] == pytest.approx(385.0) and info.width == 64

@@ -1,0 +1,72 @@
+"""defgg-record against live segmentation + inference nodes fed by a stand-in camera (real rclpy, DDS)."""
+import os
+import random
+import threading
+
+import pytest
+from session_synthetic_camera import SyntheticCamera
+
+from defgg_ros import topics
+from defgg_ros.nodes.grasp_inference_node import GraspInferenceNode
+from defgg_ros.nodes.segmentation_node import SegmentationNode
+from defgg_ros.sessions import record
+from defgg_ros.sessions import session_topics as st
+from defgg_ros.sessions.graph import FASTDDS_PROFILE, FASTDDS_PROFILE_VARIABLE
+from defgg_ros.sessions.session import load_session, stamp_ns
+
+PRIVATE_DOMAIN = random.Random(os.getpid()).randint(101, 118)
+
+
+@pytest.fixture
+def large_messages(monkeypatch):
+    """The Fast DDS profile for camera-sized messages, and a ROS domain of these tests' own.
+
+    Set before the rclpy context exists; a domain outside conftest's 1..100 (and the replay's
+    120..230) keeps other test processes' cells from showing up in the recording.
+    """
+    monkeypatch.setenv(FASTDDS_PROFILE_VARIABLE, str(FASTDDS_PROFILE))
+    monkeypatch.setenv("ROS_DOMAIN_ID", str(PRIVATE_DOMAIN))
+
+
+@pytest.fixture
+def live_cell(large_messages, executor):
+    """Camera at 5 Hz + segmentation + inference (shipped model), spinning in a background thread."""
+    for node in (SegmentationNode(context=executor.context), GraspInferenceNode(context=executor.context),
+                 SyntheticCamera(0.2, context=executor.context)):
+        executor.add_node(node)
+    thread = threading.Thread(target=executor.spin, daemon=True)
+    thread.start()
+    yield executor
+    executor.shutdown(timeout_sec=2.0)
+    thread.join(timeout=5.0)
+
+
+def test_driven_recording_holds_frames_calls_grasps_and_metadata(live_cell, tmp_path):
+    out = tmp_path / "session"
+    assert record.main([str(out), "--plan", "2", "--depth-period-s", "1000", "--no-color",
+                        "--note", "test", "--param-timeout-s", "10"]) == 0
+    session = load_session(out)
+    meta = session.metadata
+    assert meta["source"] == "real" and meta["scene"] is None and meta["note"] == "test"
+    assert meta["model"]["file"] == "defgg_cnn.pt" and meta["model"]["use_stiffness"] is True
+    assert meta["parameters"]["grasp_inference_node"]["use_stiffness"] is True
+    assert meta["software"]["defgg_ros"]
+    calls = session.of_kind("plan")
+    assert len(calls) == 2 and all(c.response is not None and c.response.decode().success for c in calls)
+    frames = {f.stamp_ns: f for f in session.frames}
+    for call in calls:  # every planned-on frame is in the bag, with its published grasp
+        planned = stamp_ns(call.response.decode().grasps[0].header.stamp)
+        assert planned in frames and frames[planned].best_grasp is not None
+    kinds = [e.kind for e in session.events]
+    assert kinds[0] == "assignment" and kinds.index("frame") < kinds.index("plan")
+    topics_in_bag = {m.topic for m in session.messages}
+    assert {topics.DEPTH_IMAGE, topics.DEPTH_CAMERA_INFO, topics.STIFFNESS_ASSIGNMENTS,
+            st.PLAN_REQUEST} <= topics_in_bag
+
+
+def test_recording_without_a_cell_fails_clearly(tmp_path, large_messages, capsys, monkeypatch):
+    monkeypatch.setenv("ROS_DOMAIN_ID", str(PRIVATE_DOMAIN + 1))  # not the domain the other test's cell used
+    out = tmp_path / "session"
+    assert record.main([str(out), "--plan", "1", "--wait-s", "1", "--param-timeout-s", "0.2"]) == 2
+    assert "did not appear" in capsys.readouterr().err
+    assert not out.exists()
