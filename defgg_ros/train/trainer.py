@@ -267,6 +267,9 @@ def train(config: TrainConfig, data_root, out_dir, **kwargs) -> dict:
         return Trainer(config, data_root, out_dir, **kwargs).run()
     except DatasetError as exc:
         raise TrainingError(str(exc)) from None
+    finally:
+        if dist.is_initialized():
+            dist.destroy_process_group()
 
 
 def load_metrics(out_dir) -> dict:
