@@ -92,12 +92,15 @@ def default_model_path(use_stiffness: bool) -> Path:
     return next((c for c in candidates if c.is_file()), candidates[0])
 
 
+@dataclasses.dataclass(frozen=True)
 class Frame:
     """One planning input: converted arrays plus the depth header."""
 
-    def __init__(self, header, depth_m, youngs_modulus_pa, camera_k, labels):
-        self.header, self.depth_m, self.youngs_modulus_pa = header, depth_m, youngs_modulus_pa
-        self.camera_k, self.labels = camera_k, labels
+    header: object                  # std_msgs/Header of the depth image
+    depth_m: np.ndarray             # HxW float32, NaN = invalid
+    youngs_modulus_pa: np.ndarray   # HxW float32, 0 = background
+    camera_k: np.ndarray            # 3x3
+    labels: np.ndarray              # HxW uint8 object labels, 0 = background
 
 
 class GraspInferenceNode(Node):
