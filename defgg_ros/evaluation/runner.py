@@ -56,12 +56,14 @@ class EvalPlan:
     tasks: tuple
     seed: int = 0
     settings: TrialSettings = field(default_factory=eval_trial_settings)
+    ranks: int | None = None       # run only grasp ranks < ranks now (budget); tables still expect grasps_per_view
 
     def model_shas(self) -> dict:
         return {name: pred.fingerprint for name, pred in self.predictors.items()}
 
     def jobs(self) -> list:
-        return jobs_mod.trial_jobs(self.views, self.model_shas(), self.grasps_per_view, self.tasks, self.seed)
+        jobs = jobs_mod.trial_jobs(self.views, self.model_shas(), self.grasps_per_view, self.tasks, self.seed)
+        return jobs if self.ranks is None else [j for j in jobs if j.rank < self.ranks]
 
 
 def plan_views(plan: EvalPlan, views, client: int, show_progress: bool = True) -> dict:
