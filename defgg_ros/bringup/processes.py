@@ -23,6 +23,9 @@ class ManagedProcess:
         self._out = out or sys.stdout
         child_env = dict(os.environ if env is None else env)
         child_env.setdefault("PYTHONUNBUFFERED", "1")
+        # ROS logs to a pipe are block-buffered by default: forward them as they happen.
+        child_env.setdefault("RCUTILS_LOGGING_BUFFERED_STREAM", "0")
+        child_env.setdefault("RCUTILS_COLORIZED_OUTPUT", "0")
         # Own session: a terminal Ctrl-C reaches only the bringup, which then
         # stops the nodes in order instead of all of them dying at once.
         self.popen = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=child_env,

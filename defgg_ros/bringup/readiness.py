@@ -4,7 +4,7 @@ import time
 import rclpy
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
-from rclpy.node import Node
+from rclpy.node import Node, NodeNameNonExistentError
 
 from defgg_ros.bringup.node_set import ReadyCheck
 
@@ -20,10 +20,21 @@ class ReadinessProbe:
         self._executor = SingleThreadedExecutor(context=self._context)
         self._executor.add_node(self.node)
 
-    def is_ready(self, check: ReadyCheck) -> bool:
-        if check.kind == "topic":
-            return self.node.count_publishers(check.name) > 0
-        services = {name for name, _ in self.node.get_service_names_and_types()}
+    def is_ready(self, check: ReadyCheck, node_name: str, namespace: str = "/") -> bool:
+        """Does the node called node_name offer the checked interface?
+
+        Asking per node (not the whole graph) keeps another process that
+        offers the same name in the same ROS domain from passing for it.
+        """
+        if node_name not in self.node.get_node_names():
+            return False
+        try:
+            if check.kind == "topic":
+                topics = self.node.get_publisher_names_and_types_by_node(node_name, namespace)
+                return check.name in {name for name, _ in topics}
+            services = {name for name, _ in self.node.get_service_names_and_types_by_node(node_name, namespace)}
+        except NodeNameNonExistentError:  # it went away between the two queries
+            return False
         if check.kind == "service":
             return check.name in services
         return f"{check.name}/_action/send_goal" in services
@@ -44,7 +55,7 @@ class ReadinessProbe:
             if alive() is not None:
                 break
             for name, check in list(pending.items()):
-                if self.is_ready(check):
+                if self.is_ready(check, name):
                     del pending[name]
             if pending:
                 self.spin_once()
