@@ -136,3 +136,32 @@ def test_camera_scene_and_object_poses(driver, client, executor, spin):
     assert [o["name"] for o in described["objects"]] == ["wooden_block"]
     assert described["objects_simulated_as"] == ["rigid"]
     assert poses[-1].poses[0].position.x == pytest.approx(0.5, abs=0.005)
+
+
+def test_malformed_trajectory_is_rejected_and_the_driver_keeps_serving(driver, client, executor, spin):
+    from builtin_interfaces.msg import Duration
+    from sensor_msgs.msg import JointState
+    from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+    from defgg_ros.constants import PANDA_JOINT_NAMES
+    from defgg_ros.nodes import qos
+
+    joints = _latest(client, JointState, topics.JOINT_STATES, qos.STATE)
+    pub = client.create_publisher(JointTrajectory, topics.JOINT_TRAJECTORY, qos.COMMAND)
+    spin(executor, lambda: joints and pub.get_subscription_count() > 0, TIMEOUT_S, "driver subscribed")
+    start = np.array(joints[-1].position[:7])
+    bad = [JointTrajectory(joint_names=list(PANDA_JOINT_NAMES[:6]),            # a joint missing
+                           points=[JointTrajectoryPoint(positions=[0.5] * 6, time_from_start=Duration(sec=1))]),
+           JointTrajectory(joint_names=list(PANDA_JOINT_NAMES),                # NaN position
+                           points=[JointTrajectoryPoint(positions=[float("nan")] * 7,
+                                                        time_from_start=Duration(sec=1))])]
+    for msg in bad:
+        pub.publish(msg)
+    count = len(joints)
+    spin(executor, lambda: len(joints) > count + 100, TIMEOUT_S, "1 s of joint states after the bad commands")
+    np.testing.assert_allclose(joints[-1].position[:7], start, atol=0.01)
+    goal = start + 0.1
+    pub.publish(JointTrajectory(joint_names=list(PANDA_JOINT_NAMES), points=[
+        JointTrajectoryPoint(positions=goal.tolist(), time_from_start=Duration(sec=0, nanosec=500_000_000))]))
+    spin(executor, lambda: np.abs(np.array(joints[-1].position[:7]) - goal).max() < 0.01, TIMEOUT_S,
+         "the valid trajectory after the bad ones")
