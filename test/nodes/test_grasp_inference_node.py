@@ -244,3 +244,13 @@ def test_shipped_yaml_config_loads(executor, checkpoint):
     executor.add_node(node)
     assert list(node.get_parameter("base_T_camera").value) == BASE_T_CAMERA
     assert node.get_parameter("default_youngs_modulus_pa").value == 2e6
+
+
+def test_default_model_paths_are_the_shipped_checkpoints():
+    from defgg_ros.model.inference import GraspPredictor
+    from defgg_ros.nodes.grasp_inference_node import default_model_path
+
+    for use_stiffness, name in ((True, "defgg_cnn.pt"), (False, "ggcnn_depth_only.pt")):
+        path = default_model_path(use_stiffness)
+        assert path.name == name and path.is_file()
+        assert GraspPredictor.from_checkpoint(path).uses_stiffness == use_stiffness
