@@ -5,14 +5,17 @@ the bin; a cancel during the descent leaves the arm stopped above the grasp;
 a driver that dies mid-trajectory aborts the goal within the watchdog time,
 and a restarted driver is served again.
 """
+import threading
 from pathlib import Path
 
 import numpy as np
 import pytest
+import rclpy
 from defgg_interfaces.action import PickAndPlace
 from defgg_interfaces.msg import Grasp
 from geometry_msgs.msg import PoseArray
 from rclpy.action import ActionClient
+from rclpy.context import Context
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -50,15 +53,28 @@ def cell(rclpy_context):
     from defgg_ros.nodes.fake_panda_driver_node import FakePandaDriver
 
     ex = MultiThreadedExecutor(num_threads=8, context=rclpy_context)
-    drivers = []
+    drivers, processes = [], []
 
-    def start_driver():
-        driver = FakePandaDriver(context=rclpy_context, parameter_overrides=[
+    def start_driver(own_process=False):
+        """The driver in the test's executor, or (own_process) in its own context + executor
+        thread: a separate DDS participant, like a restarted driver process."""
+        context = rclpy_context
+        if own_process:
+            context = Context()
+            rclpy.init(context=context)
+        driver = FakePandaDriver(context=context, parameter_overrides=[
             Parameter("scene_file", value=str(SCENE)), Parameter("max_real_time_factor", value=0.0),
             # No camera needed here; a render holds the sim thread for 0.1-1 s.
             Parameter("depth_rate_hz", value=0.01)])
-        ex.add_node(driver)
         drivers.append(driver)
+        if not own_process:
+            ex.add_node(driver)
+            return driver
+        own = MultiThreadedExecutor(num_threads=4, context=context)
+        own.add_node(driver)
+        thread = threading.Thread(target=own.spin, daemon=True)
+        thread.start()
+        processes.append((context, own, driver, thread))
         return driver
 
     def kill_driver(driver):
@@ -85,10 +101,17 @@ def cell(rclpy_context):
         ex.remove_node(node)
         node.destroy_node()
     ex.shutdown(timeout_sec=2.0)
+    for context, own, driver, thread in processes:
+        own.shutdown(timeout_sec=2.0)
+        driver.destroy_node()
+        context.try_shutdown()
+        thread.join(timeout=5.0)
 
 
 def send(ex, spin, client, goal, feedback=None):
-    assert client.wait_for_server(timeout_sec=10.0)
+    if not getattr(client, "discovered", False):  # once: readiness checks later raced with the executor
+        spin(ex, client.server_is_ready, 20.0, "the pick-and-place action server (discovery)")
+        client.discovered = True
     return spin(ex, client.send_goal_async(goal, feedback_callback=feedback), 10.0, "goal response")
 
 
@@ -152,8 +175,10 @@ def test_driver_killed_mid_trajectory_aborts_then_serves_again(cell, spin):
     response = spin(ex, handle.get_result_async(), WATCHDOG_S + 3.0, "abort after the driver died")
     assert response.status == 6  # STATUS_ABORTED
     assert "driver silent" in response.result.failure_reason
-    start_driver()
+    start_driver(own_process=True)
     fresh_state(ex, spin, executor_node)
+    spin(ex, lambda: executor_node._move_client.server_is_ready() and executor_node._grasp_client.server_is_ready(),
+         20.0, "the restarted driver's gripper actions (discovery)")
     feedback.clear()
     again = send(ex, spin, client, PickAndPlace.Goal(grasp=box_grasp()), feedback=lambda f: feedback.append(f.feedback))
     assert again.accepted

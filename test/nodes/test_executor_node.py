@@ -7,14 +7,17 @@ stop on an object of a given width) and publishes an external wrench that
 rises when the TCP goes below a contact height. Killing it = destroying it.
 """
 import math
+import threading
 
 import numpy as np
 import pytest
+import rclpy
 from defgg_interfaces.action import GripperGrasp, GripperMove, PickAndPlace
 from defgg_interfaces.msg import Grasp
 from geometry_msgs.msg import WrenchStamped
 from rclpy.action import ActionClient, ActionServer
 from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.context import Context
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -35,7 +38,7 @@ CONTACT_STIFFNESS_N_PER_M = 5000.0
 GRASP_XYZ = (0.5, 0.05, 0.03)
 FAST = {  # quicker motions than the defaults so a full run takes a few seconds
     "limits_scale": 1.0, "line_speed_mps": 0.25, "descent_speed_mps": 0.05, "lift_height_m": 0.08,
-    "place_approach_height_m": 0.06, "watchdog_timeout_s": 0.5, "server_wait_s": 2.0,
+    "place_approach_height_m": 0.06, "watchdog_timeout_s": 0.5, "server_wait_s": 10.0,
 }
 
 
@@ -43,6 +46,7 @@ class InTestDriver(Node):
     def __init__(self, context, object_width_m=0.04, contact_height_m=-1.0, q0=PANDA_READY_Q_RAD):
         super().__init__("in_test_driver", context=context)
         self.object_width_m, self.contact_height_m = object_width_m, contact_height_m
+        self.kin = PandaKinematics()  # its own: one pinocchio Data is not for sharing across threads
         self.q, self.qd = np.array(q0, dtype=float), np.zeros(7)
         self.width_m = 0.0
         self.points, self.started_s = None, 0.0
@@ -85,7 +89,7 @@ class InTestDriver(Node):
         self.joint_pub.publish(state)
         wrench = WrenchStamped()
         wrench.header.stamp, wrench.header.frame_id = stamp, topics.BASE_FRAME
-        wrench.wrench.force.z = CONTACT_STIFFNESS_N_PER_M * max(0.0, self.contact_height_m - KIN.fk(self.q)[2, 3])
+        wrench.wrench.force.z = CONTACT_STIFFNESS_N_PER_M * max(0.0, self.contact_height_m - self.kin.fk(self.q)[2, 3])
         self.wrench_pub.publish(wrench)
 
     def step_gripper(self):
@@ -138,9 +142,23 @@ def cell(rclpy_context):
     ex.add_node(node)
     ex.add_node(client_node)
 
-    def start_driver(**kwargs):
-        driver = InTestDriver(rclpy_context, **kwargs)
-        ex.add_node(driver)
+    processes = []
+
+    def start_driver(own_process=False, **kwargs):
+        """A driver in the test's executor, or (own_process) in its own context + executor
+        thread: a separate DDS participant, like a restarted driver process."""
+        if not own_process:
+            driver = InTestDriver(rclpy_context, **kwargs)
+            ex.add_node(driver)
+            return driver
+        context = Context()
+        rclpy.init(context=context)
+        driver = InTestDriver(context, **kwargs)
+        own = MultiThreadedExecutor(num_threads=4, context=context)
+        own.add_node(driver)
+        thread = threading.Thread(target=own.spin, daemon=True)
+        thread.start()
+        processes.append((context, own, driver, thread))
         return driver
 
     yield ex, node, client, start_driver
@@ -148,10 +166,17 @@ def cell(rclpy_context):
         ex.remove_node(n)
         n.destroy_node()
     ex.shutdown(timeout_sec=2.0)
+    for context, own, driver, thread in processes:
+        own.shutdown(timeout_sec=2.0)
+        driver.destroy_node()
+        context.try_shutdown()
+        thread.join(timeout=5.0)
 
 
 def send(ex, client, spin, goal, feedback=None):
-    assert client.wait_for_server(timeout_sec=5.0)
+    if not getattr(client, "discovered", False):  # once: readiness checks later raced with the executor
+        spin(ex, client.server_is_ready, 20.0, "the pick-and-place action server (discovery)")
+        client.discovered = True
     handle = spin(ex, client.send_goal_async(goal, feedback_callback=feedback), 5.0, "goal response")
     return handle
 
@@ -210,6 +235,7 @@ def test_bad_goals_are_aborted_with_a_reason_and_the_node_keeps_serving(cell, sp
     ex, node, client, start_driver = cell
     start_driver()
     wait_driver_ready(ex, spin, node)
+    node.set_parameters([Parameter("server_wait_s", value=1.0)])  # the grasp service never comes
     nan_grasp = grasp_msg()
     nan_grasp.pose_base.pose.position.x = float("nan")
     cases = [
@@ -245,8 +271,10 @@ def test_driver_killed_mid_trajectory_aborts_then_serves_again(cell, spin):
     assert response.result.phase_reached == "pre_grasp"
     # The driver comes back: a new goal is accepted and runs.
     silent_since_s = node._last_state[1]
-    driver = start_driver()
+    driver = start_driver(own_process=True)
     spin(ex, lambda: node._last_state[1] > silent_since_s, 5.0, "joint states from the restarted driver")
+    spin(ex, lambda: node._move_client.server_is_ready() and node._grasp_client.server_is_ready(), 20.0,
+         "the restarted driver's gripper actions (discovery)")
     again = send(ex, client, spin, PickAndPlace.Goal(grasp=grasp_msg()))
     assert again.accepted
     spin(ex, lambda: driver.trajectories_received > 0, 5.0, "a trajectory for the new goal")
