@@ -190,8 +190,8 @@ class GraspInferenceNode(Node):
         return response
 
     def _frame_from_request(self, request) -> Frame:
-        if request.depth.width == 0 or request.depth.height == 0:
-            if request.stiffness.width or request.objects:
+        if _unset(request.depth):
+            if not _unset(request.stiffness) or request.objects:
                 raise PlanningError("stiffness or objects were given without a depth image")
             with self._state_lock:
                 frame = self._latest_frame
@@ -202,7 +202,7 @@ class GraspInferenceNode(Node):
         info = request.camera_info
         if info.width == 0 and info.height == 0:
             raise PlanningError("request has depth but no camera_info")
-        if request.stiffness.width or request.stiffness.height:
+        if not _unset(request.stiffness):
             if request.objects:
                 raise PlanningError("give either a stiffness image or objects, not both")
             return self._frame_from_images(request.depth, info, request.stiffness)
@@ -261,6 +261,11 @@ class GraspInferenceNode(Node):
 
     def _warn(self, text: str):
         self.get_logger().warning(text, throttle_duration_sec=WARN_THROTTLE_S)
+
+
+def _unset(image: Image) -> bool:
+    """An image field the client left at its default (not a malformed image: those fail conversion)."""
+    return image.width == 0 and image.height == 0 and len(image.data) == 0 and not image.encoding
 
 
 def main(args=None):
