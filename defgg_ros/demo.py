@@ -27,6 +27,10 @@ ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_SCENE = ROOT / "sim_bringup" / "scenes" / "demo.yaml"
 DEFAULT_MODEL = ROOT / "models" / "defgg_cnn.pt"
 DRIVER, INFERENCE = "fake_panda_driver", "grasp_inference_node"
+# Before each camera frame the arm goes to the ready pose, which is out of the
+# camera's view: first straight up by this much, then in joint space.
+OBSERVE_LIFT_M = 0.12
+OBSERVE_MOVE_S = (2.0, 5.0)
 
 
 def parse_args(argv=None):
@@ -69,11 +73,12 @@ def _stiffness_msgs(scene, positions, k, image_wh, names):
 class DemoRun:
     """One demo: the client, the local predictor (for the quality pictures) and the results."""
 
-    def __init__(self, client, model_path, bringup):
+    def __init__(self, client, model_path, bringup, pick_timeout_s=900.0):
         from defgg_ros.model.inference import GraspPredictor
 
         self.client = client
         self.bringup = bringup
+        self.pick_timeout_s = pick_timeout_s
         self.predictor = GraspPredictor.from_checkpoint(model_path, num_threads=1)
         self.scene = client.scene()
         self.rows, self.panels = [], []
@@ -102,6 +107,30 @@ class DemoRun:
             row.in_bin = in_bin(position, self.scene.get("bin"))
         return row
 
+    def observe_pose(self):
+        """Open the hand, lift the TCP straight up, go to the ready pose (clear of the camera's view).
+
+        A failed pick leaves the arm where it stopped, over the objects; a frame
+        taken from there would show the arm instead of the scene.
+        """
+        from defgg_ros.constants import PANDA_READY_Q_RAD
+        from defgg_ros.control.kinematics import KinematicsError, PandaKinematics
+
+        ready = np.array(PANDA_READY_Q_RAD)
+        q_now = self.client.arm_positions()
+        if np.abs(q_now - ready).max() < 0.02:
+            return
+        self.client.open_gripper()
+        kinematics = PandaKinematics()
+        base_m_tcp = kinematics.fk(q_now)
+        base_m_tcp[2, 3] += OBSERVE_LIFT_M
+        try:
+            q_lift = kinematics.ik(base_m_tcp, q_seed_rad=q_now).q_rad
+            waypoints = [(OBSERVE_MOVE_S[0], q_lift), (OBSERVE_MOVE_S[1], ready)]
+        except KinematicsError:  # no straight lift from here: go in joint space
+            waypoints = [(OBSERVE_MOVE_S[1], ready)]
+        self.client.move_arm(waypoints)
+
     def _plan(self, index, remaining, row):
         from defgg_interfaces.srv import PlanGrasp
 
@@ -110,6 +139,7 @@ class DemoRun:
         from defgg_ros.perception.stiffness_assignment import make_entry
         from defgg_ros.perception.stiffness_segmenter import SegmenterConfig, run_segmenter
 
+        self.observe_pose()
         depth_msg, info = self.client.fresh_frame(time.monotonic())
         depth_m, k = depth_msg_to_metres(depth_msg), camera_info_to_k(info)
         positions = self.client.object_positions()
@@ -150,10 +180,13 @@ class DemoRun:
                 row.phase_reached = feedback.phase
                 progress.set_postfix_str(f"{row.name}: {feedback.phase}")
 
-        result = self.client.pick(PickAndPlace.Goal(plan_grasp=False, grasp=grasp), on_feedback)
-        row.success, row.phase_reached = result.success, result.phase_reached
-        row.held_after_transfer = result.held_after_transfer
+        result = self.client.pick(PickAndPlace.Goal(plan_grasp=False, grasp=grasp), on_feedback,
+                                  timeout_s=self.pick_timeout_s)
+        row.success, row.held_after_transfer = result.success, result.held_after_transfer
+        row.phase_reached = result.phase_reached or row.phase_reached
         row.failure_reason = result.failure_reason
+        if not result.success and not result.phase_reached:
+            row.failure_reason = "the executor returned an empty result (its error is in cell.log)"
         row.sim_duration_s = result.duration_s
 
 
@@ -172,7 +205,7 @@ def run_demo(args, out_dir: Path, log) -> int:
         print(f"defgg-demo: starting the simulated cell ({Path(args.scene).name}); node logs in {log.name}")
         print(f"defgg-demo: cell ready in {bringup.wait_ready(args.ready_timeout):.1f} s")
         client = DemoClient()
-        run = DemoRun(client, args.model, bringup)
+        run = DemoRun(client, args.model, bringup, args.pick_timeout)
         names = [o["name"] for o in run.scene["objects"]]
         wanted = args.objects.split(",") if args.objects else names
         unknown = set(wanted) - set(names)

@@ -9,19 +9,23 @@ goal response arriving before the client registered the request is dropped
 import json
 import time
 
+import numpy as np
 import rclpy
-from defgg_interfaces.action import PickAndPlace
+from builtin_interfaces.msg import Duration
+from defgg_interfaces.action import GripperMove, PickAndPlace
 from defgg_interfaces.srv import PlanGrasp, SetStiffness
 from geometry_msgs.msg import PoseArray
 from rclpy.action import ActionClient
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
-from sensor_msgs.msg import CameraInfo, Image
+from sensor_msgs.msg import CameraInfo, Image, JointState
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from defgg_ros import topics
+from defgg_ros.constants import GRIPPER_MAX_WIDTH_M, PANDA_JOINT_NAMES
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import stamp_to_ns
 from defgg_ros.nodes.fake_panda_driver_node import CAPTURE_SERVICE, IMAGE_QOS, OBJECT_POSES_TOPIC, SCENE_TOPIC
@@ -47,6 +51,10 @@ class DemoClient:
         n.create_subscription(Image, topics.DEPTH_IMAGE, self._on_depth, IMAGE_QOS)
         n.create_subscription(CameraInfo, topics.DEPTH_CAMERA_INFO, self._on_info, IMAGE_QOS)
         self.capture_client = n.create_client(Trigger, CAPTURE_SERVICE)
+        self._joints = None
+        n.create_subscription(JointState, topics.JOINT_STATES, self._on_joints, qos.STATE)
+        self._trajectory_pub = n.create_publisher(JointTrajectory, topics.JOINT_TRAJECTORY, qos.COMMAND)
+        self.gripper_move_client = ActionClient(n, GripperMove, topics.GRIPPER_MOVE_ACTION)
         self.set_stiffness_client = n.create_client(SetStiffness, topics.SET_STIFFNESS_SERVICE)
         self.plan_client = n.create_client(PlanGrasp, topics.PLAN_GRASP_SERVICE)
         self.pick_client = ActionClient(n, PickAndPlace, topics.PICK_AND_PLACE_ACTION)
@@ -63,6 +71,36 @@ class DemoClient:
     def _on_poses(self, msg):
         poses = [(p.position.x, p.position.y, p.position.z) for p in msg.poses]
         self._store(lambda: setattr(self, "_poses", (poses, time.monotonic())))
+
+    def _on_joints(self, msg):
+        by_name = dict(zip(msg.name, msg.position))
+        if all(n in by_name for n in PANDA_JOINT_NAMES):
+            self._joints = (np.array([by_name[n] for n in PANDA_JOINT_NAMES]), time.monotonic())
+
+    def arm_positions(self, timeout_s=30.0) -> np.ndarray:
+        asked = time.monotonic()
+        self._wait(lambda: self._joints is not None and self._joints[1] > asked, timeout_s, "joint states")
+        return self._joints[0].copy()
+
+    def move_arm(self, waypoints, tolerance_rad=0.02, timeout_s=120.0) -> None:
+        """Send [(time_from_start_s, q)] to the arm and wait until it is at the last q."""
+        msg = JointTrajectory(joint_names=list(PANDA_JOINT_NAMES))
+        for t_s, q in waypoints:
+            sec, nanosec = divmod(int(round(t_s * 1e9)), 1_000_000_000)
+            msg.points.append(JointTrajectoryPoint(positions=[float(v) for v in q],
+                                                   time_from_start=Duration(sec=sec, nanosec=nanosec)))
+        self._wait(lambda: self._trajectory_pub.get_subscription_count() > 0, timeout_s, "the arm's trajectory topic")
+        self._trajectory_pub.publish(msg)
+        goal = np.asarray(waypoints[-1][1])
+        self._wait(lambda: np.abs(self.arm_positions() - goal).max() < tolerance_rad, timeout_s,
+                   "the arm to reach the observation pose")
+
+    def open_gripper(self, timeout_s=60.0):
+        """Open the hand fully (GripperMove); returns its result."""
+        self._wait(self.gripper_move_client.server_is_ready, timeout_s, "the gripper move action")
+        handle = self._wait_future(self.gripper_move_client.send_goal_async(
+            GripperMove.Goal(width=GRIPPER_MAX_WIDTH_M, speed=0.1)), timeout_s, "the gripper goal response")
+        return self._wait_future(handle.get_result_async(), timeout_s, "the gripper result").result
 
     def _on_depth(self, msg):
         def put():

@@ -41,10 +41,11 @@ def half_extent_m(obj: dict) -> float:
 
 
 def object_roi(obj: dict, position_base_m, base_t_camera, camera_k, image_wh) -> tuple:
-    """(x, y, w, h) pixel box around the object's top footprint, clipped to the image."""
+    """(x, y, w, h) pixel box around the object's bounding box (top and bottom), clipped to the image."""
     r = half_extent_m(obj)
-    top_z = position_base_m[2] + obj["size_m"][-1] / 2
-    corners = [[position_base_m[0] + dx, position_base_m[1] + dy, top_z] for dx in (-r, r) for dy in (-r, r)]
+    half_h = obj["size_m"][-1] / 2
+    corners = [[position_base_m[0] + dx, position_base_m[1] + dy, position_base_m[2] + dz]
+               for dx in (-r, r) for dy in (-r, r) for dz in (-half_h, half_h)]
     uv = project_base_points(corners, base_t_camera, camera_k)
     lo = np.floor(uv.min(axis=0)) - ROI_MARGIN_PX
     hi = np.ceil(uv.max(axis=0)) + ROI_MARGIN_PX

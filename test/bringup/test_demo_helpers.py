@@ -1,0 +1,72 @@
+"""The demo's pure helpers: image geometry against the real cell camera, bin check, table, summary, picture."""
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from defgg_ros.bringup.demo_geometry import (
+    base_T_camera,
+    grasp_is_on_object,
+    in_bin,
+    label_of_object,
+    object_roi,
+    project_base_points,
+)
+from defgg_ros.bringup.demo_report import FramePanels, PickRow, format_table, save_figure, write_summary
+
+SCENES = Path(__file__).resolve().parents[2] / "sim_bringup" / "scenes"
+
+
+@pytest.fixture(scope="module")
+def rendered():
+    from defgg_ros.sim.cell import SimCell
+    from defgg_ros.sim.scene_spec import load_scene
+
+    cell = SimCell(load_scene(SCENES / "demo.yaml"))
+    try:
+        depth_m, mask, _ = cell.render_depth()
+        yield cell.scene.to_json_dict(), [xyz for xyz, _ in cell.object_poses()], cell.camera_k, mask
+    finally:
+        cell.close()
+
+
+def test_projection_and_rois_match_the_rendered_objects(rendered):
+    scene, positions, k, mask = rendered
+    b_t_c = base_T_camera(scene)
+    for i, (obj, pos) in enumerate(zip(scene["objects"], positions)):
+        u, v = project_base_points([pos], b_t_c, k)[0]
+        assert mask[int(round(v)), int(round(u))] == i, obj["name"]
+        x, y, w, h = object_roi(obj, pos, b_t_c, k, (640, 480))
+        ys, xs = np.nonzero(mask == i)
+        assert x <= xs.min() and xs.max() < x + w and y <= ys.min() and ys.max() < y + h, obj["name"]
+        labels = (mask == i).astype(np.uint8) * 7
+        assert label_of_object(labels, (u, v)) == 7
+
+
+def test_grasp_on_object_and_bin():
+    obj = {"shape": "box", "size_m": [0.05, 0.05, 0.05]}
+    assert grasp_is_on_object((0.51, 0.0), obj, (0.5, 0.0, 0.025))
+    assert not grasp_is_on_object((0.6, 0.0), obj, (0.5, 0.0, 0.025))
+    bin_dict = {"center_xy_m": [0.35, -0.45], "inner_size_m": [0.2, 0.2, 0.06]}
+    assert in_bin((0.36, -0.44, 0.03), bin_dict)
+    assert not in_bin((0.5, 0.0, 0.025), bin_dict)
+    assert not in_bin((0.35, -0.45, 0.5), bin_dict)       # held high above the bin
+    assert not in_bin((0.35, -0.45, 0.03), None)
+
+
+def test_table_summary_and_figure(tmp_path):
+    rows = [PickRow("sponge", 2e4, "soft", 0.031, 0.8, "done", True, True, True),
+            PickRow("can", 2e9, "rigid", failure_reason="PlanGrasp: no object")]
+    table = format_table(rows)
+    assert "sponge" in table and "31.0" in table and "2e+09" in table and "PlanGrasp: no object" in table
+    summary = write_summary(tmp_path / "summary.json", rows, {"scene": "x"})
+    loaded = json.loads((tmp_path / "summary.json").read_text())
+    assert loaded == json.loads(json.dumps(summary))
+    assert loaded["objects"][1]["grasp_width_m"] is None and loaded["picked_into_bin"] == 1
+    depth = np.full((48, 64), 0.4)
+    panel = FramePanels("sponge", depth, np.where(depth > 0, 2e4, 0.0), np.zeros((48, 64)), (30.0, 20.0),
+                        math.pi / 4, 10.0)
+    save_figure(tmp_path / "grasps.png", [panel])
+    assert (tmp_path / "grasps.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
