@@ -178,7 +178,7 @@ BAD_REQUESTS = {
                    "16UC1"),
     "unknown encoding": (_wrong(image_request, depth__encoding="bayer_grbg8"), "16UC1"),
     "depth with zero width": (_wrong(image_request, depth=Image(height=480, encoding="16UC1")), "0x480"),
-    "stiffness with no size": (_wrong(image_request, stiffness=Image(encoding="32FC1", data=bytes(8))), "empty"),
+    "stiffness with no size": (_wrong(image_request, stiffness=Image(encoding="32FC1", data=bytes(8))), "0x0"),
     "truncated data": (_wrong(image_request, depth__data=bytes(100)), "B, expected"),
     "stiffness size mismatch": (_wrong(image_request, stiffness=numpy_to_image(
         STIFFNESS_PA[:240, :320], "32FC1")), "stiffness is 320x240"),
