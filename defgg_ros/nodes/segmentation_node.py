@@ -8,6 +8,7 @@ and latches the assignments in force on `assignments_topic`. Assignments
 change through the `set_stiffness` service or the `default_youngs_modulus_pa`
 / `objects_json` parameters. Bad frames are skipped with a throttled warning.
 """
+import dataclasses
 import json
 import threading
 
@@ -20,8 +21,10 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import CameraInfo, Image
+from std_srvs.srv import Trigger
 
 from defgg_ros import topics
+from defgg_ros.atomic import atomic_path
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import (
     ConversionError,
@@ -56,6 +59,9 @@ PARAMETERS = {
     "max_object_height_m": (OBJECT_MAX_HEIGHT_M, "Pixels higher than this above the table (the robot) are ignored."),
     "min_object_area_px": (OBJECT_MIN_AREA_PX, "Smaller connected components are dropped (pixels)."),
     "background_depth_file": ("", "Optional .npy of an empty-scene depth in metres; '' = fit the table plane."),
+    "capture_background_service": ("/defgg/segmentation/capture_background",
+                                   "std_srvs/Trigger: use the latest depth frame as the empty-scene background."),
+    "background_save_file": ("", "Where capture_background also saves the capture (.npy); '' = keep in memory."),
 }
 
 
@@ -65,6 +71,8 @@ class SegmentationNode(Node):
         for name, (default, description) in PARAMETERS.items():
             self.declare_parameter(name, default, ParameterDescriptor(description=description))
         self._lock = threading.Lock()
+        self._captured_background = None  # from capture_background; a background_depth_file wins over it
+        self._last_depth_m = None
         self._config = self._config_from(self._params())  # invalid start-up parameters raise here
         self._camera_k = None
         self._image_size = None
@@ -77,15 +85,15 @@ class SegmentationNode(Node):
         self.create_subscription(CameraInfo, p["camera_info_topic"], self._on_camera_info, qos.SENSOR_DATA)
         self.create_subscription(Image, p["depth_topic"], self._on_depth, qos.SENSOR_DATA)
         self.create_service(SetStiffness, p["set_stiffness_service"], self._on_set_stiffness)
+        self.create_service(Trigger, p["capture_background_service"], self._on_capture_background)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._publish_assignments()
 
     def _params(self) -> dict:
         return {name: self.get_parameter(name).value for name in PARAMETERS}
 
-    @staticmethod
-    def _config_from(p: dict) -> SegmenterConfig:
-        background = None
+    def _config_from(self, p: dict) -> SegmenterConfig:
+        background = self._captured_background
         if p["background_depth_file"]:
             background = np.load(p["background_depth_file"], allow_pickle=False).astype(np.float32)
         return SegmenterConfig(float(p["default_youngs_modulus_pa"]), entries_from_json(p["objects_json"]),
@@ -117,6 +125,7 @@ class SegmentationNode(Node):
             camera_k, info = self._camera_k
             check_same_size("depth", msg, "camera_info", info)
             depth_m = depth_msg_to_metres(msg)
+            self._last_depth_m = depth_m
             with self._lock:
                 config = self._config
             out = run_segmenter(config, depth_m, camera_k)
@@ -147,6 +156,28 @@ class SegmentationNode(Node):
         if result.successful:
             response.message = f"{len(entries)} stiffness entries, default {default:g} Pa"
             self.get_logger().info(response.message)
+        return response
+
+    def _on_capture_background(self, request, response):
+        depth_m = self._last_depth_m
+        if depth_m is None:
+            response.success, response.message = False, "no valid depth frame received yet"
+            return response
+        path = self._params()["background_save_file"]
+        try:
+            if path:
+                with atomic_path(path) as tmp, open(tmp, "wb") as f:
+                    np.save(f, depth_m, allow_pickle=False)
+        except OSError as exc:
+            response.success, response.message = False, f"could not save the capture to {path}: {exc}"
+            return response
+        with self._lock:
+            self._captured_background = depth_m
+            if not self._params()["background_depth_file"]:
+                self._config = dataclasses.replace(self._config, background_depth_m=depth_m)
+        response.success = True
+        response.message = (f"captured a {depth_m.shape[1]}x{depth_m.shape[0]} empty-scene depth"
+                            + (f", saved to {path}" if path else "") + "; objects are now what differs from it")
         return response
 
     def _publish_assignments(self):

@@ -167,3 +167,23 @@ def test_shipped_yaml_config_loads(executor):
     executor.add_node(node)
     assert node.get_parameter("default_youngs_modulus_pa").value == 2e6
     assert node.get_parameter("min_object_area_px").value == 60
+
+
+def test_capture_background_removes_fixtures_that_are_not_table(harness, executor, spin, tmp_path):
+    from std_srvs.srv import Trigger
+
+    fixture = SceneObject(center_xy_m=(0.0, -0.12), height_m=0.06, size_xy_m=(0.12, 0.05))  # e.g. a bin wall
+    background_m, _ = render(SyntheticScene(objects=(fixture,)))
+    scene_m, truth = render(SyntheticScene(objects=(fixture,) + SCENE.objects))
+    labels = image_to_numpy(harness.frame(depth_metres_to_msg(scene_m, "16UC1"), stamp_sec=20)[1])
+    assert labels.max() == 3  # plane fit: the fixture counts as an object
+    save = tmp_path / "background.npy"
+    assert harness.seg_node.set_parameters([Parameter("background_save_file", value=str(save))])[0].successful
+    harness.frame(depth_metres_to_msg(background_m, "16UC1"), stamp_sec=21)
+    client = harness.node.create_client(Trigger, "/defgg/segmentation/capture_background")
+    assert client.wait_for_service(timeout_sec=10.0)
+    response = spin(executor, client.call_async(Trigger.Request()), 10.0, "capture response")
+    assert response.success, response.message
+    np.testing.assert_allclose(np.load(save, allow_pickle=False), background_m, atol=1e-3)
+    labels = image_to_numpy(harness.frame(depth_metres_to_msg(scene_m, "16UC1"), stamp_sec=22)[1])
+    assert labels.max() == 2 and not np.any(labels[truth == 1])  # only the two objects remain
