@@ -82,7 +82,9 @@ class NodeGraph:
         self.processes = {}
 
     def start(self, spec: NodeSpec) -> None:
-        log = open(self.run_dir / f"{spec.name}.log", "wb")
+        if spec.name in self.processes:
+            raise GraphError(f"node {spec.name} is already running")
+        log = open(self.run_dir / f"{spec.name}.log", "ab")
         try:
             self.processes[spec.name] = subprocess.Popen(
                 node_command(spec, self.run_dir), stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
@@ -102,18 +104,22 @@ class NodeGraph:
                 raise GraphError(f"node {name} exited with code {code} during the replay; its last log lines:\n"
                                  f"{self.log_tail(name)}")
 
-    def stop_all(self) -> None:
-        """SIGINT every node (rclpy shuts down cleanly), then SIGKILL what is left after a timeout."""
-        for process in self.processes.values():
+    def stop(self, names) -> None:
+        """SIGINT these nodes (rclpy shuts down cleanly), then SIGKILL what is left after a timeout."""
+        stopping = [self.processes.pop(n) for n in names if n in self.processes]
+        for process in stopping:
             if process.poll() is None:
                 os.killpg(process.pid, signal.SIGINT)
         deadline = time.monotonic() + STOP_TIMEOUT_S
-        for process in self.processes.values():
+        for process in stopping:
             try:
                 process.wait(timeout=max(0.1, deadline - time.monotonic()))
             except subprocess.TimeoutExpired:
                 os.killpg(process.pid, signal.SIGKILL)
                 process.wait()
+
+    def stop_all(self) -> None:
+        self.stop(list(self.processes))
 
     def __enter__(self):
         return self

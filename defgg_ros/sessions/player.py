@@ -20,8 +20,10 @@ from sensor_msgs.msg import CameraInfo, Image
 
 from defgg_ros import topics
 from defgg_ros.nodes import qos
+from defgg_ros.nodes.conversions import ns_to_stamp
 from defgg_ros.sessions.compare import GraspSummary, PickOutcome, Tolerances, grasp_problems, pick_problems
 from defgg_ros.sessions.report import Row, diff_text
+from defgg_ros.sessions.selector import restamp
 from defgg_ros.sessions.session import Frame, Session, stamp_ns
 
 # Re-send a frame this often while waiting: camera topics are best effort, a frame can be lost.
@@ -44,6 +46,10 @@ class ReplayOptions:
 class SessionPlayer(Node):
     def __init__(self, node_name="defgg_session_player", **kwargs):
         super().__init__(node_name, **kwargs)
+        # Frames go out with fresh, strictly increasing "replay stamps" (the inference node only matches
+        # stamps newer than the last it matched), mapped back to the recorded stamp on the way in.
+        self._next_stamp_ns = time.time_ns()
+        self._recorded_of = {}
         self._depth_pub = self.create_publisher(Image, topics.DEPTH_IMAGE, FRAME_QOS)
         self._info_pub = self.create_publisher(CameraInfo, topics.DEPTH_CAMERA_INFO, FRAME_QOS)
         self._color_pub = self.create_publisher(Image, topics.COLOR_IMAGE, FRAME_QOS)
@@ -56,24 +62,42 @@ class SessionPlayer(Node):
             self._grasps[stamp_ns(msg.header.stamp)] = msg
             self._changed.notify_all()
 
-    def _send(self, frame: Frame):
-        self._info_pub.publish(frame.camera_info.raw)
+    def _send(self, frame: Frame) -> int:
+        """Publish the frame under a new replay stamp; returns it."""
+        self._next_stamp_ns = max(self._next_stamp_ns + 1_000_000, time.time_ns())
+        stamp = self._next_stamp_ns
+        with self._changed:
+            self._recorded_of[stamp] = frame.stamp_ns
+        self._info_pub.publish(restamp(frame.camera_info.raw, stamp))
         if frame.color is not None:
-            self._color_pub.publish(frame.color.raw)
-        self._depth_pub.publish(frame.depth.raw)
+            self._color_pub.publish(restamp(frame.color.raw, stamp))
+        self._depth_pub.publish(restamp(frame.depth.raw, stamp))
+        return stamp
+
+    def restore(self, grasp):
+        """Put the recorded stamp back into a grasp computed on a replayed frame (in place; returns it)."""
+        recorded = self._recorded_of.get(stamp_ns(grasp.header.stamp))
+        if recorded is not None:
+            for header in (grasp.header, grasp.pose_base.header, grasp.pose_camera.header):
+                header.stamp = ns_to_stamp(recorded)
+        return grasp
 
     def feed_frame(self, frame: Frame, wait_s: float, alive=lambda: None):
-        """Publish a recorded frame until the graph's grasp for its stamp arrives; None after wait_s."""
+        """Publish a recorded frame until the graph's grasp for it arrives (stamp restored); None after wait_s.
+
+        Each re-send carries a new stamp: a lost piece of an earlier send cannot block a later one.
+        """
         deadline = time.monotonic() + wait_s
-        with self._changed:
-            self._grasps.pop(frame.stamp_ns, None)
+        sent = set()
         while True:
-            self._send(frame)
+            sent.add(self._send(frame))
             resend_at = min(deadline, time.monotonic() + RESEND_PERIOD_S)
             with self._changed:
-                got = self._changed.wait_for(lambda: frame.stamp_ns in self._grasps, resend_at - time.monotonic())
-                if got:
-                    return self._grasps[frame.stamp_ns]
+                if self._changed.wait_for(lambda: sent & self._grasps.keys(), resend_at - time.monotonic()):
+                    grasp = self._grasps[min(sent & self._grasps.keys())]
+                    for stamp in sent:
+                        self._grasps.pop(stamp, None)
+                    return self.restore(grasp)
             alive()
             if time.monotonic() >= deadline:
                 return None
@@ -109,6 +133,8 @@ class Replay:
     def _assignment(self, message):
         assignment = deserialize_message(message.raw, StiffnessAssignment)
         self.client.set_stiffness(assignment.objects, assignment.default_youngs_modulus_pa)
+        if self.recorder is not None:
+            self.recorder.write_raw(message.topic, message.raw)
 
     def _feed(self, frame: Frame):
         wait_s = self.options.grasp_timeout_s if frame.best_grasp is not None else self.options.no_grasp_wait_s
@@ -120,18 +146,14 @@ class Replay:
         self.last_fed_stamp = frame.stamp_ns
         if actual is not None:
             self.grasps_by_stamp[frame.stamp_ns] = actual
+            if self.recorder is not None:
+                self.recorder.write_grasp(actual)
         return actual
 
     def _ensure_fed(self, stamp):
-        """Make the frame with this stamp the latest one the inference node has seen."""
-        if stamp not in self.frames_by_stamp or stamp == self.last_fed_stamp:
-            return
-        if self.last_fed_stamp is not None and stamp < self.last_fed_stamp:
-            # The inference node's synchroniser drops stamps older than the newest it matched.
-            self.log(f"  note: a call used frame @{stamp / 1e9:.3f}s, older than the last one fed; "
-                     "it is compared against the last frame")
-            return
-        self._feed(self.frames_by_stamp[stamp])
+        """Make the frame with this recorded stamp the latest one the inference node has seen."""
+        if stamp in self.frames_by_stamp and stamp != self.last_fed_stamp:
+            self._feed(self.frames_by_stamp[stamp])
 
     def _frame(self, frame: Frame):
         if frame.best_grasp is None:
@@ -150,7 +172,12 @@ class Replay:
         recorded = call.response.decode() if call.response is not None else None
         if recorded is not None and recorded.grasps and request.depth.width == 0:
             self._ensure_fed(stamp_ns(recorded.grasps[0].header.stamp))  # the call planned on the latest frame
+        sent_ns = time.time_ns()
         response = self.client.plan(request, self.options.plan_timeout_s)
+        for grasp in response.grasps:
+            self.player.restore(grasp)
+        if self.recorder is not None:
+            self.recorder.record_plan(request, response, sent_ns)
         expected = _summary(recorded.grasps[0]) if recorded is not None and recorded.grasps else None
         actual = _summary(response.grasps[0]) if response.grasps else None
         problems = grasp_problems(expected, actual, self.options.tolerances)
@@ -169,7 +196,13 @@ class Replay:
         goal = deserialize_message(pick.goal.raw, PickAndPlace.Goal)
         self._prepare_goal(goal, pick)
         self.log(f"  pick {pick.index}: executing in the simulated cell ...")
-        result = self.client.pick(goal, self.options.pick_timeout_s)
+        if self.recorder is not None:
+            self.recorder.record_pick_goal(goal, time.time_ns())
+        on_feedback = self.recorder.record_pick_feedback if self.recorder is not None else None
+        result = self.client.pick(goal, self.options.pick_timeout_s, on_feedback)
+        self.player.restore(result.grasp_used)
+        if self.recorder is not None:
+            self.recorder.record_pick_result(result)
         actual = PickOutcome.of(result)
         self.rows.append(Row(f"pick {pick.index}", recorded.brief() if recorded else "none", actual.brief(), "",
                              pick_problems(recorded, actual)))

@@ -27,7 +27,10 @@ def stamp_ns_of(msg) -> int:
 
 
 class SessionRecorder(Node):
-    def __init__(self, writer, selector: FrameSelector, record_camera: bool = True, record_color: bool = True,
+    """live=True: record the cell's topics. live=False (a replay's --update): the player writes the
+    frames, grasps and assignments it sends/gets itself, with their recorded stamps and in order."""
+
+    def __init__(self, writer, selector: FrameSelector, live: bool = True, record_color: bool = True,
                  node_name="defgg_session_recorder", **kwargs):
         super().__init__(node_name, **kwargs)
         self._writer = writer
@@ -43,12 +46,17 @@ class SessionRecorder(Node):
                    (CameraInfo, topics.DEPTH_CAMERA_INFO, qos.SENSOR_DATA)]
         if record_color:
             stamped.append((Image, topics.COLOR_IMAGE, qos.SENSOR_DATA))
-        # A replay writes the frames it sends itself (write_frame): no subscription can lose one.
-        for msg_type, topic, profile in stamped if record_camera else ():
+        # A replay writes the frames it sends and the grasps it gets itself (write_frame, write_grasp):
+        # no subscription can lose one, and the recorded stamps are kept.
+        for msg_type, topic, profile in stamped if live else ():
             self.create_subscription(msg_type, topic, self._stamped_callback(topic), profile, raw=True)
-        self.create_subscription(Grasp, topics.BEST_GRASP, self._on_best_grasp, qos.STATE, raw=True)
+        if live:
+            self.create_subscription(Grasp, topics.BEST_GRASP, self._on_best_grasp, qos.STATE, raw=True)
         self.create_subscription(JointState, topics.JOINT_STATES, self._on_joint_state, qos.SENSOR_DATA, raw=True)
-        for msg_type, topic in ((StiffnessAssignment, topics.STIFFNESS_ASSIGNMENTS), (String, st.DRIVER_SCENE)):
+        latched = [(String, st.DRIVER_SCENE)]
+        if live:  # a player writes the assignments it applies itself (write_raw), in order
+            latched.append((StiffnessAssignment, topics.STIFFNESS_ASSIGNMENTS))
+        for msg_type, topic in latched:
             self.create_subscription(msg_type, topic, self._plain_callback(topic), qos.LATCHED, raw=True)
 
     # --- writing -------------------------------------------------------------
@@ -114,6 +122,13 @@ class SessionRecorder(Node):
         with self._lock:
             items = self._selector.mark_written([(topic, raw, now) for topic, raw in camera_messages])
         self._write_all(items)
+
+    def write_raw(self, topic: str, raw: bytes) -> None:
+        self._write_all([(topic, raw, time.time_ns())])
+
+    def write_grasp(self, grasp) -> None:
+        """Write a best grasp received by a player (its stamp already the recorded one)."""
+        self._write_all([(topics.BEST_GRASP, serialize_message(grasp), time.time_ns())])
 
     # --- client-side records ------------------------------------------------
     def record_plan(self, request, response, request_time_ns: int) -> None:

@@ -36,6 +36,8 @@ from defgg_ros.sessions.session import load_session
 
 EXIT_OK, EXIT_REGRESSION, EXIT_ERROR = 0, 1, 2
 STARTUP_TIMEOUT_S = 90.0
+PERCEPTION_NODES = ("segmentation_node", "grasp_inference_node")
+PICK_NODES = ("fake_panda_driver", "executor_node")
 # The replay starts its own cell: a ROS domain of its own keeps other graphs on this machine
 # (a running cell, tests, other replays) from feeding it frames. Fast DDS ports limit ids to <= 232.
 PRIVATE_DOMAIN_RANGE = (120, 230)
@@ -56,72 +58,93 @@ def find_sessions(paths) -> list[Path]:
     return found
 
 
-def _spin_in_thread(executor):
-    thread = threading.Thread(target=executor.spin, daemon=True)
-    thread.start()
-    return thread
+class ReplayRun:
+    """One private ROS domain and one player for all the sessions of a command.
 
+    The segmentation + inference nodes are reused from one session to the next while their
+    parameters are the same (each session starts by setting its own stiffness assignments); the
+    driver and executor of a session with picks are started for it and stopped after (fresh scene).
+    """
 
-def _stop(executor, thread, context) -> None:
-    """Stop spinning and wait for the spin thread before the context goes (else rcl aborts at exit)."""
-    executor.shutdown()
-    if thread is not None:
-        thread.join(timeout=10.0)
-    context.try_shutdown()
+    def __init__(self, args, log=print):
+        self.args, self.log = args, log
+        self.domain_id = args.domain_id if args.domain_id is not None else random.randint(*PRIVATE_DOMAIN_RANGE)
+        self.run_dir = Path(args.run_dir or tempfile.mkdtemp(prefix="defgg_replay_"))
+        self.context = Context()
+        rclpy.init(context=self.context, domain_id=self.domain_id)
+        self.executor = MultiThreadedExecutor(num_threads=4, context=self.context)
+        self.player = SessionPlayer(context=self.context)
+        self.executor.add_node(self.player)
+        self.client = CellClient(self.player)
+        self.graph = NodeGraph(self.run_dir, self.domain_id)
+        self._perception = None   # parameters of the running segmentation + inference nodes
+        self._spin_thread = threading.Thread(target=self.executor.spin, daemon=True)
+        self._spin_thread.start()
 
+    def close(self) -> None:
+        self.graph.stop_all()
+        # Stop spinning and wait for the thread before the context goes (else rcl aborts at exit).
+        self.executor.shutdown()
+        self._spin_thread.join(timeout=10.0)
+        self.context.try_shutdown()
 
-def replay_one(path: Path, args, log=print) -> tuple[int, str]:
-    """Replay one session; (exit code, message)."""
-    session = load_session(path)
-    meta = session.metadata
-    tolerances = _tolerances(args, md.tolerances_of(meta))
-    pick = md.pick_enabled(meta) and not args.no_pick and bool(session.picks)
-    model = resolve_model(meta, args.model, args.use_stiffness)
-    log(f"session {path.name}: {len(session.frames)} frame(s), {len(session.of_kind('plan'))} plan call(s), "
-        f"{len(session.picks)} pick(s){'' if pick else ' (picks skipped)'}; {model.describe(meta)}")
-    run_dir = Path(args.run_dir or tempfile.mkdtemp(prefix=f"defgg_replay_{path.name}_"))
-    domain_id = args.domain_id if args.domain_id is not None else random.randint(*PRIVATE_DOMAIN_RANGE)
-    context = Context()
-    rclpy.init(context=context, domain_id=domain_id)
-    executor = MultiThreadedExecutor(num_threads=4, context=context)
-    writer = recorder = spin_thread = None
-    try:
-        with NodeGraph(run_dir, domain_id) as graph:
-            for spec in graph_specs(meta, model, pick, run_dir):
-                graph.start(spec)
-            player = SessionPlayer(context=context)
-            executor.add_node(player)
+    def _start_cell(self, specs: list, pick: bool) -> None:
+        perception = [(s.name, s.parameters) for s in specs if s.name in PERCEPTION_NODES]
+        if perception != self._perception:
+            self.graph.stop(PERCEPTION_NODES)
+            for spec in specs:
+                if spec.name in PERCEPTION_NODES:
+                    self.graph.start(spec)
+            self._perception = perception
+        for spec in specs:
+            if spec.name not in PERCEPTION_NODES:
+                self.graph.start(spec)
+        started = time.monotonic()
+        self.client.wait_for_servers(STARTUP_TIMEOUT_S, pick, self.graph.check_alive)
+        self.log(f"  cell ready after {time.monotonic() - started:.1f} s (node logs in {self.run_dir})")
+
+    def replay(self, path: Path) -> tuple[int, str]:
+        """Replay one session; (exit code, message)."""
+        args, log = self.args, self.log
+        session = load_session(path)
+        meta = session.metadata
+        tolerances = _tolerances(args, md.tolerances_of(meta))
+        pick = md.pick_enabled(meta) and not args.no_pick and bool(session.picks)
+        model = resolve_model(meta, args.model, args.use_stiffness)
+        log(f"session {path.name}: {len(session.frames)} frame(s), {len(session.of_kind('plan'))} plan call(s), "
+            f"{len(session.picks)} pick(s){'' if pick else ' (picks skipped)'}; {model.describe(meta)}")
+        writer = recorder = None
+        try:
+            self._start_cell(graph_specs(meta, model, pick, self.run_dir), pick)
             if args.update:
                 new_meta = md.updated_metadata(meta, model.path, model.use_stiffness, tolerances)
                 writer = SessionWriter(path, new_meta, time.time_ns(), overwrite=True)
-                recorder = SessionRecorder(writer, FrameSelector(topics.DEPTH_IMAGE), record_camera=False,
-                                           context=context)
-                executor.add_node(recorder)
-            client = CellClient(player, recorder)
-            spin_thread = _spin_in_thread(executor)
-            started = time.monotonic()
-            client.wait_for_servers(STARTUP_TIMEOUT_S, pick, graph.check_alive)
-            log(f"  cell ready after {time.monotonic() - started:.1f} s (node logs in {run_dir})")
+                recorder = SessionRecorder(writer, FrameSelector(topics.DEPTH_IMAGE), live=False,
+                                           context=self.context)
+                self.executor.add_node(recorder)
             options = ReplayOptions(tolerances, pick=pick, grasp_timeout_s=args.timeout_s,
                                     pick_timeout_s=args.pick_timeout_s)
-            replay = Replay(session, player, client, options, graph.check_alive, log, recorder)
+            replay = Replay(session, self.player, self.client, options, self.graph.check_alive, log, recorder)
             rows = replay.run()
             if recorder is not None:
                 recorder.finish()
                 writer = None
-    finally:
-        if writer is not None:
-            writer.abort()
-        _stop(executor, spin_thread, context)
-    if replay.uncompared_frames:
-        log(f"({replay.uncompared_frames} frame(s) had no recorded grasp — the live cell skipped them — "
-            "and were not compared)")
-    log(format_table(f"\n{path.name} (tolerances: {tolerances.position_mm:g} mm, {tolerances.angle_deg:g} deg, "
-                     f"{tolerances.width_mm:g} mm)", rows))
-    if args.update:
-        return EXIT_OK, f"{path.name}: expectations re-recorded into {path}"
-    message = regression_message(path.name, rows)
-    return (EXIT_REGRESSION, message) if message else (EXIT_OK, f"{path.name}: all {len(rows)} item(s) match")
+        finally:
+            if writer is not None:
+                writer.abort()
+            if recorder is not None:
+                self.executor.remove_node(recorder)
+                recorder.destroy_node()
+            self.graph.stop(PICK_NODES)
+        if replay.uncompared_frames:
+            log(f"({replay.uncompared_frames} frame(s) had no recorded grasp — the live cell skipped them — "
+                "and were not compared)")
+        log(format_table(f"\n{path.name} (tolerances: {tolerances.position_mm:g} mm, "
+                         f"{tolerances.angle_deg:g} deg, {tolerances.width_mm:g} mm)", rows))
+        if args.update:
+            return EXIT_OK, f"{path.name}: expectations re-recorded into {path}"
+        message = regression_message(path.name, rows)
+        return (EXIT_REGRESSION, message) if message else (EXIT_OK, f"{path.name}: all {len(rows)} item(s) match")
 
 
 def _tolerances(args, recorded: Tolerances) -> Tolerances:
@@ -164,13 +187,17 @@ def main(argv=None) -> int:
         print(f"defgg-replay: error: {exc}", file=sys.stderr)
         return EXIT_ERROR
     messages = []
-    for path in paths:
-        try:
-            code, message = replay_one(path, args)
-        except (SessionBagError, md.MetadataError, GraphError, CellCallError, ValueError) as exc:
-            code, message = EXIT_ERROR, f"{path.name}: cannot replay: {exc}"
-        messages.append(message)
-        worst = max(worst, code)
+    run = ReplayRun(args)
+    try:
+        for path in paths:
+            try:
+                code, message = run.replay(path)
+            except (SessionBagError, md.MetadataError, GraphError, CellCallError, ValueError) as exc:
+                code, message = EXIT_ERROR, f"{path.name}: cannot replay: {exc}"
+            messages.append(message)
+            worst = max(worst, code)
+    finally:
+        run.close()
     print()
     for message in messages:
         print(message, file=sys.stderr if worst else sys.stdout)
