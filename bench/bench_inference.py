@@ -56,13 +56,14 @@ def peak_forward_memory_mb(fn, x) -> float:
 
 def measure(variants: dict, runs: int) -> dict:
     times = {name: [] for name in variants}
+    block = min(BLOCK, runs)
     with torch.inference_mode():
         for fn in variants.values():
-            for _ in range(5):
+            for _ in range(min(5, runs)):
                 fn()
         while min(len(t) for t in times.values()) < runs:
             for name, fn in variants.items():
-                for _ in range(BLOCK):
+                for _ in range(block):
                     t0 = time.perf_counter()
                     fn()
                     times[name].append(time.perf_counter() - t0)
