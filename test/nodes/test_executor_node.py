@@ -203,8 +203,11 @@ def test_pick_and_place_with_contact_on_the_way_down(cell, spin):
     assert result.phase_reached == "done"
     assert list(dict.fromkeys(phases)) == ["pre_grasp", "descend", "close", "lift", "transfer", "place", "retreat",
                                           "done"]
+    # The descent ended at the contact, before the grasp depth (how far past the first touch
+    # depends on scheduling in this busy process; the fake-clock tests pin the distance down).
     assert result.contact_detected
-    assert GRASP_XYZ[2] < result.contact_height_m < GRASP_XYZ[2] + 0.01
+    grasp_tcp_z = GRASP_XYZ[2] - node._config.grasp_depth_below_surface_m
+    assert grasp_tcp_z + 0.002 < result.contact_height_m < GRASP_XYZ[2] + 0.01
     assert result.gripper_width_closed_m == pytest.approx(0.04)
     assert result.held_after_lift and result.held_after_transfer
     assert result.grasp_used.width_m == pytest.approx(0.05)
