@@ -89,6 +89,12 @@ class SessionWriter:
         self._writer.write(self._connections[topic], int(log_time_ns), bytes(raw))
         self.counts[topic] = self.counts.get(topic, 0) + 1
 
+    def update_metadata(self, metadata: dict, log_time_ns: int) -> None:
+        """Metadata learned while recording (e.g. node parameters): a newer metadata message wins."""
+        text = json.dumps(metadata, sort_keys=True)
+        self._writer.set_custom_data(CUSTOM_DATA_KEY, text)
+        self.write(st.METADATA, serialize_string(text), log_time_ns)
+
     def close(self) -> Path:
         self._writer.close()
         if self.path.exists():  # only with overwrite: swap folders, old one removed after
@@ -131,11 +137,11 @@ def read_bag(path) -> tuple[dict, list[BagMessage]]:
 
 
 def _metadata(path: Path, messages: list[BagMessage]) -> dict:
-    first = next((m for m in messages if m.topic == st.METADATA), None)
-    if first is None:
+    latest = next((m for m in reversed(messages) if m.topic == st.METADATA), None)
+    if latest is None:
         raise SessionBagError(f"{path}: no {st.METADATA} message; this is not a defgg session bag")
     try:
-        metadata = json.loads(first.decode().data)
+        metadata = json.loads(latest.decode().data)
     except Exception as exc:  # noqa: BLE001 - damaged CDR or JSON
         raise SessionBagError(f"{path}: session metadata unreadable ({exc})") from None
     if not isinstance(metadata, dict):

@@ -45,6 +45,7 @@ from defgg_ros.sessions.selector import DEFAULT_DEPTH_PERIOD_S, DEFAULT_JOINT_ST
 from defgg_ros.sim.scene_spec import SceneError, load_scene
 
 FRESH_FRAME_TIMEOUT_S = 60.0
+PASSIVE_PERIODIC_S = 5.0
 
 
 def _model_path(args, parameters: dict) -> tuple[Path, bool]:
@@ -143,7 +144,7 @@ def record(args, log=print) -> Path:
             else:
                 log(f"recording into {args.out} " + (f"for {args.duration_s:g} s" if args.duration_s
                                                      else "until Ctrl-C"))
-                threading.Event().wait(args.duration_s or None)
+                wait_passive(context, args.duration_s, lambda: _late_parameters(probe, recorder, meta))
         except KeyboardInterrupt:
             log("stopping (Ctrl-C)")
         path = recorder.finish()
@@ -156,6 +157,30 @@ def record(args, log=print) -> Path:
         executor.shutdown()
         spin_thread.join(timeout=10.0)  # before the context goes, or rcl aborts at exit
         context.try_shutdown()
+
+
+def _late_parameters(probe, recorder, meta) -> None:
+    """Nodes started with the recorder (defgg-bringup --record) answer later: add their parameters."""
+    missing = [n for n in CELL_NODES if n not in meta["parameters"]]
+    late = fetch_all(probe, missing, 1.0) if missing else {}
+    if late:
+        meta["parameters"] = {**meta["parameters"], **late}
+        recorder.update_metadata(meta)
+
+
+def wait_passive(context, duration_s: float, periodic=lambda: None) -> None:
+    """Until duration_s passed (0: forever), Ctrl-C/SIGTERM, or rclpy's own SIGINT handling ends the context.
+
+    Calls `periodic()` every PASSIVE_PERIODIC_S meanwhile.
+    """
+    end = time.monotonic() + duration_s if duration_s else float("inf")
+    next_call = time.monotonic() + PASSIVE_PERIODIC_S
+    tick = threading.Event()
+    while context.ok() and time.monotonic() < end:
+        tick.wait(min(0.5, max(0.0, end - time.monotonic())))
+        if time.monotonic() >= next_call and context.ok():
+            periodic()
+            next_call = time.monotonic() + PASSIVE_PERIODIC_S
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -162,6 +162,11 @@ class SessionRecorder(Node):
         """Messages written per topic so far."""
         return dict(self._writer.counts)
 
+    def update_metadata(self, metadata: dict) -> None:
+        with self._lock:
+            if not self.closed:
+                self._writer.update_metadata(metadata, time.time_ns())
+
     def finish(self):
         """Stop writing (later callbacks are dropped) and close the bag into place."""
         with self._lock:
