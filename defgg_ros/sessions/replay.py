@@ -20,6 +20,7 @@ from pathlib import Path
 import rclpy
 from rclpy.context import Context
 from rclpy.executors import MultiThreadedExecutor
+from tqdm import tqdm
 
 from defgg_ros import topics
 from defgg_ros.sessions import metadata as md
@@ -180,27 +181,28 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     use_large_message_transport()
-    worst = EXIT_OK
     try:
         paths = find_sessions(args.sessions)
     except SessionBagError as exc:
         print(f"defgg-replay: error: {exc}", file=sys.stderr)
         return EXIT_ERROR
-    messages = []
-    run = ReplayRun(args)
+    results = []
+    run = ReplayRun(args, log=tqdm.write)
     try:
-        for path in paths:
+        for path in tqdm(paths, desc="sessions", unit="session", disable=len(paths) < 2):
             try:
-                code, message = run.replay(path)
+                results.append(run.replay(path))
             except (SessionBagError, md.MetadataError, GraphError, CellCallError, ValueError) as exc:
-                code, message = EXIT_ERROR, f"{path.name}: cannot replay: {exc}"
-            messages.append(message)
-            worst = max(worst, code)
+                results.append((EXIT_ERROR, f"{path.name}: cannot replay: {exc}"))
     finally:
         run.close()
     print()
-    for message in messages:
-        print(message, file=sys.stderr if worst else sys.stdout)
+    for code, message in results:  # the verdicts last, where CI logs end
+        print(message, file=sys.stderr if code else sys.stdout)
+    worst = max(code for code, _ in results)
+    print(f"defgg-replay: {len(results)} session(s): "
+          + {EXIT_OK: "all match", EXIT_REGRESSION: "REGRESSION", EXIT_ERROR: "ERROR"}[worst],
+          file=sys.stderr if worst else sys.stdout)
     return worst
 
 
