@@ -96,3 +96,24 @@ def test_bad_grasps_and_tests_are_refused():
         WorldGrasp((0, 0, 0.02), 0.0, 0.2)
     with pytest.raises(ValueError, match="unknown tests"):
         run_grasp_trial(box(2e9), OFF_CENTRE, ("wiggle",))
+
+
+def test_multi_material_object_rests_stably_and_a_grasp_on_its_soft_head_works():
+    """Rigid handle + soft head (2e4 Pa) anchored together: no fling at rest, and it can be grasped."""
+    spec = objects.ObjectSpec(objects.get_shape("mallet_mm"), 2e9, part_youngs_modulus_pa=2e4)
+    head = spec.shape.tet_parts[1].nodes_m
+    centre = (head.max(axis=0) + head.min(axis=0)) / 2
+    grasp = WorldGrasp((float(centre[0]), 0.0, 0.02), math.pi / 2, float(np.ptp(head[:, 1])))
+    out = run_grasp_trial(spec, grasp, ("shake",), dataclasses.replace(QUICK, shake_directions=2))
+    assert out.status in (STATUS_OK, STATUS_LIFT_FAILED), out.note
+    assert out.sim["soft"] == [False, True]
+
+
+def test_multi_material_parts_do_not_fling_each_other(client):
+    spec = objects.ObjectSpec(objects.get_shape("mallet_mm"), 2e9, part_youngs_modulus_pa=2e4)
+    w = world.create_world(client, spec.part_moduli_pa())
+    loaded = objects.load_object(client, spec)
+    start = loaded.centroid_m()
+    w.step(400)
+    assert loaded.is_finite()
+    assert np.linalg.norm(loaded.centroid_m() - start) < 0.005

@@ -1,0 +1,133 @@
+"""Cost per labelled grasp and label agreement: naive (probe) protocol vs the sped-up ones.
+
+Runs each sampled (object, E, candidate) trial under every protocol in this
+process (torch-free, one thread), appends one JSON line per trial and
+protocol to --results (resumable: finished (trial, protocol) pairs are
+skipped), then prints per E: CPU s per trial, labelled grasps per CPU-hour
+and the label agreement of each protocol with the naive one.
+
+  .venv/bin/python bench/bench_datagen.py                 # run the sample, then print
+  .venv/bin/python bench/bench_datagen.py --summary-only  # print from the results file
+
+Protocols:
+  naive      the probe's: close 0.4 s, lift 0.8 s, all 16 directions ramped over 0.5 s to the end
+  fast       production (TrialSettings.fast): shorter close/lift, a direction stops when the object
+             is lost, remaining directions stop once the label is decided
+  fast_ramp  fast + the ramp compressed to 0.25 s (a candidate surrogate)
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent))
+
+from defgg_ros.atomic import append_jsonl, read_jsonl  # noqa: E402
+
+PROTOCOLS = {
+    "naive": {"close_settle_s": 0.3, "lift_time_s": 0.6, "hold_time_s": 0.2,
+              "stop_direction_when_lost": False, "stop_when_label_decided": False},
+    "fast": {},
+    "fast_ramp": {"shake_ramp_time_s": 0.25},
+}
+DEFAULT_OBJECTS = ("box_small", "cylinder_tall", "egad_train_05_c3")
+DEFAULT_MODULI = (2e4, 2e5, 2e6, 2e9)
+
+
+def sample_jobs(objects, moduli, grasps, seed):
+    from defgg_ros.data.datagen import object_seed
+    from defgg_ros.sim.objects import get_shape
+    from defgg_ros.sim.sampler import sample_grasps
+
+    jobs = []
+    for name in objects:
+        cands = sample_grasps(get_shape(name).surface(), object_seed(seed, name), keep=grasps)
+        for e in moduli:
+            for i, c in enumerate(cands):
+                jobs.append((name, e, i, c.grasp))
+    return jobs
+
+
+def run(args):
+    import torch
+
+    from defgg_ros.sim import objects, world
+    from defgg_ros.sim.trial import TrialSettings, run_grasp_trial
+
+    torch.set_num_threads(1)
+    done = {(r["trial"], r["protocol"]) for r in read_jsonl(args.results)}
+    client = world.connect()
+    jobs = sample_jobs(args.objects, args.moduli, args.grasps, args.seed)
+    # rigid first (cheap), then soft: a partial run already has every E
+    jobs.sort(key=lambda j: (j[1] < 1e7, j[2], j[0], j[1]))
+    for name, e, i, grasp in jobs:
+        trial = f"{name}__E{e:.0e}__g{i:03d}"
+        for proto in args.protocols:
+            if (trial, proto) in done:
+                continue
+            settings = dataclasses.replace(TrialSettings.fast(), **PROTOCOLS[proto])
+            out = run_grasp_trial(objects.ObjectSpec(objects.get_shape(name), e), grasp, ("shake",), settings,
+                                  client=client)
+            mean = out.shake_mean_mps2
+            label = False if out.status == "lift_failed" else (None if mean is None else mean >= 25.0)
+            append_jsonl(args.results, {"trial": trial, "protocol": proto, "object": name, "E": e,
+                                        "status": out.status, "label": label, "mean": mean,
+                                        "accels": out.shake_accels_mps2, "measured": out.shake_measured,
+                                        "cpu_s": out.cpu_s, "steps": out.sim_steps})
+            print(f"{trial:40s} {proto:10s} {out.status:12s} label={label} mean={mean} cpu={out.cpu_s:.1f}s",
+                  flush=True)
+
+
+def summarize(results_path):
+    rows = read_jsonl(results_path)
+    by = defaultdict(dict)
+    for r in rows:
+        by[r["trial"]][r["protocol"]] = r
+    protos = [p for p in PROTOCOLS if any(p in v for v in by.values())]
+    print(f"results: {results_path} ({len(rows)} trial runs)")
+    print("| E (Pa) | protocol | trials | CPU s/trial | labelled/CPU-h | speed-up vs naive | agreement with naive |")
+    print("|---|---|---|---|---|---|---|")
+    overall = defaultdict(lambda: [0, 0])
+    for e in sorted({r["E"] for r in rows}):
+        # only trials that every present protocol has finished, so costs compare like for like
+        trials = [v for v in by.values() if all(p in v for p in protos) and next(iter(v.values()))["E"] == e]
+        if not trials:
+            continue
+        rate = {}
+        for p in protos:
+            cpu = sum(v[p]["cpu_s"] for v in trials)
+            labelled = sum(v[p]["label"] is not None for v in trials)
+            rate[p] = labelled / (cpu / 3600.0) if cpu > 0 else float("nan")
+            both = [v for v in trials if v[p]["label"] is not None and v["naive"]["label"] is not None]
+            agree = sum(v[p]["label"] == v["naive"]["label"] for v in both)
+            if p != "naive":
+                overall[p][0] += agree
+                overall[p][1] += len(both)
+            speed = rate[p] / rate["naive"] if "naive" in rate and rate["naive"] > 0 else float("nan")
+            print(f"| {e:.0e} | {p} | {len(trials)} | {cpu / len(trials):.1f} | {rate[p]:.0f} | {speed:.2f}x | "
+                  f"{agree}/{len(both)} |")
+    for p, (agree, n) in overall.items():
+        print(f"overall label agreement {p} vs naive: {agree}/{n} = {100.0 * agree / max(1, n):.1f} %")
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--objects", nargs="+", default=list(DEFAULT_OBJECTS))
+    ap.add_argument("--moduli", nargs="+", type=float, default=list(DEFAULT_MODULI))
+    ap.add_argument("--grasps", type=int, default=2, help="candidates per object (same for every E)")
+    ap.add_argument("--protocols", nargs="+", default=list(PROTOCOLS), choices=list(PROTOCOLS))
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--results", type=Path, default=HERE / "results" / "datagen_sample.jsonl")
+    ap.add_argument("--summary-only", action="store_true")
+    args = ap.parse_args(argv)
+    if not args.summary_only:
+        run(args)
+    summarize(args.results)
+
+
+if __name__ == "__main__":
+    main()
