@@ -21,18 +21,6 @@ OBJECTS = ("box_small", "cube")
 QUICK = {"close_settle_s": 0.05, "lift_time_s": 0.15, "hold_time_s": 0.05, "shake_ramp_time_s": 0.3}
 
 
-@pytest.fixture(scope="module")
-def mesh_cache(tmp_path_factory):
-    path = tmp_path_factory.mktemp("mesh_cache")
-    old = os.environ.get("DEFGG_MESH_CACHE")
-    os.environ["DEFGG_MESH_CACHE"] = str(path)
-    yield path
-    if old is None:
-        os.environ.pop("DEFGG_MESH_CACHE", None)
-    else:
-        os.environ["DEFGG_MESH_CACHE"] = old
-
-
 def _cli(out, grasps=4):
     return [sys.executable, "-m", "defgg_ros.data.datagen_cli", "--out", str(out), "--objects", *OBJECTS,
             "--moduli", "2e9", "--grasps-per-scene", str(grasps), "--pass-size", "2", "--no-progress",
@@ -57,9 +45,9 @@ def _wait_for_first_trial(proc, out, timeout_s=300):
     pytest.fail("no trial written in time")
 
 
-def test_killed_and_restarted_run_has_every_trial_once(tmp_path, mesh_cache):
+def test_killed_and_restarted_run_has_every_trial_once(tmp_path):
     out = tmp_path / "ds"
-    env = dict(os.environ, DEFGG_MESH_CACHE=str(mesh_cache))
+    env = dict(os.environ)
     proc = subprocess.Popen(_cli(out), env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     _wait_for_first_trial(proc, out)
     proc.send_signal(signal.SIGKILL)
@@ -89,7 +77,7 @@ def test_killed_and_restarted_run_has_every_trial_once(tmp_path, mesh_cache):
     assert [j.candidate_index for j in jobs] == [4, 5, 4, 5, 6, 7, 6, 7][: len(jobs)]
 
 
-def test_ray_path_gives_the_local_results(tmp_path, mesh_cache):
+def test_ray_path_gives_the_local_results(tmp_path):
     pytest.importorskip("ray")
     settings = dict(QUICK)
     local_cfg = datagen.DatagenConfig(out=tmp_path / "local", objects=("cube",), moduli_pa=(2e9,),

@@ -1,14 +1,7 @@
-"""Simulation tests: a private tet-mesh cache per test session (no fixed /tmp paths)."""
+"""Simulation tests share the content-addressed tet-mesh cache (~/.cache/defgg_ros/meshes or
+$DEFGG_MESH_CACHE): entries are keyed by a hash of the surface and written atomically, so sharing
+is safe and saves fTetWild runs; the cache test itself uses a private folder."""
 import pytest
-
-
-@pytest.fixture(scope="session", autouse=True)
-def mesh_cache(tmp_path_factory):
-    mp = pytest.MonkeyPatch()
-    path = tmp_path_factory.mktemp("mesh_cache")
-    mp.setenv("DEFGG_MESH_CACHE", str(path))
-    yield path
-    mp.undo()
 
 
 @pytest.fixture

@@ -24,7 +24,8 @@ def test_unknown_set_is_a_clear_error():
         objects.object_set("test")
 
 
-def test_tet_mesh_is_coarse_valid_and_cached(monkeypatch):
+def test_tet_mesh_is_coarse_valid_and_cached(monkeypatch, tmp_path):
+    monkeypatch.setenv(meshes.MESH_CACHE_ENV, str(tmp_path))
     box = shapes.box(0.05, 0.03, 0.04)
     tet = meshes.tetrahedralize(box)
     assert len(tet.nodes_m) <= meshes.TARGET_MAX_NODES
@@ -38,7 +39,7 @@ def test_tet_mesh_is_coarse_valid_and_cached(monkeypatch):
 
     monkeypatch.setattr(meshes, "_run_ftetwild", must_not_run)
     again = meshes.tetrahedralize(shapes.box(0.05, 0.03, 0.04))
-    assert again.content_hash == tet.content_hash
+    assert again.content_hash == tet.content_hash and again.vtk_path.parent == tmp_path
     np.testing.assert_array_equal(again.tets, tet.tets)
 
 
