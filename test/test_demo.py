@@ -63,9 +63,12 @@ def test_rigid_and_soft_objects_are_picked_into_the_bin(tmp_path):
             scene = client.scene()
             for index, obj in enumerate(scene["objects"]):
                 grasp = _grasp_from_ground_truth(obj, client.object_positions()[index])
-                result = client.pick(PickAndPlace.Goal(plan_grasp=False, grasp=grasp), timeout_s=PICK_TIMEOUT_S)
-                assert result.success, (f"{obj['name']}: {result.phase_reached}: {result.failure_reason}\n"
-                                        + log_path.read_text()[-3000:])
+                phases = []
+                result = client.pick(PickAndPlace.Goal(plan_grasp=False, grasp=grasp),
+                                     lambda f, seen=phases: seen.append(f.phase) if f.phase not in seen else None,
+                                     timeout_s=PICK_TIMEOUT_S)
+                assert result.success, (f"{obj['name']}: {result.phase_reached} (phases {phases}): "
+                                        f"{result.failure_reason}\n" + log_path.read_text()[-3000:])
                 assert result.held_after_transfer
                 assert result.gripper_width_closed_m == pytest.approx(obj["size_m"][0], abs=0.012)
                 position = client.object_positions()[index]
