@@ -75,3 +75,15 @@ def test_regression_message_names_the_frames_and_the_difference():
     assert "frame 1 @2.000s: position moved 20.0 mm (> 3 mm)" in message
     assert "--update soft_objects" in message
     assert regression_message("s", rows[:1]) is None
+
+
+def test_pure_session_modules_do_not_import_rclpy():
+    import subprocess
+    import sys
+    modules = ["interfaces", "bag", "session", "selector", "compare", "report", "metadata", "scene_stiffness",
+               "replay_graph", "graph"]
+    code = ("import sys\n" + "".join(f"import defgg_ros.sessions.{m}\n" for m in modules)
+            + "bad = [m for m in sys.modules if m.split('.')[0] in ('rclpy', 'torch')]\nprint(bad)\n"
+            + "sys.exit(1 if bad else 0)")
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stdout + result.stderr
