@@ -144,7 +144,7 @@ class ReplayRun:
                          f"{tolerances.angle_deg:g} deg, {tolerances.width_mm:g} mm)", rows))
         if args.update:
             return EXIT_OK, f"{path.name}: expectations re-recorded into {path}"
-        message = regression_message(path.name, rows)
+        message = regression_message(path.name, rows, model.change_from(meta))
         return (EXIT_REGRESSION, message) if message else (EXIT_OK, f"{path.name}: all {len(rows)} item(s) match")
 
 

@@ -37,6 +37,14 @@ class ModelChoice:
     use_stiffness: bool
     sha256: str
 
+    def change_from(self, metadata: dict) -> str:
+        """'' when this is the recorded model, else what changed (for the regression message)."""
+        recorded = metadata.get("model") or {}
+        if recorded.get("sha256") == self.sha256:
+            return ""
+        return (f"the model differs from the recording: {self.path.name} sha256 {self.sha256[:12]}, "
+                f"recorded {recorded.get('file', '?')} sha256 {recorded.get('sha256', '?')[:12]}")
+
     def describe(self, metadata: dict) -> str:
         recorded = (metadata.get("model") or {}).get("sha256", "")
         same = "same as recorded" if recorded == self.sha256 else f"CHANGED, recorded {recorded[:12] or '?'}"

@@ -34,12 +34,16 @@ def format_table(title: str, rows: list[Row]) -> str:
     return "\n".join(out)
 
 
-def regression_message(session_name: str, rows: list[Row]) -> str | None:
-    """None when everything matched, else one line per changed item saying what changed."""
+def regression_message(session_name: str, rows: list[Row], cause: str = "") -> str | None:
+    """None when everything matched, else one line per changed item saying what changed.
+
+    `cause`: a known difference from the recording (e.g. another model) to name first.
+    """
     bad = [r for r in rows if r.problems]
     if not bad:
         return None
-    lines = [f"REGRESSION in session {session_name}: {len(bad)} of {len(rows)} item(s) changed"]
+    lines = [f"REGRESSION in session {session_name}: {len(bad)} of {len(rows)} item(s) changed"
+             + (f" ({cause})" if cause else "")]
     lines += [f"  {r.item}: " + "; ".join(r.problems) for r in bad]
     lines.append("  (if the change is intended, re-record the expectations with: defgg-replay --update "
                  f"{session_name})")

@@ -54,7 +54,7 @@ def test_depth_only_model_is_a_regression_and_update_rerecords_it(tmp_path, caps
     session = shutil.copytree(SESSIONS / "mixed_objects", tmp_path / "mixed_objects")
     code, text = run_replay(capsys, session, "--model", DEPTH_ONLY)
     assert code == 1, text
-    assert "REGRESSION in session mixed_objects" in text and "CHANGED, recorded" in text
+    assert "REGRESSION in session mixed_objects" in text and "the model differs from the recording" in text
     assert "frame 0 @" in text.split("REGRESSION in session")[1]
     assert "position moved" in text or "angle changed" in text or "width changed" in text
     # On purpose: re-record with the depth-only model, then it replays clean with it.
