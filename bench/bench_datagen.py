@@ -10,15 +10,16 @@ and the label agreement of each protocol with the naive one.
   .venv/bin/python bench/bench_datagen.py --summary-only  # print from the results file
 
 Protocols:
-  naive      the probe's: close 0.4 s, lift 0.8 s, all 16 directions ramped over 0.5 s to the end
-  fast       production (TrialSettings.fast): shorter close/lift, a direction stops when the object
-             is lost, remaining directions stop once the label is decided
-  fast_ramp  fast + the ramp compressed to 0.25 s (a candidate surrogate)
+  naive      the probe's (TrialSettings.naive): close 0.4 s, lift 0.8 s, all 16 directions ramped
+             over 0.5 s to the end
+  exact      shorter close/lift (0.2 s + 0.4 s), a direction stops when the object is lost, the
+             remaining directions stop once the label is decided (TrialSettings.exact)
+  fast       the generator's (TrialSettings.fast): exact + the confident-stop surrogate (stop after
+             >= 4 directions when the measured mean is >= 40/sqrt(k) m/s^2 from the threshold)
 """
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import sys
 from collections import defaultdict
 from pathlib import Path
@@ -28,12 +29,7 @@ sys.path.insert(0, str(HERE.parent))
 
 from defgg_ros.atomic import append_jsonl, read_jsonl  # noqa: E402
 
-PROTOCOLS = {
-    "naive": {"close_settle_s": 0.3, "lift_time_s": 0.6, "hold_time_s": 0.2,
-              "stop_direction_when_lost": False, "stop_when_label_decided": False},
-    "fast": {},
-    "fast_ramp": {"shake_ramp_time_s": 0.25},
-}
+PROTOCOLS = ("naive", "exact", "fast")   # TrialSettings class methods
 DEFAULT_OBJECTS = ("box_small", "cylinder_tall", "egad_train_05_c3")
 DEFAULT_MODULI = (2e4, 2e5, 2e6, 2e9)
 
@@ -69,7 +65,7 @@ def run(args):
         for proto in args.protocols:
             if (trial, proto) in done:
                 continue
-            settings = dataclasses.replace(TrialSettings.fast(), **PROTOCOLS[proto])
+            settings = getattr(TrialSettings, proto)()
             out = run_grasp_trial(objects.ObjectSpec(objects.get_shape(name), e), grasp, ("shake",), settings,
                                   client=client)
             mean = out.shake_mean_mps2

@@ -13,12 +13,14 @@ faked by gravity). The grasp+lift state is shared by all directions:
 saveState does not cover soft nodes, so LoadedObject.restore_state resets
 the nodes with resetMeshData and zeroes their velocities.
 
-Speed-ups (TrialSettings.fast(), validated against TrialSettings.naive() in
-bench/bench_datagen.py): stop a direction as soon as the object is lost;
-stop the remaining directions once the label is decided (mean can no longer
-reach, or can no longer miss, the threshold). Skipped directions are stored
-as the bound that decided the label (50 when it could not reach, 0 when it
-could not miss) and flagged in `shake_measured`.
+Speed-ups (validated against TrialSettings.naive() in bench/bench_datagen.py).
+Exact (the defaults, TrialSettings.exact()): stop a direction as soon as the
+object is lost; stop the remaining directions once the label is decided (mean
+can no longer reach, or can no longer miss, the threshold); skipped directions
+are stored as the bound that decided the label (50 / 0). Surrogate (on in
+TrialSettings.fast(), the generator's): after >= 4 directions stop when the
+measured mean is far from the threshold; skipped directions hold the measured
+mean. Skipped directions are flagged False in `shake_measured`.
 """
 from __future__ import annotations
 
@@ -49,6 +51,8 @@ FORCE_PER_DECADE_N = 0.5
 FORCE_REFERENCE_E_PA = 2e4
 OPENING_CLEARANCE_M = 0.01      # fingers open this much wider than the grasp width (5 mm a side)
 LOSS_DISTANCE_M = 0.02          # object moved this far relative to the hand = no longer held
+CONFIDENT_MIN_DIRECTIONS = 4
+CONFIDENT_MARGIN_MPS2 = 40.0     # k=4: mean >= 45 or <= 5; k=8: >= 39.1 or <= 10.9
 TWIST_AXES = ((1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1))
 
 
@@ -96,6 +100,7 @@ class TrialSettings:
     check_every_s: float = 0.005
     stop_direction_when_lost: bool = True
     stop_when_label_decided: bool = True
+    confident_stop: bool = False       # the validated surrogate (_confidently_decided); on in fast()
     max_cpu_s: float = 900.0
     # Evaluation tasks (defgg_ros/evaluation): ramp the shake only to this limit, and stop
     # the remaining directions/axes once one is held below *_fail_below_* (the task has
@@ -108,12 +113,19 @@ class TrialSettings:
 
     @classmethod
     def naive(cls) -> TrialSettings:
-        """The probe's protocol: every direction ramps to the end, all 16 run."""
-        return cls(stop_direction_when_lost=False, stop_when_label_decided=False)
+        """The probe's protocol: close 0.4 s, lift 0.8 s, every direction ramps to the end, all 16 run."""
+        return cls(close_settle_s=0.3, lift_time_s=0.6, hold_time_s=0.2, stop_direction_when_lost=False,
+                   stop_when_label_decided=False)
+
+    @classmethod
+    def exact(cls) -> TrialSettings:
+        """Only the stops that cannot change the label (no surrogate); the dataclass defaults."""
+        return cls()
 
     @classmethod
     def fast(cls) -> TrialSettings:
-        return cls()
+        """The generator's protocol: exact stops plus the confident-stop surrogate."""
+        return cls(confident_stop=True)
 
 
 @dataclass
@@ -230,6 +242,10 @@ class _Trial:
             values.append(self.ramp(self.settings.shake_limit_mps2, self.settings.shake_ramp_time_s, apply))
             measured.append(True)
             left = len(dirs) - len(values)
+            if self.settings.confident_stop and left and _confidently_decided(values):
+                values += [float(np.mean(values))] * left    # imputed by the measured mean
+                measured += [False] * left
+                break
             fail_below = self.settings.shake_fail_below_mps2
             if fail_below is not None and values[-1] < fail_below and left:
                 values += [0.0] * left
@@ -269,6 +285,17 @@ class _Trial:
         # Axes skipped after a failure: 0, flagged in twist_measured.
         return values + [0.0] * (len(TWIST_AXES) - len(values)), [True] * len(values) + [False] * (
             len(TWIST_AXES) - len(values))
+
+
+def _confidently_decided(values) -> bool:
+    """Surrogate stop: after >= CONFIDENT_MIN_DIRECTIONS directions, the measured mean is so far from
+    the threshold (CONFIDENT_MARGIN_MPS2 / sqrt(k)) that the remaining directions, spread over the
+    sphere by the bit-reversed order, are very unlikely to carry it across. Its label agreement with
+    the full protocol is measured by bench/bench_datagen.py."""
+    k = len(values)
+    if k < CONFIDENT_MIN_DIRECTIONS:
+        return False
+    return abs(float(np.mean(values)) - SHAKE_POSITIVE_THRESHOLD_MPS2) >= CONFIDENT_MARGIN_MPS2 / math.sqrt(k)
 
 
 def _axis_angle(axis, angle):

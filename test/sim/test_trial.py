@@ -14,7 +14,8 @@ from defgg_ros.sim import objects, trial, world
 from defgg_ros.sim.trial import TrialSettings, WorldGrasp, run_grasp_trial
 
 QUICK = dataclasses.replace(TrialSettings.fast(), close_settle_s=0.05, lift_time_s=0.15, hold_time_s=0.05,
-                            shake_ramp_time_s=0.3, twist_ramp_time_s=0.3, stop_when_label_decided=False)
+                            shake_ramp_time_s=0.3, twist_ramp_time_s=0.3, stop_when_label_decided=False,
+                            confident_stop=False)
 # Across the 3 cm side of the 5 x 3 x 4 cm box, 1.5 cm off-centre along its length
 # (off-centre grasps separate soft from stiff most clearly, FEM notes).
 OFF_CENTRE = WorldGrasp((0.015, 0.0, 0.02), math.pi / 2, 0.03)
