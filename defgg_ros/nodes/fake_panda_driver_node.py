@@ -73,6 +73,9 @@ PARAMETERS = {
     "gui": (False, "Open PyBullet's GUI window (default: headless DIRECT)."),
     "joint_state_rate_hz": (100.0, "Joint states, wrench and /clock per second of sim time (control period)."),
     "depth_rate_hz": (2.0, "Depth + camera_info renders per second of sim time (TinyRenderer ~0.1-0.2 s each)."),
+    "render_while_moving": (False, "Also render periodic frames while the arm or gripper moves. Off: a render "
+                                   "stalls the sim thread (0.1-2 s wall on a loaded CPU), which reads as a "
+                                   "silent driver to the executor's watchdog; capture_depth always renders."),
     "object_pose_rate_hz": (10.0, "Ground-truth object poses per second of sim time."),
     "publish_color": (False, "Also publish an rgb8 colour image with each depth frame."),
     "max_real_time_factor": (1.0, "Run at most this much faster than real time; 0 = as fast as possible."),
@@ -247,7 +250,8 @@ class FakePandaDriver(Node):
                 outcomes = self.cell.advance(period_s)
                 now_s = self.cell.time_s
                 joints, (force, torque) = self.cell.joint_state(), self.cell.external_wrench()
-                render = now_s >= next_depth_s or self._capture_requested
+                periodic = now_s >= next_depth_s and (self.cfg["render_while_moving"] or not self.cell.moving(now_s))
+                render = periodic or self._capture_requested
                 frame = self.cell.render_depth(self.cfg["publish_color"]) if render else None
                 poses = self.cell.object_poses() if now_s >= next_pose_s else None
             self._finish_gripper(outcomes)

@@ -238,6 +238,10 @@ class SimCell:
             self._outcomes.append((self._pending_token, outcome))
             self._pending_token = None
 
+    def moving(self, time_s: float | None = None) -> bool:
+        """Is a trajectory or a gripper command running?"""
+        return self.tracker.is_active(self.time_s if time_s is None else time_s) or self.gripper.busy
+
     def real_time_factor(self) -> float:
         """Sim seconds per wall second over the recent advance() calls."""
         wall = sum(w for w, _ in self._wall_per_sim)
