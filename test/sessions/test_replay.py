@@ -105,3 +105,8 @@ def test_damaged_bag_is_a_clear_error_not_a_traceback(tmp_path, capsys, damage):
     assert code == 2
     assert "soft_objects: cannot replay:" in text and "re-record" in text
     assert "Traceback" not in text
+
+
+def test_a_folder_without_sessions_is_an_error(tmp_path, capsys):
+    code, text = run_replay(capsys, tmp_path)
+    assert code == 2 and "holds no session bags" in text and "Traceback" not in text
