@@ -10,7 +10,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from rosbags.rosbag2 import Writer  # noqa: F401  (import check: the writer the sessions use)
 
 from defgg_ros import topics
 from defgg_ros.sessions import replay
