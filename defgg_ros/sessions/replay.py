@@ -35,7 +35,7 @@ from defgg_ros.sessions.report import format_table, regression_message
 from defgg_ros.sessions.selector import FrameSelector
 from defgg_ros.sessions.session import load_session
 
-EXIT_OK, EXIT_REGRESSION, EXIT_ERROR = 0, 1, 2
+EXIT_OK, EXIT_REGRESSION, EXIT_ERROR, EXIT_INTERRUPTED = 0, 1, 2, 130
 STARTUP_TIMEOUT_S = 90.0
 PERCEPTION_NODES = ("segmentation_node", "grasp_inference_node")
 PICK_NODES = ("fake_panda_driver", "executor_node")
@@ -194,6 +194,9 @@ def main(argv=None) -> int:
                 results.append(run.replay(path))
             except (SessionBagError, md.MetadataError, GraphError, CellCallError, ValueError) as exc:
                 results.append((EXIT_ERROR, f"{path.name}: cannot replay: {exc}"))
+    except KeyboardInterrupt:
+        print("defgg-replay: interrupted; stopping the nodes", file=sys.stderr)
+        return EXIT_INTERRUPTED
     finally:
         run.close()
     print()
