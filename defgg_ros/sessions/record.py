@@ -29,6 +29,7 @@ from rclpy.context import Context
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo
+from tqdm import tqdm
 
 from defgg_ros import topics
 from defgg_ros.nodes import qos
@@ -97,12 +98,12 @@ def assign_scene_stiffness(recorder, client, scene_path, log=print) -> None:
     log(f"stiffness from the scene: {response.message}")
 
 
-def drive(recorder, client, args, log=print) -> None:
+def drive(recorder, client, args, log=tqdm.write) -> None:
     """--plan/--pick: call the cell like a user would, on fresh frames, and record it."""
     picks = _pick_indices(args.pick, args.plan)
     if args.stiffness_from_scene:
         assign_scene_stiffness(recorder, client, args.scene, log)
-    for i in range(args.plan):
+    for i in tqdm(range(args.plan), desc="plan calls", unit="call", disable=args.plan < 2):
         if not recorder.wait_for_grasps(args.frames_between, FRESH_FRAME_TIMEOUT_S):
             raise CellCallError(f"no new grasp on {topics.BEST_GRASP} within {FRESH_FRAME_TIMEOUT_S:g} s "
                                 "(is the camera publishing and the inference node running?)")
@@ -140,7 +141,7 @@ def record(args, log=print) -> Path:
         executor.add_node(recorder)
         try:
             if args.plan:
-                drive(recorder, CellClient(recorder, recorder), args, log)
+                drive(recorder, CellClient(recorder, recorder), args)
             else:
                 log(f"recording into {args.out} " + (f"for {args.duration_s:g} s" if args.duration_s
                                                      else "until Ctrl-C"))
