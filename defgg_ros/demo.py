@@ -18,7 +18,14 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from defgg_ros.bringup.demo_geometry import base_T_camera, in_bin, label_of_object, object_roi, project_base_points
+from defgg_ros.bringup.demo_geometry import (
+    base_T_camera,
+    in_bin,
+    label_of_object,
+    object_roi,
+    part_roi,
+    project_base_points,
+)
 from defgg_ros.bringup.demo_report import FramePanels, PickRow, format_table, save_figure, write_summary
 from defgg_ros.bringup.node_set import NodeSetError, load_node_set
 from defgg_ros.bringup.supervisor import Bringup, BringupError
@@ -67,6 +74,12 @@ def _stiffness_msgs(scene, positions, k, image_wh, names):
         x, y, w, h = object_roi(obj, pos, b_t_c, k, image_wh)
         out.append(ObjectStiffness(name=obj["name"], youngs_modulus_pa=float(obj["youngs_modulus_pa"]),
                                    roi=RegionOfInterest(x_offset=x, y_offset=y, width=w, height=h)))
+        part = part_roi(obj, pos, b_t_c, k, image_wh)
+        if part is not None:  # multi-material: only the part's pixels take its modulus
+            x, y, w, h = part
+            out.append(ObjectStiffness(name=f"{obj['name']}_part", region_only=True,
+                                       youngs_modulus_pa=float(obj["part"]["youngs_modulus_pa"]),
+                                       roi=RegionOfInterest(x_offset=x, y_offset=y, width=w, height=h)))
     return out
 
 
@@ -144,7 +157,7 @@ class DemoRun:
         depth_m, k = depth_msg_to_metres(depth_msg), camera_info_to_k(info)
         positions = self.client.object_positions()
         entries = tuple(make_entry(e.name, e.youngs_modulus_pa, (e.roi.x_offset, e.roi.y_offset, e.roi.width,
-                                                                  e.roi.height))
+                                                                  e.roi.height), e.region_only)
                         for e in _stiffness_msgs(self.scene, positions, k, (info.width, info.height), remaining))
         seg = run_segmenter(SegmenterConfig(entries=entries), depth_m, k)
         uv = project_base_points([positions[index]], base_T_camera(self.scene), k)[0]

@@ -75,3 +75,25 @@ def in_bin(position_base_m, bin_dict: dict | None) -> bool:
     (cx, cy), (ix, iy, h) = bin_dict["center_xy_m"], bin_dict["inner_size_m"]
     x, y, z = position_base_m
     return bool(abs(x - cx) <= ix / 2 and abs(y - cy) <= iy / 2 and z <= h + BIN_STACK_MARGIN_M)
+
+
+def part_roi(obj: dict, position_base_m, base_t_camera, camera_k, image_wh) -> tuple | None:
+    """(x, y, w, h) around the object's second-material part (local x >= part.x_from_m), or None.
+
+    Uses the scene's yaw: objects have not turned before they are picked.
+    """
+    part = obj.get("part")
+    if not part or obj["shape"] != "box":
+        return None
+    sx, sy, sz = obj["size_m"]
+    c, s = np.cos(obj.get("yaw_rad", 0.0)), np.sin(obj.get("yaw_rad", 0.0))
+    corners = []
+    for lx in (part["x_from_m"], sx / 2):
+        for ly in (-sy / 2, sy / 2):
+            for lz in (-sz / 2, sz / 2):
+                corners.append([position_base_m[0] + c * lx - s * ly, position_base_m[1] + s * lx + c * ly,
+                                position_base_m[2] + lz])
+    uv = project_base_points(corners, base_t_camera, camera_k)
+    lo = np.clip(np.floor(uv.min(axis=0)), 0, np.array(image_wh) - 1).astype(int)
+    hi = np.clip(np.ceil(uv.max(axis=0)), 0, np.array(image_wh)).astype(int)
+    return int(lo[0]), int(lo[1]), int(hi[0] - lo[0]), int(hi[1] - lo[1])

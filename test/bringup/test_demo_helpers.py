@@ -70,3 +70,42 @@ def test_table_summary_and_figure(tmp_path):
                         math.pi / 4, 10.0)
     save_figure(tmp_path / "grasps.png", [panel])
     assert (tmp_path / "grasps.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_multi_material_part_gets_its_own_modulus_in_the_stiffness_image(tmp_path):
+    from defgg_interfaces.msg import ObjectStiffness  # noqa: F401  (the demo builds these messages)
+
+    from defgg_ros.demo import _stiffness_msgs
+    from defgg_ros.perception.stiffness_assignment import make_entry
+    from defgg_ros.perception.stiffness_segmenter import SegmenterConfig, run_segmenter
+    from defgg_ros.sim.cell import SimCell
+    from defgg_ros.sim.scene_spec import load_scene
+
+    scene_path = tmp_path / "two_material.yaml"
+    scene_path.write_text("""
+objects:
+  - name: brick_with_foam_end
+    shape: box
+    size_m: [0.08, 0.04, 0.04]
+    position_xy_m: [0.5, 0.0]
+    yaw_rad: 0.3
+    youngs_modulus_pa: 2.0e9
+    part: {youngs_modulus_pa: 2.0e4, x_from_m: 0.0}
+""")
+    cell = SimCell(load_scene(scene_path))
+    try:
+        depth_m, mask, _ = cell.render_depth()
+        scene = cell.scene.to_json_dict()
+        positions = [xyz for xyz, _ in cell.object_poses()]
+        k = cell.camera_k
+    finally:
+        cell.close()
+    msgs = _stiffness_msgs(scene, positions, k, (640, 480), {"brick_with_foam_end"})
+    assert [m.region_only for m in msgs] == [False, True]
+    entries = tuple(make_entry(m.name, m.youngs_modulus_pa, (m.roi.x_offset, m.roi.y_offset, m.roi.width,
+                                                             m.roi.height), m.region_only) for m in msgs)
+    out = run_segmenter(SegmenterConfig(entries=entries), depth_m.astype(np.float32), k)
+    on_object = out.youngs_modulus_pa[mask == 0]
+    soft_share = np.mean(on_object == np.float32(2e4))
+    assert 0.3 < soft_share < 0.7, f"the foam end should be about half the brick, got {soft_share:.2f}"
+    assert np.mean(on_object == np.float32(2e9)) > 0.3
