@@ -110,7 +110,9 @@ def _add_others(sub):
                        description="Cut the dataset to its complete trial records now, write it as a .tar.gz "
                                    "(verified fingerprint) and extract it for training; both models are then "
                                    "trained on the extracted copy, so they see exactly the same trials.")
-    p.add_argument("--data", required=True, help="growing dataset root (defgg-datagen --out)")
+    p.add_argument("--data", required=True, nargs="+",
+                   help="growing dataset root(s) (defgg-datagen --out); several roots with disjoint scenes are "
+                        "merged (the first one's dataset.json is kept, frozen_from.json lists all)")
     p.add_argument("--archive", required=True, help="archive to write, e.g. models/train_data_fem_v1.tar.gz")
     p.add_argument("--extract-to", required=True, help="folder to extract the frozen copy into (e.g. runs/)")
 
@@ -335,14 +337,18 @@ def cmd_freeze(args) -> int:
     from defgg_ros.data.dataset import build_manifest, manifest_fingerprint
     from defgg_ros.evaluation import snapshot
 
-    manifest = build_manifest(args.data)
-    fingerprint = manifest_fingerprint(args.data, manifest)
-    path = snapshot.write_snapshot(args.data, manifest, fingerprint, args.archive)
+    parts = []
+    for root in args.data:
+        # Only scenes that have trials: a scene without any is no training data (and may be re-rendered).
+        manifest = {sid: n for sid, n in build_manifest(root).items() if n > 0}
+        parts.append((root, manifest, manifest_fingerprint(root, manifest)))
+    path, fingerprint = snapshot.write_merged_snapshot(parts, args.archive)
     with tarfile.open(path, "r:gz") as tar:
         tar.extractall(args.extract_to, filter="data")
     root = Path(args.extract_to) / "train_data"
     print(json.dumps({"archive": str(path), "size_mb": round(path.stat().st_size / 1e6, 3), "data": str(root),
-                      "trials": sum(manifest.values()), "scenes": len(manifest), "fingerprint": fingerprint}))
+                      "trials": sum(sum(m.values()) for _, m, _ in parts),
+                      "scenes": sum(len(m) for _, m, _ in parts), "fingerprint": fingerprint}))
     return 0
 
 

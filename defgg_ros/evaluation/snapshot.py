@@ -9,6 +9,7 @@ fingerprint, so ``defgg-train --data <extracted>`` sees the same data.
 from __future__ import annotations
 
 import io
+import json
 import tarfile
 import tempfile
 from pathlib import Path
@@ -42,19 +43,44 @@ def _add(tar: tarfile.TarFile, name: str, data: bytes) -> None:
 
 def write_snapshot(data_root, manifest: dict, fingerprint: str, out_path, top: str = "train_data") -> Path:
     """Write <out_path> (.tar.gz) holding `top`/ = the dataset as the run saw it; verify its fingerprint."""
-    data_root = Path(data_root)
+    return write_merged_snapshot([(data_root, manifest, fingerprint)], out_path, top)[0]
+
+
+def write_merged_snapshot(parts, out_path, top: str = "train_data") -> tuple:
+    """Freeze one or more datasets (root, manifest, fingerprint) with disjoint scenes into one archive.
+
+    The header (dataset.json) is the first root's; ``frozen_from.json`` lists every source with its
+    manifest and fingerprint, and each part's fingerprint is re-checked on the extracted copy.
+    Returns (path, fingerprint of the whole frozen copy).
+    """
+    seen = {}
+    for root, manifest, _ in parts:
+        for sid in manifest:
+            if sid in seen:
+                raise SnapshotError(f"scene {sid} is in both {seen[sid]} and {root}")
+            seen[sid] = root
+    sources = [{"root": str(root), "fingerprint": fp, "manifest": manifest} for root, manifest, fp in parts]
     with atomic_path(out_path) as tmp:
         with tarfile.open(tmp, "w:gz", compresslevel=9) as tar:
-            _add(tar, f"{top}/dataset.json", (data_root / "dataset.json").read_bytes())
-            for sid in sorted(manifest):
-                _add(tar, f"{top}/scenes/{sid}.npz", (data_root / "scenes" / f"{sid}.npz").read_bytes())
-                _add(tar, f"{top}/trials/{sid}.jsonl",
-                     _trial_lines(data_root / "trials" / f"{sid}.jsonl", int(manifest[sid])))
-        got = verify_snapshot(tmp, manifest, top)
-        if got != fingerprint:
-            raise SnapshotError(f"snapshot fingerprint {got} != the run's {fingerprint}: the dataset changed")
+            _add(tar, f"{top}/dataset.json", (Path(parts[0][0]) / "dataset.json").read_bytes())
+            _add(tar, f"{top}/frozen_from.json", json.dumps(sources, indent=1, sort_keys=True).encode())
+            for root, manifest, _ in parts:
+                root = Path(root)
+                for sid in sorted(manifest):
+                    _add(tar, f"{top}/scenes/{sid}.npz", (root / "scenes" / f"{sid}.npz").read_bytes())
+                    _add(tar, f"{top}/trials/{sid}.jsonl",
+                         _trial_lines(root / "trials" / f"{sid}.jsonl", int(manifest[sid])))
+        whole = {sid: n for _, manifest, _ in parts for sid, n in manifest.items()}
+        with tempfile.TemporaryDirectory() as extracted:
+            with tarfile.open(tmp, "r:gz") as tar:
+                tar.extractall(extracted, filter="data")
+            for root, manifest, fp in parts:
+                got = manifest_fingerprint(Path(extracted) / top, manifest)
+                if got != fp:
+                    raise SnapshotError(f"{root}: frozen fingerprint {got} != {fp}: the dataset changed while freezing")
+            fingerprint = manifest_fingerprint(Path(extracted) / top, whole)
     Path(out_path).chmod(0o644)
-    return Path(out_path)
+    return Path(out_path), fingerprint
 
 
 def verify_snapshot(archive, manifest: dict, top: str = "train_data") -> str:
