@@ -1,6 +1,7 @@
 """defgg-record against live segmentation + inference nodes fed by a stand-in camera (real rclpy, DDS)."""
 import os
 import random
+import re
 import threading
 
 import pytest
@@ -70,3 +71,15 @@ def test_recording_without_a_cell_fails_clearly(tmp_path, large_messages, capsys
     assert record.main([str(out), "--plan", "1", "--wait-s", "1", "--param-timeout-s", "0.2"]) == 2
     assert "did not appear" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_a_fresh_recording_replays_clean(live_cell, tmp_path, capsys):
+    """Record -> replay in a fresh graph of node processes: the real-cell path (no scene, no picks)."""
+    from defgg_ros.sessions import replay
+
+    out = tmp_path / "fresh"
+    assert record.main([str(out), "--plan", "1", "--depth-period-s", "1000", "--no-color"]) == 0
+    code = replay.main([str(out)])
+    text = capsys.readouterr().out
+    assert code == 0, text
+    assert re.search(r"fresh: all \d+ item\(s\) match", text), text
