@@ -328,9 +328,13 @@ class ExecutorNode(Node):
             goal_handle.canceled()
         else:
             goal_handle.abort()
-        log = self.get_logger().info if outcome.success else self.get_logger().warning
-        log(f"pick-and-place {'done' if outcome.success else 'ended: ' + outcome.failure_reason} "
-            f"(phase {outcome.phase_reached}, {outcome.duration_s:.1f} s)")
+        # Two call sites on purpose: rclpy refuses to change the severity of
+        # one logging call site between calls.
+        summary = f"(phase {outcome.phase_reached}, {outcome.duration_s:.1f} s)"
+        if outcome.success:
+            self.get_logger().info(f"pick-and-place done {summary}")
+        else:
+            self.get_logger().warning(f"pick-and-place ended: {outcome.failure_reason} {summary}")
         return result
 
     def _carry_out(self, sequence: PickPlaceSequence, commands):
