@@ -78,6 +78,7 @@ class SegmentationNode(Node):
         self._image_size = None
         self.frames_processed = 0
         self.frames_rejected = 0
+        self.last_rejection = ""  # the latest skipped frame's reason (the log line is throttled)
         p = self._params()
         self._stiffness_pub = self.create_publisher(Image, p["stiffness_topic"], qos.SENSOR_DATA)
         self._mask_pub = self.create_publisher(Image, p["mask_topic"], qos.SENSOR_DATA)
@@ -131,6 +132,7 @@ class SegmentationNode(Node):
             out = run_segmenter(config, depth_m, camera_k)
         except ValueError as exc:
             self.frames_rejected += 1
+            self.last_rejection = str(exc)
             self._warn(f"skipping depth frame: {exc}")
             return
         self._image_size = (msg.width, msg.height)
