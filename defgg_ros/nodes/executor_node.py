@@ -12,6 +12,7 @@ action-client callbacks feed the sequence under one lock. One goal at a
 time: goals arriving while busy are rejected (the reason is logged).
 """
 import math
+import sys
 import threading
 import time
 
@@ -385,6 +386,11 @@ def main(args=None):
         executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except (ValueError, OSError) as exc:  # bad start-up parameters or files: one clear line, not a traceback
+        if node is not None:  # raised while running: a bug, keep its traceback
+            raise
+        print(f"executor_node: {exc}", file=sys.stderr, flush=True)
+        raise SystemExit(2) from None
     finally:
         if node is not None:
             node.destroy_node()

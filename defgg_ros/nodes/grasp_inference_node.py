@@ -29,7 +29,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from defgg_ros import topics
 from defgg_ros.constants import GRIPPER_MAX_WIDTH_M
-from defgg_ros.model.inference import GraspPredictor
+from defgg_ros.model.inference import CheckpointError, GraspPredictor
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import (
     camera_info_to_k,
@@ -276,6 +276,11 @@ def main(args=None):
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except (CheckpointError, ValueError, OSError) as exc:  # bad start-up parameters or files: one line, no traceback
+        if node is not None:  # raised while running: a bug, keep its traceback
+            raise
+        print(f"grasp_inference_node: {exc}", file=sys.stderr, flush=True)
+        raise SystemExit(2) from None
     finally:
         if node is not None:
             node.destroy_node()

@@ -10,6 +10,7 @@ change through the `set_stiffness` service or the `default_youngs_modulus_pa`
 """
 import dataclasses
 import json
+import sys
 import threading
 
 import numpy as np
@@ -206,6 +207,11 @@ def main(args=None):
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except (ValueError, OSError) as exc:  # bad start-up parameters or files: one clear line, not a traceback
+        if node is not None:  # raised while running: a bug, keep its traceback
+            raise
+        print(f"segmentation_node: {exc}", file=sys.stderr, flush=True)
+        raise SystemExit(2) from None
     finally:
         if node is not None:
             node.destroy_node()
