@@ -11,12 +11,17 @@ from defgg_ros.sim.trial import OPENING_CLEARANCE_M, WorldGrasp
 
 
 def _inside(mesh, points):
-    """Point-in-mesh by ray parity along +x (independent of PyBullet's collision check)."""
+    """Point-in-mesh by ray parity along +x (independent of PyBullet's collision check).
+
+    Only points inside the mesh's bounding box can be inside; the others are skipped."""
+    lo, hi = mesh.bounds
+    near = np.all((points >= lo) & (points <= hi), axis=1)
     tris = mesh.triangles
-    return np.array([len(sampler._ray_hits(pt, np.array([1.0, 0.0, 0.0]), tris)[0]) % 2 == 1 for pt in points])
+    return np.array([len(sampler._ray_hits(pt, np.array([1.0, 0.0, 0.0]), tris)[0]) % 2 == 1
+                     for pt in points[near]], dtype=bool)
 
 
-def _hand_points(grasp, spacing=0.004):
+def _hand_points(grasp, spacing=0.005):
     opening = min(grasp.width_m + OPENING_CLEARANCE_M, GRIPPER_MAX_WIDTH_M)
     pose = hand.world_T_hand(grasp.position_m, grasp.yaw_rad)
     pts = []
@@ -35,7 +40,7 @@ def _collides(mesh, grasp):
 @pytest.mark.parametrize("name", ["box_small", "ycb_mug"])
 def test_kept_grasps_do_not_collide_and_are_antipodal(name):
     surface = objects.get_shape(name).surface()
-    kept = sampler.sample_grasps(surface, seed=1, n_candidates=60, keep=20)
+    kept = sampler.sample_grasps(surface, seed=1, n_candidates=40, keep=10)
     assert len(kept) >= 5
     for cand in kept:
         assert not _collides(surface, cand.grasp), cand
@@ -47,7 +52,7 @@ def test_kept_grasps_do_not_collide_and_are_antipodal(name):
 
 def test_the_filter_removes_colliding_candidates():
     surface = objects.get_shape("ycb_mug").surface()
-    raw = sampler.antipodal_pairs(surface, 300, np.random.default_rng(3))
+    raw = sampler.antipodal_pairs(surface, 100, np.random.default_rng(3))
     checker = sampler.CollisionChecker(surface)
     try:
         rejected = [c for c in raw if checker.hand_collides(c.grasp)]
@@ -55,8 +60,8 @@ def test_the_filter_removes_colliding_candidates():
         checker.close()
     assert rejected, "the mug's walls and handle must reject some grasps"
     # most rejected grasps really put the hand into the mug or the table
-    really = sum(_collides(surface, c.grasp) for c in rejected[:20])
-    assert really >= 0.5 * min(20, len(rejected))
+    really = sum(_collides(surface, c.grasp) for c in rejected[:10])
+    assert really >= 0.5 * min(10, len(rejected))
 
 
 def test_sampling_is_deterministic_per_seed():
