@@ -103,7 +103,12 @@ class PickOutcome:
 
 
 def pick_problems(expected: PickOutcome | None, actual: PickOutcome | None) -> list[str]:
-    """The pick outcome must match: success, phase reached, held after transfer."""
+    """The pick outcome must match: success and held after transfer (and the phase of a successful pick).
+
+    Where a *failed* pick stopped is shown but not compared: with a marginal grasp it varies from run
+    to run (the same replay, 3 runs: fingers stopped outside the width window at `close`, or closed and
+    slipped out at `lift`), while failed-vs-succeeded does not.
+    """
     if expected is None:
         return [] if actual is None else ["a pick result appeared where the recording had none"]
     if actual is None:
@@ -113,7 +118,7 @@ def pick_problems(expected: PickOutcome | None, actual: PickOutcome | None) -> l
         problems.append(f"pick {'succeeded' if actual.success else 'failed'} but the recording "
                         f"{'succeeded' if expected.success else 'failed'}"
                         + (f": {actual.failure_reason}" if actual.failure_reason else ""))
-    if expected.phase_reached != actual.phase_reached:
+    if expected.success and actual.success and expected.phase_reached != actual.phase_reached:
         problems.append(f"phase reached {actual.phase_reached!r}, recorded {expected.phase_reached!r}")
     if expected.held_after_transfer != actual.held_after_transfer:
         problems.append(f"held after transfer {actual.held_after_transfer}, recorded {expected.held_after_transfer}")

@@ -117,9 +117,9 @@ class SessionRecorder(Node):
 
     def write_frame(self, stamp_ns: int, camera_messages) -> None:
         """Write a frame sent by a player ([(topic, raw)]); its grasp is then recorded when it comes."""
-        self.keep_stamp(stamp_ns)
         now = time.time_ns()
         with self._lock:
+            self._selector.keep(stamp_ns)
             items = self._selector.mark_written([(topic, raw, now) for topic, raw in camera_messages])
         self._write_all(items)
 

@@ -27,8 +27,9 @@ DRIVER_CAMERA_REMAPS = {
 }
 
 
-# Its renders are unused (remapped away): render rarely, and run as fast as the machine allows.
-DRIVER_REPLAY_PARAMETERS = {"depth_rate_hz": 0.2, "max_real_time_factor": 0.0, "publish_color": False}
+# Its renders are unused (remapped away): render rarely. It keeps its deployed real-time pace: run
+# unthrottled on a loaded machine it starved the executor's wall-clock loop (picks aborted at pre_grasp).
+DRIVER_REPLAY_PARAMETERS = {"depth_rate_hz": 0.2, "publish_color": False}
 
 
 @dataclass(frozen=True)

@@ -59,8 +59,11 @@ def test_pick_outcome_changes_are_named():
     dropped = PickOutcome(False, "transfer", False, "object slipped")
     problems = pick_problems(ok, dropped)
     assert "pick failed but the recording succeeded: object slipped" in problems[0]
-    assert any("phase reached 'transfer'" in p for p in problems)
+    assert any("held after transfer False" in p for p in problems)
     assert pick_problems(ok, ok) == []
+    # Where a failed pick stopped is not compared (it varies with a marginal grasp); success is.
+    assert pick_problems(PickOutcome(False, "close", False, "a"), PickOutcome(False, "lift", False, "b")) == []
+    assert "phase reached 'place'" in pick_problems(ok, PickOutcome(True, "place", True, ""))[0]
     assert "no pick result" in pick_problems(ok, None)[0]
 
 
