@@ -20,11 +20,13 @@ from pathlib import Path
 
 import numpy as np
 
-from defgg_ros.atomic import write_json_atomic
+from defgg_ros.atomic import append_jsonl, write_json_atomic
 from defgg_ros.constants import GRASP_CANDIDATES_PER_OBJECT, TRAINING_YOUNGS_MODULI_PA
 from defgg_ros.data.format import DatasetWriter, GraspRect, Scene, TrialRecord, scene_id_for
 
 CANDIDATE_FILE_VERSION = 1
+# Trials that raised (not stored as trials, so the next run retries them), one JSON line each.
+ERRORS_FILE = "errors.jsonl"
 
 
 @dataclass
@@ -169,6 +171,14 @@ def run_trial_job(job: dict) -> dict:
     return record.to_json()
 
 
+def run_trial_job_guarded(job: dict) -> dict:
+    """run_trial_job, with an exception returned as {"trial_id", "error"}: one bad trial must not end the run."""
+    try:
+        return run_trial_job(job)
+    except Exception as exc:  # noqa: BLE001 - recorded in ERRORS_FILE and retried by the next run
+        return {"trial_id": job["trial_id"], "error": f"{type(exc).__name__}: {exc}"}
+
+
 _CLIENT = None
 
 
@@ -197,12 +207,12 @@ def execute(jobs: list, cfg: DatagenConfig, on_result) -> None:
         _execute_ray(payloads, cfg, on_result)
     elif cfg.workers <= 1:
         for job in payloads:
-            on_result(run_trial_job(job))
+            on_result(run_trial_job_guarded(job))
     else:
         import multiprocessing as mp
 
         with mp.get_context("spawn").Pool(cfg.workers, maxtasksperchild=50) as pool:
-            for result in pool.imap_unordered(run_trial_job, payloads, chunksize=1):
+            for result in pool.imap_unordered(run_trial_job_guarded, payloads, chunksize=1):
                 on_result(result)
 
 
@@ -215,7 +225,7 @@ def _execute_ray(payloads, cfg, on_result) -> None:
             ray.init(num_cpus=max(1, cfg.workers), include_dashboard=False, log_to_driver=False)
         else:
             ray.init(address=cfg.ray_address, log_to_driver=False)
-    remote = ray.remote(num_cpus=1)(run_trial_job)
+    remote = ray.remote(num_cpus=1)(run_trial_job_guarded)
     window = max(2, 2 * cfg.workers)
     pending, queue = [], list(payloads)
     try:
@@ -240,11 +250,16 @@ def generate(cfg: DatagenConfig, progress_bar=True) -> dict:
     t_plan = tqdm(desc="planning (objects)", unit="obj", disable=not progress_bar)
     jobs = plan(cfg, writer, progress=lambda name: t_plan.update(1))
     t_plan.close()
-    counts = {"planned_pending": len(jobs), "done": 0, "labelled": 0, "failed": 0}
+    counts = {"planned_pending": len(jobs), "done": 0, "labelled": 0, "failed": 0, "errors": 0}
     bar = tqdm(total=len(jobs), desc="trials", unit="trial", disable=not progress_bar, smoothing=0.05)
     t0 = time.monotonic()
 
     def on_result(record_json):
+        if "error" in record_json:  # not written as a trial: the next run retries it
+            append_jsonl(cfg.out / ERRORS_FILE, record_json)
+            counts["errors"] += 1
+            bar.write(f"trial {record_json['trial_id']} raised {record_json['error']} (in {ERRORS_FILE})")
+            return
         record = TrialRecord.from_json(_json_safe(record_json))
         writer.append_trial(record)
         counts["done"] += 1
