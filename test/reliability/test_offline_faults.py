@@ -146,3 +146,28 @@ def test_torn_trials_file_keeps_every_complete_record_and_a_damaged_scene_raises
         with pytest.raises(DatasetError, match=re.escape(f"{sid}.npz")):
             read_scene(scene_path)
 
+
+
+def test_one_trial_that_raises_does_not_end_the_run_and_is_retried_by_the_next(tmp_path):
+    """A damaged candidate (an impossible 0.5 m opening in the cache) makes one trial raise."""
+    cfg = datagen.DatagenConfig(out=tmp_path, objects=("cube",), moduli_pa=(2e9,), grasps_per_scene=3,
+                                pass_size=3, settings={"close_settle_s": 0.05, "lift_time_s": 0.15,
+                                                       "hold_time_s": 0.05, "shake_ramp_time_s": 0.3})
+    datagen.plan(cfg, datagen.DatasetWriter(tmp_path, cfg.header()))  # scene + candidate cache, no trials
+    cache = tmp_path / "candidates" / "cube.json"
+    cached = json.loads(cache.read_text())
+    good_width = cached["candidates"][0]["grasp"]["width_m"]
+    cached["candidates"][0]["grasp"]["width_m"] = 0.5
+    cache.write_text(json.dumps(cached))
+    counts = datagen.generate(cfg, progress_bar=False)
+    assert counts["done"] == 2 and counts["errors"] == 1
+    (sid,) = list_scene_ids(tmp_path)
+    assert sorted(t.candidate_index for t in read_trials(tmp_path, sid)) == [1, 2]
+    (error,) = [json.loads(line) for line in (tmp_path / datagen.ERRORS_FILE).read_text().splitlines()]
+    assert error["trial_id"] == f"{sid}__g000" and "width" in error["error"]
+    # Repaired input: the next run simulates exactly the trial that failed.
+    cached["candidates"][0]["grasp"]["width_m"] = good_width
+    cache.write_text(json.dumps(cached))
+    again = datagen.generate(cfg, progress_bar=False)
+    assert again["done"] == 1 and again["errors"] == 0
+    assert sorted(t.candidate_index for t in read_trials(tmp_path, sid)) == [0, 1, 2]
