@@ -123,6 +123,10 @@ class SessionRecorder(Node):
             items = self._selector.mark_written([(topic, raw, now) for topic, raw in camera_messages])
         self._write_all(items)
 
+    def copy_messages(self, messages) -> None:
+        """Carry BagMessages of an older bag over, with their original log times."""
+        self._write_all([(m.topic, m.raw, m.log_time_ns) for m in messages])
+
     def write_raw(self, topic: str, raw: bytes) -> None:
         self._write_all([(topic, raw, time.time_ns())])
 

@@ -24,6 +24,7 @@ from tqdm import tqdm
 
 from defgg_ros import topics
 from defgg_ros.sessions import metadata as md
+from defgg_ros.sessions import session_topics as st
 from defgg_ros.sessions.bag import SessionBagError, SessionWriter
 from defgg_ros.sessions.client import CellCallError, CellClient
 from defgg_ros.sessions.compare import Tolerances
@@ -39,6 +40,8 @@ EXIT_OK, EXIT_REGRESSION, EXIT_ERROR, EXIT_INTERRUPTED = 0, 1, 2, 130
 STARTUP_TIMEOUT_S = 90.0
 PERCEPTION_NODES = ("segmentation_node", "grasp_inference_node")
 PICK_NODES = ("fake_panda_driver", "executor_node")
+# Recorded from the driver; a replay without picks carries them over into an --update.
+DRIVER_TOPICS = (topics.JOINT_STATES, st.DRIVER_SCENE)
 # The replay starts its own cell: a ROS domain of its own keeps other graphs on this machine
 # (a running cell, tests, other replays) from feeding it frames. Fast DDS ports limit ids to <= 232.
 PRIVATE_DOMAIN_RANGE = (120, 230)
@@ -123,6 +126,8 @@ class ReplayRun:
                 recorder = SessionRecorder(writer, FrameSelector(topics.DEPTH_IMAGE), live=False,
                                            context=self.context)
                 self.executor.add_node(recorder)
+                if not pick:  # no driver runs: keep the recorded robot state and scene as they were
+                    recorder.copy_messages([m for m in session.messages if m.topic in DRIVER_TOPICS])
             options = ReplayOptions(tolerances, pick=pick, grasp_timeout_s=args.timeout_s,
                                     pick_timeout_s=args.pick_timeout_s)
             replay = Replay(session, self.player, self.client, options, self.graph.check_alive, log, recorder)
