@@ -4,8 +4,8 @@
   both request forms (objects -> segmented here; a stiffness image);
 - an object cut by the image border still gets a grasp ON the object (the
   network's 300 px window is clamped inside the image, not centred off it);
-- a missing, truncated or tampered model file, a missing background file or
-  invalid executor parameters stop the node's process at start-up with one
+- a missing, truncated or tampered model file, a missing background or scene
+  file or invalid parameters stop the node's process at start-up with one
   line naming the problem and exit code 2 (real processes, no traceback).
 """
 import os
@@ -106,9 +106,10 @@ def _run_node(module, *params, timeout_s=60):
     ("defgg_ros.nodes.segmentation_node", "background_depth_file:=/nonexistent/bg.npy", "No such file"),
     ("defgg_ros.nodes.segmentation_node", "default_youngs_modulus_pa:=-1.0", "default Young's modulus"),
     ("defgg_ros.nodes.executor_node", "limits_scale:=0.0", "limits_scale"),
+    ("defgg_ros.nodes.fake_panda_driver_node", "scene_file:=/nonexistent/scene.yaml", "does not exist"),
 ])
 def test_a_node_with_bad_start_up_files_or_parameters_exits_2_with_one_clear_line(module, param, words):
     done = _run_node(module, param)
-    assert done.returncode == 2, done.stderr[-2000:]
-    assert words in done.stderr, done.stderr[-2000:]
-    assert "Traceback" not in done.stderr, done.stderr[-2000:]
+    output = done.stdout + done.stderr
+    assert done.returncode == 2, output[-2000:]
+    assert words in output and "Traceback" not in output, output[-2000:]
