@@ -81,12 +81,13 @@ def trial_id_for(scene_id: str, candidate_index: int) -> str:
 
 def load_or_sample_candidates(root: Path, shape, cfg: DatagenConfig) -> list:
     """Collision-free antipodal candidates of one object, cached in <root>/candidates/<name>.json."""
-    from defgg_ros.sim.sampler import grasp_rect, sample_grasps
+    from defgg_ros.sim.sampler import SAMPLER_VERSION, grasp_rect, sample_grasps
 
     path = root / "candidates" / f"{shape.name}.json"
     seed = object_seed(cfg.seed, shape.name)
-    key = {"version": CANDIDATE_FILE_VERSION, "seed": seed, "n_candidates": cfg.n_candidates,
-           "keep": cfg.grasps_per_scene, "mesh": [t.content_hash for t in shape.tet_parts]}
+    key = {"version": CANDIDATE_FILE_VERSION, "sampler": SAMPLER_VERSION, "seed": seed,
+           "n_candidates": cfg.n_candidates, "keep": cfg.grasps_per_scene,
+           "mesh": [t.content_hash for t in shape.tet_parts]}
     if path.exists():
         cached = json.loads(path.read_text(encoding="utf-8"))
         if cached.get("key") == key:

@@ -31,6 +31,8 @@ from defgg_ros.sim import hand as hand_mod
 from defgg_ros.sim.camera import TopDownCamera
 from defgg_ros.sim.trial import OPENING_CLEARANCE_M, WorldGrasp
 
+# Bump when the sampling or the grasp height rule changes (invalidates cached candidates).
+SAMPLER_VERSION = 2
 ANTIPODAL_CONE_RAD = math.radians(30.0)
 MAX_NORMAL_TILT_RAD = math.radians(50.0)   # contact normal vs horizontal
 MIN_WIDTH_M = 0.005
