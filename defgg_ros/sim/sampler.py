@@ -2,8 +2,8 @@
 
 Sampling: surface points with a near-horizontal normal; a horizontal ray
 from each through the object finds the exit point; the pair is antipodal
-when both normals lie inside a cone around the closing axis (narrower than
-the friction cone of mu = 0.8, 38.7 deg, for margin). Filter: the Panda
+when both normals lie within 36 deg of the closing axis (inside the
+friction cone of mu = 0.8, 38.7 deg). Filter: the Panda
 hand's boxes (hand.hand_boxes, opened wider by OPENING_CLEARANCE_M) at the
 grasp and along the vertical approach must not touch the object or the
 table. The collision check is PyBullet's own (static concave triangle mesh
@@ -32,8 +32,8 @@ from defgg_ros.sim.camera import TopDownCamera
 from defgg_ros.sim.trial import OPENING_CLEARANCE_M, WorldGrasp
 
 # Bump when the sampling or the grasp height rule changes (invalidates cached candidates).
-SAMPLER_VERSION = 2
-ANTIPODAL_CONE_RAD = math.radians(30.0)
+SAMPLER_VERSION = 3
+ANTIPODAL_CONE_RAD = math.radians(36.0)   # friction cone of mu = 0.8 is 38.7 deg; 30 rejected every cone grasp
 MAX_NORMAL_TILT_RAD = math.radians(50.0)   # contact normal vs horizontal
 MIN_WIDTH_M = 0.005
 TABLE_CLEARANCE_M = 0.003                  # fingertips stay this far above the table
