@@ -74,17 +74,27 @@ def training_provenance(run_dir, command: str, wall_s: float, commit: str) -> di
     }
 
 
-def ship_model(run_dir, name: str, models_dir, provenance: dict) -> Path:
-    """Copy run_dir/best.pt to models_dir/<name>.pt (verified, atomic) and write its provenance."""
-    src = Path(run_dir) / "best.pt"
+CHECKPOINTS = {"best": "best.pt", "last": "model.pt"}
+
+
+def ship_model(run_dir, name: str, models_dir, provenance: dict, checkpoint: str = "best") -> Path:
+    """Copy the run's best (or last-epoch) checkpoint to models_dir/<name>.pt (verified, atomic), with provenance."""
+    if checkpoint not in CHECKPOINTS:
+        raise CardError(f"checkpoint must be one of {sorted(CHECKPOINTS)}, got {checkpoint!r}")
+    src = Path(run_dir) / CHECKPOINTS[checkpoint]
     load_checkpoint(src)   # refuses a corrupt or foreign file before it is shipped
     dst = Path(models_dir) / f"{name}.pt"
     with atomic_path(dst) as tmp:
         shutil.copyfile(src, tmp)
     dst.chmod(0o644)
     payload = load_checkpoint(dst)
-    write_json_atomic(Path(models_dir) / f"{name}{PROVENANCE_SUFFIX}",
-                      {**provenance, "weights_sha256": payload["weights_sha256"]})
+    shipped_epoch = payload["meta"].get("epoch")
+    prov_path = Path(models_dir) / f"{name}{PROVENANCE_SUFFIX}"
+    write_json_atomic(prov_path, {**provenance, "weights_sha256": payload["weights_sha256"],
+                                  "shipped_checkpoint": checkpoint, "shipped_epoch": shipped_epoch,
+                                  "shipped_metrics": {k: payload["meta"].get(k) for k in
+                                                      ("val_accuracy", "val_loss", "val_per_modulus")}})
+    prov_path.chmod(0o644)
     return dst
 
 
@@ -112,7 +122,9 @@ def render_card(name: str, models_dir, eval_summary: dict | None = None, eval_di
              f"- **Produced by commit**: `{prov['commit']}`",
              f"- **Training command**: `{prov['command']}`",
              f"- **Training time**: {prov['wall_s'] / 60:.1f} min wall clock, {prov['epochs_run']} epochs, "
-             f"best epoch {prov['best_epoch']} (torch threads: 1)",
+             f"best validation epoch {prov['best_epoch']} (torch threads: 1)",
+             f"- **Shipped checkpoint**: {prov.get('shipped_checkpoint', 'best')} (epoch "
+             f"{prov.get('shipped_epoch', prov['best_epoch'])})" + (f". {prov['note']}" if prov.get("note") else ""),
              f"- **Training data**: `{prov['data_root']}` (growing dataset; this run froze "
              f"{prov['n_trials']} trials), data fingerprint `{prov['data_fingerprint']}`; scenes per split "
              f"{prov['scenes']}", ""]
@@ -158,8 +170,9 @@ def _data_section(prov) -> list:
 
 
 def _validation_section(prov) -> list:
-    best = prov["val_best"]
-    lines = ["## Validation (held-out training-set objects, top-1 grasp rectangle metric)", "",
+    best = prov.get("shipped_metrics") or prov["val_best"]
+    lines = ["## Validation of the shipped weights (held-out training-set objects, top-1 grasp rectangle metric)",
+             "",
              f"Overall: {_pct(best.get('val_accuracy'))}, validation loss {best.get('val_loss', float('nan')):.4f}.",
              "", "| E (Pa) | scenes | rectangle accuracy |", "|---|---|---|"]
     for e, m in best.get("val_per_modulus", {}).items():
@@ -167,7 +180,8 @@ def _validation_section(prov) -> list:
     if prov.get("test"):
         lines += ["", f"Test objects: {_pct(prov['test'].get('accuracy'))} over {prov['test'].get('n')} scenes."]
     if prov.get("stiffness_response"):
-        lines += ["", "Stiffness response (same depth, only the stiffness input changed): "
+        lines += ["", f"Stiffness response of the best-validation checkpoint (epoch {prov['best_epoch']}, computed by "
+                  "defgg-train; same depth, only the stiffness input changed): "
                   + "; ".join(f"E={e}: mean |dQ| {v['mean_abs_dq']:.3f}, top-1 shift {v['mean_top1_shift_px']:.1f} px"
                               for e, v in prov["stiffness_response"].items())]
     return lines + [""]
@@ -196,4 +210,5 @@ def write_card(name: str, models_dir, eval_dir=None) -> Path:
         summary = json.loads((Path(eval_dir) / "summary.json").read_text())
     path = Path(models_dir) / f"{name}.md"
     write_text_atomic(path, render_card(name, models_dir, summary, str(eval_dir or "")))
+    path.chmod(0o644)
     return path

@@ -102,6 +102,9 @@ def _add_others(sub):
                    help="the training command as run (recorded in the card)")
     p.add_argument("--wall-s", type=float, required=True, help="training wall time in seconds")
     p.add_argument("--commit", default=None, help="git commit of the training code (default: current HEAD)")
+    p.add_argument("--checkpoint", choices=("best", "last"), default="best",
+                   help="best validation epoch (best.pt) or the last epoch (model.pt) (default %(default)s)")
+    p.add_argument("--note", default="", help="why this checkpoint/data, shown in the card")
     p.add_argument("--data-source", default="", help="where the (frozen) training data came from, for the card")
     p.add_argument("--data-archive", default="", help="the shipped archive of the training data, for the card")
     p.add_argument("--models-dir", default="models")
@@ -317,8 +320,8 @@ def cmd_ship(args) -> int:
     from defgg_ros.evaluation import cards
 
     prov = cards.training_provenance(args.run, args.train_command, args.wall_s, args.commit or cards.git_commit())
-    prov.update(data_source=args.data_source, data_archive=args.data_archive)
-    print(cards.ship_model(args.run, args.name, args.models_dir, prov))
+    prov.update(data_source=args.data_source, data_archive=args.data_archive, note=args.note)
+    print(cards.ship_model(args.run, args.name, args.models_dir, prov, args.checkpoint))
     return 0
 
 
