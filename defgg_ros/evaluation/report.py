@@ -105,7 +105,7 @@ def _write_sensitivity(records, manifest, models, labels, tdir) -> dict:
 
 def _cell_json(c: tables.Cell) -> dict:
     return {"success_pct": c.rate_pct, "successes": c.success, "graded": c.graded, "sim_failed": c.sim_failed,
-            "expected": c.expected}
+            "no_grasp": c.no_grasp, "expected": c.expected}
 
 
 def targets(summary: dict, manifest: dict) -> list:
@@ -126,8 +126,8 @@ def targets(summary: dict, manifest: dict) -> list:
         need = TARGET_MARGIN_COMMON_PTS if s == "common" else 0.0
         item = {"set": s, "with_stiffness_pct": a["success_pct"], "no_stiffness_pct": b["success_pct"],
                 "margin_pts": margin, "required_margin_pts": need, "margin_met": margin > need,
-                "complete": a["graded"] + a["sim_failed"] >= a["expected"] and b["graded"] + b["sim_failed"] >= b[
-                    "expected"], "trials": [a["graded"], b["graded"]], "expected": [a["expected"], b["expected"]]}
+                "complete": all(c["graded"] + c["sim_failed"] + c.get("no_grasp", 0) >= c["expected"] for c in (a, b)),
+                "trials": [a["graded"], b["graded"]], "expected": [a["expected"], b["expected"]]}
         if s == "common":
             item["required_success_pct"] = TARGET_COMMON_SUCCESS_PCT
             item["success_met"] = a["success_pct"] >= TARGET_COMMON_SUCCESS_PCT

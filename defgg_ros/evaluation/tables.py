@@ -1,7 +1,9 @@
 """Results file -> the paper's tables (Markdown and CSV), with the trial counts behind every cell.
 
 A cell's success rate is successes / graded trials; trials whose simulation
-failed (explosion, time-out) are not grasp outcomes and are counted apart.
+failed (explosion, time-out) are not grasp outcomes and are counted apart, as
+are ranks for which the model proposed no grasp (its quality map had fewer
+distinct peaks than the 5 asked for: there is no 4th or 5th grasp to try).
 Every cell also shows how many trials the full experiment would have, so a
 partial run is never read as the full one.
 """
@@ -24,9 +26,12 @@ class Cell:
     sim_failed: int = 0
     expected: int = 0
     field: str = "success"     # record field that holds the grasp outcome
+    no_grasp: int = 0          # the model proposed fewer distinct grasps (Q peaks) than asked: not a trial
 
     def add(self, rec: dict) -> None:
-        if rec.get(self.field) is None:
+        if rec.get("status") == "no_grasp":
+            self.no_grasp += 1
+        elif rec.get(self.field) is None:
             self.sim_failed += 1
         else:
             self.graded += 1
@@ -36,16 +41,21 @@ class Cell:
     def rate_pct(self) -> float | None:
         return None if self.graded == 0 else 100.0 * self.success / self.graded
 
+    @property
+    def done(self) -> int:
+        return self.graded + self.sim_failed + self.no_grasp
+
     def markdown(self) -> str:
-        if self.graded == 0:
-            return f"– (0/{self.expected})" if self.expected else "–"
-        done = self.graded + self.sim_failed
-        text = f"{self.rate_pct:.1f} ({self.success}/{self.graded}"
-        if self.expected and done < self.expected:
-            text += f"; {done} of {self.expected} run"
+        extra = []
+        if self.expected and self.done < self.expected:
+            extra.append(f"{self.done} of {self.expected} run")
         if self.sim_failed:
-            text += f"; {self.sim_failed} sim-failed"
-        return text + ")"
+            extra.append(f"{self.sim_failed} sim-failed")
+        if self.no_grasp:
+            extra.append(f"{self.no_grasp} no grasp")
+        if self.graded == 0:
+            return "– (" + "; ".join(extra or ["0 run"]) + ")"
+        return f"{self.rate_pct:.1f} ({self.success}/{self.graded}" + "".join(f"; {e}" for e in extra) + ")"
 
 
 def e_label(e_pa: float) -> str:
@@ -96,14 +106,14 @@ def main_table_csv(cells, task: str, sets, models, moduli) -> str:
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(["task", "object_set", "model", "youngs_modulus_pa", "success_pct", "successes", "graded",
-                "sim_failed", "expected_trials"])
+                "sim_failed", "no_grasp", "expected_trials"])
     for s in sets:
         for m in models:
             for row in list(moduli) + [ALL_STIFFNESSES]:
                 c = cells[(row, s, m)]
                 w.writerow([task, s, m, row if row == ALL_STIFFNESSES else f"{row:g}",
                             "" if c.rate_pct is None else f"{c.rate_pct:.2f}", c.success, c.graded, c.sim_failed,
-                            c.expected])
+                            c.no_grasp, c.expected])
     return buf.getvalue()
 
 

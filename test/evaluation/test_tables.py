@@ -33,7 +33,7 @@ def test_tables_count_trials_and_judge_targets(tmp_path):
     summary = report.write_outputs(tmp_path)
     shake = summary["tasks"]["shake"]
     assert shake["common|stiff"] == {"success_pct": 100.0, "successes": 2, "graded": 2, "sim_failed": 1,
-                                     "expected": 8}
+                                     "no_grasp": 0, "expected": 8}
     assert shake["common|base"]["graded"] == 2 and shake["common|base"]["success_pct"] == 50.0
     md = (tmp_path / "tables" / "shake.md").read_text()
     assert "100.0 (2/2; 3 of 8 run; 1 sim-failed)" in md
