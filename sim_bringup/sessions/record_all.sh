@@ -21,6 +21,6 @@ record() {  # name, then defgg-record options
   kill -INT "$bringup"; wait "$bringup" || true
 }
 
-record rigid_objects --plan 2 --pick 1 --note "two rigid objects: plan twice, pick with the second plan's grasp"
+record rigid_objects --plan 2 --pick 1 --note "two rigid cylinders: plan twice, pick with the second plan's grasp"
 record soft_objects --plan 2 --note "a sponge (2e4 Pa) and a foam cube (2e5 Pa): plan twice"
 record mixed_objects --plan 2 --note "soft cube, rigid can, rigid block with a soft pad (multi-material): plan twice"
