@@ -13,6 +13,7 @@ import pytest
 
 from defgg_ros import topics
 from defgg_ros.sessions import replay
+from defgg_ros.sessions import session_topics as st
 from defgg_ros.sessions.bag import SessionWriter, read_bag
 from defgg_ros.sessions.graph import FASTDDS_PROFILE, FASTDDS_PROFILE_VARIABLE
 from defgg_ros.sessions.interfaces import session_typestore
@@ -109,3 +110,21 @@ def test_damaged_bag_is_a_clear_error_not_a_traceback(tmp_path, capsys, damage):
 def test_a_folder_without_sessions_is_an_error(tmp_path, capsys):
     code, text = run_replay(capsys, tmp_path)
     assert code == 2 and "holds no session bags" in text and "Traceback" not in text
+
+
+def test_a_pick_that_no_longer_succeeds_is_a_regression(tmp_path, capsys):
+    """The simulated world differs from the recording (objects 6 cm off where the frames show them): the pick misses."""
+    meta, messages = read_bag(SESSIONS / "rigid_objects")
+    moved = {"position_xy_m: [0.5, 0.0]": "position_xy_m: [0.5, 0.06]",
+             "position_xy_m: [0.58, 0.08]": "position_xy_m: [0.58, 0.14]"}
+    for old, new in moved.items():
+        assert old in meta["scene"]["yaml"]
+        meta["scene"]["yaml"] = meta["scene"]["yaml"].replace(old, new)
+    writer = SessionWriter(tmp_path / "rigid_objects", meta, messages[0].log_time_ns)
+    for m in messages:
+        if m.topic != st.METADATA:
+            writer.write(m.topic, m.raw, m.log_time_ns, m.msgtype)
+    code, text = run_replay(capsys, writer.close())
+    assert code == 1, text
+    report = text.split("REGRESSION in session rigid_objects")[1]
+    assert "pick 0: pick failed but the recording succeeded" in report
