@@ -23,6 +23,9 @@ refresh() {
 
 $RUN --sets common --only mallet_mm --experiments multimaterial --multimaterial-moduli 2e4 --tasks shake --ranks 2
 refresh "multi-material, 2 best grasps, shake"
+# objects whose best grasp moves most with E first (see the strategy figure), then the rest
+$RUN --sets common --only common_toy_bone common_sponge common_ring --experiments main --tasks shake --ranks 1
+refresh "toy bone, sponge, ring: best grasp, shake"
 $RUN --sets common --experiments main --tasks shake --ranks 1
 refresh "common set, best grasp, shake"
 $RUN --sets common --experiments main --tasks twist --ranks 1
