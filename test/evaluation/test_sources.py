@@ -53,3 +53,31 @@ def test_mesh_folder_errors(tmp_path):
         sources.mesh_folder(tmp_path, yaml_path=tmp_path / "nope.yaml")
     with pytest.raises(sources.SourceError, match="outside"):
         sources.check_moduli([1e12])
+
+
+def test_cli_plans_grasps_on_a_mesh_folder(tmp_path):
+    """`defgg-eval run --objects DIR --plan-only`: a user's mesh, moduli from the YAML, real render + both models."""
+    import json
+    from pathlib import Path
+
+    from defgg_ros.evaluation import cli
+
+    meshes = tmp_path / "meshes"
+    meshes.mkdir()
+    _write_box(meshes / "block.stl", (0.05, 0.03, 0.04))
+    (meshes / "moduli.yaml").write_text("objects:\n  block: [2.0e5, 2.0e9]\n")
+    repo = Path(__file__).resolve().parents[2]
+    out = tmp_path / "out"
+    assert cli.main(["run", "--objects", str(meshes), "--out", str(out), "--plan-only", "--grasps", "2",
+                     "--experiments", "main", "--no-progress",
+                     "--model", f"defgg_cnn={repo / 'models/defgg_cnn.pt'}",
+                     "--model", f"ggcnn_depth_only={repo / 'models/ggcnn_depth_only.pt'}"]) == 0
+    plans = json.loads((out / "plans.json").read_text())
+    assert {(p["view"]["model"], p["view"]["youngs_modulus_pa"]) for p in plans} == {
+        (m, e) for m in ("defgg_cnn", "ggcnn_depth_only") for e in (2e5, 2e9)}
+    for p in plans:
+        assert p["view"]["object_set"] == "user" and 1 <= len(p["grasps"]) <= 2
+        g = p["grasps"][0]
+        assert abs(g["position_m"][0]) < 0.05 and abs(g["position_m"][1]) < 0.05 and 0 < g["width_m"] <= 0.08
+    manifest = json.loads((out / "run.json").read_text())
+    assert manifest["objects"]["user"][0]["moduli_pa"] == [2e5, 2e9]
