@@ -7,7 +7,7 @@ feedback/result is written into the session bag.
 import threading
 import time
 
-from defgg_interfaces.action import PickAndPlace
+from defgg_interfaces.action import GripperGrasp, PickAndPlace
 from defgg_interfaces.srv import PlanGrasp, SetStiffness
 from rclpy.action import ActionClient
 
@@ -36,6 +36,7 @@ class CellClient:
         self.plan_client = node.create_client(PlanGrasp, topics.PLAN_GRASP_SERVICE)
         self.stiffness_client = node.create_client(SetStiffness, topics.SET_STIFFNESS_SERVICE)
         self.pick_client = ActionClient(node, PickAndPlace, topics.PICK_AND_PLACE_ACTION)
+        self.gripper_client = ActionClient(node, GripperGrasp, topics.GRIPPER_GRASP_ACTION)
 
     def wait_for_servers(self, timeout_s: float, pick: bool, alive=lambda: None) -> None:
         """Wait until the services (and the pick action) exist; `alive()` raises if a process died."""
@@ -43,7 +44,9 @@ class CellClient:
         waits = [(self.plan_client.wait_for_service, topics.PLAN_GRASP_SERVICE),
                  (self.stiffness_client.wait_for_service, topics.SET_STIFFNESS_SERVICE)]
         if pick:
-            waits.append((self.pick_client.wait_for_server, topics.PICK_AND_PLACE_ACTION))
+            # The driver loads its scene slower than the executor starts: wait for its gripper action too.
+            waits += [(self.gripper_client.wait_for_server, topics.GRIPPER_GRASP_ACTION),
+                      (self.pick_client.wait_for_server, topics.PICK_AND_PLACE_ACTION)]
         for wait, name in waits:
             while not wait(timeout_sec=0.5):
                 alive()

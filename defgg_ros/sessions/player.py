@@ -16,11 +16,12 @@ from defgg_interfaces.srv import PlanGrasp
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
-from sensor_msgs.msg import CameraInfo, Image
+from sensor_msgs.msg import CameraInfo, Image, JointState
 
 from defgg_ros import topics
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import ns_to_stamp
+from defgg_ros.sessions.client import CellCallError
 from defgg_ros.sessions.compare import GraspSummary, PickOutcome, Tolerances, grasp_problems, pick_problems
 from defgg_ros.sessions.report import Row, diff_text
 from defgg_ros.sessions.selector import restamp
@@ -56,6 +57,9 @@ class SessionPlayer(Node):
         self._grasps = {}
         self._changed = threading.Condition()
         self.create_subscription(Grasp, topics.BEST_GRASP, self._on_grasp, qos.STATE)
+        self.joint_states_seen = threading.Event()
+        self.create_subscription(JointState, topics.JOINT_STATES, lambda _: self.joint_states_seen.set(),
+                                 qos.SENSOR_DATA)
 
     def _on_grasp(self, msg: Grasp):
         with self._changed:
@@ -195,6 +199,7 @@ class Replay:
             return
         goal = deserialize_message(pick.goal.raw, PickAndPlace.Goal)
         self._prepare_goal(goal, pick)
+        self._wait_for_joint_states()
         self.log(f"  pick {pick.index}: executing in the simulated cell ...")
         if self.recorder is not None:
             self.recorder.record_pick_goal(goal, time.time_ns())
@@ -206,6 +211,15 @@ class Replay:
         actual = PickOutcome.of(result)
         self.rows.append(Row(f"pick {pick.index}", recorded.brief() if recorded else "none", actual.brief(), "",
                              pick_problems(recorded, actual)))
+
+    def _wait_for_joint_states(self):
+        """The executor aborts ("driver silent") when a goal comes before the driver's first joint states."""
+        deadline = time.monotonic() + self.options.grasp_timeout_s
+        while not self.player.joint_states_seen.wait(0.5):
+            self.alive()
+            if time.monotonic() > deadline:
+                raise CellCallError(f"no {topics.JOINT_STATES} from the simulated driver within "
+                                    f"{self.options.grasp_timeout_s:g} s")
 
     def _prepare_goal(self, goal, pick):
         """Make the goal use this replay's grasp, not the recorded one."""
