@@ -83,6 +83,17 @@ def _stiffness_msgs(scene, positions, k, image_wh, names):
     return out
 
 
+def _describe_grasp(name, grasp, object_position_m) -> str:
+    """One line: where the network's grasp is relative to the object (to tell a bad grasp from a bad pick)."""
+    g = grasp.pose_base.pose.position
+    offset_mm = (np.array([g.x, g.y]) - np.asarray(object_position_m)[:2]) * 1000
+    angle_deg = np.degrees(grasp.angle_rad)
+    return (f"defgg-demo: {name}: grasp at ({g.x:.3f}, {g.y:.3f}, {g.z:.3f}) m, "
+            f"{offset_mm[0]:+.0f}/{offset_mm[1]:+.0f} mm (x/y) from the object's centre, "
+            f"image angle {angle_deg:+.0f} deg, width {grasp.width_m * 1000:.1f} mm, "
+            f"quality {grasp.quality:.2f}")
+
+
 class DemoRun:
     """One demo: the client, the local predictor (for the quality pictures) and the results."""
 
@@ -113,6 +124,7 @@ class DemoRun:
         try:
             grasp = self._plan(index, remaining, row)
             if grasp is not None:
+                progress.write(_describe_grasp(row.name, grasp, self.client.object_positions()[index]))
                 self._execute(grasp, row, progress)
         finally:
             row.wall_duration_s = time.monotonic() - started

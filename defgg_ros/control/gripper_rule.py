@@ -36,8 +36,8 @@ from defgg_ros.sim.trial import grasp_force_n as label_grasp_force_n
 SOFT_CLOSING_SPEED_MPS = 0.02
 RIGID_CLOSING_SPEED_MPS = 0.05
 OPENING_SPEED_MPS = 0.08
-# Open this much wider than the predicted grasp width before descending, so
-# pose and width errors do not put a finger on top of the object.
+# Kept for callers that size finger clearances from it; the pre-grasp opening
+# itself is now the hand's full opening (see `pre_grasp_opening_m`).
 PREGRASP_OPENING_MARGIN_M = 0.02
 # Fingers closed to less than this = nothing between them (missed/dropped).
 MISSED_WIDTH_M = 0.004
@@ -68,6 +68,21 @@ def grasp_force_n(youngs_modulus_pa: float) -> float:
     return min(float(label_grasp_force_n(e)), GRIPPER_MAX_FORCE_N)
 
 
+def pre_grasp_opening_m() -> float:
+    """How far to open before the descent: the hand's full opening, whatever the predicted width.
+
+    Why not "predicted width + a margin": the training trials started with the
+    fingers clear of the object (true contact width + 10 mm, `sim.trial`), and
+    the predicted width is the network's least reliable output (GG-CNN's too).
+    In the demo it was 14-40 mm narrower than the object's extent along the
+    closing direction (e.g. 28.6 mm for a 50 mm cube), so a 20 mm margin put the
+    fingers on top of the object: they jammed on FEM objects and were forced
+    open to 73-80 mm, or pinched an edge that slipped out. Opening fully
+    reproduces the trials' start; the grasp pose and the force are unchanged.
+    """
+    return GRIPPER_MAX_WIDTH_M
+
+
 def grasp_command(youngs_modulus_pa: float, grasp_width_m: float) -> GraspCommand:
     """The full gripper plan for a grasp of predicted opening `grasp_width_m` on a material E."""
     w = float(grasp_width_m)
@@ -78,7 +93,7 @@ def grasp_command(youngs_modulus_pa: float, grasp_width_m: float) -> GraspComman
                                f"{GRIPPER_MAX_WIDTH_M * 1000:.0f} mm")
     force = grasp_force_n(youngs_modulus_pa)
     soft = youngs_modulus_pa <= MAX_SOFT_BODY_YOUNGS_MODULUS_PA
-    pre_open = min(GRIPPER_MAX_WIDTH_M, w + PREGRASP_OPENING_MARGIN_M)
+    pre_open = pre_grasp_opening_m()
     width = min(w, pre_open)
     return GraspCommand(
         pre_open_width_m=pre_open,
