@@ -54,6 +54,10 @@ STOP_TIMEOUT_S = 3.0
 # objects) are raised to this height; further below is a bad grasp.
 GRASP_MIN_HEIGHT_ABOVE_TABLE_M = 0.005
 GRASP_BELOW_TABLE_TOLERANCE_M = 0.02
+# A grasp that ends this close to the opening it started from never closed:
+# a finger rests on the object (the grasp centre is off the object). Without
+# this the gripper reported success and the pick failed later as a "slip".
+NOT_CLOSED_TOLERANCE_M = 0.003
 
 
 class SequenceFailure(Exception):
@@ -296,6 +300,10 @@ class PickPlaceSequence:
         self.outcome.gripper_force_n = self._plan.gripper.force_n
         if width < MISSED_WIDTH_M:
             raise SequenceFailure(f"missed: the fingers closed to {width * 1000:.1f} mm with nothing between them")
+        opened = self._plan.gripper.pre_open_width_m
+        if width > opened - NOT_CLOSED_TOLERANCE_M:
+            raise SequenceFailure(f"the fingers did not close: they stopped at {width * 1000:.1f} mm, where they "
+                                  f"opened to ({opened * 1000:.1f} mm); a finger is on the object, not beside it")
         if not success:
             raise SequenceFailure(f"gripper grasp failed: {error or 'no reason given'}")
         self._phase = "lift"
