@@ -136,7 +136,8 @@ def record(args, log=print) -> Path:
                                 parameters=parameters, pick=bool(args.pick), tolerances=tolerances, note=args.note)
         writer = SessionWriter(args.out, meta, time.time_ns())
         recorder = SessionRecorder(writer, FrameSelector(topics.DEPTH_IMAGE, args.depth_period_s,
-                                                         args.joint_state_period_s),
+                                                         args.joint_state_period_s,
+                                                         frame_topics=(topics.DEPTH_CAMERA_INFO,)),
                                    record_color=not args.no_color, context=context)
         executor.add_node(recorder)
         try:

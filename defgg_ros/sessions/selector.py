@@ -47,10 +47,13 @@ class FrameSelector:
     """Decide what to write; every method returns [(topic, raw, log_time_ns)] to write now."""
 
     def __init__(self, depth_topic: str, depth_period_s: float = DEFAULT_DEPTH_PERIOD_S,
-                 joint_state_period_s: float = DEFAULT_JOINT_STATE_PERIOD_S):
+                 joint_state_period_s: float = DEFAULT_JOINT_STATE_PERIOD_S, frame_topics=()):
         if depth_period_s < 0 or joint_state_period_s < 0:
             raise ValueError("periods must be >= 0 s")
         self.depth_topic = depth_topic
+        # A frame counts as recorded only when every one of these arrived with its stamp (a depth
+        # image without its camera_info cannot be replayed; best-effort streams can drop either).
+        self.frame_topics = (depth_topic, *frame_topics)
         self.depth_period_ns = int(depth_period_s * 1e9)
         self.joint_state_period_ns = int(joint_state_period_s * 1e9)
         self._last_kept_depth_ns = None
@@ -75,8 +78,9 @@ class FrameSelector:
         return []
 
     def has_frame(self, stamp: int) -> bool:
-        """Is the depth frame of this stamp written or still in the buffer (so `keep` can save it)?"""
-        return (self.depth_topic, stamp) in self._written or self.depth_topic in self._pending.get(stamp, {})
+        """Is the whole frame (depth + frame_topics) of this stamp written or still in the buffer?"""
+        pending = self._pending.get(stamp, {})
+        return all((topic, stamp) in self._written or topic in pending for topic in self.frame_topics)
 
     def keep(self, stamp: int) -> list:
         """Keep a stamp (e.g. a grasp was planned on it): flush what waits for it."""
