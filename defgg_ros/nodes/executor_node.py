@@ -12,12 +12,10 @@ action-client callbacks feed the sequence under one lock. One goal at a
 time: goals arriving while busy are rejected (the reason is logged).
 """
 import math
-import sys
 import threading
 import time
 
 import numpy as np
-import rclpy
 from builtin_interfaces.msg import Duration
 from defgg_interfaces.action import GripperGrasp, GripperMove, PickAndPlace
 from defgg_interfaces.srv import PlanGrasp
@@ -25,7 +23,6 @@ from geometry_msgs.msg import WrenchStamped
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
@@ -48,6 +45,7 @@ from defgg_ros.control.sequence_types import (
 from defgg_ros.control.trajectories import LIMITS_SAFETY_SCALE, SAMPLE_DT_S
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import ConversionError, transform_from_pose
+from defgg_ros.nodes.node_main import run_node
 
 _DEFAULTS = SequenceConfig()
 PARAMETERS = {
@@ -377,24 +375,7 @@ class ExecutorNode(Node):
 
 
 def main(args=None):
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = ExecutorNode()
-        executor = MultiThreadedExecutor(num_threads=4)
-        executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (ValueError, OSError) as exc:  # bad start-up parameters or files: one clear line, not a traceback
-        if node is not None:  # raised while running: a bug, keep its traceback
-            raise
-        print(f"executor_node: {exc}", file=sys.stderr, flush=True)
-        raise SystemExit(2) from None
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    run_node("executor_node", ExecutorNode, startup_errors=(ValueError, OSError), threads=4, args=args)
 
 
 if __name__ == "__main__":

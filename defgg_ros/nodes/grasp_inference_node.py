@@ -18,11 +18,9 @@ import time
 from pathlib import Path
 
 import numpy as np
-import rclpy
 from defgg_interfaces.msg import Grasp
 from defgg_interfaces.srv import PlanGrasp
 from rcl_interfaces.msg import ParameterDescriptor
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image
 from visualization_msgs.msg import Marker, MarkerArray
@@ -43,6 +41,7 @@ from defgg_ros.nodes.conversions import (
     transform_from_list,
     transform_from_pose,
 )
+from defgg_ros.nodes.node_main import run_node
 from defgg_ros.perception.grasp_planning import (
     PlanningError,
     check_top_k,
@@ -269,22 +268,8 @@ def _unset(image: Image) -> bool:
 
 
 def main(args=None):
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = GraspInferenceNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (CheckpointError, ValueError, OSError) as exc:  # bad start-up parameters or files: one line, no traceback
-        if node is not None:  # raised while running: a bug, keep its traceback
-            raise
-        print(f"grasp_inference_node: {exc}", file=sys.stderr, flush=True)
-        raise SystemExit(2) from None
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    run_node("grasp_inference_node", GraspInferenceNode,
+             startup_errors=(CheckpointError, ValueError, OSError), args=args)
 
 
 if __name__ == "__main__":

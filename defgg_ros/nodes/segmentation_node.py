@@ -10,15 +10,12 @@ change through the `set_stiffness` service or the `default_youngs_modulus_pa`
 """
 import dataclasses
 import json
-import sys
 import threading
 
 import numpy as np
-import rclpy
 from defgg_interfaces.msg import ObjectStiffness, StiffnessAssignment
 from defgg_interfaces.srv import SetStiffness
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import CameraInfo, Image
@@ -34,6 +31,7 @@ from defgg_ros.nodes.conversions import (
     depth_msg_to_metres,
     numpy_to_image,
 )
+from defgg_ros.nodes.node_main import run_node
 from defgg_ros.perception.segmentation import OBJECT_MAX_HEIGHT_M, OBJECT_MIN_AREA_PX, OBJECT_MIN_HEIGHT_M
 from defgg_ros.perception.stiffness_assignment import check_entries_fit_image, make_entry
 from defgg_ros.perception.stiffness_segmenter import (
@@ -200,22 +198,7 @@ class SegmentationNode(Node):
 
 
 def main(args=None):
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = SegmentationNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (ValueError, OSError) as exc:  # bad start-up parameters or files: one clear line, not a traceback
-        if node is not None:  # raised while running: a bug, keep its traceback
-            raise
-        print(f"segmentation_node: {exc}", file=sys.stderr, flush=True)
-        raise SystemExit(2) from None
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    run_node("segmentation_node", SegmentationNode, startup_errors=(ValueError, OSError), args=args)
 
 
 if __name__ == "__main__":

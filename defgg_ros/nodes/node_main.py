@@ -1,0 +1,37 @@
+"""The one `main()` body of every node: spin, stop cleanly, exit 2 on bad start-up input."""
+import sys
+
+import rclpy
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+
+
+def run_node(name: str, make_node, startup_errors=(ValueError, OSError), threads: int = 1, args=None) -> None:
+    """Create the node with `make_node()` and spin it until Ctrl-C or shutdown.
+
+    A bad parameter or file while the node is being built (`startup_errors`)
+    prints one line naming the problem and exits with code 2; the same error
+    raised while running is a bug and keeps its traceback. `threads` > 1
+    spins a MultiThreadedExecutor (nodes with reentrant callback groups).
+    """
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = make_node()
+        if threads > 1:
+            executor = MultiThreadedExecutor(num_threads=threads)
+            executor.add_node(node)
+            executor.spin()
+        else:
+            rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except startup_errors as exc:
+        if node is not None:
+            raise
+        print(f"{name}: {exc}", file=sys.stderr, flush=True)
+        raise SystemExit(2) from None
+    finally:
+        if node is not None:
+            getattr(node, "shutdown", lambda: None)()
+            node.destroy_node()
+        rclpy.try_shutdown()
