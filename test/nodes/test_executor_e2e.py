@@ -13,6 +13,7 @@ import pytest
 import rclpy
 from defgg_interfaces.action import PickAndPlace
 from defgg_interfaces.msg import Grasp
+from executor_support import send_goal, stop_driver_processes
 from geometry_msgs.msg import PoseArray
 from rclpy.action import ActionClient
 from rclpy.context import Context
@@ -101,18 +102,11 @@ def cell(rclpy_context):
         ex.remove_node(node)
         node.destroy_node()
     ex.shutdown(timeout_sec=2.0)
-    for context, own, driver, thread in processes:
-        own.shutdown(timeout_sec=2.0)
-        driver.destroy_node()
-        context.try_shutdown()
-        thread.join(timeout=5.0)
+    stop_driver_processes(processes)
 
 
 def send(ex, spin, client, goal, feedback=None):
-    if not getattr(client, "discovered", False):  # once: readiness checks later raced with the executor
-        spin(ex, client.server_is_ready, 20.0, "the pick-and-place action server (discovery)")
-        client.discovered = True
-    return spin(ex, client.send_goal_async(goal, feedback_callback=feedback), 10.0, "goal response")
+    return send_goal(ex, spin, client, goal, feedback, timeout_s=10.0)
 
 
 def fresh_state(ex, spin, executor_node):
