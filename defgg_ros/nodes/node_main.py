@@ -32,6 +32,5 @@ def run_node(name: str, make_node, startup_errors=(ValueError, OSError), threads
         raise SystemExit(2) from None
     finally:
         if node is not None:
-            getattr(node, "shutdown", lambda: None)()
             node.destroy_node()
         rclpy.try_shutdown()
