@@ -87,7 +87,10 @@ def cell(rclpy_context):
     start_driver()
     executor_node = ExecutorNode(context=rclpy_context, parameter_overrides=[
         Parameter("use_sim_time", value=True), Parameter("watchdog_timeout_s", value=WATCHDOG_S),
-        Parameter("server_wait_s", value=10.0)])
+        Parameter("server_wait_s", value=10.0),
+        # A slow guarded descent (43 mm in ~4 s of sim time) leaves the cancel test time to land
+        # mid-descent even when the simulator runs faster than real time on a busy machine.
+        Parameter("descent_speed_mps", value=0.01)])
     probe = Node("executor_e2e_probe", context=rclpy_context)
     seen = {"joints": [], "poses": []}
     probe.create_subscription(JointState, topics.JOINT_STATES, seen["joints"].append, qos.STATE)
@@ -152,9 +155,12 @@ def test_cancel_mid_descent_stops_the_arm(cell, spin):
     assert "canceled during descend" in response.result.failure_reason
     last = seen["joints"][-1]
     assert np.max(np.abs(last.velocity[:7])) < 0.02
-    # Stopped part-way between the pre-grasp (25 mm above the top face) and the grasp (18 mm below it).
+    # Stopped below the pre-grasp (25 mm above the top face) and no lower than the grasp (18 mm below
+    # it): on a loaded machine the cancel may land after the descent reached the grasp pose, so the
+    # grasp height itself is allowed. What must not happen is what follows the descent: close or lift.
     tcp_z = KIN.fk(np.array(last.position[:7]))[2, 3]
-    assert BOX_SIZE_M - 0.018 + 0.001 < tcp_z < pregrasp_z - 0.005
+    assert BOX_SIZE_M - 0.018 - 0.002 < tcp_z < pregrasp_z - 0.005
+    assert sum(last.position[7:9]) > BOX_SIZE_M + 0.01, "the gripper closed after the cancel"
 
 
 def test_driver_killed_mid_trajectory_aborts_then_serves_again(cell, spin):
