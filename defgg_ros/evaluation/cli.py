@@ -255,6 +255,9 @@ def cmd_run(args, argv) -> int:
     counts = runner.run_evaluation(plan, args.out, args.workers, not args.no_progress, args.max_trials,
                                    on_progress=_reporter(args.out, args.report_every))
     report_mod.write_outputs(args.out)
+    if counts["errors"]:
+        print(f"{counts['errors']} trial(s) raised (see {Path(args.out) / runner.ERRORS_FILE}); "
+              "they are retried when this command runs again", file=sys.stderr)
     print(json.dumps(counts))
     return 0
 

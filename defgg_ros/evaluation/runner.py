@@ -6,16 +6,19 @@ and is the only writer of the results file: one fsync'd line per finished
 trial, keys already present are skipped. A trial whose simulation is
 identical to one already run (same object, materials, pose, world grasp,
 task and settings; see jobs.sim_key) is not simulated again: its record
-points at the original with ``reused_from``.
+points at the original with ``reused_from``. A trial that raises is logged
+to errors.jsonl instead of ending the run, and retried by the next run.
 """
 from __future__ import annotations
 
 import multiprocessing as mp
 import time
 from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
 
 from tqdm import tqdm
 
+from defgg_ros.atomic import append_jsonl
 from defgg_ros.constants import SHAKE_ACCEL_LIMIT_MPS2, SHAKE_POSITIVE_THRESHOLD_MPS2, TWIST_ACCEL_LIMIT_RADPS2
 from defgg_ros.evaluation import jobs as jobs_mod
 from defgg_ros.evaluation import scene as scene_mod
@@ -25,6 +28,7 @@ from defgg_ros.evaluation.store import ResultStore
 from defgg_ros.evaluation.tasks import task_success
 from defgg_ros.sim.trial import TrialSettings, WorldGrasp, run_grasp_trial
 
+ERRORS_FILE = "errors.jsonl"      # trials that raised (not results): retried by the next run
 STATUS_NO_GRASP = "no_grasp"   # the model proposed fewer grasps than asked: a failed grasp
 
 
@@ -159,6 +163,20 @@ def run_trial_payload(payload: dict) -> dict:
             "time_step_s": out.sim.get("time_step_s"), "soft": out.sim.get("soft"), "note": out.note}
 
 
+def run_trial_payload_guarded(payload: dict) -> dict:
+    """run_trial_payload, with an exception returned as {"error": ...}: one bad trial must not end the run."""
+    global _WORKER_CLIENT
+    try:
+        return run_trial_payload(payload)
+    except Exception as exc:  # noqa: BLE001 - recorded in ERRORS_FILE and retried by the next run
+        import pybullet as p
+
+        if _WORKER_CLIENT is not None and p.isConnected(_WORKER_CLIENT):
+            p.disconnect(_WORKER_CLIENT)
+        _WORKER_CLIENT = None   # the next trial starts on a fresh PyBullet server
+        return {"error": f"{type(exc).__name__}: {exc}"}
+
+
 def pending_work(plan: EvalPlan, store: ResultStore, client: int, show_progress: bool = True):
     """(records ready to append now, {sim_key: [base records]} to simulate) for unfinished trials."""
     todo = [j for j in plan.jobs() if j.key not in store]
@@ -219,8 +237,15 @@ def run_evaluation(plan: EvalPlan, out_dir, workers: int = 1, show_progress: boo
     bar = tqdm(total=len(groups), desc="trials", unit="trial", disable=not show_progress, smoothing=0.05)
     payloads = [_trial_payload(g[0][1], g[0][0]) for g in groups]
     results = _map(payloads, workers)
+    errors = 0
     for index, outcome in results:
         first, *rest = [rec for rec, _ in groups[index]]
+        if "error" in outcome:   # not stored as a trial: the next run retries it
+            errors += 1
+            append_jsonl(Path(out_dir) / ERRORS_FILE, {"key": first["key"], "error": outcome["error"]})
+            bar.write(f"trial {first['key']} raised {outcome['error']} (in {ERRORS_FILE})")
+            bar.update(1)
+            continue
         done = {**first, **outcome, "reused_from": None}
         store.append(done)
         for rec in rest:
@@ -231,15 +256,15 @@ def run_evaluation(plan: EvalPlan, out_dir, workers: int = 1, show_progress: boo
         if on_progress is not None:
             on_progress(simulated)
     bar.close()
-    return {"reused_or_no_grasp": len(ready), "simulated": simulated, "left": len(to_run) - simulated,
-            "stored": len(store)}
+    return {"reused_or_no_grasp": len(ready), "simulated": simulated, "errors": errors,
+            "left": len(to_run) - simulated, "stored": len(store)}
 
 
 def _map(payloads, workers: int):
     """Yield (index, outcome) as trials finish; in-process when workers <= 1 (easier to debug, no spawn)."""
     if workers <= 1:
         for i, payload in enumerate(payloads):
-            yield i, run_trial_payload(payload)
+            yield i, run_trial_payload_guarded(payload)
         return
     ctx = mp.get_context("spawn")   # fresh interpreters: no PyBullet or torch state inherited
     with ctx.Pool(workers) as pool:
@@ -248,4 +273,4 @@ def _map(payloads, workers: int):
 
 def _indexed(item):
     index, payload = item
-    return index, run_trial_payload(payload)
+    return index, run_trial_payload_guarded(payload)

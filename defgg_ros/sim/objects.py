@@ -205,10 +205,14 @@ class LoadedObject:
             return self.node_positions(body).mean(axis=0)
         return np.asarray(p.getBasePositionAndOrientation(body, physicsClientId=self.client)[0])
 
-    def is_finite(self, max_extent_m: float = 1.0) -> bool:
+    def tracked_points(self) -> list:
+        """Per body: the FEM nodes (soft) or the base position (rigid), as (n, 3) arrays."""
+        return [self.node_positions(b) if b in self.soft_body_ids else np.array([self._body_centre(b)])
+                for b in self.body_ids]
+
+    def is_finite(self, max_extent_m: float = 1.0, points: list | None = None) -> bool:
         """False when the simulation exploded: non-finite or runaway nodes/poses."""
-        for body in self.body_ids:
-            pts = self.node_positions(body) if body in self.soft_body_ids else np.array([self._body_centre(body)])
+        for pts in self.tracked_points() if points is None else points:
             if not np.all(np.isfinite(pts)) or np.ptp(pts, axis=0).max() > max_extent_m:
                 return False
             if np.abs(pts).max() > 10.0:

@@ -53,6 +53,10 @@ OPENING_CLEARANCE_M = 0.01      # fingers open this much wider than the grasp wi
 LOSS_DISTANCE_M = 0.02          # object moved this far relative to the hand = no longer held
 CONFIDENT_MIN_DIRECTIONS = 4
 CONFIDENT_MARGIN_MPS2 = 40.0     # k=4: mean >= 45 or <= 5; k=8: >= 39.1 or <= 10.9
+# Energy blow-up: kinetic energy per kg = v_rms^2 / 2. The fastest real motion in a trial is the
+# twist at its limit (500 rad/s^2 ramped over 0.5 s: 125 rad/s, ~6 m/s at 5 cm); 30 m/s RMS over
+# all nodes (450 J/kg) is far beyond it and only reached by a diverging FEM solve.
+MAX_RMS_NODE_SPEED_MPS = 30.0
 TWIST_AXES = ((1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1))
 
 
@@ -159,15 +163,29 @@ class _Trial:
         self.obj = objects.load_object(client, spec, object_xy_m, object_yaw_rad)
         self.force_n = grasp_force_n(min(spec.part_moduli_pa()))
         self.steps = 0
+        self.last_points = None   # for the energy check; None after a restore (a deliberate jump)
         self.t0 = time.process_time()
         self.check_steps = max(1, round(settings.check_every_s / self.world.time_step_s))
 
     def step(self, n):
-        for _ in range(n):
-            self.world.step()
+        """n physics steps, checked for blow-ups and the CPU budget every check_steps."""
+        while n > 0:
+            k = min(n, self.check_steps)
+            for _ in range(k):
+                self.world.step()
+            self._check(k)
+            n -= k
+
+    def _check(self, n):
         self.steps += n
-        if not self.obj.is_finite():
+        points = self.obj.tracked_points()
+        if not self.obj.is_finite(points=points):
             raise _Abort(STATUS_EXPLODED, "object nodes non-finite or runaway")
+        speed = rms_speed_mps(self.last_points, points, n * self.world.time_step_s)
+        if speed > MAX_RMS_NODE_SPEED_MPS:
+            raise _Abort(STATUS_EXPLODED, f"energy blow-up: RMS node speed {speed:.0f} m/s "
+                                          f"(limit {MAX_RMS_NODE_SPEED_MPS:.0f} m/s)")
+        self.last_points = points
         if time.process_time() - self.t0 > self.settings.max_cpu_s:
             raise _Abort(STATUS_TIMEOUT, f"trial exceeded {self.settings.max_cpu_s} s CPU")
 
@@ -209,6 +227,7 @@ class _Trial:
         return pose[:3, :3].T @ (self.obj.centroid_m() - pose[:3, 3])
 
     def restore(self):
+        self.last_points = None
         self.obj.restore_state(self.saved[0])
         self.hand.restore_state(self.saved[1])
         self.hand.move_to(self.lifted_tcp)
@@ -285,6 +304,14 @@ class _Trial:
         # Axes skipped after a failure: 0, flagged in twist_measured.
         return values + [0.0] * (len(TWIST_AXES) - len(values)), [True] * len(values) + [False] * (
             len(TWIST_AXES) - len(values))
+
+
+def rms_speed_mps(before: list | None, after: list, dt_s: float) -> float:
+    """RMS speed of the tracked points between two snapshots (0 when there is no comparable one)."""
+    if before is None or [b.shape for b in before] != [a.shape for a in after] or dt_s <= 0:
+        return 0.0
+    moved = np.concatenate([a - b for a, b in zip(after, before)])
+    return float(np.sqrt(np.mean(np.sum(moved ** 2, axis=1)))) / dt_s
 
 
 def _confidently_decided(values) -> bool:

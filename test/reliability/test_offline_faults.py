@@ -3,7 +3,9 @@
 - A soft body whose simulation runs away (a node metres away or NaN node
   positions written into the real PyBullet state mid-trial; the stable FEM
   settings do not explode on their own) ends the trial as "exploded", with no
-  label. A trial over its CPU budget ends as "timeout"; through the real
+  label; so does a sudden burst of kinetic energy (every node jumping 1 m in
+  one step, the body still compact: caught by the RMS node-speed check). A
+  trial over its CPU budget ends as "timeout"; through the real
   generator such trials are stored (so a restart does not redo them) and
   never become labels.
 - A truncated or foreign training-state file on --resume is a clear error.
@@ -75,13 +77,21 @@ def _nan_nodes(client):
     _move_node(client, [np.nan] * 3)
 
 
-@pytest.mark.parametrize("damage", [_runaway, _nan_nodes], ids=["runaway", "nan"])
-def test_a_simulation_that_blows_up_mid_trial_is_exploded_and_unlabelled(monkeypatch, damage):
+def _energy_burst(client):
+    """Every node jumps 1 m in one step: a 100 m/s body, still compact and near the table."""
+    body = _soft_body(client)
+    _, vertices = p.getMeshData(body, -1, flags=p.MESH_DATA_SIMULATION_MESH, physicsClientId=client)
+    p.resetMeshData(body, vertices=(np.array(vertices) + [1.0, 0.0, 0.0]).tolist(), physicsClientId=client)
+
+
+@pytest.mark.parametrize("damage,words", [(_runaway, "non-finite or runaway"), (_nan_nodes, "non-finite or runaway"),
+                                          (_energy_burst, "energy blow-up")], ids=["runaway", "nan", "energy"])
+def test_a_simulation_that_blows_up_mid_trial_is_exploded_and_unlabelled(monkeypatch, damage, words):
     state = _sabotage_step_after(monkeypatch, 10, damage)
     out = run_grasp_trial(objects.ObjectSpec(objects.get_shape("cube"), 2e4), GRASP, ("shake",), QUICK)
     assert state["done"], "the damage was never applied"
     assert out.status == STATUS_EXPLODED, (out.status, out.note)
-    assert "non-finite or runaway" in out.note
+    assert words in out.note
     assert out.status not in LABELLED_STATUSES and out.shake_accels_mps2 is None
 
 
