@@ -7,7 +7,8 @@ trials in flight and a rerun skips every trial id already on disk.
 Order: trials run in passes. Pass k runs candidates [k*pass_size,
 (k+1)*pass_size) of EVERY scene (object x E) before pass k+1 starts, so a
 partial dataset covers all objects and moduli evenly and can be trained on
-at any time.
+at any time (use a small --pass-size for a slow soft run: pass size 1 is one
+trial per scene per pass, 120 trials for the training set).
 """
 from __future__ import annotations
 
@@ -50,6 +51,7 @@ class DatagenConfig:
         d.pop("workers")
         d.pop("ray_address")
         d.pop("card_every")
+        d.pop("pass_size")   # the order trials run in, not a property of the data
         d["moduli_pa"] = list(self.moduli_pa)
         d["objects"] = list(self.objects)
         return d

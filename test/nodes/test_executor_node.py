@@ -269,7 +269,8 @@ def test_driver_killed_mid_trajectory_aborts_then_serves_again(cell, spin):
     silent_since_s = node._last_state[1]
     driver = start_driver(own_process=True)
     spin(ex, lambda: node._last_state[1] > silent_since_s, 5.0, "joint states from the restarted driver")
-    spin(ex, lambda: node._move_client.server_is_ready() and node._grasp_client.server_is_ready(), 20.0,
+    # Action discovery of a new process can take tens of seconds on a loaded 2-core machine.
+    spin(ex, lambda: node._move_client.server_is_ready() and node._grasp_client.server_is_ready(), 60.0,
          "the restarted driver's gripper actions (discovery)")
     again = send(ex, client, spin, PickAndPlace.Goal(grasp=grasp_msg()))
     assert again.accepted
