@@ -28,8 +28,9 @@ SESSIONS = REPO / "sim_bringup" / "sessions"
 DEPTH_ONLY = REPO / "models" / "ggcnn_depth_only.pt"
 
 
-# Each replay gets a ROS domain of its own: nodes that earlier tests left in this process's domain
-# (in-process contexts) were seen to take a replayed frame's grasp away (no grasp within 30 s).
+# Each replay gets a ROS domain of its own, apart from the in-process nodes of earlier tests. (A
+# frame without a replayed grasp within 30 s after earlier test files was traced to stale Fast DDS
+# shared-memory segments in /dev/shm left by SIGKILLed processes; this isolation is kept anyway.)
 _PRIVATE_DOMAINS = itertools.count(random.Random(os.getpid()).randint(120, 200))
 
 
