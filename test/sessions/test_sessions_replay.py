@@ -4,9 +4,6 @@ The committed sessions replay clean (this is CI's regression check of the
 cell); a swapped model, shifted intrinsics, a damaged bag each give a
 non-zero exit and a message naming the frames and the difference.
 """
-import itertools
-import os
-import random
 import re
 import shutil
 from pathlib import Path
@@ -28,17 +25,10 @@ SESSIONS = REPO / "sim_bringup" / "sessions"
 DEPTH_ONLY = REPO / "models" / "ggcnn_depth_only.pt"
 
 
-# Each replay gets a ROS domain of its own, apart from the in-process nodes of earlier tests. (A
-# frame without a replayed grasp within 30 s after earlier test files was traced to stale Fast DDS
-# shared-memory segments in /dev/shm left by SIGKILLed processes; this isolation is kept anyway.)
-_PRIVATE_DOMAINS = itertools.count(random.Random(os.getpid()).randint(120, 200))
-
-
 @pytest.fixture(autouse=True)
 def large_messages(monkeypatch):
     """The replay's Fast DDS profile, set (and restored) around each test instead of for the whole process."""
     monkeypatch.setenv(FASTDDS_PROFILE_VARIABLE, str(FASTDDS_PROFILE))
-    monkeypatch.setenv("ROS_DOMAIN_ID", str(next(_PRIVATE_DOMAINS)))
 
 
 def run_replay(capsys, *argv):
