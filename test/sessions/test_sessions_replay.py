@@ -4,8 +4,11 @@ The committed sessions replay clean (this is CI's regression check of the
 cell); a swapped model, shifted intrinsics, a damaged bag each give a
 non-zero exit and a message naming the frames and the difference.
 """
+import os
 import re
 import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -32,9 +35,11 @@ def large_messages(monkeypatch):
 
 
 def run_replay(capsys, *argv):
-    code = replay.main([str(a) for a in argv])
-    out = capsys.readouterr()
-    return code, out.out + out.err
+    """`defgg-replay` as CI runs it: its own process, so its DDS participant is fresh (in this long-lived
+    pytest process, after hundreds of earlier tests' contexts, replayed frames were sometimes lost)."""
+    done = subprocess.run([sys.executable, "-m", replay.__name__, *map(str, argv)], capture_output=True,
+                          text=True, timeout=900, env=dict(os.environ))
+    return done.returncode, done.stdout + done.stderr
 
 
 def test_committed_sessions_replay_clean_including_a_pick(capsys):
