@@ -41,6 +41,31 @@ def executor(rclpy_context):
     ex.shutdown(timeout_sec=2.0)
 
 
+@pytest.fixture
+def inference_service(executor):
+    """Factory: start a GraspInferenceNode on `executor` with these parameters, plus a client node whose
+    PlanGrasp client is ready. Returns (inference node, client node, client)."""
+    from defgg_interfaces.srv import PlanGrasp
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+
+    from defgg_ros import topics
+    from defgg_ros.nodes.grasp_inference_node import GraspInferenceNode
+
+    def start(client_name: str, **parameters):
+        node = GraspInferenceNode(context=executor.context, parameter_overrides=[
+            Parameter(name, value=value) for name, value in parameters.items()])
+        executor.add_node(node)
+        client_node = Node(client_name, context=executor.context)
+        executor.add_node(client_node)
+        service = parameters.get("plan_grasp_service", topics.PLAN_GRASP_SERVICE)
+        client = client_node.create_client(PlanGrasp, service)
+        assert client.wait_for_service(timeout_sec=10.0), f"{service} did not appear"
+        return node, client_node, client
+
+    return start
+
+
 def spin_until(executor, done, timeout_s: float, what: str):
     """Spin `executor` until `done` (a Future or a callable -> bool) is true.
 

@@ -4,13 +4,10 @@ from defgg_interfaces.msg import ObjectStiffness
 from defgg_interfaces.srv import PlanGrasp
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from rclpy.node import Node
-from rclpy.parameter import Parameter
 from sensor_msgs.msg import Image
 
 from defgg_ros.model.checkpoint import make_random_checkpoint
 from defgg_ros.nodes.conversions import depth_metres_to_msg, make_camera_info, numpy_to_image
-from defgg_ros.nodes.grasp_inference_node import GraspInferenceNode
 from defgg_ros.perception.synthetic_scene import SceneObject, SyntheticScene, default_camera_k, render
 
 SERVICE = "/fuzz/plan_grasp"
@@ -105,15 +102,9 @@ malformed_requests = st.one_of(
 )
 
 
-def test_fuzzed_requests_are_refused_then_a_valid_one_is_served(executor, spin, tmp_path):
+def test_fuzzed_requests_are_refused_then_a_valid_one_is_served(executor, spin, tmp_path, inference_service):
     checkpoint = make_random_checkpoint(tmp_path / "random.pt")
-    node = GraspInferenceNode(context=executor.context, parameter_overrides=[
-        Parameter("model_path", value=str(checkpoint)), Parameter("plan_grasp_service", value=SERVICE)])
-    executor.add_node(node)
-    client_node = Node("fuzz_client", context=executor.context)
-    executor.add_node(client_node)
-    client = client_node.create_client(PlanGrasp, SERVICE)
-    assert client.wait_for_service(timeout_sec=10.0)
+    _, _, client = inference_service("fuzz_client", model_path=str(checkpoint), plan_grasp_service=SERVICE)
     seen = []
 
     @settings(max_examples=250, deadline=None, database=None, derandomize=True,

@@ -5,7 +5,6 @@ import numpy as np
 import pytest
 from defgg_interfaces.msg import Grasp, ObjectStiffness
 from defgg_interfaces.srv import PlanGrasp
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
@@ -42,15 +41,8 @@ def checkpoint(tmp_path_factory):
 
 
 @pytest.fixture
-def cell(executor, checkpoint):
-    node = GraspInferenceNode(context=executor.context, parameter_overrides=[
-        Parameter("model_path", value=str(checkpoint)), Parameter("base_T_camera", value=BASE_T_CAMERA)])
-    executor.add_node(node)
-    client_node = Node("grasp_test_client", context=executor.context)
-    executor.add_node(client_node)
-    client = client_node.create_client(PlanGrasp, topics.PLAN_GRASP_SERVICE)
-    assert client.wait_for_service(timeout_sec=10.0)
-    return node, client_node, client
+def cell(checkpoint, inference_service):
+    return inference_service("grasp_test_client", model_path=str(checkpoint), base_T_camera=BASE_T_CAMERA)
 
 
 def call(executor, spin, client, request, timeout_s=20.0):
@@ -217,15 +209,11 @@ def test_bad_requests_fail_cleanly_and_node_keeps_serving(cell, executor, spin):
     assert response.success, response.message
 
 
-def test_depth_only_model_via_use_stiffness_false(executor, spin, tmp_path):
+def test_depth_only_model_via_use_stiffness_false(executor, spin, tmp_path, inference_service):
     checkpoint = make_random_checkpoint(tmp_path / "depth_only.pt", uses_stiffness=False)
-    node = GraspInferenceNode(context=executor.context, parameter_overrides=[
-        Parameter("model_path", value=str(checkpoint)), Parameter("use_stiffness", value=False),
-        Parameter("plan_grasp_service", value="/test/depth_only_plan")])
-    executor.add_node(node)
+    node, _, client = inference_service("depth_only_client", model_path=str(checkpoint), use_stiffness=False,
+                                        plan_grasp_service="/test/depth_only_plan")
     assert not node.predictor.uses_stiffness
-    client = node.create_client(PlanGrasp, "/test/depth_only_plan")
-    assert client.wait_for_service(timeout_sec=10.0)
     response = call(executor, spin, client, image_request())
     assert response.success, response.message
     assert_valid_grasp(response.grasps[0])

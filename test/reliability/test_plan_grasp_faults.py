@@ -17,7 +17,6 @@ import pytest
 import torch
 from defgg_interfaces.msg import ObjectStiffness
 from defgg_interfaces.srv import PlanGrasp
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from defgg_ros.model.checkpoint import CheckpointError, make_random_checkpoint
@@ -39,14 +38,8 @@ def checkpoint(tmp_path_factory):
 
 
 @pytest.fixture
-def client(executor, spin, checkpoint):
-    node = GraspInferenceNode(context=executor.context, parameter_overrides=[
-        Parameter("model_path", value=str(checkpoint)), Parameter("plan_grasp_service", value=SERVICE)])
-    executor.add_node(node)
-    client_node = Node("plan_fault_client", context=executor.context)
-    executor.add_node(client_node)
-    cli = client_node.create_client(PlanGrasp, SERVICE)
-    assert cli.wait_for_service(timeout_sec=10.0)
+def client(executor, spin, checkpoint, inference_service):
+    _, _, cli = inference_service("plan_fault_client", model_path=str(checkpoint), plan_grasp_service=SERVICE)
     return lambda request: spin(executor, cli.call_async(request), 20.0, "plan_grasp response")
 
 
