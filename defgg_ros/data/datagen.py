@@ -23,11 +23,11 @@ import numpy as np
 
 from defgg_ros.atomic import append_jsonl, write_json_atomic
 from defgg_ros.constants import GRASP_CANDIDATES_PER_OBJECT, TRAINING_YOUNGS_MODULI_PA
+from defgg_ros.data.format import TRIAL_ERRORS_FILE as ERRORS_FILE
 from defgg_ros.data.format import DatasetWriter, GraspRect, Scene, TrialRecord, scene_id_for
 
 CANDIDATE_FILE_VERSION = 1
 # Trials that raised (not stored as trials, so the next run retries them), one JSON line each.
-ERRORS_FILE = "errors.jsonl"
 
 
 @dataclass

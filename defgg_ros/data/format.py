@@ -46,6 +46,9 @@ STATUS_LIFT_FAILED = "lift_failed"
 STATUS_EXPLODED = "exploded"
 STATUS_TIMEOUT = "timeout"
 LABELLED_STATUSES = (STATUS_OK, STATUS_LIFT_FAILED)
+# Trials that raised (a bug or damaged input, not a simulation outcome) go to this file in the run's
+# folder (generator and evaluation alike) instead of ending the run; the next run retries them.
+TRIAL_ERRORS_FILE = "errors.jsonl"
 
 
 class DatasetError(RuntimeError):

@@ -20,6 +20,7 @@ from tqdm import tqdm
 
 from defgg_ros.atomic import append_jsonl
 from defgg_ros.constants import SHAKE_ACCEL_LIMIT_MPS2, SHAKE_POSITIVE_THRESHOLD_MPS2, TWIST_ACCEL_LIMIT_RADPS2
+from defgg_ros.data.format import TRIAL_ERRORS_FILE as ERRORS_FILE
 from defgg_ros.evaluation import jobs as jobs_mod
 from defgg_ros.evaluation import scene as scene_mod
 from defgg_ros.evaluation.planning import plan_world_grasp
@@ -28,7 +29,6 @@ from defgg_ros.evaluation.store import ResultStore
 from defgg_ros.evaluation.tasks import task_success
 from defgg_ros.sim.trial import TrialSettings, WorldGrasp, run_grasp_trial
 
-ERRORS_FILE = "errors.jsonl"      # trials that raised (not results): retried by the next run
 STATUS_NO_GRASP = "no_grasp"   # the model proposed fewer grasps than asked: a failed grasp
 
 
