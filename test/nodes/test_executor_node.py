@@ -144,7 +144,6 @@ def cell(rclpy_context):
     ex.add_node(node)
     ex.add_node(client_node)
 
-
     children = []
     trajectories_seen = []   # what the executor sends, seen from the test (the driver process is not ours)
     client_node.create_subscription(JointTrajectory, topics.JOINT_TRAJECTORY, trajectories_seen.append, qos.COMMAND)
@@ -232,9 +231,6 @@ def test_busy_goal_is_rejected_and_cancel_stops_the_arm(cell, spin):
     assert not KIN.fk(driver.q)[:3, 3] == pytest.approx(KIN.fk(node._kin.q_ready_rad)[:3, 3], abs=1e-3)
 
 
-# The restarted driver is a real process (this file run as a script). As a second rclpy context
-# inside the pytest process it was sometimes not discovered by the executor's action clients
-# within 60 s (after a test whose executor waited for a PlanGrasp service, or after many files).
 def test_driver_killed_mid_trajectory_aborts_then_serves_again(cell, spin):
     ex, node, client, start_driver = cell
     driver = start_driver()
