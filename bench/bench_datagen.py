@@ -33,10 +33,11 @@ sys.path.insert(0, str(HERE.parent))
 
 from defgg_ros.atomic import append_jsonl, read_jsonl  # noqa: E402
 
-PROTOCOLS = ("naive", "exact", "fast", "fast_ramp025", "fast_dt1ms")
+DEFAULT_PROTOCOLS = ("naive", "exact", "fast")   # TrialSettings class methods
 # Tried and rejected (kept so the measurement can be repeated): a faster ramp and a
 # longer soft time step are much cheaper but change the held accelerations.
 VARIANTS = {"fast_ramp025": {"shake_ramp_time_s": 0.25}, "fast_dt1ms": {"time_step_s": 1e-3}}
+PROTOCOLS = DEFAULT_PROTOCOLS + tuple(VARIANTS)
 
 
 def protocol_settings(name: str):
@@ -47,6 +48,8 @@ def protocol_settings(name: str):
     if name in VARIANTS:
         return replace(TrialSettings.fast(), **VARIANTS[name])
     return getattr(TrialSettings, name)()
+
+
 DEFAULT_OBJECTS = ("box_small", "cylinder_tall", "egad_train_05_c3")
 DEFAULT_MODULI = (2e4, 2e5, 2e6, 2e9)
 
@@ -137,8 +140,8 @@ def main(argv=None):
     ap.add_argument("--objects", nargs="+", default=list(DEFAULT_OBJECTS))
     ap.add_argument("--moduli", nargs="+", type=float, default=list(DEFAULT_MODULI))
     ap.add_argument("--grasps", type=int, default=2, help="candidates per object (same for every E)")
-    ap.add_argument("--protocols", nargs="+", default=list(PROTOCOLS[:3]), choices=list(PROTOCOLS),
-                    help="default: naive exact fast; fast_ramp025 / fast_dt1ms are the rejected variants")
+    ap.add_argument("--protocols", nargs="+", default=list(DEFAULT_PROTOCOLS), choices=list(PROTOCOLS),
+                    help=f"default: {' '.join(DEFAULT_PROTOCOLS)}; {' / '.join(VARIANTS)} are the rejected variants")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--results", type=Path, default=HERE / "results" / "datagen_sample.jsonl")
     ap.add_argument("--summary-only", action="store_true")
