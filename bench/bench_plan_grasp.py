@@ -12,13 +12,14 @@ Targets (issue 5): PlanGrasp p99 <= 15 ms, overhead <= 1.3x the bare call.
 """
 import argparse
 import os
-import random
 import subprocess
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+
+from defgg_ros.ros_domain import pick_private_domain
 
 ROOT = Path(__file__).resolve().parents[1]
 TARGET_P99_MS = 15.0
@@ -146,7 +147,7 @@ def main(argv=None):
     args = parse_args(argv)
     if args.calls < 200:
         raise SystemExit("--calls must be >= 200 for a meaningful p99")
-    os.environ["ROS_DOMAIN_ID"] = str(random.randint(101, 200))
+    os.environ["ROS_DOMAIN_ID"] = str(pick_private_domain())
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     import rclpy
     import torch

@@ -29,6 +29,7 @@ from bench_plan_grasp import (
 )
 
 from defgg_ros.nodes.grasp_inference_node import default_model_path
+from defgg_ros.ros_domain import pick_private_domain
 
 
 def parse_args(argv=None):
@@ -101,7 +102,7 @@ def run_round(executor, clients, requests, args, rng):
 
 def main(argv=None):
     args = parse_args(argv)
-    os.environ["ROS_DOMAIN_ID"] = str(random.randint(101, 200))
+    os.environ["ROS_DOMAIN_ID"] = str(pick_private_domain())
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     import rclpy
     from defgg_interfaces.srv import PlanGrasp

@@ -10,13 +10,14 @@
 """
 import argparse
 import os
-import random
 import subprocess
 import sys
 import tempfile
 import threading
 import time
 from pathlib import Path
+
+from defgg_ros.ros_domain import pick_private_domain
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -57,7 +58,7 @@ def transport(n_frames: int) -> None:
     for name, profile in (("default transports", None),
                           ("fastdds_profile.xml", str(REPO / "defgg_ros" / "sessions" / "fastdds_profile.xml"))):
         env = {k: v for k, v in os.environ.items() if k != "FASTRTPS_DEFAULT_PROFILES_FILE"}
-        env.update(ROS_DOMAIN_ID=str(random.randint(120, 230)), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+        env.update(ROS_DOMAIN_ID=str(pick_private_domain()), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
         if profile:
             env["FASTRTPS_DEFAULT_PROFILES_FILE"] = profile
         out = subprocess.run([sys.executable, __file__, "--child", str(n_frames)], env=env, capture_output=True,

@@ -9,7 +9,6 @@ table per session. Exit codes: 0 all matched, 1 regression, 2 a session or
 the cell could not be replayed (bad bag, node died, timeout).
 """
 import argparse
-import random
 import sys
 import tempfile
 import threading
@@ -23,6 +22,7 @@ from rclpy.executors import MultiThreadedExecutor
 from tqdm import tqdm
 
 from defgg_ros import topics
+from defgg_ros.ros_domain import SAFE_DOMAIN_RANGE, pick_private_domain
 from defgg_ros.sessions import metadata as md
 from defgg_ros.sessions import session_topics as st
 from defgg_ros.sessions.bag import SessionBagError, SessionWriter
@@ -42,9 +42,6 @@ PERCEPTION_NODES = ("segmentation_node", "grasp_inference_node")
 PICK_NODES = ("fake_panda_driver", "executor_node")
 # Recorded from the driver; a replay without picks carries them over into an --update.
 DRIVER_TOPICS = (topics.JOINT_STATES, st.DRIVER_SCENE)
-# The replay starts its own cell: a ROS domain of its own keeps other graphs on this machine
-# (a running cell, tests, other replays) from feeding it frames. Fast DDS ports limit ids to <= 232.
-PRIVATE_DOMAIN_RANGE = (120, 230)
 
 
 def find_sessions(paths) -> list[Path]:
@@ -72,7 +69,9 @@ class ReplayRun:
 
     def __init__(self, args, log=print):
         self.args, self.log = args, log
-        self.domain_id = args.domain_id if args.domain_id is not None else random.randint(*PRIVATE_DOMAIN_RANGE)
+        # A ROS domain of its own keeps other graphs on this machine (a running cell, tests, other
+        # replays) from feeding it frames.
+        self.domain_id = args.domain_id if args.domain_id is not None else pick_private_domain()
         self.run_dir = Path(args.run_dir or tempfile.mkdtemp(prefix="defgg_replay_"))
         self.context = Context()
         rclpy.init(context=self.context, domain_id=self.domain_id)
@@ -178,7 +177,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--pick-timeout-s", type=float, default=300.0, help="how long a pick may take (s)")
     parser.add_argument("--domain-id", type=int,
                         help="ROS_DOMAIN_ID of the replay's private graph (default: random in "
-                             f"{PRIVATE_DOMAIN_RANGE[0]}..{PRIVATE_DOMAIN_RANGE[1]})")
+                             f"{SAFE_DOMAIN_RANGE[0]}..{SAFE_DOMAIN_RANGE[1]})")
     parser.add_argument("--run-dir", help="folder for the nodes' logs (default: a new temporary folder)")
     return parser
 

@@ -5,25 +5,27 @@ import re
 import threading
 
 import pytest
+from replay_process import run_replay
 from session_synthetic_camera import SyntheticCamera
 
 from defgg_ros import topics
 from defgg_ros.nodes.grasp_inference_node import GraspInferenceNode
 from defgg_ros.nodes.segmentation_node import SegmentationNode
+from defgg_ros.ros_domain import pick_private_domain
 from defgg_ros.sessions import record
 from defgg_ros.sessions import session_topics as st
 from defgg_ros.sessions.graph import FASTDDS_PROFILE, FASTDDS_PROFILE_VARIABLE
 from defgg_ros.sessions.session import load_session, stamp_ns
 
-PRIVATE_DOMAIN = random.Random(os.getpid()).randint(101, 118)
+PRIVATE_DOMAIN = pick_private_domain(rng=random.Random(os.getpid()))
 
 
 @pytest.fixture
 def large_messages(monkeypatch):
     """The Fast DDS profile for camera-sized messages, and a ROS domain of these tests' own.
 
-    Set before the rclpy context exists; a domain outside conftest's 1..100 (and the replay's
-    120..230) keeps other test processes' cells from showing up in the recording.
+    Set before the rclpy context exists; a domain other than the test process's keeps nodes left
+    there by earlier tests from showing up in the recording.
     """
     monkeypatch.setenv(FASTDDS_PROFILE_VARIABLE, str(FASTDDS_PROFILE))
     monkeypatch.setenv("ROS_DOMAIN_ID", str(PRIVATE_DOMAIN))
@@ -31,15 +33,22 @@ def large_messages(monkeypatch):
 
 @pytest.fixture
 def live_cell(large_messages, executor):
-    """Camera at 5 Hz + segmentation + inference (shipped model), spinning in a background thread."""
+    """Camera at 5 Hz + segmentation + inference (shipped model), spinning in a background thread.
+
+    Yields a function that stops the cell early (idempotent; the fixture calls it at teardown).
+    """
     for node in (SegmentationNode(context=executor.context), GraspInferenceNode(context=executor.context),
                  SyntheticCamera(0.2, context=executor.context)):
         executor.add_node(node)
     thread = threading.Thread(target=executor.spin, daemon=True)
     thread.start()
-    yield executor
-    executor.shutdown(timeout_sec=2.0)
-    thread.join(timeout=5.0)
+
+    def stop():
+        executor.shutdown(timeout_sec=2.0)
+        thread.join(timeout=5.0)
+
+    yield stop
+    stop()
 
 
 def test_driven_recording_holds_frames_calls_grasps_and_metadata(live_cell, tmp_path):
@@ -66,20 +75,23 @@ def test_driven_recording_holds_frames_calls_grasps_and_metadata(live_cell, tmp_
 
 
 def test_recording_without_a_cell_fails_clearly(tmp_path, large_messages, capsys, monkeypatch):
-    monkeypatch.setenv("ROS_DOMAIN_ID", str(PRIVATE_DOMAIN + 1))  # not the domain the other test's cell used
+    # not the domain the other tests' cell used
+    monkeypatch.setenv("ROS_DOMAIN_ID", str(pick_private_domain(exclude=(PRIVATE_DOMAIN,))))
     out = tmp_path / "session"
     assert record.main([str(out), "--plan", "1", "--wait-s", "1", "--param-timeout-s", "0.2"]) == 2
     assert "did not appear" in capsys.readouterr().err
     assert not out.exists()
 
 
-def test_a_fresh_recording_replays_clean(live_cell, tmp_path, capsys):
-    """Record -> replay in a fresh graph of node processes: the real-cell path (no scene, no picks)."""
-    from defgg_ros.sessions import replay
+def test_a_fresh_recording_replays_clean(live_cell, tmp_path):
+    """Record -> replay in a fresh graph of node processes: the real-cell path (no scene, no picks).
 
+    The recording cell is stopped first and the replay runs in a process of its own, as a user would
+    replay a session later (CI once saw the replayed frame get no grasp while both shared this process).
+    """
     out = tmp_path / "fresh"
     assert record.main([str(out), "--plan", "1", "--depth-period-s", "1000", "--no-color"]) == 0
-    code = replay.main([str(out)])
-    text = capsys.readouterr().out
+    live_cell()
+    code, text = run_replay(out)
     assert code == 0, text
     assert re.search(r"fresh: all \d+ item\(s\) match", text), text

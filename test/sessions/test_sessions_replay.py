@@ -4,18 +4,15 @@ The committed sessions replay clean (this is CI's regression check of the
 cell); a swapped model, shifted intrinsics, a damaged bag each give a
 non-zero exit and a message naming the frames and the difference.
 """
-import os
 import re
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from replay_process import run_replay
 
 from defgg_ros import topics
-from defgg_ros.sessions import replay
 from defgg_ros.sessions import session_topics as st
 from defgg_ros.sessions.bag import SessionWriter, read_bag
 from defgg_ros.sessions.graph import FASTDDS_PROFILE, FASTDDS_PROFILE_VARIABLE
@@ -34,20 +31,12 @@ def large_messages(monkeypatch):
     monkeypatch.setenv(FASTDDS_PROFILE_VARIABLE, str(FASTDDS_PROFILE))
 
 
-def run_replay(capsys, *argv):
-    """`defgg-replay` as CI runs it: its own process, so its DDS participant is fresh (in this long-lived
-    pytest process, after hundreds of earlier tests' contexts, replayed frames were sometimes lost)."""
-    done = subprocess.run([sys.executable, "-m", replay.__name__, *map(str, argv)], capture_output=True,
-                          text=True, timeout=900, env=dict(os.environ))
-    return done.returncode, done.stdout + done.stderr
-
-
-def test_committed_sessions_replay_clean_including_a_pick(capsys):
+def test_committed_sessions_replay_clean_including_a_pick():
     sessions = sorted(p.name for p in SESSIONS.iterdir() if (p / "metadata.yaml").is_file())
     assert {"rigid_objects", "soft_objects", "mixed_objects"} <= set(sessions)
     assert all(sum(f.stat().st_size for f in (SESSIONS / s).iterdir()) < 3e6 for s in sessions)
     assert any(load_session(SESSIONS / s).picks for s in sessions)
-    code, text = run_replay(capsys, SESSIONS)
+    code, text = run_replay(SESSIONS)
     assert code == 0, text
     for name in sessions:
         assert f"{name}: all" in text
@@ -55,18 +44,18 @@ def test_committed_sessions_replay_clean_including_a_pick(capsys):
     assert pick_rows and all(row.rstrip().endswith("ok") and "skipped" not in row for row in pick_rows)
 
 
-def test_depth_only_model_is_a_regression_and_update_rerecords_it(tmp_path, capsys):
+def test_depth_only_model_is_a_regression_and_update_rerecords_it(tmp_path):
     session = shutil.copytree(SESSIONS / "mixed_objects", tmp_path / "mixed_objects")
-    code, text = run_replay(capsys, session, "--model", DEPTH_ONLY)
+    code, text = run_replay(session, "--model", DEPTH_ONLY)
     assert code == 1, text
     assert "REGRESSION in session mixed_objects" in text and "the model differs from the recording" in text
     assert "frame 0 @" in text.split("REGRESSION in session")[1]
     assert "position moved" in text or "angle changed" in text or "width changed" in text
     # On purpose: re-record with the depth-only model, then it replays clean with it.
-    code, text = run_replay(capsys, session, "--model", DEPTH_ONLY, "--update")
+    code, text = run_replay(session, "--model", DEPTH_ONLY, "--update")
     assert code == 0 and "expectations re-recorded" in text, text
     assert load_session(session).metadata["model"]["sha256"] == file_sha256(DEPTH_ONLY)
-    code, text = run_replay(capsys, session, "--model", DEPTH_ONLY)
+    code, text = run_replay(session, "--model", DEPTH_ONLY)
     assert code == 0, text
 
 
@@ -87,37 +76,37 @@ def shift_principal_point(source: Path, target: Path, shift_px: float) -> Path:
     return writer.close()
 
 
-def test_shifted_intrinsics_are_a_regression_naming_the_frames(tmp_path, capsys):
+def test_shifted_intrinsics_are_a_regression_naming_the_frames(tmp_path):
     session = shift_principal_point(SESSIONS / "soft_objects", tmp_path / "soft_objects", 30.0)
     def principal_points(path):
         return [m.decode().k[2] for m in read_bag(path)[1] if m.topic == topics.DEPTH_CAMERA_INFO]
     assert np.allclose(principal_points(session), np.array(principal_points(SESSIONS / "soft_objects")) + 30.0)
-    code, text = run_replay(capsys, session, "--no-pick")
+    code, text = run_replay(session, "--no-pick")
     assert code == 1, text
     report = text.split("REGRESSION in session soft_objects")[1]
     assert "frame 0 @" in report and "position moved" in report
 
 
 @pytest.mark.parametrize("damage", ["truncate", "missing"])
-def test_damaged_bag_is_a_clear_error_not_a_traceback(tmp_path, capsys, damage):
+def test_damaged_bag_is_a_clear_error_not_a_traceback(tmp_path, damage):
     session = shutil.copytree(SESSIONS / "soft_objects", tmp_path / "soft_objects")
     mcap = next(session.glob("*.mcap"))
     if damage == "truncate":
         mcap.write_bytes(mcap.read_bytes()[:5000])
     else:
         mcap.unlink()
-    code, text = run_replay(capsys, session)
+    code, text = run_replay(session)
     assert code == 2
     assert "soft_objects: cannot replay:" in text and "re-record" in text
     assert "Traceback" not in text
 
 
-def test_a_folder_without_sessions_is_an_error(tmp_path, capsys):
-    code, text = run_replay(capsys, tmp_path)
+def test_a_folder_without_sessions_is_an_error(tmp_path):
+    code, text = run_replay(tmp_path)
     assert code == 2 and "holds no session bags" in text and "Traceback" not in text
 
 
-def test_a_pick_that_no_longer_succeeds_is_a_regression(tmp_path, capsys):
+def test_a_pick_that_no_longer_succeeds_is_a_regression(tmp_path):
     """The simulated world differs from the recording (objects 6 cm off where the frames show them): the pick misses."""
     meta, messages = read_bag(SESSIONS / "rigid_objects")
     moved = {"position_xy_m: [0.5, 0.0]": "position_xy_m: [0.5, 0.06]",
@@ -129,7 +118,7 @@ def test_a_pick_that_no_longer_succeeds_is_a_regression(tmp_path, capsys):
     for m in messages:
         if m.topic != st.METADATA:
             writer.write(m.topic, m.raw, m.log_time_ns, m.msgtype)
-    code, text = run_replay(capsys, writer.close())
+    code, text = run_replay(writer.close())
     assert code == 1, text
     report = text.split("REGRESSION in session rigid_objects")[1]
     assert "pick 0: pick failed but the recording succeeded" in report
