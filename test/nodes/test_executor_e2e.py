@@ -64,7 +64,10 @@ def cell(rclpy_context):
             context = Context()
             rclpy.init(context=context)
         driver = FakePandaDriver(context=context, parameter_overrides=[
-            Parameter("scene_file", value=str(SCENE)), Parameter("max_real_time_factor", value=0.0),
+            Parameter("scene_file", value=str(SCENE)),
+            # Real time, as deployed (the default). Unthrottled, the simulator ran ahead of this
+            # process's busy executor: trajectories started late in sim time ("arm did not reach the
+            # descend target") and a cancel landed after the whole descent ("canceled during close").
             # No camera needed here; a render holds the sim thread for 0.1-1 s.
             Parameter("depth_rate_hz", value=0.01)])
         drivers.append(driver)
