@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from defgg_ros.ros_domain import pick_private_domain
+from defgg_ros.sessions.graph import FASTDDS_PROFILE_VARIABLE, use_large_message_transport
 
 ROOT = Path(__file__).resolve().parents[1]
 TARGET_P99_MS = 15.0
@@ -149,6 +150,7 @@ def main(argv=None):
         raise SystemExit("--calls must be >= 200 for a meaningful p99")
     os.environ["ROS_DOMAIN_ID"] = str(pick_private_domain())
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    use_large_message_transport()  # the cell's Fast DDS transports, as defgg-bringup sets them
     import rclpy
     import torch
     from defgg_interfaces.srv import PlanGrasp
@@ -208,6 +210,7 @@ def _ok(response):
 def report(times, in_node, args, runtime):
     print(f"\nPlanGrasp latency, {args.calls} calls per mode, torch threads {args.threads}, runtime {runtime}, "
           f"client executor {args.client_executor}, "
+          f"Fast DDS profile {Path(os.environ.get(FASTDDS_PROFILE_VARIABLE, 'built-in')).name}, "
           f"load average {os.getloadavg()[0]:.1f}")
     print(f"{'mode':32s} {'median ms':>10s} {'p99 ms':>8s} {'max ms':>8s}")
     bare = stats_ms(times["bare predictor.predict"])

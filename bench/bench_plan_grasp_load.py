@@ -30,6 +30,7 @@ from bench_plan_grasp import (
 
 from defgg_ros.nodes.grasp_inference_node import default_model_path
 from defgg_ros.ros_domain import pick_private_domain
+from defgg_ros.sessions.graph import use_large_message_transport
 
 
 def parse_args(argv=None):
@@ -104,6 +105,7 @@ def main(argv=None):
     args = parse_args(argv)
     os.environ["ROS_DOMAIN_ID"] = str(pick_private_domain())
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    use_large_message_transport()  # the cell's Fast DDS transports, as defgg-bringup sets them
     import rclpy
     from defgg_interfaces.srv import PlanGrasp
     from rclpy.context import Context

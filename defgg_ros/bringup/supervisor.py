@@ -3,28 +3,15 @@
 Used by `defgg-bringup` (cli.py), by the demo and by tests. One node dying
 stops the others; `failed_node` says which died and how.
 """
-import os
 import sys
 import time
 from dataclasses import dataclass
 
 from defgg_ros.bringup.node_set import NodeSet, node_command
 from defgg_ros.bringup.processes import ManagedProcess
+from defgg_ros.sessions.graph import use_large_message_transport
 
 DEFAULT_READY_TIMEOUT_S = 120.0
-
-
-def apply_transport_profile() -> None:
-    """Use the project's Fast DDS profile (large shared-memory segments) unless the user set one.
-
-    With the default transports, camera-sized messages between processes were
-    mostly lost (see defgg_ros/sessions/fastdds_profile.xml). Set in this
-    process's environment so the nodes and any client started here agree.
-    """
-    from defgg_ros.sessions.graph import FASTDDS_PROFILE, FASTDDS_PROFILE_VARIABLE
-
-    if FASTDDS_PROFILE.is_file():
-        os.environ.setdefault(FASTDDS_PROFILE_VARIABLE, str(FASTDDS_PROFILE))
 
 
 class BringupError(RuntimeError):
@@ -61,7 +48,9 @@ class Bringup:
         return False
 
     def start(self) -> None:
-        apply_transport_profile()
+        # Large shared-memory segments: with the default transports camera-sized messages between
+        # processes were mostly lost (defgg_ros/sessions/fastdds_profile.xml).
+        use_large_message_transport()
         unknown = set(self._overrides) - {n.name for n in self.node_set.nodes}
         if unknown:
             raise BringupError(f"parameter overrides for nodes not in set {self.node_set.name}: {sorted(unknown)}")
