@@ -18,7 +18,7 @@ from pathlib import Path
 
 import rclpy
 from rclpy.context import Context
-from rclpy.executors import MultiThreadedExecutor
+from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
 from tqdm import tqdm
 
 from defgg_ros import topics
@@ -40,6 +40,9 @@ EXIT_OK, EXIT_REGRESSION, EXIT_ERROR, EXIT_INTERRUPTED = 0, 1, 2, 130
 STARTUP_TIMEOUT_S = 90.0
 PERCEPTION_NODES = ("segmentation_node", "grasp_inference_node")
 PICK_NODES = ("fake_panda_driver", "executor_node")
+# How long a replay listens to a candidate ROS domain for other nodes (discovery on localhost
+# takes well under a second).
+DOMAIN_LISTEN_S = 1.5
 # Recorded from the driver; a replay without picks carries them over into an --update.
 DRIVER_TOPICS = (topics.JOINT_STATES, st.DRIVER_SCENE)
 
@@ -59,6 +62,36 @@ def find_sessions(paths) -> list[Path]:
     return found
 
 
+def nodes_in_domain(domain_id: int, listen_s: float = DOMAIN_LISTEN_S) -> list:
+    """Names of the ROS nodes seen in `domain_id` within listen_s (a probe node of our own)."""
+    context = Context()
+    rclpy.init(context=context, domain_id=domain_id)
+    try:
+        probe = rclpy.create_node("defgg_replay_domain_probe", context=context)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(probe)
+        deadline = time.monotonic() + listen_s
+        while time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+        return [name for name, _ in probe.get_node_names_and_namespaces() if name != probe.get_name()]
+    finally:
+        context.try_shutdown()
+
+
+def pick_empty_domain(log=print, attempts: int = 5) -> int:
+    """A private domain where no other node answers discovery. CI once saw a replay's services
+    'appear' 0.0 s after its nodes were launched and then never answer: another graph was there."""
+    tried = []
+    for _ in range(attempts):
+        domain_id = pick_private_domain(exclude=tried)
+        others = nodes_in_domain(domain_id)
+        if not others:
+            return domain_id
+        log(f"  ROS domain {domain_id} is in use ({', '.join(sorted(others)[:4])}); trying another")
+        tried.append(domain_id)
+    raise GraphError(f"no free ROS domain among {len(tried)} tried ({tried}); pass --domain-id")
+
+
 class ReplayRun:
     """One private ROS domain and one player for all the sessions of a command.
 
@@ -71,7 +104,7 @@ class ReplayRun:
         self.args, self.log = args, log
         # A ROS domain of its own keeps other graphs on this machine (a running cell, tests, other
         # replays) from feeding it frames.
-        self.domain_id = args.domain_id if args.domain_id is not None else pick_private_domain()
+        self.domain_id = args.domain_id if args.domain_id is not None else pick_empty_domain(log)
         self.run_dir = Path(args.run_dir or tempfile.mkdtemp(prefix="defgg_replay_"))
         self.context = Context()
         rclpy.init(context=self.context, domain_id=self.domain_id)
@@ -191,7 +224,11 @@ def main(argv=None) -> int:
         print(f"defgg-replay: error: {exc}", file=sys.stderr)
         return EXIT_ERROR
     results = []
-    run = ReplayRun(args, log=tqdm.write)
+    try:
+        run = ReplayRun(args, log=tqdm.write)
+    except GraphError as exc:
+        print(f"defgg-replay: error: {exc}", file=sys.stderr)
+        return EXIT_ERROR
     try:
         for path in tqdm(paths, desc="sessions", unit="session", disable=len(paths) < 2):
             try:
