@@ -130,6 +130,7 @@ class DemoRun:
             row.wall_duration_s = time.monotonic() - started
             position = self.client.object_positions()[index]
             row.in_bin = in_bin(position, self.scene.get("bin"))
+            row.final_position_m = tuple(round(float(c), 4) for c in position)
         return row
 
     def observe_pose(self):
@@ -181,7 +182,9 @@ class DemoRun:
         panel = FramePanels(row.name, depth_m, stiffness_pa)
         self.panels.append(panel)
         if not label:
-            row.failure_reason = "object not found in the depth image"
+            x, y, z = positions[index]
+            row.failure_reason = (f"object not seen where it is, ({x:.3f}, {y:.3f}, {z:.3f}) m: "
+                                  "knocked away by an earlier pick, or hidden")
             return None
         prediction = self.predictor.predict(depth_m, stiffness_pa, k, object_mask=target.astype(np.uint8), top_k=1)
         panel.quality = full_quality_image(prediction.q, prediction.crop_offset_px, depth_m.shape)

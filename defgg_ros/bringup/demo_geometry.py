@@ -15,6 +15,9 @@ BIN_STACK_MARGIN_M = 0.1
 # A grasp belongs to an object when its centre is within the object's half
 # diagonal plus this margin of the object's centre (m).
 GRASP_ON_OBJECT_MARGIN_M = 0.01
+# An object's projected centre lies inside its own segment (its centroid projects within its top
+# face); a segment farther than this belongs to another object (px, ~1 mm each at 0.4 m).
+OBJECT_SEEN_RADIUS_PX = 10.0
 
 
 def base_T_camera(scene_dict: dict) -> np.ndarray:
@@ -54,13 +57,15 @@ def object_roi(obj: dict, position_base_m, base_t_camera, camera_k, image_wh) ->
     return int(lo[0]), int(lo[1]), int(hi[0] - lo[0]), int(hi[1] - lo[1])
 
 
-def label_of_object(labels: np.ndarray, uv) -> int:
-    """Segmentation label of the object seen at pixel uv (nearest labelled pixel; 0 when none)."""
+def label_of_object(labels: np.ndarray, uv, max_distance_px: float = OBJECT_SEEN_RADIUS_PX) -> int:
+    """Segmentation label of the object seen at pixel uv: the nearest labelled pixel within
+    max_distance_px, else 0 (nothing there: the object was knocked away, or is hidden)."""
     ys, xs = np.nonzero(labels)
     if xs.size == 0:
         return 0
-    i = int(np.argmin((xs - uv[0]) ** 2 + (ys - uv[1]) ** 2))
-    return int(labels[ys[i], xs[i]])
+    d2 = (xs - uv[0]) ** 2 + (ys - uv[1]) ** 2
+    i = int(np.argmin(d2))
+    return int(labels[ys[i], xs[i]]) if d2[i] <= max_distance_px ** 2 else 0
 
 
 def grasp_is_on_object(grasp_xy_m, obj: dict, position_base_m) -> bool:

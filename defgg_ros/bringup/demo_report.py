@@ -18,6 +18,7 @@ class PickRow:
     success: bool = False
     held_after_transfer: bool = False
     in_bin: bool = False              # ground truth after the pick
+    final_position_m: tuple | None = None   # ground truth after the pick (base frame)
     failure_reason: str = ""
     sim_duration_s: float = math.nan
     wall_duration_s: float = math.nan

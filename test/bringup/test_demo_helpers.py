@@ -43,6 +43,8 @@ def test_projection_and_rois_match_the_rendered_objects(rendered):
         assert x <= xs.min() and xs.max() < x + w and y <= ys.min() and ys.max() < y + h, obj["name"]
         labels = (mask == i).astype(np.uint8) * 7
         assert label_of_object(labels, (u, v)) == 7
+        # Seen from elsewhere (the object moved away): another object's segment is not it.
+        assert label_of_object(labels, (u + 3 * w, v)) == 0
 
 
 def test_grasp_on_object_and_bin():
