@@ -69,9 +69,14 @@ CAMERA_FAR_M = 2.0
 
 # --- Franka Panda kinematics (Franka's datasheet / franka_ros defaults) ----
 # Default TCP of the Franka Hand: fingertip centre, 0.1034 m along link8's z;
-# the hand (and so the finger closing axis) is turned -45 deg about that z.
+# the hand is turned -45 deg about that z (panda_hand_joint).
 PANDA_TCP_OFFSET_M = 0.1034
 PANDA_HAND_YAW_RAD = -math.pi / 4
+# Our TCP frame's x axis is the fingers' closing axis (grasps are given as "close along x"). The
+# fingers slide along the hand's y axis (panda_finger_joint1: axis 0 1 0), so the TCP is the hand
+# frame turned a further +90 deg about z. (Until 2026-11-23 it was the hand frame itself: every
+# grasp was executed 90 deg from the planned closing direction; square boxes hid it.)
+PANDA_TCP_YAW_RAD = PANDA_HAND_YAW_RAD + math.pi / 2
 # Datasheet reach (joint 2 axis to the flange) of the Panda.
 PANDA_MAX_REACH_M = 0.855
 PANDA_SHOULDER_HEIGHT_M = 0.333  # joint 2 axis above panda_link0

@@ -3,7 +3,8 @@
 The model is PyBullet's own `franka_panda/panda.urdf` (shipped with
 pybullet_data, so nothing is downloaded and the fake driver simulates the
 same geometry). The two finger joints are locked: only the 7 arm joints move.
-A `panda_tcp` frame is added at the fingertip centre (franka_ros default TCP).
+A `panda_tcp` frame is added at the fingertip centre (franka_ros default TCP), with its x
+axis along the fingers' closing direction (the hand's y axis; see PANDA_TCP_YAW_RAD).
 Joint limits are Franka's datasheet values from `defgg_ros.constants`, which
 are tighter than the URDF's.
 """
@@ -16,7 +17,6 @@ import pinocchio as pin
 import pybullet_data
 
 from defgg_ros.constants import (
-    PANDA_HAND_YAW_RAD,
     PANDA_JOINT_NAMES,
     PANDA_MAX_REACH_M,
     PANDA_Q_MAX_RAD,
@@ -24,6 +24,7 @@ from defgg_ros.constants import (
     PANDA_READY_Q_RAD,
     PANDA_SHOULDER_HEIGHT_M,
     PANDA_TCP_OFFSET_M,
+    PANDA_TCP_YAW_RAD,
 )
 from defgg_ros.control.poses import PoseError, top_down_pose, wrap_angle
 
@@ -84,7 +85,7 @@ def _arm_model(urdf_path: Path) -> pin.Model:
     if tuple(model.names[1:]) != PANDA_JOINT_NAMES:
         raise KinematicsError(f"unexpected joints in {urdf_path}: {list(model.names[1:])}")
     flange = model.getFrameId(FLANGE_FRAME)
-    flange_M_tcp = pin.SE3(pin.utils.rotate("z", PANDA_HAND_YAW_RAD), np.array([0.0, 0.0, PANDA_TCP_OFFSET_M]))
+    flange_M_tcp = pin.SE3(pin.utils.rotate("z", PANDA_TCP_YAW_RAD), np.array([0.0, 0.0, PANDA_TCP_OFFSET_M]))
     parent = model.frames[flange]
     model.addFrame(pin.Frame(TCP_FRAME, parent.parentJoint, flange, parent.placement * flange_M_tcp,
                              pin.FrameType.OP_FRAME))
