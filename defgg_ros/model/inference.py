@@ -12,12 +12,14 @@ the maps are returned in that window's coordinates with its offset.
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
 import torch
 
 from defgg_ros.grasping.config import DEFAULT_POSTPROCESS, PostProcessConfig
+from defgg_ros.grasping.finger_clearance import clear_grasps_first
 from defgg_ros.grasping.geometry import check_camera_k, pixel_to_camera, width_px_to_m
 from defgg_ros.grasping.postprocess import grasps_from_maps, maps_from_network
 from defgg_ros.model.checkpoint import CheckpointError, load_checkpoint, network_from_checkpoint
@@ -31,6 +33,9 @@ from defgg_ros.model.preprocess import (
 )
 from defgg_ros.model.runtime import compile_for_inference
 from defgg_ros.stiffness import InvalidYoungsModulus
+
+# Peaks considered when grasps whose fingers land beside the objects are ranked first.
+CLEARANCE_POOL = 10
 
 __all__ = ["GraspPredictor", "GraspPrediction", "GraspCandidate", "CheckpointError",
            "InvalidInputError", "InvalidYoungsModulus"]
@@ -50,6 +55,7 @@ class GraspCandidate:
     position_camera_m: tuple    # (x, y, z) in the camera optical frame
     youngs_modulus_pa: float    # input modulus at the grasp centre (0 = background)
     object_id: int              # object mask label at the centre, -1 without mask/background
+    fingers_clear: bool | None = None   # both fingers land beside the objects (None: not checked)
 
 
 @dataclass(frozen=True)
@@ -103,8 +109,13 @@ class GraspPredictor:
             x = torch.from_numpy(np.ascontiguousarray(network_input_chw, dtype=np.float32))[None]
             return self._forward(x)[0].numpy()
 
-    def predict(self, depth_m, youngs_modulus_pa, camera_k, object_mask=None, top_k: int = 1) -> GraspPrediction:
+    def predict(self, depth_m, youngs_modulus_pa, camera_k, object_mask=None, top_k: int = 1,
+                finger_clearance_opening_m: float = 0.0) -> GraspPrediction:
         """Ranked grasps for one scene (see the module docstring and docs/model.md).
+
+        finger_clearance_opening_m > 0 (with an object mask): among the CLEARANCE_POOL best peaks,
+        grasps whose fingers, opened this wide, can land beside the masked objects (after a slide
+        along the closing line, grasping/finger_clearance.py) come first, slid; then the others.
 
         Raises ValueError subclasses (InvalidInputError, InvalidYoungsModulus)
         for bad shapes, sizes, depth without valid pixels, NaN/negative moduli,
@@ -122,8 +133,14 @@ class GraspPredictor:
         maps = maps_from_network(self.raw_maps(network_input(depth_crop, moduli_crop, self.uses_stiffness)),
                                  self.postprocess)
         mask_crop = None if mask is None else crop(mask, origin, self.input_size_px)
-        grasps = grasps_from_maps(maps, self.postprocess, None if mask_crop is None else mask_crop > 0, top_k)
-        candidates = [self._candidate(g, origin, depth_crop, moduli_crop, mask_crop, k) for g in grasps]
+        check_clearance = finger_clearance_opening_m > 0 and mask_crop is not None
+        grasps = grasps_from_maps(maps, self.postprocess, None if mask_crop is None else mask_crop > 0,
+                                  max(top_k, CLEARANCE_POOL) if check_clearance else top_k)
+        clear = [None] * len(grasps)
+        if check_clearance:
+            grasps, clear = clear_grasps_first(grasps, depth_crop, mask_crop, finger_clearance_opening_m, k[0, 0])
+        candidates = [dataclasses.replace(self._candidate(g, origin, depth_crop, moduli_crop, mask_crop, k),
+                                          fingers_clear=c) for g, c in zip(grasps[:top_k], clear)]
         return GraspPrediction(q=maps.q, angle_rad=maps.angle_rad, width_px=maps.width_px,
                                crop_offset_px=origin, candidates=candidates)
 

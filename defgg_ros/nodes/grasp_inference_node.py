@@ -80,6 +80,11 @@ PARAMETERS = {
     "min_object_height_m": (OBJECT_MIN_HEIGHT_M, "Segmentation of request depth: min height above table (m)."),
     "max_object_height_m": (OBJECT_MAX_HEIGHT_M, "Segmentation of request depth: max height above table (m)."),
     "min_object_area_px": (OBJECT_MIN_AREA_PX, "Segmentation of request depth: min object area (px)."),
+    # The executor opens fully before it descends (control/gripper_rule.pre_grasp_opening_m; importing
+    # it here would pull the simulator into this node).
+    "finger_clearance_opening_m": (GRIPPER_MAX_WIDTH_M,
+                                   "Rank grasps whose finger pads, opened this wide (the executor's pre-grasp "
+                                   "opening), land beside the objects before those that land on one; 0 = off."),
 }
 
 
@@ -110,6 +115,9 @@ class GraspInferenceNode(Node):
         p = {name: self.get_parameter(name).value for name in PARAMETERS}
         self._p = p
         self._base_T_camera = transform_from_list(p["base_T_camera"])
+        if not 0.0 <= float(p["finger_clearance_opening_m"]) <= GRIPPER_MAX_WIDTH_M:
+            raise ValueError(f"finger_clearance_opening_m must be in [0, {GRIPPER_MAX_WIDTH_M}] m, "
+                             f"got {p['finger_clearance_opening_m']}")
         model_path = Path(p["model_path"]) if p["model_path"] else default_model_path(p["use_stiffness"])
         self.predictor = GraspPredictor.from_checkpoint(model_path, num_threads=int(p["num_threads"]))
         if self.predictor.uses_stiffness != bool(p["use_stiffness"]):
@@ -234,10 +242,13 @@ class GraspInferenceNode(Node):
         start = time.perf_counter()
         with self._predict_lock:
             prediction = self.predictor.predict(frame.depth_m, frame.youngs_modulus_pa, frame.camera_k,
-                                                object_mask=frame.labels, top_k=top_k)
-        seconds = time.perf_counter() - start
+                                                object_mask=frame.labels, top_k=top_k,
+                                                finger_clearance_opening_m=self._p["finger_clearance_opening_m"])
         if not prediction.candidates:
             raise PlanningError("the network found no grasp on the objects")
+        if prediction.candidates[0].fingers_clear is False:
+            self._warn("no grasp among the best peaks lets both fingers land beside the objects")
+        seconds = time.perf_counter() - start
         grasps = [grasp_to_msg(c, frame.header, self._base_T_camera, self._p["base_frame"])
                   for c in prediction.candidates]
         for candidate in prediction.candidates:

@@ -12,6 +12,7 @@ from visualization_msgs.msg import MarkerArray
 
 from defgg_ros import topics
 from defgg_ros.constants import GRIPPER_MAX_WIDTH_M
+from defgg_ros.grasping.finger_clearance import fingers_clear
 from defgg_ros.model.checkpoint import make_random_checkpoint
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import (
@@ -91,14 +92,28 @@ def assert_valid_grasp(grasp: Grasp):
     np.testing.assert_allclose(rotation[:, 2], [0, 0, -1], atol=1e-6)
 
 
+def clearance(grasp: Grasp, opening_m: float) -> bool:
+    depth = float(DEPTH_M[int(round(grasp.center_v_px)), int(round(grasp.center_u_px))])
+    return fingers_clear(DEPTH_M, TRUTH, grasp.center_u_px, grasp.center_v_px, grasp.angle_rad, depth, opening_m,
+                         K[0, 0])
+
+
+def assert_ranked_clear_first(grasps, opening_m: float):
+    """Grasps whose fingers land beside the objects first, each group best quality first."""
+    clear = [clearance(g, opening_m) for g in grasps]
+    assert clear == sorted(clear, reverse=True), clear
+    for group in (True, False):
+        qualities = [g.quality for g, c in zip(grasps, clear) if c is group]
+        assert qualities == sorted(qualities, reverse=True)
+
+
 @pytest.mark.parametrize("depth_encoding", ["16UC1", "32FC1"])
 def test_plan_grasp_with_stiffness_image(cell, executor, spin, depth_encoding):
     _, _, client = cell
     response = call(executor, spin, client, image_request(depth_encoding, top_k=3))
     assert response.success, response.message
     assert 1 <= len(response.grasps) <= 3 and response.inference_time_s > 0
-    qualities = [g.quality for g in response.grasps]
-    assert qualities == sorted(qualities, reverse=True)
+    assert_ranked_clear_first(response.grasps, GRIPPER_MAX_WIDTH_M)
     for grasp in response.grasps:
         assert_valid_grasp(grasp)
         u, v = int(round(grasp.center_u_px)), int(round(grasp.center_v_px))
@@ -217,6 +232,30 @@ def test_depth_only_model_via_use_stiffness_false(executor, spin, tmp_path, infe
     response = call(executor, spin, client, image_request())
     assert response.success, response.message
     assert_valid_grasp(response.grasps[0])
+
+
+def test_finger_clearance_ranking_can_be_switched_off(executor, spin, checkpoint, inference_service):
+    _, _, client = inference_service("clearance_off_client", model_path=str(checkpoint),
+                                     base_T_camera=BASE_T_CAMERA, finger_clearance_opening_m=0.0,
+                                     plan_grasp_service="/test/clearance_off_plan")
+    response = call(executor, spin, client, image_request(top_k=5))
+    assert response.success, response.message
+    qualities = [g.quality for g in response.grasps]
+    assert qualities == sorted(qualities, reverse=True)   # the network's own ranking
+
+
+def test_bad_finger_clearance_opening_is_refused(executor, checkpoint):
+    for bad in (-0.01, 0.2):
+        with pytest.raises(ValueError, match="finger_clearance_opening_m"):
+            GraspInferenceNode(context=executor.context, parameter_overrides=[
+                Parameter("model_path", value=str(checkpoint)), Parameter("finger_clearance_opening_m", value=bad)])
+
+
+def test_clearance_opening_is_the_executors_pre_grasp_opening():
+    from defgg_ros.control.gripper_rule import pre_grasp_opening_m
+    from defgg_ros.nodes.grasp_inference_node import PARAMETERS
+
+    assert PARAMETERS["finger_clearance_opening_m"][0] == pre_grasp_opening_m()
 
 
 def test_model_that_does_not_match_use_stiffness_is_refused(executor, checkpoint):
