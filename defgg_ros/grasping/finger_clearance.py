@@ -78,11 +78,10 @@ def fingers_clear(depth_m: np.ndarray, object_mask: np.ndarray, u_px: float, v_p
     return True
 
 
-def chord_midpoint_shift_px(depth_m: np.ndarray, object_mask: np.ndarray, u_px: int, v_px: int,
-                            angle_rad: float) -> float:
-    """Signed shift (px, along the closing direction) from (u, v) to the middle of the object's chord
-    on the closing line: the run of the object's pixels through the centre that stand above the
-    fingertip's lowest point (what the fingers will touch)."""
+def chord_ends_px(depth_m: np.ndarray, object_mask: np.ndarray, u_px: int, v_px: int, angle_rad: float) -> tuple:
+    """(start, end): signed steps (px, along the closing direction) from (u, v) to the ends of the
+    object's chord on the closing line: the run of the object's pixels through the centre that
+    stand above the fingertip's lowest point (what the fingers will touch)."""
     depth = np.asarray(depth_m, dtype=np.float32)
     height, width = depth.shape
     label = object_mask[v_px, u_px]
@@ -99,7 +98,7 @@ def chord_midpoint_shift_px(depth_m: np.ndarray, object_mask: np.ndarray, u_px: 
                 break
             step += 1
         ends.append(sign * step)
-    return (ends[0] + ends[1]) / 2.0
+    return ends[0], ends[1]
 
 
 def clear_centre_shift_px(depth_m: np.ndarray, object_mask: np.ndarray, u_px: int, v_px: int, angle_rad: float,
@@ -129,11 +128,17 @@ def clear_centre_shift_px(depth_m: np.ndarray, object_mask: np.ndarray, u_px: in
             return False
         return fingers_clear(depth, mask, u, v, angle_rad, float(depth[v, u]), opening_m, fx_px)
 
-    middle = chord_midpoint_shift_px(depth, mask, u_px, v_px, angle_rad)
+    start, end = chord_ends_px(depth, mask, u_px, v_px, angle_rad)
+    half_opening_px = opening_m * fx_px / float(depth[v_px, u_px]) / 2
+    if end - start + 1 >= 2 * half_opening_px:
+        return None     # the object is wider than the opening along this line: no slide can clear it
+    middle = (start + end) / 2.0
     if abs(middle) <= max_shift_px and clear_after(middle):
         return middle
-    limit = int(max_shift_px)
-    return next((k for k in sorted(range(-limit, limit + 1), key=lambda k: (abs(k), k)) if clear_after(k)), None)
+    # Only slides that keep both fingers outside the chord can clear it.
+    low = max(math.ceil(end - half_opening_px), -math.floor(max_shift_px))
+    high = min(math.floor(start + half_opening_px), math.floor(max_shift_px))
+    return next((k for k in sorted(range(low, high + 1), key=lambda k: (abs(k), k)) if clear_after(k)), None)
 
 
 def clear_grasps_first(grasps: list, depth_m: np.ndarray, object_mask: np.ndarray, opening_m: float,
