@@ -41,8 +41,8 @@ STARTUP_TIMEOUT_S = 90.0
 PERCEPTION_NODES = ("segmentation_node", "grasp_inference_node")
 PICK_NODES = ("fake_panda_driver", "executor_node")
 # How long a replay listens to a candidate ROS domain for other nodes (discovery on localhost
-# takes well under a second).
-DOMAIN_LISTEN_S = 1.5
+# takes well under a second, but a loaded machine once needed more than 1.5 s).
+DOMAIN_LISTEN_S = 3.0
 # Recorded from the driver; a replay without picks carries them over into an --update.
 DRIVER_TOPICS = (topics.JOINT_STATES, st.DRIVER_SCENE)
 
@@ -71,9 +71,11 @@ def nodes_in_domain(domain_id: int, listen_s: float = DOMAIN_LISTEN_S) -> list:
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(probe)
         deadline = time.monotonic() + listen_s
-        while time.monotonic() < deadline:
+        others = []
+        while not others and time.monotonic() < deadline:
             executor.spin_once(timeout_sec=0.05)
-        return [name for name, _ in probe.get_node_names_and_namespaces() if name != probe.get_name()]
+            others = [name for name, _ in probe.get_node_names_and_namespaces() if name != probe.get_name()]
+        return others
     finally:
         context.try_shutdown()
 
