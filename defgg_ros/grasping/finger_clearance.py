@@ -143,9 +143,8 @@ def clear_centre_shift_px(depth_m: np.ndarray, object_mask: np.ndarray, u_px: in
 
 def clear_grasps_first(grasps: list, depth_m: np.ndarray, object_mask: np.ndarray, opening_m: float,
                        fx_px: float) -> tuple:
-    """(grasps, clear flags): each grasp that a slide along its closing line makes clear, slid
-    (clear_centre_shift_px);
-    those first, then the others as predicted; each group keeps its order (best quality first).
+    """(grasps, clear flags): the grasps that a slide along the closing line makes clear
+    (clear_centre_shift_px), slid, then the others as predicted; each group keeps its order.
 
     grasps: grasping.postprocess.Grasp2D in the same pixel frame as depth_m and object_mask.
     """
