@@ -211,8 +211,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--timeout-s", type=float, default=30.0, help="how long to wait for a frame's grasp (s)")
     parser.add_argument("--pick-timeout-s", type=float, default=300.0, help="how long a pick may take (s)")
     parser.add_argument("--domain-id", type=int,
-                        help="ROS_DOMAIN_ID of the replay's private graph (default: random in "
-                             f"{SAFE_DOMAIN_RANGE[0]}..{SAFE_DOMAIN_RANGE[1]})")
+                        help="ROS_DOMAIN_ID of the replay's private graph (default: a random one in "
+                             f"{SAFE_DOMAIN_RANGE[0]}..{SAFE_DOMAIN_RANGE[1]} where no other node answers "
+                             f"discovery within {DOMAIN_LISTEN_S:g} s)")
     parser.add_argument("--run-dir", help="folder for the nodes' logs (default: a new temporary folder)")
     return parser
 
