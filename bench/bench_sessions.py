@@ -25,10 +25,10 @@ REPO = Path(__file__).resolve().parents[1]
 def transport_child(n_frames: int) -> None:
     """Runs in a child process: publish frames, count stiffness images back, print the count."""
     import rclpy
-    from rclpy.executors import MultiThreadedExecutor
     from sensor_msgs.msg import Image
 
     from defgg_ros.nodes import qos
+    from defgg_ros.ros_executor import ThreadedExecutor
     from defgg_ros.sessions.client import CellClient
     from defgg_ros.sessions.graph import NodeGraph, NodeSpec
     from defgg_ros.sessions.player import SessionPlayer
@@ -41,7 +41,7 @@ def transport_child(n_frames: int) -> None:
         rclpy.init()
         player = SessionPlayer()
         player.create_subscription(Image, "/defgg/stiffness/youngs_modulus_pa", received.append, qos.SENSOR_DATA)
-        executor = MultiThreadedExecutor()
+        executor = ThreadedExecutor()
         executor.add_node(player)
         threading.Thread(target=executor.spin, daemon=True).start()
         CellClient(player).stiffness_client.wait_for_service(timeout_sec=60.0)

@@ -30,10 +30,10 @@ def rclpy_context():
 
 @pytest.fixture
 def executor(rclpy_context):
-    """A MultiThreadedExecutor on the test's context; nodes added to it are destroyed after."""
-    from rclpy.executors import MultiThreadedExecutor
+    """A ThreadedExecutor (defgg_ros.ros_executor) on the test's context; nodes added to it are destroyed after."""
+    from defgg_ros.ros_executor import ThreadedExecutor
 
-    ex = MultiThreadedExecutor(num_threads=4, context=rclpy_context)
+    ex = ThreadedExecutor(num_threads=4, context=rclpy_context)
     yield ex
     for node in list(ex.get_nodes()):
         ex.remove_node(node)

@@ -15,7 +15,6 @@ from builtin_interfaces.msg import Duration
 from defgg_interfaces.action import GripperMove, PickAndPlace
 from defgg_interfaces.srv import PlanGrasp, SetStiffness
 from geometry_msgs.msg import PoseArray
-from rclpy.action import ActionClient
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
@@ -29,6 +28,7 @@ from defgg_ros.constants import GRIPPER_MAX_WIDTH_M, PANDA_JOINT_NAMES
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import stamp_to_ns
 from defgg_ros.nodes.fake_panda_driver_node import CAPTURE_SERVICE, IMAGE_QOS, OBJECT_POSES_TOPIC, SCENE_TOPIC
+from defgg_ros.ros_action import ActionClient
 
 
 class DemoError(RuntimeError):

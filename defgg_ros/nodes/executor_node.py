@@ -7,7 +7,7 @@ back into the sequence, feedback and results to the client.
 
 Threads: the action's execute callback runs the control loop (wall-clock
 period, so the driver watchdog fires even when sim time has stopped) in a
-reentrant callback group on a MultiThreadedExecutor; subscriptions and
+reentrant callback group on a multi-threaded executor; subscriptions and
 action-client callbacks feed the sequence under one lock. One goal at a
 time: goals arriving while busy are rejected (the reason is logged).
 """
@@ -21,7 +21,7 @@ from defgg_interfaces.action import GripperGrasp, GripperMove, PickAndPlace
 from defgg_interfaces.srv import PlanGrasp
 from geometry_msgs.msg import WrenchStamped
 from rcl_interfaces.msg import ParameterDescriptor
-from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
@@ -46,6 +46,7 @@ from defgg_ros.control.trajectories import LIMITS_SAFETY_SCALE, SAMPLE_DT_S
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import ConversionError, transform_from_pose
 from defgg_ros.nodes.node_main import run_node
+from defgg_ros.ros_action import ActionClient
 
 _DEFAULTS = SequenceConfig()
 PARAMETERS = {

@@ -23,7 +23,7 @@ from rcl_interfaces.msg import ParameterDescriptor
 from rclpy._rclpy_pybind11 import RCLError
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
@@ -36,6 +36,7 @@ from defgg_ros import topics
 from defgg_ros.constants import CAMERA_HEIGHT_PX, CAMERA_WIDTH_PX, PANDA_JOINT_NAMES
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import depth_metres_to_msg, make_camera_info, numpy_to_image
+from defgg_ros.ros_executor import ThreadedExecutor
 from defgg_ros.sim.cell import CellSettings, SimCell
 from defgg_ros.sim.cell_camera import DepthNoise
 from defgg_ros.sim.cell_gripper import GripperCommandError
@@ -346,7 +347,7 @@ def main(args=None):
     node = None
     try:
         node = FakePandaDriver()
-        executor = MultiThreadedExecutor(num_threads=4)
+        executor = ThreadedExecutor(num_threads=4)
         executor.add_node(node)
         executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):

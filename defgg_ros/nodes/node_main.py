@@ -2,7 +2,9 @@
 import sys
 
 import rclpy
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.executors import ExternalShutdownException
+
+from defgg_ros.ros_executor import ThreadedExecutor
 
 
 def run_node(name: str, make_node, startup_errors=(ValueError, OSError), threads: int = 1, args=None) -> None:
@@ -11,14 +13,14 @@ def run_node(name: str, make_node, startup_errors=(ValueError, OSError), threads
     A bad parameter or file while the node is being built (`startup_errors`)
     prints one line naming the problem and exits with code 2; the same error
     raised while running is a bug and keeps its traceback. `threads` > 1
-    spins a MultiThreadedExecutor (nodes with reentrant callback groups).
+    spins a ThreadedExecutor (nodes with reentrant callback groups).
     """
     rclpy.init(args=args)
     node = None
     try:
         node = make_node()
         if threads > 1:
-            executor = MultiThreadedExecutor(num_threads=threads)
+            executor = ThreadedExecutor(num_threads=threads)
             executor.add_node(node)
             executor.spin()
         else:

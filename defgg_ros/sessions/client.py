@@ -9,9 +9,9 @@ import time
 
 from defgg_interfaces.action import GripperGrasp, PickAndPlace
 from defgg_interfaces.srv import PlanGrasp, SetStiffness
-from rclpy.action import ActionClient
 
 from defgg_ros import topics
+from defgg_ros.ros_action import ActionClient
 
 
 class CellCallError(RuntimeError):

@@ -26,7 +26,6 @@ from defgg_interfaces.action import PickAndPlace
 from defgg_interfaces.msg import ObjectStiffness
 from defgg_interfaces.srv import PlanGrasp
 from rclpy.context import Context
-from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo
 from tqdm import tqdm
@@ -34,6 +33,7 @@ from tqdm import tqdm
 from defgg_ros import topics
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import camera_info_to_k
+from defgg_ros.ros_executor import ThreadedExecutor
 from defgg_ros.sessions import metadata as md
 from defgg_ros.sessions.bag import SessionBagError, SessionWriter
 from defgg_ros.sessions.client import CellCallError, CellClient
@@ -118,7 +118,7 @@ def drive(recorder, client, args, log=tqdm.write) -> None:
 def record(args, log=print) -> Path:
     context = Context()
     rclpy.init(context=context)
-    executor = MultiThreadedExecutor(num_threads=4, context=context)
+    executor = ThreadedExecutor(num_threads=4, context=context)
     spin_thread = threading.Thread(target=executor.spin, daemon=True)
     spin_thread.start()
     writer = None

@@ -18,11 +18,12 @@ from pathlib import Path
 
 import rclpy
 from rclpy.context import Context
-from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
+from rclpy.executors import SingleThreadedExecutor
 from tqdm import tqdm
 
 from defgg_ros import topics
 from defgg_ros.ros_domain import SAFE_DOMAIN_RANGE, pick_private_domain
+from defgg_ros.ros_executor import ThreadedExecutor
 from defgg_ros.sessions import metadata as md
 from defgg_ros.sessions import session_topics as st
 from defgg_ros.sessions.bag import SessionBagError, SessionWriter
@@ -110,7 +111,7 @@ class ReplayRun:
         self.run_dir = Path(args.run_dir or tempfile.mkdtemp(prefix="defgg_replay_"))
         self.context = Context()
         rclpy.init(context=self.context, domain_id=self.domain_id)
-        self.executor = MultiThreadedExecutor(num_threads=4, context=self.context)
+        self.executor = ThreadedExecutor(num_threads=4, context=self.context)
         self.player = SessionPlayer(context=self.context)
         self.executor.add_node(self.player)
         self.client = CellClient(self.player)

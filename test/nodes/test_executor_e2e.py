@@ -15,9 +15,7 @@ from defgg_interfaces.action import PickAndPlace
 from defgg_interfaces.msg import Grasp
 from executor_support import send_goal, stop_driver_processes
 from geometry_msgs.msg import PoseArray
-from rclpy.action import ActionClient
 from rclpy.context import Context
-from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
@@ -27,6 +25,8 @@ from defgg_ros.control.kinematics import PandaKinematics
 from defgg_ros.control.poses import matrix_to_quaternion, top_down_pose
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.executor_node import ExecutorNode
+from defgg_ros.ros_action import ActionClient
+from defgg_ros.ros_executor import ThreadedExecutor
 
 SCENE = Path(__file__).resolve().parents[2] / "sim_bringup" / "scenes" / "rigid_box.yaml"
 BOX_XY_M, BOX_YAW_RAD, BOX_SIZE_M = (0.5, 0.05), 0.3, 0.05   # as in rigid_box.yaml
@@ -53,7 +53,7 @@ def box_grasp() -> Grasp:
 def cell(rclpy_context):
     from defgg_ros.nodes.fake_panda_driver_node import FakePandaDriver
 
-    ex = MultiThreadedExecutor(num_threads=8, context=rclpy_context)
+    ex = ThreadedExecutor(num_threads=8, context=rclpy_context)
     drivers, processes = [], []
 
     def start_driver(own_process=False):
@@ -74,7 +74,7 @@ def cell(rclpy_context):
         if not own_process:
             ex.add_node(driver)
             return driver
-        own = MultiThreadedExecutor(num_threads=4, context=context)
+        own = ThreadedExecutor(num_threads=4, context=context)
         own.add_node(driver)
         thread = threading.Thread(target=own.spin, daemon=True)
         thread.start()

@@ -18,9 +18,8 @@ from defgg_interfaces.action import GripperGrasp, GripperMove, PickAndPlace
 from defgg_interfaces.msg import Grasp
 from executor_support import send_goal
 from geometry_msgs.msg import WrenchStamped
-from rclpy.action import ActionClient, ActionServer
+from rclpy.action import ActionServer
 from rclpy.callback_groups import ReentrantCallbackGroup
-from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.task import Future
@@ -33,6 +32,8 @@ from defgg_ros.control.kinematics import PandaKinematics
 from defgg_ros.control.poses import matrix_to_quaternion, top_down_pose
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.executor_node import PARAMETERS, ExecutorNode
+from defgg_ros.ros_action import ActionClient
+from defgg_ros.ros_executor import ThreadedExecutor
 
 KIN = PandaKinematics()
 DRIVER_PERIOD_S = 0.01
@@ -138,7 +139,7 @@ def grasp_msg(xyz=GRASP_XYZ, yaw=0.3, width_m=0.05, modulus_pa=2e9):
 @pytest.fixture
 def cell(rclpy_context):
     """(executor, executor_node, action client, driver factory); everything destroyed after."""
-    ex = MultiThreadedExecutor(num_threads=8, context=rclpy_context)
+    ex = ThreadedExecutor(num_threads=8, context=rclpy_context)
     node = ExecutorNode(context=rclpy_context,
                         parameter_overrides=[Parameter(k, value=v) for k, v in FAST.items()])
     client_node = Node("executor_test_client", context=rclpy_context)
@@ -310,7 +311,7 @@ def _run_driver_process():
     """The restarted driver of test_driver_killed_mid_trajectory_aborts_then_serves_again."""
     rclpy.init()
     driver = InTestDriver(None)
-    executor = MultiThreadedExecutor(num_threads=4)
+    executor = ThreadedExecutor(num_threads=4)
     executor.add_node(driver)
     try:
         executor.spin()

@@ -90,7 +90,8 @@ def test_trajectory_is_executed_in_sim_time(driver, client, executor, spin):
 
 def test_gripper_actions(driver, client, executor, spin):
     from defgg_interfaces.action import GripperGrasp, GripperMove
-    from rclpy.action import ActionClient
+
+    from defgg_ros.ros_action import ActionClient
 
     move = ActionClient(client, GripperMove, topics.GRIPPER_MOVE_ACTION)
     grasp = ActionClient(client, GripperGrasp, topics.GRIPPER_GRASP_ACTION)

@@ -1,0 +1,41 @@
+"""An rclpy ActionClient whose requests cannot lose their responses.
+
+rclpy 7.1.6 (the Jazzy wheels this project installs) sends a goal, cancel or result request and
+only afterwards records its sequence number. When the server answers before that line runs, an
+executor thread takes the response, finds no pending request ("Ignoring unexpected goal response.
+There may be more than one action server") and the caller's future never completes: a pick that
+waits forever for the gripper, a replay that gets "no answer within 10 s". On an idle 2-core VM
+the answer is often that fast; a busy machine hides it. This is ros2/rclpy#1123, fixed upstream
+by holding a lock across send + record and across take (ros2/rclpy#1308, backported to Jazzy
+after 7.1.6). This subclass does the same, so every node and tool here is correct on the wheels
+it installs and stays correct once they carry the fix.
+"""
+import threading
+
+from rclpy.action import ActionClient as _RclpyActionClient
+
+
+class ActionClient(_RclpyActionClient):
+    """rclpy's ActionClient with request sending and response taking serialised by one lock."""
+
+    def __init__(self, *args, **kwargs):
+        # Before super(): the base constructor registers the waitable, after which an executor
+        # thread may call take_data() at any time.
+        self._request_lock = threading.Lock()
+        super().__init__(*args, **kwargs)
+
+    def take_data(self):
+        with self._request_lock:
+            return super().take_data()
+
+    def send_goal_async(self, goal, feedback_callback=None, goal_uuid=None):
+        with self._request_lock:
+            return super().send_goal_async(goal, feedback_callback=feedback_callback, goal_uuid=goal_uuid)
+
+    def _cancel_goal_async(self, goal_handle):
+        with self._request_lock:
+            return super()._cancel_goal_async(goal_handle)
+
+    def _get_result_async(self, goal_handle):
+        with self._request_lock:
+            return super()._get_result_async(goal_handle)

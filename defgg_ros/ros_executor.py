@@ -1,0 +1,67 @@
+"""A MultiThreadedExecutor that queues each task at most once.
+
+rclpy 7.1.6's MultiThreadedExecutor yields every task that is not yet running on every pass of
+its wait loop and submits it to its thread pool again. A task already waiting in the pool's queue
+is therefore queued again and again: on an idle 2-core VM the main thread loops fast enough that
+the queue grew to thousands of copies of the same two tasks (measured: 3367), and a 100 Hz timer
+and its subscription then fired 75 times in 20 s instead of 2000 (bench/bench_executor_jitter.py).
+A busy machine slows the spinning thread and hides it. In the cell this was a driver "silent" for
+over a second and gripper results arriving 10 s late.
+
+Worse, the spinning thread can starve the pool. While a subscription's handler waits in the
+queue, the subscription is left out of the wait set but its QoS event handlers are not, and Fast
+DDS then returns from every wait at once with nothing ready (measured: 37 000 empty waits in 5 s).
+The spinning thread loops in Python, holding the GIL, and the queued handler that would end the
+loop does not get to run.
+
+This executor keeps the set of tasks that are queued or running and submits a task only when it is
+in neither; when the wait loop offers a task that is still in flight, the spinning thread blocks
+until some task finishes (at most IN_FLIGHT_WAIT_S), which hands the GIL to the workers.
+"""
+import threading
+
+from rclpy.executors import (
+    ConditionReachedException,
+    ExternalShutdownException,
+    MultiThreadedExecutor,
+    ShutdownException,
+    TimeoutException,
+)
+
+# Long enough to let a worker take the GIL and finish a callback, short enough that a coroutine
+# polled by the wait loop (an action's execute callback awaiting a future) is resumed promptly.
+IN_FLIGHT_WAIT_S = 0.005
+_NOTHING_TO_RUN = (ExternalShutdownException, ShutdownException, TimeoutException, ConditionReachedException)
+
+
+class ThreadedExecutor(MultiThreadedExecutor):
+    """rclpy's MultiThreadedExecutor without duplicate submissions of one task."""
+
+    def __init__(self, num_threads=None, *, context=None):
+        super().__init__(num_threads, context=context)
+        self._in_flight = set()
+        self._in_flight_changed = threading.Condition()
+
+    def _spin_once_impl(self, timeout_sec=None, wait_condition=lambda: False):
+        try:
+            handler, _entity, _node = self.wait_for_ready_callbacks(timeout_sec, None, wait_condition)
+        except _NOTHING_TO_RUN:
+            return
+        with self._in_flight_changed:
+            if handler in self._in_flight:
+                self._in_flight_changed.wait(IN_FLIGHT_WAIT_S)
+                return
+            self._in_flight.add(handler)
+        self._futures.append(self._executor.submit(self._run, handler))
+        for future in self._futures[:]:
+            if future.done():
+                self._futures.remove(future)
+                future.result()  # re-raise what a callback raised, as rclpy does
+
+    def _run(self, handler):
+        try:
+            handler()
+        finally:
+            with self._in_flight_changed:
+                self._in_flight.discard(handler)
+                self._in_flight_changed.notify_all()
