@@ -19,6 +19,7 @@ import numpy as np
 import torch
 
 from defgg_ros.grasping.config import DEFAULT_POSTPROCESS, PostProcessConfig
+from defgg_ros.grasping.contact_angle import square_contact_angle
 from defgg_ros.grasping.finger_clearance import clear_grasps_first
 from defgg_ros.grasping.geometry import check_camera_k, pixel_to_camera, width_px_to_m
 from defgg_ros.grasping.postprocess import grasps_from_maps, maps_from_network
@@ -110,12 +111,14 @@ class GraspPredictor:
             return self._forward(x)[0].numpy()
 
     def predict(self, depth_m, youngs_modulus_pa, camera_k, object_mask=None, top_k: int = 1,
-                finger_clearance_opening_m: float = 0.0) -> GraspPrediction:
+                finger_clearance_opening_m: float = 0.0, contact_angle: bool = False) -> GraspPrediction:
         """Ranked grasps for one scene (see the module docstring and docs/model.md).
 
         finger_clearance_opening_m > 0 (with an object mask): among the CLEARANCE_POOL best peaks,
         grasps whose fingers, opened this wide, can land beside the masked objects (after a slide
         along the closing line, grasping/finger_clearance.py) come first, slid; then the others.
+        contact_angle (with an object mask and an opening): before that, each grasp's angle is
+        re-chosen at its centre for square pad contacts (grasping/contact_angle.py).
 
         Raises ValueError subclasses (InvalidInputError, InvalidYoungsModulus)
         for bad shapes, sizes, depth without valid pixels, NaN/negative moduli,
@@ -137,6 +140,8 @@ class GraspPredictor:
         grasps = grasps_from_maps(maps, self.postprocess, None if mask_crop is None else mask_crop > 0,
                                   max(top_k, CLEARANCE_POOL) if check_clearance else top_k)
         clear = [None] * len(grasps)
+        if contact_angle and check_clearance:
+            grasps = [_square_contacts(g, depth_crop, mask_crop, finger_clearance_opening_m, k[0, 0]) for g in grasps]
         if check_clearance:
             grasps, clear = clear_grasps_first(grasps, depth_crop, mask_crop, finger_clearance_opening_m, k[0, 0])
         candidates = [dataclasses.replace(self._candidate(g, origin, depth_crop, moduli_crop, mask_crop, k),
@@ -154,6 +159,12 @@ class GraspPredictor:
             width_m=float(width_px_to_m(g.width_px, z, k[0, 0])), quality=g.quality, depth_m=z,
             position_camera_m=tuple(float(c) for c in pixel_to_camera(u, v, z, k)),
             youngs_modulus_pa=float(moduli_crop[g.center_v_px, g.center_u_px]), object_id=obj)
+
+
+def _square_contacts(g, depth_crop, mask_crop, opening_m: float, fx_px: float):
+    angle, u, v, _score = square_contact_angle(depth_crop, mask_crop, g.center_u_px, g.center_v_px, g.angle_rad,
+                                               opening_m, fx_px)
+    return dataclasses.replace(g, angle_rad=angle, center_u_px=u, center_v_px=v)
 
 
 def _check_moduli(youngs_modulus_pa, shape) -> np.ndarray:

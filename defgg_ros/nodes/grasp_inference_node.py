@@ -85,6 +85,8 @@ PARAMETERS = {
     "finger_clearance_opening_m": (GRIPPER_MAX_WIDTH_M,
                                    "Rank grasps whose finger pads, opened this wide (the executor's pre-grasp "
                                    "opening), land beside the objects before those that land on one; 0 = off."),
+    "contact_angle": (False, "Re-choose each grasp's angle at its centre so both finger pads meet the object "
+                             "squarely (grasping/contact_angle.py); needs finger_clearance_opening_m > 0."),
 }
 
 
@@ -243,7 +245,8 @@ class GraspInferenceNode(Node):
         with self._predict_lock:
             prediction = self.predictor.predict(frame.depth_m, frame.youngs_modulus_pa, frame.camera_k,
                                                 object_mask=frame.labels, top_k=top_k,
-                                                finger_clearance_opening_m=self._p["finger_clearance_opening_m"])
+                                                finger_clearance_opening_m=self._p["finger_clearance_opening_m"],
+                                                contact_angle=self._p["contact_angle"])
         if not prediction.candidates:
             raise PlanningError("the network found no grasp on the objects")
         if prediction.candidates[0].fingers_clear is False:
