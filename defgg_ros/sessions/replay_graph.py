@@ -2,7 +2,7 @@
 
 The replay runs the *current* code and shipped model on the recorded
 inputs; recorded node parameters that shape the result (camera extrinsic,
-segmentation thresholds) are applied so a session recorded with non-default
+segmentation thresholds, the grasp service's post-processing steps) are applied so a session recorded with non-default
 settings still replays like it was recorded.
 """
 from dataclasses import dataclass
@@ -17,7 +17,7 @@ MODELS_DIR = Path(__file__).resolve().parents[2] / "models"
 REPLAYED_PARAMETERS = {
     "segmentation_node": ("default_youngs_modulus_pa", "min_object_height_m", "min_object_area_px"),
     "grasp_inference_node": ("base_T_camera", "base_frame", "default_youngs_modulus_pa", "min_object_height_m",
-                             "min_object_area_px"),
+                             "min_object_area_px", "finger_clearance_opening_m", "contact_angle"),
 }
 # The fake driver renders its own camera; in a replay the recorded frames are the camera.
 DRIVER_CAMERA_REMAPS = {
