@@ -20,16 +20,6 @@ PERIOD_S = 0.01
 MESSAGES = 300  # 3 s at 100 Hz
 
 
-@pytest.fixture
-def threaded(rclpy_context):
-    ex = ThreadedExecutor(num_threads=4, context=rclpy_context)
-    yield ex
-    for node in list(ex.get_nodes()):
-        ex.remove_node(node)
-        node.destroy_node()
-    ex.shutdown(timeout_sec=2.0)
-
-
 def add_talker_and_listener(ex):
     """A 100 Hz timer publishing and a subscription counting, on two nodes (as driver and executor)."""
     talker, listener = Node("talker", context=ex.context), Node("listener", context=ex.context)
@@ -42,7 +32,9 @@ def add_talker_and_listener(ex):
     return received
 
 
-def test_no_task_is_in_the_pool_twice_and_messages_keep_coming(threaded, spin):
+def test_no_task_is_in_the_pool_twice_and_messages_keep_coming(executor, spin):
+    threaded = executor
+    assert isinstance(threaded, ThreadedExecutor)   # conftest's fixture, as every node runs
     in_pool, duplicates, lock = Counter(), [], threading.Lock()
     submit = threaded._executor.submit
 
@@ -68,9 +60,10 @@ def test_no_task_is_in_the_pool_twice_and_messages_keep_coming(threaded, spin):
     assert not duplicates
 
 
-def test_an_action_result_set_from_a_timer_reaches_the_client(threaded, spin):
+def test_an_action_result_set_from_a_timer_reaches_the_client(executor, spin):
     """The in-test gripper pattern: the execute coroutine awaits a future a 100 Hz timer completes."""
     from rclpy.task import Future
+    threaded = executor
     server_node = Node("gripper", context=threaded.context)
     pending = []
 
