@@ -244,6 +244,23 @@ def test_finger_clearance_ranking_can_be_switched_off(executor, spin, checkpoint
     assert qualities == sorted(qualities, reverse=True)   # the network's own ranking
 
 
+def test_square_contacts_turn_the_grasps_to_the_box_faces(executor, spin, checkpoint, inference_service):
+    import cv2
+    _, _, client = inference_service("contact_client", model_path=str(checkpoint), base_T_camera=BASE_T_CAMERA,
+                                     contact_angle=True, plan_grasp_service="/test/contact_plan")
+    box_only = numpy_to_image(np.where(TRUTH == 1, 2e4, 0.0).astype(np.float32), "32FC1", header())
+    response = call(executor, spin, client, image_request(top_k=3, stiffness=box_only))
+    assert response.success, response.message
+    assert len(response.grasps) == 3
+    # the 50 x 40 mm box's faces in the image, from its pixels
+    _, _, face_deg = cv2.minAreaRect(np.argwhere(TRUTH == 1)[:, ::-1].astype(np.float32))
+    for grasp in response.grasps:
+        assert_valid_grasp(grasp)
+        off_face_deg = min(abs(math.degrees((grasp.angle_rad - math.radians(face_deg + f) + math.pi / 2) % math.pi
+                                            - math.pi / 2)) for f in (0.0, 90.0))
+        assert off_face_deg <= 5.0 + 1e-6, (grasp.angle_rad, face_deg)
+
+
 def test_bad_finger_clearance_opening_is_refused(executor, checkpoint):
     for bad in (-0.01, 0.2):
         with pytest.raises(ValueError, match="finger_clearance_opening_m"):
