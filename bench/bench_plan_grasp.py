@@ -2,7 +2,9 @@
 
 Starts grasp_inference_node as its own process (like the cell runs it), on a
 private ROS_DOMAIN_ID, then alternates per iteration:
-  bare     GraspPredictor.predict on the same 640x480 scene in this process
+  bare     GraspPredictor.predict on the same 640x480 scene in this process, with the node's default
+           post-processing (finger clearance at its default opening; square contacts off), so the
+           ratio is what the service adds: DDS, message conversion, segmentation of the frame
   latest   PlanGrasp with an empty request (the node plans on its latest
            synchronised depth + stiffness + camera_info)
   images   PlanGrasp carrying depth (16UC1), stiffness (32FC1) and camera_info
@@ -171,8 +173,11 @@ def main(argv=None):
         frame_msgs = messages(depth_m, moduli_pa, camera_k)
         prime_latest_frame(cell, frame_msgs)
         image_request = PlanGrasp.Request(depth=frame_msgs[0], stiffness=frame_msgs[1], camera_info=frame_msgs[2])
+        from defgg_ros.nodes.grasp_inference_node import PARAMETERS
+        node_clearance_m = PARAMETERS["finger_clearance_opening_m"][0]   # the node's default
         modes = {
-            "bare predictor.predict": lambda: predictor.predict(depth_m, moduli_pa, camera_k, labels, top_k=1),
+            "bare predictor.predict": lambda: predictor.predict(depth_m, moduli_pa, camera_k, labels, top_k=1,
+                                                                finger_clearance_opening_m=node_clearance_m),
             "PlanGrasp (latest frame)": lambda: _ok(cell.call(PlanGrasp.Request())),
             "PlanGrasp (images in request)": lambda: _ok(cell.call(image_request)),
         }

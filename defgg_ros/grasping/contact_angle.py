@@ -21,7 +21,7 @@ import math
 import numpy as np
 
 from defgg_ros.constants import FINGER_PAD_WIDTH_M
-from defgg_ros.grasping.finger_clearance import CLEARANCE_MARGIN_M, TIP_BELOW_SURFACE_M
+from defgg_ros.grasping.finger_clearance import touchable
 
 ANGLE_STEP_RAD = math.radians(5.0)
 # A pad sample counts as touching when the object reaches within this of the pad's first contact
@@ -31,12 +31,6 @@ PAD_SAMPLES = 7
 # Scores within one pad sample of the best count as equally square (rasterised edges move a
 # sample in or out of the tolerance); among them the angle nearest the network's wins.
 SCORE_SLACK = 1.0 / PAD_SAMPLES
-
-
-def touchable(depth_m: np.ndarray, object_mask: np.ndarray, u_px: int, v_px: int) -> np.ndarray:
-    """HxW bool: the pixels of the object at (u, v) that stand above the fingertip's lowest point."""
-    tip_depth = float(depth_m[v_px, u_px]) + TIP_BELOW_SURFACE_M
-    return (object_mask == object_mask[v_px, u_px]) & (depth_m < tip_depth - CLEARANCE_MARGIN_M)
 
 
 def _run_lengths(inside: np.ndarray) -> np.ndarray:

@@ -80,13 +80,21 @@ def find_peaks(q: np.ndarray, min_distance_px: int, threshold: float, allowed=No
         v, u = np.unravel_index(int(np.argmax(qm)), q.shape)
         return [(int(v), int(u))]
     order = np.argsort(-qm[vs, us], kind="stable")
+    vs, us = vs[order], us[order]
+    # Plateaus give several equal maxima (a saturated quality map: thousands): keep them min_distance
+    # apart by blanking the square around each kept peak, so each pick is one vectorised look-up.
+    d = int(min_distance_px)
+    suppressed = np.zeros(q.shape, bool)
     kept = []
-    for i in order:  # plateaus give several equal maxima: keep them min_distance apart
+    while len(kept) < top_k:
+        free = ~suppressed[vs, us]
+        if not free.any():
+            break
+        i = int(np.argmax(free))
         v, u = int(vs[i]), int(us[i])
-        if all(max(abs(v - kv), abs(u - ku)) > min_distance_px for kv, ku in kept):
-            kept.append((v, u))
-            if len(kept) == top_k:
-                break
+        kept.append((v, u))
+        suppressed[max(0, v - d):v + d + 1, max(0, u - d):u + d + 1] = True
+        vs, us = vs[i + 1:], us[i + 1:]
     return kept
 
 

@@ -5,7 +5,8 @@ import cv2
 import numpy as np
 import pytest
 
-from defgg_ros.grasping.contact_angle import contact_scores, square_contact_angle, touchable
+from defgg_ros.grasping.contact_angle import contact_scores, square_contact_angle
+from defgg_ros.grasping.finger_clearance import touchable
 from defgg_ros.grasping.geometry import check_camera_k
 from defgg_ros.model.inference import GraspPredictor
 

@@ -97,3 +97,19 @@ def test_clear_grasps_first_slides_the_clear_able_ones_and_keeps_each_groups_ord
 def test_bad_geometry_is_refused():
     with pytest.raises(ValueError, match="> 0"):
         finger_footprints_px(10, 10, 0.0, OPENING_M, 0.0, FX)
+
+
+def test_the_slide_search_checks_every_shift_like_fingers_clear():
+    """clear_after_shifts (one pass over all shifts) agrees with fingers_clear shift by shift."""
+    from defgg_ros.grasping.finger_clearance import clear_after_shifts
+    depth, mask = scene((135, 95, 185, 145, 0.05), (192, 100, 230, 140, 0.07), (90, 110, 128, 135, 0.03))
+    rng = np.random.default_rng(0)
+    for _ in range(40):
+        u, v = int(rng.integers(136, 184)), int(rng.integers(96, 144))
+        angle = float(rng.uniform(-math.pi / 2, math.pi / 2))
+        shifts = list(range(-60, 61, 3))
+        fast = clear_after_shifts(depth, mask, u, v, angle, shifts, OPENING_M, FX)
+        for k, got in zip(shifts, fast):
+            cu, cv = int(round(u + k * math.cos(angle))), int(round(v + k * math.sin(angle)))
+            on_box = 0 <= cu < 320 and 0 <= cv < 240 and mask[cv, cu] == mask[v, u]
+            assert got == (on_box and clear(depth, mask, cu, cv, angle)), (u, v, angle, k)

@@ -80,3 +80,17 @@ def test_plateau_gives_one_peak_and_flat_map_falls_back_to_best_allowed():
         find_peaks(q, 5, 0.0, allowed=np.ones((10, 10), bool))
     with pytest.raises(ValueError):
         find_peaks(q, 5, 0.0, top_k=0)
+
+
+def test_a_saturated_plateau_gives_peaks_min_distance_apart_in_scan_order():
+    """A quality map clipped at 1 over a large area (the shipped net on the bench scene): thousands of
+    equal maxima; the kept peaks are the first in row-major order that keep min_distance apart."""
+    q = np.zeros((80, 80), np.float32)
+    q[10:70, 10:70] = 1.0
+    peaks = find_peaks(q, min_distance_px=10, threshold=0.0, top_k=5)
+    assert peaks[0] == (10, 10)
+    assert len(peaks) == 5
+    for i, a in enumerate(peaks):
+        for b in peaks[i + 1:]:
+            assert max(abs(a[0] - b[0]), abs(a[1] - b[1])) > 10
+    assert peaks == sorted(peaks)    # equal quality: stable order, row-major
