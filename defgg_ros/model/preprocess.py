@@ -95,9 +95,9 @@ def crop_origin(image_shape, mask=None, size_px: int = NETWORK_INPUT_SIZE_PX) ->
         raise InvalidInputError(f"image {width}x{height} is smaller than the {size_px}x{size_px} network input")
     cu, cv = width / 2.0, height / 2.0
     if mask is not None:
-        vs, us = np.nonzero(mask)
-        if us.size:
-            cu, cv = (us.min() + us.max() + 1) / 2.0, (vs.min() + vs.max() + 1) / 2.0
+        rows, cols = np.flatnonzero(np.any(mask, axis=1)), np.flatnonzero(np.any(mask, axis=0))
+        if cols.size:   # the bounding box from row/column projections: ~10x cheaper than np.nonzero
+            cu, cv = (cols[0] + cols[-1] + 1) / 2.0, (rows[0] + rows[-1] + 1) / 2.0
     u0 = int(np.clip(round(cu - size_px / 2.0), 0, width - size_px))
     v0 = int(np.clip(round(cv - size_px / 2.0), 0, height - size_px))
     return u0, v0
