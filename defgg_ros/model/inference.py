@@ -144,7 +144,7 @@ class GraspPredictor:
         clear = [None] * len(grasps)
         if check_clearance:
             grasps, clear = clear_grasps_first(grasps, depth_crop, mask_crop, finger_clearance_opening_m, k[0, 0])
-            if contact_angle:   # the returned grasps only: ~2 ms each (bench/bench_finger_clearance.py)
+            if contact_angle:   # the returned grasps only: ~1 ms each (bench/bench_finger_clearance.py)
                 for i in range(min(top_k, len(grasps))):
                     grasps[i], clear[i] = _square_contacts(grasps[i], clear[i], depth_crop, mask_crop,
                                                            finger_clearance_opening_m, k[0, 0])
