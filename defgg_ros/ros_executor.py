@@ -3,14 +3,16 @@
 rclpy 7.1.6's MultiThreadedExecutor yields every task that is not yet running on every pass of
 its wait loop and submits it to its thread pool again. A task already waiting in the pool's queue
 is therefore queued again and again: on an idle 2-core VM the main thread loops fast enough that
-the queue grew to thousands of copies of the same two tasks (measured: 3367), and a 100 Hz timer
-and its subscription then fired 75 times in 20 s instead of 2000 (bench/bench_executor_jitter.py).
+the queue grew to thousands of copies of the same two tasks (3367, seen with one-off instrumentation
+of rclpy's executor), and a 100 Hz timer and its subscription then fired 29-222 times in 10 s
+instead of 1000 (bench/bench_executor_jitter.py).
 A busy machine slows the spinning thread and hides it. In the cell this was a driver "silent" for
 over a second and gripper results arriving 10 s late.
 
 Worse, the spinning thread can starve the pool. While a subscription's handler waits in the
 queue, the subscription is left out of the wait set but its QoS event handlers are not, and Fast
-DDS then returns from every wait at once with nothing ready (measured: 37 000 empty waits in 5 s).
+DDS then returns from every wait at once with nothing ready (37 000 empty waits in 5 s, same
+instrumentation).
 The spinning thread loops in Python, holding the GIL, and the queued handler that would end the
 loop does not get to run.
 
