@@ -4,8 +4,8 @@ rclpy 7.1.6's MultiThreadedExecutor yields every task that is not yet running on
 its wait loop and submits it to its thread pool again. A task already waiting in the pool's queue
 is therefore queued again and again: on an idle 2-core VM the main thread loops fast enough that
 the queue grew to thousands of copies of the same two tasks (3367, seen with one-off instrumentation
-of rclpy's executor), and a 100 Hz timer and its subscription then fired 29-222 times in 10 s
-instead of 1000 (bench/bench_executor_jitter.py).
+of rclpy's executor), and a 100 Hz timer and its subscription then fired 29-756 times in 10 s
+instead of 1000 in five of six runs (bench/bench_executor_jitter.py).
 A busy machine slows the spinning thread and hides it. In the cell this was a driver "silent" for
 over a second and gripper results arriving 10 s late.
 
