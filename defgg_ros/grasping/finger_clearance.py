@@ -119,25 +119,16 @@ def clear_centre_shift_px(depth_m: np.ndarray, object_mask: np.ndarray, u_px: in
     """
     depth = np.asarray(depth_m, dtype=np.float32)
     mask = np.asarray(object_mask)
-    height, width = depth.shape
-    label = mask[v_px, u_px]
-    if label == 0 or not math.isfinite(float(depth[v_px, u_px])):
+    if mask[v_px, u_px] == 0 or not math.isfinite(float(depth[v_px, u_px])):
         return None
-    along = (math.cos(angle_rad), math.sin(angle_rad))
     max_shift_px = max_shift_m * fx_px / float(depth[v_px, u_px])
-
-    def clear_after(shift) -> bool:
-        u, v = int(round(u_px + shift * along[0])), int(round(v_px + shift * along[1]))
-        if not (0 <= u < width and 0 <= v < height) or mask[v, u] != label or not math.isfinite(float(depth[v, u])):
-            return False
-        return fingers_clear(depth, mask, u, v, angle_rad, float(depth[v, u]), opening_m, fx_px)
-
     start, end = chord_ends_px(depth, mask, u_px, v_px, angle_rad)
     half_opening_px = opening_m * fx_px / float(depth[v_px, u_px]) / 2
     if end - start + 1 >= 2 * half_opening_px:
         return None     # the object is wider than the opening along this line: no slide can clear it
     middle = (start + end) / 2.0
-    if abs(middle) <= max_shift_px and clear_after(middle):
+    if abs(middle) <= max_shift_px and clear_after_shifts(depth, mask, u_px, v_px, angle_rad, [middle], opening_m,
+                                                         fx_px)[0]:
         return middle
     # Only slides that keep both fingers outside the chord can clear it.
     low = max(math.ceil(end - half_opening_px), -math.floor(max_shift_px))
