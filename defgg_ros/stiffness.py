@@ -48,16 +48,28 @@ def decode_stiffness(encoded: float) -> float:
     return float(10.0 ** (_LOG_MIN + np.clip(t, 0.0, 1.0) * (_LOG_MAX - _LOG_MIN)))
 
 
+def check_modulus_image(youngs_modulus_pa_image: np.ndarray, what: str = "stiffness image") -> None:
+    """Raise InvalidYoungsModulus when a per-pixel modulus image has NaN, infinite or negative pixels.
+
+    One min and one max (NaN propagates through both) instead of element-wise masks: a 640x480
+    image is checked on every PlanGrasp call."""
+    image = np.asarray(youngs_modulus_pa_image)
+    if image.size == 0:
+        return
+    low, high = image.min(), image.max()
+    if np.isnan(low) or np.isnan(high) or np.isinf(high) or low == -np.inf:
+        raise InvalidYoungsModulus(f"{what} contains NaN or infinite moduli")
+    if low < 0:
+        raise InvalidYoungsModulus(f"{what} contains negative moduli")
+
+
 def encode_stiffness_image(youngs_modulus_pa_image: np.ndarray) -> np.ndarray:
     """Encode a per-pixel modulus image (Pa; 0 = background) to float32.
 
     Raises InvalidYoungsModulus for negative, NaN or infinite pixels.
     """
     image = np.asarray(youngs_modulus_pa_image, dtype=np.float64)
-    if not np.all(np.isfinite(image)):
-        raise InvalidYoungsModulus("stiffness image contains NaN or infinite moduli")
-    if np.any(image < 0.0):
-        raise InvalidYoungsModulus("stiffness image contains negative moduli")
+    check_modulus_image(image)
     out = np.full(image.shape, STIFFNESS_BACKGROUND, dtype=np.float32)
     obj = image > 0.0
     if np.any(obj):

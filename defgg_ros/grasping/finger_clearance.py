@@ -171,14 +171,20 @@ def clear_after_shifts(depth_m: np.ndarray, object_mask: np.ndarray, u_px: int, 
 
 
 def clear_grasps_first(grasps: list, depth_m: np.ndarray, object_mask: np.ndarray, opening_m: float,
-                       fx_px: float) -> tuple:
+                       fx_px: float, needed: int | None = None) -> tuple:
     """(grasps, clear flags): the grasps that a slide along the closing line makes clear
     (clear_centre_shift_px), slid, then the others as predicted; each group keeps its order.
 
     grasps: grasping.postprocess.Grasp2D in the same pixel frame as depth_m and object_mask.
+    needed: stop checking once this many grasps are clear (the caller keeps that many: the first
+    `needed` entries are then the same as with every grasp checked); the unchecked ones follow the
+    blocked ones with flag None. A PlanGrasp wants one grasp of a pool of 10: ~0.5 ms per check saved.
     """
     clear, blocked = [], []
-    for g in grasps:
+    for i, g in enumerate(grasps):
+        if needed is not None and len(clear) >= needed:
+            unchecked = grasps[i:]
+            return clear + blocked + unchecked, [True] * len(clear) + [False] * len(blocked) + [None] * len(unchecked)
         shift = clear_centre_shift_px(depth_m, object_mask, g.center_u_px, g.center_v_px, g.angle_rad, opening_m,
                                       fx_px)
         if shift is None:

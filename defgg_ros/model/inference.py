@@ -23,7 +23,7 @@ from defgg_ros.grasping.config import DEFAULT_POSTPROCESS, PostProcessConfig
 from defgg_ros.grasping.contact_angle import square_contact_angle
 from defgg_ros.grasping.finger_clearance import clear_centre_shift_px, clear_grasps_first
 from defgg_ros.grasping.geometry import check_camera_k, pixel_to_camera, width_px_to_m
-from defgg_ros.grasping.postprocess import grasps_from_maps, maps_from_network
+from defgg_ros.grasping.postprocess import GraspMaps, grasps_from_maps, maps_from_network
 from defgg_ros.model.checkpoint import CheckpointError, load_checkpoint, network_from_checkpoint
 from defgg_ros.model.preprocess import (
     InvalidInputError,
@@ -34,7 +34,7 @@ from defgg_ros.model.preprocess import (
     network_input,
 )
 from defgg_ros.model.runtime import compile_for_inference
-from defgg_ros.stiffness import InvalidYoungsModulus
+from defgg_ros.stiffness import InvalidYoungsModulus, check_modulus_image
 
 # Peaks considered when grasps whose fingers land beside the objects are ranked first.
 CLEARANCE_POOL = 10
@@ -62,11 +62,21 @@ class GraspCandidate:
 
 @dataclass(frozen=True)
 class GraspPrediction:
-    q: np.ndarray               # 300x300 quality map (crop coordinates)
-    angle_rad: np.ndarray       # 300x300
-    width_px: np.ndarray        # 300x300
+    maps: GraspMaps             # 300x300 maps in crop coordinates (angle and width filtered when read)
     crop_offset_px: tuple       # (u0, v0): full-image pixel of the crop's (0, 0)
     candidates: list            # GraspCandidate, best first
+
+    @property
+    def q(self) -> np.ndarray:
+        return self.maps.q
+
+    @property
+    def angle_rad(self) -> np.ndarray:
+        return self.maps.angle_rad
+
+    @property
+    def width_px(self) -> np.ndarray:
+        return self.maps.width_px
 
     @property
     def best(self) -> GraspCandidate | None:
@@ -143,15 +153,15 @@ class GraspPredictor:
                                   max(top_k, CLEARANCE_POOL) if check_clearance else top_k)
         clear = [None] * len(grasps)
         if check_clearance:
-            grasps, clear = clear_grasps_first(grasps, depth_crop, mask_crop, finger_clearance_opening_m, k[0, 0])
+            grasps, clear = clear_grasps_first(grasps, depth_crop, mask_crop, finger_clearance_opening_m, k[0, 0],
+                                               needed=top_k)
             if contact_angle:   # the returned grasps only: ~1 ms each (bench/bench_finger_clearance.py)
                 for i in range(min(top_k, len(grasps))):
                     grasps[i], clear[i] = _square_contacts(grasps[i], clear[i], depth_crop, mask_crop,
                                                            finger_clearance_opening_m, k[0, 0])
         candidates = [dataclasses.replace(self._candidate(g, origin, depth_crop, moduli_crop, mask_crop, k),
                                           fingers_clear=c) for g, c in zip(grasps[:top_k], clear)]
-        return GraspPrediction(q=maps.q, angle_rad=maps.angle_rad, width_px=maps.width_px,
-                               crop_offset_px=origin, candidates=candidates)
+        return GraspPrediction(maps=maps, crop_offset_px=origin, candidates=candidates)
 
     @staticmethod
     def _candidate(g, origin, depth_crop, moduli_crop, mask_crop, k) -> GraspCandidate:
@@ -184,10 +194,7 @@ def _check_moduli(youngs_modulus_pa, shape) -> np.ndarray:
         raise InvalidYoungsModulus(f"youngs_modulus_pa must be numeric, got dtype {moduli.dtype}")
     # Same rules as encode_stiffness_image, checked on the full image so a bad
     # pixel outside the crop is still reported.
-    if not np.all(np.isfinite(moduli)):
-        raise InvalidYoungsModulus("youngs_modulus_pa contains NaN or infinite moduli")
-    if np.any(moduli < 0):
-        raise InvalidYoungsModulus("youngs_modulus_pa contains negative moduli")
+    check_modulus_image(moduli, "youngs_modulus_pa")
     return moduli.astype(np.float32, copy=False)
 
 

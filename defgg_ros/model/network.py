@@ -120,7 +120,9 @@ class GGCNN(nn.Module):
         f = F.relu(self.dec1(f))
         f = F.interpolate(f, scale_factor=2.0, mode="bilinear", align_corners=False)
         f = F.relu(self.dec2(f))
-        return F.interpolate(self.head(f), size=size, mode="bilinear", align_corners=False)
+        # contiguous(): a no-op in training (NCHW); in the channels-last inference graph (model/runtime.py)
+        # it makes the output plain NCHW at the cost of a 100x100x4 copy, not a 300x300x4 one later.
+        return F.interpolate(self.head(f).contiguous(), size=size, mode="bilinear", align_corners=False)
 
 
 def parameter_count(model: nn.Module) -> int:

@@ -92,6 +92,11 @@ def test_clear_grasps_first_slides_the_clear_able_ones_and_keeps_each_groups_ord
     assert [g.quality for g in ranked] == [0.8, 0.7, 0.9] and flags == [True, True, False]
     assert (ranked[0].center_u_px, ranked[0].center_v_px) == (160, 120)     # 142 + 17.5, rounded
     assert ranked[1] == grasps[2] and ranked[2] == grasps[0]
+    # Asked for one clear grasp, the search stops at the first: same head, the rest unchecked.
+    ranked_1, flags_1 = clear_grasps_first(grasps, depth, mask, OPENING_M, FX, needed=1)
+    assert ranked_1[0] == ranked[0] and flags_1 == [True, False, None]
+    assert ranked_1[1:] == [grasps[0], grasps[2]]
+    assert clear_grasps_first(grasps, depth, mask, OPENING_M, FX, needed=2) == (ranked, flags)
 
 
 def test_bad_geometry_is_refused():

@@ -94,3 +94,16 @@ def test_a_saturated_plateau_gives_peaks_min_distance_apart_in_scan_order():
         for b in peaks[i + 1:]:
             assert max(abs(a[0] - b[0]), abs(a[1] - b[1])) > 10
     assert peaks == sorted(peaks)    # equal quality: stable order, row-major
+
+
+@pytest.mark.parametrize("config", [PostProcessConfig(), PostProcessConfig(angle_sigma_px=2.6, width_sigma_px=0.0)])
+def test_values_at_one_pixel_are_the_full_maps_values(config):
+    """Ranking reads angle and width at the peaks only (at_pixel); they must be the full maps' values,
+    borders included (where the blur replicates the edge)."""
+    raw = np.random.default_rng(3).normal(size=(4, 300, 300)).astype(np.float32)
+    pixels = [(0, 0), (299, 299), (0, 150), (3, 296), (150, 7), (120, 201)]
+    lazy = [maps_from_network(raw, config).at_pixel(v, u) for v, u in pixels]
+    full = maps_from_network(raw, config)
+    expected = [(full.angle_rad[v, u], full.width_px[v, u]) for v, u in pixels]
+    assert np.allclose(lazy, expected, atol=1e-5)
+    assert full.at_pixel(120, 201) == pytest.approx(expected[-1], abs=1e-6)   # from the computed maps
