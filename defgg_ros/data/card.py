@@ -11,6 +11,7 @@ import numpy as np
 from defgg_ros.atomic import write_text_atomic
 from defgg_ros.constants import MAX_SOFT_BODY_YOUNGS_MODULUS_PA, SHAKE_POSITIVE_THRESHOLD_MPS2
 from defgg_ros.data.format import check_header, list_scene_ids, read_scene, read_trials
+from defgg_ros.data.labels import slips_in_a_direction
 
 RIGID_NOTE = (
     f"Moduli above {MAX_SOFT_BODY_YOUNGS_MODULUS_PA:.0e} Pa are simulated as rigid bodies: PyBullet's FEM "
@@ -33,19 +34,8 @@ def _stats(root):
             row["pos" if label is True else "neg" if label is False else "fail"] += 1
             if t.shake_mean_mps2 is not None:
                 row["means"].append(t.shake_mean_mps2)
-            row["pos_slip"] += label is True and _slips_in_a_direction(t)
+            row["pos_slip"] += label is True and slips_in_a_direction(t)
     return rows
-
-
-def _slips_in_a_direction(trial) -> bool:
-    """A measured direction held less than the threshold: the mean label can be positive while the
-    evaluation's shake task (every direction must hold it) fails. A lower bound: skipped directions
-    (shake_measured False) are not counted."""
-    accels = trial.shake_accels_mps2
-    if accels is None:
-        return False
-    measured = (trial.sim or {}).get("shake_measured") or [True] * len(accels)
-    return any(m and a < SHAKE_POSITIVE_THRESHOLD_MPS2 for a, m in zip(accels, measured))
 
 
 def _planned(root, grasps_per_scene):

@@ -24,6 +24,7 @@ from defgg_ros.constants import NETWORK_INPUT_SIZE_PX
 from defgg_ros.data.augment import AugmentConfig, augment_sample
 from defgg_ros.data.format import DatasetError, GraspRect, list_scene_ids, read_scene, read_trials
 from defgg_ros.data.groundtruth import ground_truth_maps, training_targets
+from defgg_ros.data.labels import is_positive
 from defgg_ros.model.preprocess import crop, crop_origin, encode_depth, inpaint_depth
 from defgg_ros.stiffness import encode_stiffness_image
 
@@ -59,7 +60,8 @@ class SceneSample:
 
 
 def load_scene_sample(root, scene_id: str, n_trials: int | None = None,
-                      size_px: int = NETWORK_INPUT_SIZE_PX) -> SceneSample:
+                      size_px: int = NETWORK_INPUT_SIZE_PX, label_rule: str = "mean") -> SceneSample:
+    """label_rule: which trials are positives (defgg_ros/data/labels.py)."""
     scene = read_scene(Path(root) / "scenes" / f"{scene_id}.npz")
     trials = read_trials(root, scene_id)
     trials = trials if n_trials is None else trials[:n_trials]
@@ -72,7 +74,7 @@ def load_scene_sample(root, scene_id: str, n_trials: int | None = None,
     k[0, 2] -= u0
     k[1, 2] -= v0
     positives = [GraspRect(t.rect.center_u_px - u0, t.rect.center_v_px - v0, t.rect.angle_rad,
-                           t.rect.width_px, t.rect.finger_height_px) for t in trials if t.label is True]
+                           t.rect.width_px, t.rect.finger_height_px) for t in trials if is_positive(t, label_rule)]
     return SceneSample(scene_id=scene_id, object_name=scene.object_name,
                        youngs_modulus_pa=float(scene.meta.get("youngs_modulus_pa", np.max(scene.youngs_modulus_pa))),
                        depth_m=depth, youngs_modulus_image_pa=crop(scene.youngs_modulus_pa, (u0, v0), size_px).copy(),
@@ -89,14 +91,16 @@ class GraspDataset(torch.utils.data.Dataset):
     """
 
     def __init__(self, root, scene_ids, manifest: dict | None = None, uses_stiffness: bool = True,
-                 augment: AugmentConfig | None = None, samples_per_scene: int = 1, seed: int = 0):
+                 augment: AugmentConfig | None = None, samples_per_scene: int = 1, seed: int = 0,
+                 label_rule: str = "mean"):
         self.root = Path(root)
         self.uses_stiffness = uses_stiffness
         self.augment = augment
         self.samples_per_scene = int(samples_per_scene)
         self.seed = int(seed)
         self.epoch = 0
-        samples = [load_scene_sample(root, sid, None if manifest is None else manifest[sid]) for sid in scene_ids]
+        samples = [load_scene_sample(root, sid, None if manifest is None else manifest[sid], label_rule=label_rule)
+                   for sid in scene_ids]
         self.samples = [s for s in samples if s.positives]
         self.skipped_scene_ids = [s.scene_id for s in samples if not s.positives]
 

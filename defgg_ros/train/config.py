@@ -4,6 +4,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 
 from defgg_ros.data.augment import AugmentConfig
+from defgg_ros.data.labels import LABEL_RULES
 from defgg_ros.model.network import GGCNNConfig
 
 
@@ -26,6 +27,12 @@ class TrainConfig:
     test_fraction: float = 0.15
     augment: AugmentConfig = field(default_factory=AugmentConfig)
     max_steps: int | None = None   # stop early (smoke tests); None = all epochs
+    # Which trials are positives (defgg_ros/data/labels.py): "mean" is the paper's rule.
+    label_rule: str = "mean"
+
+    def __post_init__(self):
+        if self.label_rule not in LABEL_RULES:
+            raise ValueError(f"label_rule must be one of {LABEL_RULES}, got {self.label_rule!r}")
 
     def network_config(self) -> GGCNNConfig:
         return GGCNNConfig(input_channels=2 if self.uses_stiffness else 1, architecture=self.architecture)
