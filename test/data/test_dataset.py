@@ -82,3 +82,25 @@ def test_split_is_by_object():
     assert split_objects(names, 0.15, 0.15, seed=3) == split
     with pytest.raises(ValueError):
         split_objects(["a", "b"], 0.2, 0.2, 0)
+
+
+def test_the_strict_label_rule_drops_positives_that_slip(synth, tmp_path):
+    """--label-rule every_direction: a positive (mean >= 25 m/s^2) that slipped in one direction is
+    no longer a ground-truth grasp; the others stay."""
+    import json
+    import shutil
+
+    root = tmp_path / "copy"
+    shutil.copytree(synth, root)
+    sid = list_scene_ids(root)[0]
+    path = root / "trials" / f"{sid}.jsonl"
+    records = [json.loads(line) for line in path.read_text().splitlines()]
+    first = next(i for i, t in enumerate(read_trials(root, sid)) if t.label is True)
+    records[first]["shake_accels_mps2"] = [50.0] * 8 + [10.0] + [30.0] * 7     # mean 28.1, one slip
+    path.write_text("".join(json.dumps(r) + "\n" for r in records))
+    mean_rule = load_scene_sample(root, sid)
+    strict = load_scene_sample(root, sid, label_rule="every_direction")
+    assert read_trials(root, sid)[first].label is True
+    assert len(strict.positives) == len(mean_rule.positives) - 1 > 0
+    with pytest.raises(ValueError, match="label rule"):
+        load_scene_sample(root, sid, label_rule="median")
