@@ -17,8 +17,8 @@ import torch
 
 from defgg_ros.data.augment import AugmentConfig
 from defgg_ros.data.format import DatasetError
-from defgg_ros.model.network import ARCHITECTURES
 from defgg_ros.data.labels import LABEL_RULES
+from defgg_ros.model.network import ARCHITECTURES
 from defgg_ros.train.config import TrainConfig
 from defgg_ros.train.trainer import (
     BEST_FILE,
