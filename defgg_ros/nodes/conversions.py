@@ -32,6 +32,7 @@ from defgg_ros.perception.geometry import (
     transform_from_xyz_quaternion,
     transform_to_xyz_quaternion,
 )
+from defgg_ros.stiffness import InvalidYoungsModulus, check_modulus_image
 
 __all__ = [
     "ConversionError", "ENCODINGS", "image_to_numpy", "numpy_to_image", "depth_msg_to_metres",
@@ -127,10 +128,10 @@ def stiffness_msg_to_pa(msg: Image) -> np.ndarray:
     if msg.encoding != "32FC1":
         raise ConversionError(f"stiffness image must be 32FC1 (Young's modulus in Pa), got {msg.encoding!r}")
     youngs_modulus_pa = image_to_numpy(msg)
-    if not np.all(np.isfinite(youngs_modulus_pa)):
-        raise ConversionError("stiffness image contains NaN or infinite moduli")
-    if np.any(youngs_modulus_pa < 0):
-        raise ConversionError("stiffness image contains negative moduli (Pa must be >= 0, 0 = background)")
+    try:
+        check_modulus_image(youngs_modulus_pa)
+    except InvalidYoungsModulus as exc:
+        raise ConversionError(f"{exc} (Pa must be finite and >= 0, 0 = background)") from exc
     return youngs_modulus_pa
 
 
