@@ -23,7 +23,12 @@ def slips_in_a_direction(trial) -> bool:
     return any(m and a < SHAKE_POSITIVE_THRESHOLD_MPS2 for a, m in zip(accels, measured))
 
 
-def is_positive(trial, rule: str = "mean") -> bool:
+def check_label_rule(rule: str) -> str:
     if rule not in LABEL_RULES:
         raise ValueError(f"label rule must be one of {LABEL_RULES}, got {rule!r}")
+    return rule
+
+
+def is_positive(trial, rule: str = "mean") -> bool:
+    check_label_rule(rule)
     return trial.label is True and (rule == "mean" or not slips_in_a_direction(trial))

@@ -4,7 +4,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 
 from defgg_ros.data.augment import AugmentConfig
-from defgg_ros.data.labels import LABEL_RULES
+from defgg_ros.data.labels import check_label_rule
 from defgg_ros.model.network import GGCNNConfig
 
 
@@ -31,8 +31,7 @@ class TrainConfig:
     label_rule: str = "mean"
 
     def __post_init__(self):
-        if self.label_rule not in LABEL_RULES:
-            raise ValueError(f"label_rule must be one of {LABEL_RULES}, got {self.label_rule!r}")
+        check_label_rule(self.label_rule)   # fail before any data is read
 
     def network_config(self) -> GGCNNConfig:
         return GGCNNConfig(input_channels=2 if self.uses_stiffness else 1, architecture=self.architecture)
