@@ -16,6 +16,12 @@ Protocols:
              remaining directions stop once the label is decided (TrialSettings.exact)
   fast       the generator's (TrialSettings.fast): exact + the confident-stop surrogate (stop after
              >= 4 directions when the measured mean is >= 40/sqrt(k) m/s^2 from the threshold)
+  fast_coarse
+             fast on a coarser FEM mesh (at most COARSE_SIM_MAX_TET_NODES nodes per part instead of 220);
+             the grasp candidates still come from the default mesh, so both protocols try the same grasps
+  naive_remesh
+             naive on an independent fTetWild run of the same surface (not the shipped mesh): the
+             label noise that the mesh alone causes, the floor for any agreement figure
   fast_ramp025, fast_dt1ms
              rejected variants of fast: the shake ramp in 0.25 s instead of 0.5 s, and a 1 ms
              soft time step instead of 0.5 ms (0.25 ms at 2e6). Both are cheaper; run them to
@@ -37,7 +43,9 @@ DEFAULT_PROTOCOLS = ("naive", "exact", "fast")   # TrialSettings class methods
 # Tried and rejected (kept so the measurement can be repeated): a faster ramp and a
 # longer soft time step are much cheaper but change the held accelerations.
 VARIANTS = {"fast_ramp025": {"shake_ramp_time_s": 0.25}, "fast_dt1ms": {"time_step_s": 1e-3}}
-PROTOCOLS = DEFAULT_PROTOCOLS + tuple(VARIANTS)
+# Same settings as fast, simulated on a coarser tet mesh (the generator's --sim-max-tet-nodes).
+MESH_VARIANTS = {"fast_coarse": "fast", "naive_remesh": "naive"}
+PROTOCOLS = DEFAULT_PROTOCOLS + tuple(MESH_VARIANTS) + tuple(VARIANTS)
 
 
 def protocol_settings(name: str):
@@ -47,7 +55,17 @@ def protocol_settings(name: str):
 
     if name in VARIANTS:
         return replace(TrialSettings.fast(), **VARIANTS[name])
-    return getattr(TrialSettings, name)()
+    return getattr(TrialSettings, MESH_VARIANTS.get(name, name))()
+
+
+def protocol_shape(name: str, object_name: str):
+    from defgg_ros.data.datagen import COARSE_SIM_MAX_TET_NODES
+    from defgg_ros.sim.objects import get_shape
+
+    shape = get_shape(object_name)
+    if name == "fast_coarse":
+        return shape.coarsened(COARSE_SIM_MAX_TET_NODES)
+    return shape.remeshed("bench-remesh1") if name == "naive_remesh" else shape
 
 
 DEFAULT_OBJECTS = ("box_small", "cylinder_tall", "egad_train_05_c3")
@@ -86,14 +104,15 @@ def run(args):
             if (trial, proto) in done:
                 continue
             settings = protocol_settings(proto)
-            out = run_grasp_trial(objects.ObjectSpec(objects.get_shape(name), e), grasp, ("shake",), settings,
-                                  client=client)
+            shape = protocol_shape(proto, name)
+            out = run_grasp_trial(objects.ObjectSpec(shape, e), grasp, ("shake",), settings, client=client)
             mean = out.shake_mean_mps2
             label = False if out.status == "lift_failed" else (None if mean is None else mean >= 25.0)
             append_jsonl(args.results, {"trial": trial, "protocol": proto, "object": name, "E": e,
                                         "status": out.status, "label": label, "mean": mean,
                                         "accels": out.shake_accels_mps2, "measured": out.shake_measured,
-                                        "cpu_s": out.cpu_s, "steps": out.sim_steps})
+                                        "cpu_s": out.cpu_s, "steps": out.sim_steps,
+                                        "tet_nodes": [len(t.nodes_m) for t in shape.tet_parts]})
             print(f"{trial:40s} {proto:10s} {out.status:12s} label={label} mean={mean} cpu={out.cpu_s:.1f}s",
                   flush=True)
 

@@ -31,7 +31,13 @@ TARGET_MAX_NODES = 220
 # bounds the node count more than the edge length does: 5e-3 kept ~400
 # nodes on wavy blobs, 1e-2 (~0.8 mm on an 8 cm object) ~220-250.
 COARSENING_STEPS = ((0.12, 5e-3), (0.15, 1e-2), (0.2, 1.5e-2), (0.25, 2e-2))
+# Further steps, only for simulation meshes asked to be coarser than
+# TARGET_MAX_NODES (the data generator's FEM mesh, docs/dataset.md): the
+# default meshes stay exactly what they were.
+EXTRA_COARSENING_STEPS = ((0.35, 3e-2), (0.5, 4e-2), (0.7, 5e-2))
 MESH_CACHE_ENV = "DEFGG_MESH_CACHE"
+# The shipped, frozen tet meshes of the library objects (read-only; npz of nodes_m and tets).
+STORE_DIR = Path(__file__).resolve().parent / "tet_meshes"
 MESH_FORMAT_VERSION = "tet-v1"
 
 
@@ -101,17 +107,37 @@ def boundary_faces(nodes, tets) -> np.ndarray:
     return faces[counts[inverse.ravel()] == 1]
 
 
-def tetrahedralize(mesh: trimesh.Trimesh) -> TetMesh:
-    """Tetrahedralize (or load from the cache) a closed surface mesh in metres."""
+def mesh_key(mesh: trimesh.Trimesh, max_nodes: int = TARGET_MAX_NODES, variant: str = "") -> str:
+    """Name of a surface's tet mesh in the store and the cache."""
+    digest = surface_hash(mesh.vertices, mesh.faces)
+    if max_nodes != TARGET_MAX_NODES:
+        digest = f"{digest}-n{max_nodes}"
+    return f"{digest}-{variant}" if variant else digest
+
+
+def tetrahedralize(mesh: trimesh.Trimesh, max_nodes: int = TARGET_MAX_NODES, variant: str = "") -> TetMesh:
+    """The tet mesh of a closed surface mesh in metres: from the store, the cache, or fTetWild.
+
+    fTetWild is not deterministic (the same surface gave 123-125 nodes in
+    four runs), so the library objects' meshes are frozen in the shipped
+    store (STORE_DIR, see freeze_meshes.py): every machine simulates the same
+    discretization. `max_nodes` below TARGET_MAX_NODES asks for a coarser
+    mesh; `variant` names an independent fTetWild run that bypasses the store
+    (bench/bench_datagen.py measures what re-meshing does to the labels).
+    """
     if len(mesh.faces) == 0 or not np.all(np.isfinite(mesh.vertices)):
         raise MeshError("empty mesh or non-finite vertices")
-    digest = surface_hash(mesh.vertices, mesh.faces)
+    if max_nodes < 4:
+        raise MeshError(f"a tet mesh needs at least 4 nodes, asked for at most {max_nodes}")
+    digest = mesh_key(mesh, max_nodes, variant)
     folder = cache_dir()
-    npz_path = folder / f"{digest}.npz"
-    if not npz_path.exists():
-        nodes, tets = _run_ftetwild(mesh)
-        with atomic_path(npz_path) as tmp, open(tmp, "wb") as f:
-            np.savez(f, nodes_m=nodes, tets=tets)
+    npz_path = STORE_DIR / f"{digest}.npz"
+    if variant or not npz_path.exists():
+        npz_path = folder / f"{digest}.npz"
+        if not npz_path.exists():
+            nodes, tets = _run_ftetwild(mesh, max_nodes)
+            with atomic_path(npz_path) as tmp, open(tmp, "wb") as f:
+                np.savez_compressed(f, nodes_m=nodes, tets=tets)
     with np.load(npz_path, allow_pickle=False) as z:
         nodes, tets = z["nodes_m"], z["tets"]
     vtk_path, obj_path = folder / f"{digest}.vtk", folder / f"{digest}.obj"
@@ -125,15 +151,29 @@ def tetrahedralize(mesh: trimesh.Trimesh) -> TetMesh:
     return TetMesh(nodes, tets, surface, digest, vtk_path, obj_path)
 
 
-def _run_ftetwild(mesh):
+def freeze(mesh: trimesh.Trimesh, max_nodes: int = TARGET_MAX_NODES) -> tuple:
+    """Put a surface's tet mesh (the cached one if any) into the store; (path, newly added)."""
+    digest = mesh_key(mesh, max_nodes)
+    target = STORE_DIR / f"{digest}.npz"
+    if target.exists():
+        return target, False
+    tet = tetrahedralize(mesh, max_nodes)
+    STORE_DIR.mkdir(parents=True, exist_ok=True)
+    with atomic_path(target) as tmp, open(tmp, "wb") as f:
+        np.savez_compressed(f, nodes_m=tet.nodes_m, tets=tet.tets)
+    return target, True
+
+
+def _run_ftetwild(mesh, max_nodes: int = TARGET_MAX_NODES):
     pytetwild = _import_pytetwild()
     verts = np.asarray(mesh.vertices, dtype=np.float64)
     faces = np.asarray(mesh.faces, dtype=np.int32)
     nodes = tets = None
-    for fac, eps in COARSENING_STEPS:
+    steps = COARSENING_STEPS + (EXTRA_COARSENING_STEPS if max_nodes < TARGET_MAX_NODES else ())
+    for fac, eps in steps:
         nodes, tets = pytetwild.tetrahedralize(verts, faces, edge_length_fac=fac, coarsen=True,
                                                epsilon=eps, num_threads=1, quiet=True)
-        if len(nodes) <= TARGET_MAX_NODES:
+        if len(nodes) <= max_nodes:
             break
     if tets is None or len(tets) == 0:
         raise MeshError("fTetWild produced no tetrahedra (is the surface closed?)")

@@ -49,10 +49,27 @@ class UnknownObject(KeyError):
 
 @dataclass(frozen=True)
 class ObjectShape:
-    """Geometry only. `build` returns one list of overlapping surface pieces per part."""
+    """Geometry only. `build` returns one list of overlapping surface pieces per part.
+
+    `max_tet_nodes` bounds the tet meshes' node count; `coarsened(n)` is the
+    same shape with a coarser FEM mesh. `mesh_variant` names an independent
+    fTetWild run instead of the shipped mesh (meshes.tetrahedralize).
+    """
     name: str
     set_name: str
     build: object = field(repr=False, compare=False)
+    max_tet_nodes: int = meshes.TARGET_MAX_NODES
+    mesh_variant: str = ""
+
+    def coarsened(self, max_tet_nodes: int | None) -> ObjectShape:
+        """This shape meshed with at most `max_tet_nodes` nodes per part (None: unchanged)."""
+        if max_tet_nodes is None or max_tet_nodes == self.max_tet_nodes:
+            return self
+        return replace(self, max_tet_nodes=int(max_tet_nodes))
+
+    def remeshed(self, variant: str) -> ObjectShape:
+        """The same surface through another fTetWild run (not the shipped mesh)."""
+        return replace(self, mesh_variant=variant)
 
     @functools.cached_property
     def _surfaces(self) -> tuple:
@@ -68,14 +85,15 @@ class ObjectShape:
     @functools.cached_property
     def tet_parts(self) -> tuple:
         """Tet mesh per part, object frame."""
-        return tuple(meshes.tetrahedralize(m) for m in self._surfaces)
+        return tuple(meshes.tetrahedralize(m, self.max_tet_nodes, self.mesh_variant) for m in self._surfaces)
 
     @functools.cached_property
     def union_tet(self) -> meshes.TetMesh:
         """One tet mesh of all parts together (one soft body of one material)."""
         if len(self._surfaces) == 1:
             return self.tet_parts[0]
-        return meshes.tetrahedralize(trimesh.util.concatenate(list(self._surfaces)))
+        return meshes.tetrahedralize(trimesh.util.concatenate(list(self._surfaces)), self.max_tet_nodes,
+                                     self.mesh_variant)
 
     @property
     def n_parts(self) -> int:

@@ -34,13 +34,54 @@ def test_tet_mesh_is_coarse_valid_and_cached(monkeypatch, tmp_path):
     assert tet.surface().is_watertight
     assert tet.vtk_path.read_text().startswith("# vtk DataFile")
 
-    def must_not_run(_):
+    def must_not_run(*_):
         raise AssertionError("fTetWild ran again although the mesh is cached")
 
     monkeypatch.setattr(meshes, "_run_ftetwild", must_not_run)
     again = meshes.tetrahedralize(shapes.box(0.05, 0.03, 0.04))
     assert again.content_hash == tet.content_hash and again.vtk_path.parent == tmp_path
     np.testing.assert_array_equal(again.tets, tet.tets)
+
+
+def test_every_library_object_has_a_shipped_mesh():
+    from defgg_ros.sim.freeze_meshes import surfaces_to_mesh
+
+    for set_name in ("train", "common", "adversarial"):
+        for shape in objects.object_set(set_name):
+            for surface in surfaces_to_mesh(shape):
+                key = meshes.mesh_key(surface)
+                assert (meshes.STORE_DIR / f"{key}.npz").exists(), f"{set_name}/{shape.name}: no shipped mesh"
+
+
+def test_library_meshes_come_from_the_store_not_ftetwild(monkeypatch, tmp_path):
+    # fTetWild is not deterministic: a fresh run would give other nodes, so equality
+    # with the shipped file shows that every machine simulates the same mesh.
+    monkeypatch.setenv(meshes.MESH_CACHE_ENV, str(tmp_path))
+
+    def must_not_run(*_):
+        raise AssertionError("fTetWild ran for a library object")
+
+    monkeypatch.setattr(meshes, "_run_ftetwild", must_not_run)
+    surface = objects.ObjectShape("box_small", "train", objects.get_shape("box_small").build)._surfaces[0]
+    tet = meshes.tetrahedralize(surface)
+    with np.load(meshes.STORE_DIR / f"{meshes.mesh_key(surface)}.npz") as shipped:
+        np.testing.assert_array_equal(tet.nodes_m, shipped["nodes_m"])
+        np.testing.assert_array_equal(tet.tets, shipped["tets"])
+    assert tet.vtk_path.parent == tmp_path       # derived files go to the cache, never the store
+
+
+def test_coarsened_and_remeshed_shapes(monkeypatch, tmp_path):
+    monkeypatch.setenv(meshes.MESH_CACHE_ENV, str(tmp_path))
+    shape = objects.get_shape("cylinder_tall")
+    coarse = shape.coarsened(80)
+    assert coarse.coarsened(None) is coarse and shape.coarsened(shape.max_tet_nodes) is shape
+    assert all(len(t.nodes_m) <= 80 for t in coarse.tet_parts)
+    assert len(coarse.tet_parts[0].nodes_m) < len(shape.tet_parts[0].nodes_m)
+    other = shape.remeshed("bench1").tet_parts[0]              # an fTetWild run of its own
+    assert other.content_hash.endswith("-bench1") and other.vtk_path.parent == tmp_path
+    assert other.volume_m3 == pytest.approx(shape.tet_parts[0].volume_m3, rel=0.02)
+    with pytest.raises(meshes.MeshError, match="at least 4 nodes"):
+        meshes.tetrahedralize(shape._surfaces[0], max_nodes=3)
 
 
 def test_shapes_rest_on_the_table_and_fit_the_gripper():
