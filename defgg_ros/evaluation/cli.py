@@ -124,6 +124,25 @@ def _add_others(sub):
     p.add_argument("--out", required=True, help="archive to write, e.g. models/train_data_fem_v1.tar.gz")
     p.add_argument("--models-dir", default="models")
 
+    p = sub.add_parser(
+        "ceiling", help="run the sampler's candidates (not a model's) under a task: random-pick and best-case "
+                        "success per modulus, the bounds of any model in this simulator",
+        description="For each object of the sets and each modulus, the training data's antipodal sampler proposes "
+                    "collision-free candidates; each runs under the task's evaluation protocol. OUT/ceiling.md "
+                    "gives per modulus the success of a random candidate and the share of objects where any "
+                    "candidate succeeds (resumable: OUT/ceiling.jsonl).")
+    p.add_argument("--out", required=True, help="folder for ceiling.jsonl and ceiling.md")
+    p.add_argument("--sets", nargs="+", default=["common"], choices=sources.EVAL_SETS, help="default: %(default)s")
+    p.add_argument("--only", nargs="+", metavar="OBJECT", help="restrict the sets to these objects")
+    p.add_argument("--moduli", nargs="+", type=float, default=list(TRAINING_YOUNGS_MODULI_PA), metavar="PA")
+    p.add_argument("--candidates", type=int, default=8, help="candidates per object (default %(default)s)")
+    p.add_argument("--task", default="shake", choices=TASKS)
+    p.add_argument("--seed", type=int, default=0, help="sampler seed (default %(default)s, the training data's)")
+    p.add_argument("--sim-max-tet-nodes", type=int, default=None, metavar="N",
+                   help="simulate on a coarser FEM mesh of at most N nodes (default: the shipped mesh)")
+    p.add_argument("--max-trials", type=int, default=None, help="stop after simulating this many trials")
+    p.add_argument("--summary-only", action="store_true", help="only rewrite OUT/ceiling.md")
+
     p = sub.add_parser("card", help="(re)write models/<name>.md from its provenance, weights and evaluation")
     p.add_argument("--name", required=True, nargs="+")
     p.add_argument("--eval", default=None, metavar="OUT", help="evaluation folder whose summary.json to include")
@@ -358,6 +377,24 @@ def cmd_freeze(args) -> int:
     return 0
 
 
+def cmd_ceiling(args) -> int:
+    from defgg_ros.evaluation import ceiling
+    from defgg_ros.evaluation.runner import eval_trial_settings
+
+    if not args.summary_only:
+        sources.check_moduli(args.moduli)
+        shapes = [sh for s in args.sets for sh in sources.sim_objects.object_set(s)
+                  if not args.only or sh.name in args.only]
+        if not shapes:
+            raise sources.SourceError(f"no object of {args.sets} matches --only {args.only}")
+        trials = ceiling.plan_trials(shapes, args.moduli, args.candidates, args.task, args.seed,
+                                     args.sim_max_tet_nodes)
+        ceiling.run(args.out, trials, args.task, eval_trial_settings(), args.max_trials,
+                    progress=lambda n, total, key: print(f"[{n}/{total}] {key}", flush=True))
+    print(ceiling.write_table(args.out))
+    return 0
+
+
 def cmd_card(args) -> int:
     from defgg_ros.evaluation import cards
 
@@ -379,7 +416,7 @@ def main(argv=None) -> int:
         if args.command == "run":
             return cmd_run(args, argv)
         commands = {"report": cmd_report, "strategy": cmd_strategy, "ship": cmd_ship, "card": cmd_card,
-                    "snapshot": cmd_snapshot, "freeze": cmd_freeze}
+                    "snapshot": cmd_snapshot, "freeze": cmd_freeze, "ceiling": cmd_ceiling}
         return commands[args.command](args)
     except (sources.SourceError, ReportError, ResultsError, CardError, CheckpointError, SnapshotError, OSError,
             ValueError) as exc:

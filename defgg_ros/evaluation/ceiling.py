@@ -1,0 +1,127 @@
+"""What any grasp choice could reach: the task run on the sampler's candidates instead of a model's.
+
+For each object and modulus, the generator's antipodal sampler proposes
+collision-free candidates (the same sampler and seeds as the training data,
+object at the origin, yaw 0) and each runs under the evaluation's task
+protocol. Two figures per modulus bound a model's success:
+
+- *random candidate*: the mean per-object fraction of candidates that
+  succeed, i.e. what picking a candidate at random scores (no skill);
+- *ceiling*: the fraction of objects where at least one candidate succeeds,
+  i.e. the best a perfect ranking of these candidates could score.
+
+A model below the random figure ranks worse than chance; a ceiling far below
+a target says the simulator (grip force, friction, mass) and not the network
+is what bounds the number. Results are one fsync'd JSON line per trial
+(resumable, like ``defgg-eval run``).
+"""
+from __future__ import annotations
+
+from collections import defaultdict
+from pathlib import Path
+
+from defgg_ros.atomic import append_jsonl, read_jsonl, write_text_atomic
+from defgg_ros.evaluation.tasks import check_task, task_success
+
+RESULTS_FILE = "ceiling.jsonl"
+TABLE_FILE = "ceiling.md"
+
+
+def trial_key(set_name: str, object_name: str, youngs_modulus_pa: float, candidate: int, task: str,
+              max_tet_nodes: int) -> str:
+    return f"{set_name}/{object_name}|E={youngs_modulus_pa:.3g}|c{candidate:03d}|{task}|nodes<={max_tet_nodes}"
+
+
+def plan_trials(shapes, moduli_pa, n_candidates: int, task: str, seed: int, max_tet_nodes: int | None = None):
+    """[(key, shape, E, candidate index, WorldGrasp)] in candidate-major order (all objects' first one first)."""
+    from defgg_ros.data.datagen import object_seed
+    from defgg_ros.sim.sampler import sample_grasps
+
+    check_task(task)
+    if n_candidates < 1:
+        raise ValueError(f"candidates per object must be >= 1, got {n_candidates}")
+    per_shape = [(s, sample_grasps(s.surface(), object_seed(seed, s.name), keep=n_candidates)) for s in shapes]
+    trials = []
+    for i in range(n_candidates):
+        for shape, cands in per_shape:
+            if i >= len(cands):
+                continue
+            sim_shape = shape.coarsened(max_tet_nodes)
+            for e in moduli_pa:
+                key = trial_key(shape.set_name, shape.name, e, i, task, sim_shape.max_tet_nodes)
+                trials.append((key, sim_shape, e, i, cands[i].grasp))
+    return trials
+
+
+def run(out_dir, trials, task: str, settings, max_trials: int | None = None, progress=None) -> int:
+    """Simulate the trials not yet in OUT/ceiling.jsonl; returns how many ran."""
+    from dataclasses import asdict
+
+    from defgg_ros.sim import objects, world
+    from defgg_ros.sim.trial import run_grasp_trial
+
+    path = Path(out_dir) / RESULTS_FILE
+    path.parent.mkdir(parents=True, exist_ok=True)
+    done = {r["key"] for r in read_jsonl(path)}
+    pending = [t for t in trials if t[0] not in done][:max_trials]
+    client = world.connect()
+    for n, (key, shape, e, i, grasp) in enumerate(pending, 1):
+        out = run_grasp_trial(objects.ObjectSpec(shape, e), grasp, tests=(task,), settings=settings, client=client)
+        accels = out.shake_accels_mps2 if task == "shake" else out.twist_accels_radps2
+        append_jsonl(path, {"key": key, "object": shape.name, "object_set": shape.set_name, "youngs_modulus_pa": e,
+                            "candidate": i, "task": task, "status": out.status, "accels": accels,
+                            "success": task_success(task, out.status, accels), "cpu_s": out.cpu_s,
+                            "tet_nodes": [len(t.nodes_m) for t in shape.tet_parts],
+                            "grasp_force_n": out.grasp_force_n, "trial_settings": asdict(settings)})
+        if progress:
+            progress(n, len(pending), key)
+    return len(pending)
+
+
+def summarize(records) -> list:
+    """Rows per (task, E) and one "all" row per task: objects, trials, random-candidate and ceiling rates (%)."""
+    by_view = defaultdict(list)
+    for r in records:
+        if r["success"] is not None:
+            by_view[(r["task"], r["youngs_modulus_pa"], r["object"])].append(bool(r["success"]))
+    rows = []
+    for task in sorted({k[0] for k in by_view}):
+        groups = defaultdict(list)
+        for (t, e, _), outcomes in by_view.items():
+            if t == task:
+                groups[e].append(outcomes)
+                groups["all"].append(outcomes)
+        for e in sorted((k for k in groups if k != "all"), key=float) + ["all"]:
+            views = groups[e]
+            rows.append({"task": task, "youngs_modulus_pa": e, "objects": len(views),
+                         "trials": sum(len(v) for v in views),
+                         "random_pct": 100.0 * sum(sum(v) / len(v) for v in views) / len(views),
+                         "ceiling_pct": 100.0 * sum(any(v) for v in views) / len(views)})
+    return rows
+
+
+def per_object_table(records) -> list:
+    """Lines 'object | E | held/tried' for the Markdown file."""
+    counts = defaultdict(lambda: [0, 0])
+    for r in records:
+        if r["success"] is not None:
+            c = counts[(r["task"], r["object"], r["youngs_modulus_pa"])]
+            c[0] += bool(r["success"])
+            c[1] += 1
+    return [f"| {t} | {o} | {e:.0e} | {h}/{n} |" for (t, o, e), (h, n) in sorted(counts.items())]
+
+
+def write_table(out_dir) -> str:
+    records = read_jsonl(Path(out_dir) / RESULTS_FILE)
+    lines = ["# Task success of the sampler's candidates (generated by defgg_ros.evaluation.ceiling)", "",
+             "| task | E (Pa) | objects | trials | random candidate (%) | ceiling: any candidate (%) |",
+             "|---|---|---|---|---|---|"]
+    for r in summarize(records):
+        e = r["youngs_modulus_pa"]
+        e_txt = "all stiffnesses" if e == "all" else f"{e:.0e}"
+        lines.append(f"| {r['task']} | {e_txt} | {r['objects']} | {r['trials']} | {r['random_pct']:.1f} | "
+                     f"{r['ceiling_pct']:.1f} |")
+    lines += ["", "| task | object | E (Pa) | held / tried |", "|---|---|---|---|"] + per_object_table(records)
+    text = "\n".join(lines) + "\n"
+    write_text_atomic(Path(out_dir) / TABLE_FILE, text)
+    return text

@@ -1,0 +1,46 @@
+"""The candidate ceiling: sampler candidates under the task, random-pick and best-case rates."""
+import json
+
+import pytest
+
+from defgg_ros.evaluation import ceiling
+from defgg_ros.evaluation.cli import main as eval_main
+
+
+def _rec(obj, e, success, task="shake"):
+    return {"object": obj, "youngs_modulus_pa": e, "task": task, "success": success}
+
+
+def test_summary_separates_random_pick_from_ceiling():
+    records = [_rec("a", 2e4, True), _rec("a", 2e4, False), _rec("a", 2e4, False), _rec("a", 2e4, False),
+               _rec("b", 2e4, False), _rec("b", 2e4, False),
+               _rec("a", 2e9, True), _rec("b", 2e9, True), _rec("b", 2e9, None)]   # None: sim failure, not counted
+    rows = {r["youngs_modulus_pa"]: r for r in ceiling.summarize(records)}
+    assert rows[2e4]["random_pct"] == pytest.approx(12.5)      # mean of 1/4 and 0/2
+    assert rows[2e4]["ceiling_pct"] == pytest.approx(50.0)      # a has a success, b none
+    assert rows[2e9]["trials"] == 2 and rows[2e9]["ceiling_pct"] == 100.0
+    assert rows["all"]["objects"] == 4 and rows["all"]["random_pct"] == pytest.approx((25 + 0 + 100 + 100) / 4)
+
+
+def test_plan_rejects_bad_input():
+    with pytest.raises(ValueError, match="candidates per object"):
+        ceiling.plan_trials([], [2e9], 0, "shake", 0)
+    with pytest.raises(ValueError, match="unknown task"):
+        ceiling.plan_trials([], [2e9], 1, "juggle", 0)
+
+
+def test_ceiling_command_runs_real_trials_and_resumes(tmp_path, capsys):
+    out = tmp_path / "ceil"
+    argv = ["ceiling", "--out", str(out), "--only", "common_sponge", "--moduli", "2e9", "--candidates", "2"]
+    assert eval_main(argv) == 0
+    lines = [json.loads(x) for x in (out / ceiling.RESULTS_FILE).read_text().splitlines()]
+    assert [r["candidate"] for r in lines] == [0, 1]
+    for r in lines:
+        assert r["status"] in ("ok", "lift_failed") and r["cpu_s"] > 0
+        assert r["success"] == (r["status"] == "ok" and min(r["accels"]) >= 25.0 * (1 - 1e-6))
+    table = (out / ceiling.TABLE_FILE).read_text()
+    assert "| shake | 2e+09 | 1 | 2 |" in table and "common_sponge" in table
+    capsys.readouterr()
+    assert eval_main(argv) == 0                      # rerun: nothing left to simulate
+    assert len((out / ceiling.RESULTS_FILE).read_text().splitlines()) == 2
+    assert "[1/" not in capsys.readouterr().out
