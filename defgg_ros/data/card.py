@@ -89,12 +89,19 @@ def render_card(root, grasps_per_scene: int | None = None) -> str:
               f"acceleration is >= {SHAKE_POSITIVE_THRESHOLD_MPS2} m/s^2; a failed lift is a negative.",
               "- Grasp force per finger: 2 N at E = 2e4 Pa plus 0.5 N per decade of E (defgg_ros/sim/trial.py).",
               f"- {RIGID_NOTE}",
+              f"- {MESH_NOTE}",
               f"- Generator settings: `{json.dumps(gen, sort_keys=True)}`",
               f"- Last column: positives (mean >= {SHAKE_POSITIVE_THRESHOLD_MPS2} m/s^2) of which at least one "
               "measured direction held less; skipped directions are not counted, so it is a lower bound. "
               "Such grasps are positive training examples but fail the evaluation's shake task, where every "
               "direction must hold (docs/results.md).", ""]
     return "\n".join(lines)
+
+
+MESH_NOTE = ("Tet meshes: fTetWild is not deterministic (the same surface gives a few nodes more or less per run), "
+             "so since 2026-11-24 every trial simulates the library's frozen meshes (defgg_ros/sim/tet_meshes). "
+             "Earlier trials ran on meshes regenerated per machine: the 'tet nodes' column is the first "
+             "scene render's, and a grasp near the threshold can flip with the mesh (bench/README.md).")
 
 
 def _share(rows) -> str:
