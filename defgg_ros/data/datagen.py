@@ -47,6 +47,7 @@ class DatagenConfig:
     workers: int = 1
     ray_address: str | None = None
     settings: dict = field(default_factory=dict)   # TrialSettings overrides
+    sim_max_tet_nodes: int | None = None           # None: simulate on the shipped mesh
     card_every: int = 20                           # regenerate the card every N finished trials
 
     def header(self) -> dict:
@@ -72,6 +73,7 @@ class TrialJob:
     rect: dict               # GraspRect fields
     seed: int
     settings: dict
+    sim_max_tet_nodes: int | None = None
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -154,7 +156,7 @@ def plan(cfg: DatagenConfig, writer: DatasetWriter, progress=None) -> list:
                 tid = trial_id_for(sid, i)
                 if tid not in done:
                     jobs.append(TrialJob(tid, sid, name, e, i, cands[i]["grasp"], cands[i]["rect"],
-                                         object_seed(cfg.seed, tid), cfg.settings))
+                                         object_seed(cfg.seed, tid), cfg.settings, cfg.sim_max_tet_nodes))
     return jobs
 
 
@@ -165,10 +167,13 @@ def run_trial_job(job: dict) -> dict:
 
     job = TrialJob(**job)
     settings = replace(TrialSettings.fast(), **job.settings)
-    spec = objects.ObjectSpec(objects.get_shape(job.object_name), job.youngs_modulus_pa)
+    # Images and candidates come from the shipped mesh; only the FEM may run on a coarser one.
+    shape = objects.get_shape(job.object_name).coarsened(job.sim_max_tet_nodes)
+    spec = objects.ObjectSpec(shape, job.youngs_modulus_pa)
     grasp = WorldGrasp(tuple(job.grasp["position_m"]), job.grasp["yaw_rad"], job.grasp["width_m"])
     outcome = run_grasp_trial(spec, grasp, ("shake",), settings, client=_worker_client(world))
-    sim = dict(outcome.sim, shake_measured=outcome.shake_measured, sim_steps=outcome.sim_steps)
+    sim = dict(outcome.sim, shake_measured=outcome.shake_measured, sim_steps=outcome.sim_steps,
+               tet_nodes=[len(t.nodes_m) for t in shape.tet_parts])
     record = TrialRecord(
         trial_id=job.trial_id, scene_id=job.scene_id, object_name=job.object_name,
         youngs_modulus_pa=job.youngs_modulus_pa, candidate_index=job.candidate_index,
@@ -247,6 +252,17 @@ def _execute_ray(payloads, cfg, on_result) -> None:
             ray.shutdown()
 
 
+def check_same_sim_mesh(cfg: DatagenConfig) -> None:
+    """A resumed dataset keeps the FEM mesh it was started with (labels depend on it)."""
+    from defgg_ros.data.format import DatasetError, check_header
+
+    stored = check_header(cfg.out).get("generator", {}).get("sim_max_tet_nodes")
+    if stored != cfg.sim_max_tet_nodes:
+        flag = "no --sim-max-tet-nodes" if stored is None else f"--sim-max-tet-nodes {stored}"
+        raise DatasetError(f"{cfg.out} was generated with {flag}; resume it with the same FEM mesh "
+                           f"(got {cfg.sim_max_tet_nodes}) or write a new dataset")
+
+
 def generate(cfg: DatagenConfig, progress_bar=True) -> dict:
     """Plan + execute; returns counts. Safe to rerun: finished trials are skipped."""
     from tqdm import tqdm
@@ -254,6 +270,7 @@ def generate(cfg: DatagenConfig, progress_bar=True) -> dict:
     from defgg_ros.data.card import write_card
 
     writer = DatasetWriter(cfg.out, cfg.header())
+    check_same_sim_mesh(cfg)
     t_plan = tqdm(desc="planning (objects)", unit="obj", disable=not progress_bar)
     jobs = plan(cfg, writer, progress=lambda name: t_plan.update(1))
     t_plan.close()

@@ -24,6 +24,8 @@ Example (background, one worker):
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from defgg_ros.data.datagen import COARSE_SIM_MAX_TET_NODES
+
     ap = argparse.ArgumentParser(prog="defgg-datagen", description=DESCRIPTION,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", type=Path, required=True, help="dataset folder (created or resumed)")
@@ -43,6 +45,10 @@ def build_parser() -> argparse.ArgumentParser:
                          "a local Ray instance with --workers CPUs")
     ap.add_argument("--settings", default="{}",
                     help='JSON overrides of TrialSettings, e.g. \'{"shake_ramp_time_s": 0.5}\'')
+    ap.add_argument("--sim-max-tet-nodes", type=int, default=None, metavar="N",
+                    help="simulate the FEM on a coarser mesh of at most N nodes per part (images and grasp "
+                         f"candidates keep the shipped mesh); {COARSE_SIM_MAX_TET_NODES} is the measured one "
+                         "(bench/README.md: speed-up and label agreement). Fixed for the life of a dataset.")
     ap.add_argument("--no-progress", action="store_true", help="no progress bar")
     return ap
 
@@ -50,6 +56,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     from defgg_ros.data.datagen import DatagenConfig, generate
+    from defgg_ros.data.format import DatasetError
     from defgg_ros.sim.trial import TrialSettings
 
     try:
@@ -58,14 +65,22 @@ def main(argv=None) -> int:
     except (json.JSONDecodeError, TypeError) as exc:
         print(f"defgg-datagen: bad --settings: {exc}", file=sys.stderr)
         return 2
+    if args.sim_max_tet_nodes is not None and args.sim_max_tet_nodes < 4:
+        print("defgg-datagen: --sim-max-tet-nodes must be >= 4 (a tetrahedron)", file=sys.stderr)
+        return 2
     if args.grasps_per_scene < 1 or args.pass_size < 1 or args.workers < 1:
         print("defgg-datagen: --grasps-per-scene, --pass-size and --workers must be >= 1", file=sys.stderr)
         return 2
     cfg = DatagenConfig(out=args.out, object_set=args.object_set, objects=tuple(args.objects),
                         moduli_pa=tuple(args.moduli), grasps_per_scene=args.grasps_per_scene,
                         pass_size=args.pass_size, n_candidates=args.candidates, seed=args.seed,
-                        workers=args.workers, ray_address=args.ray_address, settings=settings)
-    counts = generate(cfg, progress_bar=not args.no_progress)
+                        workers=args.workers, ray_address=args.ray_address, settings=settings,
+                        sim_max_tet_nodes=args.sim_max_tet_nodes)
+    try:
+        counts = generate(cfg, progress_bar=not args.no_progress)
+    except DatasetError as exc:
+        print(f"defgg-datagen: error: {exc}", file=sys.stderr)
+        return 2
     print(json.dumps(counts))
     return 0
 

@@ -93,3 +93,20 @@ def test_ray_path_gives_the_local_results(tmp_path):
     for t in read_trials(tmp_path / "ray", sid):
         assert t.label == by_id[t.trial_id].label
         assert t.shake_accels_mps2 == pytest.approx(by_id[t.trial_id].shake_accels_mps2, abs=0.5)
+
+
+def test_coarse_fem_mesh_is_recorded_and_fixed_for_the_dataset(tmp_path):
+    out = tmp_path / "coarse"
+    cfg = datagen.DatagenConfig(out=out, objects=("cube",), moduli_pa=(2e9,), grasps_per_scene=1, pass_size=1,
+                                settings=QUICK, sim_max_tet_nodes=datagen.COARSE_SIM_MAX_TET_NODES)
+    assert datagen.generate(cfg, progress_bar=False)["done"] == 1
+    (trial,) = read_trials(out, "cube__E2e+09")
+    assert 4 <= max(trial.sim["tet_nodes"]) <= datagen.COARSE_SIM_MAX_TET_NODES
+    scene = read_scene(out / "scenes" / "cube__E2e+09.npz")
+    assert scene.meta["tet_nodes"] != trial.sim["tet_nodes"]     # images keep the shipped mesh
+    # resuming with another FEM mesh would mix discretizations: refused, the CLI says how to resume
+    done = subprocess.run([sys.executable, "-m", "defgg_ros.data.datagen_cli", "--out", str(out), "--objects", "cube",
+                           "--moduli", "2e9", "--grasps-per-scene", "2", "--no-progress"],
+                          capture_output=True, text=True, timeout=600)
+    assert done.returncode == 2 and "--sim-max-tet-nodes 80" in done.stderr
+    assert len(read_trials(out, "cube__E2e+09")) == 1
