@@ -135,7 +135,8 @@ def _add_others(sub):
     p.add_argument("--sets", nargs="+", default=["common"], choices=sources.EVAL_SETS, help="default: %(default)s")
     p.add_argument("--only", nargs="+", metavar="OBJECT", help="restrict the sets to these objects")
     p.add_argument("--moduli", nargs="+", type=float, default=list(TRAINING_YOUNGS_MODULI_PA), metavar="PA")
-    p.add_argument("--candidates", type=int, default=8, help="candidates per object (default %(default)s)")
+    p.add_argument("--candidates", type=int, default=8,
+                   help="candidates per object; the table covers the first this many (default %(default)s)")
     p.add_argument("--task", default="shake", choices=TASKS)
     p.add_argument("--seed", type=int, default=0, help="sampler seed (default %(default)s, the training data's)")
     p.add_argument("--sim-max-tet-nodes", type=int, default=None, metavar="N",
@@ -391,7 +392,7 @@ def cmd_ceiling(args) -> int:
                                      args.sim_max_tet_nodes)
         ceiling.run(args.out, trials, args.task, eval_trial_settings(), args.max_trials,
                     progress=lambda n, total, key: print(f"[{n}/{total}] {key}", flush=True))
-    print(ceiling.write_table(args.out))
+    print(ceiling.write_table(args.out, args.candidates))
     return 0
 
 

@@ -44,3 +44,18 @@ def test_ceiling_command_runs_real_trials_and_resumes(tmp_path, capsys):
     assert eval_main(argv) == 0                      # rerun: nothing left to simulate
     assert len((out / ceiling.RESULTS_FILE).read_text().splitlines()) == 2
     assert "[1/" not in capsys.readouterr().out
+
+
+def test_stiffness_advantage_is_per_modulus_choice_minus_one_choice():
+    def rec(obj, c, e, ok):
+        return {"object": obj, "candidate": c, "youngs_modulus_pa": e, "task": "shake", "success": ok}
+
+    # object a: candidate 0 holds only when soft, candidate 1 only when rigid -> stiffness helps
+    # object b: candidate 0 holds at both moduli -> nothing to gain; candidate 2 ran at one modulus only
+    records = [rec("a", 0, 2e4, True), rec("a", 0, 2e9, False), rec("a", 1, 2e4, False), rec("a", 1, 2e9, True),
+               rec("b", 0, 2e4, True), rec("b", 0, 2e9, True), rec("b", 1, 2e4, False), rec("b", 1, 2e9, False),
+               rec("b", 2, 2e4, True)]
+    (row,) = ceiling.stiffness_advantage(records)
+    assert row["views"] == 4
+    assert row["one_for_all_pct"] == pytest.approx(75.0)      # a: 1 of 2, b: 2 of 2
+    assert row["per_modulus_pct"] == pytest.approx(100.0)
