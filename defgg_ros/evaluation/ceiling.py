@@ -156,10 +156,11 @@ def write_table(out_dir, max_candidates: int | None = None) -> str:
         e_txt = "all stiffnesses" if e == "all" else f"{e:.0e}"
         lines.append(f"| {r['task']} | {e_txt} | {r['objects']} | {r['trials']} | {r['random_pct']:.1f} | "
                      f"{r['ceiling_pct']:.1f} |")
-    lines += ["", "Largest advantage the stiffness input can give on these candidates (objects x moduli, only candidates "
-              "run at every modulus): best case of one grasp per object for every E (all a depth-only model can "
-              "do) vs one grasp per E.", "",
-              "| task | views | one grasp for all E (%) | one grasp per E (%) | gap (points) |", "|---|---|---|---|---|"]
+    lines += ["", "Largest advantage the stiffness input can give on these candidates (objects x moduli, only "
+              "candidates run at every modulus): best case of one grasp per object for every E (all a depth-only "
+              "model can do) vs one grasp per E.", "",
+              "| task | views | one grasp for all E (%) | one grasp per E (%) | gap (points) |",
+              "|---|---|---|---|---|"]
     for r in stiffness_advantage(records):
         lines.append(f"| {r['task']} | {r['views']} | {r['one_for_all_pct']:.1f} | {r['per_modulus_pct']:.1f} | "
                      f"{r['per_modulus_pct'] - r['one_for_all_pct']:.1f} |")
