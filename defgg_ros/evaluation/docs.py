@@ -99,6 +99,12 @@ def results_markdown(out_dir, doc_path, notes_path=None) -> str:
     mm = _read(tdir / "multimaterial.md")
     if mm:
         lines += ["## Multi-material object", "", mm, ""]
+    ceiling_md = _read(out_dir / "ceiling.md")
+    if ceiling_md:
+        # ceiling.md starts with its own title; the report gives it a section heading instead
+        body = ceiling_md.split("\n", 1)[1].strip()
+        lines += ["## What any grasp choice could reach: the sampler's candidates under the task", "",
+                  f"`defgg-eval ceiling --out {out_dir} ...` (defgg_ros/evaluation/ceiling.py).", "", body, ""]
     diag = _read(out_dir / "diagnostics.md")
     if diag:
         lines += ["## Diagnostics: do the labels and the plans depend on the stiffness?", "", diag, ""]

@@ -63,10 +63,14 @@ def test_outputs_have_the_papers_table_structure(mini_run, tmp_path):
                    "stiffnesses") == 4
     summary = json.loads((out / "summary.json").read_text())
     assert summary["records"] == 8
+    # the candidate ceiling, run into the same folder, becomes a section of the report
+    assert cli.main(["ceiling", "--out", str(out), "--only", "common_sponge", "--moduli", "2e9",
+                     "--candidates", "1"]) == 0
     doc = tmp_path / "results.md"
     assert cli.main(["report", "--out", str(out), "--docs", str(doc)]) == 0
     text = doc.read_text()
     assert "--quick" in text and "## Shake task" in text and "## Twist task" in text
+    assert "## What any grasp choice could reach" in text and "| shake | 2e+09 | 1 | 1 |" in text
 
 
 def test_rerun_skips_finished_trials(mini_run, capsys):
