@@ -19,13 +19,16 @@ Protocols:
   fast_coarse
              fast on a coarser FEM mesh (at most COARSE_SIM_MAX_TET_NODES nodes per part instead of 220);
              the grasp candidates still come from the default mesh, so both protocols try the same grasps
+  fast_coarse50
+             the same with at most 50 nodes
   naive_remesh
              naive on an independent fTetWild run of the same surface (not the shipped mesh): the
              label noise that the mesh alone causes, the floor for any agreement figure
-  fast_ramp025, fast_dt1ms
-             rejected variants of fast: the shake ramp in 0.25 s instead of 0.5 s, and a 1 ms
-             soft time step instead of 0.5 ms (0.25 ms at 2e6). Both are cheaper; run them to
-             see what they do to the labels.
+  fast_ramp025, fast_dt1ms, fast_lift03
+             rejected variants of fast: the shake ramp in 0.25 s instead of 0.5 s, a 1 ms soft
+             time step instead of 0.5 ms (0.25 ms at 2e6), and the generator's lift before
+             2026-11-24 (0.3 s lift, 0.1 s hold). All cheaper; run them to see what they do to
+             the labels. (Rows named *_lift03 in the results were run with that lift.)
 """
 from __future__ import annotations
 
@@ -42,9 +45,11 @@ from defgg_ros.atomic import append_jsonl, read_jsonl  # noqa: E402
 DEFAULT_PROTOCOLS = ("naive", "exact", "fast")   # TrialSettings class methods
 # Tried and rejected (kept so the measurement can be repeated): a faster ramp and a
 # longer soft time step are much cheaper but change the held accelerations.
-VARIANTS = {"fast_ramp025": {"shake_ramp_time_s": 0.25}, "fast_dt1ms": {"time_step_s": 1e-3}}
+VARIANTS = {"fast_ramp025": {"shake_ramp_time_s": 0.25}, "fast_dt1ms": {"time_step_s": 1e-3},
+            "fast_lift03": {"lift_time_s": 0.3, "hold_time_s": 0.1}}
 # Same settings as fast, simulated on a coarser tet mesh (the generator's --sim-max-tet-nodes).
-MESH_VARIANTS = {"fast_coarse": "fast", "naive_remesh": "naive"}
+MESH_VARIANTS = {"fast_coarse": "fast", "fast_coarse50": "fast", "naive_remesh": "naive"}
+COARSE50_MAX_TET_NODES = 50
 PROTOCOLS = DEFAULT_PROTOCOLS + tuple(MESH_VARIANTS) + tuple(VARIANTS)
 
 
@@ -65,6 +70,8 @@ def protocol_shape(name: str, object_name: str):
     shape = get_shape(object_name)
     if name == "fast_coarse":
         return shape.coarsened(COARSE_SIM_MAX_TET_NODES)
+    if name == "fast_coarse50":
+        return shape.coarsened(COARSE50_MAX_TET_NODES)
     return shape.remeshed("bench-remesh1") if name == "naive_remesh" else shape
 
 

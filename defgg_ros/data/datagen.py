@@ -59,7 +59,16 @@ class DatagenConfig:
         d.pop("pass_size")   # the order trials run in, not a property of the data
         d["moduli_pa"] = list(self.moduli_pa)
         d["objects"] = list(self.objects)
+        d["trial_settings"] = effective_trial_settings(self.settings)
         return d
+
+
+def effective_trial_settings(overrides: dict, legacy: bool = False) -> dict:
+    """Every TrialSettings field of the generator's protocol with these overrides (legacy: the pre-2026-11-24 lift)."""
+    from defgg_ros.sim.trial import LEGACY_LIFT_SETTINGS, TrialSettings
+
+    base = replace(TrialSettings.fast(), **LEGACY_LIFT_SETTINGS) if legacy else TrialSettings.fast()
+    return asdict(replace(base, **overrides))
 
 
 @dataclass(frozen=True)
@@ -252,15 +261,23 @@ def _execute_ray(payloads, cfg, on_result) -> None:
             ray.shutdown()
 
 
-def check_same_sim_mesh(cfg: DatagenConfig) -> None:
-    """A resumed dataset keeps the FEM mesh it was started with (labels depend on it)."""
+def check_resumable(cfg: DatagenConfig) -> None:
+    """A resumed dataset keeps its FEM mesh and trial protocol (labels depend on both)."""
     from defgg_ros.data.format import DatasetError, check_header
 
-    stored = check_header(cfg.out).get("generator", {}).get("sim_max_tet_nodes")
-    if stored != cfg.sim_max_tet_nodes:
-        flag = "no --sim-max-tet-nodes" if stored is None else f"--sim-max-tet-nodes {stored}"
+    stored = check_header(cfg.out).get("generator", {})
+    mesh = stored.get("sim_max_tet_nodes")
+    if mesh != cfg.sim_max_tet_nodes:
+        flag = "no --sim-max-tet-nodes" if mesh is None else f"--sim-max-tet-nodes {mesh}"
         raise DatasetError(f"{cfg.out} was generated with {flag}; resume it with the same FEM mesh "
                            f"(got {cfg.sim_max_tet_nodes}) or write a new dataset")
+    # headers before 2026-11-24 did not record the protocol: theirs was the legacy lift
+    protocol = stored.get("trial_settings") or effective_trial_settings(stored.get("settings", {}), legacy=True)
+    current = effective_trial_settings(cfg.settings)
+    if protocol != current:
+        needed = {k: v for k, v in protocol.items() if current.get(k) != v}
+        raise DatasetError(f"{cfg.out} was generated with another trial protocol; resume it with "
+                           f"--settings '{json.dumps({**cfg.settings, **needed})}' or write a new dataset")
 
 
 def generate(cfg: DatagenConfig, progress_bar=True) -> dict:
@@ -270,7 +287,7 @@ def generate(cfg: DatagenConfig, progress_bar=True) -> dict:
     from defgg_ros.data.card import write_card
 
     writer = DatasetWriter(cfg.out, cfg.header())
-    check_same_sim_mesh(cfg)
+    check_resumable(cfg)
     t_plan = tqdm(desc="planning (objects)", unit="obj", disable=not progress_bar)
     jobs = plan(cfg, writer, progress=lambda name: t_plan.update(1))
     t_plan.close()

@@ -231,6 +231,22 @@ def write_manifest(out_dir, args, model_paths, predictors, objects, argv, settin
     write_json_atomic(Path(out_dir) / report_mod.MANIFEST_FILE, merge_manifest(out_dir, manifest))
 
 
+def check_same_protocol(out_dir, settings) -> None:
+    """Trials of one folder share one protocol: finished trials are skipped by key, so a folder run
+    with other trial settings (e.g. before the 0.6 s lift of 2026-11-24) would silently mix them."""
+    from dataclasses import asdict
+
+    path = Path(out_dir) / report_mod.MANIFEST_FILE
+    if not path.is_file():
+        return
+    old = json.loads(path.read_text(encoding="utf-8")).get("trial_settings") or {}
+    new = asdict(settings)
+    differ = sorted(k for k in set(old) | set(new) if old.get(k) != new.get(k))
+    if differ:
+        raise ValueError(f"{out_dir} holds trials of another protocol (differs in {', '.join(differ)}); "
+                         "evaluate into a new --out folder")
+
+
 def merge_manifest(out_dir, manifest: dict) -> dict:
     """Several runs into one folder (e.g. multi-material first, then the main tables) with the same models:
     the folder's manifest is their union, so the report covers everything they ran."""
@@ -265,6 +281,7 @@ def cmd_run(args, argv) -> int:
     predictors = load_predictors(model_paths)
     objects = eval_objects(args)
     settings = runner.quick_trial_settings() if args.quick else runner.eval_trial_settings()
+    check_same_protocol(args.out, settings)
     write_manifest(args.out, args, model_paths, predictors, objects, argv, settings)
     plan = runner.EvalPlan(objects, predictors, build_views(args, predictors, objects), args.grasps,
                            tuple(args.tasks), args.seed, settings, args.ranks)

@@ -35,6 +35,11 @@ COARSENING_STEPS = ((0.12, 5e-3), (0.15, 1e-2), (0.2, 1.5e-2), (0.25, 2e-2))
 # TARGET_MAX_NODES (the data generator's FEM mesh, docs/dataset.md): the
 # default meshes stay exactly what they were.
 EXTRA_COARSENING_STEPS = ((0.35, 3e-2), (0.5, 4e-2), (0.7, 5e-2))
+# A coarser step may lose at most this fraction of the finest step's volume:
+# coarsening shrinks curved surfaces (a 42-node sphere had 14 % less volume,
+# hence mass) and collapsed the mug's thin wall (-95 %); then the mesh stays
+# at the last step within it, above the node bound.
+MAX_COARSENING_VOLUME_LOSS = 0.05
 MESH_CACHE_ENV = "DEFGG_MESH_CACHE"
 # The shipped, frozen tet meshes of the library objects (read-only; npz of nodes_m and tets).
 STORE_DIR = Path(__file__).resolve().parent / "tet_meshes"
@@ -129,6 +134,15 @@ def tetrahedralize(mesh: trimesh.Trimesh, max_nodes: int = TARGET_MAX_NODES, var
         raise MeshError("empty mesh or non-finite vertices")
     if max_nodes < 4:
         raise MeshError(f"a tet mesh needs at least 4 nodes, asked for at most {max_nodes}")
+    if max_nodes < TARGET_MAX_NODES:
+        coarse = _tetrahedralize(mesh, max_nodes, variant)
+        default = _tetrahedralize(mesh, TARGET_MAX_NODES, variant)
+        # the volume rule can stop coarsening above the default mesh's node count: then keep the default
+        return coarse if len(coarse.nodes_m) < len(default.nodes_m) else default
+    return _tetrahedralize(mesh, max_nodes, variant)
+
+
+def _tetrahedralize(mesh: trimesh.Trimesh, max_nodes: int, variant: str) -> TetMesh:
     digest = mesh_key(mesh, max_nodes, variant)
     folder = cache_dir()
     npz_path = STORE_DIR / f"{digest}.npz"
@@ -168,17 +182,24 @@ def _run_ftetwild(mesh, max_nodes: int = TARGET_MAX_NODES):
     pytetwild = _import_pytetwild()
     verts = np.asarray(mesh.vertices, dtype=np.float64)
     faces = np.asarray(mesh.faces, dtype=np.int32)
-    nodes = tets = None
+    nodes = tets = reference_volume = None
     steps = COARSENING_STEPS + (EXTRA_COARSENING_STEPS if max_nodes < TARGET_MAX_NODES else ())
     for fac, eps in steps:
-        nodes, tets = pytetwild.tetrahedralize(verts, faces, edge_length_fac=fac, coarsen=True,
-                                               epsilon=eps, num_threads=1, quiet=True)
+        step_nodes, step_tets = pytetwild.tetrahedralize(verts, faces, edge_length_fac=fac, coarsen=True,
+                                                         epsilon=eps, num_threads=1, quiet=True)
+        if step_tets is None or len(step_tets) == 0:
+            break
+        step_nodes = np.asarray(step_nodes, dtype=np.float64)
+        step_tets = np.asarray(step_tets, dtype=np.int64)
+        volume = float(np.abs(tet_volumes(step_nodes, step_tets)).sum())
+        reference_volume = reference_volume or volume
+        if volume < (1.0 - MAX_COARSENING_VOLUME_LOSS) * reference_volume:
+            break
+        nodes, tets = step_nodes, step_tets
         if len(nodes) <= max_nodes:
             break
     if tets is None or len(tets) == 0:
         raise MeshError("fTetWild produced no tetrahedra (is the surface closed?)")
-    nodes = np.asarray(nodes, dtype=np.float64)
-    tets = np.asarray(tets, dtype=np.int64)
     # fTetWild returns negatively oriented tets (FEM notes): flip them.
     vol = tet_volumes(nodes, tets)
     tets[vol < 0] = tets[vol < 0][:, [0, 2, 1, 3]]

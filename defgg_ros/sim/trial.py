@@ -91,14 +91,21 @@ class WorldGrasp:
             raise ValueError(f"grasp width {self.width_m} m outside (0, {GRIPPER_MAX_WIDTH_M}]")
 
 
+# Until 2026-11-24 the lift took 0.3 s and the hold 0.1 s: soft grasps that the
+# probe's 0.6 s lift holds fell out (capsule at 2e5 Pa: held 29 m/s^2 after the
+# slow lift, lift failure after the fast one; bench/README.md). Datasets made
+# with it record these values and resume with them (data/datagen.py).
+LEGACY_LIFT_SETTINGS = {"lift_time_s": 0.3, "hold_time_s": 0.1}
+
+
 @dataclass(frozen=True)
 class TrialSettings:
     close_speed_mps: float = 0.1
     close_settle_s: float = 0.1
     settle_before_s: float = 0.02
     lift_height_m: float = 0.03
-    lift_time_s: float = 0.3
-    hold_time_s: float = 0.1
+    lift_time_s: float = 0.6
+    hold_time_s: float = 0.2
     shake_ramp_time_s: float = 0.5
     twist_ramp_time_s: float = 0.5
     check_every_s: float = 0.005

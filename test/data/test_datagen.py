@@ -110,3 +110,24 @@ def test_coarse_fem_mesh_is_recorded_and_fixed_for_the_dataset(tmp_path):
                           capture_output=True, text=True, timeout=600)
     assert done.returncode == 2 and "--sim-max-tet-nodes 80" in done.stderr
     assert len(read_trials(out, "cube__E2e+09")) == 1
+
+
+def test_resume_keeps_the_trial_protocol_of_the_dataset(tmp_path):
+    from defgg_ros.data.format import DatasetError
+
+    out = tmp_path / "legacy"
+    cfg = datagen.DatagenConfig(out=out, objects=("cube",), moduli_pa=(2e9,))
+    legacy_header = cfg.header()
+    del legacy_header["trial_settings"]            # headers written before the protocol was recorded
+    DatasetWriter(out, legacy_header)
+    with pytest.raises(DatasetError, match='"lift_time_s": 0.3') as err:
+        datagen.check_resumable(cfg)
+    assert '"hold_time_s": 0.1' in str(err.value)
+    datagen.check_resumable(datagen.DatagenConfig(out=out, objects=("cube",), moduli_pa=(2e9,),
+                                                  settings={"lift_time_s": 0.3, "hold_time_s": 0.1}))
+    # a new dataset records its whole protocol; changing one value on resume is refused
+    new = tmp_path / "new"
+    DatasetWriter(new, datagen.DatagenConfig(out=new, settings={"shake_ramp_time_s": 0.5}).header())
+    datagen.check_resumable(datagen.DatagenConfig(out=new, settings={"shake_ramp_time_s": 0.5}))
+    with pytest.raises(DatasetError, match="another trial protocol"):
+        datagen.check_resumable(datagen.DatagenConfig(out=new, settings={"shake_ramp_time_s": 0.25}))

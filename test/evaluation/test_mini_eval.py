@@ -81,3 +81,12 @@ def test_rerun_skips_finished_trials(mini_run, capsys):
     counts = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert counts["simulated"] == 0 and counts["stored"] == 8
     assert (out / "trials.jsonl").read_bytes() == before
+
+
+def test_a_folder_of_another_protocol_is_refused(mini_run, capsys):
+    out, argv = mini_run
+    before = (out / "trials.jsonl").read_bytes()
+    no_quick = [a for a in argv if a != "--quick"]         # the full protocol into the --quick folder
+    assert cli.main(no_quick) == 2
+    assert "another protocol" in capsys.readouterr().err
+    assert (out / "trials.jsonl").read_bytes() == before
