@@ -30,7 +30,7 @@ CANDIDATE_FILE_VERSION = 1
 # Node bound of the coarse FEM mesh that --sim-max-tet-nodes offers (the
 # default mesh allows 220). Label agreement with the naive protocol on the
 # default mesh and the speed-up: bench/README.md, "Dataset generation cost".
-COARSE_SIM_MAX_TET_NODES = 80
+COARSE_SIM_MAX_TET_NODES = 50
 # Trials that raised (not stored as trials, so the next run retries them), one JSON line each.
 
 
@@ -268,9 +268,9 @@ def check_resumable(cfg: DatagenConfig) -> None:
     stored = check_header(cfg.out).get("generator", {})
     mesh = stored.get("sim_max_tet_nodes")
     if mesh != cfg.sim_max_tet_nodes:
-        flag = "no --sim-max-tet-nodes" if mesh is None else f"--sim-max-tet-nodes {mesh}"
+        flag = f"--sim-max-tet-nodes {mesh or 0}"
         raise DatasetError(f"{cfg.out} was generated with {flag}; resume it with the same FEM mesh "
-                           f"(got {cfg.sim_max_tet_nodes}) or write a new dataset")
+                           f"(got {cfg.sim_max_tet_nodes or 0}; 0 = the shipped mesh) or write a new dataset")
     # headers before 2026-11-24 did not record the protocol: theirs was the legacy lift
     protocol = stored.get("trial_settings") or effective_trial_settings(stored.get("settings", {}), legacy=True)
     current = effective_trial_settings(cfg.settings)

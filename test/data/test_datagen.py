@@ -106,9 +106,10 @@ def test_coarse_fem_mesh_is_recorded_and_fixed_for_the_dataset(tmp_path):
     assert scene.meta["tet_nodes"] != trial.sim["tet_nodes"]     # images keep the shipped mesh
     # resuming with another FEM mesh would mix discretizations: refused, the CLI says how to resume
     done = subprocess.run([sys.executable, "-m", "defgg_ros.data.datagen_cli", "--out", str(out), "--objects", "cube",
-                           "--moduli", "2e9", "--grasps-per-scene", "2", "--no-progress"],
+                           "--moduli", "2e9", "--grasps-per-scene", "2", "--no-progress", "--sim-max-tet-nodes", "0",
+                           "--settings", json.dumps(QUICK)],
                           capture_output=True, text=True, timeout=600)
-    assert done.returncode == 2 and "--sim-max-tet-nodes 80" in done.stderr
+    assert done.returncode == 2 and f"--sim-max-tet-nodes {datagen.COARSE_SIM_MAX_TET_NODES}" in done.stderr
     assert len(read_trials(out, "cube__E2e+09")) == 1
 
 
