@@ -64,15 +64,15 @@ def protocol_settings(name: str):
     return getattr(TrialSettings, MESH_VARIANTS.get(name, name))()
 
 
-def protocol_shape(name: str, object_name: str):
+def protocol_shape(name: str, object_name: str, youngs_modulus_pa: float):
     from defgg_ros.data.datagen import COARSE_SIM_MAX_TET_NODES
-    from defgg_ros.sim.objects import get_shape
+    from defgg_ros.sim.objects import get_shape, simulation_shape
 
     shape = get_shape(object_name)
-    if name == "fast_coarse":
-        return shape.coarsened(COARSE_SIM_MAX_TET_NODES)
+    if name == "fast_coarse":     # as the generator: coarse for soft bodies only
+        return simulation_shape(shape, youngs_modulus_pa, COARSE_SIM_MAX_TET_NODES)
     if name == "fast_coarse80":
-        return shape.coarsened(COARSE80_MAX_TET_NODES)
+        return simulation_shape(shape, youngs_modulus_pa, COARSE80_MAX_TET_NODES)
     return shape.remeshed("bench-remesh1") if name == "naive_remesh" else shape
 
 
@@ -112,7 +112,7 @@ def run(args):
             if (trial, proto) in done:
                 continue
             settings = protocol_settings(proto)
-            shape = protocol_shape(proto, name)
+            shape = protocol_shape(proto, name, e)
             out = run_grasp_trial(objects.ObjectSpec(shape, e), grasp, ("shake",), settings, client=client)
             mean = out.shake_mean_mps2
             label = False if out.status == "lift_failed" else (None if mean is None else mean >= 25.0)

@@ -177,7 +177,8 @@ def run_trial_job(job: dict) -> dict:
     job = TrialJob(**job)
     settings = replace(TrialSettings.fast(), **job.settings)
     # Images and candidates come from the shipped mesh; only the FEM may run on a coarser one.
-    shape = objects.get_shape(job.object_name).coarsened(job.sim_max_tet_nodes)
+    shape = objects.simulation_shape(objects.get_shape(job.object_name), job.youngs_modulus_pa,
+                                     job.sim_max_tet_nodes)
     spec = objects.ObjectSpec(shape, job.youngs_modulus_pa)
     grasp = WorldGrasp(tuple(job.grasp["position_m"]), job.grasp["yaw_rad"], job.grasp["width_m"])
     outcome = run_grasp_trial(spec, grasp, ("shake",), settings, client=_worker_client(world))

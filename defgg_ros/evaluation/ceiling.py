@@ -42,6 +42,7 @@ def trial_key(set_name: str, object_name: str, youngs_modulus_pa: float, candida
 def plan_trials(shapes, moduli_pa, n_candidates: int, task: str, seed: int, max_tet_nodes: int | None = None):
     """[(key, shape, E, candidate index, WorldGrasp)] in candidate-major order (all objects' first one first)."""
     from defgg_ros.data.datagen import object_seed
+    from defgg_ros.sim.objects import simulation_shape
     from defgg_ros.sim.sampler import sample_grasps
 
     check_task(task)
@@ -53,8 +54,8 @@ def plan_trials(shapes, moduli_pa, n_candidates: int, task: str, seed: int, max_
         for shape, cands in per_shape:
             if i >= len(cands):
                 continue
-            sim_shape = shape.coarsened(max_tet_nodes)
             for e in moduli_pa:
+                sim_shape = simulation_shape(shape, e, max_tet_nodes)
                 key = trial_key(shape.set_name, shape.name, e, i, task, sim_shape.max_tet_nodes)
                 trials.append((key, sim_shape, e, i, cands[i].grasp))
     return trials

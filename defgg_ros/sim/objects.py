@@ -145,6 +145,13 @@ def is_soft(youngs_modulus_pa: float) -> bool:
     return youngs_modulus_pa <= MAX_SOFT_BODY_YOUNGS_MODULUS_PA
 
 
+def simulation_shape(shape: ObjectShape, youngs_modulus_pa: float, max_tet_nodes: int | None) -> ObjectShape:
+    """The shape to simulate: a coarser FEM mesh only for soft bodies. A rigid body gains no speed
+    from it (0.3 s CPU per trial either way) and its faceted collision shape changes the grip: a
+    rigid sphere that slipped at 1.6 m/s^2 on the shipped mesh held 25.7 m/s^2 on a coarse one."""
+    return shape.coarsened(max_tet_nodes) if is_soft(youngs_modulus_pa) else shape
+
+
 def object_set(set_name: str) -> list:
     """ObjectShapes of a named set ("train", "common", "adversarial"), sorted by name."""
     if set_name not in library.OBJECT_SETS:

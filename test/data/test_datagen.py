@@ -97,20 +97,22 @@ def test_ray_path_gives_the_local_results(tmp_path):
 
 def test_coarse_fem_mesh_is_recorded_and_fixed_for_the_dataset(tmp_path):
     out = tmp_path / "coarse"
-    cfg = datagen.DatagenConfig(out=out, objects=("cube",), moduli_pa=(2e9,), grasps_per_scene=1, pass_size=1,
+    cfg = datagen.DatagenConfig(out=out, objects=("cube",), moduli_pa=(2e5, 2e9), grasps_per_scene=1, pass_size=1,
                                 settings=QUICK, sim_max_tet_nodes=datagen.COARSE_SIM_MAX_TET_NODES)
-    assert datagen.generate(cfg, progress_bar=False)["done"] == 1
-    (trial,) = read_trials(out, "cube__E2e+09")
-    assert 4 <= max(trial.sim["tet_nodes"]) <= datagen.COARSE_SIM_MAX_TET_NODES
-    scene = read_scene(out / "scenes" / "cube__E2e+09.npz")
-    assert scene.meta["tet_nodes"] != trial.sim["tet_nodes"]     # images keep the shipped mesh
+    assert datagen.generate(cfg, progress_bar=False)["done"] == 2
+    (soft,) = read_trials(out, "cube__E2e+05")
+    (rigid,) = read_trials(out, "cube__E2e+09")
+    assert 4 <= max(soft.sim["tet_nodes"]) <= datagen.COARSE_SIM_MAX_TET_NODES
+    scene = read_scene(out / "scenes" / "cube__E2e+05.npz")
+    # images keep the shipped mesh, and so do rigid bodies (no speed to gain, and facets change the grip)
+    assert scene.meta["tet_nodes"] == rigid.sim["tet_nodes"] != soft.sim["tet_nodes"]
     # resuming with another FEM mesh would mix discretizations: refused, the CLI says how to resume
     done = subprocess.run([sys.executable, "-m", "defgg_ros.data.datagen_cli", "--out", str(out), "--objects", "cube",
-                           "--moduli", "2e9", "--grasps-per-scene", "2", "--no-progress", "--sim-max-tet-nodes", "0",
-                           "--settings", json.dumps(QUICK)],
+                           "--moduli", "2e5", "2e9", "--grasps-per-scene", "2", "--no-progress",
+                           "--sim-max-tet-nodes", "0", "--settings", json.dumps(QUICK)],
                           capture_output=True, text=True, timeout=600)
     assert done.returncode == 2 and f"--sim-max-tet-nodes {datagen.COARSE_SIM_MAX_TET_NODES}" in done.stderr
-    assert len(read_trials(out, "cube__E2e+09")) == 1
+    assert len(read_trials(out, "cube__E2e+05")) == 1
 
 
 def test_resume_keeps_the_trial_protocol_of_the_dataset(tmp_path):
