@@ -90,6 +90,7 @@ def render_card(root, grasps_per_scene: int | None = None) -> str:
               "- Grasp force per finger: 2 N at E = 2e4 Pa plus 0.5 N per decade of E (defgg_ros/sim/trial.py).",
               f"- {RIGID_NOTE}",
               f"- {MESH_NOTE}",
+              f"- {_protocol_line(gen)}",
               f"- Generator settings: `{json.dumps(gen, sort_keys=True)}`",
               f"- Last column: positives (mean >= {SHAKE_POSITIVE_THRESHOLD_MPS2} m/s^2) of which at least one "
               "measured direction held less; skipped directions are not counted, so it is a lower bound. "
@@ -102,6 +103,20 @@ MESH_NOTE = ("Tet meshes: fTetWild is not deterministic (the same surface gives 
              "so since 2026-11-24 every trial simulates the library's frozen meshes (defgg_ros/sim/tet_meshes). "
              "Earlier trials ran on meshes regenerated per machine: the 'tet nodes' column is the first "
              "scene render's, and a grasp near the threshold can flip with the mesh (bench/README.md).")
+
+
+def _protocol_line(gen: dict) -> str:
+    from defgg_ros.data.datagen import effective_trial_settings
+
+    recorded = gen.get("trial_settings")
+    settings = recorded or effective_trial_settings(gen.get("settings", {}), legacy=True)
+    mesh = gen.get("sim_max_tet_nodes")
+    return (f"Trial protocol{'' if recorded else ' (not recorded in the header: the generator of the time)'}: "
+            f"close settle {settings['close_settle_s']} s, lift {settings['lift_height_m'] * 100:.0f} cm in "
+            f"{settings['lift_time_s']} s, hold {settings['hold_time_s']} s; FEM mesh: "
+            + (f"at most {mesh} nodes (soft bodies)" if mesh else "the shipped mesh")
+            + ("" if settings["lift_time_s"] >= 0.6 else ". This lift dropped soft grasps that a 0.6 s lift holds "
+               "(bench/README.md): some soft lift failures here are artifacts of it"))
 
 
 def _share(rows) -> str:
