@@ -17,9 +17,9 @@ Protocols:
   fast       the generator's (TrialSettings.fast): exact + the confident-stop surrogate (stop after
              >= 4 directions when the measured mean is >= 40/sqrt(k) m/s^2 from the threshold)
   fast_coarse
-             fast on the generator's coarse FEM mesh (--sim-max-tet-nodes, at most
-             COARSE_SIM_MAX_TET_NODES = 50 nodes per part instead of 220, volume kept within 5 %); the
-             grasp candidates still come from the shipped mesh, so both protocols try the same grasps
+             fast with soft bodies on a coarse FEM mesh (defgg-datagen --sim-max-tet-nodes 50: at most
+             50 nodes per part instead of 220, volume kept within 5 %); the grasp candidates still come
+             from the shipped mesh, so both protocols try the same grasps. Measured and rejected (labels).
   fast_coarse80
              the same with at most 80 nodes (measured first: slower, no better agreement)
   naive_remesh
