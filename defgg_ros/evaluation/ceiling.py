@@ -32,6 +32,20 @@ from defgg_ros.evaluation.tasks import check_task, task_success
 
 RESULTS_FILE = "ceiling.jsonl"
 TABLE_FILE = "ceiling.md"
+COMMANDS_FILE = "ceiling_commands.txt"   # the commands that ran trials into the folder, for the report
+
+
+def record_command(out_dir, command: str) -> None:
+    path = Path(out_dir) / COMMANDS_FILE
+    known = path.read_text(encoding="utf-8").splitlines() if path.is_file() else []
+    if command not in known:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_text_atomic(path, "\n".join(known + [command]) + "\n")
+
+
+def recorded_commands(out_dir) -> list:
+    path = Path(out_dir) / COMMANDS_FILE
+    return path.read_text(encoding="utf-8").splitlines() if path.is_file() else []
 
 
 def trial_key(set_name: str, object_name: str, youngs_modulus_pa: float, candidate: int, task: str,

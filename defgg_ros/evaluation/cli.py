@@ -395,7 +395,7 @@ def cmd_freeze(args) -> int:
     return 0
 
 
-def cmd_ceiling(args) -> int:
+def cmd_ceiling(args, argv) -> int:
     from defgg_ros.evaluation import ceiling
     from defgg_ros.evaluation.runner import eval_trial_settings
 
@@ -407,6 +407,7 @@ def cmd_ceiling(args) -> int:
             raise sources.SourceError(f"no object of {args.sets} matches --only {args.only}")
         trials = ceiling.plan_trials(shapes, args.moduli, args.candidates, args.task, args.seed,
                                      args.sim_max_tet_nodes)
+        ceiling.record_command(args.out, "defgg-eval " + " ".join(shlex.quote(a) for a in argv))
         ceiling.run(args.out, trials, args.task, eval_trial_settings(), args.max_trials,
                     progress=lambda n, total, key: print(f"[{n}/{total}] {key}", flush=True))
     print(ceiling.write_table(args.out, args.candidates))
@@ -433,8 +434,10 @@ def main(argv=None) -> int:
     try:
         if args.command == "run":
             return cmd_run(args, argv)
+        if args.command == "ceiling":
+            return cmd_ceiling(args, argv)
         commands = {"report": cmd_report, "strategy": cmd_strategy, "ship": cmd_ship, "card": cmd_card,
-                    "snapshot": cmd_snapshot, "freeze": cmd_freeze, "ceiling": cmd_ceiling}
+                    "snapshot": cmd_snapshot, "freeze": cmd_freeze}
         return commands[args.command](args)
     except (sources.SourceError, ReportError, ResultsError, CardError, CheckpointError, SnapshotError, OSError,
             ValueError) as exc:

@@ -103,8 +103,11 @@ def results_markdown(out_dir, doc_path, notes_path=None) -> str:
     if ceiling_md:
         # ceiling.md starts with its own title; the report gives it a section heading instead
         body = ceiling_md.split("\n", 1)[1].strip()
+        from defgg_ros.evaluation.ceiling import recorded_commands
+
+        commands = "; ".join(f"`{c}`" for c in recorded_commands(out_dir)) or f"`defgg-eval ceiling --out {out_dir}`"
         lines += ["## What any grasp choice could reach: the sampler's candidates under the task", "",
-                  f"`defgg-eval ceiling --out {out_dir} ...` (defgg_ros/evaluation/ceiling.py).", "", body, ""]
+                  f"Commands (resumable): {commands} (defgg_ros/evaluation/ceiling.py).", "", body, ""]
     diag = _read(out_dir / "diagnostics.md")
     if diag:
         lines += ["## Diagnostics: do the labels and the plans depend on the stiffness?", "", diag, ""]

@@ -44,6 +44,8 @@ def test_ceiling_command_runs_real_trials_and_resumes(tmp_path, capsys):
     assert eval_main(argv) == 0                      # rerun: nothing left to simulate
     assert len((out / ceiling.RESULTS_FILE).read_text().splitlines()) == 2
     assert "[1/" not in capsys.readouterr().out
+    (command,) = ceiling.recorded_commands(out)          # once, though it ran twice
+    assert command.startswith("defgg-eval ceiling --out") and "--candidates 2" in command
 
 
 def test_stiffness_advantage_is_per_modulus_choice_minus_one_choice():
