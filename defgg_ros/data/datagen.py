@@ -28,7 +28,7 @@ from defgg_ros.data.format import DatasetWriter, GraspRect, Scene, TrialRecord, 
 
 CANDIDATE_FILE_VERSION = 1
 # The coarse FEM mesh measured against the shipped one (up to 220 nodes):
-# 6-7x cheaper soft trials, but 5 of 24 soft labels flipped (bench/README.md,
+# 6-12x cheaper soft trials, but 5 of 27 soft labels flipped (bench/README.md,
 # "Dataset generation cost"), so the generator's default stays the shipped mesh.
 COARSE_SIM_MAX_TET_NODES = 50
 # Trials that raised (not stored as trials, so the next run retries them), one JSON line each.

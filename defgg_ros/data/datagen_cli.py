@@ -50,7 +50,7 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--sim-max-tet-nodes", type=int, default=0, metavar="N",
                     help="0 (default): the FEM runs on the shipped mesh. N: soft bodies on a coarser mesh of at "
                          "most N nodes (images and grasp candidates keep the shipped mesh). Measured and NOT used "
-                         f"for our data: at N={COARSE_SIM_MAX_TET_NODES} it is 6-7x cheaper but flipped 5 of 24 "
+                         f"for our data: at N={COARSE_SIM_MAX_TET_NODES} it is 6-12x cheaper but flipped 5 of 27 "
                          "soft labels (bench/README.md). Fixed for the life of a dataset.")
     ap.add_argument("--no-progress", action="store_true", help="no progress bar")
     return ap
