@@ -191,8 +191,8 @@ def _eval_section(name, summary, eval_dir, sha16: str) -> list:
     lines = ["## Evaluation in the FEM simulator (held-out object sets)", ""]
     if not summary or summary.get("models", {}).get(name, {}).get("sha") != sha16:
         return lines + ["Not evaluated yet with these weights.", ""]
-    lines.append(f"From `{eval_dir}/summary.json` (see docs/results.md for the full tables and how complete "
-                 "each cell is). Success over all stiffnesses:")
+    lines.append(f"From `{eval_dir}/summary.json` (its report, docs/results.md or docs/results_sim_v*.md, has the "
+                 "full tables and how complete each cell is). Success over all stiffnesses:")
     lines += ["", "| task | object set | success | trials graded / planned |", "|---|---|---|---|"]
     for task, cells in summary["tasks"].items():
         for key, c in cells.items():
