@@ -153,6 +153,23 @@ def summarize(results_path):
                   f"{speed:.2f}x | {agree}/{len(both)} |")
     for p, (agree, n) in overall.items():
         print(f"overall label agreement {p} vs naive: {agree}/{n} = {100.0 * agree / max(1, n):.1f} %")
+    print_mix_speedup(by)
+
+
+def print_mix_speedup(by):
+    """CPU for one labelled grasp per modulus (the dataset's mix: equal trials per E), like for like."""
+    moduli = sorted({v["naive"]["E"] for v in by.values() if "naive" in v})
+    for p in PROTOCOLS[1:]:
+        per_e = []
+        for e in moduli:
+            trials = [v for v in by.values() if p in v and "naive" in v and v["naive"]["E"] == e]
+            if not trials:
+                break
+            per_e.append((_rate(trials, p)[1] / len(trials), _rate(trials, "naive")[1] / len(trials)))
+        else:
+            cpu_p, cpu_n = sum(c for c, _ in per_e), sum(n for _, n in per_e)
+            print(f"mix of one trial per E ({len(moduli)} moduli): naive {cpu_n:.0f} s, {p} {cpu_p:.0f} s CPU "
+                  f"= {cpu_n / cpu_p:.2f}x")
 
 
 def _rate(trials, protocol):

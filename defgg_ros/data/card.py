@@ -10,7 +10,7 @@ import numpy as np
 
 from defgg_ros.atomic import write_text_atomic
 from defgg_ros.constants import MAX_SOFT_BODY_YOUNGS_MODULUS_PA, SHAKE_POSITIVE_THRESHOLD_MPS2
-from defgg_ros.data.format import check_header, list_scene_ids, read_scene, read_trials
+from defgg_ros.data.format import STATUS_LIFT_FAILED, check_header, list_scene_ids, read_scene, read_trials
 from defgg_ros.data.labels import slips_in_a_direction
 
 RIGID_NOTE = (
@@ -21,7 +21,8 @@ RIGID_NOTE = (
 
 
 def _stats(root):
-    rows = defaultdict(lambda: {"n": 0, "pos": 0, "neg": 0, "fail": 0, "cpu": [], "means": [], "pos_slip": 0})
+    rows = defaultdict(lambda: {"n": 0, "pos": 0, "neg": 0, "fail": 0, "cpu": [], "means": [], "pos_slip": 0,
+                                "lift_failed": 0})
     for sid in list_scene_ids(root):
         meta = read_scene(Path(root) / "scenes" / f"{sid}.npz").meta
         row = rows[(meta["object_name"], meta["youngs_modulus_pa"])]
@@ -32,6 +33,7 @@ def _stats(root):
             row["cpu"].append(t.cpu_s)
             label = t.label
             row["pos" if label is True else "neg" if label is False else "fail"] += 1
+            row["lift_failed"] += t.status == STATUS_LIFT_FAILED
             if t.shake_mean_mps2 is not None:
                 row["means"].append(t.shake_mean_mps2)
             row["pos_slip"] += label is True and slips_in_a_direction(t)
@@ -64,15 +66,16 @@ def render_card(root, grasps_per_scene: int | None = None) -> str:
         f"- Labelled: {total['pos'] + total['neg']} (positive {total['pos']}, negative {total['neg']}); "
         f"simulation failures (exploded/timeout, never labels): {total['fail']}.",
         "- Trials run in passes over all scenes, so a partial dataset covers every object and modulus evenly.",
-        "", "## Per modulus", "", "| E (Pa) | body | trials | positive | negative | failed | mean CPU s/trial "
-        "| positives with a direction held < threshold |",
-        "|---|---|---|---|---|---|---|---|"]
+        "", "## Per modulus", "", "| E (Pa) | body | trials | positive | negative | of them lift failures | failed "
+        "| mean CPU s/trial | positives with a direction held < threshold |",
+        "|---|---|---|---|---|---|---|---|---|"]
     for e in moduli:
         sel = [r for (_, ee), r in rows.items() if ee == e]
         cpu = [c for r in sel for c in r["cpu"]]
         body = "soft (FEM)" if any(r.get("soft") for r in sel) else "rigid"
         lines.append(f"| {e:.0e} | {body} | {sum(r['n'] for r in sel)} | {sum(r['pos'] for r in sel)} | "
-                     f"{sum(r['neg'] for r in sel)} | {sum(r['fail'] for r in sel)} | "
+                     f"{sum(r['neg'] for r in sel)} | {sum(r['lift_failed'] for r in sel)} | "
+                     f"{sum(r['fail'] for r in sel)} | "
                      f"{np.mean(cpu) if cpu else float('nan'):.1f} | {_share(sel)} |")
     lines += ["", "## Per object and modulus (positive / negative / failed of planned)", "",
               "| object | tet nodes | " + " | ".join(f"E={e:.0e}" for e in moduli) + " |",
