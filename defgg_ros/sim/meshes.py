@@ -1,5 +1,8 @@
 """Surface mesh -> coarse tetrahedral mesh (fTetWild), cached on disk by content hash.
 
+The library objects' meshes are frozen in STORE_DIR (fTetWild is not
+deterministic), so every machine simulates the same ones.
+
 The tet mesh is the one geometry of an object: its nodes are the FEM soft
 body, its boundary triangles are the rigid body's collision shape, the
 rendered surface and the grasp sampler's surface. So a soft and a rigid
@@ -35,7 +38,7 @@ COARSENING_STEPS = ((0.12, 5e-3), (0.15, 1e-2), (0.2, 1.5e-2), (0.25, 2e-2))
 # TARGET_MAX_NODES (the data generator's FEM mesh, docs/dataset.md): the
 # default meshes stay exactly what they were.
 EXTRA_COARSENING_STEPS = ((0.35, 3e-2), (0.5, 4e-2), (0.7, 5e-2))
-# A coarser step may lose at most this fraction of the finest step's volume:
+# A step coarser than the default may lose at most this fraction of the finest step's volume:
 # coarsening shrinks curved surfaces (a 42-node sphere had 14 % less volume,
 # hence mass) and collapsed the mug's thin wall (-95 %); then the mesh stays
 # at the last step within it, above the node bound.
@@ -193,7 +196,8 @@ def _run_ftetwild(mesh, max_nodes: int = TARGET_MAX_NODES):
         step_tets = np.asarray(step_tets, dtype=np.int64)
         volume = float(np.abs(tet_volumes(step_nodes, step_tets)).sum())
         reference_volume = reference_volume or volume
-        if volume < (1.0 - MAX_COARSENING_VOLUME_LOSS) * reference_volume:
+        coarser_than_default = max_nodes < TARGET_MAX_NODES
+        if coarser_than_default and volume < (1.0 - MAX_COARSENING_VOLUME_LOSS) * reference_volume:
             break
         nodes, tets = step_nodes, step_tets
         if len(nodes) <= max_nodes:
