@@ -79,8 +79,7 @@ def run(out_dir, trials, task: str, settings, max_trials: int | None = None, pro
     """Simulate the trials not yet in OUT/ceiling.jsonl; returns how many ran."""
     from dataclasses import asdict
 
-    from defgg_ros.sim import objects, world
-    from defgg_ros.sim.trial import run_grasp_trial
+    from defgg_ros.sim import world
 
     path = Path(out_dir) / RESULTS_FILE
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -90,17 +89,38 @@ def run(out_dir, trials, task: str, settings, max_trials: int | None = None, pro
     done = {r["key"] for r in existing}
     pending = [t for t in trials if t[0] not in done][:max_trials]
     client = world.connect()
-    for n, (key, shape, e, i, grasp) in enumerate(pending, 1):
-        out = run_grasp_trial(objects.ObjectSpec(shape, e), grasp, tests=(task,), settings=settings, client=client)
-        accels = out.shake_accels_mps2 if task == "shake" else out.twist_accels_radps2
-        append_jsonl(path, {"key": key, "object": shape.name, "object_set": shape.set_name, "youngs_modulus_pa": e,
-                            "candidate": i, "task": task, "status": out.status, "accels": accels,
-                            "success": task_success(task, out.status, accels), "cpu_s": out.cpu_s,
-                            "tet_nodes": [len(t.nodes_m) for t in shape.tet_parts],
-                            "grasp_force_n": out.grasp_force_n, "trial_settings": asdict(settings)})
-        if progress:
-            progress(n, len(pending), key)
+    try:
+        for n, trial in enumerate(pending, 1):
+            _run_one(path, client, trial, task, settings)
+            if progress:
+                progress(n, len(pending), trial[0])
+    finally:
+        import pybullet
+
+        pybullet.disconnect(client)
     return len(pending)
+
+
+def _run_one(path, client, trial, task: str, settings) -> None:
+    """One trial, appended to the results; a trial that raises is reported and left for the next run."""
+    import sys
+    from dataclasses import asdict
+
+    from defgg_ros.sim import objects
+    from defgg_ros.sim.trial import run_grasp_trial
+
+    key, shape, e, i, grasp = trial
+    try:
+        out = run_grasp_trial(objects.ObjectSpec(shape, e), grasp, tests=(task,), settings=settings, client=client)
+    except Exception as exc:  # noqa: BLE001 - not recorded, so a rerun retries it
+        print(f"{key}: {type(exc).__name__}: {exc} (not recorded; a rerun retries it)", file=sys.stderr)
+        return
+    accels = out.shake_accels_mps2 if task == "shake" else out.twist_accels_radps2
+    append_jsonl(path, {"key": key, "object": shape.name, "object_set": shape.set_name, "youngs_modulus_pa": e,
+                        "candidate": i, "task": task, "status": out.status, "accels": accels,
+                        "success": task_success(task, out.status, accels), "cpu_s": out.cpu_s,
+                        "tet_nodes": [len(t.nodes_m) for t in shape.tet_parts],
+                        "grasp_force_n": out.grasp_force_n, "trial_settings": asdict(settings)})
 
 
 def summarize(records) -> list:
