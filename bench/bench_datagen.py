@@ -30,6 +30,10 @@ Protocols:
              time step instead of 0.5 ms (0.25 ms at 2e6), and the generator's lift before
              2026-11-24 (0.3 s lift, 0.1 s hold). All cheaper; run them to see what they do to
              the labels. (Rows named *_lift03 in the results were run with that lift.)
+  fast_conf40
+             fast with the confident stop of before 2026-11-25 (k >= 4 directions, margin 40/sqrt(k)
+             instead of k >= 3, 20/sqrt(k); bench/replay_confident_stop.py). Not rejected: replaced
+             by the cheaper rule. The fast rows measured before 2026-11-25 carry this name.
 """
 from __future__ import annotations
 
@@ -47,7 +51,8 @@ DEFAULT_PROTOCOLS = ("naive", "exact", "fast")   # TrialSettings class methods
 # Tried and rejected (kept so the measurement can be repeated): a faster ramp and a
 # longer soft time step are much cheaper but change the held accelerations.
 VARIANTS = {"fast_ramp025": {"shake_ramp_time_s": 0.25}, "fast_dt1ms": {"time_step_s": 1e-3},
-            "fast_lift03": {"lift_time_s": 0.3, "hold_time_s": 0.1}}
+            "fast_lift03": {"lift_time_s": 0.3, "hold_time_s": 0.1},
+            "fast_conf40": {"confident_min_directions": 4, "confident_margin_mps2": 40.0}}
 # Same settings as fast, simulated on a coarser tet mesh (the generator's --sim-max-tet-nodes).
 MESH_VARIANTS = {"fast_coarse": "fast", "fast_coarse80": "fast", "naive_remesh": "naive"}
 COARSE80_MAX_TET_NODES = 80

@@ -39,3 +39,18 @@ class ActionClient(_RclpyActionClient):
     def _get_result_async(self, goal_handle):
         with self._request_lock:
             return super()._get_result_async(goal_handle)
+
+
+def destroy_actions(node) -> None:
+    """Destroy every action server and client of `node`.
+
+    rclpy 7.1's Node.destroy_node destroys publishers, subscriptions, services and timers but not
+    waitables: a destroyed node's actions stay advertised (and keep its DDS participant busy) until the
+    garbage collector gets to them. A driver that was shut down must not look alive to the executor's
+    discovery, so every node here that owns actions calls this from its destroy_node.
+    """
+    from rclpy.action import ActionServer as _RclpyActionServer
+
+    for waitable in list(node.waitables):
+        if isinstance(waitable, (_RclpyActionServer, _RclpyActionClient)):
+            waitable.destroy()

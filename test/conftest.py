@@ -35,8 +35,11 @@ def executor(rclpy_context):
 
     ex = ThreadedExecutor(num_threads=4, context=rclpy_context)
     yield ex
+    from defgg_ros.ros_action import destroy_actions
+
     for node in list(ex.get_nodes()):
         ex.remove_node(node)
+        destroy_actions(node)  # plain client nodes too: rclpy's destroy_node leaves actions alive
         node.destroy_node()
     ex.shutdown(timeout_sec=2.0)
 

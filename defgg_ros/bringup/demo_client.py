@@ -28,7 +28,7 @@ from defgg_ros.constants import GRIPPER_MAX_WIDTH_M, PANDA_JOINT_NAMES
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import stamp_to_ns
 from defgg_ros.nodes.fake_panda_driver_node import CAPTURE_SERVICE, IMAGE_QOS, OBJECT_POSES_TOPIC, SCENE_TOPIC
-from defgg_ros.ros_action import ActionClient
+from defgg_ros.ros_action import ActionClient, destroy_actions
 
 
 class DemoError(RuntimeError):
@@ -182,5 +182,6 @@ class DemoClient:
 
     def close(self):
         self._executor.shutdown(timeout_sec=2.0)
+        destroy_actions(self.node)
         self.node.destroy_node()
         self._context.try_shutdown()

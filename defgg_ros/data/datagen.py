@@ -64,10 +64,13 @@ class DatagenConfig:
 
 
 def effective_trial_settings(overrides: dict, legacy: bool = False) -> dict:
-    """Every TrialSettings field of the generator's protocol with these overrides (legacy: the pre-2026-11-24 lift)."""
-    from defgg_ros.sim.trial import LEGACY_LIFT_SETTINGS, TrialSettings
+    """Every TrialSettings field of the generator's protocol with these overrides (legacy: the
+    pre-2026-11-24 lift and the pre-2026-11-25 confident stop)."""
+    from defgg_ros.sim.trial import LEGACY_CONFIDENT_SETTINGS, LEGACY_LIFT_SETTINGS, TrialSettings
 
-    base = replace(TrialSettings.fast(), **LEGACY_LIFT_SETTINGS) if legacy else TrialSettings.fast()
+    base = TrialSettings.fast()
+    if legacy:
+        base = replace(base, **LEGACY_LIFT_SETTINGS, **LEGACY_CONFIDENT_SETTINGS)
     return asdict(replace(base, **overrides))
 
 
@@ -273,8 +276,11 @@ def check_resumable(cfg: DatagenConfig) -> None:
         raise DatasetError(f"{cfg.out} was generated with {flag}; resume it with the same FEM mesh "
                            f"(got {cfg.sim_max_tet_nodes or 0}; 0 = the shipped mesh) or write a new dataset")
     # headers before 2026-11-24 did not record the protocol: theirs was the legacy lift
-    protocol = stored.get("trial_settings") or effective_trial_settings(stored.get("settings", {}), legacy=True)
-    current = effective_trial_settings(cfg.settings)
+    from defgg_ros.sim.trial import comparable_protocol
+
+    protocol = comparable_protocol(
+        stored.get("trial_settings") or effective_trial_settings(stored.get("settings", {}), legacy=True))
+    current = comparable_protocol(effective_trial_settings(cfg.settings))
     if protocol != current:
         needed = {k: v for k, v in protocol.items() if current.get(k) != v}
         raise DatasetError(f"{cfg.out} was generated with another trial protocol; resume it with "

@@ -239,8 +239,10 @@ def check_same_protocol(out_dir, settings) -> None:
     path = Path(out_dir) / report_mod.MANIFEST_FILE
     if not path.is_file():
         return
-    old = json.loads(path.read_text(encoding="utf-8")).get("trial_settings") or {}
-    new = asdict(settings)
+    from defgg_ros.sim.trial import comparable_protocol
+
+    old = comparable_protocol(json.loads(path.read_text(encoding="utf-8")).get("trial_settings") or {})
+    new = comparable_protocol(asdict(settings))
     differ = sorted(k for k in set(old) | set(new) if old.get(k) != new.get(k))
     if differ:
         raise ValueError(f"{out_dir} holds trials of another protocol (differs in {', '.join(differ)}); "

@@ -46,7 +46,7 @@ from defgg_ros.control.trajectories import LIMITS_SAFETY_SCALE, SAMPLE_DT_S
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import ConversionError, transform_from_pose
 from defgg_ros.nodes.node_main import run_node
-from defgg_ros.ros_action import ActionClient
+from defgg_ros.ros_action import ActionClient, destroy_actions
 
 _DEFAULTS = SequenceConfig()
 PARAMETERS = {
@@ -205,6 +205,7 @@ class ExecutorNode(Node):
 
     def destroy_node(self):
         self._shutdown.set()  # ends a running control loop
+        destroy_actions(self)
         return super().destroy_node()
 
     # --- inputs -------------------------------------------------------------

@@ -36,6 +36,7 @@ from defgg_ros import topics
 from defgg_ros.constants import CAMERA_HEIGHT_PX, CAMERA_WIDTH_PX, PANDA_JOINT_NAMES
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import depth_metres_to_msg, make_camera_info, numpy_to_image
+from defgg_ros.ros_action import destroy_actions
 from defgg_ros.ros_executor import ThreadedExecutor
 from defgg_ros.sim.cell import CellSettings, SimCell
 from defgg_ros.sim.cell_camera import DepthNoise
@@ -340,6 +341,10 @@ class FakePandaDriver(Node):
             self._thread.join(timeout=5.0)
         with self._lock:
             self.cell.close()
+
+    def destroy_node(self):
+        destroy_actions(self)  # the gripper actions must vanish with the driver (see destroy_actions)
+        return super().destroy_node()
 
 
 def main(args=None):

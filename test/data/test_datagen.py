@@ -12,6 +12,7 @@ import time
 from collections import Counter
 
 import pytest
+from defgg_ros.sim.trial import LEGACY_CONFIDENT_SETTINGS
 
 from defgg_ros.atomic import read_jsonl
 from defgg_ros.data import datagen
@@ -125,9 +126,18 @@ def test_resume_keeps_the_trial_protocol_of_the_dataset(tmp_path):
     DatasetWriter(out, legacy_header)
     with pytest.raises(DatasetError, match='"lift_time_s": 0.3') as err:
         datagen.check_resumable(cfg)
-    assert '"hold_time_s": 0.1' in str(err.value)
-    datagen.check_resumable(datagen.DatagenConfig(out=out, objects=("cube",), moduli_pa=(2e9,),
-                                                  settings={"lift_time_s": 0.3, "hold_time_s": 0.1}))
+    assert '"hold_time_s": 0.1' in str(err.value) and '"confident_margin_mps2": 40.0' in str(err.value)
+    datagen.check_resumable(datagen.DatagenConfig(out=out, objects=("cube",), moduli_pa=(2e9,), settings={
+        "lift_time_s": 0.3, "hold_time_s": 0.1, "confident_min_directions": 4, "confident_margin_mps2": 40.0}))
+    # recorded after the lift fix, before the confident-stop knobs existed (datasets/fem_v2)
+    before_knobs = tmp_path / "before_knobs"
+    header = datagen.DatagenConfig(out=before_knobs).header()
+    for key in ("confident_min_directions", "confident_margin_mps2"):
+        del header["trial_settings"][key]
+    DatasetWriter(before_knobs, header)
+    with pytest.raises(DatasetError, match='"confident_min_directions": 4'):
+        datagen.check_resumable(datagen.DatagenConfig(out=before_knobs))
+    datagen.check_resumable(datagen.DatagenConfig(out=before_knobs, settings=LEGACY_CONFIDENT_SETTINGS))
     # a new dataset records its whole protocol; changing one value on resume is refused
     new = tmp_path / "new"
     DatasetWriter(new, datagen.DatagenConfig(out=new, settings={"shake_ramp_time_s": 0.5}).header())

@@ -89,3 +89,28 @@ def test_an_action_result_set_from_a_timer_reaches_the_client(executor, spin):
         assert handle.accepted
         result = spin(threaded, handle.get_result_async(), 5.0, f"result {i}").result
         assert result.success and result.width == pytest.approx(0.04)
+
+
+def test_destroyed_action_server_stops_being_advertised(executor, spin):
+    """rclpy's destroy_node leaves an action server advertised; destroy_actions takes it off the graph, as a
+    stopped driver must (the executor would otherwise wait on a dead driver's gripper)."""
+    from defgg_ros.ros_action import destroy_actions
+
+    client_node = Node("watcher", context=executor.context)
+    client = ActionClient(client_node, GripperMove, "gripper_move_vanishing")
+    executor.add_node(client_node)
+    for use_destroy_actions in (False, True):
+        server_node = Node("vanishing_gripper", context=executor.context)
+        server = ActionServer(server_node, GripperMove, "gripper_move_vanishing", lambda handle: None)
+        executor.add_node(server_node)
+        spin(executor, client.server_is_ready, 10.0, "the action server")
+        executor.remove_node(server_node)
+        if use_destroy_actions:
+            destroy_actions(server_node)
+        server_node.destroy_node()
+        if use_destroy_actions:
+            spin(executor, lambda: not client.server_is_ready(), 10.0, "the destroyed server leaving the graph")
+        else:  # still there: nothing took it down
+            assert client.server_is_ready()
+            server.destroy()
+            spin(executor, lambda: not client.server_is_ready(), 10.0, "the server destroyed by hand")

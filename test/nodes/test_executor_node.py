@@ -32,7 +32,7 @@ from defgg_ros.control.kinematics import PandaKinematics
 from defgg_ros.control.poses import matrix_to_quaternion, top_down_pose
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.executor_node import PARAMETERS, ExecutorNode
-from defgg_ros.ros_action import ActionClient
+from defgg_ros.ros_action import ActionClient, destroy_actions
 from defgg_ros.ros_executor import ThreadedExecutor
 
 KIN = PandaKinematics()
@@ -64,6 +64,12 @@ class InTestDriver(Node):
         ActionServer(self, GripperMove, topics.GRIPPER_MOVE_ACTION, self.on_move, callback_group=group)
         ActionServer(self, GripperGrasp, topics.GRIPPER_GRASP_ACTION, self.on_grasp, callback_group=group)
         self.create_timer(DRIVER_PERIOD_S, self.step)
+
+    def destroy_node(self):
+        # rclpy's destroy_node leaves action servers alive (and advertised) until garbage collection:
+        # a "killed" driver whose gripper actions stay in the graph is not what a dead process looks like.
+        destroy_actions(self)
+        super().destroy_node()
 
     def now_s(self):
         return self.get_clock().now().nanoseconds * 1e-9
@@ -170,6 +176,7 @@ def cell(rclpy_context):
     yield ex, node, client, start_driver
     for n in list(ex.get_nodes()):
         ex.remove_node(n)
+        destroy_actions(n)
         n.destroy_node()
     ex.shutdown(timeout_sec=2.0)
     for child in children:

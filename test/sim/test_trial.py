@@ -11,7 +11,7 @@ import pytest
 
 from defgg_ros.data.format import STATUS_LIFT_FAILED, STATUS_OK
 from defgg_ros.sim import objects, trial, world
-from defgg_ros.sim.trial import TrialSettings, WorldGrasp, run_grasp_trial
+from defgg_ros.sim.trial import LEGACY_CONFIDENT_SETTINGS, TrialSettings, WorldGrasp, run_grasp_trial
 
 QUICK = dataclasses.replace(TrialSettings.fast(), close_settle_s=0.05, lift_time_s=0.15, hold_time_s=0.05,
                             shake_ramp_time_s=0.3, twist_ramp_time_s=0.3, stop_when_label_decided=False,
@@ -101,6 +101,23 @@ def test_label_early_stop_keeps_the_label():
     assert not all(early.shake_measured) and early.sim_steps < full.sim_steps
     n = sum(early.shake_measured)
     assert early.shake_accels_mps2[:n] == pytest.approx(full.shake_accels_mps2[:n], abs=1.0)
+
+
+def test_confident_stop_waits_for_enough_directions_and_a_wide_margin():
+    from defgg_ros.sim.trial import _confidently_decided, comparable_protocol
+
+    assert not _confidently_decided([50.0, 50.0], 3, 20.0)          # too few directions
+    assert _confidently_decided([50.0, 40.0, 35.0], 3, 20.0)        # mean 41.7 >= 25 + 11.5
+    assert not _confidently_decided([50.0, 30.0, 25.0], 3, 20.0)    # mean 35.0: could still fall
+    assert _confidently_decided([10.0, 12.0, 14.0, 18.0], 3, 20.0)  # mean 13.5 <= 25 - 10
+    assert not _confidently_decided([10.0, 12.0, 14.0, 18.0], 4, 40.0)  # the pre-2026-11-25 rule
+    # the surrogate's knobs only matter when it is on; absent knobs are the old rule's
+    off = dataclasses.asdict(QUICK)
+    assert comparable_protocol(off) == comparable_protocol({**off, "confident_margin_mps2": 99.0})
+    on = dataclasses.asdict(dataclasses.replace(QUICK, confident_stop=True))
+    old = {k: v for k, v in on.items() if not k.startswith("confident_m")}
+    assert comparable_protocol(old) != comparable_protocol(on)
+    assert comparable_protocol(old) == comparable_protocol({**on, **LEGACY_CONFIDENT_SETTINGS})
 
 
 def test_bad_grasps_and_tests_are_refused():
