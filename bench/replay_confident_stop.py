@@ -14,7 +14,6 @@ Prints per (min directions, margin): trials, labels changed, shake cost relative
 Command: .venv/bin/python bench/replay_confident_stop.py [--datasets datasets/fem_v1 datasets/fem_v2]
 """
 import argparse
-import json
 import math
 import sys
 from pathlib import Path

@@ -12,11 +12,11 @@ import time
 from collections import Counter
 
 import pytest
-from defgg_ros.sim.trial import LEGACY_CONFIDENT_SETTINGS
 
 from defgg_ros.atomic import read_jsonl
 from defgg_ros.data import datagen
 from defgg_ros.data.format import DatasetWriter, list_scene_ids, read_scene, read_trials
+from defgg_ros.sim.trial import LEGACY_CONFIDENT_SETTINGS
 
 OBJECTS = ("box_small", "cube")
 QUICK = {"close_settle_s": 0.05, "lift_time_s": 0.15, "hold_time_s": 0.05, "shake_ramp_time_s": 0.3}
