@@ -78,6 +78,10 @@ def prefix_error_table(trials):
         print(f"| {k} | {err.std():.1f} | {np.abs(err).max():.1f} | {20.0 / math.sqrt(k):.1f} |")
 
 
+def _shown(path: Path) -> str:
+    return str(path.resolve().relative_to(ROOT)) if path.resolve().is_relative_to(ROOT) else str(path)
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--datasets", nargs="+", type=Path,
@@ -88,8 +92,8 @@ def main(argv=None):
     check = list(naive_trials(args.naive_sample))
     if not tuning and not check:
         parser.error("no soft trials found in --datasets or --naive-sample")
-    print(f"tuning: {len(tuning)} soft trials from {', '.join(str(d) for d in args.datasets)}; "
-          f"check: {len(check)} naive soft trials from {args.naive_sample}")
+    print(f"tuning: {len(tuning)} soft trials from {', '.join(_shown(d) for d in args.datasets)}; "
+          f"check: {len(check)} naive soft trials from {_shown(args.naive_sample)}")
     print("| min directions | margin (m/s^2) | tuning: labels changed | tuning: shake cost | "
           "check: labels changed | check: shake cost |\n|---|---|---|---|---|---|")
     for min_directions, margin in GRID:
