@@ -40,13 +40,13 @@ def dataset_trials(folder: Path):
             if r["status"] != "ok" or r["shake_accels_mps2"] is None or r["youngs_modulus_pa"] >= SOFT_BELOW_PA:
                 continue
             measured = r["sim"].get("shake_measured") or [True] * len(r["shake_accels_mps2"])
-            yield np.array(r["shake_accels_mps2"])[:sum(measured)], bool(r["label"])
+            yield np.array(r["shake_accels_mps2"])[:sum(measured)], bool(r["label"]), r["yaw_rad"]
 
 
 def naive_trials(path: Path):
     for r in read_jsonl(path) if path.is_file() else []:
         if r["protocol"] == "naive" and r["status"] == "ok" and r["E"] < SOFT_BELOW_PA and r["accels"]:
-            yield np.array(r["accels"]), bool(r["label"])
+            yield np.array(r["accels"]), bool(r["label"]), None
 
 
 def shake_cost(values) -> float:
@@ -56,7 +56,7 @@ def shake_cost(values) -> float:
 def replay(trials, min_directions, margin_mps2):
     """(labels changed, cost with the rule, cost with no confident stop)."""
     changed, cost, base = 0, 0.0, 0.0
-    for values, label in trials:
+    for values, label, _ in trials:
         base += shake_cost(values)
         stop = next((k for k in range(1, len(values)) if _confidently_decided(values[:k], min_directions,
                                                                                  margin_mps2)), None)
@@ -70,7 +70,7 @@ def replay(trials, min_directions, margin_mps2):
 
 def prefix_error_table(trials):
     """How far the mean of the first k directions is from the 16-direction mean (fully measured trials)."""
-    full = [v for v, _ in trials if len(v) == 16]
+    full = [v for v, _, _ in trials if len(v) == 16]
     print(f"\nprefix mean - full mean over {len(full)} fully measured soft trials (m/s^2):")
     print("| k | sd | max abs | margin 20/sqrt(k) |\n|---|---|---|---|")
     for k in range(2, 9):
@@ -80,6 +80,40 @@ def prefix_error_table(trials):
 
 def _shown(path: Path) -> str:
     return str(path.resolve().relative_to(ROOT)) if path.resolve().is_relative_to(ROOT) else str(path)
+
+
+def friction_cone_held_mps2(capacity_mps2, normal_weight, yaw_rad):
+    """Held acceleration per shake direction if the grasp fails when the load per kg it must carry,
+    |t|^2 + (w n_part)^2 with t the part across the closing axis n, exceeds capacity^2: a friction
+    cone (w = 0: the fingers carry any load along n) with the closing-axis load partly counted."""
+    from defgg_ros.sim.trial import shake_directions
+
+    accel = np.linspace(0.0, SHAKE_ACCEL_LIMIT_MPS2, 501)
+    normal = np.array([math.cos(yaw_rad), math.sin(yaw_rad), 0.0])
+    held = []
+    for d in shake_directions():
+        load = np.array([0.0, 0.0, -9.81])[None, :] - accel[:, None] * d[None, :]
+        along = load @ normal
+        across = load - along[:, None] * normal
+        over = np.nonzero(np.sum(across ** 2, 1) + (normal_weight * along) ** 2 > capacity_mps2 ** 2)[0]
+        held.append(accel[over[0]] if len(over) else SHAKE_ACCEL_LIMIT_MPS2)
+    return np.array(held)
+
+
+def friction_cone_table(trials):
+    """Predict the 16-direction mean from the first k directions: prefix mean vs a friction-cone fit."""
+    full = [(v, yaw) for v, _, yaw in trials if len(v) == 16 and yaw is not None]
+    grid = [(c, w) for c in np.arange(5.0, 61.0) for w in (0.0, 0.25, 0.5, 0.75, 1.0)]
+    print(f"\npredicting the 16-direction mean from k directions ({len(full)} fully measured dataset trials):")
+    print("| k | prefix mean: error SD | friction-cone fit: error SD |\n|---|---|---|")
+    models = [{g: friction_cone_held_mps2(*g, yaw) for g in grid} for _, yaw in full]
+    for k in (3, 4, 6, 8):
+        plain, fitted = [], []
+        for (values, _), model in zip(full, models):
+            best = min(model.values(), key=lambda held: float(np.mean((held[:k] - values[:k]) ** 2)))
+            plain.append(values[:k].mean() - values.mean())
+            fitted.append(best.mean() - values.mean())
+        print(f"| {k} | {np.std(plain):.1f} | {np.std(fitted):.1f} |")
 
 
 def main(argv=None):
@@ -103,6 +137,7 @@ def main(argv=None):
             row += [f"{changed}/{len(trials)}", f"{cost / base:.2f}" if base else "-"]
         print(f"| {min_directions} | {margin:g} | " + " | ".join(row) + " |")
     prefix_error_table(tuning + check)
+    friction_cone_table(tuning)
 
 
 if __name__ == "__main__":

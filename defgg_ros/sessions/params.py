@@ -8,6 +8,8 @@ from defgg_ros.sessions.client import CellCallError, wait_future
 
 # The cell's nodes whose parameters a session records.
 CELL_NODES = ("segmentation_node", "grasp_inference_node", "executor_node", "fake_panda_driver")
+# Those whose parameters decide a replayed grasp: a replay runs them with the recorded values.
+PERCEPTION_NODES = ("segmentation_node", "grasp_inference_node")
 
 
 def fetch_parameters(node, node_name: str, timeout_s: float = 3.0) -> dict | None:

@@ -39,7 +39,7 @@ from defgg_ros.sessions.bag import SessionBagError, SessionWriter
 from defgg_ros.sessions.client import CellCallError, CellClient
 from defgg_ros.sessions.compare import GraspSummary, PickOutcome, Tolerances
 from defgg_ros.sessions.graph import use_large_message_transport
-from defgg_ros.sessions.params import CELL_NODES, fetch_all
+from defgg_ros.sessions.params import CELL_NODES, PERCEPTION_NODES, fetch_all
 from defgg_ros.sessions.recorder_node import SessionRecorder
 from defgg_ros.sessions.scene_stiffness import scene_stiffness_entries
 from defgg_ros.sessions.selector import DEFAULT_DEPTH_PERIOD_S, DEFAULT_JOINT_STATE_PERIOD_S, FrameSelector
@@ -115,6 +115,22 @@ def drive(recorder, client, args, log=tqdm.write) -> None:
             log(f"  pick {i}: {PickOutcome.of(result).brief()}")
 
 
+def _cell_parameters(probe, args, log) -> dict:
+    """The running cell nodes' parameters. Driving a cell, its perception nodes are known to be up: a
+    slow answer (a loaded machine) is waited for up to --wait-s, because a session without their
+    parameters replays against the shipped YAML, which may not be what the cell ran."""
+    parameters = fetch_all(probe, CELL_NODES, args.param_timeout_s)
+    missing = [name for name in PERCEPTION_NODES if name not in parameters]
+    if args.plan and missing:
+        parameters.update(fetch_all(probe, missing, max(args.wait_s, args.param_timeout_s)))
+    log(f"parameters recorded from: {', '.join(parameters) or 'no running cell node'}")
+    missing = [name for name in PERCEPTION_NODES if name not in parameters]
+    if missing:
+        log(f"WARNING: no parameters from {', '.join(missing)}: a replay runs them with the shipped YAML "
+            "(sim_bringup/config), which may differ from what this cell ran")
+    return parameters
+
+
 def record(args, log=print) -> Path:
     context = Context()
     rclpy.init(context=context)
@@ -127,8 +143,7 @@ def record(args, log=print) -> Path:
         executor.add_node(probe)
         if args.plan:  # driving: the cell must be up before its parameters can be read
             CellClient(probe).wait_for_servers(args.wait_s, pick=bool(args.pick))
-        parameters = fetch_all(probe, CELL_NODES, args.param_timeout_s)
-        log(f"parameters recorded from: {', '.join(parameters) or 'no running cell node'}")
+        parameters = _cell_parameters(probe, args, log)
         model_path, use_stiffness = _model_path(args, parameters)
         tolerances = Tolerances(args.position_tol_mm, args.angle_tol_deg, args.width_tol_mm)
         meta = md.make_metadata(Path(args.out).name, source=args.source or ("sim" if args.scene else "real"),

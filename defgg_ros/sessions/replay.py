@@ -30,6 +30,7 @@ from defgg_ros.sessions.bag import SessionBagError, SessionWriter
 from defgg_ros.sessions.client import CellCallError, CellClient
 from defgg_ros.sessions.compare import Tolerances
 from defgg_ros.sessions.graph import GraphError, NodeGraph, use_large_message_transport
+from defgg_ros.sessions.params import PERCEPTION_NODES
 from defgg_ros.sessions.player import Replay, ReplayOptions, SessionPlayer
 from defgg_ros.sessions.recorder_node import SessionRecorder
 from defgg_ros.sessions.replay_graph import graph_specs, resolve_model
@@ -39,7 +40,6 @@ from defgg_ros.sessions.session import load_session
 
 EXIT_OK, EXIT_REGRESSION, EXIT_ERROR, EXIT_INTERRUPTED = 0, 1, 2, 130
 STARTUP_TIMEOUT_S = 90.0
-PERCEPTION_NODES = ("segmentation_node", "grasp_inference_node")
 PICK_NODES = ("fake_panda_driver", "executor_node")
 # How long a replay listens to a candidate ROS domain for other nodes (discovery on localhost
 # takes well under a second, but a loaded machine once needed more than 1.5 s).
@@ -152,6 +152,10 @@ class ReplayRun:
         model = resolve_model(meta, args.model, args.use_stiffness)
         log(f"session {path.name}: {len(session.frames)} frame(s), {len(session.of_kind('plan'))} plan call(s), "
             f"{len(session.picks)} pick(s){'' if pick else ' (picks skipped)'}; {model.describe(meta)}")
+        unrecorded = [name for name in PERCEPTION_NODES if name not in (meta.get("parameters") or {})]
+        if unrecorded:
+            log(f"  no recorded parameters for {', '.join(unrecorded)}: running the shipped YAML "
+                "(sim_bringup/config); a difference may be the cell's parameters, not a regression")
         writer = recorder = None
         try:
             self._start_cell(graph_specs(meta, model, pick, self.run_dir), pick)

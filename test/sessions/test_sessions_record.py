@@ -91,6 +91,9 @@ def test_a_fresh_recording_replays_clean(live_cell, tmp_path):
     """
     out = tmp_path / "fresh"
     assert record.main([str(out), "--plan", "1", "--depth-period-s", "1000", "--no-color"]) == 0
+    # Driving, the recorder waits for the perception nodes' parameters even past --param-timeout-s (CI
+    # once recorded none under load, and the replay ran the shipped YAML's contact_angle: true instead).
+    assert {"segmentation_node", "grasp_inference_node"} <= set(load_session(out).metadata["parameters"])
     live_cell()
     code, text = run_replay(out)
     assert code == 0, text
