@@ -30,10 +30,11 @@ Protocols:
              time step instead of 0.5 ms (0.25 ms at 2e6), and the generator's lift before
              2026-11-24 (0.3 s lift, 0.1 s hold). All cheaper; run them to see what they do to
              the labels. (Rows named *_lift03 in the results were run with that lift.)
-  fast_conf40
-             fast with the confident stop of before 2026-11-25 (k >= 4 directions, margin 40/sqrt(k)
-             instead of k >= 3, 20/sqrt(k); bench/replay_confident_stop.py). Not rejected: replaced
-             by the cheaper rule. The fast rows measured before 2026-11-25 carry this name.
+  *_conf40
+             a protocol with the confident stop of before 2026-11-25 (k >= 4 directions, margin
+             40/sqrt(k) instead of k >= 3, 20/sqrt(k); bench/replay_confident_stop.py): fast_conf40,
+             fast_coarse_conf40, fast_coarse80_conf40, fast_lift03_conf40. Every fast* row measured
+             before 2026-11-25 carries the suffix.
 """
 from __future__ import annotations
 
@@ -51,19 +52,23 @@ DEFAULT_PROTOCOLS = ("naive", "exact", "fast")   # TrialSettings class methods
 # Tried and rejected (kept so the measurement can be repeated): a faster ramp and a
 # longer soft time step are much cheaper but change the held accelerations.
 VARIANTS = {"fast_ramp025": {"shake_ramp_time_s": 0.25}, "fast_dt1ms": {"time_step_s": 1e-3},
-            "fast_lift03": {"lift_time_s": 0.3, "hold_time_s": 0.1},
-            "fast_conf40": {"confident_min_directions": 4, "confident_margin_mps2": 40.0}}
+            "fast_lift03": {"lift_time_s": 0.3, "hold_time_s": 0.1}}
 # Same settings as fast, simulated on a coarser tet mesh (the generator's --sim-max-tet-nodes).
 MESH_VARIANTS = {"fast_coarse": "fast", "fast_coarse80": "fast", "naive_remesh": "naive"}
 COARSE80_MAX_TET_NODES = 80
-PROTOCOLS = DEFAULT_PROTOCOLS + tuple(MESH_VARIANTS) + tuple(VARIANTS)
+# Suffix: the same protocol with the confident stop of before 2026-11-25 (k >= 4, 40/sqrt(k)).
+CONF40 = "_conf40"
+PROTOCOLS = DEFAULT_PROTOCOLS + tuple(MESH_VARIANTS) + tuple(VARIANTS) + tuple(
+    p + CONF40 for p in ("fast", "fast_coarse", "fast_coarse80", "fast_lift03"))
 
 
 def protocol_settings(name: str):
     from dataclasses import replace
 
-    from defgg_ros.sim.trial import TrialSettings
+    from defgg_ros.sim.trial import LEGACY_CONFIDENT_SETTINGS, TrialSettings
 
+    if name.endswith(CONF40):
+        return replace(protocol_settings(name.removesuffix(CONF40)), **LEGACY_CONFIDENT_SETTINGS)
     if name in VARIANTS:
         return replace(TrialSettings.fast(), **VARIANTS[name])
     return getattr(TrialSettings, MESH_VARIANTS.get(name, name))()
@@ -74,6 +79,7 @@ def protocol_shape(name: str, object_name: str, youngs_modulus_pa: float):
     from defgg_ros.sim.objects import get_shape, simulation_shape
 
     shape = get_shape(object_name)
+    name = name.removesuffix(CONF40)
     if name == "fast_coarse":     # as the generator: coarse for soft bodies only
         return simulation_shape(shape, youngs_modulus_pa, COARSE_SIM_MAX_TET_NODES)
     if name == "fast_coarse80":
