@@ -136,12 +136,16 @@ def run(args):
                   flush=True)
 
 
-def summarize(results_path):
-    rows = read_jsonl(results_path)
-    by = defaultdict(dict)
-    for r in rows:
-        by[r["trial"]][r["protocol"]] = r
-    print(f"results: {results_path} ({len(rows)} trial runs)")
+def summarize(results_paths):
+    """Tables over one results file, or pooled over several (trials keyed by file, so the same
+    trial name in two samples with different seeds stays two trials)."""
+    rows, by = [], defaultdict(dict)
+    for path in results_paths:
+        part = read_jsonl(path)
+        rows += part
+        for r in part:
+            by[(str(path), r["trial"])][r["protocol"]] = r
+    print(f"results: {', '.join(map(str, results_paths))} ({len(rows)} trial runs)")
     print("| E (Pa) | protocol | trials | CPU s/trial | labelled/CPU-h | naive on the same trials | speed-up vs naive "
           "| agreement with naive |")
     print("|---|---|---|---|---|---|---|---|")
@@ -200,10 +204,12 @@ def main(argv=None):
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--results", type=Path, default=HERE / "results" / "datagen_sample.jsonl")
     ap.add_argument("--summary-only", action="store_true")
+    ap.add_argument("--pool-with", nargs="+", type=Path, default=(), metavar="RESULTS",
+                    help="print the tables pooled over --results and these results files (other samples)")
     args = ap.parse_args(argv)
     if not args.summary_only:
         run(args)
-    summarize(args.results)
+    summarize([args.results, *args.pool_with])
 
 
 if __name__ == "__main__":
