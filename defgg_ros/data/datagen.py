@@ -29,7 +29,8 @@ from defgg_ros.data.format import DatasetWriter, GraspRect, Scene, TrialRecord, 
 CANDIDATE_FILE_VERSION = 1
 # The coarse FEM mesh measured against the shipped one (up to 220 nodes):
 # 6-12x cheaper soft trials, but 5 of 27 soft labels flipped (bench/README.md,
-# "Dataset generation cost"), so the generator's default stays the shipped mesh.
+# "Dataset generation cost"); at most 80 nodes, 1.6x cheaper but 3 of 55 labels changed (94.5 %,
+# 2026-11-25), so the generator's default stays the shipped mesh.
 COARSE_SIM_MAX_TET_NODES = 50
 # Trials that raised (not stored as trials, so the next run retries them), one JSON line each.
 

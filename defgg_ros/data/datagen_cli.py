@@ -51,7 +51,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help="0 (default): the FEM runs on the shipped mesh. N: soft bodies on a coarser mesh of at "
                          "most N nodes (images and grasp candidates keep the shipped mesh). Measured and NOT used "
                          f"for our data: at N={COARSE_SIM_MAX_TET_NODES} it is 6-12x cheaper but flipped 5 of 27 "
-                         "soft labels (bench/README.md). Fixed for the life of a dataset.")
+                         "soft labels; at N=80, 1.6x cheaper than the shipped mesh with 3 of 55 labels changed "
+                         "(bench/README.md). Fixed for the life of a dataset.")
     ap.add_argument("--no-progress", action="store_true", help="no progress bar")
     return ap
 
