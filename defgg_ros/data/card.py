@@ -110,17 +110,17 @@ MESH_NOTE = ("Tet meshes: fTetWild is not deterministic (the same surface gives 
 
 def _protocol_line(gen: dict) -> str:
     from defgg_ros.data.datagen import effective_trial_settings
-    from defgg_ros.sim.trial import LEGACY_CONFIDENT_SETTINGS
+    from defgg_ros.sim.trial import comparable_protocol
 
     recorded = gen.get("trial_settings")
-    settings = {**LEGACY_CONFIDENT_SETTINGS, **(recorded or effective_trial_settings(gen.get("settings", {}),
-                                                                                   legacy=True))}
+    settings = comparable_protocol(recorded or effective_trial_settings(gen.get("settings", {}), legacy=True))
+    stop = (f"shake stopped early once the mean is {settings['confident_margin_mps2']:g}/sqrt(k) m/s^2 from the "
+            f"threshold after k >= {settings['confident_min_directions']} directions"
+            if settings["confident_stop"] else "no early stop on the measured mean")
     mesh = gen.get("sim_max_tet_nodes")
     return (f"Trial protocol{'' if recorded else ' (not recorded in the header: the generator of the time)'}: "
             f"close settle {settings['close_settle_s']} s, lift {settings['lift_height_m'] * 100:.0f} cm in "
-            f"{settings['lift_time_s']} s, hold {settings['hold_time_s']} s; shake stopped early once the mean is "
-            f"{settings['confident_margin_mps2']:g}/sqrt(k) m/s^2 from the threshold after k >= "
-            f"{settings['confident_min_directions']} directions; FEM mesh: "
+            f"{settings['lift_time_s']} s, hold {settings['hold_time_s']} s; {stop}; FEM mesh: "
             + (f"at most {mesh} nodes (soft bodies)" if mesh else "the shipped mesh")
             + ("" if settings["lift_time_s"] >= 0.6 else ". This lift dropped soft grasps that a 0.6 s lift holds "
                "(bench/README.md): some soft lift failures here are artifacts of it"))

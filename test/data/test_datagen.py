@@ -144,3 +144,14 @@ def test_resume_keeps_the_trial_protocol_of_the_dataset(tmp_path):
     datagen.check_resumable(datagen.DatagenConfig(out=new, settings={"shake_ramp_time_s": 0.5}))
     with pytest.raises(DatasetError, match="another trial protocol"):
         datagen.check_resumable(datagen.DatagenConfig(out=new, settings={"shake_ramp_time_s": 0.25}))
+
+
+def test_card_states_the_shake_early_stop_the_dataset_was_made_with():
+    from defgg_ros.data.card import _protocol_line
+
+    header = datagen.DatagenConfig(out=None).header()
+    assert "20/sqrt(k) m/s^2 from the threshold after k >= 3 directions" in _protocol_line(header)
+    legacy = {k: v for k, v in header.items() if k != "trial_settings"}   # before the protocol was recorded
+    assert "40/sqrt(k) m/s^2 from the threshold after k >= 4 directions" in _protocol_line(legacy)
+    header["trial_settings"]["confident_stop"] = False
+    assert "no early stop on the measured mean" in _protocol_line(header)
