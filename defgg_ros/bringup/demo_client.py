@@ -29,6 +29,7 @@ from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import stamp_to_ns
 from defgg_ros.nodes.fake_panda_driver_node import CAPTURE_SERVICE, IMAGE_QOS, OBJECT_POSES_TOPIC, SCENE_TOPIC
 from defgg_ros.ros_action import ActionClient, destroy_actions
+from defgg_ros.ros_service import ServiceTimeout, call_idempotent
 
 
 class DemoError(RuntimeError):
@@ -124,6 +125,12 @@ class DemoClient:
                 raise DemoError(f"timed out after {timeout_s:.0f} s waiting for {what}")
             self._executor.spin_once(timeout_sec=min(0.1, remaining))
 
+    def _spin_until(self, predicate, timeout_s) -> bool:
+        deadline = time.monotonic() + timeout_s
+        while not predicate() and time.monotonic() < deadline:
+            self._executor.spin_once(timeout_sec=min(0.1, max(deadline - time.monotonic(), 0.0)))
+        return predicate()
+
     def _wait_future(self, future, timeout_s, what):
         self._wait(future.done, timeout_s, what)
         return future.result()
@@ -157,7 +164,11 @@ class DemoClient:
     # ---- calls -----------------------------------------------------------------
     def _call(self, client, request, timeout_s, what):
         self._wait(client.service_is_ready, timeout_s, f"the {what} service")
-        return self._wait_future(client.call_async(request), timeout_s, f"the answer of {what}")
+        # Both services called here are idempotent: re-sent while unanswered (ros_service.py).
+        try:
+            return call_idempotent(client, request, timeout_s, f"the answer of {what}", wait_until=self._spin_until)
+        except (ServiceTimeout, RuntimeError) as error:
+            raise DemoError(str(error)) from None
 
     def set_stiffness(self, objects, default_youngs_modulus_pa=0.0, timeout_s=30.0):
         request = SetStiffness.Request(objects=objects, default_youngs_modulus_pa=default_youngs_modulus_pa)

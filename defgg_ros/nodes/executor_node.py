@@ -47,6 +47,7 @@ from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import ConversionError, transform_from_pose
 from defgg_ros.nodes.node_main import run_node
 from defgg_ros.ros_action import ActionClient, destroy_actions
+from defgg_ros.ros_service import ServiceTimeout, call_idempotent
 
 _DEFAULTS = SequenceConfig()
 PARAMETERS = {
@@ -275,13 +276,11 @@ class ExecutorNode(Node):
         p = self._params()
         if not self._plan_client.wait_for_service(timeout_sec=p["server_wait_s"]):
             raise GoalError(f"grasp service {p['plan_grasp_service']} is not available")
-        done = threading.Event()
-        future = self._plan_client.call_async(PlanGrasp.Request(top_k=1))
-        future.add_done_callback(lambda _: done.set())
-        if not done.wait(p["plan_grasp_timeout_s"]):
-            self._plan_client.remove_pending_request(future)
-            raise GoalError(f"grasp service did not answer within {p['plan_grasp_timeout_s']:.0f} s")
-        response = future.result()
+        try:  # planning on the latest frame is idempotent: re-sent while unanswered (ros_service.py)
+            response = call_idempotent(self._plan_client, PlanGrasp.Request(top_k=1),
+                                       p["plan_grasp_timeout_s"], "grasp service")
+        except (ServiceTimeout, RuntimeError) as error:
+            raise GoalError(str(error)) from None
         if not response.success or not response.grasps:
             raise GoalError(f"grasp planning failed: {response.message or 'no grasp returned'}")
         return response.grasps[0]

@@ -12,6 +12,7 @@ from defgg_interfaces.srv import PlanGrasp, SetStiffness
 
 from defgg_ros import topics
 from defgg_ros.ros_action import ActionClient
+from defgg_ros.ros_service import ServiceTimeout, call_idempotent
 
 
 class CellCallError(RuntimeError):
@@ -27,6 +28,14 @@ def wait_future(future, timeout_s: float, what: str):
     if future.exception() is not None:
         raise CellCallError(f"{what}: {future.exception()!r}")
     return future.result()
+
+
+def _call(client, request, timeout_s: float, what: str):
+    """An idempotent service call (re-sent while unanswered: defgg_ros/ros_service.py)."""
+    try:
+        return call_idempotent(client, request, timeout_s, what)
+    except (ServiceTimeout, RuntimeError) as error:
+        raise CellCallError(str(error)) from None
 
 
 class CellClient:
@@ -55,7 +64,7 @@ class CellClient:
 
     def plan(self, request, timeout_s: float = 30.0):
         sent_ns = time.time_ns()
-        response = wait_future(self.plan_client.call_async(request), timeout_s, "PlanGrasp")
+        response = _call(self.plan_client, request, timeout_s, "PlanGrasp")
         if self.recorder is not None:
             self.recorder.record_plan(request, response, sent_ns)
         return response
@@ -63,7 +72,7 @@ class CellClient:
     def set_stiffness(self, objects, default_youngs_modulus_pa: float, timeout_s: float = 10.0):
         request = SetStiffness.Request(objects=list(objects),
                                        default_youngs_modulus_pa=float(default_youngs_modulus_pa))
-        response = wait_future(self.stiffness_client.call_async(request), timeout_s, "SetStiffness")
+        response = _call(self.stiffness_client, request, timeout_s, "SetStiffness")
         if not response.success:
             raise CellCallError(f"SetStiffness refused the assignments: {response.message}")
         return response
