@@ -90,3 +90,30 @@ def spin_until(executor, done, timeout_s: float, what: str):
 def spin():
     """The spin_until helper as a fixture: spin(executor, done, timeout_s, what)."""
     return spin_until
+
+
+def call_service(executor, client, request, timeout_s: float, what: str):
+    """Call `client` with an idempotent `request`, spinning `executor` here and re-sending it while
+    unanswered (defgg_ros.ros_service: Fast DDS can drop a response to a just-started client).
+    Fails the test with `what` after `timeout_s`; returns the response."""
+    from defgg_ros.ros_service import ServiceTimeout, call_idempotent
+
+    def wait_until(predicate, wait_s):
+        deadline = time.monotonic() + wait_s
+        while not predicate():
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                return False
+            executor.spin_once(timeout_sec=min(0.05, remaining))
+        return True
+
+    try:
+        return call_idempotent(client, request, timeout_s, what, wait_until=wait_until)
+    except ServiceTimeout as error:
+        pytest.fail(str(error))
+
+
+@pytest.fixture
+def call():
+    """The call_service helper as a fixture: call(executor, client, request, timeout_s, what)."""
+    return call_service

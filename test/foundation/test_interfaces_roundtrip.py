@@ -33,7 +33,7 @@ def _server_node(context):
     return node
 
 
-def test_plan_grasp_round_trip_between_two_nodes(rclpy_context, executor, spin):
+def test_plan_grasp_round_trip_between_two_nodes(rclpy_context, executor, spin, call):
     from rclpy.node import Node
 
     server = _server_node(rclpy_context)
@@ -48,13 +48,13 @@ def test_plan_grasp_round_trip_between_two_nodes(rclpy_context, executor, spin):
     request.depth.step = 4
     request.depth.data = bytes([7, 0, 9, 0, 1, 0, 2, 0])
     request.top_k = 3
-    response = spin(executor, client.call_async(request), 10.0, "PlanGrasp response")
+    response = call(executor, client, request, 10.0, "PlanGrasp response")
     assert response.success, response.message
     assert response.message == "2x2 16UC1"
     assert [g.quality for g in response.grasps] == pytest.approx([1.0, 0.5, 1 / 3])
     assert [g.center_u_px for g in response.grasps] == [7.0, 0.0, 9.0]
 
-    empty = spin(executor, client.call_async(PlanGrasp.Request()), 10.0, "PlanGrasp response to empty request")
+    empty = call(executor, client, PlanGrasp.Request(), 10.0, "PlanGrasp response to empty request")
     assert not empty.success and "empty" in empty.message
 
 

@@ -39,7 +39,7 @@ def chain(executor, tmp_path):
     driver.shutdown()
 
 
-def test_best_grasp_lands_on_the_box_and_plan_grasp_serves_the_latest_frame(chain, executor, spin):
+def test_best_grasp_lands_on_the_box_and_plan_grasp_serves_the_latest_frame(chain, executor, spin, call):
     grasps, poses = [], []
     chain.create_subscription(Grasp, topics.BEST_GRASP, grasps.append, qos.STATE)
     chain.create_subscription(PoseArray, "/fake_panda/object_poses", poses.append, qos.STATE)
@@ -55,6 +55,6 @@ def test_best_grasp_lands_on_the_box_and_plan_grasp_serves_the_latest_frame(chai
     assert 0.0 <= grasp.width_m <= GRIPPER_MAX_WIDTH_M
     client = chain.create_client(PlanGrasp, topics.PLAN_GRASP_SERVICE)
     assert client.wait_for_service(timeout_sec=10.0)
-    response = spin(executor, client.call_async(PlanGrasp.Request(top_k=2)), TIMEOUT_S, "plan_grasp response")
+    response = call(executor, client, PlanGrasp.Request(top_k=2), TIMEOUT_S, "plan_grasp response")
     assert response.success, response.message
     assert response.grasps[0].header.frame_id == grasp.header.frame_id

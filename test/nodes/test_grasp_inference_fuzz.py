@@ -102,7 +102,7 @@ malformed_requests = st.one_of(
 )
 
 
-def test_fuzzed_requests_are_refused_then_a_valid_one_is_served(executor, spin, tmp_path, inference_service):
+def test_fuzzed_requests_are_refused_then_a_valid_one_is_served(executor, spin, tmp_path, inference_service, call):
     checkpoint = make_random_checkpoint(tmp_path / "random.pt")
     _, _, client = inference_service("fuzz_client", model_path=str(checkpoint), plan_grasp_service=SERVICE)
     seen = []
@@ -117,7 +117,7 @@ def test_fuzzed_requests_are_refused_then_a_valid_one_is_served(executor, spin, 
             request = valid_request()
             for mutation in example:
                 apply(request, mutation)
-        response = spin(executor, client.call_async(request), 20.0, "fuzzed plan_grasp response")
+        response = call(executor, client, request, 20.0, "fuzzed plan_grasp response")
         assert not response.success, f"malformed request accepted: {example!r:.300}"
         assert response.message and not response.grasps
         assert not response.message.startswith("internal error"), response.message
@@ -126,7 +126,7 @@ def test_fuzzed_requests_are_refused_then_a_valid_one_is_served(executor, spin, 
     fuzz()
     assert len(seen) >= 200
     assert len({message.split(":")[0][:40] for message in seen}) >= 10  # many different failure paths
-    response = spin(executor, client.call_async(valid_request()), 20.0, "valid plan_grasp response")
+    response = call(executor, client, valid_request(), 20.0, "valid plan_grasp response")
     assert response.success, response.message
     grasp = response.grasps[0]
     assert TRUTH[int(round(grasp.center_v_px)), int(round(grasp.center_u_px))] > 0

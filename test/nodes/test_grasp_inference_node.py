@@ -46,8 +46,8 @@ def cell(checkpoint, inference_service):
     return inference_service("grasp_test_client", model_path=str(checkpoint), base_T_camera=BASE_T_CAMERA)
 
 
-def call(executor, spin, client, request, timeout_s=20.0):
-    return spin(executor, client.call_async(request), timeout_s, "plan_grasp response")
+def plan(executor, call, client, request, timeout_s=20.0):
+    return call(executor, client, request, timeout_s, "plan_grasp response")
 
 
 def header(stamp_sec=1):
@@ -108,9 +108,9 @@ def assert_ranked_clear_first(grasps, opening_m: float):
 
 
 @pytest.mark.parametrize("depth_encoding", ["16UC1", "32FC1"])
-def test_plan_grasp_with_stiffness_image(cell, executor, spin, depth_encoding):
+def test_plan_grasp_with_stiffness_image(cell, executor, spin, depth_encoding, call):
     _, _, client = cell
-    response = call(executor, spin, client, image_request(depth_encoding, top_k=3))
+    response = plan(executor, call, client, image_request(depth_encoding, top_k=3))
     assert response.success, response.message
     assert 1 <= len(response.grasps) <= 3 and response.inference_time_s > 0
     assert_ranked_clear_first(response.grasps, GRIPPER_MAX_WIDTH_M)
@@ -121,15 +121,15 @@ def test_plan_grasp_with_stiffness_image(cell, executor, spin, depth_encoding):
         assert grasp.header.stamp.sec == 1
 
 
-def test_plan_grasp_with_objects_segments_the_request(cell, executor, spin):
+def test_plan_grasp_with_objects_segments_the_request(cell, executor, spin, call):
     _, _, client = cell
-    response = call(executor, spin, client, objects_request([entry(2e5)]))
+    response = plan(executor, call, client, objects_request([entry(2e5)]))
     assert response.success, response.message
     assert_valid_grasp(response.grasps[0])
     assert response.grasps[0].youngs_modulus_pa == pytest.approx(2e5)
 
 
-def test_synchronised_streams_publish_and_serve_empty_requests(cell, executor, spin):
+def test_synchronised_streams_publish_and_serve_empty_requests(cell, executor, spin, call):
     node, client_node, client = cell
     pubs = {name: client_node.create_publisher(kind, topic, qos.SENSOR_DATA) for name, kind, topic in (
         ("depth", Image, topics.DEPTH_IMAGE), ("stiffness", Image, topics.STIFFNESS_IMAGE),
@@ -160,7 +160,7 @@ def test_synchronised_streams_publish_and_serve_empty_requests(cell, executor, s
     assert len(fingers) == 2
     gap = math.dist(*[(m.pose.position.x, m.pose.position.y, m.pose.position.z) for m in fingers])
     assert gap == pytest.approx(got["grasp"][0].width_m + fingers[0].scale.x, abs=1e-6)
-    response = call(executor, spin, client, PlanGrasp.Request())
+    response = plan(executor, call, client, PlanGrasp.Request())
     assert response.success, response.message
     assert response.grasps[0].header.stamp.sec == 42
 
@@ -213,43 +213,43 @@ BAD_REQUESTS = {
 }
 
 
-def test_bad_requests_fail_cleanly_and_node_keeps_serving(cell, executor, spin):
+def test_bad_requests_fail_cleanly_and_node_keeps_serving(cell, executor, spin, call):
     _, _, client = cell
     for name, (build, reason) in BAD_REQUESTS.items():
-        response = call(executor, spin, client, build())
+        response = plan(executor, call, client, build())
         assert not response.success, f"{name}: unexpectedly succeeded"
         assert reason in response.message, f"{name}: message {response.message!r} lacks {reason!r}"
         assert not response.grasps
-    response = call(executor, spin, client, image_request())
+    response = plan(executor, call, client, image_request())
     assert response.success, response.message
 
 
-def test_depth_only_model_via_use_stiffness_false(executor, spin, tmp_path, inference_service):
+def test_depth_only_model_via_use_stiffness_false(executor, spin, tmp_path, inference_service, call):
     checkpoint = make_random_checkpoint(tmp_path / "depth_only.pt", uses_stiffness=False)
     node, _, client = inference_service("depth_only_client", model_path=str(checkpoint), use_stiffness=False,
                                         plan_grasp_service="/test/depth_only_plan")
     assert not node.predictor.uses_stiffness
-    response = call(executor, spin, client, image_request())
+    response = plan(executor, call, client, image_request())
     assert response.success, response.message
     assert_valid_grasp(response.grasps[0])
 
 
-def test_finger_clearance_ranking_can_be_switched_off(executor, spin, checkpoint, inference_service):
+def test_finger_clearance_ranking_can_be_switched_off(executor, spin, checkpoint, inference_service, call):
     _, _, client = inference_service("clearance_off_client", model_path=str(checkpoint),
                                      base_T_camera=BASE_T_CAMERA, finger_clearance_opening_m=0.0,
                                      plan_grasp_service="/test/clearance_off_plan")
-    response = call(executor, spin, client, image_request(top_k=5))
+    response = plan(executor, call, client, image_request(top_k=5))
     assert response.success, response.message
     qualities = [g.quality for g in response.grasps]
     assert qualities == sorted(qualities, reverse=True)   # the network's own ranking
 
 
-def test_square_contacts_turn_the_grasps_to_the_box_faces(executor, spin, checkpoint, inference_service):
+def test_square_contacts_turn_the_grasps_to_the_box_faces(executor, spin, checkpoint, inference_service, call):
     import cv2
     _, _, client = inference_service("contact_client", model_path=str(checkpoint), base_T_camera=BASE_T_CAMERA,
                                      contact_angle=True, plan_grasp_service="/test/contact_plan")
     box_only = numpy_to_image(np.where(TRUTH == 1, 2e4, 0.0).astype(np.float32), "32FC1", header())
-    response = call(executor, spin, client, image_request(top_k=3, stiffness=box_only))
+    response = plan(executor, call, client, image_request(top_k=3, stiffness=box_only))
     assert response.success, response.message
     assert len(response.grasps) == 3
     # the 50 x 40 mm box's faces in the image, from its pixels

@@ -31,8 +31,8 @@ DEPTH_M, TRUTH = render(SCENE)
 class Harness:
     """A test-side node: publishes camera frames, collects the segmentation outputs."""
 
-    def __init__(self, executor, spin):
-        self.executor, self.spin = executor, spin
+    def __init__(self, executor, spin, call):
+        self.executor, self.spin, self.call = executor, spin, call
         self.node = Node("seg_test_harness", context=executor.context)
         executor.add_node(self.node)
         self.depth_pub = self.node.create_publisher(Image, topics.DEPTH_IMAGE, qos.SENSOR_DATA)
@@ -67,8 +67,8 @@ class Harness:
 
     def set_stiffness(self, objects, default=0.0):
         assert self.set_client.wait_for_service(timeout_sec=10.0)
-        future = self.set_client.call_async(SetStiffness.Request(objects=objects, default_youngs_modulus_pa=default))
-        return self.spin(self.executor, future, 10.0, "set_stiffness response")
+        request = SetStiffness.Request(objects=objects, default_youngs_modulus_pa=default)
+        return self.call(self.executor, self.set_client, request, 10.0, "set_stiffness response")
 
 
 def _entry(name, value, roi=(0, 0, 0, 0), region_only=False):
@@ -78,11 +78,11 @@ def _entry(name, value, roi=(0, 0, 0, 0), region_only=False):
 
 
 @pytest.fixture
-def harness(executor, spin):
+def harness(executor, spin, call):
     node = SegmentationNode(context=executor.context,
                             parameter_overrides=[Parameter("default_youngs_modulus_pa", value=3e5)])
     executor.add_node(node)
-    h = Harness(executor, spin)
+    h = Harness(executor, spin, call)
     h.seg_node = node
     return h
 
@@ -182,7 +182,7 @@ def test_capture_background_removes_fixtures_that_are_not_table(harness, executo
     harness.frame(depth_metres_to_msg(background_m, "16UC1"), stamp_sec=21)
     client = harness.node.create_client(Trigger, "/defgg/segmentation/capture_background")
     assert client.wait_for_service(timeout_sec=10.0)
-    response = spin(executor, client.call_async(Trigger.Request()), 10.0, "capture response")
+    response = harness.call(executor, client, Trigger.Request(), 10.0, "capture response")
     assert response.success, response.message
     np.testing.assert_allclose(np.load(save, allow_pickle=False), background_m, atol=1e-3)
     labels = image_to_numpy(harness.frame(depth_metres_to_msg(scene_m, "16UC1"), stamp_sec=22)[1])

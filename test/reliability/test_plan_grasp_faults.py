@@ -38,9 +38,9 @@ def checkpoint(tmp_path_factory):
 
 
 @pytest.fixture
-def client(executor, spin, checkpoint, inference_service):
+def client(executor, call, checkpoint, inference_service):
     _, _, cli = inference_service("plan_fault_client", model_path=str(checkpoint), plan_grasp_service=SERVICE)
-    return lambda request: spin(executor, cli.call_async(request), 20.0, "plan_grasp response")
+    return lambda request: call(executor, cli, request, 20.0, "plan_grasp response")
 
 
 def _objects_request(depth_m):

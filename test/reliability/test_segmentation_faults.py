@@ -49,8 +49,8 @@ BAD_FRAMES = {
 
 
 class Harness:
-    def __init__(self, executor, spin, node):
-        self.executor, self.spin, self.seg = executor, spin, node
+    def __init__(self, executor, spin, call, node):
+        self.executor, self.spin, self.call, self.seg = executor, spin, call, node
         self.node = Node("seg_fault_harness", context=executor.context)
         executor.add_node(self.node)
         self.depth_pub = self.node.create_publisher(Image, topics.DEPTH_IMAGE, qos.SENSOR_DATA)
@@ -93,16 +93,16 @@ class Harness:
 
     def set_stiffness(self, objects, default=0.0):
         assert self.set_client.wait_for_service(timeout_sec=10.0)
-        future = self.set_client.call_async(SetStiffness.Request(objects=objects, default_youngs_modulus_pa=default))
-        return self.spin(self.executor, future, 10.0, "set_stiffness response")
+        request = SetStiffness.Request(objects=objects, default_youngs_modulus_pa=default)
+        return self.call(self.executor, self.set_client, request, 10.0, "set_stiffness response")
 
 
 @pytest.fixture
-def harness(executor, spin):
+def harness(executor, spin, call):
     node = SegmentationNode(context=executor.context,
                             parameter_overrides=[Parameter("default_youngs_modulus_pa", value=DEFAULT_PA)])
     executor.add_node(node)
-    return Harness(executor, spin, node)
+    return Harness(executor, spin, call, node)
 
 
 def test_each_bad_frame_is_skipped_with_its_reason_and_the_next_good_frame_is_served(harness):
