@@ -20,6 +20,7 @@ from tqdm import tqdm
 
 from defgg_ros.bringup.demo_geometry import (
     base_T_camera,
+    bin_place_xy,
     in_bin,
     label_of_object,
     object_roi,
@@ -97,10 +98,12 @@ def _describe_grasp(name, grasp, object_position_m) -> str:
 class DemoRun:
     """One demo: the client, the local predictor (for the quality pictures) and the results."""
 
-    def __init__(self, client, model_path, bringup, pick_timeout_s=900.0):
+    def __init__(self, client, model_path, bringup, pick_timeout_s=900.0, executor_params=None):
         from defgg_ros.model.inference import GraspPredictor
 
         self.client = client
+        self.executor_params = executor_params or {}  # without them, the executor's own place pose
+        self.placed = 0
         self.bringup = bringup
         self.pick_timeout_s = pick_timeout_s
         self.predictor = GraspPredictor.from_checkpoint(model_path, num_threads=1)
@@ -208,14 +211,45 @@ class DemoRun:
                 row.phase_reached = feedback.phase
                 progress.set_postfix_str(f"{row.name}: {feedback.phase}")
 
-        result = self.client.pick(PickAndPlace.Goal(plan_grasp=False, grasp=grasp), on_feedback,
-                                  timeout_s=self.pick_timeout_s)
+        goal = PickAndPlace.Goal(plan_grasp=False, grasp=grasp, place_pose=self._place_pose())
+        result = self.client.pick(goal, on_feedback, timeout_s=self.pick_timeout_s)
+        self.placed += bool(result.held_after_transfer)
         row.success, row.held_after_transfer = result.success, result.held_after_transfer
         row.phase_reached = result.phase_reached or row.phase_reached
         row.failure_reason = result.failure_reason
         if not result.success and not result.phase_reached:
             row.failure_reason = "the executor returned an empty result (its error is in cell.log)"
         row.sim_duration_s = result.duration_s
+
+    def _place_pose(self):
+        """Each object into its own quadrant of the bin, at the executor's release height.
+
+        An empty frame (no bin in the scene, or no release height) leaves it to the executor.
+        """
+        from geometry_msgs.msg import PoseStamped
+
+        pose = PoseStamped()
+        p = self.executor_params
+        if self.scene.get("bin") and "place_position_m" in p and "base_frame" in p:
+            pose.header.frame_id = p["base_frame"]
+            x, y = bin_place_xy(self.scene["bin"], self.placed)
+            pose.pose.position.x, pose.pose.position.y = x, y
+            pose.pose.position.z = float(p["place_position_m"][2])
+            pose.pose.orientation.w = 1.0  # identity: keep the executor's place yaw
+        return pose
+
+
+def executor_params(node_set) -> dict:
+    """The executor's parameters from its params files (place pose, base frame), {} if none."""
+    import yaml
+
+    params = {}
+    for entry in node_set.nodes:
+        if entry.name == "executor_node":
+            for path in entry.params_files:
+                raw = yaml.safe_load(Path(path).read_text()) or {}
+                params.update(raw.get(entry.name, {}).get("ros__parameters", {}))
+    return params
 
 
 def run_demo(args, out_dir: Path, log) -> int:
@@ -224,7 +258,8 @@ def run_demo(args, out_dir: Path, log) -> int:
     overrides = {DRIVER: {"scene_file": str(Path(args.scene).resolve()), "gui": bool(args.gui),
                           "max_real_time_factor": float(args.max_rtf)},
                  INFERENCE: {"model_path": str(Path(args.model).resolve())}}
-    bringup = Bringup(load_node_set("sim_cell"), overrides, out=log)
+    node_set = load_node_set("sim_cell")
+    bringup = Bringup(node_set, overrides, out=log)
     client = None
     rows, panels = [], []
     started = time.monotonic()
@@ -233,7 +268,7 @@ def run_demo(args, out_dir: Path, log) -> int:
         print(f"defgg-demo: starting the simulated cell ({Path(args.scene).name}); node logs in {log.name}")
         print(f"defgg-demo: cell ready in {bringup.wait_ready(args.ready_timeout):.1f} s")
         client = DemoClient()
-        run = DemoRun(client, args.model, bringup, args.pick_timeout)
+        run = DemoRun(client, args.model, bringup, args.pick_timeout, executor_params(node_set))
         names = [o["name"] for o in run.scene["objects"]]
         wanted = args.objects.split(",") if args.objects else names
         unknown = set(wanted) - set(names)

@@ -82,6 +82,21 @@ def in_bin(position_base_m, bin_dict: dict | None) -> bool:
     return bool(abs(x - cx) <= ix / 2 and abs(y - cy) <= iy / 2 and z <= h + BIN_STACK_MARGIN_M)
 
 
+# The order in which the demo fills the bin's quadrants: diagonal first, so the next object lands
+# as far as possible from the one before (all at the bin's centre, they piled up and one came to
+# rest on the rim: 3/4 in the bin on a fresh clone).
+BIN_QUADRANT_ORDER = ((1, 1), (-1, -1), (1, -1), (-1, 1))
+
+
+def bin_place_xy(bin_dict: dict, slot: int) -> tuple:
+    """(x, y) base-frame centre of the bin quadrant for the slot-th placed object (cycles after 4)."""
+    if slot < 0:
+        raise ValueError(f"slot must be >= 0, got {slot}")
+    (cx, cy), (ix, iy, _h) = bin_dict["center_xy_m"], bin_dict["inner_size_m"]
+    sx, sy = BIN_QUADRANT_ORDER[slot % len(BIN_QUADRANT_ORDER)]
+    return cx + sx * ix / 4, cy + sy * iy / 4
+
+
 def part_roi(obj: dict, position_base_m, base_t_camera, camera_k, image_wh) -> tuple | None:
     """(x, y, w, h) around the object's second-material part (local x >= part.x_from_m), or None.
 

@@ -8,6 +8,7 @@ import pytest
 
 from defgg_ros.bringup.demo_geometry import (
     base_T_camera,
+    bin_place_xy,
     grasp_is_on_object,
     in_bin,
     label_of_object,
@@ -111,3 +112,17 @@ objects:
     soft_share = np.mean(on_object == np.float32(2e4))
     assert 0.3 < soft_share < 0.7, f"the foam end should be about half the brick, got {soft_share:.2f}"
     assert np.mean(on_object == np.float32(2e9)) > 0.3
+
+
+def test_bin_place_points_are_distinct_quadrant_centres_inside_the_bin():
+    bin_dict = {"center_xy_m": [0.35, -0.45], "inner_size_m": [0.22, 0.22, 0.06]}
+    points = [bin_place_xy(bin_dict, slot) for slot in range(4)]
+    assert len(set(points)) == 4
+    for x, y in points:
+        assert in_bin((x, y, 0.03), bin_dict)
+        assert abs(abs(x - 0.35) - 0.055) < 1e-9 and abs(abs(y + 0.45) - 0.055) < 1e-9
+    # consecutive objects go to opposite corners, and the fifth reuses the first quadrant
+    assert math.dist(points[0], points[1]) == pytest.approx(0.11 * math.sqrt(2))
+    assert bin_place_xy(bin_dict, 4) == points[0]
+    with pytest.raises(ValueError, match="slot"):
+        bin_place_xy(bin_dict, -1)
