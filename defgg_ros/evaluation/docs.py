@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 from pathlib import Path
 
 from defgg_ros.atomic import write_text_atomic
@@ -44,6 +45,11 @@ def _targets_md(targets: list) -> list:
     return lines
 
 
+def distinct_commands(commands) -> list:
+    """The evaluation commands without their --workers (which changes speed, never a result), each once."""
+    return list(dict.fromkeys(re.sub(r"\s--workers[ =]\d+", "", c) for c in commands))
+
+
 def results_markdown(out_dir, doc_path, notes_path=None) -> str:
     out_dir = Path(out_dir)
     manifest = report_mod.read_manifest(out_dir)
@@ -56,8 +62,8 @@ def results_markdown(out_dir, doc_path, notes_path=None) -> str:
         + (f" --notes {notes_path}" if notes_path else "") + "` from the files in "
         f"`{out_dir}/`; do not edit by hand.*", "",
         "## How to reproduce", "",
-        "1. Evaluation (resumable; rerun the same commands to continue): "
-        + "; ".join(f"`{c}`" for c in manifest.get("commands", [manifest["command"]])),
+        "1. Evaluation (resumable; rerun the same commands to continue; `--workers N` runs N in parallel): "
+        + "; ".join(f"`{c}`" for c in distinct_commands(manifest.get("commands", [manifest["command"]]))),
         f"2. Tables, plots and this report: `defgg-eval report --out {out_dir} --docs {doc_path}`",
         f"3. Strategy figure: `defgg-eval strategy --out {out_dir}`",
         "4. Models and their training: see the model cards `models/defgg_cnn.md` and "
