@@ -46,8 +46,8 @@ def _targets_md(targets: list) -> list:
 
 
 def distinct_commands(commands) -> list:
-    """The evaluation commands without their --workers (which changes speed, never a result), each once."""
-    return list(dict.fromkeys(re.sub(r"\s--workers[ =]\d+", "", c) for c in commands))
+    """The evaluation commands that ran trials, without their --workers (speed, never a result), each once."""
+    return list(dict.fromkeys(re.sub(r"\s--workers[ =]\d+", "", c) for c in commands if "--plan-only" not in c))
 
 
 def results_markdown(out_dir, doc_path, notes_path=None) -> str:

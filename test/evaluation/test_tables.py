@@ -45,10 +45,10 @@ def test_tables_count_trials_and_judge_targets(tmp_path):
     assert json.loads((tmp_path / "summary.json").read_text())["records"] == 6
 
 
-def test_report_lists_each_evaluation_command_once_whatever_its_worker_count():
+def test_report_lists_each_trial_running_command_once_whatever_its_worker_count():
     from defgg_ros.evaluation.docs import distinct_commands
 
     commands = ["defgg-eval run --out r --workers 1 --sets common", "defgg-eval run --out r --workers=2 --sets common",
-                "defgg-eval run --out r --sets adversarial --workers 2"]
+                "defgg-eval run --out r --sets adversarial --workers 2", "defgg-eval run --out r --plan-only"]
     assert distinct_commands(commands) == ["defgg-eval run --out r --sets common",
                                            "defgg-eval run --out r --sets adversarial"]
