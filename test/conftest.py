@@ -75,15 +75,21 @@ def spin_until(executor, done, timeout_s: float, what: str):
     Fails the test with `what` after `timeout_s` seconds; never sleeps.
     Returns the future's result when `done` is a Future.
     """
-    deadline = time.monotonic() + timeout_s
     is_future = hasattr(done, "done") and hasattr(done, "result")
-    check = done.done if is_future else done
+    if not _spin_while_not(executor, done.done if is_future else done, timeout_s):
+        pytest.fail(f"timed out after {timeout_s:.1f} s waiting for {what}")
+    return done.result() if is_future else True
+
+
+def _spin_while_not(executor, check, timeout_s: float) -> bool:
+    """Spin `executor` in short slices until check() holds (True) or `timeout_s` passes (False)."""
+    deadline = time.monotonic() + timeout_s
     while not check():
         remaining = deadline - time.monotonic()
         if remaining <= 0:
-            pytest.fail(f"timed out after {timeout_s:.1f} s waiting for {what}")
+            return False
         executor.spin_once(timeout_sec=min(0.05, remaining))
-    return done.result() if is_future else True
+    return True
 
 
 @pytest.fixture
@@ -99,13 +105,7 @@ def call_service(executor, client, request, timeout_s: float, what: str):
     from defgg_ros.ros_service import ServiceTimeout, call_idempotent
 
     def wait_until(predicate, wait_s):
-        deadline = time.monotonic() + wait_s
-        while not predicate():
-            remaining = deadline - time.monotonic()
-            if remaining <= 0:
-                return False
-            executor.spin_once(timeout_sec=min(0.05, remaining))
-        return True
+        return _spin_while_not(executor, predicate, wait_s)
 
     try:
         return call_idempotent(client, request, timeout_s, what, wait_until=wait_until)
