@@ -118,18 +118,18 @@ class DemoClient:
         self._store(put)
 
     def _wait(self, predicate, timeout_s, what):
+        if not self._spin_until(predicate, timeout_s):
+            raise DemoError(f"timed out after {timeout_s:.0f} s waiting for {what}")
+
+    def _spin_until(self, predicate, timeout_s) -> bool:
+        """Spin until predicate() holds (True) or `timeout_s` passes (False)."""
         deadline = time.monotonic() + timeout_s
         while not predicate():
             remaining = deadline - time.monotonic()
             if remaining <= 0:
-                raise DemoError(f"timed out after {timeout_s:.0f} s waiting for {what}")
+                return False
             self._executor.spin_once(timeout_sec=min(0.1, remaining))
-
-    def _spin_until(self, predicate, timeout_s) -> bool:
-        deadline = time.monotonic() + timeout_s
-        while not predicate() and time.monotonic() < deadline:
-            self._executor.spin_once(timeout_sec=min(0.1, max(deadline - time.monotonic(), 0.0)))
-        return predicate()
+        return True
 
     def _wait_future(self, future, timeout_s, what):
         self._wait(future.done, timeout_s, what)
