@@ -15,6 +15,10 @@ STALL_SPEED_MPS = 0.002
 # ...for this long (sim time); shorter windows ended grasps on soft objects
 # while they were still being squeezed.
 STALL_TIME_S = 0.15
+# So "stopped" means the opening stayed within this band for STALL_TIME_S. Measured as a
+# displacement over the window, not a per-step speed: at the 0.5 ms step of a 2e4 Pa sponge a
+# 1 um contact jitter is already 2 mm/s, and a grasp held still at 48.8 mm timed out (demo, 2026-11-25).
+STALL_BAND_M = STALL_SPEED_MPS * STALL_TIME_S
 # A move has arrived when the opening is this close to its target.
 MOVE_TOLERANCE_M = 0.002
 # Franka's gripper rejects speeds above 0.1 m/s (opening rate).
@@ -62,7 +66,7 @@ class GripperController:
         self._started_s = 0.0
         self._last_moving_s = 0.0
         self._last_width_m = initial_width_m
-        self._last_time_s = None
+        self._anchor_width_m = initial_width_m   # opening when the fingers last moved
 
     @property
     def motor(self) -> MotorCommand:
@@ -96,14 +100,13 @@ class GripperController:
     def _begin(self, kind, goal, now_s):
         self._kind, self._goal = kind, goal
         self._started_s = self._last_moving_s = now_s
+        self._anchor_width_m = self._last_width_m
 
     def update(self, now_s: float, width_m: float) -> GripperOutcome | None:
         """Feed the measured opening; returns the outcome when the command ends."""
-        if self._last_time_s is not None and now_s > self._last_time_s:
-            speed = abs(width_m - self._last_width_m) / (now_s - self._last_time_s)
-            if speed > STALL_SPEED_MPS:
-                self._last_moving_s = now_s
-        self._last_width_m, self._last_time_s = width_m, now_s
+        if abs(width_m - self._anchor_width_m) > STALL_BAND_M:
+            self._anchor_width_m, self._last_moving_s = width_m, now_s
+        self._last_width_m = width_m
         if self._kind is None:
             return None
         stalled = now_s - self._last_moving_s >= STALL_TIME_S

@@ -51,3 +51,23 @@ def test_bad_move_goals_raise(args):
 def test_bad_grasp_force_raises():
     with pytest.raises(GripperCommandError, match="force"):
         GripperController(0.08).start_grasp(0.04, 0.005, 0.005, 0.05, 500.0, 0.0)
+
+
+def test_a_grasp_held_still_with_contact_jitter_ends():
+    """A soft object's FEM contact makes the opening jitter by microns at a 0.5 ms step: that
+    is 2+ mm/s as a per-step speed, yet the fingers are not moving (the 2026-11-25 demo's
+    sponge grasp timed out this way)."""
+    ctrl = GripperController(0.08)
+    ctrl.start_grasp(0.045, 0.01, 0.01, 0.05, 20.0, 0.0)
+    closing = [0.08 - 0.00005 * i for i in range(640)]            # 0.1 m/s opening rate
+    jitter = [0.0488 + (0.000002 if i % 2 else -0.000002) for i in range(2000)]
+    out = _feed(ctrl, closing + jitter, dt=0.0005)
+    assert out is not None and out.success, out
+    assert out.width_m == pytest.approx(0.0488, abs=1e-5)
+
+
+def test_slow_squeezing_is_not_a_stop():
+    ctrl = GripperController(0.08)
+    ctrl.start_grasp(0.03, 0.005, 0.005, 0.05, 20.0, 0.0)
+    squeeze = [0.05 - 0.004 * 0.0005 * i for i in range(1000)]    # 4 mm/s for 0.5 s
+    assert _feed(ctrl, squeeze, dt=0.0005) is None
