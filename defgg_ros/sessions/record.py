@@ -101,10 +101,14 @@ def assign_scene_stiffness(recorder, client, scene_path, log=print) -> None:
 def drive(recorder, client, args, log=tqdm.write) -> None:
     """--plan/--pick: call the cell like a user would, on fresh frames, and record it."""
     picks = _pick_indices(args.pick, args.plan)
+    flush = 0
     if args.stiffness_from_scene:
         assign_scene_stiffness(recorder, client, args.scene, log)
+        # The frame in flight when SetStiffness returned was segmented with the old moduli and its
+        # grasp still counts as fresh: let one more frame through so plan 0 sees the new ones.
+        flush = 1
     for i in tqdm(range(args.plan), desc="plan calls", unit="call", disable=args.plan < 2):
-        if not recorder.wait_for_grasps(args.frames_between, FRESH_FRAME_TIMEOUT_S):
+        if not recorder.wait_for_grasps(args.frames_between + (flush if i == 0 else 0), FRESH_FRAME_TIMEOUT_S):
             raise CellCallError(f"no new grasp on {topics.BEST_GRASP} within {FRESH_FRAME_TIMEOUT_S:g} s "
                                 "(is the camera publishing and the inference node running?)")
         response = client.plan(PlanGrasp.Request(top_k=args.top_k))
