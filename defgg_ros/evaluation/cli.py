@@ -231,22 +231,30 @@ def write_manifest(out_dir, args, model_paths, predictors, objects, argv, settin
     write_json_atomic(Path(out_dir) / report_mod.MANIFEST_FILE, merge_manifest(out_dir, manifest))
 
 
-def check_same_protocol(out_dir, settings) -> None:
-    """Trials of one folder share one protocol: finished trials are skipped by key, so a folder run
-    with other trial settings (e.g. before the 0.6 s lift of 2026-11-24) would silently mix them."""
+def check_same_protocol(out_dir, settings, tasks) -> None:
+    """Trials of one folder share one protocol per task: finished trials are skipped by key, so a run
+    with other trial settings (e.g. before the 0.6 s lift of 2026-11-24) would silently mix them. Only
+    what a task reads is compared (sim.trial.task_protocol): a new twist ramp leaves the shake trials."""
     from dataclasses import asdict
 
-    path = Path(out_dir) / report_mod.MANIFEST_FILE
+    from defgg_ros.evaluation.store import RESULTS_FILE, read_results
+    from defgg_ros.sim.trial import task_protocol
+
+    path = Path(out_dir) / RESULTS_FILE
     if not path.is_file():
         return
-    from defgg_ros.sim.trial import comparable_protocol
-
-    old = comparable_protocol(json.loads(path.read_text(encoding="utf-8")).get("trial_settings") or {})
-    new = comparable_protocol(asdict(settings))
-    differ = sorted(k for k in set(old) | set(new) if old.get(k) != new.get(k))
-    if differ:
-        raise ValueError(f"{out_dir} holds trials of another protocol (differs in {', '.join(differ)}); "
-                         "evaluate into a new --out folder")
+    manifest_path = Path(out_dir) / report_mod.MANIFEST_FILE
+    folder_settings = (json.loads(manifest_path.read_text(encoding="utf-8")).get("trial_settings") or {}
+                       if manifest_path.is_file() else {})
+    for task in tasks:
+        new = task_protocol(asdict(settings), task)
+        olds = {json.dumps(task_protocol(r.get("trial_settings") or folder_settings, task), sort_keys=True)
+                for r in read_results(path) if r["task"] == task}
+        for old in map(json.loads, olds):
+            differ = sorted(k for k in set(old) | set(new) if old.get(k) != new.get(k))
+            if differ:
+                raise ValueError(f"{out_dir} holds {task} trials of another protocol (differs in "
+                                 f"{', '.join(differ)}); evaluate into a new --out folder")
 
 
 def merge_manifest(out_dir, manifest: dict) -> dict:
@@ -284,7 +292,7 @@ def cmd_run(args, argv) -> int:
     predictors = load_predictors(model_paths)
     objects = eval_objects(args)
     settings = runner.quick_trial_settings() if args.quick else runner.eval_trial_settings()
-    check_same_protocol(args.out, settings)
+    check_same_protocol(args.out, settings, args.tasks)
     write_manifest(args.out, args, model_paths, predictors, objects, argv, settings)
     plan = runner.EvalPlan(objects, predictors, build_views(args, predictors, objects), args.grasps,
                            tuple(args.tasks), args.seed, settings, args.ranks)

@@ -32,15 +32,28 @@ from defgg_ros.sim.trial import TrialSettings, WorldGrasp, run_grasp_trial
 STATUS_NO_GRASP = "no_grasp"   # the model proposed fewer grasps than asked: a failed grasp
 
 
+# The twist's angular acceleration oscillates at this angular frequency (6.4 Hz) under an amplitude
+# ramped to 500 rad/s^2 in 0.5 s, so the hand turns back and forth (at most ~0.3 rad) and spins at most
+# ~500 / 40 = 12.5 rad/s. Until 2026-11-25 it accelerated one way: the hand reached 125 rad/s, and from
+# ~25 rad/s the simulated hand came apart (palm up to 112 mm off its held pose, force-limited fingers
+# forced open), so every grasp was "lost" at ~200 rad/s^2 whatever its grip (x15 force or torsional
+# friction changed nothing). Oscillating, the palm stays on its pose (<= 0.1 mm) and rigid grasps hold
+# or fail by their grip (bench/bench_twist_limit.py, bench/README.md). The real Panda's wrist turns at
+# most 2.61 rad/s: the one-way spin tested nothing a cell could do.
+EVAL_TWIST_OSCILLATION_RADPS = 40.0
+
+
 def eval_trial_settings() -> TrialSettings:
     """The tasks' protocol: the generator's trial (same close, lift and ramp rates) with the shake ramped
-    only to the task's 25 m/s^2 (0.25 s at the generator's 100 m/s^3), and each task stopped at the first
-    direction/axis that is not held (the grasp has failed; the rest is recorded as unmeasured)."""
+    only to the task's 25 m/s^2 (0.25 s at the generator's 100 m/s^3), the twist oscillating
+    (EVAL_TWIST_OSCILLATION_RADPS), and each task stopped at the first direction/axis that is not held (the
+    grasp has failed; the rest is recorded as unmeasured)."""
     rate_mps3 = SHAKE_ACCEL_LIMIT_MPS2 / TrialSettings().shake_ramp_time_s
     return TrialSettings(stop_direction_when_lost=True, stop_when_label_decided=False,
                          shake_limit_mps2=SHAKE_POSITIVE_THRESHOLD_MPS2,
                          shake_ramp_time_s=SHAKE_POSITIVE_THRESHOLD_MPS2 / rate_mps3,
                          shake_fail_below_mps2=SHAKE_POSITIVE_THRESHOLD_MPS2,
+                         twist_oscillation_radps=EVAL_TWIST_OSCILLATION_RADPS,
                          twist_fail_below_radps2=TWIST_ACCEL_LIMIT_RADPS2)
 
 

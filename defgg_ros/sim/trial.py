@@ -9,7 +9,8 @@ SHAKE_POSITIVE_THRESHOLD_MPS2 (TrialRecord.label).
 The shake uses the gravity trick measured in the FEM notes: the hand stays
 still and gravity is set to g - a*d, which matched moving the hand within
 0.1 m/s^2. The twist really rotates the hand (a non-uniform field cannot be
-faked by gravity). The grasp+lift state is shared by all directions:
+faked by gravity), one way or oscillating (TrialSettings.twist_oscillation_radps).
+The grasp+lift state is shared by all directions:
 saveState does not cover soft nodes, so LoadedObject.restore_state resets
 the nodes with resetMeshData and zeroes their velocities.
 
@@ -59,6 +60,7 @@ LOSS_DISTANCE_M = 0.02          # object moved this far relative to the hand = n
 CONFIDENT_MIN_DIRECTIONS = 3
 CONFIDENT_MARGIN_MPS2 = 20.0
 LEGACY_CONFIDENT_SETTINGS = {"confident_min_directions": 4, "confident_margin_mps2": 40.0}
+LEGACY_TWIST_SETTINGS = {"twist_oscillation_radps": None}   # before 2026-11-25: the one-way twist
 # Energy blow-up: kinetic energy per kg = v_rms^2 / 2. The fastest real motion in a trial is the
 # twist at its limit (500 rad/s^2 ramped over 0.5 s: 125 rad/s, ~6 m/s at 5 cm); 30 m/s RMS over
 # all nodes (450 J/kg) is far beyond it and only reached by a diverging FEM solve.
@@ -114,6 +116,9 @@ class TrialSettings:
     hold_time_s: float = 0.2
     shake_ramp_time_s: float = 0.5
     twist_ramp_time_s: float = 0.5
+    # None: the twist's angular acceleration ramps one way (the hand spins up to 125 rad/s); a value
+    # (rad/s): it oscillates at that angular frequency under the ramped amplitude (the evaluation's).
+    twist_oscillation_radps: float | None = None
     check_every_s: float = 0.005
     stop_direction_when_lost: bool = True
     stop_when_label_decided: bool = True
@@ -299,19 +304,23 @@ class _Trial:
 
     def twist(self):
         values = []
+        osc = self.settings.twist_oscillation_radps
         for axis in TWIST_AXES:
             self.restore()
-            state = {"omega": 0.0, "theta": 0.0}
+            state = {"omega": 0.0, "theta": 0.0, "t": 0.0}
             axis_w = self.lifted_tcp[:3, :3] @ np.asarray(axis, dtype=float)
 
-            def apply(alpha, n, axis_w=axis_w, state=state):
-                dt = n * self.world.time_step_s
-                state["omega"] += alpha * dt
-                state["theta"] += state["omega"] * dt
-                target = self.lifted_tcp.copy()
-                target[:3, :3] = _axis_angle(axis_w, state["theta"]) @ self.lifted_tcp[:3, :3]
-                self.hand.move_to(target)
-                self.step(n)
+            def apply(level, n, axis_w=axis_w, state=state):
+                if osc is None:    # one way for the whole ramp: the hand spins up to 125 rad/s
+                    self._turn(axis_w, state, level, n * self.world.time_step_s)
+                    self.world.step(n)
+                else:              # level * sin(osc * t): the spin stays below level / osc
+                    dt = self.world.time_step_s
+                    for _ in range(n):
+                        state["t"] += dt
+                        self._turn(axis_w, state, level * math.sin(osc * state["t"]), dt)
+                        self.world.step()
+                self._check(n)
 
             values.append(self.ramp(TWIST_ACCEL_LIMIT_RADPS2, self.settings.twist_ramp_time_s, apply))
             fail_below = self.settings.twist_fail_below_radps2
@@ -321,16 +330,33 @@ class _Trial:
         return values + [0.0] * (len(TWIST_AXES) - len(values)), [True] * len(values) + [False] * (
             len(TWIST_AXES) - len(values))
 
+    def _turn(self, axis_w, state, alpha_radps2, dt_s):
+        """Integrate the hand's angular acceleration about axis_w over dt_s and move the palm's target."""
+        state["omega"] += alpha_radps2 * dt_s
+        state["theta"] += state["omega"] * dt_s
+        target = self.lifted_tcp.copy()
+        target[:3, :3] = _axis_angle(axis_w, state["theta"]) @ self.lifted_tcp[:3, :3]
+        self.hand.move_to(target)
+
 
 def comparable_protocol(recorded: dict) -> dict:
     """A recorded TrialSettings dict in the form two protocols are compared in (resuming a dataset or an
     evaluation folder): fields added after it was recorded get the value they implicitly had then
-    (LEGACY_CONFIDENT_SETTINGS), and the surrogate's knobs drop out when the surrogate is off."""
-    full = {**LEGACY_CONFIDENT_SETTINGS, **recorded}
+    (LEGACY_CONFIDENT_SETTINGS, LEGACY_TWIST_SETTINGS), and the surrogate's knobs drop out when the
+    surrogate is off."""
+    full = {**LEGACY_CONFIDENT_SETTINGS, **LEGACY_TWIST_SETTINGS, **recorded}
     if not full.get("confident_stop"):
         for key in LEGACY_CONFIDENT_SETTINGS:
             full.pop(key)
     return full
+
+
+def task_protocol(recorded: dict, task: str) -> dict:
+    """comparable_protocol of the settings `task` reads: the other task's own settings (shake_* for the
+    twist, twist_* for the shake) drop out, so a new twist ramp does not make a folder's shake trials
+    another protocol."""
+    other = {"shake": "twist_", "twist": "shake_"}[task]
+    return {k: v for k, v in comparable_protocol(recorded).items() if not k.startswith(other)}
 
 
 def rms_speed_mps(before: list | None, after: list, dt_s: float) -> float:

@@ -1,0 +1,80 @@
+"""The evaluation's trial protocol: a twist the simulated hand survives, and one protocol per task and folder."""
+import dataclasses
+import json
+import math
+
+import pytest
+
+from defgg_ros.evaluation import cli
+from defgg_ros.evaluation.runner import eval_trial_settings
+from defgg_ros.sim import objects
+from defgg_ros.sim.trial import WorldGrasp, run_grasp_trial, task_protocol
+
+CENTRED = WorldGrasp((0.0, 0.0, 0.02), math.pi / 2, 0.03)     # across the 3 cm side of box_small
+
+
+def test_a_firm_rigid_grasp_holds_the_twist_about_every_axis():
+    """Real PyBullet: with the one-way twist of before 2026-11-25 this grasp was "lost" at 185-415 rad/s^2
+    (the hand itself came apart at ~25 rad/s of spin; bench/bench_twist_limit.py)."""
+    settings = dataclasses.replace(eval_trial_settings(), twist_fail_below_radps2=None)
+    out = run_grasp_trial(objects.ObjectSpec(objects.get_shape("box_small"), 2e9), CENTRED, ("twist",), settings)
+    assert out.status == "ok", out.note
+    assert out.twist_accels_radps2 == [500.0] * 6 and all(out.twist_measured)
+
+
+def _folder(tmp_path, records):
+    with (tmp_path / "trials.jsonl").open("w") as f:
+        for r in records:
+            f.write(json.dumps(r) + "\n")
+    return tmp_path
+
+
+def _settings(**changes) -> dict:
+    return dataclasses.asdict(dataclasses.replace(eval_trial_settings(), **changes))
+
+
+def test_task_protocol_drops_only_the_other_tasks_settings():
+    slow_twist = _settings(twist_oscillation_radps=None)
+    assert task_protocol(slow_twist, "shake") == task_protocol(_settings(), "shake")
+    assert task_protocol(slow_twist, "twist") != task_protocol(_settings(), "twist")
+    assert task_protocol(_settings(lift_time_s=0.3), "twist") != task_protocol(_settings(), "twist")
+    with pytest.raises(KeyError):
+        task_protocol(_settings(), "squeeze")
+
+
+def test_a_new_twist_ramp_keeps_the_folders_shake_trials_but_refuses_its_old_twist_trials(tmp_path):
+    one_way = {k: v for k, v in _settings().items() if k != "twist_oscillation_radps"}   # recorded before it existed
+    out = _folder(tmp_path, [{"key": "a", "task": "shake", "trial_settings": one_way},
+                             {"key": "b", "task": "twist", "trial_settings": one_way}])
+    cli.check_same_protocol(out, eval_trial_settings(), ["shake"])                 # accepted
+    with pytest.raises(ValueError, match="twist trials of another protocol .*twist_oscillation_radps"):
+        cli.check_same_protocol(out, eval_trial_settings(), ["shake", "twist"])
+
+
+def test_a_shared_setting_refuses_every_task(tmp_path):
+    out = _folder(tmp_path, [{"key": "a", "task": "shake", "trial_settings": _settings(lift_time_s=0.3)}])
+    with pytest.raises(ValueError, match="shake trials of another protocol .*lift_time_s"):
+        cli.check_same_protocol(out, eval_trial_settings(), ["shake"])
+    cli.check_same_protocol(out, eval_trial_settings(), ["twist"])     # no twist trial there to mix with
+
+
+def test_the_twist_limit_bench_reruns_a_recorded_trial(tmp_path):
+    """bench/bench_twist_limit.py on one recorded rigid twist trial (the can of results/sim_v4, one-way twist;
+    the grasp at full precision: a 1e-7 change of it moves the held value by a ramp step)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    record = {"key": "k", "task": "twist", "experiment": "main", "rank": 0, "model": "m", "object": "common_can",
+              "object_set": "common", "youngs_modulus_pa": 2e9, "part_moduli_pa": [2e9],
+              "object_yaw_rad": 0.5242208014656741,
+              "grasp": {"position_m": [-0.017507142339433943, -0.0018428570883614675, 0.04525001049041749],
+                        "yaw_rad": 0.27020367980003357, "width_m": 0.04324560849507959},
+              "trial_settings": _settings(twist_oscillation_radps=None), "accels": [225.0, 0, 0, 0, 0, 0]}
+    results = _folder(tmp_path, [record]) / "trials.jsonl"
+    bench = Path(__file__).resolve().parents[2] / "bench" / "bench_twist_limit.py"
+    done = subprocess.run([sys.executable, str(bench), str(results), "--variants", "as_eval", "osc_40"],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert "first axis reproduces the record in 1/1" in done.stdout, done.stdout
+    assert "osc_40: grip 4.5 N/finger, 1/1 lifted, held all axes 1/1" in done.stdout, done.stdout
