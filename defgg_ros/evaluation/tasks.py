@@ -7,9 +7,9 @@ procedure and withstands the task's acceleration limit:
   the object is held at SHAKE_POSITIVE_THRESHOLD_MPS2 (25 m/s^2) in EVERY
   direction (the paper's "withstand the linear acceleration limit of 25
   m/s^2"; the training label used the mean instead, which is weaker);
-- twist: angular acceleration about each of the six hand axes, success if
-  the object is held up to TWIST_ACCEL_LIMIT_RADPS2 (500 rad/s^2) about
-  every axis.
+- twist: angular acceleration about each of the six hand axes (oscillating,
+  runner.EVAL_TWIST_OSCILLATION_RADPS), success if the object is held up to
+  TWIST_ACCEL_LIMIT_RADPS2 (500 rad/s^2) amplitude about every axis.
 
 The training label is weaker (mean held acceleration over the directions
 >= 25 m/s^2 with a ramp to 50 m/s^2); the task needs every direction, so the
