@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # The budgeted evaluation of the shipped models (results/sim_v1: the weights of 2026-11-22;
-# results/sim_v2: the weights of 2026-11-23), in the background:
-#   WORKERS=2 nohup results/run_budgeted_eval.sh results/sim_v2 > results/sim_v2.log 2>&1 &
+# results/sim_v2, sim_v3: the weights of 2026-11-23; results/sim_v4: the weights of 2026-11-25), in the
+# background (setsid: stop it with kill -TERM -- -<its process group>, which reaches the workers too):
+#   WORKERS=2 NOTES=results/notes_v4.md setsid nohup results/run_budgeted_eval.sh results/sim_v4 \
+#       > results/sim_v4.log 2>&1 &
 # Every step is resumable: rerunning this script skips every finished trial. The order puts the
 # cheapest informative trials first: every common object's best grasp (shake), the multi-material
 # object, the best grasps' twist, then the stiffness-error sensitivity of that best grasp, then the
