@@ -330,9 +330,11 @@ def cmd_report(args) -> int:
 
 
 def write_diagnostics(out_dir, data_root) -> None:
-    """OUT/diagnostics.json + .md from the training labels (if --data) and OUT/plans.json (if present)."""
+    """OUT/diagnostics.json + .md from the training labels (if --data), OUT/plans.json (if present) and
+    the repeatability of the folder's trials (if it ran the sensitivity experiment)."""
     from defgg_ros.evaluation import diagnose
     from defgg_ros.evaluation.runner import PLANS_FILE
+    from defgg_ros.evaluation.store import RESULTS_FILE, read_results
 
     out_dir = Path(out_dir)
     path = out_dir / "diagnostics.json"
@@ -340,13 +342,15 @@ def write_diagnostics(out_dir, data_root) -> None:
     labels = diagnose.label_stats(data_root) if data_root else old.get("labels")
     plans_path = out_dir / PLANS_FILE
     shifts = diagnose.plan_shifts(json.loads(plans_path.read_text())) if plans_path.is_file() else None
-    if labels is None and shifts is None:
+    results = out_dir / RESULTS_FILE
+    replicates = diagnose.replicate_flips(read_results(results)) if results.is_file() else None
+    if labels is None and shifts is None and replicates is None:
         return
     write_json_atomic(path, {"labels": labels, "data_root": str(data_root or old.get("data_root")),
-                             "plan_shifts": shifts})
+                             "plan_shifts": shifts, "replicates": replicates})
     from defgg_ros.atomic import write_text_atomic
 
-    write_text_atomic(out_dir / "diagnostics.md", diagnose.diagnostics_markdown(labels, shifts))
+    write_text_atomic(out_dir / "diagnostics.md", diagnose.diagnostics_markdown(labels, shifts, replicates))
 
 
 def cmd_strategy(args) -> int:

@@ -8,6 +8,11 @@
    moves between moduli on the same object. The depth-only model cannot
    move it (its input is the same); the stiffness-aware model moves it only
    if it learned to.
+3. Repeatability (an evaluation's trial records): a sensitivity trial whose
+   grasp landed on the same pixel as its view's correct-input trial differs
+   from it only by the network's regressed width and angle (a fraction of a
+   mm or degree); how often the outcome still differs is the noise floor of
+   every comparison in the tables.
 """
 from __future__ import annotations
 
@@ -79,7 +84,34 @@ def plan_shifts(plans) -> dict:
                 for e, v in sorted(per.items(), key=lambda kv: float(kv[0]))} for m, per in out.items()}
 
 
-def diagnostics_markdown(labels: dict | None, shifts: dict | None) -> str:
+def _main_key(r) -> tuple:
+    return r["model"], r["object_set"], r["object"], r["youngs_modulus_pa"], r["rank"], r["task"]
+
+
+def replicate_flips(records) -> dict | None:
+    """Sensitivity trials on the same grasp pixel as their view's correct-input (main) trial: how many,
+    how far their width and angle moved, and how often the outcome differs. None without such pairs."""
+    main = {_main_key(r): r for r in records if r["experiment"] == "main" and r.get("grasp")}
+    widths_mm, angles_deg, differ = [], [], 0
+    for r in records:
+        m = main.get(_main_key(r)) if r["experiment"] == "sensitivity" and r.get("grasp") else None
+        if m is None or r.get("success") is None or m.get("success") is None or r.get("reused_from"):
+            continue
+        g, h = r["grasp"], m["grasp"]
+        if (g["center_u_px"], g["center_v_px"]) != (h["center_u_px"], h["center_v_px"]):
+            continue
+        widths_mm.append(1000 * abs(g["width_m"] - h["width_m"]))
+        turn = abs(g["yaw_rad"] - h["yaw_rad"]) % math.pi     # a parallel-jaw grasp is the same after a half turn
+        angles_deg.append(math.degrees(min(turn, math.pi - turn)))
+        differ += int(r["success"] != m["success"])
+    if not widths_mm:
+        return None
+    return {"pairs": len(widths_mm), "outcome_differs": differ, "rate": differ / len(widths_mm),
+            "median_width_change_mm": float(np.median(widths_mm)),
+            "median_angle_change_deg": float(np.median(angles_deg))}
+
+
+def diagnostics_markdown(labels: dict | None, shifts: dict | None, replicates: dict | None = None) -> str:
     lines = []
     if labels:
         lines += ["**Training labels by modulus** (dataset as it is now)", "",
@@ -105,4 +137,10 @@ def diagnostics_markdown(labels: dict | None, shifts: dict | None) -> str:
                 lines.append(f"| {m} | {e} | {v['objects']} | {v['mean_shift_mm']:.1f} | {v['moved_over_5mm']} | "
                              f"{v['mean_width_change_mm']:.1f} |")
         lines.append("")
+    if replicates:
+        lines += ["**How repeatable an outcome is** (sensitivity trials whose grasp is on the same pixel as the "
+                  "correct-input trial of their view)", "",
+                  f"{replicates['pairs']} pairs; width moved by a median {replicates['median_width_change_mm']:.2f} "
+                  f"mm and angle by {replicates['median_angle_change_deg']:.2f} deg; the outcome differs in "
+                  f"{replicates['outcome_differs']} ({100 * replicates['rate']:.1f} %).", ""]
     return "\n".join(lines)

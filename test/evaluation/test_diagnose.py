@@ -29,3 +29,26 @@ def test_plan_shifts_measure_how_far_the_best_grasp_moves():
     assert shifts["stiff"]["2e+04"]["moved_over_5mm"] == 1
     assert abs(shifts["stiff"]["2e+04"]["mean_width_change_mm"] - 10.0) < 1e-9
     assert shifts["depth"]["2e+04"]["mean_shift_mm"] == 0.0
+
+
+def _trial(experiment, success, u=100, yaw=0.0, width=0.04, **extra):
+    return {"experiment": experiment, "model": "stiff", "object_set": "common", "object": "a",
+            "youngs_modulus_pa": 2e5, "rank": 0, "task": "shake", "success": success,
+            "grasp": {"center_u_px": u, "center_v_px": 50, "yaw_rad": yaw, "width_m": width}, **extra}
+
+
+def test_replicate_flips_compare_only_same_pixel_grasps_with_their_views_main_trial():
+    import math
+
+    records = [_trial("main", True),
+               _trial("sensitivity", False, width=0.0402, yaw=math.pi - 0.01),   # same pixel, outcome differs
+               _trial("sensitivity", True, width=0.0404),                        # same pixel, same outcome
+               _trial("sensitivity", False, u=140),                              # moved: not a replicate
+               _trial("sensitivity", None),                                      # simulation failed
+               _trial("sensitivity", False, reused_from="k")]                    # the main trial itself
+    rep = diagnose.replicate_flips(records)
+    assert rep["pairs"] == 2 and rep["outcome_differs"] == 1 and rep["rate"] == 0.5
+    assert abs(rep["median_width_change_mm"] - 0.3) < 1e-9
+    assert abs(rep["median_angle_change_deg"] - math.degrees(0.005)) < 1e-9     # a half turn is the same grasp
+    assert "outcome differs in 1 (50.0 %)" in diagnose.diagnostics_markdown(None, None, rep)
+    assert diagnose.replicate_flips([_trial("main", True)]) is None
