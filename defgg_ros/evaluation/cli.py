@@ -247,10 +247,11 @@ def check_same_protocol(out_dir, settings, tasks) -> None:
     manifest_path = Path(out_dir) / report_mod.MANIFEST_FILE
     folder_settings = (json.loads(manifest_path.read_text(encoding="utf-8")).get("trial_settings") or {}
                        if manifest_path.is_file() else {})
+    records = read_results(path)
     for task in tasks:
         new = task_protocol(asdict(settings), task)
         olds = {json.dumps(task_protocol(r.get("trial_settings") or folder_settings, task), sort_keys=True)
-                for r in read_results(path) if r["task"] == task}
+                for r in records if r["task"] == task}
         for old in map(json.loads, olds):
             differ = sorted(k for k in set(old) | set(new) if old.get(k) != new.get(k))
             if differ:
