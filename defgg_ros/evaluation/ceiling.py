@@ -84,10 +84,9 @@ def run(out_dir, trials, task: str, settings, max_trials: int | None = None, pro
     path = Path(out_dir) / RESULTS_FILE
     path.parent.mkdir(parents=True, exist_ok=True)
     existing = read_jsonl(path)
-    from defgg_ros.sim.trial import task_protocol
+    from defgg_ros.sim.trial import protocol_differences
 
-    current = task_protocol(asdict(settings), task)
-    if any(task_protocol(r["trial_settings"], task) != current for r in existing if r["task"] == task):
+    if protocol_differences(existing, asdict(settings), task):
         raise ValueError(f"{path} holds trials of another protocol; run the ceiling into a new --out folder")
     done = {r["key"] for r in existing}
     pending = [t for t in trials if t[0] not in done][:max_trials]

@@ -239,24 +239,17 @@ def check_same_protocol(out_dir, settings, tasks) -> None:
     from dataclasses import asdict
 
     from defgg_ros.evaluation.store import RESULTS_FILE, read_results
-    from defgg_ros.sim.trial import task_protocol
+    from defgg_ros.sim.trial import protocol_differences
 
     path = Path(out_dir) / RESULTS_FILE
     if not path.is_file():
         return
-    manifest_path = Path(out_dir) / report_mod.MANIFEST_FILE
-    folder_settings = (json.loads(manifest_path.read_text(encoding="utf-8")).get("trial_settings") or {}
-                       if manifest_path.is_file() else {})
     records = read_results(path)
     for task in tasks:
-        new = task_protocol(asdict(settings), task)
-        olds = {json.dumps(task_protocol(r.get("trial_settings") or folder_settings, task), sort_keys=True)
-                for r in records if r["task"] == task}
-        for old in map(json.loads, olds):
-            differ = sorted(k for k in set(old) | set(new) if old.get(k) != new.get(k))
-            if differ:
-                raise ValueError(f"{out_dir} holds {task} trials of another protocol (differs in "
-                                 f"{', '.join(differ)}); evaluate into a new --out folder")
+        differ = protocol_differences(records, asdict(settings), task)
+        if differ:
+            raise ValueError(f"{out_dir} holds {task} trials of another protocol (differs in "
+                             f"{', '.join(differ)}); evaluate into a new --out folder")
 
 
 def merge_manifest(out_dir, manifest: dict) -> dict:

@@ -359,6 +359,19 @@ def task_protocol(recorded: dict, task: str) -> dict:
     return {k: v for k, v in comparable_protocol(recorded).items() if not k.startswith(other)}
 
 
+def protocol_differences(records, settings: dict, task: str) -> list:
+    """The settings (sorted names) in which the first of `records`' `task` trials whose task_protocol
+    differs from that of `settings` differs; [] when all match. Records carry their trial_settings."""
+    new = task_protocol(settings, task)
+    for r in records:
+        if r["task"] == task:
+            old = task_protocol(r["trial_settings"], task)
+            differ = sorted(k for k in set(old) | set(new) if old.get(k) != new.get(k))
+            if differ:
+                return differ
+    return []
+
+
 def rms_speed_mps(before: list | None, after: list, dt_s: float) -> float:
     """RMS speed of the tracked points between two snapshots (0 when there is no comparable one)."""
     if before is None or [b.shape for b in before] != [a.shape for a in after] or dt_s <= 0:
