@@ -86,6 +86,9 @@ def results_markdown(out_dir, doc_path, notes_path=None) -> str:
         lines += ["**WARNING: this run used --quick (0.1 s ramps): a smoke test, not the paper's protocol.**", ""]
     for task in manifest["tasks"]:
         lines += [f"## {task.capitalize()} task", "", _read(tdir / f"{task}.md") or "(no table yet)", ""]
+        by_rank = _read(tdir / f"{task}_by_rank.md")
+        if by_rank:
+            lines += [by_rank, ""]
     lines += ["## Targets of the issue (shake task, all stiffnesses)", ""] + _targets_md(summary["targets"]) + [""]
     for md in sorted(tdir.glob("sensitivity*.md")):
         lines += ["## Sensitivity to errors in the stiffness input", "", _read(md), "",

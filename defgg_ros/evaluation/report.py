@@ -2,7 +2,7 @@
 
 <out>/run.json           manifest (models + weights sha, objects, moduli, grasps, tasks, command, commit)
 <out>/trials.jsonl       one record per trial (the only source of every number below)
-<out>/tables/<task>.md|.csv, sensitivity.md|.csv|.png, multimaterial.md|.csv
+<out>/tables/<task>.md|.csv, <task>_by_rank.md|.csv, sensitivity.md|.csv|.png, multimaterial.md|.csv
 <out>/summary.json       headline numbers + completeness, read by the model cards and docs
 """
 from __future__ import annotations
@@ -12,7 +12,7 @@ from pathlib import Path
 
 from defgg_ros.atomic import write_json_atomic, write_text_atomic
 from defgg_ros.constants import TRAINING_YOUNGS_MODULI_PA
-from defgg_ros.evaluation import figures, tables
+from defgg_ros.evaluation import figures, ranks, tables
 from defgg_ros.evaluation.store import RESULTS_FILE, read_results
 
 MANIFEST_FILE = "run.json"
@@ -77,6 +77,7 @@ def write_outputs(out_dir) -> dict:
                                   for s in sets for m in models}
         summary["tasks"][task].update({f"{s}|{m}|{e:g}": _cell_json(cells[(e, s, m)])
                                        for s in sets for m in models for e in moduli})
+        _write_ranks(records, task, manifest, models, labels, tdir)
     if "sensitivity" in manifest["experiments"]:
         summary["sensitivity"] = _write_sensitivity(records, manifest, models, labels, tdir)
     if "multimaterial" in manifest["experiments"]:
@@ -86,6 +87,14 @@ def write_outputs(out_dir) -> dict:
     summary["targets"] = targets(summary, manifest)
     write_json_atomic(out_dir / SUMMARY_FILE, summary)
     return summary
+
+
+def _write_ranks(records, task, manifest, models, labels, tdir) -> None:
+    sets, n_ranks = list(manifest["objects"]), manifest["grasps_per_object"]
+    views = {s: sum(len(o["moduli_pa"]) for o in objs) for s, objs in manifest["objects"].items()}
+    cells = ranks.rank_cells(records, task, sets, models, n_ranks, views)
+    write_text_atomic(tdir / f"{task}_by_rank.md", ranks.rank_markdown(cells, task, sets, models, n_ranks, labels))
+    write_text_atomic(tdir / f"{task}_by_rank.csv", ranks.rank_csv(cells, task, sets, models, n_ranks))
 
 
 def _write_sensitivity(records, manifest, models, labels, tdir) -> dict:

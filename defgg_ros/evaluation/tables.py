@@ -2,8 +2,9 @@
 
 A cell's success rate is successes / graded trials; trials whose simulation
 failed (explosion, time-out) are not grasp outcomes and are counted apart, as
-are ranks for which the model proposed no grasp (its quality map had fewer
-distinct peaks than the 5 asked for: there is no 4th or 5th grasp to try).
+are ranks for which the model proposed no grasp (fewer than the 5 asked for
+fit on the object 10 px apart, see grasping.postprocess.find_peaks: there is
+no 4th or 5th grasp to try).
 Every cell also shows how many trials the full experiment would have, so a
 partial run is never read as the full one.
 """
@@ -26,7 +27,7 @@ class Cell:
     sim_failed: int = 0
     expected: int = 0
     field: str = "success"     # record field that holds the grasp outcome
-    no_grasp: int = 0          # the model proposed fewer distinct grasps (Q peaks) than asked: not a trial
+    no_grasp: int = 0          # the model proposed fewer distinct grasps than asked: not a trial
 
     def add(self, rec: dict) -> None:
         if rec.get("status") == "no_grasp":

@@ -109,10 +109,14 @@ def maps_from_network(raw: np.ndarray, config: PostProcessConfig = DEFAULT_POSTP
     return GraspMaps(raw, config)
 
 
-def find_peaks(q: np.ndarray, min_distance_px: int, threshold: float, allowed=None, top_k: int = 1) -> list:
+def find_peaks(q: np.ndarray, min_distance_px: int, threshold: float, allowed=None, top_k: int = 1,
+               fill: bool = False) -> list:
     """Up to top_k (v, u) local maxima of q, best first, at least
     min_distance_px apart (Chebyshev), with q > threshold, on allowed pixels.
 
+    fill: when q has fewer such maxima than top_k (a small object's quality map is often one
+    blob), continue with the best remaining pixels that keep min_distance_px from every pick
+    (greedy non-maximum suppression), after all the maxima: so the local maxima keep their ranks.
     When no pixel passes the threshold, the best allowed pixel is returned
     alone. Returns [] only when no pixel is allowed.
     """
@@ -129,26 +133,38 @@ def find_peaks(q: np.ndarray, min_distance_px: int, threshold: float, allowed=No
     # below): searching the box alone gives the same peaks in the same order, for less work.
     v0, u0 = int(rows[0]), int(cols[0])
     box = np.s_[v0:int(rows[-1]) + 1, u0:int(cols[-1]) + 1]
-    return [(v + v0, u + u0) for v, u in _peaks_in(q[box], allowed[box], min_distance_px, threshold, top_k)]
+    peaks = _peaks_in(q[box], allowed[box], min_distance_px, threshold, top_k, fill)
+    return [(v + v0, u + u0) for v, u in peaks]
 
 
-def _peaks_in(q: np.ndarray, allowed: np.ndarray, min_distance_px: int, threshold: float, top_k: int) -> list:
+def _peaks_in(q: np.ndarray, allowed: np.ndarray, min_distance_px: int, threshold: float, top_k: int,
+              fill: bool) -> list:
     # Masked-out pixels get -inf so they neither win nor suppress neighbours.
     qm = np.where(allowed, q, -np.inf).astype(np.float32)
     size = 2 * int(min_distance_px) + 1
     dilated = cv2.dilate(qm, np.ones((size, size), np.uint8), borderType=cv2.BORDER_CONSTANT, borderValue=-np.inf)
-    vs, us = np.nonzero((qm == dilated) & (qm > threshold) & allowed)
+    passes = (qm > threshold) & allowed
+    vs, us = np.nonzero((qm == dilated) & passes)
     if vs.size == 0:
         v, u = np.unravel_index(int(np.argmax(qm)), q.shape)
         return [(int(v), int(u))]
+    suppressed = np.zeros(q.shape, bool)
+    kept = _pick_apart(qm, vs, us, int(min_distance_px), top_k, suppressed)
+    if fill and len(kept) < top_k:
+        vs, us = np.nonzero(passes & ~suppressed)
+        kept += _pick_apart(qm, vs, us, int(min_distance_px), top_k - len(kept), suppressed)
+    return kept
+
+
+def _pick_apart(qm: np.ndarray, vs: np.ndarray, us: np.ndarray, d: int, n: int, suppressed: np.ndarray) -> list:
+    """Up to n of the candidate pixels (vs, us), best qm first, each more than d from every earlier
+    pick (marked in `suppressed`, updated in place)."""
     order = np.argsort(-qm[vs, us], kind="stable")
     vs, us = vs[order], us[order]
     # Plateaus give several equal maxima (a saturated quality map: thousands): keep them min_distance
     # apart by blanking the square around each kept peak, so each pick is one vectorised look-up.
-    d = int(min_distance_px)
-    suppressed = np.zeros(q.shape, bool)
     kept = []
-    while len(kept) < top_k:
+    while len(kept) < n:
         free = ~suppressed[vs, us]
         if not free.any():
             break
@@ -161,7 +177,7 @@ def _peaks_in(q: np.ndarray, allowed: np.ndarray, min_distance_px: int, threshol
 
 
 def grasps_from_maps(maps: GraspMaps, config: PostProcessConfig = DEFAULT_POSTPROCESS,
-                     allowed=None, top_k: int = 1) -> list:
-    """Ranked Grasp2D list from filtered maps."""
-    peaks = find_peaks(maps.q, config.peak_min_distance_px, config.q_threshold, allowed, top_k)
+                     allowed=None, top_k: int = 1, fill: bool = False) -> list:
+    """Ranked Grasp2D list from filtered maps (fill: see find_peaks)."""
+    peaks = find_peaks(maps.q, config.peak_min_distance_px, config.q_threshold, allowed, top_k, fill)
     return [Grasp2D(u, v, *maps.at_pixel(v, u), quality=float(maps.q[v, u])) for v, u in peaks]

@@ -131,6 +131,8 @@ class GraspPredictor:
         contact_angle (with an object mask and an opening): then each returned grasp's angle is
         re-chosen at its centre for square pad contacts (grasping/contact_angle.py), kept only if its
         fingers clear too or the original's did not.
+        Up to top_k grasps: the quality map's local maxima, then (when it has fewer) the best pixels
+        apart from them (grasping.postprocess.find_peaks, fill), so the first ranks never depend on top_k.
 
         Raises ValueError subclasses (InvalidInputError, InvalidYoungsModulus)
         for bad shapes, sizes, depth without valid pixels, NaN/negative moduli,
@@ -149,16 +151,20 @@ class GraspPredictor:
                                  self.postprocess)
         mask_crop = None if mask is None else crop(mask, origin, self.input_size_px)
         check_clearance = finger_clearance_opening_m > 0 and mask_crop is not None
-        grasps = grasps_from_maps(maps, self.postprocess, None if mask_crop is None else mask_crop > 0,
-                                  max(top_k, CLEARANCE_POOL) if check_clearance else top_k)
+        allowed = None if mask_crop is None else mask_crop > 0
+        grasps = grasps_from_maps(maps, self.postprocess, allowed, max(top_k, CLEARANCE_POOL) if check_clearance
+                                  else top_k)
         clear = [None] * len(grasps)
         if check_clearance:
             grasps, clear = clear_grasps_first(grasps, depth_crop, mask_crop, finger_clearance_opening_m, k[0, 0],
                                                needed=top_k)
-            if contact_angle:   # the returned grasps only: ~1 ms each (bench/bench_finger_clearance.py)
-                for i in range(min(top_k, len(grasps))):
-                    grasps[i], clear[i] = _square_contacts(grasps[i], clear[i], depth_crop, mask_crop,
-                                                           finger_clearance_opening_m, k[0, 0])
+        if len(grasps) < top_k:
+            extra = _fill_ranks(maps, self.postprocess, allowed, grasps, top_k)
+            grasps, clear = grasps + extra, clear + [None] * len(extra)
+        if check_clearance and contact_angle:   # the returned grasps only: ~1 ms each (bench_finger_clearance)
+            for i in range(min(top_k, len(grasps))):
+                grasps[i], clear[i] = _square_contacts(grasps[i], clear[i], depth_crop, mask_crop,
+                                                       finger_clearance_opening_m, k[0, 0])
         candidates = [dataclasses.replace(self._candidate(g, origin, depth_crop, moduli_crop, mask_crop, k),
                                           fingers_clear=c) for g, c in zip(grasps[:top_k], clear)]
         return GraspPrediction(maps=maps, crop_offset_px=origin, candidates=candidates)
@@ -173,6 +179,21 @@ class GraspPredictor:
             width_m=float(width_px_to_m(g.width_px, z, k[0, 0])), quality=g.quality, depth_m=z,
             position_camera_m=tuple(float(c) for c in pixel_to_camera(u, v, z, k)),
             youngs_modulus_pa=float(moduli_crop[g.center_v_px, g.center_u_px]), object_id=obj)
+
+
+def _fill_ranks(maps, config: PostProcessConfig, allowed, grasps: list, top_k: int) -> list:
+    """The ranks after the quality map's maxima (all of them are in `grasps`: fewer than top_k):
+    find_peaks' fill picks, best first, skipping any that the clearance step's slide brought within
+    the peak distance of a returned grasp, so no two returned grasps are near-duplicates."""
+    d = config.peak_min_distance_px
+    picks = grasps_from_maps(maps, config, allowed, top_k + CLEARANCE_POOL, fill=True)[len(grasps):]
+    out = []
+    for g in picks:
+        if len(grasps) + len(out) >= top_k:
+            break
+        if all(max(abs(g.center_u_px - h.center_u_px), abs(g.center_v_px - h.center_v_px)) > d for h in grasps):
+            out.append(g)
+    return out
 
 
 def _square_contacts(g, clear: bool, depth_crop, mask_crop, opening_m: float, fx_px: float) -> tuple:

@@ -1,4 +1,5 @@
 """Aggregation into the paper's tables: counts, sim failures apart, old weights ignored, targets."""
+import csv
 import json
 
 from defgg_ros.atomic import write_json_atomic
@@ -52,3 +53,26 @@ def test_report_lists_each_trial_running_command_once_whatever_its_worker_count(
                 "defgg-eval run --out r --sets adversarial --workers 2", "defgg-eval run --out r --plan-only"]
     assert distinct_commands(commands) == ["defgg-eval run --out r --sets common",
                                            "defgg-eval run --out r --sets adversarial"]
+
+
+def test_success_by_rank_and_any_rank_per_view(tmp_path):
+    _manifest(tmp_path)
+    store = ResultStore(tmp_path)
+    ranked = [  # (model, object, E, rank, success)
+        ("stiff", "a", 2e4, 0, False), ("stiff", "a", 2e4, 1, True),     # view a/2e4: rank 2 saves it
+        ("stiff", "b", 2e4, 0, True), ("stiff", "b", 2e4, 1, True),
+        ("stiff", "a", 2e9, 0, False), ("stiff", "a", 2e9, 1, None),     # sim failure is not a success
+        ("base", "a", 2e4, 0, True)]
+    for i, (m, obj, e, rank, ok) in enumerate(ranked):
+        store.append({**_rec(i, m, {"stiff": "S", "base": "B"}[m], e, ok, obj=obj), "rank": rank})
+    store.append({**_rec(9, "stiff", "S", 2e4, False, experiment="sensitivity", err=-60.0), "rank": 0})
+    report.write_outputs(tmp_path)
+    rows = {(r["model"], r["rank"]): r for r in csv.DictReader(open(tmp_path / "tables" / "shake_by_rank.csv"))}
+    assert (rows[("stiff", "1")]["successes"], rows[("stiff", "1")]["graded"]) == ("1", "3")
+    assert (rows[("stiff", "2")]["successes"], rows[("stiff", "2")]["graded"], rows[("stiff", "2")]["sim_failed"]) \
+        == ("2", "2", "1")
+    anyr = rows[("stiff", "any")]
+    assert (anyr["successes"], anyr["graded"], anyr["expected_trials"]) == ("2", "3", "4")
+    assert rows[("base", "any")]["successes"] == "1" and rows[("base", "2")]["graded"] == "0"
+    md = (tmp_path / "tables" / "shake_by_rank.md").read_text()
+    assert "| common | with stiffness (stiff) | 33.3 (1/3; 3 of 4 run) |" in md

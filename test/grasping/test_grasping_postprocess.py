@@ -107,3 +107,23 @@ def test_values_at_one_pixel_are_the_full_maps_values(config):
     expected = [(full.angle_rad[v, u], full.width_px[v, u]) for v, u in pixels]
     assert np.allclose(lazy, expected, atol=1e-5)
     assert full.at_pixel(120, 201) == pytest.approx(expected[-1], abs=1e-6)   # from the computed maps
+
+
+def test_fill_adds_ranks_after_the_maxima_apart_from_every_pick():
+    """One quality blob (a small object) has one local maximum; fill gives the next best pixels, each
+    more than min_distance from every pick, after the maxima, so the maxima keep their ranks."""
+    vv, uu = np.mgrid[0:100, 0:100]
+    q = np.exp(-((vv - 50) ** 2 + (uu - 40) ** 2) / 400.0).astype(np.float32)
+    q[85, 85] = 0.05                                            # a second, weak local maximum
+    assert find_peaks(q, 10, 0.0, top_k=5) == [(50, 40), (85, 85)]
+    peaks = find_peaks(q, 10, 0.0, top_k=5, fill=True)
+    assert peaks[:2] == [(50, 40), (85, 85)] and len(peaks) == 5
+    for i, a in enumerate(peaks):
+        for b in peaks[i + 1:]:
+            assert max(abs(a[0] - b[0]), abs(a[1] - b[1])) > 10
+    fills = peaks[2:]
+    assert [q[p] for p in fills] == sorted((q[p] for p in fills), reverse=True)
+    assert all(q[p] > 0.5 for p in fills)                       # on the blob's flanks, next to its top
+    mask = np.zeros_like(q, bool)
+    mask[40:60, 30:50] = True                                   # room for one pick only beside the top
+    assert find_peaks(q, 10, 0.0, allowed=mask, top_k=5, fill=True) == [(50, 40)]

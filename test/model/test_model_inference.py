@@ -109,3 +109,30 @@ def test_torchscript_runtime_matches_eager(tmp_path):
     assert np.allclose(a.q, b.q, atol=1e-4) and np.allclose(a.width_px, b.width_px, atol=1e-2)
     if len(a.candidates) < 2 or a.candidates[0].quality - a.candidates[1].quality > 1e-3:  # no near-tie
         assert (a.best.center_u_px, a.best.center_v_px) == (b.best.center_u_px, b.best.center_v_px)
+
+
+@pytest.mark.parametrize("weights", ["models/defgg_cnn.pt", "models/ggcnn_depth_only.pt"])
+def test_more_grasps_asked_adds_ranks_without_changing_the_first(weights):
+    """A small object's quality map has few local maxima (the shipped nets: one here); top_k=5 still
+    gives five grasps, apart, on the object, and the first ranks are those of a smaller top_k."""
+    from pathlib import Path
+
+    from defgg_ros.grasping.postprocess import find_peaks
+
+    predictor = GraspPredictor.from_checkpoint(Path(__file__).resolve().parents[2] / weights)
+    depth = np.full((480, 640), 0.40, np.float32)
+    mask = np.zeros((480, 640), np.int32)
+    mask[220:250, 440:470] = 7                      # a 30 x 30 px block
+    depth[mask > 0] = 0.37
+    moduli = np.where(mask > 0, 2e5, 0.0).astype(np.float32)
+    runs = {k: predictor.predict(depth, moduli, K, mask, top_k=k) for k in (1, 2, 5)}
+    v0, u0 = runs[5].crop_offset_px[1], runs[5].crop_offset_px[0]
+    crop_mask = mask[v0:v0 + 300, u0:u0 + 300] > 0
+    n_maxima = len(find_peaks(runs[5].q, 10, 0.0, allowed=crop_mask, top_k=5))
+    assert n_maxima < 5                             # so the test exercises the fill
+    pixel = {k: [(c.center_u_px, c.center_v_px) for c in runs[k].candidates] for k in runs}
+    assert len(pixel[5]) == 5 and pixel[5][:1] == pixel[1] and pixel[5][:2] == pixel[2]
+    assert all(mask[int(v), int(u)] == 7 for u, v in pixel[5])
+    for i, a in enumerate(pixel[5]):
+        for b in pixel[5][i + 1:]:
+            assert max(abs(a[0] - b[0]), abs(a[1] - b[1])) > 10
