@@ -171,9 +171,11 @@ def clear_after_shifts(depth_m: np.ndarray, object_mask: np.ndarray, u_px: int, 
 
 
 def clear_grasps_first(grasps: list, depth_m: np.ndarray, object_mask: np.ndarray, opening_m: float,
-                       fx_px: float, needed: int | None = None) -> tuple:
+                       fx_px: float, needed: int | None = None, apart_px: int | None = None) -> tuple:
     """(grasps, clear flags): the grasps that a slide along the closing line makes clear
     (clear_centre_shift_px), slid, then the others as predicted; each group keeps its order.
+    apart_px: drop a slid grasp that lands within apart_px (Chebyshev) of an earlier clear one (two
+    peaks on one chord slide to its middle; a caller asking for alternatives wants distinct ones).
 
     grasps: grasping.postprocess.Grasp2D in the same pixel frame as depth_m and object_mask.
     needed: stop checking once this many grasps are clear (the caller keeps that many: the first
@@ -192,5 +194,8 @@ def clear_grasps_first(grasps: list, depth_m: np.ndarray, object_mask: np.ndarra
             continue
         u = int(round(g.center_u_px + shift * math.cos(g.angle_rad)))
         v = int(round(g.center_v_px + shift * math.sin(g.angle_rad)))
+        if apart_px is not None and any(max(abs(u - c.center_u_px), abs(v - c.center_v_px)) <= apart_px
+                                        for c in clear):
+            continue
         clear.append(dataclasses.replace(g, center_u_px=u, center_v_px=v))
     return clear + blocked, [True] * len(clear) + [False] * len(blocked)

@@ -150,24 +150,45 @@ class GraspPredictor:
         maps = maps_from_network(self.raw_maps(network_input(depth_crop, moduli_crop, self.uses_stiffness)),
                                  self.postprocess)
         mask_crop = None if mask is None else crop(mask, origin, self.input_size_px)
-        check_clearance = finger_clearance_opening_m > 0 and mask_crop is not None
-        allowed = None if mask_crop is None else mask_crop > 0
-        grasps = grasps_from_maps(maps, self.postprocess, allowed, max(top_k, CLEARANCE_POOL) if check_clearance
-                                  else top_k)
-        clear = [None] * len(grasps)
-        if check_clearance:
-            grasps, clear = clear_grasps_first(grasps, depth_crop, mask_crop, finger_clearance_opening_m, k[0, 0],
-                                               needed=top_k)
-        if len(grasps) < top_k:
-            extra = _fill_ranks(maps, self.postprocess, allowed, grasps, top_k)
-            grasps, clear = grasps + extra, clear + [None] * len(extra)
-        if check_clearance and contact_angle:   # the returned grasps only: ~1 ms each (bench_finger_clearance)
-            for i in range(min(top_k, len(grasps))):
-                grasps[i], clear[i] = _square_contacts(grasps[i], clear[i], depth_crop, mask_crop,
-                                                       finger_clearance_opening_m, k[0, 0])
+        grasps, clear = self._ranked(maps, depth_crop, mask_crop, k[0, 0], top_k, finger_clearance_opening_m,
+                                     contact_angle)
         candidates = [dataclasses.replace(self._candidate(g, origin, depth_crop, moduli_crop, mask_crop, k),
-                                          fingers_clear=c) for g, c in zip(grasps[:top_k], clear)]
+                                          fingers_clear=c) for g, c in zip(grasps, clear)]
         return GraspPrediction(maps=maps, crop_offset_px=origin, candidates=candidates)
+
+    def _ranked(self, maps, depth_crop, mask_crop, fx_px: float, top_k: int, opening_m: float,
+                contact_angle: bool) -> tuple:
+        """(top_k grasps in crop pixels, fingers-clear flags): the maxima, then fill ranks; with an
+        opening, the clear ones first (slid); with contact_angle, squared. No two within the peak
+        distance of each other, so a caller asking for alternatives gets distinct grasps."""
+        cfg, d = self.postprocess, self.postprocess.peak_min_distance_px
+        check_clearance = opening_m > 0 and mask_crop is not None
+        allowed = None if mask_crop is None else mask_crop > 0
+        grasps = grasps_from_maps(maps, cfg, allowed, max(top_k, CLEARANCE_POOL) if check_clearance else top_k)
+        n_maxima = len(grasps)
+        clear = [None] * n_maxima
+        if check_clearance:
+            grasps, clear = clear_grasps_first(grasps, depth_crop, mask_crop, opening_m, fx_px, needed=top_k,
+                                               apart_px=d)
+        square = check_clearance and contact_angle
+        # Squaring may slide a grasp onto a better one: keep reserves to replace it (top_k > 1 only).
+        wanted = top_k + CLEARANCE_POOL if square and top_k > 1 else top_k
+        if len(grasps) < wanted:
+            extra = _more_ranks(maps, cfg, allowed, n_maxima, grasps, wanted)
+            grasps, clear = grasps + extra, clear + [None] * len(extra)
+        if not square:
+            return grasps[:top_k], clear[:top_k]
+        out = []
+        for g, c in zip(grasps, clear):     # ~1 ms each (bench/bench_finger_clearance.py)
+            sg, sc = _square_contacts(g, c, depth_crop, mask_crop, opening_m, fx_px)
+            if _apart(sg, [o[0] for o in out], d):
+                out.append((sg, sc))
+            if len(out) == top_k:
+                break
+        for g, c in zip(grasps, clear):     # too few distinct squared ones: the rest as they are
+            if len(out) < top_k and _apart(g, [o[0] for o in out], d):
+                out.append((g, c))
+        return [o[0] for o in out], [o[1] for o in out]
 
     @staticmethod
     def _candidate(g, origin, depth_crop, moduli_crop, mask_crop, k) -> GraspCandidate:
@@ -181,17 +202,20 @@ class GraspPredictor:
             youngs_modulus_pa=float(moduli_crop[g.center_v_px, g.center_u_px]), object_id=obj)
 
 
-def _fill_ranks(maps, config: PostProcessConfig, allowed, grasps: list, top_k: int) -> list:
-    """The ranks after the quality map's maxima (all of them are in `grasps`: fewer than top_k):
-    find_peaks' fill picks, best first, skipping any that the clearance step's slide brought within
-    the peak distance of a returned grasp, so no two returned grasps are near-duplicates."""
+def _apart(g, others: list, d: int) -> bool:
+    return all(max(abs(g.center_u_px - h.center_u_px), abs(g.center_v_px - h.center_v_px)) > d for h in others)
+
+
+def _more_ranks(maps, config: PostProcessConfig, allowed, n_maxima: int, grasps: list, wanted: int) -> list:
+    """Ranks after the first n_maxima maxima (those that gave `grasps`): further maxima, then
+    find_peaks' fill picks, best first, skipping any within the peak distance of a grasp (the
+    clearance slide moves grasps), so no two are near-duplicates."""
     d = config.peak_min_distance_px
-    picks = grasps_from_maps(maps, config, allowed, top_k + CLEARANCE_POOL, fill=True)[len(grasps):]
     out = []
-    for g in picks:
-        if len(grasps) + len(out) >= top_k:
+    for g in grasps_from_maps(maps, config, allowed, wanted + n_maxima, fill=True)[n_maxima:]:
+        if len(grasps) + len(out) >= wanted:
             break
-        if all(max(abs(g.center_u_px - h.center_u_px), abs(g.center_v_px - h.center_v_px)) > d for h in grasps):
+        if _apart(g, grasps + out, d):
             out.append(g)
     return out
 

@@ -93,10 +93,21 @@ def test_the_predictor_applies_it_when_asked(tmp_path):
     faces = [math.radians(20.0), math.radians(110.0)]
     square = predictor.predict(depth, moduli, k, mask, finger_clearance_opening_m=OPENING_M, top_k=3,
                                contact_angle=True).candidates
-    for grasp in square:
-        assert min(angle_between_deg(grasp.angle_rad, f) for f in faces) <= 5.0
-        assert mask[int(grasp.center_v_px), int(grasp.center_u_px)] == 1
     plain = predictor.predict(depth, moduli, k, mask, finger_clearance_opening_m=OPENING_M, top_k=3).candidates
+    assert len(square) == len(plain) == 3
+    squared = 0
+    for grasp, before in zip(square, plain):
+        assert mask[int(grasp.center_v_px), int(grasp.center_u_px)] == 1
+        if min(angle_between_deg(grasp.angle_rad, f) for f in faces) <= 5.0:
+            squared += 1
+        else:   # left as it was only when squaring would have slid it onto a better grasp
+            assert (grasp.center_u_px, grasp.center_v_px, grasp.angle_rad) == \
+                (before.center_u_px, before.center_v_px, before.angle_rad)
+    assert squared >= 2 and min(angle_between_deg(square[0].angle_rad, f) for f in faces) <= 5.0
+    for grasps in (plain, square):      # distinct alternatives: no two slid onto the same spot
+        for i, a in enumerate(grasps):
+            for b in grasps[i + 1:]:
+                assert max(abs(a.center_u_px - b.center_u_px), abs(a.center_v_px - b.center_v_px)) > 10
     assert [g.quality for g in plain] == pytest.approx([g.quality for g in square])   # same peaks, same order
     # off without an opening: the step needs to know how wide the fingers open
     unchanged = predictor.predict(depth, moduli, k, mask, top_k=3, contact_angle=True).candidates

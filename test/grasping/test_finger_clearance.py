@@ -97,6 +97,9 @@ def test_clear_grasps_first_slides_the_clear_able_ones_and_keeps_each_groups_ord
     assert ranked_1[0] == ranked[0] and flags_1 == [True, False, None]
     assert ranked_1[1:] == [grasps[0], grasps[2]]
     assert clear_grasps_first(grasps, depth, mask, OPENING_M, FX, needed=2) == (ranked, flags)
+    # The first grasp slides onto (160, 120), where the third already is: with apart_px it is dropped.
+    apart, apart_flags = clear_grasps_first(grasps, depth, mask, OPENING_M, FX, apart_px=10)
+    assert [g.quality for g in apart] == [0.8, 0.9] and apart_flags == [True, False]
 
 
 def test_bad_geometry_is_refused():
