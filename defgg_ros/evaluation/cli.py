@@ -337,14 +337,15 @@ def write_diagnostics(out_dir, data_root) -> None:
     plans_path = out_dir / PLANS_FILE
     shifts = diagnose.plan_shifts(json.loads(plans_path.read_text())) if plans_path.is_file() else None
     results = out_dir / RESULTS_FILE
-    replicates = diagnose.replicate_flips(read_results(results)) if results.is_file() else None
-    if labels is None and shifts is None and replicates is None:
+    records = read_results(results) if results.is_file() else []
+    replicates, ranking = diagnose.replicate_flips(records), diagnose.quality_ranking(records)
+    if labels is None and shifts is None and replicates is None and ranking is None:
         return
     write_json_atomic(path, {"labels": labels, "data_root": str(data_root or old.get("data_root")),
-                             "plan_shifts": shifts, "replicates": replicates})
+                             "plan_shifts": shifts, "replicates": replicates, "quality_ranking": ranking})
     from defgg_ros.atomic import write_text_atomic
 
-    write_text_atomic(out_dir / "diagnostics.md", diagnose.diagnostics_markdown(labels, shifts, replicates))
+    write_text_atomic(out_dir / "diagnostics.md", diagnose.diagnostics_markdown(labels, shifts, replicates, ranking))
 
 
 def cmd_strategy(args) -> int:

@@ -13,6 +13,9 @@
    from it only by the network's regressed width and angle (a fraction of a
    mm or degree); how often the outcome still differs is the noise floor of
    every comparison in the tables.
+4. Ranking (an evaluation's trial records): within one view, when two of a
+   model's grasps ended differently, how often the one that held had the
+   higher predicted quality (50 % = the quality map does not order grasps).
 """
 from __future__ import annotations
 
@@ -111,7 +114,31 @@ def replicate_flips(records) -> dict | None:
             "median_angle_change_deg": float(np.median(angles_deg))}
 
 
-def diagnostics_markdown(labels: dict | None, shifts: dict | None, replicates: dict | None = None) -> str:
+def quality_ranking(records) -> dict | None:
+    """Per "task|set|model": over pairs of one view's graded main-experiment grasps (correct input)
+    whose outcomes differ, how many have the higher predicted quality on the grasp that held (a tie
+    counts one half). None without such pairs."""
+    views = defaultdict(list)
+    for r in records:
+        if (r["experiment"] == "main" and float(r.get("input_error_pct") or 0.0) == 0.0 and r.get("grasp")
+                and r.get("success") is not None):
+            views[(r["task"], r["object_set"], r["model"], r.get("model_sha"), r["object"],
+                   r["youngs_modulus_pa"])].append(r)      # one weights' grasps compared with each other only
+    out = defaultdict(lambda: {"pairs": 0, "concordant": 0.0})
+    for (task, object_set, model, _sha, _obj, _e), recs in views.items():
+        for a, b in itertools.combinations(recs, 2):
+            if bool(a["success"]) == bool(b["success"]):
+                continue
+            held, failed = (a, b) if a["success"] else (b, a)
+            qh, qf = held["grasp"]["quality"], failed["grasp"]["quality"]
+            cell = out[f"{task}|{object_set}|{model}"]
+            cell["pairs"] += 1
+            cell["concordant"] += 1.0 if qh > qf else 0.5 if qh == qf else 0.0
+    return {k: {**v, "rate": v["concordant"] / v["pairs"]} for k, v in sorted(out.items())} or None
+
+
+def diagnostics_markdown(labels: dict | None, shifts: dict | None, replicates: dict | None = None,
+                         ranking: dict | None = None) -> str:
     lines = []
     if labels:
         lines += ["**Training labels by modulus** (dataset as it is now)", "",
@@ -143,4 +170,13 @@ def diagnostics_markdown(labels: dict | None, shifts: dict | None, replicates: d
                   f"{replicates['pairs']} pairs; width moved by a median {replicates['median_width_change_mm']:.2f} "
                   f"mm and angle by {replicates['median_angle_change_deg']:.2f} deg; the outcome differs in "
                   f"{replicates['outcome_differs']} ({100 * replicates['rate']:.1f} %).", ""]
+    if ranking:
+        lines += ["**Does the predicted quality order a view's grasps by outcome?** (pairs of one view's grasps, "
+                  "correct stiffness input, that ended differently: share where the grasp that held had the higher "
+                  "predicted quality; 50 % = no information, 100 % = a perfect order)", "",
+                  "| task | object set | model | pairs | held grasp ranked higher |", "|---|---|---|---|---|"]
+        for key, v in ranking.items():
+            task, object_set, model = key.split("|")
+            lines.append(f"| {task} | {object_set} | {model} | {v['pairs']} | {100 * v['rate']:.1f} % |")
+        lines.append("")
     return "\n".join(lines)

@@ -52,3 +52,23 @@ def test_replicate_flips_compare_only_same_pixel_grasps_with_their_views_main_tr
     assert abs(rep["median_angle_change_deg"] - math.degrees(0.005)) < 1e-9     # a half turn is the same grasp
     assert "outcome differs in 1 (50.0 %)" in diagnose.diagnostics_markdown(None, None, rep)
     assert diagnose.replicate_flips([_trial("main", True)]) is None
+
+
+def test_quality_ranking_compares_grasps_of_one_view_that_ended_differently():
+    def ranked(success, quality, obj="a", rank=0, experiment="main"):
+        r = _trial(experiment, success, rank=rank, input_error_pct=0.0)
+        r["object"], r["grasp"]["quality"] = obj, quality
+        return r
+
+    records = [ranked(True, 0.9), ranked(False, 0.8, rank=1), ranked(False, 0.95, rank=2),
+               ranked(True, 0.7, rank=3),
+               ranked(True, 0.5, obj="b"), ranked(False, 0.5, obj="b", rank=1),              # a tie: one half
+               ranked(None, 0.99, obj="b", rank=2),                 # simulation failed: not graded
+               ranked(False, 0.1, obj="c", experiment="sensitivity"), ranked(True, 0.2, obj="c")]
+    rank = diagnose.quality_ranking(records)
+    # view a: held {0.9, 0.7} x failed {0.8, 0.95}: only 0.9 > 0.8 is in order, 1 of 4; view b: a tie, 1/2;
+    # view c: its only other trial is a sensitivity trial, so no pair
+    assert rank == {"shake|common|stiff": {"pairs": 5, "concordant": 1.5, "rate": 0.3}}
+    md = diagnose.diagnostics_markdown(None, None, None, rank)
+    assert "| shake | common | stiff | 5 | 30.0 % |" in md
+    assert diagnose.quality_ranking([ranked(True, 0.9)]) is None
