@@ -4,6 +4,9 @@
    positive; and, because the generator tries the SAME candidate grasps of an
    object at every modulus, how often a candidate's label changes with E.
    If labels hardly depend on E, no network can learn to use stiffness.
+   And, within one object and modulus, whether nearby candidates (centres
+   < 10 px apart, angles < 20 deg) share a label more often than distant ones:
+   if not, the labels have no spatial order that a quality map could learn.
 2. Plans (an evaluation's trial records): how far each model's best grasp
    moves between moduli on the same object. The depth-only model cannot
    move it (its input is the same); the stiffness-aware model moves it only
@@ -25,6 +28,7 @@ from collections import defaultdict
 
 import numpy as np
 
+from defgg_ros.constants import MAX_SOFT_BODY_YOUNGS_MODULUS_PA
 from defgg_ros.data.format import list_scene_ids, read_trials
 
 
@@ -46,6 +50,7 @@ def label_stats(data_root) -> dict:
             by_candidate[(t.object_name, t.candidate_index)][e] = t.label
             if t.shake_mean_mps2 is not None:
                 shake_means[e].append(t.shake_mean_mps2)
+    locality = _label_locality(list_scene_ids(data_root), data_root)
     pairs = defaultdict(lambda: [0, 0])       # (E1, E2) -> [same label, compared]
     for labels in by_candidate.values():
         for e1, e2 in itertools.combinations(sorted(labels, key=float), 2):
@@ -59,7 +64,35 @@ def label_stats(data_root) -> dict:
         "candidates_with_several_moduli": sum(1 for v in by_candidate.values() if len(v) > 1),
         "label_agreement": {f"{a} vs {b}": {"same": s, "compared": n, "rate": s / n if n else None}
                             for (a, b), (s, n) in sorted(pairs.items())},
+        "locality": locality,
+        "data_root": str(data_root),
     }
+
+
+NEAR_PX, NEAR_DEG, FAR_PX = 10.0, 20.0, 30.0
+
+
+def _label_locality(scene_ids, data_root) -> dict:
+    """Same-label rate of candidate pairs of one scene, near (centres < NEAR_PX, angles < NEAR_DEG) and far
+    (centres >= FAR_PX), over the scenes that have both labels (elsewhere every pair agrees trivially)."""
+    out = {body: {"near": [0, 0], "far": [0, 0], "scenes": 0} for body in ("soft", "rigid")}
+    for sid in scene_ids:
+        trials = [t for t in read_trials(data_root, sid) if t.label is not None]
+        if len({t.label for t in trials}) < 2:
+            continue
+        body = out["soft" if trials[0].youngs_modulus_pa <= MAX_SOFT_BODY_YOUNGS_MODULUS_PA else "rigid"]
+        body["scenes"] += 1
+        for a, b in itertools.combinations(trials, 2):
+            dist = math.hypot(a.rect.center_u_px - b.rect.center_u_px, a.rect.center_v_px - b.rect.center_v_px)
+            turn = abs(a.rect.angle_rad - b.rect.angle_rad) % math.pi
+            near = dist < NEAR_PX and math.degrees(min(turn, math.pi - turn)) < NEAR_DEG
+            kind = "near" if near else "far" if dist >= FAR_PX else None
+            if kind:
+                body[kind][0] += int(a.label == b.label)
+                body[kind][1] += 1
+    return {name: {"scenes": b["scenes"], **{k: {"same": s, "pairs": n, "rate": s / n if n else None}
+                                             for k in ("near", "far") for s, n in [b[k]]}}
+            for name, b in out.items()}
 
 
 def plan_shifts(plans) -> dict:
@@ -141,7 +174,7 @@ def diagnostics_markdown(labels: dict | None, shifts: dict | None, replicates: d
                          ranking: dict | None = None) -> str:
     lines = []
     if labels:
-        lines += ["**Training labels by modulus** (dataset as it is now)", "",
+        lines += [f"**Training labels by modulus** (`{labels.get('data_root', 'the dataset')}`)", "",
                   "| E (Pa) | trials | labelled | positive | positive rate | mean held shake accel. (m/s^2) |",
                   "|---|---|---|---|---|---|"]
         for e, v in labels["per_modulus"].items():
@@ -155,6 +188,7 @@ def diagnostics_markdown(labels: dict | None, shifts: dict | None, replicates: d
             rate = "–" if v["rate"] is None else f"{100 * v['rate']:.1f} %"
             lines.append(f"| {k} | {v['same']} | {v['compared']} | {rate} |")
         lines.append("")
+        lines += _locality_markdown(labels.get("locality"))
     if shifts:
         lines += ["**How far the best grasp moves with the modulus** (rank-0 grasp vs the one at the stiffest "
                   "modulus, same object)", "", "| model | E (Pa) | objects | mean shift (mm) | moved > 5 mm | "
@@ -180,3 +214,19 @@ def diagnostics_markdown(labels: dict | None, shifts: dict | None, replicates: d
             lines.append(f"| {task} | {object_set} | {model} | {v['pairs']} | {100 * v['rate']:.1f} % |")
         lines.append("")
     return "\n".join(lines)
+
+
+def _locality_markdown(locality: dict | None) -> list:
+    if not locality or not any(b["scenes"] for b in locality.values()):
+        return []
+    lines = [f"**Do nearby candidates share a label?** Pairs of one object and modulus (scenes with both labels "
+             f"only); near = centres < {NEAR_PX:g} px and angles < {NEAR_DEG:g} deg apart, far = centres >= "
+             f"{FAR_PX:g} px. Equal rates mean the labels have no spatial order for a quality map to learn.", "",
+             "| bodies | scenes | near pairs | same label (near) | far pairs | same label (far) |",
+             "|---|---|---|---|---|---|"]
+    for name, b in locality.items():
+        rates = {k: "–" if b[k]["rate"] is None else f"{100 * b[k]['rate']:.1f} %" for k in ("near", "far")}
+        lines.append(f"| {name} | {b['scenes']} | {b['near']['pairs']} | {rates['near']} | {b['far']['pairs']} | "
+                     f"{rates['far']} |")
+    return lines + [""]
+

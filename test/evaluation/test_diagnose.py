@@ -16,6 +16,17 @@ def test_label_stats_count_every_trial(tmp_path):
     assert "Training labels by modulus" in diagnose.diagnostics_markdown(stats, None)
 
 
+def test_label_locality_finds_the_spatial_order_of_rule_based_labels(tmp_path):
+    """The synthetic labels are a rule of the grasp's place on the box: near candidates share a label
+    far more often than distant ones."""
+    write_synthetic_dataset(tmp_path, n_objects=3, trials_per_scene=40)
+    locality = diagnose.label_stats(tmp_path)["locality"]
+    for loc in locality.values():       # soft and rigid boxes both follow a rule
+        assert loc["scenes"] > 0 and loc["near"]["pairs"] > 20 and loc["far"]["pairs"] > 100
+        assert loc["near"]["rate"] >= 0.8 and loc["near"]["rate"] > loc["far"]["rate"] + 0.2
+    assert "| soft | " in diagnose.diagnostics_markdown(diagnose.label_stats(tmp_path), None)
+
+
 def _entry(model, obj, e, xy, width=0.04):
     view = {"experiment": "main", "model": model, "object_name": obj, "youngs_modulus_pa": e}
     return {"view": view, "grasps": [{"position_m": [*xy, 0.02], "width_m": width}]}
