@@ -119,7 +119,8 @@ def results_markdown(out_dir, doc_path, notes_path=None) -> str:
                   f"Commands (resumable): {commands} (defgg_ros/evaluation/ceiling.py).", "", body, ""]
     diag = _read(out_dir / "diagnostics.md")
     if diag:
-        lines += ["## Diagnostics: do the labels and the plans depend on the stiffness, and how repeatable is a trial?",
+        lines += ["## Diagnostics: do the labels depend on the stiffness and on the grasp's place, how repeatable "
+                  "is a trial, and does the predicted quality rank grasps?",
                   "", diag, ""]
     notes = _read(notes_path) if notes_path else None
     if notes:
