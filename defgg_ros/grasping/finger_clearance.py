@@ -24,6 +24,7 @@ from defgg_ros.constants import (
     PANDA_FINGER_THICKNESS_M,
     PANDA_FINGERTIP_BELOW_TCP_M,
 )
+from defgg_ros.grasping.postprocess import apart
 
 # The fingertip's lowest point under the surface at the grasp centre (TCP depth + tip offset).
 TIP_BELOW_SURFACE_M = FINGER_DEPTH_M + PANDA_FINGERTIP_BELOW_TCP_M
@@ -194,8 +195,7 @@ def clear_grasps_first(grasps: list, depth_m: np.ndarray, object_mask: np.ndarra
             continue
         u = int(round(g.center_u_px + shift * math.cos(g.angle_rad)))
         v = int(round(g.center_v_px + shift * math.sin(g.angle_rad)))
-        if apart_px is not None and any(max(abs(u - c.center_u_px), abs(v - c.center_v_px)) <= apart_px
-                                        for c in clear):
-            continue
-        clear.append(dataclasses.replace(g, center_u_px=u, center_v_px=v))
+        slid = dataclasses.replace(g, center_u_px=u, center_v_px=v)
+        if apart_px is None or apart(slid, clear, apart_px):
+            clear.append(slid)
     return clear + blocked, [True] * len(clear) + [False] * len(blocked)

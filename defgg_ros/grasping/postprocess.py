@@ -176,6 +176,12 @@ def _pick_apart(qm: np.ndarray, vs: np.ndarray, us: np.ndarray, d: int, n: int, 
     return kept
 
 
+def apart(g, others, min_distance_px: int) -> bool:
+    """True when grasp g's centre is more than min_distance_px (Chebyshev, as find_peaks) from every other's."""
+    return all(max(abs(g.center_u_px - h.center_u_px), abs(g.center_v_px - h.center_v_px)) > min_distance_px
+               for h in others)
+
+
 def grasps_from_maps(maps: GraspMaps, config: PostProcessConfig = DEFAULT_POSTPROCESS,
                      allowed=None, top_k: int = 1, fill: bool = False) -> list:
     """Ranked Grasp2D list from filtered maps (fill: see find_peaks)."""

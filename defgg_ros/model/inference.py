@@ -23,7 +23,7 @@ from defgg_ros.grasping.config import DEFAULT_POSTPROCESS, PostProcessConfig
 from defgg_ros.grasping.contact_angle import square_contact_angle
 from defgg_ros.grasping.finger_clearance import clear_centre_shift_px, clear_grasps_first
 from defgg_ros.grasping.geometry import check_camera_k, pixel_to_camera, width_px_to_m
-from defgg_ros.grasping.postprocess import GraspMaps, grasps_from_maps, maps_from_network
+from defgg_ros.grasping.postprocess import GraspMaps, apart, grasps_from_maps, maps_from_network
 from defgg_ros.model.checkpoint import CheckpointError, load_checkpoint, network_from_checkpoint
 from defgg_ros.model.preprocess import (
     InvalidInputError,
@@ -181,12 +181,12 @@ class GraspPredictor:
         out = []
         for g, c in zip(grasps, clear):     # ~1 ms each (bench/bench_finger_clearance.py)
             sg, sc = _square_contacts(g, c, depth_crop, mask_crop, opening_m, fx_px)
-            if _apart(sg, [o[0] for o in out], d):
+            if apart(sg, [o[0] for o in out], d):
                 out.append((sg, sc))
             if len(out) == top_k:
                 break
         for g, c in zip(grasps, clear):     # too few distinct squared ones: the rest as they are
-            if len(out) < top_k and _apart(g, [o[0] for o in out], d):
+            if len(out) < top_k and apart(g, [o[0] for o in out], d):
                 out.append((g, c))
         return [o[0] for o in out], [o[1] for o in out]
 
@@ -202,10 +202,6 @@ class GraspPredictor:
             youngs_modulus_pa=float(moduli_crop[g.center_v_px, g.center_u_px]), object_id=obj)
 
 
-def _apart(g, others: list, d: int) -> bool:
-    return all(max(abs(g.center_u_px - h.center_u_px), abs(g.center_v_px - h.center_v_px)) > d for h in others)
-
-
 def _more_ranks(maps, config: PostProcessConfig, allowed, n_maxima: int, grasps: list, wanted: int) -> list:
     """Ranks after the first n_maxima maxima (those that gave `grasps`): further maxima, then
     find_peaks' fill picks, best first, skipping any within the peak distance of a grasp (the
@@ -215,7 +211,7 @@ def _more_ranks(maps, config: PostProcessConfig, allowed, n_maxima: int, grasps:
     for g in grasps_from_maps(maps, config, allowed, wanted + n_maxima, fill=True)[n_maxima:]:
         if len(grasps) + len(out) >= wanted:
             break
-        if _apart(g, grasps + out, d):
+        if apart(g, grasps + out, d):
             out.append(g)
     return out
 
