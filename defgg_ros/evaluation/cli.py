@@ -324,8 +324,9 @@ def cmd_report(args) -> int:
 
 
 def write_diagnostics(out_dir, data_root) -> None:
-    """OUT/diagnostics.json + .md from the training labels (if --data), OUT/plans.json (if present) and
-    the repeatability of the folder's trials (if it ran the sensitivity experiment)."""
+    """OUT/diagnostics.json + .md from the training labels (if --data), OUT/plans.json (if present), the
+    repeatability of the folder's trials (if it ran the sensitivity experiment) and how well the
+    predicted quality ranks each view's grasps (if it ran more than one rank)."""
     from defgg_ros.evaluation import diagnose
     from defgg_ros.evaluation.runner import PLANS_FILE
     from defgg_ros.evaluation.store import RESULTS_FILE, read_results

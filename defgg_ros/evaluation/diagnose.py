@@ -30,6 +30,7 @@ import numpy as np
 
 from defgg_ros.constants import MAX_SOFT_BODY_YOUNGS_MODULUS_PA
 from defgg_ros.data.format import list_scene_ids, read_trials
+from defgg_ros.evaluation.tables import is_main_correct_input
 
 
 def label_stats(data_root) -> dict:
@@ -37,8 +38,11 @@ def label_stats(data_root) -> dict:
     per_e = defaultdict(lambda: {"trials": 0, "labelled": 0, "positive": 0, "sim_failed": 0})
     by_candidate = defaultdict(dict)          # (object, candidate) -> {E: label}
     shake_means = defaultdict(list)
+    labelled_by_scene = []                    # each scene's labelled trials, for the locality check
     for sid in list_scene_ids(data_root):
-        for t in read_trials(data_root, sid):
+        trials = read_trials(data_root, sid)
+        labelled_by_scene.append([t for t in trials if t.label is not None])
+        for t in trials:
             e = f"{t.youngs_modulus_pa:.0e}"
             s = per_e[e]
             s["trials"] += 1
@@ -50,7 +54,7 @@ def label_stats(data_root) -> dict:
             by_candidate[(t.object_name, t.candidate_index)][e] = t.label
             if t.shake_mean_mps2 is not None:
                 shake_means[e].append(t.shake_mean_mps2)
-    locality = _label_locality(list_scene_ids(data_root), data_root)
+    locality = _label_locality(labelled_by_scene)
     pairs = defaultdict(lambda: [0, 0])       # (E1, E2) -> [same label, compared]
     for labels in by_candidate.values():
         for e1, e2 in itertools.combinations(sorted(labels, key=float), 2):
@@ -72,20 +76,18 @@ def label_stats(data_root) -> dict:
 NEAR_PX, NEAR_DEG, FAR_PX = 10.0, 20.0, 30.0
 
 
-def _label_locality(scene_ids, data_root) -> dict:
+def _label_locality(labelled_by_scene) -> dict:
     """Same-label rate of candidate pairs of one scene, near (centres < NEAR_PX, angles < NEAR_DEG) and far
     (centres >= FAR_PX), over the scenes that have both labels (elsewhere every pair agrees trivially)."""
     out = {body: {"near": [0, 0], "far": [0, 0], "scenes": 0} for body in ("soft", "rigid")}
-    for sid in scene_ids:
-        trials = [t for t in read_trials(data_root, sid) if t.label is not None]
+    for trials in labelled_by_scene:
         if len({t.label for t in trials}) < 2:
             continue
         body = out["soft" if trials[0].youngs_modulus_pa <= MAX_SOFT_BODY_YOUNGS_MODULUS_PA else "rigid"]
         body["scenes"] += 1
         for a, b in itertools.combinations(trials, 2):
             dist = math.hypot(a.rect.center_u_px - b.rect.center_u_px, a.rect.center_v_px - b.rect.center_v_px)
-            turn = abs(a.rect.angle_rad - b.rect.angle_rad) % math.pi
-            near = dist < NEAR_PX and math.degrees(min(turn, math.pi - turn)) < NEAR_DEG
+            near = dist < NEAR_PX and _grasp_turn_deg(a.rect.angle_rad, b.rect.angle_rad) < NEAR_DEG
             kind = "near" if near else "far" if dist >= FAR_PX else None
             if kind:
                 body[kind][0] += int(a.label == b.label)
@@ -120,6 +122,12 @@ def plan_shifts(plans) -> dict:
                 for e, v in sorted(per.items(), key=lambda kv: float(kv[0]))} for m, per in out.items()}
 
 
+def _grasp_turn_deg(a_rad: float, b_rad: float) -> float:
+    """Angle between two parallel-jaw grasp directions (the same grasp after a half turn), in [0, 90]."""
+    turn = abs(a_rad - b_rad) % math.pi
+    return math.degrees(min(turn, math.pi - turn))
+
+
 def _main_key(r) -> tuple:
     return r["model"], r["object_set"], r["object"], r["youngs_modulus_pa"], r["rank"], r["task"]
 
@@ -137,8 +145,7 @@ def replicate_flips(records) -> dict | None:
         if (g["center_u_px"], g["center_v_px"]) != (h["center_u_px"], h["center_v_px"]):
             continue
         widths_mm.append(1000 * abs(g["width_m"] - h["width_m"]))
-        turn = abs(g["yaw_rad"] - h["yaw_rad"]) % math.pi     # a parallel-jaw grasp is the same after a half turn
-        angles_deg.append(math.degrees(min(turn, math.pi - turn)))
+        angles_deg.append(_grasp_turn_deg(g["yaw_rad"], h["yaw_rad"]))
         differ += int(r["success"] != m["success"])
     if not widths_mm:
         return None
@@ -153,8 +160,7 @@ def quality_ranking(records) -> dict | None:
     counts one half). None without such pairs."""
     views = defaultdict(list)
     for r in records:
-        if (r["experiment"] == "main" and float(r.get("input_error_pct") or 0.0) == 0.0 and r.get("grasp")
-                and r.get("success") is not None):
+        if is_main_correct_input(r) and r.get("grasp") and r.get("success") is not None:
             views[(r["task"], r["object_set"], r["model"], r.get("model_sha"), r["object"],
                    r["youngs_modulus_pa"])].append(r)      # one weights' grasps compared with each other only
     out = defaultdict(lambda: {"pairs": 0, "concordant": 0.0})

@@ -11,13 +11,9 @@ from __future__ import annotations
 import csv
 import io
 
-from defgg_ros.evaluation.tables import Cell
+from defgg_ros.evaluation.tables import Cell, is_main_correct_input
 
 ANY_RANK = "any"
-
-
-def _is_main(r: dict, task: str) -> bool:
-    return r["experiment"] == "main" and r["task"] == task and float(r.get("input_error_pct") or 0.0) == 0.0
 
 
 def rank_cells(records, task: str, sets, models, n_ranks: int, views_per_set: dict) -> dict:
@@ -30,7 +26,7 @@ def rank_cells(records, task: str, sets, models, n_ranks: int, views_per_set: di
              for s in sets for m in models for k in [*range(n_ranks), ANY_RANK]}
     views = {}
     for r in records:
-        if not _is_main(r, task) or r.get("rank") is None:
+        if r["task"] != task or not is_main_correct_input(r) or r.get("rank") is None:
             continue
         cell = cells.get((r["object_set"], r["model"], int(r["rank"])))
         if cell is None:

@@ -59,6 +59,11 @@ class Cell:
         return f"{self.rate_pct:.1f} ({self.success}/{self.graded}" + "".join(f"; {e}" for e in extra) + ")"
 
 
+def is_main_correct_input(r: dict) -> bool:
+    """A trial of the main experiment with the true stiffness input (no sensitivity error)."""
+    return r["experiment"] == "main" and float(r.get("input_error_pct") or 0.0) == 0.0
+
+
 def e_label(e_pa: float) -> str:
     mantissa, exp = f"{e_pa:.0e}".split("e")
     return f"{mantissa}e{int(exp)}"
