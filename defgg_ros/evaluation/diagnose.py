@@ -55,6 +55,7 @@ def label_stats(data_root) -> dict:
             if t.shake_mean_mps2 is not None:
                 shake_means[e].append(t.shake_mean_mps2)
     locality = _label_locality(labelled_by_scene)
+    choice = _grasp_choice(labelled_by_scene)
     pairs = defaultdict(lambda: [0, 0])       # (E1, E2) -> [same label, compared]
     for labels in by_candidate.values():
         for e1, e2 in itertools.combinations(sorted(labels, key=float), 2):
@@ -69,6 +70,7 @@ def label_stats(data_root) -> dict:
         "label_agreement": {f"{a} vs {b}": {"same": s, "compared": n, "rate": s / n if n else None}
                             for (a, b), (s, n) in sorted(pairs.items())},
         "locality": locality,
+        "grasp_choice": choice,
         "data_root": str(data_root),
     }
 
@@ -95,6 +97,43 @@ def _label_locality(labelled_by_scene) -> dict:
     return {name: {"scenes": b["scenes"], **{k: {"same": s, "pairs": n, "rate": s / n if n else None}
                                              for k in ("near", "far") for s, n in [b[k]]}}
             for name, b in out.items()}
+
+
+def _held_mean_mps2(trial) -> float:
+    """Mean held shake acceleration over the directions really measured (the generator imputes the
+    others once the label is decided, which piles means up at the threshold); 0 if the lift failed."""
+    accels = trial.shake_accels_mps2
+    if not accels:
+        return 0.0
+    measured = (trial.sim or {}).get("shake_measured") or [True] * len(accels)
+    values = [a for a, m in zip(accels, measured) if m]
+    return float(np.mean(values)) if values else 0.0
+
+
+def _grasp_choice(labelled_by_scene) -> dict:
+    """Per body kind, how much of the held shake acceleration the choice of grasp decides: the share
+    of its variance that lies within a scene (object x modulus) rather than between scenes, the median
+    spread within a scene, and how often a random vs the best of a scene's candidates is positive."""
+    out = {}
+    for name in ("soft", "rigid"):
+        scenes = [t for t in labelled_by_scene if t and (t[0].youngs_modulus_pa <= MAX_SOFT_BODY_YOUNGS_MODULUS_PA)
+                  == (name == "soft")]
+        held = [np.array([_held_mean_mps2(t) for t in trials]) for trials in scenes]
+        several = [h for h in held if len(h) > 1]
+        if not several:
+            continue
+        everything = np.concatenate(held)
+        within = sum(float(np.sum((h - h.mean()) ** 2)) for h in held)
+        total = float(np.sum((everything - everything.mean()) ** 2))
+        out[name] = {
+            "scenes": len(scenes), "trials": int(everything.size),
+            "within_scene_share": within / total if total else None,
+            "median_within_scene_sd_mps2": float(np.median([h.std(ddof=1) for h in several])),
+            "scenes_with_both_labels": sum(len({t.label for t in trials}) == 2 for trials in scenes),
+            "random_candidate_positive": float(np.mean([np.mean([t.label for t in trials]) for trials in scenes])),
+            "best_candidate_positive": float(np.mean([any(t.label for t in trials) for trials in scenes])),
+        }
+    return out
 
 
 def plan_shifts(plans) -> dict:
@@ -195,6 +234,7 @@ def diagnostics_markdown(labels: dict | None, shifts: dict | None, replicates: d
             lines.append(f"| {k} | {v['same']} | {v['compared']} | {rate} |")
         lines.append("")
         lines += _locality_markdown(labels.get("locality"))
+        lines += _grasp_choice_markdown(labels.get("grasp_choice"))
     if shifts:
         lines += ["**How far the best grasp moves with the modulus** (rank-0 grasp vs the one at the stiffest "
                   "modulus, same object)", "", "| model | E (Pa) | objects | mean shift (mm) | moved > 5 mm | "
@@ -236,3 +276,21 @@ def _locality_markdown(locality: dict | None) -> list:
                      f"{rates['far']} |")
     return lines + [""]
 
+
+
+def _grasp_choice_markdown(choice: dict | None) -> list:
+    if not choice:
+        return []
+    lines = ["**How much does the choice of grasp decide?** Held shake acceleration (mean over the measured "
+             "directions, 0 for a failed lift) of the training trials: the share of its variance within one "
+             "object and modulus, i.e. the part a grasp ranking can act on; and the positive rate of a random "
+             "candidate vs the best candidate of each scene (a perfect ranking of the sampler's candidates).", "",
+             "| bodies | scenes | trials | variance within a scene | median SD within a scene (m/s^2) | "
+             "scenes with both labels | random candidate positive | best candidate positive |",
+             "|---|---|---|---|---|---|---|---|"]
+    for name, c in choice.items():
+        share = "–" if c["within_scene_share"] is None else f"{100 * c['within_scene_share']:.1f} %"
+        lines.append(f"| {name} | {c['scenes']} | {c['trials']} | {share} | {c['median_within_scene_sd_mps2']:.1f} | "
+                     f"{c['scenes_with_both_labels']} | {100 * c['random_candidate_positive']:.1f} % | "
+                     f"{100 * c['best_candidate_positive']:.1f} % |")
+    return lines + [""]

@@ -1,4 +1,6 @@
 """Diagnostics: label statistics of a real dataset on disk and grasp shifts between moduli."""
+import pytest
+
 from defgg_ros.data.synthetic import write_synthetic_dataset
 from defgg_ros.evaluation import diagnose
 
@@ -83,3 +85,30 @@ def test_quality_ranking_compares_grasps_of_one_view_that_ended_differently():
     md = diagnose.diagnostics_markdown(None, None, None, rank)
     assert "| shake | common | stiff | 5 | 30.0 % |" in md
     assert diagnose.quality_ranking([ranked(True, 0.9)]) is None
+
+
+def _labelled(e_pa, accels, measured=None):
+    from types import SimpleNamespace
+
+    mean = sum(accels) / len(accels) if accels else 0.0
+    return SimpleNamespace(youngs_modulus_pa=e_pa, shake_accels_mps2=accels, label=bool(accels) and mean >= 25.0,
+                           sim={"shake_measured": measured} if measured else {})
+
+
+def test_grasp_choice_splits_the_held_acceleration_into_within_and_between_scenes():
+    """Two soft scenes: one whose grasps all hold 40 m/s^2, one whose grasps hold 30 or drop in the
+    lift (0): the variance within scenes is 2 * 15^2 * 2 of a total that the scene means add to."""
+    held_40 = [_labelled(2e4, [40.0] * 4) for _ in range(4)]
+    # An unmeasured direction (imputed 50 by the generator) must not count.
+    mixed = [_labelled(2e4, [30.0, 30.0, 50.0], [True, True, False]), _labelled(2e4, [30.0] * 3),
+             _labelled(2e4, None), _labelled(2e4, None)]
+    choice = diagnose._grasp_choice([held_40, mixed, [_labelled(2e9, [50.0] * 2)]])
+    soft = choice["soft"]
+    values = [40.0] * 4 + [30.0, 30.0, 0.0, 0.0]
+    grand = sum(values) / 8
+    total = sum((v - grand) ** 2 for v in values)
+    assert soft["within_scene_share"] == pytest.approx(4 * 15.0 ** 2 / total)
+    assert soft["scenes"] == 2 and soft["trials"] == 8 and soft["scenes_with_both_labels"] == 1
+    assert soft["random_candidate_positive"] == pytest.approx(0.75) and soft["best_candidate_positive"] == 1.0
+    assert "rigid" not in choice          # a single rigid trial has no spread to split
+    assert "| soft | 2 | 8 |" in "\n".join(diagnose._grasp_choice_markdown(choice))
