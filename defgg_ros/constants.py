@@ -88,3 +88,7 @@ PANDA_HAND_PALM_SIZE_M = (0.204, 0.063, 0.066)  # along closing, across, height
 PANDA_FINGER_LENGTH_M = 0.054        # finger from palm to tip
 PANDA_FINGER_THICKNESS_M = 0.014     # finger pad thickness along the closing direction
 PANDA_FINGERTIP_BELOW_TCP_M = 0.007  # fingertip end below the TCP (tip at 0.112, TCP at 0.105)
+TABLE_CLEARANCE_M = 0.003            # fingertips stay this far above the table
+# TCP height of an executed top-down grasp, as a fraction of the object height seen at the grasp
+# centre (grasping.geometry.tcp_height_m). The image-space grasp has no height of its own.
+GRASP_HEIGHT_FRACTION = 0.5

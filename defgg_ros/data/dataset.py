@@ -24,7 +24,7 @@ from defgg_ros.constants import NETWORK_INPUT_SIZE_PX
 from defgg_ros.data.augment import AugmentConfig, augment_sample
 from defgg_ros.data.format import DatasetError, GraspRect, list_scene_ids, read_scene, read_trials
 from defgg_ros.data.groundtruth import ground_truth_maps, training_targets
-from defgg_ros.data.labels import is_positive
+from defgg_ros.data.labels import height_offset_m, is_positive
 from defgg_ros.model.preprocess import crop, crop_origin, encode_depth, inpaint_depth
 from defgg_ros.stiffness import encode_stiffness_image
 
@@ -60,11 +60,15 @@ class SceneSample:
 
 
 def load_scene_sample(root, scene_id: str, n_trials: int | None = None,
-                      size_px: int = NETWORK_INPUT_SIZE_PX, label_rule: str = "mean") -> SceneSample:
-    """label_rule: which trials are positives (defgg_ros/data/labels.py)."""
+                      size_px: int = NETWORK_INPUT_SIZE_PX, label_rule: str = "mean",
+                      max_height_offset_m: float | None = None) -> SceneSample:
+    """label_rule: which trials are positives (defgg_ros/data/labels.py); max_height_offset_m: if set,
+    only trials whose TCP was within it of the executor's height for their pixel (height_offset_m)."""
     scene = read_scene(Path(root) / "scenes" / f"{scene_id}.npz")
     trials = read_trials(root, scene_id)
     trials = trials if n_trials is None else trials[:n_trials]
+    if max_height_offset_m is not None:
+        trials = [t for t in trials if abs(height_offset_m(t, scene.depth_m)) <= max_height_offset_m]
     try:
         u0, v0 = crop_origin(scene.depth_m.shape, scene.object_mask, size_px)
         depth = inpaint_depth(crop(scene.depth_m, (u0, v0), size_px))
@@ -92,15 +96,15 @@ class GraspDataset(torch.utils.data.Dataset):
 
     def __init__(self, root, scene_ids, manifest: dict | None = None, uses_stiffness: bool = True,
                  augment: AugmentConfig | None = None, samples_per_scene: int = 1, seed: int = 0,
-                 label_rule: str = "mean"):
+                 label_rule: str = "mean", max_height_offset_m: float | None = None):
         self.root = Path(root)
         self.uses_stiffness = uses_stiffness
         self.augment = augment
         self.samples_per_scene = int(samples_per_scene)
         self.seed = int(seed)
         self.epoch = 0
-        samples = [load_scene_sample(root, sid, None if manifest is None else manifest[sid], label_rule=label_rule)
-                   for sid in scene_ids]
+        samples = [load_scene_sample(root, sid, None if manifest is None else manifest[sid], label_rule=label_rule,
+                                     max_height_offset_m=max_height_offset_m) for sid in scene_ids]
         self.samples = [s for s in samples if s.positives]
         self.skipped_scene_ids = [s.scene_id for s in samples if not s.positives]
 

@@ -9,7 +9,10 @@ strict rule only removes positives that were seen to slip; it is an experiment
 """
 from __future__ import annotations
 
-from defgg_ros.constants import SHAKE_POSITIVE_THRESHOLD_MPS2
+import numpy as np
+
+from defgg_ros.constants import CAMERA_HEIGHT_ABOVE_TABLE_M, SHAKE_POSITIVE_THRESHOLD_MPS2
+from defgg_ros.grasping.geometry import tcp_height_m
 
 LABEL_RULES = ("mean", "every_direction")
 
@@ -32,3 +35,17 @@ def check_label_rule(rule: str) -> str:
 def is_positive(trial, rule: str = "mean") -> bool:
     check_label_rule(rule)
     return trial.label is True and (rule == "mean" or not slips_in_a_direction(trial))
+
+
+def height_offset_m(trial, scene_depth_m: np.ndarray) -> float:
+    """The trial's TCP height minus the height the executor would grasp at on the same pixel.
+
+    The sampler puts each candidate at its own contacts' height, but an image-space grasp has no
+    height: the executor derives it from the depth at the centre pixel (tcp_height_m). The scene's
+    camera looks straight down from CAMERA_HEIGHT_ABOVE_TABLE_M above the table (z = 0).
+    """
+    h, w = scene_depth_m.shape
+    u = int(np.clip(round(trial.rect.center_u_px), 0, w - 1))
+    v = int(np.clip(round(trial.rect.center_v_px), 0, h - 1))
+    surface_z_m = CAMERA_HEIGHT_ABOVE_TABLE_M - float(scene_depth_m[v, u])
+    return float(trial.position_m[2]) - tcp_height_m(surface_z_m)

@@ -25,11 +25,13 @@ from __future__ import annotations
 import itertools
 import math
 from collections import defaultdict
+from pathlib import Path
 
 import numpy as np
 
 from defgg_ros.constants import MAX_SOFT_BODY_YOUNGS_MODULUS_PA
-from defgg_ros.data.format import list_scene_ids, read_trials
+from defgg_ros.data.format import list_scene_ids, read_scene, read_trials
+from defgg_ros.data.labels import height_offset_m
 from defgg_ros.evaluation.tables import is_main_correct_input
 
 
@@ -39,9 +41,14 @@ def label_stats(data_root) -> dict:
     by_candidate = defaultdict(dict)          # (object, candidate) -> {E: label}
     shake_means = defaultdict(list)
     labelled_by_scene = []                    # each scene's labelled trials, for the locality check
+    with_offsets = []                         # and their height offsets from the executor's grasp height
     for sid in list_scene_ids(data_root):
         trials = read_trials(data_root, sid)
-        labelled_by_scene.append([t for t in trials if t.label is not None])
+        labelled = [t for t in trials if t.label is not None]
+        labelled_by_scene.append(labelled)
+        if labelled:
+            depth_m = read_scene(Path(data_root) / "scenes" / f"{sid}.npz").depth_m
+            with_offsets.append((labelled, [height_offset_m(t, depth_m) for t in labelled]))
         for t in trials:
             e = f"{t.youngs_modulus_pa:.0e}"
             s = per_e[e]
@@ -56,6 +63,7 @@ def label_stats(data_root) -> dict:
                 shake_means[e].append(t.shake_mean_mps2)
     locality = _label_locality(labelled_by_scene)
     choice = _grasp_choice(labelled_by_scene)
+    by_height = _positive_rate_by_height_offset(with_offsets)
     pairs = defaultdict(lambda: [0, 0])       # (E1, E2) -> [same label, compared]
     for labels in by_candidate.values():
         for e1, e2 in itertools.combinations(sorted(labels, key=float), 2):
@@ -71,32 +79,61 @@ def label_stats(data_root) -> dict:
                             for (a, b), (s, n) in sorted(pairs.items())},
         "locality": locality,
         "grasp_choice": choice,
+        "positive_rate_by_height_offset_mm": by_height,
         "data_root": str(data_root),
     }
 
 
 NEAR_PX, NEAR_DEG, FAR_PX = 10.0, 20.0, 30.0
+SAME_HEIGHT_M, APART_HEIGHT_M = 0.003, 0.010
+LOCALITY_KINDS = ("near", "near_same_height", "near_height_apart", "far")
+HEIGHT_OFFSET_BINS_M = (-0.010, -0.003, 0.003, 0.010)
+
+
+def _body(trials) -> str:
+    return "soft" if trials[0].youngs_modulus_pa <= MAX_SOFT_BODY_YOUNGS_MODULUS_PA else "rigid"
 
 
 def _label_locality(labelled_by_scene) -> dict:
     """Same-label rate of candidate pairs of one scene, near (centres < NEAR_PX, angles < NEAR_DEG) and far
-    (centres >= FAR_PX), over the scenes that have both labels (elsewhere every pair agrees trivially)."""
-    out = {body: {"near": [0, 0], "far": [0, 0], "scenes": 0} for body in ("soft", "rigid")}
+    (centres >= FAR_PX), over the scenes that have both labels (elsewhere every pair agrees trivially).
+    Near pairs are also split by their TCP heights: < SAME_HEIGHT_M vs >= APART_HEIGHT_M apart (the
+    image-space grasp has no height; the sampler's candidates do)."""
+    out = {body: {**{k: [0, 0] for k in LOCALITY_KINDS}, "scenes": 0} for body in ("soft", "rigid")}
     for trials in labelled_by_scene:
         if len({t.label for t in trials}) < 2:
             continue
-        body = out["soft" if trials[0].youngs_modulus_pa <= MAX_SOFT_BODY_YOUNGS_MODULUS_PA else "rigid"]
+        body = out[_body(trials)]
         body["scenes"] += 1
         for a, b in itertools.combinations(trials, 2):
             dist = math.hypot(a.rect.center_u_px - b.rect.center_u_px, a.rect.center_v_px - b.rect.center_v_px)
             near = dist < NEAR_PX and _grasp_turn_deg(a.rect.angle_rad, b.rect.angle_rad) < NEAR_DEG
-            kind = "near" if near else "far" if dist >= FAR_PX else None
-            if kind:
+            dz = abs(a.position_m[2] - b.position_m[2])
+            kinds = ["near", "near_same_height" if dz < SAME_HEIGHT_M else
+                     "near_height_apart" if dz >= APART_HEIGHT_M else None] if near else \
+                ["far"] if dist >= FAR_PX else []
+            for kind in filter(None, kinds):
                 body[kind][0] += int(a.label == b.label)
                 body[kind][1] += 1
     return {name: {"scenes": b["scenes"], **{k: {"same": s, "pairs": n, "rate": s / n if n else None}
-                                             for k in ("near", "far") for s, n in [b[k]]}}
+                                             for k in LOCALITY_KINDS for s, n in [b[k]]}}
             for name, b in out.items()}
+
+
+def _positive_rate_by_height_offset(scenes_with_offsets) -> dict:
+    """Positive rate of the labelled trials per bin of height_offset_m (trial TCP minus the executor's
+    height on its pixel), soft and rigid. scenes_with_offsets: [(trials, offsets_m)]."""
+    edges = (-math.inf, *HEIGHT_OFFSET_BINS_M, math.inf)
+    out = {}
+    for trials, offsets in scenes_with_offsets:
+        body = out.setdefault(_body(trials), [[0, 0] for _ in range(len(edges) - 1)])
+        for t, dz in zip(trials, offsets):
+            i = next(k for k in range(len(edges) - 1) if edges[k] <= dz < edges[k + 1])
+            body[i][0] += int(t.label)
+            body[i][1] += 1
+    names = [f"< {1000 * edges[1]:g}", *(f"{1000 * lo:g} to {1000 * hi:g}" for lo, hi in
+                                         zip(edges[1:-2], edges[2:-1])), f">= {1000 * edges[-2]:g}"]
+    return {body: {n: {"positive": p, "trials": k} for n, (p, k) in zip(names, bins)} for body, bins in out.items()}
 
 
 def _held_mean_mps2(trial) -> float:
@@ -116,8 +153,7 @@ def _grasp_choice(labelled_by_scene) -> dict:
     spread within a scene, and how often a random vs the best of a scene's candidates is positive."""
     out = {}
     for name in ("soft", "rigid"):
-        scenes = [t for t in labelled_by_scene if t and (t[0].youngs_modulus_pa <= MAX_SOFT_BODY_YOUNGS_MODULUS_PA)
-                  == (name == "soft")]
+        scenes = [t for t in labelled_by_scene if t and _body(t) == name]
         held = [np.array([_held_mean_mps2(t) for t in trials]) for trials in scenes]
         several = [h for h in held if len(h) > 1]
         if not several:
@@ -234,6 +270,7 @@ def diagnostics_markdown(labels: dict | None, shifts: dict | None, replicates: d
             lines.append(f"| {k} | {v['same']} | {v['compared']} | {rate} |")
         lines.append("")
         lines += _locality_markdown(labels.get("locality"))
+        lines += _height_offset_markdown(labels.get("positive_rate_by_height_offset_mm"))
         lines += _grasp_choice_markdown(labels.get("grasp_choice"))
     if shifts:
         lines += ["**How far the best grasp moves with the modulus** (rank-0 grasp vs the one at the stiffest "
@@ -266,16 +303,32 @@ def _locality_markdown(locality: dict | None) -> list:
     if not locality or not any(b["scenes"] for b in locality.values()):
         return []
     lines = [f"**Do nearby candidates share a label?** Pairs of one object and modulus (scenes with both labels "
-             f"only); near = centres < {NEAR_PX:g} px and angles < {NEAR_DEG:g} deg apart, far = centres >= "
-             f"{FAR_PX:g} px. Equal rates mean the labels have no spatial order for a quality map to learn.", "",
-             "| bodies | scenes | near pairs | same label (near) | far pairs | same label (far) |",
+             f"only); near = centres < {NEAR_PX:g} px and angles < {NEAR_DEG:g} deg apart, split by the "
+             f"candidates' TCP heights (< {1000 * SAME_HEIGHT_M:g} mm or >= {1000 * APART_HEIGHT_M:g} mm apart); "
+             f"far = centres >= {FAR_PX:g} px. The image-space grasp has no height: the executor derives it from "
+             "the depth at the centre pixel, while the sampler's candidates span the object's height.", "",
+             "| bodies | scenes | near: same label | near, same height | near, heights apart | far |",
              "|---|---|---|---|---|---|"]
+
+    def cell(v):
+        return "–" if not v or v["rate"] is None else f"{100 * v['rate']:.1f} % of {v['pairs']}"
     for name, b in locality.items():
-        rates = {k: "–" if b[k]["rate"] is None else f"{100 * b[k]['rate']:.1f} %" for k in ("near", "far")}
-        lines.append(f"| {name} | {b['scenes']} | {b['near']['pairs']} | {rates['near']} | {b['far']['pairs']} | "
-                     f"{rates['far']} |")
+        lines.append(f"| {name} | {b['scenes']} | " + " | ".join(cell(b.get(k)) for k in LOCALITY_KINDS) + " |")
     return lines + [""]
 
+
+def _height_offset_markdown(by_height: dict | None) -> list:
+    if not by_height:
+        return []
+    bins = list(next(iter(by_height.values())))
+    lines = ["**Positive rate by the candidate's height above the executed grasp** (TCP height of the "
+             "trial minus the height the executor grasps at on the same pixel, mm)", "",
+             "| bodies | " + " | ".join(bins) + " |", "|---|" + "---|" * len(bins)]
+    for name, per_bin in by_height.items():
+        cells = ["–" if not v["trials"] else f"{100 * v['positive'] / v['trials']:.1f} % of {v['trials']}"
+                 for v in per_bin.values()]
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    return lines + [""]
 
 
 def _grasp_choice_markdown(choice: dict | None) -> list:

@@ -18,12 +18,10 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from defgg_ros.constants import GRIPPER_MAX_WIDTH_M, PANDA_FINGERTIP_BELOW_TCP_M
-from defgg_ros.sim.sampler import MIN_WIDTH_M, TABLE_CLEARANCE_M
+from defgg_ros.constants import GRIPPER_MAX_WIDTH_M
+from defgg_ros.grasping.geometry import tcp_height_m
+from defgg_ros.sim.sampler import MIN_WIDTH_M
 from defgg_ros.sim.trial import WorldGrasp
-
-# TCP height as a fraction of the object height seen at the grasp centre.
-GRASP_HEIGHT_FRACTION = 0.5
 
 
 @dataclass(frozen=True)
@@ -56,12 +54,6 @@ def yaw_from_image_angle(angle_rad: float, base_T_camera: np.ndarray) -> float:
     if math.hypot(d_world[0], d_world[1]) < 1e-6:
         raise ValueError("camera does not look down: image angle has no horizontal direction")
     return float(math.atan2(d_world[1], d_world[0]))
-
-
-def tcp_height_m(surface_z_m: float, table_top_z_m: float = 0.0) -> float:
-    """TCP height for a top-down grasp whose centre pixel sees the surface at surface_z_m."""
-    lowest = table_top_z_m + PANDA_FINGERTIP_BELOW_TCP_M + TABLE_CLEARANCE_M
-    return float(max(table_top_z_m + GRASP_HEIGHT_FRACTION * (surface_z_m - table_top_z_m), lowest))
 
 
 def plan_world_grasp(candidate, rank: int, base_T_camera: np.ndarray, camera_k: np.ndarray,

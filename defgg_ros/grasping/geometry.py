@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from defgg_ros.constants import GRASP_HEIGHT_FRACTION, PANDA_FINGERTIP_BELOW_TCP_M, TABLE_CLEARANCE_M
 from defgg_ros.model.preprocess import InvalidInputError
 
 
@@ -41,3 +42,10 @@ def pixel_to_camera(u_px, v_px, depth_m, camera_k) -> np.ndarray:
     x = (u_px - k[0, 2]) * depth_m / k[0, 0]
     y = (v_px - k[1, 2]) * depth_m / k[1, 1]
     return np.array([x, y, depth_m], dtype=np.float64)
+
+
+def tcp_height_m(surface_z_m: float, table_top_z_m: float = 0.0) -> float:
+    """TCP height for a top-down grasp whose centre pixel sees the surface at surface_z_m: the
+    executor's rule (GRASP_HEIGHT_FRACTION of the height seen there, fingertips above the table)."""
+    lowest = table_top_z_m + PANDA_FINGERTIP_BELOW_TCP_M + TABLE_CLEARANCE_M
+    return float(max(table_top_z_m + GRASP_HEIGHT_FRACTION * (surface_z_m - table_top_z_m), lowest))

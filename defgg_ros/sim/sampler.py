@@ -25,6 +25,7 @@ from defgg_ros.constants import (
     GRIPPER_MAX_WIDTH_M,
     PANDA_FINGERTIP_BELOW_TCP_M,
     PREGRASP_HEIGHT_M,
+    TABLE_CLEARANCE_M,
 )
 from defgg_ros.data.format import GraspRect
 from defgg_ros.sim import hand as hand_mod
@@ -36,7 +37,6 @@ SAMPLER_VERSION = 3
 ANTIPODAL_CONE_RAD = math.radians(36.0)   # friction cone of mu = 0.8 is 38.7 deg; 30 rejected every cone grasp
 MAX_NORMAL_TILT_RAD = math.radians(50.0)   # contact normal vs horizontal
 MIN_WIDTH_M = 0.005
-TABLE_CLEARANCE_M = 0.003                  # fingertips stay this far above the table
 COLLISION_TOLERANCE_M = 0.0005
 APPROACH_STEP_M = 0.01
 MAX_SAMPLE_ROUNDS = 20

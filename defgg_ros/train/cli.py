@@ -69,6 +69,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="positives: 'mean' = mean held acceleration over the 16 shake directions >= 25 m/s^2 "
                         "(the paper's, default); 'every_direction' = that and no measured direction below it "
                         "(the evaluation's shake criterion; an experiment)")
+    p.add_argument("--max-height-offset-mm", type=float, default=None, metavar="MM",
+                   help="positives only from trials whose TCP was within MM of the height the executor grasps "
+                        "at on their pixel (an experiment; default: every trial, as in the paper)")
     p.add_argument("--max-steps", type=int, default=None, help="stop after this many optimizer steps (smoke runs)")
     p.add_argument("--checkpoint-every", type=int, default=25, metavar="STEPS",
                    help="also save the resume state every STEPS optimizer steps, so a kill mid-epoch loses at "
@@ -86,7 +89,9 @@ def config_from_args(args) -> TrainConfig:
                        batch_size=args.batch_size, learning_rate=args.lr,
                        positive_weight=args.positive_weight, samples_per_scene=args.samples_per_scene,
                        seed=args.seed, val_fraction=args.val_fraction, test_fraction=args.test_fraction,
-                       augment=augment, max_steps=args.max_steps, label_rule=args.label_rule)
+                       augment=augment, max_steps=args.max_steps, label_rule=args.label_rule,
+                       max_height_offset_m=None if args.max_height_offset_mm is None
+                       else args.max_height_offset_mm / 1000.0)
 
 
 def main(argv=None) -> int:

@@ -29,9 +29,15 @@ class TrainConfig:
     max_steps: int | None = None   # stop early (smoke tests); None = all epochs
     # Which trials are positives (defgg_ros/data/labels.py): "mean" is the paper's rule.
     label_rule: str = "mean"
+    # Positives only from trials whose TCP was within this of the height the executor grasps at on
+    # their pixel (data.labels.height_offset_m); None = every trial (the paper's). An experiment:
+    # the sampler's candidates span the object's height, the executed grasp does not.
+    max_height_offset_m: float | None = None
 
     def __post_init__(self):
         check_label_rule(self.label_rule)   # fail before any data is read
+        if self.max_height_offset_m is not None and not self.max_height_offset_m >= 0:
+            raise ValueError(f"max_height_offset_m must be >= 0 or None, got {self.max_height_offset_m}")
 
     def network_config(self) -> GGCNNConfig:
         return GGCNNConfig(input_channels=2 if self.uses_stiffness else 1, architecture=self.architecture)

@@ -109,7 +109,8 @@ class Trainer:
                                               self.config.test_fraction, self.config.seed)
         self.scene_split = split_scenes(scene_objects, self.object_split)
         c = self.config
-        common = {"manifest": self.manifest, "uses_stiffness": c.uses_stiffness, "label_rule": c.label_rule}
+        common = {"manifest": self.manifest, "uses_stiffness": c.uses_stiffness, "label_rule": c.label_rule,
+                  "max_height_offset_m": c.max_height_offset_m}
         self.train_set = GraspDataset(self.data_root, self.scene_split["train"], augment=c.augment,
                                       samples_per_scene=c.samples_per_scene, seed=c.seed, **common)
         self.val_set = GraspDataset(self.data_root, self.scene_split["val"], **common)

@@ -33,6 +33,15 @@ def test_only_positive_trials_become_labels(synth):
     assert len(sample.positives) == sum(t.label is True for t in read_trials(synth, sid)) > 0
 
 
+def test_height_filter_keeps_only_positives_near_the_executors_grasp_height(synth):
+    """The synthetic trials sit at z = 0, at least 10 mm under any height the executor would use:
+    a filter of a metre keeps every positive, one of 5 mm keeps none."""
+    sid = list_scene_ids(synth)[0]
+    every = load_scene_sample(synth, sid).positives
+    assert load_scene_sample(synth, sid, max_height_offset_m=1.0).positives == every and every
+    assert load_scene_sample(synth, sid, max_height_offset_m=0.005).positives == []
+
+
 def test_manifest_freezes_a_growing_dataset(synth, tmp_path):
     manifest = build_manifest(synth)
     fp = manifest_fingerprint(synth, manifest)

@@ -1,8 +1,9 @@
 """Label rules (data/labels.py): positives that slip in a measured direction."""
+import numpy as np
 import pytest
 
 from defgg_ros.data.format import GraspRect, TrialRecord
-from defgg_ros.data.labels import is_positive, slips_in_a_direction
+from defgg_ros.data.labels import height_offset_m, is_positive, slips_in_a_direction
 
 
 def _trial(accels, measured=None):
@@ -32,3 +33,16 @@ def test_the_strict_rule_drops_only_the_positives_seen_to_slip():
     assert not is_positive(_trial([10.0] * 16), "every_direction")
     with pytest.raises(ValueError, match="label rule"):
         is_positive(clean, "median")
+
+
+def test_height_offset_is_measured_from_the_executors_height_on_the_trials_pixel():
+    """A 60 mm tall object under pixel (150, 150), the table elsewhere: the executor grasps at half
+    the height seen at the pixel (30 mm), so a trial at 42 mm is 12 mm too high; a trial whose pixel
+    sees the table is measured from the lowest grasp (fingertips 3 mm above the table)."""
+    depth = np.full((300, 300), 0.40)
+    depth[140:160, 140:160] = 0.40 - 0.06
+    trial = _trial([30.0] * 16)
+    trial.position_m = [0.0, 0.0, 0.042]
+    assert height_offset_m(trial, depth) == pytest.approx(0.012)
+    trial.rect = GraspRect(20.0, 20.0, 0.0, 40.0, 20.0)
+    assert height_offset_m(trial, depth) == pytest.approx(0.042 - 0.010)

@@ -112,3 +112,26 @@ def test_grasp_choice_splits_the_held_acceleration_into_within_and_between_scene
     assert soft["random_candidate_positive"] == pytest.approx(0.75) and soft["best_candidate_positive"] == 1.0
     assert "rigid" not in choice          # a single rigid trial has no spread to split
     assert "| soft | 2 | 8 |" in "\n".join(diagnose._grasp_choice_markdown(choice))
+
+
+def test_near_pairs_are_split_by_their_grasp_heights():
+    """Two candidates on one pixel: at the same height they agree, 12 mm apart they do not."""
+    from types import SimpleNamespace
+
+    from defgg_ros.data.format import GraspRect
+
+    def cand(z_m, label):
+        return SimpleNamespace(youngs_modulus_pa=2e4, label=label, position_m=[0.0, 0.0, z_m],
+                               rect=GraspRect(150.0, 150.0, 0.0, 40.0, 20.0))
+    locality = diagnose._label_locality([[cand(0.020, True), cand(0.021, True), cand(0.033, False)]])["soft"]
+    assert locality["near"]["pairs"] == 3 and locality["near_same_height"] == {"same": 1, "pairs": 1, "rate": 1.0}
+    assert locality["near_height_apart"] == {"same": 0, "pairs": 2, "rate": 0.0}
+
+
+def test_positive_rate_by_height_offset_bins_every_labelled_trial(tmp_path):
+    write_synthetic_dataset(tmp_path, n_objects=2, trials_per_scene=6)
+    by_height = diagnose.label_stats(tmp_path)["positive_rate_by_height_offset_mm"]
+    assert sum(v["trials"] for body in by_height.values() for v in body.values()) == 2 * 4 * 6
+    # Synthetic trials sit at z = 0, always >= 10 mm below the executor's grasp height.
+    assert all(v["trials"] == 0 for body in by_height.values() for k, v in body.items() if k != "< -10")
+    assert "| soft | " in "\n".join(diagnose._height_offset_markdown(by_height))

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from defgg_ros.evaluation import jobs
-from defgg_ros.evaluation.planning import plan_world_grasp, tcp_height_m, yaw_from_image_angle
+from defgg_ros.evaluation.planning import plan_world_grasp, yaw_from_image_angle
+from defgg_ros.grasping.geometry import tcp_height_m
 from defgg_ros.sim.camera import TopDownCamera
 from defgg_ros.sim.sampler import grasp_rect
 from defgg_ros.sim.trial import WorldGrasp
