@@ -49,6 +49,7 @@ class DatagenConfig:
     ray_address: str | None = None
     settings: dict = field(default_factory=dict)   # TrialSettings overrides
     sim_max_tet_nodes: int | None = None           # None: simulate on the shipped mesh
+    grasp_height: str = "contacts"                 # sim.sampler.GRASP_HEIGHT_RULES
     card_every: int = 20                           # regenerate the card every N finished trials
 
     def header(self) -> dict:
@@ -109,11 +110,14 @@ def load_or_sample_candidates(root: Path, shape, cfg: DatagenConfig) -> list:
     key = {"version": CANDIDATE_FILE_VERSION, "sampler": SAMPLER_VERSION, "seed": seed,
            "n_candidates": cfg.n_candidates, "keep": cfg.grasps_per_scene,
            "mesh": [t.content_hash for t in shape.tet_parts]}
+    if cfg.grasp_height != "contacts":      # the key of the datasets before the option stays as it was
+        key["grasp_height"] = cfg.grasp_height
     if path.exists():
         cached = json.loads(path.read_text(encoding="utf-8"))
         if cached.get("key") == key:
             return cached["candidates"]
-    found = sample_grasps(shape.surface(), seed, cfg.n_candidates, keep=cfg.grasps_per_scene)
+    found = sample_grasps(shape.surface(), seed, cfg.n_candidates, keep=cfg.grasps_per_scene,
+                          height_rule=cfg.grasp_height)
     cands = [{"grasp": {"position_m": list(c.grasp.position_m), "yaw_rad": c.grasp.yaw_rad,
                         "width_m": c.grasp.width_m},
               "rect": asdict(grasp_rect(c.grasp))} for c in found]
@@ -276,6 +280,10 @@ def check_resumable(cfg: DatagenConfig) -> None:
         flag = f"--sim-max-tet-nodes {mesh or 0}"
         raise DatasetError(f"{cfg.out} was generated with {flag}; resume it with the same FEM mesh "
                            f"(got {cfg.sim_max_tet_nodes or 0}; 0 = the shipped mesh) or write a new dataset")
+    height = stored.get("grasp_height", "contacts")     # headers before 2026-11-26: the contacts' height
+    if height != cfg.grasp_height:
+        raise DatasetError(f"{cfg.out} was generated with --grasp-height {height}; resume it with the same rule "
+                           f"(got {cfg.grasp_height}) or write a new dataset")
     # headers before 2026-11-24 did not record the protocol: theirs was the legacy lift
     from defgg_ros.sim.trial import comparable_protocol
 

@@ -27,6 +27,7 @@ Resume the dataset of the shipped models (made with the lift of its time):
 
 def build_parser() -> argparse.ArgumentParser:
     from defgg_ros.data.datagen import COARSE_SIM_MAX_TET_NODES
+    from defgg_ros.sim.sampler import GRASP_HEIGHT_RULES
 
     ap = argparse.ArgumentParser(prog="defgg-datagen", description=DESCRIPTION,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -53,6 +54,12 @@ def build_parser() -> argparse.ArgumentParser:
                          f"for our data: at N={COARSE_SIM_MAX_TET_NODES} it is 6-12x cheaper but flipped 5 of 27 "
                          "soft labels; at N=80, 1.6x cheaper than the shipped mesh with 3 of 55 labels changed "
                          "(bench/README.md). Fixed for the life of a dataset.")
+    ap.add_argument("--grasp-height", choices=GRASP_HEIGHT_RULES, default="contacts",
+                    help="TCP height of a candidate: 'contacts' (default; the datasets up to fem_v3) = at the "
+                         "sampled contacts, anywhere on the object's side; 'executor' = at the height the "
+                         "executor derives from the depth image (half the height seen at the grasp centre), "
+                         "the contacts found again there, so each label is of the grasp that is later "
+                         "performed (results/notes_height.md). Fixed for the life of a dataset.")
     ap.add_argument("--no-progress", action="store_true", help="no progress bar")
     return ap
 
@@ -80,7 +87,7 @@ def main(argv=None) -> int:
                         moduli_pa=tuple(args.moduli), grasps_per_scene=args.grasps_per_scene,
                         pass_size=args.pass_size, n_candidates=args.candidates, seed=args.seed,
                         workers=args.workers, ray_address=args.ray_address, settings=settings,
-                        sim_max_tet_nodes=args.sim_max_tet_nodes or None)
+                        sim_max_tet_nodes=args.sim_max_tet_nodes or None, grasp_height=args.grasp_height)
     try:
         counts = generate(cfg, progress_bar=not args.no_progress)
     except DatasetError as exc:

@@ -28,6 +28,7 @@ from defgg_ros.constants import (
     TABLE_CLEARANCE_M,
 )
 from defgg_ros.data.format import GraspRect
+from defgg_ros.grasping.geometry import tcp_height_m
 from defgg_ros.sim import hand as hand_mod
 from defgg_ros.sim.camera import TopDownCamera
 from defgg_ros.sim.trial import OPENING_CLEARANCE_M, WorldGrasp
@@ -67,8 +68,22 @@ def _ray_hits(origin, direction, tris):
     return t[idx][order], idx[order]
 
 
-def antipodal_pairs(mesh: trimesh.Trimesh, n_points: int, rng) -> list:
+# Where a candidate's TCP goes: "contacts" = at the sampled contacts' height (grasp_height_m; the
+# datasets up to fem_v3), "executor" = at the height the executor derives from the depth image
+# (grasping.geometry.tcp_height_m), with the contacts found again on that horizontal line. An
+# image-space grasp has no height, so only "executor" labels the grasp that is later performed.
+GRASP_HEIGHT_RULES = ("contacts", "executor")
+
+
+def check_height_rule(rule: str) -> str:
+    if rule not in GRASP_HEIGHT_RULES:
+        raise ValueError(f"grasp height rule must be one of {GRASP_HEIGHT_RULES}, got {rule!r}")
+    return rule
+
+
+def antipodal_pairs(mesh: trimesh.Trimesh, n_points: int, rng, height_rule: str = "contacts") -> list:
     """Up to n_points antipodal candidates on a closed surface (object frame)."""
+    check_height_rule(height_rule)
     points, faces = trimesh.sample.sample_surface(mesh, n_points, seed=int(rng.integers(2**31)))
     normals = mesh.face_normals[faces]
     tris = mesh.triangles
@@ -92,11 +107,41 @@ def antipodal_pairs(mesh: trimesh.Trimesh, n_points: int, rng) -> list:
             continue
         p2 = p1 + axis * t2
         centre = (p1 + p2) / 2
-        z = grasp_height_m(centre, _surface_height_m(centre, tris))
+        if height_rule == "executor":
+            found = _pair_at_executor_height(centre, axis, mesh)
+            if found is None:
+                continue
+            p1, p2, t2 = found
+            centre = (p1 + p2) / 2
+            z = centre[2]
+        else:
+            z = grasp_height_m(centre, _surface_height_m(centre, tris))
         yaw = math.atan2(axis[1], axis[0])
         out.append(Candidate(WorldGrasp((float(centre[0]), float(centre[1]), float(z)), yaw, float(t2)),
                              (tuple(p1), tuple(p2))))
     return out
+
+
+def _pair_at_executor_height(centre, axis, mesh: trimesh.Trimesh):
+    """The contacts on the horizontal line along `axis` through `centre`'s (x, y) at the executor's
+    TCP height there: (p1, p2, width) if the line starts inside the object and leaves it through two
+    faces within the antipodal cone and the hand's width range, else None."""
+    tris = mesh.triangles
+    for _ in range(2):      # the midpoint moves a little: take the height under the new one
+        z = tcp_height_m(_surface_height_m(centre, tris))
+        origin = np.array([centre[0], centre[1], z])
+        ends = []
+        for direction in (-axis, axis):
+            t, idx = _ray_hits(origin, direction, tris)
+            # The first face must be an exit (outward normal along the ray): the line starts inside.
+            if not len(t) or math.acos(np.clip(mesh.face_normals[idx[0]] @ direction, -1, 1)) > ANTIPODAL_CONE_RAD:
+                return None
+            ends.append(origin + direction * t[0])
+        centre = (ends[0] + ends[1]) / 2
+    width = float(np.linalg.norm(ends[1] - ends[0]))
+    if not MIN_WIDTH_M <= width <= GRIPPER_MAX_WIDTH_M - OPENING_CLEARANCE_M / 2:
+        return None
+    return ends[0], ends[1], width
 
 
 def grasp_height_m(contact_centre_m, surface_top_z_m: float) -> float:
@@ -162,12 +207,12 @@ class CollisionChecker:
 
 
 def sample_grasps(surface: trimesh.Trimesh, seed: int, n_candidates: int = GRASP_CANDIDATES_PER_OBJECT,
-                  keep: int | None = None) -> list:
+                  keep: int | None = None, height_rule: str = "contacts") -> list:
     """~n_candidates antipodal candidates, collision-filtered; at most `keep`, in a seeded order."""
     rng = np.random.default_rng(seed)
     candidates = []
     for _ in range(MAX_SAMPLE_ROUNDS):
-        candidates += antipodal_pairs(surface, 4 * n_candidates, rng)
+        candidates += antipodal_pairs(surface, 4 * n_candidates, rng, height_rule)
         if len(candidates) >= n_candidates:
             break
     candidates = candidates[:n_candidates]

@@ -10,6 +10,7 @@ import subprocess
 import sys
 import time
 from collections import Counter
+from dataclasses import replace
 
 import pytest
 
@@ -114,6 +115,20 @@ def test_coarse_fem_mesh_is_recorded_and_fixed_for_the_dataset(tmp_path):
                           capture_output=True, text=True, timeout=600)
     assert done.returncode == 2 and f"--sim-max-tet-nodes {datagen.COARSE_SIM_MAX_TET_NODES}" in done.stderr
     assert len(read_trials(out, "cube__E2e+05")) == 1
+
+
+def test_grasp_height_rule_is_recorded_and_fixed_for_the_dataset(tmp_path):
+    from defgg_ros.data.format import DatasetError, check_header
+
+    out = tmp_path / "executor"
+    cfg = datagen.DatagenConfig(out=out, objects=("cube",), moduli_pa=(2e9,), grasps_per_scene=1, pass_size=1,
+                                settings=QUICK, grasp_height="executor")
+    assert datagen.generate(cfg, progress_bar=False)["done"] == 1
+    assert check_header(out)["generator"]["grasp_height"] == "executor"
+    cached = json.loads((out / "candidates" / "cube.json").read_text())
+    assert cached["key"]["grasp_height"] == "executor"
+    with pytest.raises(DatasetError, match="--grasp-height executor"):
+        datagen.generate(replace(cfg, grasp_height="contacts"), progress_bar=False)
 
 
 def test_resume_keeps_the_trial_protocol_of_the_dataset(tmp_path):

@@ -50,6 +50,29 @@ def test_kept_grasps_do_not_collide_and_are_antipodal(name):
         assert np.allclose((p2 - p1) / np.linalg.norm(p2 - p1), axis, atol=1e-6)
 
 
+@pytest.mark.parametrize("name", ["box_small", "sphere"])
+def test_executor_height_candidates_sit_where_the_executor_will_grasp(name):
+    """With height_rule="executor" each TCP is at tcp_height_m of the surface seen above its centre
+    (the height the cell and the evaluation derive from the depth image), the contacts are on that
+    horizontal line, antipodal and collision-free; the contacts rule spreads over the object's side."""
+    from defgg_ros.grasping.geometry import tcp_height_m
+
+    surface = objects.get_shape(name).surface()
+    kept = sampler.sample_grasps(surface, seed=1, n_candidates=40, keep=10, height_rule="executor")
+    assert len(kept) >= 5
+    for cand in kept:
+        centre = np.asarray(cand.grasp.position_m)
+        assert centre[2] == pytest.approx(tcp_height_m(sampler._surface_height_m(centre, surface.triangles)), abs=1e-3)
+        p1, p2 = map(np.asarray, cand.contacts_m)
+        assert p1[2] == pytest.approx(centre[2]) and p2[2] == pytest.approx(centre[2])
+        assert np.linalg.norm(p2 - p1) == pytest.approx(cand.grasp.width_m, abs=1e-6)
+        assert not _collides(surface, cand.grasp), cand
+    heights = [c.grasp.position_m[2] for c in sampler.sample_grasps(surface, seed=1, n_candidates=40, keep=10)]
+    assert np.ptp(heights) > 0.005
+    with pytest.raises(ValueError, match="height rule"):
+        sampler.sample_grasps(surface, seed=1, height_rule="middle")
+
+
 def test_the_filter_removes_colliding_candidates():
     surface = objects.get_shape("ycb_mug").surface()
     raw = sampler.antipodal_pairs(surface, 100, np.random.default_rng(3))
