@@ -41,7 +41,7 @@ def height_offset_m(trial, scene_depth_m: np.ndarray) -> float:
     """The trial's TCP height minus the height the executor would grasp at on the same pixel.
 
     The sampler puts each candidate at its own contacts' height, but an image-space grasp has no
-    height: the executor derives it from the depth at the centre pixel (tcp_height_m). The scene's
+    height: the evaluation's executor derives it from the depth at the centre pixel (tcp_height_m). The scene's
     camera looks straight down from CAMERA_HEIGHT_ABOVE_TABLE_M above the table (z = 0).
     """
     h, w = scene_depth_m.shape

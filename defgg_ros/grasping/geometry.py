@@ -45,7 +45,9 @@ def pixel_to_camera(u_px, v_px, depth_m, camera_k) -> np.ndarray:
 
 
 def tcp_height_m(surface_z_m: float, table_top_z_m: float = 0.0) -> float:
-    """TCP height for a top-down grasp whose centre pixel sees the surface at surface_z_m: the
-    executor's rule (GRASP_HEIGHT_FRACTION of the height seen there, fingertips above the table)."""
+    """TCP height for a top-down grasp whose centre pixel sees the surface at surface_z_m: the rule the
+    evaluation executes grasps with (evaluation.planning.plan_world_grasp) and "executor"-height
+    candidates are sampled at: GRASP_HEIGHT_FRACTION of the height seen there, fingertips above the
+    table. (The cell's executor node goes its grasp_depth_below_surface_m parameter below the surface.)"""
     lowest = table_top_z_m + PANDA_FINGERTIP_BELOW_TCP_M + TABLE_CLEARANCE_M
     return float(max(table_top_z_m + GRASP_HEIGHT_FRACTION * (surface_z_m - table_top_z_m), lowest))
