@@ -305,7 +305,7 @@ def _locality_markdown(locality: dict | None) -> list:
     lines = [f"**Do nearby candidates share a label?** Pairs of one object and modulus (scenes with both labels "
              f"only); near = centres < {NEAR_PX:g} px and angles < {NEAR_DEG:g} deg apart, split by the "
              f"candidates' TCP heights (< {1000 * SAME_HEIGHT_M:g} mm or >= {1000 * APART_HEIGHT_M:g} mm apart); "
-             f"far = centres >= {FAR_PX:g} px. The image-space grasp has no height: the executor derives it from "
+             f"far = centres >= {FAR_PX:g} px. The image-space grasp has no height: the evaluation derives it from "
              "the depth at the centre pixel, while the sampler's candidates span the object's height.", "",
              "| bodies | scenes | near: same label | near, same height | near, heights apart | far |",
              "|---|---|---|---|---|---|"]
@@ -321,8 +321,8 @@ def _height_offset_markdown(by_height: dict | None) -> list:
     if not by_height:
         return []
     bins = list(next(iter(by_height.values())))
-    lines = ["**Positive rate by the candidate's height above the executed grasp** (TCP height of the "
-             "trial minus the height the executor grasps at on the same pixel, mm)", "",
+    lines = ["**Positive rate by the candidate's height above the evaluation's grasp** (TCP height of the "
+             "trial minus the height the evaluation grasps at on the same pixel, mm)", "",
              "| bodies | " + " | ".join(bins) + " |", "|---|" + "---|" * len(bins)]
     for name, per_bin in by_height.items():
         cells = ["–" if not v["trials"] else f"{100 * v['positive'] / v['trials']:.1f} % of {v['trials']}"
