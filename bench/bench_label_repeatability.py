@@ -13,6 +13,11 @@ random.Random(--seed), one positive and one negative trial from each; the first 
 re-run unchanged (is the simulator deterministic?). One JSON line per re-run is appended to
 --results (resumable: finished (trial, variant) pairs are skipped).
 
+Variant eval_height (the causal test of the grasp height): each sampled trial whose TCP was at least
+--min-offset-mm away from the evaluation's grasp height on its pixel is re-run at that height, same
+centre (x, y) and closing direction, the contacts found again on that line (the generator's
+--grasp-height executor rule); skipped where that line does not give an antipodal pair.
+
   .venv/bin/python bench/bench_label_repeatability.py                 # run the sample, then print
   .venv/bin/python bench/bench_label_repeatability.py --summary-only  # print from the results file
 """
@@ -27,6 +32,8 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
+
+import numpy as np  # noqa: E402
 
 from defgg_ros.atomic import append_jsonl, read_jsonl  # noqa: E402
 
@@ -59,6 +66,24 @@ def nudged_grasp(trial, shift_mm: float, turn_deg: float, seed: int):
                       trial.width_m)
 
 
+def eval_height_grasp(trial, data_root):
+    """The trial's grasp moved to the evaluation's height on its pixel (None if no antipodal pair there)."""
+    from defgg_ros.data.format import read_scene
+    from defgg_ros.data.labels import height_offset_m
+    from defgg_ros.sim import objects
+    from defgg_ros.sim.sampler import _pair_at_executor_height
+    from defgg_ros.sim.trial import WorldGrasp
+
+    offset_m = height_offset_m(trial, read_scene(Path(data_root) / "scenes" / f"{trial.scene_id}.npz").depth_m)
+    axis = np.array([math.cos(trial.yaw_rad), math.sin(trial.yaw_rad), 0.0])
+    found = _pair_at_executor_height(np.asarray(trial.position_m, dtype=float), axis,
+                                     objects.get_shape(trial.object_name).surface())
+    if found is None:
+        return offset_m, None
+    p1, p2, width_m = found
+    return offset_m, WorldGrasp(tuple(float(v) for v in (p1 + p2) / 2), trial.yaw_rad, float(width_m))
+
+
 def rerun(trial, grasp) -> dict:
     from dataclasses import replace
 
@@ -79,13 +104,26 @@ def run(args) -> None:
 
     done = {(r["trial_id"], r["variant"]) for r in read_jsonl(args.results)}
     trials = [t for pair in soft_scene_pairs(args.data, args.scenes, args.seed) for t in pair]
-    jobs = [(t, "nudge") for t in trials] + [(t, "same") for t in trials[:args.same]]
-    todo = [(t, v) for t, v in jobs if (t.trial_id, v) not in done]
+    jobs = [(t, "nudge") for t in trials] + [(t, "same") for t in trials[:args.same]] + \
+        [(t, "eval_height") for t in trials]
+    todo = [(t, v) for t, v in jobs if (t.trial_id, v) not in done and v in args.variants]
     print(f"{len(jobs)} re-runs in the sample, {len(todo)} to run", flush=True)
     t0 = time.time()
     for i, (t, variant) in enumerate(todo, 1):
-        grasp = (WorldGrasp(tuple(t.position_m), t.yaw_rad, t.width_m) if variant == "same"
-                 else nudged_grasp(t, args.shift_mm, args.turn_deg, args.seed))
+        extra = {}
+        if variant == "eval_height":
+            offset_m, grasp = eval_height_grasp(t, args.data)
+            extra = {"height_offset_mm": 1000 * offset_m}
+            if abs(offset_m) * 1000 < args.min_offset_mm or grasp is None:
+                append_jsonl(args.results, {"trial_id": t.trial_id, "variant": variant, "skipped": True,
+                                            "label": None, "recorded_label": t.label, **extra})
+                continue
+            extra["height_change_mm"] = 1000 * (grasp.position_m[2] - t.position_m[2])
+            extra["width_change_mm"] = 1000 * (grasp.width_m - t.width_m)
+        elif variant == "same":
+            grasp = WorldGrasp(tuple(t.position_m), t.yaw_rad, t.width_m)
+        else:
+            grasp = nudged_grasp(t, args.shift_mm, args.turn_deg, args.seed)
         out = rerun(t, grasp)
         accels = out["shake_accels_mps2"]
         label = None if out["status"] not in ("ok", "lift_failed") else \
@@ -95,7 +133,7 @@ def run(args) -> None:
             "shift_mm": 0.0 if variant == "same" else args.shift_mm,
             "turn_deg": 0.0 if variant == "same" else args.turn_deg,
             "recorded_label": t.label, "recorded_accels_mps2": t.shake_accels_mps2,
-            "recorded_measured": t.sim.get("shake_measured"), "label": label, **out})
+            "recorded_measured": t.sim.get("shake_measured"), "label": label, **extra, **out})
         eta_min = (time.time() - t0) / i * (len(todo) - i) / 60
         print(f"[{i}/{len(todo)}] {t.trial_id} {variant}: {t.label} -> {label} "
               f"({out['cpu_s']:.0f} s CPU; ETA {eta_min:.0f} min)", flush=True)
@@ -110,9 +148,12 @@ def _measured_mean(accels, measured):
 
 def summarize(results_path) -> None:
     rows = [r for r in read_jsonl(results_path) if r["label"] is not None]
-    for variant in ("same", "nudge"):
+    for variant in ("same", "nudge", "eval_height"):
         sel = [r for r in rows if r["variant"] == variant]
         if not sel:
+            continue
+        if variant == "eval_height":
+            _summarize_height(sel, [r for r in read_jsonl(results_path) if r.get("skipped")])
             continue
         flips = sum(r["label"] != r["recorded_label"] for r in sel)
         by_label = {lab: [r for r in sel if r["recorded_label"] == lab] for lab in (True, False)}
@@ -126,9 +167,25 @@ def summarize(results_path) -> None:
                           for lab, v in by_label.items() if v)
               + f"; |change of the measured mean| median {diffs[len(diffs) // 2]:.1f} m/s^2, "
               f"max {diffs[-1]:.1f}; {cpu / 60:.0f} CPU-min")
-    failed = sum(1 for r in read_jsonl(results_path) if r["label"] is None)
+    failed = sum(1 for r in read_jsonl(results_path) if r["label"] is None and not r.get("skipped"))
     if failed:
         print(f"{failed} re-runs ended in a simulation failure (not counted)")
+
+
+def _summarize_height(sel, skipped) -> None:
+    flips = sum(r["label"] != r["recorded_label"] for r in sel)
+    print(f"eval_height: {len(sel)} trials re-run at the evaluation's grasp height ({len(skipped)} skipped: "
+          f"within the offset or no antipodal pair there), label changed on {flips} "
+          f"({100 * flips / len(sel):.1f} %); median |height change| "
+          f"{sorted(abs(r['height_change_mm']) for r in sel)[len(sel) // 2]:.1f} mm")
+    for name, keep in (("was above it", lambda r: r["height_offset_mm"] > 0),
+                       ("was below it", lambda r: r["height_offset_mm"] < 0)):
+        part = [r for r in sel if keep(r)]
+        if part:
+            pos = [r for r in part if r["recorded_label"]]
+            neg = [r for r in part if not r["recorded_label"]]
+            print(f"  {name}: {len(part)} trials; recorded positive -> negative {sum(not r['label'] for r in pos)}"
+                  f"/{len(pos)}, recorded negative -> positive {sum(bool(r['label']) for r in neg)}/{len(neg)}")
 
 
 def main(argv=None) -> None:
@@ -141,6 +198,10 @@ def main(argv=None) -> None:
     ap.add_argument("--shift-mm", type=float, default=0.5, help="horizontal nudge of the grasp centre")
     ap.add_argument("--turn-deg", type=float, default=1.0, help="turn of the grasp about the vertical")
     ap.add_argument("--seed", type=int, default=20261126)
+    ap.add_argument("--variants", nargs="+", default=["nudge", "same", "eval_height"],
+                    choices=["nudge", "same", "eval_height"], help="which re-runs to make")
+    ap.add_argument("--min-offset-mm", type=float, default=3.0,
+                    help="eval_height: only trials at least this far from the evaluation's grasp height")
     ap.add_argument("--summary-only", action="store_true", help="print from --results without simulating")
     args = ap.parse_args(argv)
     if not args.summary_only:
