@@ -71,12 +71,12 @@ def eval_height_grasp(trial, data_root):
     from defgg_ros.data.format import read_scene
     from defgg_ros.data.labels import height_offset_m
     from defgg_ros.sim import objects
-    from defgg_ros.sim.sampler import _pair_at_executor_height
+    from defgg_ros.sim.sampler import pair_at_executor_height
     from defgg_ros.sim.trial import WorldGrasp
 
     offset_m = height_offset_m(trial, read_scene(Path(data_root) / "scenes" / f"{trial.scene_id}.npz").depth_m)
     axis = np.array([math.cos(trial.yaw_rad), math.sin(trial.yaw_rad), 0.0])
-    found = _pair_at_executor_height(np.asarray(trial.position_m, dtype=float), axis,
+    found = pair_at_executor_height(np.asarray(trial.position_m, dtype=float), axis,
                                      objects.get_shape(trial.object_name).surface())
     if found is None:
         return offset_m, None

@@ -108,7 +108,7 @@ def antipodal_pairs(mesh: trimesh.Trimesh, n_points: int, rng, height_rule: str 
         p2 = p1 + axis * t2
         centre = (p1 + p2) / 2
         if height_rule == "executor":
-            found = _pair_at_executor_height(centre, axis, mesh)
+            found = pair_at_executor_height(centre, axis, mesh)
             if found is None:
                 continue
             p1, p2, t2 = found
@@ -122,7 +122,7 @@ def antipodal_pairs(mesh: trimesh.Trimesh, n_points: int, rng, height_rule: str 
     return out
 
 
-def _pair_at_executor_height(centre, axis, mesh: trimesh.Trimesh):
+def pair_at_executor_height(centre, axis, mesh: trimesh.Trimesh):
     """The contacts on the horizontal line along `axis` through `centre`'s (x, y) at the executor's
     TCP height there: (p1, p2, width) if the line starts inside the object and leaves it through two
     faces within the antipodal cone and the hand's width range, else None."""
