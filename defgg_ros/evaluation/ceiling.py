@@ -49,12 +49,17 @@ def recorded_commands(out_dir) -> list:
 
 
 def trial_key(set_name: str, object_name: str, youngs_modulus_pa: float, candidate: int, task: str,
-              max_tet_nodes: int) -> str:
-    return f"{set_name}/{object_name}|E={youngs_modulus_pa:.3g}|c{candidate:03d}|{task}|nodes<={max_tet_nodes}"
+              max_tet_nodes: int, grasp_height: str = "contacts") -> str:
+    key = f"{set_name}/{object_name}|E={youngs_modulus_pa:.3g}|c{candidate:03d}|{task}|nodes<={max_tet_nodes}"
+    return key if grasp_height == "contacts" else f"{key}|height={grasp_height}"   # older keys unchanged
 
 
-def plan_trials(shapes, moduli_pa, n_candidates: int, task: str, seed: int, max_tet_nodes: int | None = None):
-    """[(key, shape, E, candidate index, WorldGrasp)] in candidate-major order (all objects' first one first)."""
+def plan_trials(shapes, moduli_pa, n_candidates: int, task: str, seed: int, max_tet_nodes: int | None = None,
+                grasp_height: str = "contacts"):
+    """[(key, shape, E, candidate index, WorldGrasp)] in candidate-major order (all objects' first one first).
+
+    grasp_height: the sampler's rule (sim.sampler.GRASP_HEIGHT_RULES); "executor" puts the candidates at
+    the height the evaluation executes a model's grasp at, so the bound is of comparable grasps."""
     from defgg_ros.data.datagen import object_seed
     from defgg_ros.sim.objects import simulation_shape
     from defgg_ros.sim.sampler import sample_grasps
@@ -62,7 +67,8 @@ def plan_trials(shapes, moduli_pa, n_candidates: int, task: str, seed: int, max_
     check_task(task)
     if n_candidates < 1:
         raise ValueError(f"candidates per object must be >= 1, got {n_candidates}")
-    per_shape = [(s, sample_grasps(s.surface(), object_seed(seed, s.name), keep=n_candidates)) for s in shapes]
+    per_shape = [(s, sample_grasps(s.surface(), object_seed(seed, s.name), keep=n_candidates,
+                                   height_rule=grasp_height)) for s in shapes]
     trials = []
     for i in range(n_candidates):
         for shape, cands in per_shape:
@@ -70,12 +76,13 @@ def plan_trials(shapes, moduli_pa, n_candidates: int, task: str, seed: int, max_
                 continue
             for e in moduli_pa:
                 sim_shape = simulation_shape(shape, e, max_tet_nodes)
-                key = trial_key(shape.set_name, shape.name, e, i, task, sim_shape.max_tet_nodes)
+                key = trial_key(shape.set_name, shape.name, e, i, task, sim_shape.max_tet_nodes, grasp_height)
                 trials.append((key, sim_shape, e, i, cands[i].grasp))
     return trials
 
 
-def run(out_dir, trials, task: str, settings, max_trials: int | None = None, progress=None) -> int:
+def run(out_dir, trials, task: str, settings, max_trials: int | None = None, progress=None,
+        grasp_height: str = "contacts") -> int:
     """Simulate the trials not yet in OUT/ceiling.jsonl; returns how many ran."""
     from dataclasses import asdict
 
@@ -88,12 +95,16 @@ def run(out_dir, trials, task: str, settings, max_trials: int | None = None, pro
 
     if protocol_differences(existing, asdict(settings), task):
         raise ValueError(f"{path} holds trials of another protocol; run the ceiling into a new --out folder")
+    heights = {r.get("grasp_height", "contacts") for r in existing}
+    if heights - {grasp_height}:
+        raise ValueError(f"{path} holds candidates at the {sorted(heights)[0]} height, not {grasp_height}; "
+                         "run the ceiling into a new --out folder")
     done = {r["key"] for r in existing}
     pending = [t for t in trials if t[0] not in done][:max_trials]
     client = world.connect()
     try:
         for n, trial in enumerate(pending, 1):
-            _run_one(path, client, trial, task, settings)
+            _run_one(path, client, trial, task, settings, grasp_height)
             if progress:
                 progress(n, len(pending), trial[0])
     finally:
@@ -103,7 +114,7 @@ def run(out_dir, trials, task: str, settings, max_trials: int | None = None, pro
     return len(pending)
 
 
-def _run_one(path, client, trial, task: str, settings) -> None:
+def _run_one(path, client, trial, task: str, settings, grasp_height: str) -> None:
     """One trial, appended to the results; a trial that raises is reported and left for the next run."""
     import sys
     from dataclasses import asdict
@@ -122,7 +133,8 @@ def _run_one(path, client, trial, task: str, settings) -> None:
                         "candidate": i, "task": task, "status": out.status, "accels": accels,
                         "success": task_success(task, out.status, accels), "cpu_s": out.cpu_s,
                         "tet_nodes": [len(t.nodes_m) for t in shape.tet_parts],
-                        "grasp_force_n": out.grasp_force_n, "trial_settings": asdict(settings)})
+                        "grasp_force_n": out.grasp_force_n, "trial_settings": asdict(settings),
+                        "grasp_height": grasp_height})
 
 
 def summarize(records) -> list:

@@ -142,6 +142,10 @@ def _add_others(sub):
     p.add_argument("--seed", type=int, default=0, help="sampler seed (default %(default)s, the training data's)")
     p.add_argument("--sim-max-tet-nodes", type=int, default=None, metavar="N",
                    help="simulate on a coarser FEM mesh of at most N nodes (default: the shipped mesh)")
+    p.add_argument("--grasp-height", choices=("contacts", "executor"), default="contacts",
+                   help="candidates at their contacts' height (default, as the training data up to fem_v3) or at "
+                        "the height the evaluation executes a model's grasp at (comparable to the models; use a "
+                        "new --out folder)")
     p.add_argument("--max-trials", type=int, default=None, help="stop after simulating this many trials")
     p.add_argument("--summary-only", action="store_true", help="only rewrite OUT/ceiling.md")
 
@@ -418,10 +422,11 @@ def cmd_ceiling(args, argv) -> int:
         if not shapes:
             raise sources.SourceError(f"no object of {args.sets} matches --only {args.only}")
         trials = ceiling.plan_trials(shapes, args.moduli, args.candidates, args.task, args.seed,
-                                     args.sim_max_tet_nodes)
+                                     args.sim_max_tet_nodes, args.grasp_height)
         ceiling.record_command(args.out, "defgg-eval " + " ".join(shlex.quote(a) for a in argv))
         ceiling.run(args.out, trials, args.task, eval_trial_settings(), args.max_trials,
-                    progress=lambda n, total, key: print(f"[{n}/{total}] {key}", flush=True))
+                    progress=lambda n, total, key: print(f"[{n}/{total}] {key}", flush=True),
+                    grasp_height=args.grasp_height)
     print(ceiling.write_table(args.out, args.candidates))
     return 0
 

@@ -3,6 +3,7 @@ import json
 
 import pytest
 
+from defgg_ros.atomic import read_jsonl
 from defgg_ros.evaluation import ceiling
 from defgg_ros.evaluation.cli import main as eval_main
 
@@ -73,3 +74,24 @@ def test_ceiling_refuses_a_folder_of_another_protocol(tmp_path, capsys):
     ceiling.run(tmp_path, trials, "shake", replace(eval_trial_settings(), lift_time_s=0.3))
     with pytest.raises(ValueError, match="another protocol"):
         ceiling.run(tmp_path, trials, "shake", eval_trial_settings())
+
+
+def test_executor_height_ceiling_runs_comparable_grasps_in_its_own_folder(tmp_path):
+    """--grasp-height executor: the candidates sit at the evaluation's grasp height, their keys differ
+    from the contacts rule's, and a folder of one rule refuses trials of the other."""
+    from defgg_ros.evaluation.runner import eval_trial_settings
+    from defgg_ros.grasping.geometry import tcp_height_m
+    from defgg_ros.sim.objects import get_shape
+    from defgg_ros.sim.sampler import _surface_height_m
+
+    shape = get_shape("common_sponge")
+    executor = ceiling.plan_trials([shape], [2e9], 1, "shake", 0, grasp_height="executor")
+    contacts = ceiling.plan_trials([shape], [2e9], 1, "shake", 0)
+    (key, _, _, _, grasp), = executor
+    assert key.endswith("|height=executor") and key != contacts[0][0]
+    top_z = _surface_height_m(grasp.position_m, shape.surface().triangles)
+    assert grasp.position_m[2] == pytest.approx(tcp_height_m(top_z), abs=1e-3)
+    assert ceiling.run(tmp_path, executor, "shake", eval_trial_settings(), grasp_height="executor") == 1
+    assert read_jsonl(tmp_path / ceiling.RESULTS_FILE)[0]["grasp_height"] == "executor"
+    with pytest.raises(ValueError, match="new --out folder"):
+        ceiling.run(tmp_path, contacts, "shake", eval_trial_settings())
