@@ -36,6 +36,7 @@ sys.path.insert(0, str(HERE.parent))
 import numpy as np  # noqa: E402
 
 from defgg_ros.atomic import append_jsonl, read_jsonl  # noqa: E402
+from defgg_ros.data.labels import measured_mean_mps2  # noqa: E402
 
 
 def soft_scene_pairs(data_root, n_scenes: int, seed: int) -> list:
@@ -139,13 +140,6 @@ def run(args) -> None:
               f"({out['cpu_s']:.0f} s CPU; ETA {eta_min:.0f} min)", flush=True)
 
 
-def _measured_mean(accels, measured):
-    if not accels:
-        return 0.0
-    values = [a for a, m in zip(accels, measured or [True] * len(accels)) if m]
-    return sum(values) / len(values) if values else 0.0
-
-
 def summarize(results_path) -> None:
     rows = [r for r in read_jsonl(results_path) if r["label"] is not None]
     for variant in ("same", "nudge", "eval_height"):
@@ -157,8 +151,8 @@ def summarize(results_path) -> None:
             continue
         flips = sum(r["label"] != r["recorded_label"] for r in sel)
         by_label = {lab: [r for r in sel if r["recorded_label"] == lab] for lab in (True, False)}
-        diffs = [abs(_measured_mean(r["shake_accels_mps2"], r["shake_measured"]) -
-                     _measured_mean(r["recorded_accels_mps2"], r["recorded_measured"])) for r in sel]
+        diffs = [abs(measured_mean_mps2(r["shake_accels_mps2"], r["shake_measured"]) -
+                     measured_mean_mps2(r["recorded_accels_mps2"], r["recorded_measured"])) for r in sel]
         diffs.sort()
         cpu = sum(r["cpu_s"] for r in sel)
         print(f"{variant} (shift {sel[0]['shift_mm']:g} mm, turn {sel[0]['turn_deg']:g} deg): "

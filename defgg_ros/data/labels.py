@@ -26,6 +26,16 @@ def slips_in_a_direction(trial) -> bool:
     return any(m and a < SHAKE_POSITIVE_THRESHOLD_MPS2 for a, m in zip(accels, measured))
 
 
+def measured_mean_mps2(accels, measured=None) -> float:
+    """Mean held shake acceleration over the directions really measured (the generator imputes the
+    others once the label is decided, which piles recorded means up at the threshold); 0 without any
+    (a failed lift)."""
+    if not accels:
+        return 0.0
+    values = [a for a, m in zip(accels, measured or [True] * len(accels)) if m]
+    return float(sum(values) / len(values)) if values else 0.0
+
+
 def check_label_rule(rule: str) -> str:
     if rule not in LABEL_RULES:
         raise ValueError(f"label rule must be one of {LABEL_RULES}, got {rule!r}")

@@ -31,7 +31,7 @@ import numpy as np
 
 from defgg_ros.constants import MAX_SOFT_BODY_YOUNGS_MODULUS_PA
 from defgg_ros.data.format import list_scene_ids, read_scene, read_trials
-from defgg_ros.data.labels import height_offset_m
+from defgg_ros.data.labels import height_offset_m, measured_mean_mps2
 from defgg_ros.evaluation.tables import is_main_correct_input
 
 
@@ -109,10 +109,12 @@ def _label_locality(labelled_by_scene) -> dict:
             dist = math.hypot(a.rect.center_u_px - b.rect.center_u_px, a.rect.center_v_px - b.rect.center_v_px)
             near = dist < NEAR_PX and _grasp_turn_deg(a.rect.angle_rad, b.rect.angle_rad) < NEAR_DEG
             dz = abs(a.position_m[2] - b.position_m[2])
-            kinds = ["near", "near_same_height" if dz < SAME_HEIGHT_M else
-                     "near_height_apart" if dz >= APART_HEIGHT_M else None] if near else \
-                ["far"] if dist >= FAR_PX else []
-            for kind in filter(None, kinds):
+            if near:
+                kinds = ["near"] + (["near_same_height"] if dz < SAME_HEIGHT_M else
+                                    ["near_height_apart"] if dz >= APART_HEIGHT_M else [])
+            else:
+                kinds = ["far"] if dist >= FAR_PX else []
+            for kind in kinds:
                 body[kind][0] += int(a.label == b.label)
                 body[kind][1] += 1
     return {name: {"scenes": b["scenes"], **{k: {"same": s, "pairs": n, "rate": s / n if n else None}
@@ -136,17 +138,6 @@ def _positive_rate_by_height_offset(scenes_with_offsets) -> dict:
     return {body: {n: {"positive": p, "trials": k} for n, (p, k) in zip(names, bins)} for body, bins in out.items()}
 
 
-def _held_mean_mps2(trial) -> float:
-    """Mean held shake acceleration over the directions really measured (the generator imputes the
-    others once the label is decided, which piles means up at the threshold); 0 if the lift failed."""
-    accels = trial.shake_accels_mps2
-    if not accels:
-        return 0.0
-    measured = (trial.sim or {}).get("shake_measured") or [True] * len(accels)
-    values = [a for a, m in zip(accels, measured) if m]
-    return float(np.mean(values)) if values else 0.0
-
-
 def _grasp_choice(labelled_by_scene) -> dict:
     """Per body kind, how much of the held shake acceleration the choice of grasp decides: the share
     of its variance that lies within a scene (object x modulus) rather than between scenes, the median
@@ -154,7 +145,8 @@ def _grasp_choice(labelled_by_scene) -> dict:
     out = {}
     for name in ("soft", "rigid"):
         scenes = [t for t in labelled_by_scene if t and _body(t) == name]
-        held = [np.array([_held_mean_mps2(t) for t in trials]) for trials in scenes]
+        held = [np.array([measured_mean_mps2(t.shake_accels_mps2, (t.sim or {}).get("shake_measured"))
+                          for t in trials]) for trials in scenes]
         several = [h for h in held if len(h) > 1]
         if not several:
             continue
