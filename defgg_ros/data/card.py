@@ -122,9 +122,9 @@ def _protocol_line(gen: dict) -> str:
             f"close settle {settings['close_settle_s']} s, lift {settings['lift_height_m'] * 100:.0f} cm in "
             f"{settings['lift_time_s']} s, hold {settings['hold_time_s']} s; {stop}; FEM mesh: "
             + (f"at most {mesh} nodes (soft bodies)" if mesh else "the shipped mesh")
-            + ("; candidates at the executor's grasp height (--grasp-height executor)"
+            + ("; candidates at the evaluation's grasp height (--grasp-height executor)"
                if gen.get("grasp_height", "contacts") == "executor" else
-               "; candidates at their contacts' height, which the executor does not use: only the trials within a "
+               "; candidates at their contacts' height, which the evaluation does not use: only the trials within a "
                "few mm of its height label the grasp it performs (results/notes_height.md)")
             + ("" if settings["lift_time_s"] >= 0.6 else ". This lift dropped soft grasps that a 0.6 s lift holds "
                "(bench/README.md): some soft lift failures here are artifacts of it"))
