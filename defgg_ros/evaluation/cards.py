@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import shutil
 import subprocess
+import tarfile
 from collections import defaultdict
 from pathlib import Path
 
@@ -138,10 +139,7 @@ def _data_section(prov) -> list:
     split = prov["object_split"]
     counts = prov["trial_counts"]
     moduli = sorted({e for per in counts.values() for e in per}, key=float)
-    header = {}
-    header_path = Path(prov["data_root"]) / "dataset.json"
-    if header_path.is_file():
-        header = json.loads(header_path.read_text()).get("generator", {})
+    header = _generator_header(prov)
     lines = ["## Training data", ""]
     if prov.get("data_source"):
         lines += [f"Source: {prov['data_source']}.", ""]
@@ -151,6 +149,11 @@ def _data_section(prov) -> list:
                   f"runs/frozen`, then the training command above with `--data runs/frozen/train_data`.", ""]
     if header:
         lines += [f"Generator settings (`dataset.json`, written by `defgg-datagen`): `{json.dumps(header)}`", ""]
+        if "n_candidates" in header and header.get("grasp_height", "contacts") == "contacts":   # defgg-datagen's
+            lines += ["Known limitation of these labels: the candidates sit at their contacts' height, anywhere up "
+                      "the object's side, while the evaluation executes a grasp at half the height seen at its "
+                      "pixel; moved to that height, half of the off-height soft labels change "
+                      "(`results/notes_height.md`, `bench/README.md`).", ""]
     lines += [f"Objects by split (split by object, seed {prov['train_config']['seed']}): "
              + "; ".join(f"**{k}** ({len(v)}): {', '.join(sorted(v))}" for k, v in split.items()), "",
              "Trials used per object and Young's modulus (positive / labelled):", "",
@@ -167,6 +170,20 @@ def _data_section(prov) -> list:
         lines.append(f"| {obj} | " + " | ".join(cells) + " |")
     lines.append("| **total** | " + " | ".join(f"**{totals[e][0]}/{totals[e][1]}**" for e in moduli) + " |")
     return lines + [""]
+
+
+def _generator_header(prov) -> dict:
+    """The training data's generator header: from its folder if present, else from the shipped archive."""
+    header_path = Path(prov["data_root"]) / "dataset.json"
+    if header_path.is_file():
+        return json.loads(header_path.read_text()).get("generator", {})
+    archive = Path(prov.get("data_archive") or "")
+    if archive.is_file():
+        with tarfile.open(archive, "r:gz") as tar:
+            member = next((m for m in tar.getmembers() if m.name.endswith("/dataset.json")), None)
+            if member is not None:
+                return json.loads(tar.extractfile(member).read()).get("generator", {})
+    return {}
 
 
 def _validation_section(prov) -> list:

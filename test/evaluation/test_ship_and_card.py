@@ -60,3 +60,29 @@ def test_card_refuses_weights_that_changed_after_shipping(trained, tmp_path):
     prov_path.write_text(json.dumps(prov))
     with pytest.raises(CardError, match="does not match"):
         render_card("m", tmp_path)
+
+
+def test_card_reads_the_generator_header_from_the_archive_and_states_the_height_rule(tmp_path):
+    """Without the frozen folder (a fresh clone) the header comes from the shipped archive; labels of
+    contacts-height candidates carry their known limitation, executor-height ones do not."""
+    import io
+    import tarfile
+
+    from defgg_ros.evaluation.cards import _data_section
+
+    def archive(generator):
+        path = tmp_path / f"{generator.get('grasp_height', 'contacts')}.tar.gz"
+        blob = json.dumps({"format": "defgg-dataset", "version": 1, "generator": generator}).encode()
+        with tarfile.open(path, "w:gz") as tar:
+            info = tarfile.TarInfo("train_data/dataset.json")
+            info.size = len(blob)
+            tar.addfile(info, io.BytesIO(blob))
+        return path
+
+    prov = {"data_root": str(tmp_path / "gone"), "object_split": {"train": ["box"]}, "train_config": {"seed": 0},
+            "trial_counts": {"box": {"2e+04": {"positive": 1, "labelled": 2}}}}
+    contacts = "\n".join(_data_section({**prov, "data_archive": str(archive({"n_candidates": 200}))}))
+    assert '"n_candidates": 200' in contacts and "Known limitation" in contacts
+    executor = "\n".join(_data_section({**prov, "data_archive": str(
+        archive({"n_candidates": 200, "grasp_height": "executor"}))}))
+    assert '"grasp_height": "executor"' in executor and "Known limitation" not in executor
