@@ -92,3 +92,6 @@ TABLE_CLEARANCE_M = 0.003            # fingertips stay this far above the table
 # TCP height of an executed top-down grasp, as a fraction of the object height seen at the grasp
 # centre (grasping.geometry.tcp_height_m). The image-space grasp has no height of its own.
 GRASP_HEIGHT_FRACTION = 0.5
+# Where a training candidate's TCP goes (sim.sampler): "contacts" = at the sampled contacts' height
+# (the datasets up to fem_v3), "executor" = at tcp_height_m, the height the evaluation executes a grasp at.
+GRASP_HEIGHT_RULES = ("contacts", "executor")

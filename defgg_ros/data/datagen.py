@@ -49,7 +49,7 @@ class DatagenConfig:
     ray_address: str | None = None
     settings: dict = field(default_factory=dict)   # TrialSettings overrides
     sim_max_tet_nodes: int | None = None           # None: simulate on the shipped mesh
-    grasp_height: str = "contacts"                 # sim.sampler.GRASP_HEIGHT_RULES
+    grasp_height: str = "contacts"                 # constants.GRASP_HEIGHT_RULES
     card_every: int = 20                           # regenerate the card every N finished trials
 
     def header(self) -> dict:

@@ -6,7 +6,7 @@ import json
 import sys
 from pathlib import Path
 
-from defgg_ros.constants import GRASP_CANDIDATES_PER_OBJECT, TRAINING_YOUNGS_MODULI_PA
+from defgg_ros.constants import GRASP_CANDIDATES_PER_OBJECT, GRASP_HEIGHT_RULES, TRAINING_YOUNGS_MODULI_PA
 
 DESCRIPTION = """\
 Generate grasp trials: per object x Young's modulus, render depth/stiffness/mask,
@@ -27,7 +27,6 @@ Resume the dataset of the shipped models (made with the lift of its time):
 
 def build_parser() -> argparse.ArgumentParser:
     from defgg_ros.data.datagen import COARSE_SIM_MAX_TET_NODES
-    from defgg_ros.sim.sampler import GRASP_HEIGHT_RULES
 
     ap = argparse.ArgumentParser(prog="defgg-datagen", description=DESCRIPTION,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)

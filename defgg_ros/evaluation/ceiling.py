@@ -58,7 +58,7 @@ def plan_trials(shapes, moduli_pa, n_candidates: int, task: str, seed: int, max_
                 grasp_height: str = "contacts"):
     """[(key, shape, E, candidate index, WorldGrasp)] in candidate-major order (all objects' first one first).
 
-    grasp_height: the sampler's rule (sim.sampler.GRASP_HEIGHT_RULES); "executor" puts the candidates at
+    grasp_height: the sampler's rule (constants.GRASP_HEIGHT_RULES); "executor" puts the candidates at
     the height the evaluation executes a model's grasp at, so the bound is of comparable grasps."""
     from defgg_ros.data.datagen import object_seed
     from defgg_ros.sim.objects import simulation_shape

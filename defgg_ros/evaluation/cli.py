@@ -22,7 +22,7 @@ import sys
 from pathlib import Path
 
 from defgg_ros.atomic import write_json_atomic
-from defgg_ros.constants import EVAL_GRASPS_PER_OBJECT, TRAINING_YOUNGS_MODULI_PA
+from defgg_ros.constants import EVAL_GRASPS_PER_OBJECT, GRASP_HEIGHT_RULES, TRAINING_YOUNGS_MODULI_PA
 from defgg_ros.evaluation import jobs as jobs_mod
 from defgg_ros.evaluation import report as report_mod
 from defgg_ros.evaluation import sources
@@ -142,7 +142,7 @@ def _add_others(sub):
     p.add_argument("--seed", type=int, default=0, help="sampler seed (default %(default)s, the training data's)")
     p.add_argument("--sim-max-tet-nodes", type=int, default=None, metavar="N",
                    help="simulate on a coarser FEM mesh of at most N nodes (default: the shipped mesh)")
-    p.add_argument("--grasp-height", choices=("contacts", "executor"), default="contacts",
+    p.add_argument("--grasp-height", choices=GRASP_HEIGHT_RULES, default="contacts",
                    help="candidates at their contacts' height (default, as the training data up to fem_v3) or at "
                         "the height the evaluation executes a model's grasp at (comparable to the models; use a "
                         "new --out folder)")

@@ -22,6 +22,7 @@ from defgg_ros.constants import (
     FINGER_DEPTH_M,
     FINGER_PAD_WIDTH_M,
     GRASP_CANDIDATES_PER_OBJECT,
+    GRASP_HEIGHT_RULES,
     GRIPPER_MAX_WIDTH_M,
     PANDA_FINGERTIP_BELOW_TCP_M,
     PREGRASP_HEIGHT_M,
@@ -72,7 +73,7 @@ def _ray_hits(origin, direction, tris):
 # datasets up to fem_v3), "executor" = at the height the executor derives from the depth image
 # (grasping.geometry.tcp_height_m), with the contacts found again on that horizontal line. An
 # image-space grasp has no height, so only "executor" labels the grasp that is later performed.
-GRASP_HEIGHT_RULES = ("contacts", "executor")
+# The rule names are constants.GRASP_HEIGHT_RULES (the CLIs offer them without importing the sampler).
 
 
 def check_height_rule(rule: str) -> str:
