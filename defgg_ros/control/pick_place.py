@@ -45,6 +45,7 @@ from defgg_ros.control.trajectories import (
     plan_line,
     plan_stop,
 )
+from defgg_ros.grasping.geometry import tcp_height_m
 
 # The arm counts as still below this joint speed (ending a guarded stop).
 STILL_SPEED_RADPS = 0.02
@@ -161,14 +162,18 @@ class PickPlaceSequence:
         return commands + self._send(motion, sim_s)
 
     def _grasp_positions(self) -> tuple[np.ndarray, np.ndarray]:
-        """(pre-grasp, grasp) TCP positions: PREGRASP above the surface point, the grasp below it."""
+        """(pre-grasp, grasp) TCP positions: PREGRASP above the surface point, the grasp below it
+        by the configured grasp_height_rule."""
         surface = _finite("grasp position", self._grasp.position_m).copy()
         floor = self._cfg.table_z_m + GRASP_MIN_HEIGHT_ABOVE_TABLE_M
         if surface[2] < self._cfg.table_z_m - GRASP_BELOW_TABLE_TOLERANCE_M:
             raise WorkspaceError(f"grasp outside the workspace: {surface[2]:.3f} m is below the table "
                                  f"at {self._cfg.table_z_m:.3f} m")
         grasp = surface.copy()
-        grasp[2] = max(surface[2] - self._cfg.grasp_depth_below_surface_m, floor)
+        if self._cfg.grasp_height_rule == "half_height":
+            grasp[2] = max(tcp_height_m(surface[2], self._cfg.table_z_m), floor)
+        else:
+            grasp[2] = max(surface[2] - self._cfg.grasp_depth_below_surface_m, floor)
         pregrasp = surface.copy()
         pregrasp[2] = max(surface[2], floor) + self._cfg.pregrasp_height_m
         return pregrasp, grasp

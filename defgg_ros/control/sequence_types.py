@@ -8,6 +8,12 @@ from defgg_ros.constants import FINGER_DEPTH_M, PREGRASP_HEIGHT_M
 from defgg_ros.control.gripper_rule import GraspCommand
 from defgg_ros.control.trajectories import LIMITS_SAFETY_SCALE, SAMPLE_DT_S, SampledTrajectory
 
+# Where the cell's TCP goes down to for a grasp whose point lies on the seen surface:
+# "below_surface" = grasp_depth_below_surface_m under that point (one finger pad: the pads overlap the
+# top of the object); "half_height" = grasping.geometry.tcp_height_m, the height the simulated
+# evaluation grasps at and datasets made with `defgg-datagen --grasp-height executor` are labelled at.
+CELL_GRASP_HEIGHT_RULES = ("below_surface", "half_height")
+
 PHASES = ("pre_grasp", "descend", "close", "lift", "transfer", "place", "retreat", "done")
 
 
@@ -20,6 +26,7 @@ class SequenceConfig:
     # go this far below it so the pads overlap the object (never below the
     # table: see GRASP_MIN_HEIGHT_ABOVE_TABLE_M).
     grasp_depth_below_surface_m: float = FINGER_DEPTH_M
+    grasp_height_rule: str = "below_surface"  # one of CELL_GRASP_HEIGHT_RULES
     descent_speed_mps: float = 0.03
     line_speed_mps: float = 0.1            # lift, place, retreat
     lift_height_m: float = 0.15
@@ -52,6 +59,9 @@ class SequenceConfig:
             raise ValueError(f"transfer_via_position_m must be 3 finite numbers, got {via}")
         if not (math.isfinite(self.grasp_depth_below_surface_m) and self.grasp_depth_below_surface_m >= 0):
             raise ValueError(f"grasp_depth_below_surface_m must be >= 0, got {self.grasp_depth_below_surface_m}")
+        if self.grasp_height_rule not in CELL_GRASP_HEIGHT_RULES:
+            raise ValueError(f"grasp_height_rule must be one of {CELL_GRASP_HEIGHT_RULES}, "
+                             f"got {self.grasp_height_rule!r}")
         if not 0.0 <= self.slip_width_fraction < 1.0:
             raise ValueError(f"slip_width_fraction must be in [0, 1), got {self.slip_width_fraction}")
 

@@ -65,7 +65,12 @@ PARAMETERS = {
     "limits_scale": (LIMITS_SAFETY_SCALE, "Fraction (0, 1] of the Panda's velocity/acceleration/jerk limits."),
     "pregrasp_height_m": (PREGRASP_HEIGHT_M, "Pre-grasp height above the grasp (m)."),
     "grasp_depth_below_surface_m": (_DEFAULTS.grasp_depth_below_surface_m,
-                                    "Fingertips go this far below the grasp point (on the surface) (m)."),
+                                    "Fingertips go this far below the grasp point (on the surface) (m); "
+                                    "used by grasp_height_rule below_surface."),
+    "grasp_height_rule": (_DEFAULTS.grasp_height_rule,
+                          "Grasp TCP height: below_surface (grasp_depth_below_surface_m under the grasp "
+                          "point) or half_height (half the object height seen there, the rule of the "
+                          "simulated evaluation and of executor-height training data)."),
     "descent_speed_mps": (_DEFAULTS.descent_speed_mps, "TCP speed of the guarded descent (m/s)."),
     "line_speed_mps": (_DEFAULTS.line_speed_mps, "TCP speed of lift, place and retreat lines (m/s)."),
     "lift_height_m": (_DEFAULTS.lift_height_m, "Lift height after closing (m)."),
@@ -193,6 +198,7 @@ class ExecutorNode(Node):
             table_z_m=float(p["table_z_m"]), limits_scale=float(p["limits_scale"]),
             pregrasp_height_m=float(p["pregrasp_height_m"]), descent_speed_mps=float(p["descent_speed_mps"]),
             grasp_depth_below_surface_m=float(p["grasp_depth_below_surface_m"]),
+            grasp_height_rule=str(p["grasp_height_rule"]),
             line_speed_mps=float(p["line_speed_mps"]), lift_height_m=float(p["lift_height_m"]),
             place_approach_height_m=float(p["place_approach_height_m"]),
             contact_force_threshold_n=float(p["contact_force_threshold_n"]),

@@ -216,3 +216,30 @@ def test_grasp_on_a_thin_object_stops_above_the_table(kin):
     assert sequence.outcome.contact_height_m == pytest.approx(0.005, abs=1e-4)
     tcp_heights = [kin.fk(q)[2, 3] for c in robot.sent if isinstance(c, SendTrajectory) for q in c.trajectory.q_rad]
     assert min(tcp_heights) >= 0.005 - 1e-4
+
+
+@pytest.mark.parametrize("table_z_m", [0.0, 0.1])
+def test_half_height_rule_grasps_where_the_simulated_evaluation_does(kin, table_z_m):
+    """grasp_height_rule half_height: the TCP stops at half the object height above the table, the
+    height the evaluation and executor-height training data grasp at (grasping.geometry.tcp_height_m)."""
+    from defgg_ros.grasping.geometry import tcp_height_m
+
+    tall = GraspTarget(position_m=(0.5, 0.05, table_z_m + 0.08), yaw_rad=0.4, width_m=0.05,
+                       youngs_modulus_pa=2e5)
+    config = SequenceConfig(watchdog_timeout_s=0.5, table_z_m=table_z_m, grasp_height_rule="half_height")
+    sequence, robot = make(kin, grasp=tall, config=config), FakeRobot(kin, World(object_width_m=0.045))
+    run(sequence, robot, until=lambda r, s: s.phase == "close")
+    assert not sequence.outcome.contact_detected
+    assert sequence.outcome.contact_height_m == pytest.approx(table_z_m + 0.04, abs=1e-3)
+    assert sequence.outcome.contact_height_m == pytest.approx(tcp_height_m(tall.position_m[2], table_z_m), abs=1e-3)
+    # The default rule on the same grasp goes one finger pad below the surface instead.
+    default = SequenceConfig(watchdog_timeout_s=0.5, table_z_m=table_z_m)
+    sequence, robot = make(kin, grasp=tall, config=default), FakeRobot(kin, World(object_width_m=0.045))
+    run(sequence, robot, until=lambda r, s: s.phase == "close")
+    assert sequence.outcome.contact_height_m == pytest.approx(tall.position_m[2] - default.grasp_depth_below_surface_m,
+                                                              abs=1e-3)
+
+
+def test_unknown_grasp_height_rule_is_refused():
+    with pytest.raises(ValueError, match="grasp_height_rule"):
+        SequenceConfig(grasp_height_rule="middle").validate()

@@ -312,6 +312,8 @@ def test_shipped_yaml_sets_every_parameter_and_loads(rclpy_context):
 def test_invalid_parameters_refuse_to_start(rclpy_context):
     with pytest.raises(ValueError, match="limits_scale"):
         ExecutorNode(context=rclpy_context, parameter_overrides=[Parameter("limits_scale", value=1.5)])
+    with pytest.raises(ValueError, match="grasp_height_rule"):
+        ExecutorNode(context=rclpy_context, parameter_overrides=[Parameter("grasp_height_rule", value="middle")])
 
 
 def _run_driver_process():
