@@ -2,8 +2,9 @@
 
 The replay runs the *current* code and shipped model on the recorded
 inputs; recorded node parameters that shape the result (camera extrinsic,
-segmentation thresholds, the grasp service's post-processing steps) are applied so a session recorded with non-default
-settings still replays like it was recorded.
+segmentation thresholds, the grasp service's post-processing steps, the executor's grasp height
+and guarded-descent settings) are applied so a session recorded with non-default settings still
+replays like it was recorded.
 """
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,6 +19,14 @@ REPLAYED_PARAMETERS = {
     "segmentation_node": ("default_youngs_modulus_pa", "min_object_height_m", "min_object_area_px"),
     "grasp_inference_node": ("base_T_camera", "base_frame", "default_youngs_modulus_pa", "min_object_height_m",
                              "min_object_area_px", "finger_clearance_opening_m", "contact_angle"),
+    # Those that decide where and how a replayed pick grasps (a changed default must not change a replay).
+    "executor_node": ("table_z_m", "pregrasp_height_m", "grasp_depth_below_surface_m", "grasp_height_rule",
+                      "descent_speed_mps", "contact_force_threshold_n", "lift_height_m", "slip_width_fraction",
+                      "default_youngs_modulus_pa"),
+}
+# What a recording made before a parameter existed did (recorded parameter sets lack the name).
+BEFORE_PARAMETER_EXISTED = {
+    "executor_node": {"grasp_height_rule": "below_surface"},
 }
 # The fake driver renders its own camera; in a replay the recorded frames are the camera.
 DRIVER_CAMERA_REMAPS = {
@@ -79,7 +88,10 @@ def resolve_model(metadata: dict, model_arg: str | None, use_stiffness_arg: str 
 
 
 def _recorded(metadata: dict, node: str) -> dict:
+    """The node's recorded parameters that a replay re-applies ({} when none were recorded)."""
     values = (metadata.get("parameters") or {}).get(node) or {}
+    if values:
+        values = {**BEFORE_PARAMETER_EXISTED.get(node, {}), **values}
     return {k: values[k] for k in REPLAYED_PARAMETERS.get(node, ()) if k in values}
 
 
@@ -96,6 +108,7 @@ def graph_specs(metadata: dict, model: ModelChoice, pick: bool, run_dir: Path) -
         specs += [
             NodeSpec("fake_panda_driver", "defgg_ros.nodes.fake_panda_driver_node",
                      {"scene_file": str(scene_file), **DRIVER_REPLAY_PARAMETERS}, dict(DRIVER_CAMERA_REMAPS)),
-            NodeSpec("executor_node", "defgg_ros.nodes.executor_node", {"use_sim_time": True}),
+            NodeSpec("executor_node", "defgg_ros.nodes.executor_node",
+                     {**_recorded(metadata, "executor_node"), "use_sim_time": True}),
         ]
     return specs
