@@ -16,12 +16,14 @@ from defgg_ros.control.sequence_types import (
     SendTrajectory,
     SequenceConfig,
 )
+from defgg_ros.grasping.geometry import tcp_height_m
 
 # The network's grasp point is on the object's top surface, here a 5 cm tall object.
 GRASP = GraspTarget(position_m=(0.5, 0.05, 0.05), yaw_rad=0.4, width_m=0.05, youngs_modulus_pa=2e9)
 PLACE = PlaceTarget(position_m=(0.35, -0.45, 0.12))
 CONFIG = SequenceConfig(watchdog_timeout_s=0.5)
-GRASP_TCP_Z_M = GRASP.position_m[2] - CONFIG.grasp_depth_below_surface_m
+# The default grasp_height_rule, half_height: half the height seen at the grasp point.
+GRASP_TCP_Z_M = tcp_height_m(GRASP.position_m[2], CONFIG.table_z_m)
 
 
 @pytest.fixture(scope="module")
@@ -209,21 +211,24 @@ def test_transfer_passes_the_via_point_without_stopping(kin):
     assert distance < 0.01 and speed > 0.2
 
 
-def test_grasp_on_a_thin_object_stops_above_the_table(kin):
+@pytest.mark.parametrize("rule, lowest_tcp_z_m", [
+    ("below_surface", 0.005),   # pick_place.GRASP_MIN_HEIGHT_ABOVE_TABLE_M
+    ("half_height", 0.010),     # fingertips (7 mm below the TCP) 3 mm above the table: tcp_height_m's floor
+])
+def test_grasp_on_a_thin_object_stops_above_the_table(kin, rule, lowest_tcp_z_m):
     thin = GraspTarget(position_m=(0.5, 0.05, 0.008), yaw_rad=0.0, width_m=0.03, youngs_modulus_pa=2e5)
-    sequence, robot = make(kin, grasp=thin), FakeRobot(kin, World(object_width_m=0.02))
+    config = SequenceConfig(watchdog_timeout_s=0.5, grasp_height_rule=rule)
+    sequence, robot = make(kin, grasp=thin, config=config), FakeRobot(kin, World(object_width_m=0.02))
     run(sequence, robot, until=lambda r, s: s.phase == "close")
-    assert sequence.outcome.contact_height_m == pytest.approx(0.005, abs=1e-4)
+    assert sequence.outcome.contact_height_m == pytest.approx(lowest_tcp_z_m, abs=1e-4)
     tcp_heights = [kin.fk(q)[2, 3] for c in robot.sent if isinstance(c, SendTrajectory) for q in c.trajectory.q_rad]
-    assert min(tcp_heights) >= 0.005 - 1e-4
+    assert min(tcp_heights) >= lowest_tcp_z_m - 1e-4
 
 
 @pytest.mark.parametrize("table_z_m", [0.0, 0.1])
 def test_half_height_rule_grasps_where_the_simulated_evaluation_does(kin, table_z_m):
     """grasp_height_rule half_height: the TCP stops at half the object height above the table, the
     height the evaluation and executor-height training data grasp at (grasping.geometry.tcp_height_m)."""
-    from defgg_ros.grasping.geometry import tcp_height_m
-
     tall = GraspTarget(position_m=(0.5, 0.05, table_z_m + 0.08), yaw_rad=0.4, width_m=0.05,
                        youngs_modulus_pa=2e5)
     config = SequenceConfig(watchdog_timeout_s=0.5, table_z_m=table_z_m, grasp_height_rule="half_height")
@@ -232,11 +237,11 @@ def test_half_height_rule_grasps_where_the_simulated_evaluation_does(kin, table_
     assert not sequence.outcome.contact_detected
     assert sequence.outcome.contact_height_m == pytest.approx(table_z_m + 0.04, abs=1e-3)
     assert sequence.outcome.contact_height_m == pytest.approx(tcp_height_m(tall.position_m[2], table_z_m), abs=1e-3)
-    # The default rule on the same grasp goes one finger pad below the surface instead.
-    default = SequenceConfig(watchdog_timeout_s=0.5, table_z_m=table_z_m)
-    sequence, robot = make(kin, grasp=tall, config=default), FakeRobot(kin, World(object_width_m=0.045))
+    # below_surface on the same grasp goes one finger pad below the surface instead.
+    below = SequenceConfig(watchdog_timeout_s=0.5, table_z_m=table_z_m, grasp_height_rule="below_surface")
+    sequence, robot = make(kin, grasp=tall, config=below), FakeRobot(kin, World(object_width_m=0.045))
     run(sequence, robot, until=lambda r, s: s.phase == "close")
-    assert sequence.outcome.contact_height_m == pytest.approx(tall.position_m[2] - default.grasp_depth_below_surface_m,
+    assert sequence.outcome.contact_height_m == pytest.approx(tall.position_m[2] - below.grasp_depth_below_surface_m,
                                                               abs=1e-3)
 
 

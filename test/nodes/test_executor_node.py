@@ -30,6 +30,7 @@ from defgg_ros import topics
 from defgg_ros.constants import PANDA_FINGER_JOINT_NAMES, PANDA_JOINT_NAMES, PANDA_READY_Q_RAD
 from defgg_ros.control.kinematics import PandaKinematics
 from defgg_ros.control.poses import matrix_to_quaternion, top_down_pose
+from defgg_ros.grasping.geometry import tcp_height_m
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.executor_node import PARAMETERS, ExecutorNode
 from defgg_ros.ros_action import ActionClient, destroy_actions
@@ -213,7 +214,8 @@ def test_pick_and_place_with_contact_on_the_way_down(cell, spin):
     # The descent ended at the contact, before the grasp depth (how far past the first touch
     # depends on scheduling in this busy process; the fake-clock tests pin the distance down).
     assert result.contact_detected
-    grasp_tcp_z = GRASP_XYZ[2] - node._config.grasp_depth_below_surface_m
+    assert node._config.grasp_height_rule == "half_height"
+    grasp_tcp_z = tcp_height_m(GRASP_XYZ[2], node._config.table_z_m)
     assert grasp_tcp_z + 0.002 < result.contact_height_m < GRASP_XYZ[2] + 0.01
     assert result.gripper_width_closed_m == pytest.approx(0.04)
     assert result.held_after_lift and result.held_after_transfer

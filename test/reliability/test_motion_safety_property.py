@@ -20,12 +20,14 @@ from defgg_ros.control.kinematics import PandaKinematics
 from defgg_ros.control.pick_place import GRASP_MIN_HEIGHT_ABOVE_TABLE_M, PickPlaceSequence
 from defgg_ros.control.sequence_types import GraspTarget, PlaceTarget, SendTrajectory, SequenceConfig
 from defgg_ros.control.trajectories import panda_limits
+from defgg_ros.grasping.geometry import tcp_height_m
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "control"))
 from control_fake_robot import CONTACT_STIFFNESS_N_PER_M, FakeRobot, World, run  # noqa: E402
 
 KIN = PandaKinematics()
 CONFIG = SequenceConfig(watchdog_timeout_s=0.5)
+assert CONFIG.grasp_height_rule == "half_height"
 LIMITS = panda_limits(CONFIG.limits_scale)
 REL_TOL = 1e-6
 CANCEL_PHASES = ("pre_grasp", "descend", "lift", "transfer", "place")
@@ -56,7 +58,8 @@ scenarios = st.fixed_dictionaries({
 def run_scenario(s) -> dict:
     x, y, z, yaw = s["grasp"]
     grasp = GraspTarget((x, y, z), yaw, 0.08, 2e6)
-    tcp_grasp_z = max(z - CONFIG.grasp_depth_below_surface_m, CONFIG.table_z_m + GRASP_MIN_HEIGHT_ABOVE_TABLE_M)
+    # The default grasp_height_rule, half_height: half the height seen at the grasp point.
+    tcp_grasp_z = max(tcp_height_m(z, CONFIG.table_z_m), CONFIG.table_z_m + GRASP_MIN_HEIGHT_ABOVE_TABLE_M)
     contact_z = None if s["contact_above_grasp_m"] is None else tcp_grasp_z + s["contact_above_grasp_m"]
     world = World(object_width_m=s["width_m"], contact_height_m=-1.0 if contact_z is None else contact_z)
     sequence = PickPlaceSequence(KIN, CONFIG, grasp, PlaceTarget(s["place"]))
