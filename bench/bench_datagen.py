@@ -51,6 +51,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 
 from defgg_ros.atomic import append_jsonl, read_jsonl  # noqa: E402
+from defgg_ros.constants import GRASP_HEIGHT_RULES  # noqa: E402
 
 DEFAULT_PROTOCOLS = ("naive", "exact", "fast")   # TrialSettings class methods
 # Tried and rejected (kept so the measurement can be repeated): a faster ramp and a
@@ -95,14 +96,15 @@ DEFAULT_OBJECTS = ("box_small", "cylinder_tall", "egad_train_05_c3")
 DEFAULT_MODULI = (2e4, 2e5, 2e6, 2e9)
 
 
-def sample_jobs(objects, moduli, grasps, seed):
+def sample_jobs(objects, moduli, grasps, seed, grasp_height="contacts"):
     from defgg_ros.data.datagen import object_seed
     from defgg_ros.sim.objects import get_shape
     from defgg_ros.sim.sampler import sample_grasps
 
     jobs = []
     for name in objects:
-        cands = sample_grasps(get_shape(name).surface(), object_seed(seed, name), keep=grasps)
+        cands = sample_grasps(get_shape(name).surface(), object_seed(seed, name), keep=grasps,
+                              height_rule=grasp_height)
         for e in moduli:
             for i, c in enumerate(cands):
                 jobs.append((name, e, i, c.grasp))
@@ -118,7 +120,7 @@ def run(args):
     torch.set_num_threads(1)
     done = {(r["trial"], r["protocol"]) for r in read_jsonl(args.results)}
     client = world.connect()
-    jobs = sample_jobs(args.objects, args.moduli, args.grasps, args.seed)
+    jobs = sample_jobs(args.objects, args.moduli, args.grasps, args.seed, args.grasp_height)
     # rigid first (cheap), then soft: a partial run already has every E
     jobs.sort(key=lambda j: (j[1] < 1e7, j[2], j[0], j[1]))
     for name, e, i, grasp in jobs:
@@ -132,6 +134,7 @@ def run(args):
             mean = out.shake_mean_mps2
             label = False if out.status == "lift_failed" else (None if mean is None else mean >= 25.0)
             append_jsonl(args.results, {"trial": trial, "protocol": proto, "object": name, "E": e,
+                                        "grasp_height": args.grasp_height,
                                         "status": out.status, "label": label, "mean": mean,
                                         "accels": out.shake_accels_mps2, "measured": out.shake_measured,
                                         "cpu_s": out.cpu_s, "steps": out.sim_steps,
@@ -206,6 +209,9 @@ def main(argv=None):
     ap.add_argument("--protocols", nargs="+", default=list(DEFAULT_PROTOCOLS), choices=list(PROTOCOLS),
                     help=f"default: {' '.join(DEFAULT_PROTOCOLS)}; {' / '.join(VARIANTS)} are the rejected variants")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--grasp-height", choices=GRASP_HEIGHT_RULES, default="contacts",
+                    help="where the sampled candidates' TCP goes (defgg-datagen --grasp-height; default contacts, "
+                         "the rule of every sample measured before 2026-11-26)")
     ap.add_argument("--results", type=Path, default=HERE / "results" / "datagen_sample.jsonl")
     ap.add_argument("--summary-only", action="store_true")
     ap.add_argument("--pool-with", nargs="+", type=Path, default=(), metavar="RESULTS",
