@@ -49,7 +49,9 @@ class DatagenConfig:
     ray_address: str | None = None
     settings: dict = field(default_factory=dict)   # TrialSettings overrides
     sim_max_tet_nodes: int | None = None           # None: simulate on the shipped mesh
-    grasp_height: str = "contacts"                 # constants.GRASP_HEIGHT_RULES
+    # constants.GRASP_HEIGHT_RULES; executor since 2026-11-26: each label is of the grasp the evaluation
+    # and the cell perform (results/notes_height.md). A resumed dataset keeps its own (resolve_grasp_height).
+    grasp_height: str = "executor"
     card_every: int = 20                           # regenerate the card every N finished trials
 
     def header(self) -> dict:
@@ -268,6 +270,18 @@ def _execute_ray(payloads, cfg, on_result) -> None:
     finally:
         if started_here:
             ray.shutdown()
+
+
+def resolve_grasp_height(out, requested: str | None) -> str:
+    """The candidates' height rule of a run: as requested; else the dataset's own when resuming one
+    (headers before 2026-11-26 lack it: contacts), else executor (DatagenConfig's default)."""
+    if requested is not None:
+        return requested
+    from defgg_ros.data.format import check_header
+
+    if (Path(out) / "dataset.json").exists():
+        return check_header(out).get("generator", {}).get("grasp_height", "contacts")
+    return DatagenConfig.grasp_height
 
 
 def check_resumable(cfg: DatagenConfig) -> None:

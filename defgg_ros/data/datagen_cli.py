@@ -53,19 +53,20 @@ def build_parser() -> argparse.ArgumentParser:
                          f"for our data: at N={COARSE_SIM_MAX_TET_NODES} it is 6-12x cheaper but flipped 5 of 27 "
                          "soft labels; at N=80, 1.6x cheaper than the shipped mesh with 3 of 55 labels changed "
                          "(bench/README.md). Fixed for the life of a dataset.")
-    ap.add_argument("--grasp-height", choices=GRASP_HEIGHT_RULES, default="contacts",
-                    help="TCP height of a candidate: 'contacts' (default; the datasets up to fem_v3) = at the "
-                         "sampled contacts, anywhere on the object's side; 'executor' = at the height the "
-                         "executor derives from the depth image (half the height seen at the grasp centre), "
-                         "the contacts found again there, so each label is of the grasp that is later "
-                         "performed (results/notes_height.md). Fixed for the life of a dataset.")
+    ap.add_argument("--grasp-height", choices=GRASP_HEIGHT_RULES, default=None,
+                    help="TCP height of a candidate: 'executor' (default for a new dataset) = at the height the "
+                         "executor derives from the depth image (half the height seen at the grasp centre), the "
+                         "contacts found again there, so each label is of the grasp that is later performed "
+                         "(results/notes_height.md); 'contacts' (the datasets up to fem_v3) = at the sampled "
+                         "contacts, anywhere on the object's side. Fixed for the life of a dataset: a resumed "
+                         "dataset keeps its own rule when this is not given.")
     ap.add_argument("--no-progress", action="store_true", help="no progress bar")
     return ap
 
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
-    from defgg_ros.data.datagen import DatagenConfig, generate
+    from defgg_ros.data.datagen import DatagenConfig, generate, resolve_grasp_height
     from defgg_ros.data.format import DatasetError
     from defgg_ros.sim.trial import TrialSettings
 
@@ -82,12 +83,13 @@ def main(argv=None) -> int:
     if args.grasps_per_scene < 1 or args.pass_size < 1 or args.workers < 1:
         print("defgg-datagen: --grasps-per-scene, --pass-size and --workers must be >= 1", file=sys.stderr)
         return 2
-    cfg = DatagenConfig(out=args.out, object_set=args.object_set, objects=tuple(args.objects),
-                        moduli_pa=tuple(args.moduli), grasps_per_scene=args.grasps_per_scene,
-                        pass_size=args.pass_size, n_candidates=args.candidates, seed=args.seed,
-                        workers=args.workers, ray_address=args.ray_address, settings=settings,
-                        sim_max_tet_nodes=args.sim_max_tet_nodes or None, grasp_height=args.grasp_height)
     try:
+        cfg = DatagenConfig(out=args.out, object_set=args.object_set, objects=tuple(args.objects),
+                            moduli_pa=tuple(args.moduli), grasps_per_scene=args.grasps_per_scene,
+                            pass_size=args.pass_size, n_candidates=args.candidates, seed=args.seed,
+                            workers=args.workers, ray_address=args.ray_address, settings=settings,
+                            sim_max_tet_nodes=args.sim_max_tet_nodes or None,
+                            grasp_height=resolve_grasp_height(args.out, args.grasp_height))
         counts = generate(cfg, progress_bar=not args.no_progress)
     except DatasetError as exc:
         print(f"defgg-datagen: error: {exc}", file=sys.stderr)

@@ -131,6 +131,20 @@ def test_grasp_height_rule_is_recorded_and_fixed_for_the_dataset(tmp_path):
         datagen.generate(replace(cfg, grasp_height="contacts"), progress_bar=False)
 
 
+def test_a_new_dataset_samples_at_the_executor_height_and_a_resumed_one_keeps_its_rule(tmp_path):
+    assert datagen.resolve_grasp_height(tmp_path / "new", None) == "executor"
+    assert datagen.resolve_grasp_height(tmp_path / "new", "contacts") == "contacts"
+    legacy = tmp_path / "legacy"                     # headers before 2026-11-26 did not record the rule
+    header = datagen.DatagenConfig(out=legacy).header()
+    del header["grasp_height"]
+    DatasetWriter(legacy, header)
+    assert datagen.resolve_grasp_height(legacy, None) == "contacts"
+    datagen.check_resumable(datagen.DatagenConfig(out=legacy, grasp_height="contacts"))
+    executor = tmp_path / "executor"
+    DatasetWriter(executor, datagen.DatagenConfig(out=executor).header())
+    assert datagen.resolve_grasp_height(executor, None) == "executor"
+
+
 def test_resume_keeps_the_trial_protocol_of_the_dataset(tmp_path):
     from defgg_ros.data.format import DatasetError
 
