@@ -109,7 +109,7 @@ MESH_NOTE = ("Tet meshes: fTetWild is not deterministic (the same surface gives 
 
 
 def _protocol_line(gen: dict) -> str:
-    from defgg_ros.data.datagen import effective_trial_settings
+    from defgg_ros.data.datagen import effective_trial_settings, recorded_grasp_height
     from defgg_ros.sim.trial import comparable_protocol
 
     recorded = gen.get("trial_settings")
@@ -123,7 +123,7 @@ def _protocol_line(gen: dict) -> str:
             f"{settings['lift_time_s']} s, hold {settings['hold_time_s']} s; {stop}; FEM mesh: "
             + (f"at most {mesh} nodes (soft bodies)" if mesh else "the shipped mesh")
             + ("; candidates at the evaluation's grasp height (--grasp-height executor)"
-               if gen.get("grasp_height", "contacts") == "executor" else
+               if recorded_grasp_height(gen) == "executor" else
                "; candidates at their contacts' height, which the evaluation does not use: only the trials within a "
                "few mm of its height label the grasp it performs (results/notes_height.md)")
             + ("" if settings["lift_time_s"] >= 0.6 else ". This lift dropped soft grasps that a 0.6 s lift holds "

@@ -272,15 +272,21 @@ def _execute_ray(payloads, cfg, on_result) -> None:
             ray.shutdown()
 
 
+def recorded_grasp_height(generator: dict) -> str:
+    """The candidates' height rule a dataset header's generator settings record (headers before
+    2026-11-26 lack it: their candidates sat at the contacts' height)."""
+    return generator.get("grasp_height", "contacts")
+
+
 def resolve_grasp_height(out, requested: str | None) -> str:
-    """The candidates' height rule of a run: as requested; else the dataset's own when resuming one
-    (headers before 2026-11-26 lack it: contacts), else executor (DatagenConfig's default)."""
+    """The candidates' height rule of a run: as requested; else the dataset's own when resuming one,
+    else executor (DatagenConfig's default)."""
     if requested is not None:
         return requested
     from defgg_ros.data.format import check_header
 
     if (Path(out) / "dataset.json").exists():
-        return check_header(out).get("generator", {}).get("grasp_height", "contacts")
+        return recorded_grasp_height(check_header(out).get("generator", {}))
     return DatagenConfig.grasp_height
 
 
@@ -294,7 +300,7 @@ def check_resumable(cfg: DatagenConfig) -> None:
         flag = f"--sim-max-tet-nodes {mesh or 0}"
         raise DatasetError(f"{cfg.out} was generated with {flag}; resume it with the same FEM mesh "
                            f"(got {cfg.sim_max_tet_nodes or 0}; 0 = the shipped mesh) or write a new dataset")
-    height = stored.get("grasp_height", "contacts")     # headers before 2026-11-26: the contacts' height
+    height = recorded_grasp_height(stored)
     if height != cfg.grasp_height:
         raise DatasetError(f"{cfg.out} was generated with --grasp-height {height}; resume it with the same rule "
                            f"(got {cfg.grasp_height}) or write a new dataset")
