@@ -90,6 +90,9 @@ def results_markdown(out_dir, doc_path, notes_path=None) -> str:
         if by_rank:
             lines += [by_rank, ""]
     lines += ["## Targets of the issue (shake task, all stiffnesses)", ""] + _targets_md(summary["targets"]) + [""]
+    pairs_md = _read(tdir / "paired.md")
+    if pairs_md:
+        lines += ["## Are the two models separable on these trials?", "", pairs_md, ""]
     for md in sorted(tdir.glob("sensitivity*.md")):
         lines += ["## Sensitivity to errors in the stiffness input", "", _read(md), "",
                   f"![sensitivity]({_rel(md.with_suffix('.png'), doc_path)})", ""]

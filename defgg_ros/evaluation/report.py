@@ -2,7 +2,8 @@
 
 <out>/run.json           manifest (models + weights sha, objects, moduli, grasps, tasks, command, commit)
 <out>/trials.jsonl       one record per trial (the only source of every number below)
-<out>/tables/<task>.md|.csv, <task>_by_rank.md|.csv, sensitivity.md|.csv|.png, multimaterial.md|.csv
+<out>/tables/<task>.md|.csv, <task>_by_rank.md|.csv, paired.md|.csv, sensitivity.md|.csv|.png,
+                         multimaterial.md|.csv
 <out>/summary.json       headline numbers + completeness, read by the model cards and docs
 """
 from __future__ import annotations
@@ -12,7 +13,7 @@ from pathlib import Path
 
 from defgg_ros.atomic import write_json_atomic, write_text_atomic
 from defgg_ros.constants import TRAINING_YOUNGS_MODULI_PA
-from defgg_ros.evaluation import figures, ranks, tables
+from defgg_ros.evaluation import figures, paired, ranks, tables
 from defgg_ros.evaluation.store import RESULTS_FILE, read_results
 
 MANIFEST_FILE = "run.json"
@@ -78,6 +79,7 @@ def write_outputs(out_dir) -> dict:
         summary["tasks"][task].update({f"{s}|{m}|{e:g}": _cell_json(cells[(e, s, m)])
                                        for s in sets for m in models for e in moduli})
         _write_ranks(records, task, manifest, models, labels, tdir)
+    summary["paired"] = _write_paired(records, manifest, labels, tdir)
     if "sensitivity" in manifest["experiments"]:
         summary["sensitivity"] = _write_sensitivity(records, manifest, models, labels, tdir)
     if "multimaterial" in manifest["experiments"]:
@@ -97,8 +99,25 @@ def _write_ranks(records, task, manifest, models, labels, tdir) -> None:
     write_text_atomic(tdir / f"{task}_by_rank.csv", ranks.rank_csv(cells, task, sets, models, n_ranks))
 
 
+def _stiff_and_base(models: dict) -> tuple:
+    """(stiffness-aware model names, baseline names) of a manifest's models, in manifest order."""
+    return ([m for m in models if models[m]["uses_stiffness"]], [m for m in models if not models[m]["uses_stiffness"]])
+
+
+def _write_paired(records, manifest, labels, tdir) -> list:
+    """tables/paired.md|.csv: the first stiffness-aware model against the first baseline, trial by trial."""
+    stiff, base = _stiff_and_base(manifest["models"])
+    if not stiff or not base:
+        return []
+    rows = paired.paired_rows(records, manifest["tasks"], list(manifest["objects"]), stiff[0], base[0])
+    write_text_atomic(tdir / "paired.md", paired.paired_markdown(rows, labels[stiff[0]], labels[base[0]]))
+    write_text_atomic(tdir / "paired.csv", paired.paired_csv(rows, stiff[0], base[0]))
+    return [{"task": t, "set": s, "grasps": scope, "pairs": p.pairs, "a_only": p.a_only, "b_only": p.b_only,
+             "margin_pts": p.margin_pts, "p_sign_test": p.p_value} for t, s, scope, p in rows]
+
+
 def _write_sensitivity(records, manifest, models, labels, tdir) -> dict:
-    stiff = [m for m in models if manifest["models"][m]["uses_stiffness"]]
+    stiff, _ = _stiff_and_base(manifest["models"])
     object_set = "common" if "common" in manifest["objects"] else next(iter(manifest["objects"]))
     n_rows = sum(len(o["moduli_pa"]) for o in manifest["objects"][object_set])
     out = {}
@@ -120,9 +139,7 @@ def _cell_json(c: tables.Cell) -> dict:
 def targets(summary: dict, manifest: dict) -> list:
     """The issue's targets, each with its numbers and whether the data is complete enough to judge."""
     shake = summary["tasks"].get("shake")
-    models = manifest["models"]
-    stiff = [m for m in models if models[m]["uses_stiffness"]]
-    base = [m for m in models if not models[m]["uses_stiffness"]]
+    stiff, base = _stiff_and_base(manifest["models"])
     if not shake or not stiff or not base:
         return []
     out = []

@@ -1,0 +1,78 @@
+"""Paired comparison of the two models: pairing, the exact sign test, the margin a split would need."""
+import math
+
+import pytest
+
+from defgg_ros.atomic import write_json_atomic
+from defgg_ros.evaluation import paired, report
+from defgg_ros.evaluation.docs import results_markdown
+from defgg_ros.evaluation.store import ResultStore
+
+
+def _two_model_run(out):
+    write_json_atomic(out / "run.json", {
+        "command": "defgg-eval run", "commit": "c", "seed": 0, "grasps_per_object": 1, "tasks": ["shake"],
+        "experiments": ["main"], "models": {"stiff": {"sha": "S", "uses_stiffness": True, "path": "p"},
+                                            "base": {"sha": "B", "uses_stiffness": False, "path": "q"}},
+        "objects": {"common": [{"name": n, "moduli_pa": [2e4, 2e9]} for n in ("a", "b")]}})
+
+
+def _trial(i, model, sha, obj, e, rank, success, **extra):
+    rec = {"key": f"k{i}", "experiment": "main", "model": model, "model_sha": sha, "object": obj,
+           "object_set": "common", "youngs_modulus_pa": e, "input_error_pct": 0.0, "task": "shake", "rank": rank,
+           "success": success, "reused_from": None, "sim_key": f"s{i}", "cpu_s": 1.0, "input": "true"}
+    rec.update(extra)
+    return rec
+
+
+def test_sign_test_matches_the_binomial_tail():
+    assert paired.sign_test_p(0, 0) == 1.0
+    assert paired.sign_test_p(4, 0) == pytest.approx(2 / 16)
+    # 13 vs 3 of 16: 2 * P(X <= 3), X ~ Bin(16, 1/2)
+    tail = sum(math.comb(16, k) for k in range(4)) / 2**16
+    assert paired.sign_test_p(13, 3) == pytest.approx(2 * tail)
+    assert paired.sign_test_p(3, 13) == paired.sign_test_p(13, 3)
+    assert paired.sign_test_p(8, 8) == 1.0
+
+
+def test_margin_needed_is_the_least_uneven_significant_split():
+    p = paired.Paired(both=50, a_only=9, b_only=7, neither=30)       # 16 discordant of 96
+    assert p.pairs == 96 and p.margin_pts == pytest.approx(100 * 2 / 96)
+    assert paired.sign_test_p(13, 3) < 0.05 <= paired.sign_test_p(12, 4)
+    assert p.margin_needed_pts == pytest.approx(100 * (13 - 3) / 96)
+    assert paired.Paired(both=10, a_only=4, b_only=0, neither=10).margin_needed_pts is None   # 4 cannot reach 0.05
+    low, high = p.margin_ci_pts()
+    assert low < p.margin_pts < high
+
+
+def test_trials_pair_by_view_and_rank_and_unpaired_or_ungraded_ones_are_left_out():
+    recs = [
+        _trial(0, "stiff", "S", "a", 2e4, 0, True), _trial(1, "base", "B", "a", 2e4, 0, False),    # A only
+        _trial(2, "stiff", "S", "a", 2e4, 1, True), _trial(3, "base", "B", "a", 2e4, 1, True),     # both
+        _trial(4, "stiff", "S", "b", 2e9, 0, False), _trial(5, "base", "B", "b", 2e9, 0, True),    # B only
+        _trial(6, "stiff", "S", "b", 2e4, 0, True),                                               # no partner
+        _trial(7, "stiff", "S", "a", 2e9, 0, None), _trial(8, "base", "B", "a", 2e9, 0, False),    # sim failed
+        _trial(9, "stiff", "S", "b", 2e4, 1, None, status="no_grasp"), _trial(10, "base", "B", "b", 2e4, 1, True),
+        _trial(11, "stiff", "S", "a", 2e4, 0, False, experiment="sensitivity", input_error_pct=-60.0),
+        _trial(12, "stiff", "S", "a", 2e4, 2, False, task="twist"), _trial(13, "base", "B", "a", 2e4, 2, False),
+    ]
+    every = paired.paired_counts(recs, "shake", "common", "stiff", "base", best_only=False)
+    assert (every.both, every.a_only, every.b_only, every.neither) == (1, 1, 1, 0)
+    best = paired.paired_counts(recs, "shake", "common", "stiff", "base", best_only=True)
+    assert (best.both, best.a_only, best.b_only, best.neither) == (0, 1, 1, 0)
+
+
+def test_report_writes_the_paired_table_and_the_results_doc_shows_it(tmp_path):
+    _two_model_run(tmp_path)
+    store = ResultStore(tmp_path)
+    for i, (obj, e) in enumerate([("a", 2e4), ("a", 2e9), ("b", 2e4), ("b", 2e9)]):
+        store.append(_trial(2 * i, "stiff", "S", obj, e, 0, True))
+        store.append(_trial(2 * i + 1, "base", "B", obj, e, 0, i == 0))
+    summary = report.write_outputs(tmp_path)
+    best = next(r for r in summary["paired"] if r["grasps"] == paired.BEST_GRASP)
+    assert (best["pairs"], best["a_only"], best["b_only"]) == (4, 3, 0)
+    assert best["p_sign_test"] == pytest.approx(0.25)
+    csv_text = (tmp_path / "tables" / "paired.csv").read_text()
+    assert csv_text.splitlines()[1].startswith("shake,common,best grasp,stiff,base,4,1,3,0,0,75.00")
+    doc = results_markdown(tmp_path, tmp_path / "results.md")
+    assert "## Are the two models separable on these trials?" in doc and "| shake | common | best grasp | 4 |" in doc
