@@ -19,6 +19,11 @@
 4. Ranking (an evaluation's trial records): within one view, when two of a
    model's grasps ended differently, how often the one that held had the
    higher predicted quality (50 % = the quality map does not order grasps).
+5. Twist by axis (an evaluation's trial records): per modulus, how often a
+   lifted object holds the full twist amplitude about each axis of the hand
+   (x = the closing line, y = across it, z = the approach axis), both
+   models' grasps pooled: which rotation a grasp loses says whether the
+   grip's friction (about y and z) or its torsion (about x) gives way.
 """
 from __future__ import annotations
 
@@ -29,10 +34,11 @@ from pathlib import Path
 
 import numpy as np
 
-from defgg_ros.constants import MAX_SOFT_BODY_YOUNGS_MODULUS_PA
-from defgg_ros.data.format import list_scene_ids, read_scene, read_trials
+from defgg_ros.constants import MAX_SOFT_BODY_YOUNGS_MODULUS_PA, TWIST_ACCEL_LIMIT_RADPS2
+from defgg_ros.data.format import STATUS_LIFT_FAILED, STATUS_OK, list_scene_ids, read_scene, read_trials
 from defgg_ros.data.labels import height_offset_m, measured_mean_mps2
 from defgg_ros.evaluation.tables import is_main_correct_input
+from defgg_ros.evaluation.tasks import LIMIT_TOLERANCE
 
 
 def label_stats(data_root) -> dict:
@@ -243,8 +249,53 @@ def quality_ranking(records) -> dict | None:
     return {k: {**v, "rate": v["concordant"] / v["pairs"]} for k, v in sorted(out.items())} or None
 
 
+TWIST_AXIS_NAMES = ("x", "y", "z")    # sim.trial.TWIST_AXES in pairs: +x, -x, +y, -y, +z, -z
+
+
+def twist_by_axis(records) -> dict | None:
+    """{E label: {"trials", "lift_failed", "lifted", "axes": {axis: [held, tried]}}} over the main
+    experiment's twist trials. The evaluation stops a trial at its first failing direction, so an axis
+    counts as tried when one of its two directions failed or both were measured; None without trials."""
+    held_at = TWIST_ACCEL_LIMIT_RADPS2 * (1 - LIMIT_TOLERANCE)
+    per_e = defaultdict(lambda: {"trials": 0, "lift_failed": 0, "lifted": 0,
+                                 "axes": {a: [0, 0] for a in TWIST_AXIS_NAMES}})
+    for r in records:
+        if r["task"] != "twist" or not is_main_correct_input(r) or r.get("status") not in (STATUS_OK,
+                                                                                           STATUS_LIFT_FAILED):
+            continue
+        cell = per_e[f"{float(r['youngs_modulus_pa']):.0e}"]
+        cell["trials"] += 1
+        if r["status"] == STATUS_LIFT_FAILED:
+            cell["lift_failed"] += 1
+            continue
+        cell["lifted"] += 1
+        measured = r.get("measured") or [True] * len(r["accels"])
+        for i, axis in enumerate(TWIST_AXIS_NAMES):
+            both = [(r["accels"][j], measured[j]) for j in (2 * i, 2 * i + 1)]
+            failed = any(m and a < held_at for a, m in both)
+            if failed or all(m for _, m in both):
+                cell["axes"][axis][0] += int(not failed)
+                cell["axes"][axis][1] += 1
+    return {e: per_e[e] for e in sorted(per_e, key=float)} or None
+
+
+def _twist_axes_markdown(axes: dict | None) -> list:
+    if not axes:
+        return []
+    lines = ["**Where the twist fails** (main experiment, both models' grasps pooled; of the lifted objects, "
+             "held/tried per hand axis, both ways: x = the closing line, y = across it, z = the approach axis; "
+             "a trial stops at its first failing axis, so later axes are tried on the survivors only)", "",
+             "| E (Pa) | trials | lift failed | lifted | held about x | held about y | held about z |",
+             "|---|---|---|---|---|---|---|"]
+    for e, v in axes.items():
+        counts = (v["axes"][a] for a in TWIST_AXIS_NAMES)
+        held = " | ".join(f"{100 * h / n:.1f} % of {n}" if n else "–" for h, n in counts)
+        lines.append(f"| {e} | {v['trials']} | {v['lift_failed']} | {v['lifted']} | {held} |")
+    return lines + [""]
+
+
 def diagnostics_markdown(labels: dict | None, shifts: dict | None, replicates: dict | None = None,
-                         ranking: dict | None = None) -> str:
+                         ranking: dict | None = None, twist_axes: dict | None = None) -> str:
     lines = []
     if labels:
         lines += [f"**Training labels by modulus** (`{labels.get('data_root', 'the dataset')}`)", "",
@@ -288,6 +339,7 @@ def diagnostics_markdown(labels: dict | None, shifts: dict | None, replicates: d
             task, object_set, model = key.split("|")
             lines.append(f"| {task} | {object_set} | {model} | {v['pairs']} | {100 * v['rate']:.1f} % |")
         lines.append("")
+    lines += _twist_axes_markdown(twist_axes)
     return "\n".join(lines)
 
 

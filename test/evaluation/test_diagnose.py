@@ -135,3 +135,33 @@ def test_positive_rate_by_height_offset_bins_every_labelled_trial(tmp_path):
     # Synthetic trials sit at z = 0, always >= 10 mm below the executor's grasp height.
     assert all(v["trials"] == 0 for body in by_height.values() for k, v in body.items() if k != "< -10")
     assert "| soft | " in "\n".join(diagnose._height_offset_markdown(by_height))
+
+
+def _twist(e_pa, status, accels=None, measured=None, **extra):
+    rec = {"task": "twist", "experiment": "main", "input_error_pct": 0.0, "youngs_modulus_pa": e_pa,
+           "status": status, "accels": accels, "measured": measured}
+    rec.update(extra)
+    return rec
+
+
+def test_twist_by_axis_counts_an_axis_only_where_the_trial_reached_it():
+    full, short = 500.0, 120.0
+    recs = [
+        _twist(2e4, "ok", [full] * 6, [True] * 6),                                        # held everywhere
+        _twist(2e4, "ok", [full, full, short, 0, 0, 0], [True, True, True] + [False] * 3),  # lost about y
+        _twist(2e4, "ok", [full, full, full, full, short, 0], [True] * 5 + [False]),        # lost about z
+        _twist(2e4, "lift_failed"),
+        _twist(2e4, "exploded"),                                                          # not a grasp outcome
+        _twist(2e4, "ok", [full] * 6, [True] * 6, experiment="sensitivity", input_error_pct=30.0),
+        _twist(2e9, "ok", [short, 0, 0, 0, 0, 0], [True] + [False] * 5),                   # lost about x
+        _twist(2e9, "ok", [full] * 6, [True] * 6, task="shake"),
+    ]
+    axes = diagnose.twist_by_axis(recs)
+    assert list(axes) == ["2e+04", "2e+09"]
+    soft = axes["2e+04"]
+    assert (soft["trials"], soft["lift_failed"], soft["lifted"]) == (4, 1, 3)
+    assert soft["axes"] == {"x": [3, 3], "y": [2, 3], "z": [1, 2]}
+    assert axes["2e+09"]["axes"] == {"x": [0, 1], "y": [0, 0], "z": [0, 0]}
+    md = "\n".join(diagnose._twist_axes_markdown(axes))
+    assert "| 2e+04 | 4 | 1 | 3 | 100.0 % of 3 | 66.7 % of 3 | 50.0 % of 2 |" in md
+    assert diagnose.twist_by_axis([_twist(2e4, "ok", [full] * 6, task="shake")]) is None
