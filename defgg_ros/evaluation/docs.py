@@ -123,7 +123,7 @@ def results_markdown(out_dir, doc_path, notes_path=None) -> str:
     diag = _read(out_dir / "diagnostics.md")
     if diag:
         lines += ["## Diagnostics: do the labels depend on the stiffness and on the grasp's place, how repeatable "
-                  "is a trial, and does the predicted quality rank grasps?",
+                  "is a trial, does the predicted quality rank grasps, and where does the twist fail?",
                   "", diag, ""]
     notes = _read(notes_path) if notes_path else None
     if notes:
