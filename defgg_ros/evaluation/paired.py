@@ -19,7 +19,7 @@ import io
 import math
 from dataclasses import dataclass
 
-from defgg_ros.evaluation.tables import is_main_correct_input
+from defgg_ros.evaluation.tables import is_graded, is_main_correct_input
 
 ALPHA = 0.05
 Z_95 = 1.959964
@@ -84,7 +84,7 @@ def paired_counts(records, task: str, object_set: str, model_a: str, model_b: st
     outcome = {}
     for r in records:
         if (r["task"] != task or r["object_set"] != object_set or r["model"] not in (model_a, model_b)
-                or not is_main_correct_input(r) or r.get("status") == "no_grasp" or r.get("success") is None):
+                or not is_main_correct_input(r) or not is_graded(r)):
             continue
         rank = int(r.get("rank") or 0)
         if best_only and rank != 0:

@@ -11,7 +11,7 @@ from __future__ import annotations
 import csv
 import io
 
-from defgg_ros.evaluation.tables import Cell, is_main_correct_input
+from defgg_ros.evaluation.tables import Cell, is_graded, is_main_correct_input
 
 ANY_RANK = "any"
 
@@ -34,7 +34,7 @@ def rank_cells(records, task: str, sets, models, n_ranks: int, views_per_set: di
         cell.add(r)
         views.setdefault((r["object_set"], r["model"], r["object"], r["youngs_modulus_pa"]), []).append(r)
     for (s, m, _obj, _e), recs in views.items():
-        graded = [r for r in recs if r.get("status") != "no_grasp" and r.get("success") is not None]
+        graded = [r for r in recs if is_graded(r)]
         if graded:
             cells[(s, m, ANY_RANK)].add({"success": any(bool(r["success"]) for r in graded)})
         elif all(r.get("status") == "no_grasp" for r in recs):

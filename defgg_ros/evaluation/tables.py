@@ -64,6 +64,11 @@ def is_main_correct_input(r: dict) -> bool:
     return r["experiment"] == "main" and float(r.get("input_error_pct") or 0.0) == 0.0
 
 
+def is_graded(r: dict) -> bool:
+    """A grasp outcome: the model proposed the grasp and its simulation finished (success True or False)."""
+    return r.get("status") != "no_grasp" and r.get("success") is not None
+
+
 def e_label(e_pa: float) -> str:
     mantissa, exp = f"{e_pa:.0e}".split("e")
     return f"{mantissa}e{int(exp)}"
