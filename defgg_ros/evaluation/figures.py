@@ -22,15 +22,19 @@ def _save(fig, path) -> None:
     plt.close(fig)
 
 
-def sensitivity_plot(cells: dict, path, label: str) -> None:
-    """Success over all stiffnesses vs stiffness input error; n per point annotated."""
+def sensitivity_plot(cells: dict, path, label: str, best: dict | None = None) -> None:
+    """Success over all stiffnesses vs stiffness input error (and, given, on the best grasp); n annotated."""
     fig, ax = plt.subplots(figsize=(5.5, 3.8))
-    xs = [e for e, c in cells.items() if c.rate_pct is not None]
-    ys = [cells[e].rate_pct for e in xs]
-    ax.plot(xs, ys, "s-", color="tab:blue", label=f"{label} (this simulator)")
-    for x, y in zip(xs, ys):
-        ax.annotate(f"n={cells[x].graded}", (x, y), textcoords="offset points", xytext=(0, 6), ha="center",
-                    fontsize=7)
+    curves = [(cells, "s-", "tab:blue", "" if best is None else ", all ranks run", 6)]
+    if best is not None:
+        curves.append((best, "o:", "tab:orange", ", best grasp", -11))
+    for curve_cells, style, color, suffix, dy in curves:
+        xs = [e for e, c in curve_cells.items() if c.rate_pct is not None]
+        ys = [curve_cells[e].rate_pct for e in xs]
+        ax.plot(xs, ys, style, color=color, label=f"{label}{suffix} (this simulator)")
+        for x, y in zip(xs, ys):
+            ax.annotate(f"n={curve_cells[x].graded}", (x, y), textcoords="offset points", xytext=(0, dy),
+                        ha="center", fontsize=7, color=color)
     px, py = zip(*PAPER_SENSITIVITY)
     ax.plot(px, py, "--", color="grey", alpha=0.7, label="paper (Isaac Gym)")
     ax.set_xlabel("error of stiffness input [%]")
@@ -38,7 +42,7 @@ def sensitivity_plot(cells: dict, path, label: str) -> None:
     ax.set_xlim(-65, 65)
     ax.set_ylim(0, 100)
     ax.grid(True, linestyle="--", alpha=0.5)
-    ax.legend(loc="lower center", fontsize=8)
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.16), fontsize=8)  # below: clear of the points
     _save(fig, path)
 
 

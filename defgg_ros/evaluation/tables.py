@@ -129,11 +129,16 @@ def main_table_csv(cells, task: str, sets, models, moduli) -> str:
 
 
 def sensitivity_cells(records, model: str, object_set: str, expected: int, errors=SENSITIVITY_ERRORS_PCT,
-                      task: str = "shake") -> dict:
-    """{error_pct: Cell} over all stiffnesses; 0 % comes from the main experiment."""
+                      task: str = "shake", ranks=None) -> dict:
+    """{error_pct: Cell} over all stiffnesses; 0 % comes from the main experiment.
+
+    ranks: only these grasp ranks (0 = a view's best grasp); None takes every rank.
+    """
     cells = {float(e): Cell(expected=expected) for e in errors}
     for r in records:
         if r["model"] != model or r["object_set"] != object_set or r["task"] != task:
+            continue
+        if ranks is not None and r.get("rank", 0) not in ranks:
             continue
         if r["experiment"] == "sensitivity" or (r["experiment"] == "main" and r["input_error_pct"] == 0):
             cell = cells.get(float(r["input_error_pct"]))
@@ -142,21 +147,37 @@ def sensitivity_cells(records, model: str, object_set: str, expected: int, error
     return cells
 
 
-def sensitivity_markdown(cells: dict, model_label: str, object_set: str) -> str:
-    lines = [f"**Sensitivity** ({model_label}, {object_set} set, shake task, all stiffnesses)", "",
-             "| stiffness input error (%) | success (%) |", "|---|---|"]
-    lines += [f"| {e:+g} | {c.markdown()} |" for e, c in cells.items()]
+def sensitivity_markdown(cells: dict, model_label: str, object_set: str, best: dict | None = None,
+                         n_best: int = 5) -> str:
+    """The error sweep; with ``best`` (the same sweep on each view's best grasp) a second column.
+
+    The best-grasp column is like-for-like while a budgeted run (--ranks) has
+    simulated more ranks at 0 % (the main experiment) than at the other errors.
+    """
+    head = f"**Sensitivity** ({model_label}, {object_set} set, shake task, all stiffnesses)"
+    if best is None:
+        lines = [head, "", "| stiffness input error (%) | success (%) |", "|---|---|"]
+        return "\n".join(lines + [f"| {e:+g} | {c.markdown()} |" for e, c in cells.items()]) + "\n"
+    lines = [head, "", f"| stiffness input error (%) | success, {n_best} best grasps (%) | success, best grasp (%) |",
+             "|---|---|---|"]
+    lines += [f"| {e:+g} | {c.markdown()} | {best[e].markdown()} |" for e, c in cells.items()]
+    done = {c.done for c in cells.values()}
+    if len(done) > 1:
+        lines += ["", f"The rows of the {n_best}-best column have run different numbers of trials "
+                      f"({min(done)}–{max(done)}), so compare rows in the best-grasp column."]
     return "\n".join(lines) + "\n"
 
 
-def sensitivity_csv(cells: dict, model: str, object_set: str) -> str:
+def sensitivity_csv(cells: dict, model: str, object_set: str, best: dict | None = None, n_best: int = 5) -> str:
+    """One row per error and grasp scope ("<n_best> best", and "best" when ``best`` is given)."""
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    w.writerow(["model", "object_set", "input_error_pct", "success_pct", "successes", "graded", "sim_failed",
-                "expected_trials"])
-    for e, c in cells.items():
-        w.writerow([model, object_set, f"{e:g}", "" if c.rate_pct is None else f"{c.rate_pct:.2f}", c.success,
-                    c.graded, c.sim_failed, c.expected])
+    w.writerow(["model", "object_set", "grasps", "input_error_pct", "success_pct", "successes", "graded",
+                "sim_failed", "expected_trials"])
+    for scope, scope_cells in ((f"{n_best} best", cells), ("best", best)):
+        for e, c in (scope_cells or {}).items():
+            w.writerow([model, object_set, scope, f"{e:g}", "" if c.rate_pct is None else f"{c.rate_pct:.2f}",
+                        c.success, c.graded, c.sim_failed, c.expected])
     return buf.getvalue()
 
 

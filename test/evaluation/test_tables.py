@@ -76,3 +76,22 @@ def test_success_by_rank_and_any_rank_per_view(tmp_path):
     assert rows[("base", "any")]["successes"] == "1" and rows[("base", "2")]["graded"] == "0"
     md = (tmp_path / "tables" / "shake_by_rank.md").read_text()
     assert "| common | with stiffness (stiff) | 33.3 (1/3; 3 of 4 run) |" in md
+
+
+def test_sensitivity_compares_errors_on_the_best_grasp_while_ranks_are_partial(tmp_path):
+    _manifest(tmp_path)
+    store = ResultStore(tmp_path)
+    trials = [("main", 0.0, 0, True), ("main", 0.0, 1, True),          # 0 %: both ranks run
+              ("sensitivity", -60.0, 0, False)]                        # -60 %: only the best grasp so far
+    for i, (exp, err, rank, ok) in enumerate(trials):
+        store.append({**_rec(i, "stiff", "S", 2e4, ok, experiment=exp, err=err), "rank": rank})
+    summary = report.write_outputs(tmp_path)
+    sens = summary["sensitivity"]
+    assert sens["stiff"]["0"]["graded"] == 2 and sens["stiff|best"]["0"]["graded"] == 1
+    assert sens["stiff|best"]["-60"] == {"success_pct": 0.0, "successes": 0, "graded": 1, "sim_failed": 0,
+                                         "no_grasp": 0, "expected": 4}
+    md = (tmp_path / "tables" / "sensitivity.md").read_text()
+    assert "| +0 | 100.0 (2/2; 2 of 8 run) | 100.0 (1/1; 1 of 4 run) |" in md
+    assert "compare rows in the best-grasp column" in md
+    rows = list(csv.DictReader(open(tmp_path / "tables" / "sensitivity.csv")))
+    assert {r["grasps"] for r in rows} == {"2 best", "best"} and len(rows) == 22
