@@ -22,18 +22,20 @@ def _save(fig, path) -> None:
     plt.close(fig)
 
 
-def sensitivity_plot(cells: dict, path, label: str, best: dict | None = None) -> None:
-    """Success over all stiffnesses vs stiffness input error (and, given, on the best grasp); n annotated."""
+# key -> (style, colour, offset of the n= labels in points; None: no labels, they would overlap)
+_SCOPE_STYLES = {"all": ("s-", "tab:blue", 6), "ranks": ("^--", "tab:green", None), "best": ("o:", "tab:orange", -11)}
+
+
+def sensitivity_plot(scopes: dict, path, label: str) -> None:
+    """Success over all stiffnesses vs stiffness input error, one curve per grasp scope; n annotated."""
     fig, ax = plt.subplots(figsize=(5.5, 3.8))
-    curves = [(cells, "s-", "tab:blue", "" if best is None else ", all ranks run", 6)]
-    if best is not None:
-        curves.append((best, "o:", "tab:orange", ", best grasp", -11))
-    for curve_cells, style, color, suffix, dy in curves:
-        xs = [e for e, c in curve_cells.items() if c.rate_pct is not None]
-        ys = [curve_cells[e].rate_pct for e in xs]
-        ax.plot(xs, ys, style, color=color, label=f"{label}{suffix} (this simulator)")
-        for x, y in zip(xs, ys):
-            ax.annotate(f"n={curve_cells[x].graded}", (x, y), textcoords="offset points", xytext=(0, dy),
+    for key, (scope_label, cells) in scopes.items():
+        style, color, dy = _SCOPE_STYLES[key]
+        xs = [e for e, c in cells.items() if c.rate_pct is not None]
+        ys = [cells[e].rate_pct for e in xs]
+        ax.plot(xs, ys, style, color=color, label=f"{label}, {scope_label} (this simulator)")
+        for x, y in zip(xs, ys) if dy is not None else ():
+            ax.annotate(f"n={cells[x].graded}", (x, y), textcoords="offset points", xytext=(0, dy),
                         ha="center", fontsize=7, color=color)
     px, py = zip(*PAPER_SENSITIVITY)
     ax.plot(px, py, "--", color="grey", alpha=0.7, label="paper (Isaac Gym)")

@@ -117,23 +117,20 @@ def _write_paired(records, manifest, labels, tdir) -> list:
 
 
 def _write_sensitivity(records, manifest, models, labels, tdir) -> dict:
-    """Tables and plot per stiffness model; {model: {error: cell}} plus "<model>|best" for the best grasp."""
+    """Tables and plot per stiffness model; {model: {error: cell}} (n best grasps), plus
+    {"<model>|<scope>": ...} for the like-for-like columns (tables.sensitivity_scopes)."""
     stiff, _ = _stiff_and_base(manifest["models"])
     object_set = "common" if "common" in manifest["objects"] else next(iter(manifest["objects"]))
     n_rows = sum(len(o["moduli_pa"]) for o in manifest["objects"][object_set])
-    n_best = manifest["grasps_per_object"]
     out = {}
     for m in stiff:
-        cells = tables.sensitivity_cells(records, m, object_set, n_rows * n_best)
-        best = tables.sensitivity_cells(records, m, object_set, n_rows, ranks={0}) if n_best > 1 else None
+        scopes = tables.sensitivity_scopes(records, m, object_set, n_rows, manifest["grasps_per_object"])
         suffix = "" if len(stiff) == 1 else f"_{m}"
-        write_text_atomic(tdir / f"sensitivity{suffix}.md",
-                          tables.sensitivity_markdown(cells, labels[m], object_set, best, n_best))
-        write_text_atomic(tdir / f"sensitivity{suffix}.csv", tables.sensitivity_csv(cells, m, object_set, best, n_best))
-        figures.sensitivity_plot(cells, tdir / f"sensitivity{suffix}.png", labels[m], best)
-        out[m] = {f"{e:g}": _cell_json(c) for e, c in cells.items()}
-        if best is not None:
-            out[f"{m}|best"] = {f"{e:g}": _cell_json(c) for e, c in best.items()}
+        write_text_atomic(tdir / f"sensitivity{suffix}.md", tables.sensitivity_markdown(scopes, labels[m], object_set))
+        write_text_atomic(tdir / f"sensitivity{suffix}.csv", tables.sensitivity_csv(scopes, m, object_set))
+        figures.sensitivity_plot(scopes, tdir / f"sensitivity{suffix}.png", labels[m])
+        for key, (_, cells) in scopes.items():
+            out[m if key == "all" else f"{m}|{key}"] = {f"{e:g}": _cell_json(c) for e, c in cells.items()}
     return out
 
 

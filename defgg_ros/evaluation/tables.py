@@ -147,36 +147,51 @@ def sensitivity_cells(records, model: str, object_set: str, expected: int, error
     return cells
 
 
-def sensitivity_markdown(cells: dict, model_label: str, object_set: str, best: dict | None = None,
-                         n_best: int = 5) -> str:
-    """The error sweep; with ``best`` (the same sweep on each view's best grasp) a second column.
+def sensitivity_scopes(records, model: str, object_set: str, n_rows: int, n_best: int) -> dict:
+    """{key: (column label, {error_pct: Cell})}: the n best grasps, then like-for-like columns.
 
-    The best-grasp column is like-for-like while a budgeted run (--ranks) has
-    simulated more ranks at 0 % (the main experiment) than at the other errors.
+    A budgeted run (--ranks) simulates one rank at a time, and the 0 % row comes
+    from the main experiment, which may have every rank already; so the rows of
+    the first column can differ in trials. Added then: the ranks finished at
+    every error ("ranks"), and always each view's best grasp ("best").
     """
-    head = f"**Sensitivity** ({model_label}, {object_set} set, shake task, all stiffnesses)"
-    if best is None:
-        lines = [head, "", "| stiffness input error (%) | success (%) |", "|---|---|"]
-        return "\n".join(lines + [f"| {e:+g} | {c.markdown()} |" for e, c in cells.items()]) + "\n"
-    lines = [head, "", f"| stiffness input error (%) | success, {n_best} best grasps (%) | success, best grasp (%) |",
-             "|---|---|---|"]
-    lines += [f"| {e:+g} | {c.markdown()} | {best[e].markdown()} |" for e, c in cells.items()]
-    done = {c.done for c in cells.values()}
-    if len(done) > 1:
-        lines += ["", f"The rows of the {n_best}-best column have run different numbers of trials "
-                      f"({min(done)}–{max(done)}), so compare rows in the best-grasp column."]
+    scopes = {"all": (f"{n_best} best grasps", sensitivity_cells(records, model, object_set, n_rows * n_best))}
+    if n_best == 1:
+        return scopes
+    per_rank = [sensitivity_cells(records, model, object_set, n_rows, ranks={r}) for r in range(n_best)]
+    finished = 0
+    while finished < n_best and all(c.done >= n_rows for c in per_rank[finished].values()):
+        finished += 1
+    if 1 < finished < n_best:
+        scopes["ranks"] = (f"ranks 1–{finished}, run at every error",
+                           sensitivity_cells(records, model, object_set, n_rows * finished, ranks=set(range(finished))))
+    scopes["best"] = ("best grasp", per_rank[0])
+    return scopes
+
+
+def sensitivity_markdown(scopes: dict, model_label: str, object_set: str) -> str:
+    lines = [f"**Sensitivity** ({model_label}, {object_set} set, shake task, all stiffnesses)", "",
+             "| stiffness input error (%) | " + " | ".join(f"success, {label} (%)" for label, _ in scopes.values())
+             + " |", "|---" * (1 + len(scopes)) + "|"]
+    first = next(iter(scopes.values()))[1]
+    for e in first:
+        lines.append(f"| {e:+g} | " + " | ".join(cells[e].markdown() for _, cells in scopes.values()) + " |")
+    done = {c.done for c in first.values()}
+    if len(done) > 1 and len(scopes) > 1:
+        lines += ["", f"The rows of the first column have run different numbers of trials ({min(done)}–{max(done)}); "
+                      "compare rows within the other columns, which are like-for-like."]
     return "\n".join(lines) + "\n"
 
 
-def sensitivity_csv(cells: dict, model: str, object_set: str, best: dict | None = None, n_best: int = 5) -> str:
-    """One row per error and grasp scope ("<n_best> best", and "best" when ``best`` is given)."""
+def sensitivity_csv(scopes: dict, model: str, object_set: str) -> str:
+    """One row per grasp scope (see sensitivity_scopes) and error."""
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(["model", "object_set", "grasps", "input_error_pct", "success_pct", "successes", "graded",
                 "sim_failed", "expected_trials"])
-    for scope, scope_cells in ((f"{n_best} best", cells), ("best", best)):
-        for e, c in (scope_cells or {}).items():
-            w.writerow([model, object_set, scope, f"{e:g}", "" if c.rate_pct is None else f"{c.rate_pct:.2f}",
+    for label, cells in scopes.values():
+        for e, c in cells.items():
+            w.writerow([model, object_set, label, f"{e:g}", "" if c.rate_pct is None else f"{c.rate_pct:.2f}",
                         c.success, c.graded, c.sim_failed, c.expected])
     return buf.getvalue()
 

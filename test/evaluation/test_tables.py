@@ -78,20 +78,44 @@ def test_success_by_rank_and_any_rank_per_view(tmp_path):
     assert "| common | with stiffness (stiff) | 33.3 (1/3; 3 of 4 run) |" in md
 
 
-def test_sensitivity_compares_errors_on_the_best_grasp_while_ranks_are_partial(tmp_path):
+
+def test_sensitivity_adds_like_for_like_columns_while_ranks_are_partial(tmp_path):
+    from defgg_ros.evaluation.jobs import SENSITIVITY_ERRORS_PCT
+
     _manifest(tmp_path)
+    manifest = json.loads((tmp_path / "run.json").read_text())
+    write_json_atomic(tmp_path / "run.json", {**manifest, "grasps_per_object": 3})
     store = ResultStore(tmp_path)
-    trials = [("main", 0.0, 0, True), ("main", 0.0, 1, True),          # 0 %: both ranks run
-              ("sensitivity", -60.0, 0, False)]                        # -60 %: only the best grasp so far
-    for i, (exp, err, rank, ok) in enumerate(trials):
-        store.append({**_rec(i, "stiff", "S", 2e4, ok, experiment=exp, err=err), "rank": rank})
+    i = 0
+    for obj in ("a", "b"):
+        for e in (2e4, 2e9):
+            for rank in range(3):
+                for err in SENSITIVITY_ERRORS_PCT:
+                    if err != 0 and rank == 2:
+                        continue                       # rank 3 so far only in the main experiment (0 %)
+                    exp = "main" if err == 0 else "sensitivity"
+                    ok = rank == 0 or (rank == 1 and obj == "a")
+                    store.append({**_rec(i, "stiff", "S", e, ok, experiment=exp, err=float(err), obj=obj),
+                                  "rank": rank})
+                    i += 1
     summary = report.write_outputs(tmp_path)
     sens = summary["sensitivity"]
-    assert sens["stiff"]["0"]["graded"] == 2 and sens["stiff|best"]["0"]["graded"] == 1
-    assert sens["stiff|best"]["-60"] == {"success_pct": 0.0, "successes": 0, "graded": 1, "sim_failed": 0,
-                                         "no_grasp": 0, "expected": 4}
+    assert sens["stiff"]["0"]["graded"] == 12 and sens["stiff"]["-60"]["graded"] == 8
+    assert sens["stiff|ranks"]["-60"] == sens["stiff|ranks"]["0"] == {
+        "success_pct": 75.0, "successes": 6, "graded": 8, "sim_failed": 0, "no_grasp": 0, "expected": 8}
+    assert sens["stiff|best"]["0"]["successes"] == 4 and sens["stiff|best"]["0"]["expected"] == 4
     md = (tmp_path / "tables" / "sensitivity.md").read_text()
-    assert "| +0 | 100.0 (2/2; 2 of 8 run) | 100.0 (1/1; 1 of 4 run) |" in md
-    assert "compare rows in the best-grasp column" in md
+    assert "| +0 | 50.0 (6/12) | 75.0 (6/8) | 100.0 (4/4) |" in md
+    assert "| -60 | 75.0 (6/8; 8 of 12 run) | 75.0 (6/8) | 100.0 (4/4) |" in md
+    assert "success, ranks 1–2, run at every error (%)" in md and "like-for-like" in md
     rows = list(csv.DictReader(open(tmp_path / "tables" / "sensitivity.csv")))
-    assert {r["grasps"] for r in rows} == {"2 best", "best"} and len(rows) == 22
+    assert len(rows) == 3 * len(SENSITIVITY_ERRORS_PCT)
+    store.append({**_rec(i, "stiff", "S", 2e4, True, experiment="sensitivity", err=-60.0, obj="a"), "rank": 2})
+    assert "stiff|ranks" in report.write_outputs(tmp_path)["sensitivity"]   # one rank-3 trial: still partial
+    for obj, e in (("a", 2e9), ("b", 2e4), ("b", 2e9), ("a", 2e4)):
+        for err in SENSITIVITY_ERRORS_PCT:
+            if err != 0 and not (obj == "a" and e == 2e4 and err == -60.0):
+                i += 1
+                store.append({**_rec(i, "stiff", "S", e, False, experiment="sensitivity", err=float(err), obj=obj),
+                              "rank": 2})
+    assert set(report.write_outputs(tmp_path)["sensitivity"]) == {"stiff", "stiff|best"}   # all ranks run
