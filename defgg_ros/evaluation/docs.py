@@ -96,6 +96,9 @@ def results_markdown(out_dir, doc_path, notes_path=None) -> str:
     for md in sorted(tdir.glob("sensitivity*.md")):
         lines += ["## Sensitivity to errors in the stiffness input", "", _read(md), "",
                   f"![sensitivity]({_rel(md.with_suffix('.png'), doc_path)})", ""]
+        pairs_md = _read(tdir / f"paired_{md.name}")
+        if pairs_md:
+            lines += [pairs_md, ""]
     strategy = _read(out_dir / "strategy.json")
     if strategy:
         s = json.loads(strategy)

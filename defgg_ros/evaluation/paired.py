@@ -79,24 +79,50 @@ def sign_test_p(wins: int, losses: int) -> float:
     return min(1.0, 2.0 * tail)
 
 
+def _count_pairs(outcome_a: dict, outcome_b: dict) -> Paired:
+    """Paired counts over the keys both outcome maps ({pairing key: held?}) have."""
+    counts = {"both": 0, "a_only": 0, "b_only": 0, "neither": 0}
+    for key, a in outcome_a.items():
+        if key not in outcome_b:
+            continue
+        b = outcome_b[key]
+        counts["both" if a and b else "a_only" if a else "b_only" if b else "neither"] += 1
+    return Paired(**counts)
+
+
+def _view_rank(r: dict) -> tuple:
+    return r["object"], float(r["youngs_modulus_pa"]), int(r.get("rank") or 0)
+
+
 def paired_counts(records, task: str, object_set: str, model_a: str, model_b: str, best_only: bool) -> Paired:
     """Pair model_a's and model_b's graded main-experiment trials of one task and set by (object, E, rank)."""
-    outcome = {}
+    outcome = {model_a: {}, model_b: {}}
     for r in records:
         if (r["task"] != task or r["object_set"] != object_set or r["model"] not in (model_a, model_b)
                 or not is_main_correct_input(r) or not is_graded(r)):
             continue
-        rank = int(r.get("rank") or 0)
-        if best_only and rank != 0:
+        if best_only and _view_rank(r)[2] != 0:
             continue
-        outcome[(r["model"], r["object"], float(r["youngs_modulus_pa"]), rank)] = bool(r["success"])
-    counts = {"both": 0, "a_only": 0, "b_only": 0, "neither": 0}
-    for (model, obj, e, rank), a in outcome.items():
-        if model != model_a or (model_b, obj, e, rank) not in outcome:
+        outcome[r["model"]][_view_rank(r)] = bool(r["success"])
+    return _count_pairs(outcome[model_a], outcome[model_b])
+
+
+def sensitivity_pairs(records, model: str, object_set: str, task: str = "shake") -> list:
+    """[(error_pct, Paired)]: A = the correct stiffness input, B = the input off by error_pct, same grasp rank.
+
+    The paper's curve says a wrong input costs success (75.9 % at 0 %, 21-25 % at
+    +-60 %); pairing each wrong-input trial with the correct-input trial of the
+    same view and rank tests that drop trial by trial.
+    """
+    by_error = {}
+    for r in records:
+        if r["model"] != model or r["object_set"] != object_set or r["task"] != task or not is_graded(r):
             continue
-        b = outcome[(model_b, obj, e, rank)]
-        counts["both" if a and b else "a_only" if a else "b_only" if b else "neither"] += 1
-    return Paired(**counts)
+        if r["experiment"] == "sensitivity" or is_main_correct_input(r):
+            by_error.setdefault(float(r["input_error_pct"]), {})[_view_rank(r)] = bool(r["success"])
+    correct = by_error.pop(0.0, {})
+    rows = [(e, _count_pairs(correct, by_error[e])) for e in sorted(by_error)]
+    return [(e, p) for e, p in rows if p.pairs]
 
 
 def paired_rows(records, tasks, sets, model_a: str, model_b: str) -> list:
@@ -128,6 +154,22 @@ def paired_markdown(rows, label_a: str, label_b: str) -> str:
         lines.append(f"| {task} | {s} | {scope} | {p.pairs} | {p.both} | {p.a_only} | {p.b_only} | {p.neither} | "
                      f"{_fmt(p.margin_pts)} | {interval} | {_fmt(p.p_value, '.2f')} | "
                      f"{'none' if p.margin_needed_pts is None else format(p.margin_needed_pts, '.1f')} |")
+    return "\n".join(lines) + "\n"
+
+
+def sensitivity_paired_markdown(rows, model_label: str, object_set: str) -> str:
+    lines = [f"**Does a wrong stiffness input cost grasps?** ({model_label}, {object_set} set, shake; each "
+             "wrong-input trial paired with the correct-input trial of the same object, modulus and rank; "
+             "margin = correct − wrong in points; p = exact two-sided sign test on the discordant pairs)", "",
+             "| input error (%) | pairs | both held | only correct | only wrong | neither | margin (pts) | "
+             "95 % interval | p |", "|---" * 9 + "|"]
+    for e, p in rows:
+        ci = p.margin_ci_pts()
+        lines.append(f"| {e:+g} | {p.pairs} | {p.both} | {p.a_only} | {p.b_only} | {p.neither} | "
+                     f"{_fmt(p.margin_pts)} | {ci[0]:+.1f} … {ci[1]:+.1f} | {_fmt(p.p_value, '.2f')} |")
+    if len(rows) > 1:   # many rows, many chances: chance alone puts one of ten rows under p = 0.05 four times in ten
+        lines += ["", f"{len(rows)} error levels are tested, so a single row is significant at a family-wise "
+                      f"{ALPHA:g} only with p < {ALPHA / len(rows):.3g} (Bonferroni)."]
     return "\n".join(lines) + "\n"
 
 

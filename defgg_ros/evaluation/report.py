@@ -131,6 +131,11 @@ def _write_sensitivity(records, manifest, models, labels, tdir) -> dict:
         figures.sensitivity_plot(scopes, tdir / f"sensitivity{suffix}.png", labels[m])
         for key, (_, cells) in scopes.items():
             out[m if key == "all" else f"{m}|{key}"] = {f"{e:g}": _cell_json(c) for e, c in cells.items()}
+        pairs = paired.sensitivity_pairs(records, m, object_set)
+        write_text_atomic(tdir / f"paired_sensitivity{suffix}.md",
+                          paired.sensitivity_paired_markdown(pairs, labels[m], object_set))
+        out[f"{m}|paired"] = {f"{e:g}": {"pairs": p.pairs, "correct_only": p.a_only, "wrong_only": p.b_only,
+                                         "margin_pts": p.margin_pts, "p_sign_test": p.p_value} for e, p in pairs}
     return out
 
 

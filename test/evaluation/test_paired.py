@@ -1,4 +1,5 @@
 """Paired comparison of the two models: pairing, the exact sign test, the margin a split would need."""
+import json
 import math
 
 import pytest
@@ -76,3 +77,33 @@ def test_report_writes_the_paired_table_and_the_results_doc_shows_it(tmp_path):
     assert csv_text.splitlines()[1].startswith("shake,common,best grasp,stiff,base,4,1,3,0,0,75.00")
     doc = results_markdown(tmp_path, tmp_path / "results.md")
     assert "## Are the two models separable on these trials?" in doc and "| shake | common | best grasp | 4 |" in doc
+
+
+def test_wrong_stiffness_input_pairs_with_the_correct_input_of_the_same_view_and_rank(tmp_path):
+    _two_model_run(tmp_path)
+    manifest = json.loads((tmp_path / "run.json").read_text())
+    write_json_atomic(tmp_path / "run.json", {**manifest, "experiments": ["main", "sensitivity"]})
+    sens = {"experiment": "sensitivity"}
+    recs = [
+        _trial(0, "stiff", "S", "a", 2e4, 0, True), _trial(1, "stiff", "S", "a", 2e4, 0, False,
+                                                           input_error_pct=-60.0, **sens),       # only correct
+        _trial(2, "stiff", "S", "b", 2e4, 0, False), _trial(3, "stiff", "S", "b", 2e4, 0, True,
+                                                            input_error_pct=-60.0, **sens),      # only wrong
+        _trial(4, "stiff", "S", "a", 2e9, 1, True), _trial(5, "stiff", "S", "a", 2e9, 1, True,
+                                                           input_error_pct=-60.0, **sens),       # both
+        _trial(6, "stiff", "S", "a", 2e9, 0, True, input_error_pct=-60.0, **sens),               # no partner
+        _trial(7, "stiff", "S", "a", 2e4, 0, None, input_error_pct=30.0, **sens),                # sim failed
+        _trial(8, "stiff", "S", "a", 2e4, 0, False, input_error_pct=30.0, **sens),
+        _trial(9, "base", "B", "a", 2e4, 0, False),                                              # other model
+    ]
+    rows = dict(paired.sensitivity_pairs(recs, "stiff", "common"))
+    assert set(rows) == {-60.0, 30.0}
+    assert (rows[-60.0].both, rows[-60.0].a_only, rows[-60.0].b_only, rows[-60.0].neither) == (1, 1, 1, 0)
+    assert (rows[30.0].pairs, rows[30.0].a_only) == (1, 1)
+    store = ResultStore(tmp_path)
+    for r in recs:
+        store.append(r)
+    summary = report.write_outputs(tmp_path)
+    assert summary["sensitivity"]["stiff|paired"]["-60"]["pairs"] == 3
+    doc = results_markdown(tmp_path, tmp_path / "results.md")
+    assert "**Does a wrong stiffness input cost grasps?**" in doc and "| -60 | 3 | 1 | 1 | 1 | 0 | +0.0 |" in doc
