@@ -140,7 +140,7 @@ def sensitivity_cells(records, model: str, object_set: str, expected: int, error
             continue
         if ranks is not None and r.get("rank", 0) not in ranks:
             continue
-        if r["experiment"] == "sensitivity" or (r["experiment"] == "main" and r["input_error_pct"] == 0):
+        if r["experiment"] == "sensitivity" or is_main_correct_input(r):
             cell = cells.get(float(r["input_error_pct"]))
             if cell is not None:
                 cell.add(r)

@@ -78,7 +78,6 @@ def test_success_by_rank_and_any_rank_per_view(tmp_path):
     assert "| common | with stiffness (stiff) | 33.3 (1/3; 3 of 4 run) |" in md
 
 
-
 def test_sensitivity_adds_like_for_like_columns_while_ranks_are_partial(tmp_path):
     from defgg_ros.evaluation.jobs import SENSITIVITY_ERRORS_PCT
 
