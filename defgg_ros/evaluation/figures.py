@@ -26,15 +26,24 @@ def _save(fig, path) -> None:
 _SCOPE_STYLES = {"all": ("s-", "tab:blue", 6), "ranks": ("^--", "tab:green", None), "best": ("o:", "tab:orange", -11)}
 
 
+def common_n_label(counts) -> str:
+    """', n = N per point' when every point of a curve has the same n, else '' (each point is labelled)."""
+    distinct = set(counts)
+    return f", n = {distinct.pop()} per point" if len(distinct) == 1 else ""
+
+
 def sensitivity_plot(scopes: dict, path, label: str) -> None:
-    """Success over all stiffnesses vs stiffness input error, one curve per grasp scope; n annotated."""
+    """Success over all stiffnesses vs stiffness input error, one curve per grasp scope; n in the legend
+    when a curve has one n, else at each point."""
     fig, ax = plt.subplots(figsize=(5.5, 3.8))
     for key, (scope_label, cells) in scopes.items():
         style, color, dy = _SCOPE_STYLES[key]
         xs = [e for e, c in cells.items() if c.rate_pct is not None]
         ys = [cells[e].rate_pct for e in xs]
-        ax.plot(xs, ys, style, color=color, label=f"{label}, {scope_label} (this simulator)")
-        for x, y in zip(xs, ys) if dy is not None else ():
+        same_n = common_n_label([cells[x].graded for x in xs])
+        ax.plot(xs, ys, style, color=color, label=f"{label}, {scope_label} (this simulator{same_n})")
+        # One n for the whole curve goes in the legend; per-point labels only when they differ.
+        for x, y in zip(xs, ys) if dy is not None and not same_n else ():
             ax.annotate(f"n={cells[x].graded}", (x, y), textcoords="offset points", xytext=(0, dy),
                         ha="center", fontsize=7, color=color)
     px, py = zip(*PAPER_SENSITIVITY)

@@ -118,3 +118,9 @@ def test_sensitivity_adds_like_for_like_columns_while_ranks_are_partial(tmp_path
                 store.append({**_rec(i, "stiff", "S", e, False, experiment="sensitivity", err=float(err), obj=obj),
                               "rank": 2})
     assert "stiff|ranks" not in report.write_outputs(tmp_path)["sensitivity"]   # all ranks run
+
+
+def test_sensitivity_curve_states_one_n_in_the_legend_only_when_every_point_shares_it():
+    from defgg_ros.evaluation.figures import common_n_label
+    assert common_n_label([135, 135, 135]) == ", n = 135 per point"
+    assert common_n_label([135, 124, 135]) == ""
