@@ -4,6 +4,7 @@ import json
 
 from defgg_ros.atomic import write_json_atomic
 from defgg_ros.evaluation import report
+from defgg_ros.evaluation.figures import common_n_label
 from defgg_ros.evaluation.store import ResultStore
 
 
@@ -121,6 +122,5 @@ def test_sensitivity_adds_like_for_like_columns_while_ranks_are_partial(tmp_path
 
 
 def test_sensitivity_curve_states_one_n_in_the_legend_only_when_every_point_shares_it():
-    from defgg_ros.evaluation.figures import common_n_label
     assert common_n_label([135, 135, 135]) == ", n = 135 per point"
     assert common_n_label([135, 124, 135]) == ""
