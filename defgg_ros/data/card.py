@@ -66,6 +66,7 @@ def render_card(root, grasps_per_scene: int | None = None) -> str:
         f"- Labelled: {total['pos'] + total['neg']} (positive {total['pos']}, negative {total['neg']}); "
         f"simulation failures (exploded/timeout, never labels): {total['fail']}.",
         "- Trials run in passes over all scenes, so a partial dataset covers every object and modulus evenly.",
+        *_coverage_lines(rows, planned),
         "", "## Per modulus", "", "| E (Pa) | body | trials | positive | negative | of them lift failures | failed "
         "| mean CPU s/trial | positives with a direction held < threshold |",
         "|---|---|---|---|---|---|---|---|---|"]
@@ -106,6 +107,21 @@ MESH_NOTE = ("Tet meshes: fTetWild is not deterministic (the same surface gives 
              "so since 2026-11-24 every trial simulates the library's frozen meshes (defgg_ros/sim/tet_meshes). "
              "Earlier trials ran on meshes regenerated per machine: the 'tet nodes' column is the first "
              "scene render's, and a grasp near the threshold can flip with the mesh (bench/README.md).")
+
+
+def _coverage_lines(rows, planned) -> list[str]:
+    """Which objects got trials, and how many labelled grasps a scene with candidates has."""
+    names = sorted({n for n, _ in rows})
+    without = [n for n in names if planned.get(n) == 0]
+    per_scene = sorted(r["pos"] + r["neg"] for (n, _), r in rows.items() if n not in without)
+    lines = [f"- Objects with trials: {len(names) - len(without)} of {len(names)}."]
+    if without:
+        lines.append(f"- No candidate passed the hand/table collision filter (scene images only, no trials): "
+                     f"{', '.join(without)}.")
+    if per_scene:
+        lines.append(f"- Labelled grasps per scene with candidates: min {per_scene[0]}, median "
+                     f"{per_scene[len(per_scene) // 2]}, max {per_scene[-1]}.")
+    return lines
 
 
 def _protocol_line(gen: dict) -> str:

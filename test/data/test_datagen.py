@@ -184,3 +184,15 @@ def test_card_states_the_shake_early_stop_the_dataset_was_made_with():
     assert "40/sqrt(k) m/s^2 from the threshold after k >= 4 directions" in _protocol_line(legacy)
     header["trial_settings"]["confident_stop"] = False
     assert "no early stop on the measured mean" in _protocol_line(header)
+
+
+def test_card_names_objects_without_candidates_and_counts_labels_per_scene():
+    from defgg_ros.data.card import _coverage_lines
+
+    rows = {("box", 2e4): {"pos": 3, "neg": 1}, ("box", 2e9): {"pos": 6, "neg": 0},
+            ("cone", 2e4): {"pos": 0, "neg": 0}, ("cone", 2e9): {"pos": 0, "neg": 0}}
+    lines = _coverage_lines(rows, {"box": 6, "cone": 0})
+    assert lines[0] == "- Objects with trials: 1 of 2."
+    assert "(scene images only, no trials): cone." in lines[1]
+    assert lines[2] == "- Labelled grasps per scene with candidates: min 4, median 6, max 6."
+    assert _coverage_lines(rows, {"box": 6, "cone": 2})[0] == "- Objects with trials: 2 of 2."
