@@ -116,11 +116,11 @@ def _coverage_lines(rows, planned) -> list[str]:
     per_scene = sorted(r["pos"] + r["neg"] for (n, _), r in rows.items() if n not in without)
     lines = [f"- Objects with trials: {len(names) - len(without)} of {len(names)}."]
     if without:
-        lines.append(f"- No candidate passed the hand/table collision filter (scene images only, no trials): "
-                     f"{', '.join(without)}.")
+        lines.append(f"- No candidate passed the sampler's filters (an antipodal pair at the dataset's grasp height, "
+                     f"no hand/table collision), so scene images only, no trials: {', '.join(without)}.")
     if per_scene:
         lines.append(f"- Labelled grasps per scene with candidates: min {per_scene[0]}, median "
-                     f"{per_scene[len(per_scene) // 2]}, max {per_scene[-1]}.")
+                     f"{np.median(per_scene):g}, max {per_scene[-1]}.")
     return lines
 
 

@@ -193,6 +193,6 @@ def test_card_names_objects_without_candidates_and_counts_labels_per_scene():
             ("cone", 2e4): {"pos": 0, "neg": 0}, ("cone", 2e9): {"pos": 0, "neg": 0}}
     lines = _coverage_lines(rows, {"box": 6, "cone": 0})
     assert lines[0] == "- Objects with trials: 1 of 2."
-    assert "(scene images only, no trials): cone." in lines[1]
-    assert lines[2] == "- Labelled grasps per scene with candidates: min 4, median 6, max 6."
+    assert "no trials: cone." in lines[1]
+    assert lines[2] == "- Labelled grasps per scene with candidates: min 4, median 5, max 6."
     assert _coverage_lines(rows, {"box": 6, "cone": 2})[0] == "- Objects with trials: 2 of 2."
