@@ -34,7 +34,8 @@ from defgg_ros.model.preprocess import (
     network_input,
 )
 from defgg_ros.model.runtime import compile_for_inference
-from defgg_ros.stiffness import InvalidYoungsModulus, check_modulus_image
+from defgg_ros.perception.plausibility import check_moduli_plausible
+from defgg_ros.stiffness import InvalidYoungsModulus
 
 # Peaks considered when grasps whose fingers land beside the objects are ranked first.
 CLEARANCE_POOL = 10
@@ -233,9 +234,9 @@ def _check_moduli(youngs_modulus_pa, shape) -> np.ndarray:
         raise InvalidInputError(f"youngs_modulus_pa shape {moduli.shape} does not match depth {shape}")
     if not np.issubdtype(moduli.dtype, np.number):
         raise InvalidYoungsModulus(f"youngs_modulus_pa must be numeric, got dtype {moduli.dtype}")
-    # Same rules as encode_stiffness_image, checked on the full image so a bad
-    # pixel outside the crop is still reported.
-    check_modulus_image(moduli, "youngs_modulus_pa")
+    # The plausibility rule of every entry (SetStiffness, topics, requests), checked on the full
+    # image so a bad pixel outside the crop is still reported.
+    check_moduli_plausible(moduli, "youngs_modulus_pa")
     return moduli.astype(np.float32, copy=False)
 
 

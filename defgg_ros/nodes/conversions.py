@@ -32,7 +32,8 @@ from defgg_ros.perception.geometry import (
     transform_from_xyz_quaternion,
     transform_to_xyz_quaternion,
 )
-from defgg_ros.stiffness import InvalidYoungsModulus, check_modulus_image
+from defgg_ros.perception.plausibility import check_moduli_plausible
+from defgg_ros.stiffness import InvalidYoungsModulus
 
 __all__ = [
     "ConversionError", "ENCODINGS", "image_to_numpy", "numpy_to_image", "depth_msg_to_metres",
@@ -129,9 +130,9 @@ def stiffness_msg_to_pa(msg: Image) -> np.ndarray:
         raise ConversionError(f"stiffness image must be 32FC1 (Young's modulus in Pa), got {msg.encoding!r}")
     youngs_modulus_pa = image_to_numpy(msg)
     try:
-        check_modulus_image(youngs_modulus_pa)
+        check_moduli_plausible(youngs_modulus_pa)   # the same rule as SetStiffness
     except InvalidYoungsModulus as exc:
-        raise ConversionError(f"{exc} (Pa must be finite and >= 0, 0 = background)") from exc
+        raise ConversionError(f"{exc} (0 = background)") from exc
     return youngs_modulus_pa
 
 

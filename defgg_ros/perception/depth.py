@@ -3,17 +3,12 @@
 ROS cameras publish depth as 16UC1 millimetres (realsense, 0 = invalid) or
 32FC1 metres (REP 118; NaN/+-Inf = invalid). Everything downstream works in
 float32 metres with NaN for invalid pixels, so the two conventions cannot
-be mixed up later. A unit check catches the classic mistake of metres
-written into a 16UC1 image (values 0..2) or millimetres into 32FC1.
+be mixed up later. The plausibility rule (perception/plausibility.py) catches metres written
+into 16UC1 (values 0..2), millimetres in 32FC1 and byte-swapped 16UC1 (is_bigendian mismatch).
 """
 import numpy as np
 
-from defgg_ros.constants import CAMERA_FAR_M, CAMERA_NEAR_M
-
-MILLIMETRES_PER_METRE = 1000.0
-# 32FC1 depth whose median is this many times the camera's far limit is not
-# metres (a 0.4 m table would read 400 in millimetres).
-IMPLAUSIBLE_FAR_FACTOR = 10.0
+from defgg_ros.perception.plausibility import MILLIMETRES_PER_METRE, ImplausibleDepth, check_depth_plausible
 
 DEPTH_ENCODINGS_MM = ("16UC1", "mono16")
 DEPTH_ENCODINGS_M = ("32FC1",)
@@ -47,12 +42,7 @@ def _from_millimetres(array: np.ndarray) -> np.ndarray:
     valid = array > 0
     if not np.any(valid):
         raise DepthError("depth image has no valid pixel (all zero)")
-    median_mm = float(np.median(array[valid]))
-    if median_mm < CAMERA_NEAR_M * MILLIMETRES_PER_METRE:
-        raise DepthError(
-            f"16UC1 depth median is {median_mm:.0f}, below the camera's near limit of "
-            f"{CAMERA_NEAR_M * MILLIMETRES_PER_METRE:.0f} mm: the values look like metres; "
-            "send millimetres in 16UC1 or metres in 32FC1")
+    _check_plausible(array, "16UC1", float(np.median(array[valid])) / MILLIMETRES_PER_METRE)
     depth_m = array.astype(np.float32) / np.float32(MILLIMETRES_PER_METRE)
     depth_m[~valid] = np.nan
     return depth_m
@@ -65,13 +55,16 @@ def _from_metres(array: np.ndarray) -> np.ndarray:
     valid = np.isfinite(depth_m) & (depth_m > 0)
     if not np.any(valid):
         raise DepthError("depth image has no valid pixel (all NaN, Inf or <= 0)")
-    median_m = float(np.median(depth_m[valid]))
-    if median_m > CAMERA_FAR_M * IMPLAUSIBLE_FAR_FACTOR:
-        raise DepthError(
-            f"32FC1 depth median is {median_m:.1f} m, far beyond the camera's {CAMERA_FAR_M} m range: "
-            "the values look like millimetres; send metres in 32FC1 or millimetres in 16UC1")
+    _check_plausible(array, "32FC1", float(np.median(depth_m[valid])))
     depth_m[~valid] = np.nan
     return depth_m
+
+
+def _check_plausible(array: np.ndarray, encoding: str, median_m: float) -> None:
+    try:
+        check_depth_plausible(array, encoding, median_m)
+    except ImplausibleDepth as exc:
+        raise DepthError(str(exc)) from exc
 
 
 def metres_to_millimetres_u16(depth_m: np.ndarray) -> np.ndarray:

@@ -13,13 +13,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from defgg_ros.perception.plausibility import (  # noqa: F401 - the limits are re-exported for callers
+    PLAUSIBLE_YOUNGS_MODULUS_MAX_PA,
+    PLAUSIBLE_YOUNGS_MODULUS_MIN_PA,
+    check_moduli_plausible,
+)
 from defgg_ros.stiffness import InvalidYoungsModulus, check_youngs_modulus
-
-# Outside these limits a value is a unit mistake, not a material: softer than
-# any gel (1 Pa) or stiffer than diamond (~1.2e12 Pa). Inside them, the
-# stiffness encoding clips to its own range.
-PLAUSIBLE_YOUNGS_MODULUS_MIN_PA = 1.0
-PLAUSIBLE_YOUNGS_MODULUS_MAX_PA = 1.2e12
 
 
 @dataclass(frozen=True)
@@ -68,10 +67,7 @@ def check_plausible_modulus(youngs_modulus_pa, what: str = "Young's modulus") ->
         value = check_youngs_modulus(youngs_modulus_pa)
     except InvalidYoungsModulus as exc:
         raise InvalidYoungsModulus(f"{what}: {exc}") from exc
-    if not PLAUSIBLE_YOUNGS_MODULUS_MIN_PA <= value <= PLAUSIBLE_YOUNGS_MODULUS_MAX_PA:
-        raise InvalidYoungsModulus(
-            f"{what} = {value:g} Pa is outside the plausible range "
-            f"[{PLAUSIBLE_YOUNGS_MODULUS_MIN_PA:g}, {PLAUSIBLE_YOUNGS_MODULUS_MAX_PA:g}] Pa (wrong unit?)")
+    check_moduli_plausible(value, what, background_allowed=False)   # the rule of every stiffness entry
     return value
 
 
