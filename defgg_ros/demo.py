@@ -8,6 +8,11 @@ bin. Prints a table (E, grasp width, quality, phase reached, held after
 transfer, in the bin) and writes summary.json, grasps.png (depth, stiffness,
 quality map and chosen grasp per object) and cell.log (every node's log) to
 --out.
+
+The cell runs in a private ROS domain with localhost-only discovery (the first
+line printed names it), so it never reaches a real arm's controller on the
+lab network; `--ros-domain inherit` (or DEFGG_ROS_DOMAIN=inherit) uses the
+shell's ROS_DOMAIN_ID and discovery instead.
 """
 import argparse
 import sys
@@ -30,6 +35,7 @@ from defgg_ros.bringup.demo_geometry import (
 from defgg_ros.bringup.demo_report import FramePanels, PickRow, format_table, save_figure, write_summary
 from defgg_ros.bringup.node_set import NodeSetError, load_node_set
 from defgg_ros.bringup.supervisor import Bringup, BringupError
+from defgg_ros.ros_domain import ISOLATION_ENV, apply_domain_choice, default_domain_choice
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_SCENE = ROOT / "sim_bringup" / "scenes" / "demo.yaml"
@@ -53,6 +59,9 @@ def parse_args(argv=None):
                         help="cap on the simulation's real-time factor (default 0: as fast as the CPU allows)")
     parser.add_argument("--ready-timeout", type=float, default=180.0, help="seconds for the cell to come up")
     parser.add_argument("--pick-timeout", type=float, default=900.0, help="wall seconds allowed per pick")
+    parser.add_argument("--ros-domain", default=default_domain_choice(), metavar="private|inherit|ID",
+                        help="ROS domain of the cell: private (default: a random id, localhost-only discovery), "
+                             f"inherit (the shell's ROS_DOMAIN_ID and discovery) or an id; default from ${ISOLATION_ENV}")
     return parser.parse_args(argv)
 
 
@@ -313,6 +322,12 @@ def _report(out_dir, rows, panels, args, wall_s):
 
 def main(argv=None) -> int:
     args = parse_args(argv)
+    try:  # first: before any rclpy context or node process exists (they read the domain at start-up)
+        domain_line = f"defgg-demo: {apply_domain_choice(args.ros_domain)}"
+        print(domain_line, flush=True)
+    except ValueError as exc:
+        print(f"defgg-demo: --ros-domain: {exc}", file=sys.stderr)
+        return 2
     for path, what in ((args.scene, "scene"), (args.model, "model")):
         if not Path(path).is_file():
             print(f"defgg-demo: {what} file {path} does not exist", file=sys.stderr)
@@ -320,6 +335,7 @@ def main(argv=None) -> int:
     out_dir = _out_dir(args)
     out_dir.mkdir(parents=True, exist_ok=True)
     with open(out_dir / "cell.log", "w", encoding="utf-8") as log:
+        print(domain_line, file=log, flush=True)
         return run_demo(args, out_dir, log)
 
 

@@ -3,18 +3,28 @@
     defgg-bringup                       # simulated cell: driver, segmentation, inference, executor
     defgg-bringup --set real_cell       # the three non-simulated nodes (real robot + camera drivers run apart)
     defgg-bringup --scene sim_bringup/scenes/soft_box.yaml --gui
+    defgg-bringup --ros-domain 42       # the sim cell in domain 42 (localhost-only discovery)
+
+ROS domain: the simulated cell runs in a private, random domain with
+localhost-only discovery (the first log line names it), so it never reaches a
+real arm's controller; `--ros-domain inherit` (or DEFGG_ROS_DOMAIN=inherit)
+uses the shell's ROS_DOMAIN_ID and discovery. The real cell inherits them and
+warns when it finds a simulated driver on that domain.
 
 Waits until every node is ready (its service/action/topic is in the ROS
 graph), forwards their logs as '[node] ...', and stops them all on Ctrl-C /
 SIGTERM or as soon as one dies (naming it; exit code 1).
 """
 import argparse
+import os
 import signal
 import sys
 import threading
+import time
 
 from defgg_ros.bringup.node_set import NodeSetError, load_node_set
 from defgg_ros.bringup.supervisor import DEFAULT_READY_TIMEOUT_S, Bringup, BringupError
+from defgg_ros.ros_domain import ISOLATION_ENV, apply_domain_choice, parse_domain_choice
 
 DRIVER = "fake_panda_driver"
 
@@ -30,6 +40,10 @@ def parse_args(argv=None):
                         help="override one node parameter, e.g. -p fake_panda_driver:max_real_time_factor:=0")
     parser.add_argument("--ready-timeout", type=float, default=DEFAULT_READY_TIMEOUT_S,
                         help="seconds to wait for every node to become ready")
+    parser.add_argument("--ros-domain", default=None, metavar="private|inherit|ID",
+                        help="ROS domain of the cell's graph: private (sim sets' default: random id, localhost-only "
+                             "discovery), inherit (the shell's; real_cell's default) or an id (localhost-only); "
+                             f"default also from ${ISOLATION_ENV}")
     parser.add_argument("--record", metavar="PATH",
                         help="also record the session to this bag folder (runs defgg-record alongside)")
     return parser.parse_args(argv)
@@ -64,13 +78,42 @@ def record_hook(path: str, scene: str | None) -> dict:
     return {"recorder": argv}
 
 
+# How often the real cell looks again for a simulated driver on its domain (s).
+INTRUDER_CHECK_PERIOD_S = 30.0
+
+
+def domain_choice(args, node_set, env=None) -> str | int:
+    """--ros-domain, else $DEFGG_ROS_DOMAIN, else the node set's own default (sim: private, real: inherit)."""
+    env = os.environ if env is None else env
+    text = args.ros_domain or env.get(ISOLATION_ENV) or node_set.ros_domain
+    return parse_domain_choice(text)
+
+
+def warn_about_intruders(bringup: Bringup) -> list:
+    """Print a warning for every node of the set's warn_if_present list found on its domain; returns them."""
+    wanted = bringup.node_set.warn_if_present
+    found = bringup.nodes_present(wanted)
+    print(f"defgg-bringup: looked for {', '.join(wanted)} on this domain: "
+          f"{'found ' + ', '.join(found) if found else 'none'}", flush=True)
+    for name in found:
+        domain = os.environ.get("ROS_DOMAIN_ID", "0")
+        print(f"defgg-bringup: WARNING: node '{name}' (a simulated driver) is running on this ROS domain "
+              f"(ROS_DOMAIN_ID={domain}): it may answer in the real robot's place; stop it or move it to "
+              "another domain", file=sys.stderr, flush=True)
+    return found
+
+
 def supervise(bringup: Bringup, stop_requested: threading.Event) -> int:
     """Until Ctrl-C/SIGTERM (exit 0) or a node dies (exit 1)."""
+    next_check = time.monotonic() + INTRUDER_CHECK_PERIOD_S
     while not stop_requested.wait(0.2):
         dead = bringup.failed_node()
         if dead is not None:
             print(f"defgg-bringup: {dead.describe()}; stopping the others", file=sys.stderr, flush=True)
             return 1
+        if bringup.node_set.warn_if_present and time.monotonic() >= next_check:
+            next_check = time.monotonic() + INTRUDER_CHECK_PERIOD_S
+            warn_about_intruders(bringup)
     print("defgg-bringup: stop requested; stopping the nodes", flush=True)
     return 0
 
@@ -82,9 +125,11 @@ def main(argv=None) -> int:
         signal.signal(sig, lambda *_: stop_requested.set())
     try:
         node_set = load_node_set(args.set)
+        # First, before any rclpy context or child process exists: they read the domain at start-up.
+        print(f"defgg-bringup: {apply_domain_choice(domain_choice(args, node_set))}", flush=True)
         extra = record_hook(args.record, args.scene) if args.record else {}
         bringup = Bringup(node_set, parse_overrides(args), extra)
-    except (NodeSetError, BringupError) as exc:
+    except (NodeSetError, BringupError, ValueError) as exc:
         print(f"defgg-bringup: {exc}", file=sys.stderr)
         return 2
     code = 1
@@ -94,6 +139,8 @@ def main(argv=None) -> int:
         print(f"defgg-bringup: started {started}; waiting until ready", flush=True)
         took = bringup.wait_ready(args.ready_timeout, stop_requested)
         print(f"defgg-bringup: cell ready in {took:.1f} s ({node_set.name})", flush=True)
+        if node_set.warn_if_present:
+            warn_about_intruders(bringup)
         code = supervise(bringup, stop_requested)
     except BringupError as exc:
         print(f"defgg-bringup: {exc}", file=sys.stderr, flush=True)

@@ -5,6 +5,11 @@ parameter files (`--ros-args --params-file`), extra parameter overrides, and
 how to tell it is ready (a service, an action server or a publisher on a
 topic becomes visible in the ROS graph). `use_sim_time: true` gives every
 node of the set use_sim_time:=true (the simulated cell's clock is /clock).
+`ros_domain:` private (the default: a random domain, localhost-only discovery,
+so a simulated cell never reaches a real robot's controller) or inherit (the
+shell's ROS_DOMAIN_ID and discovery: the real cell, whose drivers run apart);
+`warn_if_present:` node names that must not share the set's domain (the real
+cell warns when it finds the simulated driver).
 Pure: no rclpy.
 """
 import sys
@@ -12,6 +17,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import yaml
+
+from defgg_ros.ros_domain import parse_domain_choice
 
 READY_KINDS = ("service", "action", "topic")
 
@@ -41,6 +48,8 @@ class NodeSet:
     use_sim_time: bool
     nodes: tuple
     config_dir: Path
+    ros_domain: str = "private"          # the --ros-domain default for this set
+    warn_if_present: tuple = ()          # node names that must not be on the set's domain
 
 
 def config_dir() -> Path:
@@ -101,7 +110,16 @@ def load_node_set(set_name_or_path: str) -> NodeSet:
     names = [n.name for n in nodes]
     if len(set(names)) != len(names):
         raise NodeSetError(f"{path}: node names must be unique, got {names}")
-    return NodeSet(str(raw.get("name", path.stem)), bool(raw.get("use_sim_time", False)), nodes, path.parent)
+    domain = str(raw.get("ros_domain", "private"))
+    try:
+        parse_domain_choice(domain)
+    except ValueError as exc:
+        raise NodeSetError(f"{path}: ros_domain: {exc}") from None
+    warn = raw.get("warn_if_present") or []
+    if not isinstance(warn, list) or not all(isinstance(n, str) and n for n in warn):
+        raise NodeSetError(f"{path}: warn_if_present must be a list of node names, got {warn!r}")
+    return NodeSet(str(raw.get("name", path.stem)), bool(raw.get("use_sim_time", False)), nodes, path.parent,
+                   domain, tuple(warn))
 
 
 def _ros_value(value) -> str:

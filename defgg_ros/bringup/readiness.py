@@ -10,6 +10,8 @@ from defgg_ros.bringup.node_set import ReadyCheck
 
 # Graph queries are cheap; spinning the probe between them lets discovery progress.
 PROBE_SPIN_S = 0.1
+# How long a fresh probe listens before it trusts that a node is absent (discovery on one host: < 1 s).
+DISCOVERY_WAIT_S = 2.0
 
 
 class ReadinessProbe:
@@ -38,6 +40,15 @@ class ReadinessProbe:
         if check.kind == "service":
             return check.name in services
         return f"{check.name}/_action/send_goal" in services
+
+    def nodes_present(self, names, discovery_s: float = DISCOVERY_WAIT_S) -> list:
+        """Which of `names` are in the graph, looking for `discovery_s` (a fresh probe needs time to see it)."""
+        found = set()
+        deadline = time.monotonic() + discovery_s
+        while time.monotonic() < deadline and len(found) < len(names):
+            found |= set(names) & set(self.node.get_node_names())
+            self.spin_once()
+        return sorted(found)
 
     def spin_once(self):
         # Nothing is subscribed: this only waits for graph events, bounded.

@@ -94,6 +94,18 @@ class Bringup:
             raise BringupError(f"not ready after {timeout_s:.0f} s: {details}")
         return time.monotonic() - t0
 
+    def nodes_present(self, names) -> list:
+        """Which of `names` are nodes in this process's ROS domain right now (after a short discovery wait)."""
+        if not names:
+            return []
+        from defgg_ros.bringup.readiness import ReadinessProbe
+
+        probe = ReadinessProbe()
+        try:
+            return probe.nodes_present(names)
+        finally:
+            probe.close()
+
     def stop(self) -> dict:
         """Stop every process (reverse start order); returns name -> exit code."""
         codes = {}
