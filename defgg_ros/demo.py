@@ -61,7 +61,8 @@ def parse_args(argv=None):
     parser.add_argument("--pick-timeout", type=float, default=900.0, help="wall seconds allowed per pick")
     parser.add_argument("--ros-domain", default=default_domain_choice(), metavar="private|inherit|ID",
                         help="ROS domain of the cell: private (default: a random id, localhost-only discovery), "
-                             f"inherit (the shell's ROS_DOMAIN_ID and discovery) or an id; default from ${ISOLATION_ENV}")
+                             "inherit (the shell's ROS_DOMAIN_ID and discovery) or an id; "
+                             f"default from ${ISOLATION_ENV}")
     return parser.parse_args(argv)
 
 
