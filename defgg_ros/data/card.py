@@ -135,7 +135,7 @@ def _protocol_line(gen: dict) -> str:
             if settings["confident_stop"] else "no early stop on the measured mean")
     mesh = gen.get("sim_max_tet_nodes")
     return (f"Trial protocol{'' if recorded else ' (not recorded in the header: the generator of the time)'}: "
-            f"close settle {settings['close_settle_s']} s, lift {settings['lift_height_m'] * 100:.0f} cm in "
+            f"{_protocol_summary(settings)}; close settle {settings['close_settle_s']} s, lift {settings['lift_height_m'] * 100:.0f} cm in "
             f"{settings['lift_time_s']} s, hold {settings['hold_time_s']} s; {stop}; FEM mesh: "
             + (f"at most {mesh} nodes (soft bodies)" if mesh else "the shipped mesh")
             + ("; candidates at the evaluation's grasp height (--grasp-height executor)"
@@ -146,6 +146,33 @@ def _protocol_line(gen: dict) -> str:
                "(bench/README.md): some soft lift failures here are artifacts of it"))
 
 
+def _protocol_summary(settings: dict) -> str:
+    from defgg_ros.sim.trial import PROTOCOL_DEFGRASPSIM, TrialSettings
+
+    known = {k: v for k, v in settings.items() if k in TrialSettings.__dataclass_fields__}
+    material = TrialSettings(**known).material()
+    nu = material["poisson_ratio"]
+    nu_text = f"nu {nu}" if nu is not None else "nu of the object (0.4)"
+    if settings["protocol"] == PROTOCOL_DEFGRASPSIM:
+        rule = ("**defgraspsim** (zero gravity after settling, grip force FOS*m*g/mu split over the fingers, table "
+                "moved away for the pickup, fingers locked after it (rigid stand-in held with F/2), lost when either "
+                "finger has no contact)")
+    else:
+        rule = ("**legacy** (gravity on, 2 N + 0.5 N per decade a finger, fingers force-held, lost when both fingers "
+                "let go or the centroid moved 20 mm)")
+    return f"{rule}, effective friction {material['effective_friction']:.2f}, Neo-Hookean FEM, {nu_text}"
+
+
+def signal_section(root) -> list[str]:
+    """The signal report of the dataset's trials, as card lines (empty when there is nothing to report)."""
+    from defgg_ros.data.signal import SignalError, read_trial_records, render_markdown, signal_report
+
+    try:
+        return ["", render_markdown(signal_report(read_trial_records(root)), "Signal report (defgg-datagen signal)")]
+    except SignalError:
+        return []
+
+
 def _share(rows) -> str:
     positives = sum(r["pos"] for r in rows)
     slips = sum(r["pos_slip"] for r in rows)
@@ -154,5 +181,6 @@ def _share(rows) -> str:
 
 def write_card(root, cfg=None) -> Path:
     path = Path(root) / "card.md"
-    write_text_atomic(path, render_card(root, getattr(cfg, "grasps_per_scene", None)))
+    text = render_card(root, getattr(cfg, "grasps_per_scene", None))
+    write_text_atomic(path, text + "\n".join(signal_section(root)))
     return path

@@ -290,6 +290,25 @@ def resolve_grasp_height(out, requested: str | None) -> str:
     return DatagenConfig.grasp_height
 
 
+def recorded_protocol(generator: dict) -> str:
+    """The trial protocol a dataset header records (headers before 2026-11-26 lack it: legacy)."""
+    return (generator.get("trial_settings") or {}).get("protocol", "legacy")
+
+
+def resolve_protocol(out, requested: str | None) -> str:
+    """The trial protocol of a run: as requested; else the dataset's own when resuming one, else the
+    default (TrialSettings.protocol, defgraspsim)."""
+    from defgg_ros.sim.trial import TrialSettings
+
+    if requested is not None:
+        return requested
+    from defgg_ros.data.format import check_header
+
+    if (Path(out) / "dataset.json").exists():
+        return recorded_protocol(check_header(out).get("generator", {}))
+    return TrialSettings.protocol
+
+
 def check_resumable(cfg: DatagenConfig) -> None:
     """A resumed dataset keeps its FEM mesh and trial protocol (labels depend on both)."""
     from defgg_ros.data.format import DatasetError, check_header

@@ -22,6 +22,13 @@ Example (background, one worker):
   nohup defgg-datagen --out datasets/fem_v2 --workers 1 > datasets/fem_v2.log 2>&1 &
 Resume the dataset of the shipped models (made with the lift of its time):
   defgg-datagen --out datasets/fem_v1 --settings '{"lift_time_s": 0.3, "hold_time_s": 0.1}'
+
+Trial protocol (--protocol): defgraspsim (default for a new dataset; the paper's labels: zero gravity,
+grip force FOS*m*g/mu, fingers locked after pickup, lost when either finger lets go) or legacy
+(fem_v1-v4). A resumed dataset keeps its own. docs/dataset.md, "Trial protocols".
+
+Signal report (do the labels carry "stiffness changes which grasp is good"?):
+  defgg-datagen signal datasets/fem_v4 [--json out.json] [--md out.md]
 """
 
 
@@ -60,20 +67,61 @@ def build_parser() -> argparse.ArgumentParser:
                          "(results/notes_height.md); 'contacts' (the datasets up to fem_v3) = at the sampled "
                          "contacts, anywhere on the object's side. Fixed for the life of a dataset: a resumed "
                          "dataset keeps its own rule when this is not given.")
+    ap.add_argument("--protocol", choices=("defgraspsim", "legacy"), default=None,
+                    help="trial protocol: defgraspsim (default for a new dataset) or legacy (fem_v1-v4); a resumed "
+                         "dataset keeps its own when this is not given")
     ap.add_argument("--no-progress", action="store_true", help="no progress bar")
     return ap
 
 
+def build_signal_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(
+        prog="defgg-datagen signal",
+        description="Signal report of a dataset or pilot folder, from its trial records alone: positive rate per "
+                    "modulus, within-scene share of the held-acceleration variance, reversal rates and the "
+                    "stiffness-aware minus stiffness-blind oracle gap (docs/dataset.md, 'Signal report').")
+    ap.add_argument("folder", type=Path, help="a folder with trials/*.jsonl (a dataset or a pilot)")
+    ap.add_argument("--json", type=Path, default=None, help="also write the figures as JSON here")
+    ap.add_argument("--md", type=Path, default=None, help="also write the Markdown report here")
+    ap.add_argument("--title", default=None, help="heading of the Markdown report (default: the folder name)")
+    return ap
+
+
+def signal_main(argv) -> int:
+    from defgg_ros.atomic import write_json_atomic, write_text_atomic
+    from defgg_ros.data.signal import SignalError, read_trial_records, render_markdown, signal_report
+
+    args = build_signal_parser().parse_args(argv)
+    try:
+        report = signal_report(read_trial_records(args.folder))
+    except (SignalError, OSError, ValueError, KeyError) as exc:
+        print(f"defgg-datagen signal: error: {exc}", file=sys.stderr)
+        return 2
+    text = render_markdown(report, args.title or f"Signal report: {args.folder.name}")
+    if args.json:
+        write_json_atomic(args.json, report)
+    if args.md:
+        write_text_atomic(args.md, text)
+    print(text, end="")
+    return 0
+
+
 def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["signal"]:
+        return signal_main(argv[1:])
     args = build_parser().parse_args(argv)
-    from defgg_ros.data.datagen import DatagenConfig, generate, resolve_grasp_height
+    from defgg_ros.data.datagen import DatagenConfig, generate, resolve_grasp_height, resolve_protocol
     from defgg_ros.data.format import DatasetError
     from defgg_ros.sim.trial import TrialSettings
 
     try:
         settings = json.loads(args.settings)
+        if not isinstance(settings, dict):
+            raise TypeError("--settings must be a JSON object")
+        settings.setdefault("protocol", resolve_protocol(args.out, args.protocol))
         TrialSettings(**settings)  # validate names now, not in a worker
-    except (json.JSONDecodeError, TypeError) as exc:
+    except (json.JSONDecodeError, TypeError, ValueError) as exc:
         print(f"defgg-datagen: bad --settings: {exc}", file=sys.stderr)
         return 2
     if 0 < args.sim_max_tet_nodes < 4 or args.sim_max_tet_nodes < 0:

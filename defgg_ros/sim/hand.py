@@ -33,6 +33,11 @@ FINGER_MASS_KG = 0.005
 FINGER_FRICTION = 0.8
 HOLD_FORCE_N = 2000.0     # constraint force holding the palm at its target
 GEAR_FORCE_N = 500.0
+# Finger lock (DefGraspSim's protocol locks both finger joints after pickup). With the gear kept and a
+# weak drive the soft squeeze leaked to ~10 % of F/2 in a PyBullet pilot; each finger on its own stiff
+# position drive (gear released) kept ~60 %. Measured again by bench/bench_finger_lock.py.
+LOCK_FORCE_N = 500.0
+LOCK_POSITION_GAIN = 1.0
 
 
 def finger_box_centre_z_m() -> float:
@@ -90,6 +95,21 @@ class Hand:
             p.setJointMotorControl2(self.body_id, j, p.VELOCITY_CONTROL, targetVelocity=-speed_mps,
                                     force=force_n, physicsClientId=self.client)
 
+    def finger_forces_n(self) -> list:
+        """Force each finger's motor applies now (N, positive = closing)."""
+        return [-p.getJointState(self.body_id, j, physicsClientId=self.client)[3] for j in self.FINGER_LINKS]
+
+    def lock_fingers(self) -> None:
+        """Lock both fingers where they are: gear released, each on a stiff position drive."""
+        if self.gear_id is not None:
+            p.removeConstraint(self.gear_id, physicsClientId=self.client)
+            self.gear_id = None
+        for j in self.FINGER_LINKS:
+            q = p.getJointState(self.body_id, j, physicsClientId=self.client)[0]
+            p.setJointMotorControl2(self.body_id, j, p.POSITION_CONTROL, targetPosition=q, targetVelocity=0.0,
+                                    positionGain=LOCK_POSITION_GAIN, velocityGain=1.0, force=LOCK_FORCE_N,
+                                    physicsClientId=self.client)
+
     def move_to(self, pose: np.ndarray) -> None:
         """Move the palm's target pose (the constraint pulls the palm there)."""
         yaw = math.atan2(pose[1, 0], pose[0, 0])
@@ -142,8 +162,10 @@ def _quat(pose):
     return q
 
 
-def create_hand(client: int, world_T_tcp: np.ndarray, opening_m: float = GRIPPER_MAX_WIDTH_M) -> Hand:
-    """Create the floating hand with its TCP at `world_T_tcp`, fingers open to `opening_m`."""
+def create_hand(client: int, world_T_tcp: np.ndarray, opening_m: float = GRIPPER_MAX_WIDTH_M,
+                friction: float = FINGER_FRICTION) -> Hand:
+    """Create the floating hand with its TCP at `world_T_tcp`, fingers open to `opening_m`; `friction` is
+    the pads' own coefficient (Bullet multiplies it by the object's)."""
     if not 0.0 <= opening_m <= GRIPPER_MAX_WIDTH_M + 1e-9:
         raise ValueError(f"opening {opening_m} m outside [0, {GRIPPER_MAX_WIDTH_M}]")
     (palm_c, palm_h), (f1_c, f_h), _ = hand_boxes(0.0)
@@ -172,7 +194,7 @@ def create_hand(client: int, world_T_tcp: np.ndarray, opening_m: float = GRIPPER
         linkJointTypes=[p.JOINT_PRISMATIC] * 2, linkJointAxis=[[1, 0, 0], [-1, 0, 0]],
         physicsClientId=client)
     for link in (-1, 0, 1):
-        p.changeDynamics(body, link, lateralFriction=FINGER_FRICTION, jointLowerLimit=0.0,
+        p.changeDynamics(body, link, lateralFriction=friction, jointLowerLimit=0.0,
                          jointUpperLimit=GRIPPER_MAX_WIDTH_M / 2, physicsClientId=client)
     hold = p.createConstraint(body, -1, -1, -1, p.JOINT_FIXED, [0, 0, 0], [0, 0, 0],
                               world_T_tcp[:3, 3].tolist(), childFrameOrientation=_quat(world_T_tcp),

@@ -275,10 +275,11 @@ def object_pose(position_xy_m, yaw_rad, table_top_z_m=0.0) -> np.ndarray:
 
 
 def load_object(client: int, spec: ObjectSpec, position_xy_m=(0.0, 0.0), yaw_rad: float = 0.0,
-                table_top_z_m: float = 0.0) -> LoadedObject:
+                table_top_z_m: float = 0.0, friction: float = OBJECT_FRICTION) -> LoadedObject:
     """Load `spec` resting on the table; soft parts as FEM soft bodies, stiff ones rigid.
 
-    The world must be a deformable world (world.create_world) when any part is soft.
+    The world must be a deformable world (world.create_world) when any part is soft. `friction` is the
+    object's own coefficient; Bullet multiplies it by the other body's in every contact.
     """
     moduli = spec.part_moduli_pa()
     softness = [is_soft(e) for e in moduli]
@@ -292,14 +293,15 @@ def load_object(client: int, spec: ObjectSpec, position_xy_m=(0.0, 0.0), yaw_rad
     parts: list = [None] * len(tets)
     rigid_idx = [i for i, soft in enumerate(softness) if not soft]
     if rigid_idx:
-        body = _load_rigid(client, [tets[i] for i in rigid_idx], [masses[i] for i in rigid_idx], world_T_object)
+        body = _load_rigid(client, [tets[i] for i in rigid_idx], [masses[i] for i in rigid_idx], world_T_object,
+                           friction)
         for link, i in enumerate(rigid_idx):
             parts[i] = LoadedPart(body, link - 1, moduli[i], False, masses[i])
     soft_idx = [i for i, soft in enumerate(softness) if soft]
     if soft_idx:
         soft_tet = tets[soft_idx[0]] if len(soft_idx) == 1 else spec.shape.union_tet
         body = _load_soft(client, soft_tet, sum(masses[i] for i in soft_idx), moduli[soft_idx[0]],
-                          spec.poisson_ratio, world_T_object)
+                          spec.poisson_ratio, world_T_object, friction)
         for i in soft_idx:
             parts[i] = LoadedPart(body, -1, moduli[i], True, masses[i])
         if rigid_idx:
@@ -321,22 +323,22 @@ def _quat(pose):
     return p.getQuaternionFromEuler([0, 0, yaw])
 
 
-def _load_soft(client, tet, mass_kg, youngs_modulus_pa, poisson_ratio, world_T_object) -> int:
+def _load_soft(client, tet, mass_kg, youngs_modulus_pa, poisson_ratio, world_T_object, friction) -> int:
     mu = youngs_modulus_pa / (2 * (1 + poisson_ratio))
     lam = youngs_modulus_pa * poisson_ratio / ((1 + poisson_ratio) * (1 - 2 * poisson_ratio))
     with meshes._stdout_silenced():  # loadSoftBody prints node/tet counts from C
-        return _load_soft_quiet(client, tet, mass_kg, mu, lam, world_T_object)
+        return _load_soft_quiet(client, tet, mass_kg, mu, lam, world_T_object, friction)
 
 
-def _load_soft_quiet(client, tet, mass_kg, mu, lam, world_T_object) -> int:
+def _load_soft_quiet(client, tet, mass_kg, mu, lam, world_T_object, friction) -> int:
     return p.loadSoftBody(
         str(tet.vtk_path), basePosition=world_T_object[:3, 3].tolist(), baseOrientation=_quat(world_T_object),
         mass=mass_kg, useNeoHookean=1, NeoHookeanMu=mu, NeoHookeanLambda=lam,
         NeoHookeanDamping=NEO_HOOKEAN_DAMPING, collisionMargin=SOFT_COLLISION_MARGIN_M,
-        frictionCoeff=OBJECT_FRICTION, useFaceContact=1, useSelfCollision=0, physicsClientId=client)
+        frictionCoeff=friction, useFaceContact=1, useSelfCollision=0, physicsClientId=client)
 
 
-def _load_rigid(client, tets, masses, world_T_object) -> int:
+def _load_rigid(client, tets, masses, world_T_object, friction) -> int:
     """One rigid multibody: part 0 as the base, further parts as fixed links (own segmentation ids)."""
     shapes_ = []
     for tet in tets:
@@ -356,7 +358,7 @@ def _load_rigid(client, tets, masses, world_T_object) -> int:
         linkInertialFrameOrientations=[[0, 0, 0, 1]] * extra, linkParentIndices=[0] * extra,
         linkJointTypes=[p.JOINT_FIXED] * extra, linkJointAxis=[[0, 0, 1]] * extra, physicsClientId=client)
     for link in range(-1, extra):
-        p.changeDynamics(body, link, lateralFriction=OBJECT_FRICTION, physicsClientId=client)
+        p.changeDynamics(body, link, lateralFriction=friction, physicsClientId=client)
     return body
 
 

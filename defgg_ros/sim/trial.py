@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
@@ -43,6 +43,23 @@ from defgg_ros.data.format import STATUS_EXPLODED, STATUS_LIFT_FAILED, STATUS_OK
 from defgg_ros.sim import hand as hand_mod
 from defgg_ros.sim import objects, world
 from defgg_ros.sim.hand import world_T_hand
+
+# Trial protocols (docs/dataset.md, "Trial protocols"). legacy: fem_v1-v4's (gravity on, grip force
+# 2 N + 0.5 N per decade a finger, fingers force-held, lost when both fingers let go or the centroid moved
+# 20 mm). defgraspsim: the protocol of the paper's labels (NVlabs/DefGraspSim): zero gravity once the
+# object has settled, total grip force FOS * m * g / mu with FOS = 1 + log10(E) / 10, the table moved away
+# for the pickup, fingers locked after it, lost as soon as either finger has no contact.
+PROTOCOL_LEGACY = "legacy"
+PROTOCOL_DEFGRASPSIM = "defgraspsim"
+PROTOCOLS = (PROTOCOL_LEGACY, PROTOCOL_DEFGRASPSIM)
+# Material per protocol: the pads' and the object's friction coefficients (Bullet multiplies them: the
+# effective mu of a finger contact is their product) and Poisson's ratio. DefGraspSim: mu 0.7, nu 0.3.
+PROTOCOL_MATERIAL = {
+    PROTOCOL_LEGACY: {"finger_friction": hand_mod.FINGER_FRICTION, "object_friction": objects.OBJECT_FRICTION,
+                      "poisson_ratio": None},          # None: the ObjectSpec's own (constants.POISSON_RATIO)
+    PROTOCOL_DEFGRASPSIM: {"finger_friction": 1.0, "object_friction": 0.7, "poisson_ratio": 0.3},
+}
+TABLE_AWAY_Z_M = -1.0   # where the defgraspsim pickup moves the table (DefGraspSim lowers its platform)
 
 # Grasp force rule (per finger): 2 N at E = 2e4 Pa plus 0.5 N per decade of E,
 # as DefGraspSim grew the force with log E: soft objects are squeezed
@@ -61,6 +78,8 @@ CONFIDENT_MIN_DIRECTIONS = 3
 CONFIDENT_MARGIN_MPS2 = 20.0
 LEGACY_CONFIDENT_SETTINGS = {"confident_min_directions": 4, "confident_margin_mps2": 40.0}
 LEGACY_TWIST_SETTINGS = {"twist_oscillation_radps": None}   # before 2026-11-25: the one-way twist
+# Before 2026-11-26 every trial ran the legacy protocol on its own material.
+LEGACY_PROTOCOL_SETTINGS = {"protocol": "legacy", "object_friction": None, "poisson_ratio": None}
 # Energy blow-up: kinetic energy per kg = v_rms^2 / 2. The fastest real motion in a trial is the
 # twist at its limit (500 rad/s^2 ramped over 0.5 s: 125 rad/s, ~6 m/s at 5 cm); 30 m/s RMS over
 # all nodes (450 J/kg) is far beyond it and only reached by a diverging FEM solve.
@@ -69,8 +88,20 @@ TWIST_AXES = ((1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1
 
 
 def grasp_force_n(youngs_modulus_pa: float) -> float:
+    """The legacy protocol's force per finger (N), independent of the object's mass."""
     decades = math.log10(max(youngs_modulus_pa, FORCE_REFERENCE_E_PA) / FORCE_REFERENCE_E_PA)
     return float(min(FORCE_AT_SOFTEST_N + FORCE_PER_DECADE_N * decades, GRIPPER_MAX_FORCE_N))
+
+
+def factor_of_safety(youngs_modulus_pa: float) -> float:
+    """DefGraspSim's FOS = 1 + log10(E) / 10 (1.43 at 2e4 Pa ... 1.93 at 2e9 Pa)."""
+    return 1.0 + math.log10(youngs_modulus_pa) / 10.0
+
+
+def defgraspsim_finger_force_n(youngs_modulus_pa: float, mass_kg: float, friction: float) -> float:
+    """Force per finger (N) of the defgraspsim protocol: half of FOS * m * g / mu, capped at the hand's."""
+    total = factor_of_safety(youngs_modulus_pa) * mass_kg * world.GRAVITY_MPS2 / friction
+    return float(min(total / 2.0, GRIPPER_MAX_FORCE_N))
 
 
 def shake_directions(n: int = SHAKE_DIRECTIONS) -> np.ndarray:
@@ -134,6 +165,30 @@ class TrialSettings:
     twist_fail_below_radps2: float | None = None
     time_step_s: float | None = None   # None: world.time_step_for(E), the probe's stable steps
     shake_directions: int = SHAKE_DIRECTIONS   # fewer only in tests
+    # PROTOCOLS; records made before the field existed are legacy (comparable_protocol).
+    protocol: str = PROTOCOL_DEFGRASPSIM
+    # Material overrides (None: the protocol's, PROTOCOL_MATERIAL): the object's friction coefficient
+    # (the pads' stays the protocol's) and Poisson's ratio.
+    object_friction: float | None = None
+    poisson_ratio: float | None = None
+
+    def __post_init__(self):
+        if self.protocol not in PROTOCOLS:
+            raise ValueError(f"unknown trial protocol {self.protocol!r}; known: {', '.join(PROTOCOLS)}")
+        if self.object_friction is not None and not 0.0 < self.object_friction <= 2.0:
+            raise ValueError(f"object_friction must be in (0, 2], got {self.object_friction}")
+        if self.poisson_ratio is not None and not 0.0 <= self.poisson_ratio < 0.5:
+            raise ValueError(f"poisson_ratio must be in [0, 0.5), got {self.poisson_ratio}")
+
+    def material(self) -> dict:
+        """finger_friction, object_friction, effective_friction (their product) and poisson_ratio."""
+        m = dict(PROTOCOL_MATERIAL[self.protocol])
+        if self.object_friction is not None:
+            m["object_friction"] = self.object_friction
+        if self.poisson_ratio is not None:
+            m["poisson_ratio"] = self.poisson_ratio
+        m["effective_friction"] = m["finger_friction"] * m["object_friction"]
+        return m
 
     @classmethod
     def naive(cls) -> TrialSettings:
@@ -150,6 +205,11 @@ class TrialSettings:
     def fast(cls) -> TrialSettings:
         """The generator's protocol: exact stops plus the confident-stop surrogate."""
         return cls(confident_stop=True)
+
+    @classmethod
+    def legacy(cls) -> TrialSettings:
+        """fem_v4's generator settings exactly (the legacy protocol, its confident stop)."""
+        return cls(confident_stop=True, protocol=PROTOCOL_LEGACY)
 
 
 @dataclass
@@ -178,10 +238,23 @@ class _Abort(Exception):
 
 class _Trial:
     def __init__(self, client, spec, grasp, settings, object_xy_m, object_yaw_rad):
-        self.client, self.spec, self.grasp, self.settings = client, spec, grasp, settings
+        self.client, self.grasp, self.settings = client, grasp, settings
+        self.defgraspsim = settings.protocol == PROTOCOL_DEFGRASPSIM
+        self.material = settings.material()
+        if self.material["poisson_ratio"] is not None:
+            spec = replace(spec, poisson_ratio=self.material["poisson_ratio"])
+        self.spec = spec
         self.world = world.create_world(client, spec.part_moduli_pa(), settings.time_step_s)
-        self.obj = objects.load_object(client, spec, object_xy_m, object_yaw_rad)
-        self.force_n = grasp_force_n(min(spec.part_moduli_pa()))
+        self.obj = objects.load_object(client, spec, object_xy_m, object_yaw_rad,
+                                       friction=self.material["object_friction"])
+        softest = min(spec.part_moduli_pa())
+        if self.defgraspsim:
+            self.force_n = defgraspsim_finger_force_n(softest, self.obj.mass_kg, self.material["effective_friction"])
+            self.gravity = np.zeros(3)      # during the squeeze, the pickup and the tests
+        else:
+            self.force_n = grasp_force_n(softest)
+            self.gravity = np.array([0.0, 0.0, -world.GRAVITY_MPS2])
+        self.fingers_locked = False
         self.steps = 0
         self.last_points = None   # for the energy check; None after a restore (a deliberate jump)
         self.t0 = time.process_time()
@@ -214,14 +287,34 @@ class _Trial:
 
     def grasp_and_lift(self):
         s = self.settings
-        self.step(self.seconds(s.settle_before_s))
+        self.step(self.seconds(s.settle_before_s))      # settles under gravity on the table
+        self.world.set_gravity(self.gravity)             # defgraspsim: zero before the fingers close
         opening = min(self.grasp.width_m + OPENING_CLEARANCE_M, GRIPPER_MAX_WIDTH_M)
         self.tcp = world_T_hand(self.grasp.position_m, self.grasp.yaw_rad)
-        self.hand = hand_mod.create_hand(self.client, self.tcp, opening)
+        self.hand = hand_mod.create_hand(self.client, self.tcp, opening, friction=self.material["finger_friction"])
         self.hand.close(self.force_n, s.close_speed_mps)
         self.step(self.seconds(opening / 2 / s.close_speed_mps + s.close_settle_s))
         if self.hand.finger_opening_m() < 1e-3:
             raise _Abort(STATUS_LIFT_FAILED, "fingers closed on nothing")
+        if self.defgraspsim:
+            self._pickup_without_gravity()
+        else:
+            self._lift()
+        self.ref_offset = self.object_in_hand()
+        if not self.held():
+            raise _Abort(STATUS_LIFT_FAILED, "object not held after lift")
+        if self.defgraspsim and all(pt.soft for pt in self.obj.parts):
+            # A rigid body stores no elastic squeeze: between locked fingers it kept ~1e-4 N and slid off
+            # (an artefact), so the rigid stand-in of 2e9 Pa stays held with force F/2 instead.
+            self.hand.lock_fingers()
+            self.fingers_locked = True
+            self.step(self.check_steps)
+        self.squeeze_after_lock_n = self.hand.finger_forces_n()
+        self.saved = (self.obj.save_state(), self.hand.save_state())
+
+    def _lift(self):
+        """legacy: lift the object off the table with a smooth 0.6 s profile, then hold."""
+        s = self.settings
         n_lift = self.seconds(s.lift_time_s)
         for k in range(0, n_lift, self.check_steps):
             frac = min(1.0, (k + self.check_steps) / n_lift)
@@ -231,13 +324,26 @@ class _Trial:
             self.step(self.check_steps)
         self.step(self.seconds(s.hold_time_s))
         self.lifted_tcp = target
-        self.ref_offset = self.object_in_hand()
-        if not self.held():
-            raise _Abort(STATUS_LIFT_FAILED, "object not held after lift")
-        self.saved = (self.obj.save_state(), self.hand.save_state())
+
+    def _pickup_without_gravity(self):
+        """defgraspsim: the squeeze has settled; move the table away and hold (the hand stays put)."""
+        self.squeeze_before_pickup_n = self.hand.finger_forces_n()
+        self.world.move_table(TABLE_AWAY_Z_M)
+        self.step(self.seconds(self.settings.hold_time_s))
+        self.lifted_tcp = self.tcp.copy()
+
+    def protocol_facts(self) -> dict:
+        """What the trial really did, read back from the engine after the pickup (recorded per trial)."""
+        return {"gravity_during_test_mps2": self.world.gravity(), "finger_force_set_n": self.force_n,
+                "fingers_locked": self.fingers_locked,
+                "squeeze_after_pickup_n": [round(f, 6) for f in self.squeeze_after_lock_n],
+                "loss_rule": "either_finger" if self.defgraspsim else "both_fingers_or_20mm"}
 
     def held(self) -> bool:
-        if not any(sum(self.hand.finger_contacts(b)) for b in self.obj.body_ids):
+        contacts = np.sum([self.hand.finger_contacts(b) for b in self.obj.body_ids], axis=0)
+        if self.defgraspsim:                 # lost as soon as either finger has no contact
+            return bool(np.all(contacts > 0))
+        if not contacts.any():
             return False
         return float(np.linalg.norm(self.object_in_hand() - self.ref_offset)) < LOSS_DISTANCE_M
 
@@ -251,7 +357,7 @@ class _Trial:
         self.obj.restore_state(self.saved[0])
         self.hand.restore_state(self.saved[1])
         self.hand.move_to(self.lifted_tcp)
-        self.world.set_gravity((0, 0, -world.GRAVITY_MPS2))
+        self.world.set_gravity(self.gravity)
 
     def ramp(self, limit, ramp_time_s, apply) -> float:
         """Ramp 0..limit over ramp_time_s calling apply(value); return the last held value."""
@@ -267,7 +373,7 @@ class _Trial:
         return held_value
 
     def shake(self):
-        g = np.array([0, 0, -world.GRAVITY_MPS2])
+        g = self.gravity
         dirs = shake_directions(self.settings.shake_directions)
         values, measured = [], []
         need = SHAKE_POSITIVE_THRESHOLD_MPS2 * len(dirs)
@@ -342,9 +448,9 @@ class _Trial:
 def comparable_protocol(recorded: dict) -> dict:
     """A recorded TrialSettings dict in the form two protocols are compared in (resuming a dataset or an
     evaluation folder): fields added after it was recorded get the value they implicitly had then
-    (LEGACY_CONFIDENT_SETTINGS, LEGACY_TWIST_SETTINGS), and the surrogate's knobs drop out when the
+    (LEGACY_CONFIDENT_SETTINGS, LEGACY_TWIST_SETTINGS, LEGACY_PROTOCOL_SETTINGS), and the surrogate's knobs drop out when the
     surrogate is off."""
-    full = {**LEGACY_CONFIDENT_SETTINGS, **LEGACY_TWIST_SETTINGS, **recorded}
+    full = {**LEGACY_CONFIDENT_SETTINGS, **LEGACY_TWIST_SETTINGS, **LEGACY_PROTOCOL_SETTINGS, **recorded}
     if not full.get("confident_stop"):
         for key in LEGACY_CONFIDENT_SETTINGS:
             full.pop(key)
@@ -419,8 +525,10 @@ def run_grasp_trial(spec: objects.ObjectSpec, grasp: WorldGrasp, tests=("shake",
         trial = _Trial(client, spec, grasp, settings, object_xy_m, object_yaw_rad)
         out.grasp_force_n = trial.force_n
         out.sim.update(time_step_s=trial.world.time_step_s,
-                       soft=[pt.soft for pt in trial.obj.parts], mass_kg=trial.obj.mass_kg)
+                       soft=[pt.soft for pt in trial.obj.parts], mass_kg=trial.obj.mass_kg,
+                       protocol=settings.protocol, **trial.material)
         trial.grasp_and_lift()
+        out.sim.update(trial.protocol_facts())
         if "shake" in tests:
             out.shake_accels_mps2, out.shake_measured = trial.shake()
         if "twist" in tests:

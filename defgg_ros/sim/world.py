@@ -38,6 +38,17 @@ class World:
     def set_gravity(self, gravity_mps2) -> None:
         p.setGravity(*gravity_mps2, physicsClientId=self.client)
 
+    def gravity(self) -> list:
+        """The engine's gravity now (m/s^2), read back from it."""
+        params = p.getPhysicsEngineParameters(physicsClientId=self.client)
+        return [params.get(f"gravityAcceleration{a}", float("nan")) for a in "XYZ"]
+
+    def move_table(self, top_z_m: float) -> None:
+        """Move the table so its top is at top_z_m (the defgraspsim pickup takes it out of the way)."""
+        half_z = TABLE_SIZE_M[2] / 2
+        p.resetBasePositionAndOrientation(self.table_id, [0, 0, top_z_m - half_z], [0, 0, 0, 1],
+                                          physicsClientId=self.client)
+
 
 def time_step_for(youngs_moduli_pa) -> float:
     """Largest stable step for a world holding objects of these moduli (Pa)."""

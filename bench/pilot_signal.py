@@ -1,0 +1,131 @@
+"""Signal pilots: which trial setting gives labels where stiffness changes which grasp is good?
+
+Each try labels the same pilot set (PILOT_OBJECTS x the first CANDIDATES of datasets/fem_v4's candidates x
+the four training moduli) under one trial setting, into bench/pilots/<try>/ (a resumable dataset folder),
+then prints and writes its signal report (signal.json, signal.md). Every direction is measured (no
+early stop), so the held accelerations behind the variance figures are measured, not imputed.
+
+The gate (the issue on labels that carry the signal): an oracle gap >= 5 points with a within-scene share
+>= 30 %; the search stops at the first try that reaches it or after ~8 CPU-hours.
+
+  .venv/bin/python bench/pilot_signal.py --list
+  .venv/bin/python bench/pilot_signal.py a_defgraspsim [--workers 2]
+  .venv/bin/python bench/pilot_signal.py --summary      # the table of every finished try (bench/pilots/README.md)
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+PILOTS = ROOT / "bench" / "pilots"
+SOURCE = ROOT / "datasets" / "fem_v4"
+# >= 6 objects: four EGAD-like shapes of complexity 4-6, two elongated ones (training objects only).
+PILOT_OBJECTS = ("egad_train_06_c4", "egad_train_07_c4", "egad_train_09_c5", "egad_train_10_c6", "ycb_banana",
+                 "capsule")
+CANDIDATES = 10
+EVERY_DIRECTION = {"confident_stop": False, "stop_when_label_decided": False}
+GATE_GAP_POINTS, GATE_WITHIN_SHARE = 5.0, 0.30
+
+# name -> (what it tries, TrialSettings overrides, datagen extras)
+TRIES = {
+    "a_defgraspsim": ("DefGraspSim's protocol: mu 0.7, nu 0.3", {"protocol": "defgraspsim"}, {}),
+    "b_defgraspsim_mu04": ("(a) with effective friction 0.4: friction carries less, geometry more",
+                           {"protocol": "defgraspsim", "object_friction": 0.4}, {}),
+    "b_defgraspsim_mu03": ("(a) with effective friction 0.3", {"protocol": "defgraspsim", "object_friction": 0.3}, {}),
+    "legacy": ("fem_v4's protocol on the pilot set (the baseline)", {"protocol": "legacy"}, {}),
+}
+
+
+def seed_candidates(folder: Path) -> None:
+    """The pilot's candidates = fem_v4's first CANDIDATES of each object, under the key the generator
+    expects for grasps_per_scene=CANDIDATES (so the labels compare with fem_v4's on the same grasps)."""
+    from defgg_ros.atomic import write_json_atomic
+    from defgg_ros.data.datagen import CANDIDATE_FILE_VERSION, object_seed
+    from defgg_ros.sim.objects import get_shape
+    from defgg_ros.sim.sampler import SAMPLER_VERSION
+
+    for name in PILOT_OBJECTS:
+        src = json.loads((SOURCE / "candidates" / f"{name}.json").read_text(encoding="utf-8"))
+        key = dict(src["key"], keep=CANDIDATES)
+        assert key["sampler"] == SAMPLER_VERSION and key["seed"] == object_seed(0, name)
+        assert key["version"] == CANDIDATE_FILE_VERSION
+        assert key["mesh"] == [t.content_hash for t in get_shape(name).tet_parts]
+        write_json_atomic(folder / "candidates" / f"{name}.json",
+                          {"key": key, "candidates": src["candidates"][:CANDIDATES]})
+
+
+def run_try(name: str, workers: int, progress: bool) -> dict:
+    from defgg_ros.atomic import write_json_atomic, write_text_atomic
+    from defgg_ros.data.datagen import DatagenConfig, generate
+    from defgg_ros.data.signal import read_trial_records, render_markdown, signal_report
+
+    what, settings, extras = TRIES[name]
+    folder = PILOTS / name
+    if not (folder / "candidates").exists():
+        seed_candidates(folder)
+    cfg = DatagenConfig(out=folder, objects=PILOT_OBJECTS, grasps_per_scene=CANDIDATES, pass_size=1,
+                        workers=workers, settings={**EVERY_DIRECTION, **settings}, grasp_height="executor",
+                        **extras)
+    counts = generate(cfg, progress_bar=progress)
+    report = signal_report(read_trial_records(folder))
+    report["try"] = {"name": name, "what": what, "settings": cfg.settings, "extras": extras,
+                     "cpu_h": cpu_hours(folder)}
+    write_json_atomic(folder / "signal.json", report)
+    write_text_atomic(folder / "signal.md", render_markdown(report, f"Pilot {name}: {what}"))
+    print(json.dumps(counts))
+    print((folder / "signal.md").read_text(encoding="utf-8"))
+    return report
+
+
+def cpu_hours(folder: Path) -> float:
+    from defgg_ros.data.signal import read_trial_records
+
+    return sum(r.get("cpu_s", 0.0) for r in read_trial_records(folder)) / 3600
+
+
+def summary() -> str:
+    rows = ["| try | what | labelled | positive 2e4/2e5/2e6/2e9 | within-scene (soft) | soft+ & rigid- | "
+            "oracle gap best / top5 (points) | gate | CPU-h |", "|---|---|---|---|---|---|---|---|---|"]
+    total = 0.0
+    for path in sorted(PILOTS.glob("*/signal.json")):
+        r = json.loads(path.read_text(encoding="utf-8"))
+        pos = "/".join(f"{100 * v['rate']:.0f}" for v in r["positive_rate"].values())
+        gap, top = r["oracle"]["best"]["gap_points"], r["oracle"]["top5"]["gap_points"]
+        share = r["within_scene_share"]["soft"]
+        gate = "**yes**" if gap >= GATE_GAP_POINTS and share >= GATE_WITHIN_SHARE else "no"
+        total += r["try"]["cpu_h"]
+        rows.append(f"| {r['try']['name']} | {r['try']['what']} | {r['labelled']} | {pos} % | {100 * share:.1f} % | "
+                    f"{100 * r['candidates']['soft_pos_rigid_neg']:.1f} % | {gap:.1f} / {top:.1f} | {gate} | "
+                    f"{r['try']['cpu_h']:.2f} |")
+    rows.append(f"\nPilot CPU so far: {total:.2f} CPU-h (budget ~8).")
+    return "\n".join(rows)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("tries", nargs="*", help=f"tries to run, of: {', '.join(TRIES)}")
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--list", action="store_true", help="list the tries")
+    ap.add_argument("--summary", action="store_true", help="print the table of finished tries")
+    ap.add_argument("--no-progress", action="store_true")
+    args = ap.parse_args(argv)
+    if args.list:
+        for name, (what, settings, extras) in TRIES.items():
+            print(f"{name}: {what} {settings} {extras}")
+        return 0
+    unknown = [t for t in args.tries if t not in TRIES]
+    if unknown:
+        print(f"pilot_signal: unknown tries {unknown}; known: {', '.join(TRIES)}", file=sys.stderr)
+        return 2
+    for name in args.tries:
+        run_try(name, args.workers, not args.no_progress)
+    if args.summary or args.tries:
+        print(summary())
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,242 @@
+"""The signal report: do a dataset's labels carry "stiffness changes which grasp is good"?
+
+Read from the trial records alone (trials/*.jsonl or *.jsonl.gz of a dataset or pilot folder), so it can
+be recomputed by anyone. Figures, per the issue that asked for them (docs/dataset.md, "Signal report"):
+
+- per modulus: labelled trials and positive rate;
+- within-scene share: of the soft trials' held-acceleration variance (mean over the directions; a lift
+  failure holds 0), the part that lies within one object x modulus (the mean per-scene variance over the
+  variance of all trials), pooled over the soft moduli and per modulus. Low = where a soft object is grasped
+  barely matters, only which object it is;
+- monotone / reversal rates over candidates labelled at every modulus: monotone = labels never go from
+  positive to negative as E rises; soft->rigid reversal = positive at a soft modulus and negative at the
+  stiffest (the paper's pinch grasp that fails on a stiff object), also for the softest alone; the converse
+  = negative at a soft modulus and positive at the stiffest;
+- the oracle gap: success of a stiffness-aware oracle (the best candidates per object x E) minus a
+  stiffness-blind one (the same candidates for every E of an object, best on average over the moduli),
+  for the best grasp and the best five; both choose among the candidates labelled at every modulus;
+- the friction limit: Spearman correlation, over the softest modulus's scenes, between 2 mu F / m (the
+  tangential acceleration friction alone can hold) and the scene's mean held acceleration.
+"""
+from __future__ import annotations
+
+import gzip
+import json
+import math
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+
+from defgg_ros.constants import MAX_SOFT_BODY_YOUNGS_MODULUS_PA, SHAKE_POSITIVE_THRESHOLD_MPS2
+
+LABELLED = ("ok", "lift_failed")
+TOP_K = 5
+# PyBullet multiplies the two bodies' friction coefficients; fem_v1-v4 used 0.8 on both (legacy).
+LEGACY_EFFECTIVE_FRICTION = 0.64
+
+
+class SignalError(ValueError):
+    """The folder holds no trial records the report can use."""
+
+
+def read_trial_records(root) -> list[dict]:
+    """Every trial record (dict) under <root>/trials, plain or gzip-compressed JSON lines."""
+    folder = Path(root) / "trials"
+    files = sorted(folder.glob("*.jsonl")) + sorted(folder.glob("*.jsonl.gz"))
+    if not files:
+        raise SignalError(f"no trial files in {folder}")
+    records = []
+    for path in files:
+        opener = gzip.open if path.suffix == ".gz" else open
+        with opener(path, "rt", encoding="utf-8") as fh:
+            records += [json.loads(line) for line in fh if line.strip()]
+    return records
+
+
+def held_mps2(record: dict) -> float | None:
+    """Mean held acceleration of a labelled trial (0 for a lift failure), None for a sim failure."""
+    if record["status"] == "lift_failed":
+        return 0.0
+    accels = record.get("shake_accels_mps2")
+    if record["status"] != "ok" or not accels:
+        return None
+    return float(np.mean(accels))
+
+
+def is_positive(record: dict) -> bool | None:
+    value = held_mps2(record)
+    return None if value is None else value >= SHAKE_POSITIVE_THRESHOLD_MPS2
+
+
+def signal_report(records: list[dict]) -> dict:
+    """Every figure of the report, as plain JSON-able numbers."""
+    rows = [r for r in records if held_mps2(r) is not None]
+    if not rows:
+        raise SignalError("no labelled trial (ok or lift_failed) among the records")
+    moduli = sorted({float(r["youngs_modulus_pa"]) for r in rows})
+    return {
+        "trials": len(records),
+        "labelled": len(rows),
+        "moduli_pa": moduli,
+        "protocols": sorted({_protocol_of(r) for r in rows}),
+        "positive_rate": _positive_rates(rows, moduli),
+        "within_scene_share": _within_scene_shares(rows, moduli),
+        "candidates": _candidate_figures(rows, moduli),
+        "oracle": _oracle_figures(rows, moduli),
+        "friction_limit_spearman": _friction_limit_spearman(rows, moduli),
+    }
+
+
+def _protocol_of(record: dict) -> str:
+    return str(record.get("sim", {}).get("settings", {}).get("protocol", "legacy"))
+
+
+def _positive_rates(rows, moduli) -> dict:
+    out = {}
+    for e in moduli:
+        labels = [is_positive(r) for r in rows if float(r["youngs_modulus_pa"]) == e]
+        out[_key(e)] = {"n": len(labels), "positive": sum(labels), "rate": sum(labels) / len(labels)}
+    return out
+
+
+def _within_scene_shares(rows, moduli) -> dict:
+    soft = [e for e in moduli if e <= MAX_SOFT_BODY_YOUNGS_MODULUS_PA]
+    groups = {"soft": soft, **{_key(e): [e] for e in moduli}}
+    return {name: _within_share([r for r in rows if float(r["youngs_modulus_pa"]) in es])
+            for name, es in groups.items()}
+
+
+def _within_share(rows) -> float | None:
+    """Mean within-scene variance (scenes weighted equally) over the variance of all the rows (None with
+    no variance): the share of the spread that choosing where to grasp an object could explain."""
+    by_scene = defaultdict(list)
+    for r in rows:
+        by_scene[r["scene_id"]].append(held_mps2(r))
+    values = np.array([v for vs in by_scene.values() for v in vs])
+    total = float(np.var(values)) if len(values) else 0.0
+    if total <= 0:
+        return None
+    return float(np.mean([np.var(vs) for vs in by_scene.values()])) / total
+
+
+def _label_table(rows, moduli) -> dict:
+    """(object, candidate) -> {E: label} for candidates labelled at every modulus."""
+    table = defaultdict(dict)
+    for r in rows:
+        table[(r["object_name"], int(r["candidate_index"]))][float(r["youngs_modulus_pa"])] = is_positive(r)
+    return {k: v for k, v in table.items() if len(v) == len(moduli)}
+
+
+def _candidate_figures(rows, moduli) -> dict:
+    table = _label_table(rows, moduli)
+    n = len(table)
+    if n == 0 or len(moduli) < 2:
+        return {"n": n}
+    stiffest, softest = moduli[-1], moduli[0]
+    soft = [e for e in moduli if e <= MAX_SOFT_BODY_YOUNGS_MODULUS_PA and e != stiffest]
+    monotone = sum(all(not (lab[a] and not lab[b]) for a, b in zip(moduli, moduli[1:]))
+                   for lab in table.values())
+    soft_to_rigid = sum(any(lab[e] for e in soft) and not lab[stiffest] for lab in table.values())
+    softest_to_rigid = sum(lab[softest] and not lab[stiffest] for lab in table.values())
+    converse = sum(any(not lab[e] for e in soft) and lab[stiffest] for lab in table.values())
+    same_soft = sum(len({lab[e] for e in soft}) == 1 for lab in table.values())
+    return {"n": n, "monotone": monotone / n, "soft_pos_rigid_neg": soft_to_rigid / n,
+            "softest_pos_rigid_neg": softest_to_rigid / n, "softest_pos_rigid_neg_count": softest_to_rigid,
+            "soft_neg_rigid_pos": converse / n, "same_label_every_soft_modulus": same_soft / n}
+
+
+def _oracle_figures(rows, moduli) -> dict:
+    """Stiffness-aware vs stiffness-blind oracle success (fractions), best grasp and best TOP_K."""
+    table = _label_table(rows, moduli)
+    by_object = defaultdict(dict)
+    for (obj, cand), labels in table.items():
+        by_object[obj][cand] = labels
+    if not by_object:
+        return {"objects": 0}
+    out = {"objects": len(by_object)}
+    for k in (1, TOP_K):
+        aware, blind = [], []
+        for cands in by_object.values():
+            kk = min(k, len(cands))
+            for e in moduli:   # aware: the kk best for this E (labels are 0/1, so: positives first)
+                aware.append(min(kk, sum(labels[e] for labels in cands.values())) / kk)
+            mean_over_e = sorted((np.mean([labels[e] for e in moduli]) for labels in cands.values()),
+                                 reverse=True)
+            blind += [float(np.mean(mean_over_e[:kk]))] * len(moduli)
+        name = "best" if k == 1 else f"top{k}"
+        out[name] = {"aware": float(np.mean(aware)), "blind": float(np.mean(blind)),
+                     "gap_points": 100 * (float(np.mean(aware)) - float(np.mean(blind)))}
+    return out
+
+
+def _friction_limit_spearman(rows, moduli) -> float | None:
+    softest = [r for r in rows if float(r["youngs_modulus_pa"]) == moduli[0]]
+    limit, held = defaultdict(list), defaultdict(list)
+    for r in softest:
+        mass = r.get("sim", {}).get("mass_kg")
+        if not mass or not r.get("grasp_force_n"):
+            continue
+        mu = r.get("sim", {}).get("effective_friction", LEGACY_EFFECTIVE_FRICTION)
+        limit[r["scene_id"]].append(2 * mu * r["grasp_force_n"] / mass)
+        held[r["scene_id"]].append(held_mps2(r))
+    scenes = sorted(limit)
+    if len(scenes) < 3:
+        return None
+    return spearman([np.mean(limit[s]) for s in scenes], [np.mean(held[s]) for s in scenes])
+
+
+def spearman(x, y) -> float:
+    """Spearman's rank correlation (average ranks for ties)."""
+    rx, ry = _ranks(np.asarray(x, float)), _ranks(np.asarray(y, float))
+    if rx.std() == 0 or ry.std() == 0:
+        return float("nan")
+    return float(np.corrcoef(rx, ry)[0, 1])
+
+
+def _ranks(v: np.ndarray) -> np.ndarray:
+    order = np.argsort(v, kind="mergesort")
+    ranks = np.empty(len(v))
+    ranks[order] = np.arange(len(v), dtype=float)
+    for value in np.unique(v):      # ties share their mean rank
+        tied = v == value
+        ranks[tied] = ranks[tied].mean()
+    return ranks
+
+
+def _key(e: float) -> str:
+    return f"{e:.0e}".replace("e+0", "e")
+
+
+def _pct(x) -> str:
+    return "n/a" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{100 * x:.1f} %"
+
+
+def render_markdown(report: dict, title: str = "Signal report") -> str:
+    """The report as Markdown (the dataset card embeds it)."""
+    lines = [f"## {title}", "",
+             f"{report['labelled']} labelled of {report['trials']} trials; protocol(s): "
+             f"{', '.join(report['protocols'])}.", "",
+             "| E (Pa) | labelled | positive | within-scene share of held-acceleration variance |",
+             "|---|---|---|---|"]
+    for e in report["moduli_pa"]:
+        pr = report["positive_rate"][_key(e)]
+        lines.append(f"| {e:.0e} | {pr['n']} | {_pct(pr['rate'])} | {_pct(report['within_scene_share'][_key(e)])} |")
+    c, o = report["candidates"], report["oracle"]
+    lines += ["", f"- Within-scene share, soft moduli pooled: **{_pct(report['within_scene_share']['soft'])}**."]
+    if c.get("n") and "monotone" in c:
+        lines += [f"- Candidates labelled at every modulus: {c['n']}. Monotone in E: {_pct(c['monotone'])}; "
+                  f"positive at a soft E and negative at the stiffest: {_pct(c['soft_pos_rigid_neg'])} "
+                  f"(at the softest: {c['softest_pos_rigid_neg_count']}, {_pct(c['softest_pos_rigid_neg'])}); "
+                  f"the converse: {_pct(c['soft_neg_rigid_pos'])}; same label at every soft E: "
+                  f"{_pct(c['same_label_every_soft_modulus'])}."]
+    if o.get("objects"):
+        for name, label in (("best", "best grasp"), (f"top{TOP_K}", f"best {TOP_K} grasps")):
+            lines.append(f"- Oracle, {label}: stiffness-aware {_pct(o[name]['aware'])}, stiffness-blind "
+                         f"{_pct(o[name]['blind'])}: **gap {o[name]['gap_points']:.1f} points** "
+                         f"({o['objects']} objects).")
+    rho = report["friction_limit_spearman"]
+    if rho is not None:
+        lines.append(f"- Spearman (softest E, per scene) between the friction limit 2 mu F / m and the mean "
+                     f"held acceleration: {rho:.2f}.")
+    return "\n".join(lines) + "\n"

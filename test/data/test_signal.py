@@ -1,0 +1,75 @@
+"""The signal report on hand-made trial records whose figures can be worked out by hand."""
+import gzip
+import json
+
+import pytest
+
+from defgg_ros.data import datagen_cli
+from defgg_ros.data.signal import SignalError, read_trial_records, signal_report, spearman
+
+pytestmark = pytest.mark.unit
+
+
+def rec(obj, cand, e, held, status="ok", force=1.0, mass=0.1):
+    return {"object_name": obj, "candidate_index": cand, "youngs_modulus_pa": e, "scene_id": f"{obj}__{e:.0e}",
+            "status": status, "shake_accels_mps2": None if status != "ok" else [held] * 4,
+            "grasp_force_n": force, "sim": {"mass_kg": mass, "settings": {"protocol": "defgraspsim"}}}
+
+
+def reversal_records():
+    """Two objects x two candidates x (2e4, 2e9). Object A: candidate 0 is the soft grasp (held at 2e4 only),
+    candidate 1 the stiff one (held at 2e9 only): a stiffness-aware choice is right at both, a blind one
+    at one of two. Object B: candidate 0 always holds."""
+    out = []
+    for e, c0, c1 in ((2e4, 30.0, 10.0), (2e9, 10.0, 40.0)):
+        out += [rec("A", 0, e, c0), rec("A", 1, e, c1)]
+    for e in (2e4, 2e9):
+        out += [rec("B", 0, e, 45.0), rec("B", 1, e, 0.0, status="lift_failed")]
+    return out
+
+
+def test_oracle_gap_and_reversals_of_a_pinch_versus_cage_object():
+    r = signal_report(reversal_records())
+    assert r["oracle"]["best"]["aware"] == 1.0
+    assert r["oracle"]["best"]["blind"] == 0.75          # A: 1 of 2 moduli, B: both
+    assert r["oracle"]["best"]["gap_points"] == pytest.approx(25.0)
+    c = r["candidates"]
+    assert c["n"] == 4
+    assert c["softest_pos_rigid_neg_count"] == 1 and c["soft_neg_rigid_pos"] == 0.25
+    assert c["monotone"] == 0.75
+    assert r["positive_rate"]["2e4"]["rate"] == 0.5 and r["positive_rate"]["2e9"]["rate"] == 0.5
+
+
+def test_within_scene_share_is_zero_when_only_the_object_matters_and_one_when_only_the_grasp_does():
+    only_object = [rec("A", i, 2e4, 10.0) for i in range(3)] + [rec("B", i, 2e4, 40.0) for i in range(3)]
+    only_grasp = [rec(o, i, 2e4, [0.0, 20.0, 40.0][i]) for o in "AB" for i in range(3)]
+    assert signal_report(only_object)["within_scene_share"]["soft"] == 0.0
+    assert signal_report(only_grasp)["within_scene_share"]["soft"] == pytest.approx(1.0)
+
+
+def test_spearman_with_ties():
+    assert spearman([1, 2, 3, 4], [10, 20, 30, 40]) == pytest.approx(1.0)
+    assert spearman([1, 2, 3, 4], [4, 3, 2, 1]) == pytest.approx(-1.0)
+    assert spearman([1, 1, 2], [5, 5, 9]) == pytest.approx(1.0)
+
+
+def test_cli_reads_plain_and_gzip_trials_and_writes_json_and_markdown(tmp_path, capsys):
+    trials = tmp_path / "pilot" / "trials"
+    trials.mkdir(parents=True)
+    records = reversal_records()
+    (trials / "A.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records[:4]))
+    with gzip.open(trials / "B.jsonl.gz", "wt") as fh:
+        fh.write("".join(json.dumps(r) + "\n" for r in records[4:]))
+    assert len(read_trial_records(tmp_path / "pilot")) == 8
+    rc = datagen_cli.main(["signal", str(tmp_path / "pilot"), "--json", str(tmp_path / "s.json"),
+                           "--md", str(tmp_path / "s.md")])
+    assert rc == 0
+    assert json.loads((tmp_path / "s.json").read_text())["oracle"]["best"]["gap_points"] == pytest.approx(25.0)
+    assert "gap 25.0 points" in (tmp_path / "s.md").read_text() and "gap 25.0 points" in capsys.readouterr().out
+
+
+def test_cli_refuses_a_folder_without_trials(tmp_path, capsys):
+    assert datagen_cli.main(["signal", str(tmp_path)]) == 2
+    assert "no trial files" in capsys.readouterr().err
+    with pytest.raises(SignalError):
+        signal_report([rec("A", 0, 2e4, 1.0, status="exploded")])

@@ -1,0 +1,90 @@
+"""The two trial protocols in real PyBullet: what each trial records is what the engine really did.
+
+defgraspsim: zero gravity after settling, total grip force FOS*m*g/mu, the table moved away, fingers
+locked on a soft object (force-held on the rigid stand-in), lost as soon as either finger lets go.
+legacy: fem_v1-v4's protocol, unchanged (gravity on, 2 N + 0.5 N per decade, both-fingers/20 mm rule).
+"""
+import dataclasses
+import math
+
+import pytest
+
+from defgg_ros.data.format import STATUS_OK
+from defgg_ros.sim import objects, trial, world
+from defgg_ros.sim.trial import TrialSettings, WorldGrasp, run_grasp_trial
+
+pytestmark = pytest.mark.sim
+
+QUICK = dataclasses.replace(TrialSettings.exact(), close_settle_s=0.05, hold_time_s=0.05, lift_time_s=0.15,
+                            shake_ramp_time_s=0.3, shake_directions=2, stop_when_label_decided=False)
+CENTRED = WorldGrasp((0.0, 0.0, 0.02), math.pi / 2, 0.03)
+
+
+def box(e):
+    return objects.ObjectSpec(objects.get_shape("box_small"), e)
+
+
+def test_defgraspsim_soft_trial_records_zero_gravity_weight_force_lock_and_either_finger_rule():
+    out = run_grasp_trial(box(2e5), CENTRED, ("shake",), dataclasses.replace(QUICK, protocol="defgraspsim"))
+    assert out.status == STATUS_OK, out.note
+    sim = out.sim
+    assert sim["protocol"] == "defgraspsim" and sim["settings"]["protocol"] == "defgraspsim"
+    assert sim["gravity_during_test_mps2"] == [0.0, 0.0, 0.0]
+    assert sim["effective_friction"] == pytest.approx(0.7) and sim["poisson_ratio"] == 0.3
+    total = (1 + math.log10(2e5) / 10) * sim["mass_kg"] * world.GRAVITY_MPS2 / 0.7
+    assert out.grasp_force_n == pytest.approx(total / 2)
+    assert sim["fingers_locked"] is True and sim["loss_rule"] == "either_finger"
+    # the lock keeps the squeeze: each finger still pushes with a good part of F/2
+    assert all(f > 0.3 * out.grasp_force_n for f in sim["squeeze_after_pickup_n"]), sim["squeeze_after_pickup_n"]
+
+
+def test_defgraspsim_rigid_stand_in_is_force_held_not_locked():
+    out = run_grasp_trial(box(2e9), CENTRED, ("shake",), dataclasses.replace(QUICK, protocol="defgraspsim"))
+    assert out.status == STATUS_OK, out.note
+    assert out.sim["fingers_locked"] is False and out.sim["gravity_during_test_mps2"] == [0.0, 0.0, 0.0]
+    assert out.sim["squeeze_after_pickup_n"] == pytest.approx([out.grasp_force_n] * 2, rel=0.05)
+
+
+def test_legacy_trial_records_gravity_fixed_force_and_the_old_loss_rule():
+    out = run_grasp_trial(box(2e5), CENTRED, ("shake",), dataclasses.replace(QUICK, protocol="legacy"))
+    assert out.status == STATUS_OK, out.note
+    sim = out.sim
+    assert sim["gravity_during_test_mps2"] == pytest.approx([0.0, 0.0, -world.GRAVITY_MPS2])
+    assert out.grasp_force_n == pytest.approx(trial.grasp_force_n(2e5)) == pytest.approx(2.5)
+    assert sim["effective_friction"] == pytest.approx(0.64) and sim["poisson_ratio"] is None
+    assert sim["fingers_locked"] is False and sim["loss_rule"] == "both_fingers_or_20mm"
+
+
+@pytest.mark.parametrize("protocol, held_with_one_finger", [("defgraspsim", False), ("legacy", True)])
+def test_one_finger_off_the_object_is_lost_only_under_the_either_finger_rule(client, protocol, held_with_one_finger):
+    import pybullet as p
+
+    run = trial._Trial(client, box(2e9), CENTRED, dataclasses.replace(QUICK, protocol=protocol), (0, 0), 0.0)
+    run.grasp_and_lift()
+    assert run.held()
+    if run.hand.gear_id is not None:      # free the second finger from the first
+        p.removeConstraint(run.hand.gear_id, physicsClientId=client)
+    finger = run.hand.FINGER_LINKS[1]
+    p.resetJointState(run.hand.body_id, finger, 0.04, 0.0, physicsClientId=client)
+    p.setJointMotorControl2(run.hand.body_id, finger, p.POSITION_CONTROL, targetPosition=0.04, force=50.0,
+                            physicsClientId=client)
+    run.world.step()
+    per_finger = [sum(c) for c in zip(*[run.hand.finger_contacts(b) for b in run.obj.body_ids])]
+    assert per_finger[0] > 0 and per_finger[1] == 0, per_finger
+    assert run.held() is held_with_one_finger
+
+
+def test_protocol_and_material_are_validated():
+    with pytest.raises(ValueError, match="unknown trial protocol"):
+        TrialSettings(protocol="isaac")
+    with pytest.raises(ValueError, match="object_friction"):
+        TrialSettings(object_friction=0.0)
+    assert TrialSettings(protocol="defgraspsim", object_friction=0.4).material()["effective_friction"] == 0.4
+
+
+def test_records_without_a_protocol_compare_as_legacy():
+    recorded = dataclasses.asdict(TrialSettings.legacy())
+    for key in ("protocol", "object_friction", "poisson_ratio"):
+        recorded.pop(key)
+    assert trial.comparable_protocol(recorded) == trial.comparable_protocol(dataclasses.asdict(TrialSettings.legacy()))
+    assert trial.comparable_protocol(recorded) != trial.comparable_protocol(dataclasses.asdict(TrialSettings.fast()))
