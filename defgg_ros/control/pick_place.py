@@ -7,6 +7,17 @@ see gripper_rule) -> lift -> transfer (a joint motion at the planning limits:
 real accelerations on the grasp) -> place (straight down at the goal, open)
 -> retreat (straight up) -> done.
 
+Stop means stopped: a failure or cancel stops the arm (jerk-limited) and the
+run ends only once every joint is slower than still_speed_radps for
+rest_hold_s, or, after stop_timeout_s, as a failure of its own ("the arm did
+not come to rest"). Then, with an observation pose configured, the arm is
+recovered before the run ends (phase "recover"): holding an object (failed in
+lift/transfer/place) it is carried to the place pose and released; otherwise
+the hand opens (an object under it stays where it is), the TCP rises straight
+up and a joint motion ends at the observation pose, out of the camera's view.
+A failure during recovery stops there. Outcome.arm_state says where the arm
+was left, Outcome.recovery what the recovery did.
+
 No ROS and no wall clock inside: the owner feeds events (joint states,
 external force, gripper results) and calls `tick(sim_s, wall_s)`; the
 machine answers with commands (trajectories, gripper goals). Motion progress
@@ -15,12 +26,15 @@ watchdog runs on `wall_s`, because a dead simulator stops sim time.
 Every way of ending carries a reason a person can read.
 """
 
+import math
+
 import numpy as np
 
 from defgg_ros.control.gripper_rule import MISSED_WIDTH_M, OPENING_SPEED_MPS, grasp_command
 from defgg_ros.control.kinematics import KinematicsError, PandaKinematics, WorkspaceError, check_workspace
 from defgg_ros.control.poses import top_down_pose
 from defgg_ros.control.sequence_types import (
+    RECOVER_PHASE,
     ArmState,
     CancelGripper,
     Feedback,
@@ -47,10 +61,9 @@ from defgg_ros.control.trajectories import (
 )
 from defgg_ros.grasping.geometry import tcp_height_m
 
-# The arm counts as still below this joint speed (ending a guarded stop).
-STILL_SPEED_RADPS = 0.02
-# Ending a sequence waits at most this long (robot clock) for the arm to stop.
-STOP_TIMEOUT_S = 3.0
+# Defaults of SequenceConfig.still_speed_radps / stop_timeout_s (kept for importers).
+STILL_SPEED_RADPS = SequenceConfig.still_speed_radps
+STOP_TIMEOUT_S = SequenceConfig.stop_timeout_s
 # Grasps predicted a little below the table top (depth noise on thin
 # objects) are raised to this height; further below is a bad grasp.
 GRASP_MIN_HEIGHT_ABOVE_TABLE_M = 0.005
@@ -75,7 +88,8 @@ def _finite(name: str, values) -> np.ndarray:
 class PickPlaceSequence:
     """One pick-and-place run; create a new one per goal."""
 
-    def __init__(self, kin: PandaKinematics, config: SequenceConfig, grasp: GraspTarget, place: PlaceTarget):
+    def __init__(self, kin: PandaKinematics, config: SequenceConfig, grasp: GraspTarget | None,
+                 place: PlaceTarget | None):
         config.validate()
         self._kin, self._cfg, self._grasp, self._place = kin, config, grasp, place
         self._limits = panda_limits(config.limits_scale)
@@ -86,6 +100,13 @@ class PickPlaceSequence:
         self._phase = "idle"
         self._placed_open_sent = False
         self._stopping = False
+        self._stop_began_s = 0.0
+        self._still_since_s: float | None = None
+        self._failed_phase = ""
+        self._recovering = False
+        self._recovery_steps: list = []
+        self._recovery_log: list = []
+        self._step_name, self._awaiting, self._holding_step = "", "motion", False
         self._start_s = 0.0
         self.outcome = Outcome()
         self.finished = False
@@ -122,17 +143,23 @@ class PickPlaceSequence:
             return []
         if self._stopping:
             return self._tick_stopping(sim_s, wall_s)
+        if self._recovering:
+            return self._guarded(self._tick_recover, sim_s, wall_s)
         handlers = {"pre_grasp": self._tick_pre_grasp, "descend": self._tick_descend, "close": self._tick_close,
                     "lift": self._tick_lift, "transfer": self._tick_transfer, "place": self._tick_place,
                     "retreat": self._tick_retreat}
         return self._guarded(handlers[self._phase], sim_s, wall_s)
 
     def cancel(self, sim_s: float, wall_s: float) -> list:
-        """Stop the arm (jerk-limited) and end as canceled once it is still."""
+        """Stop the arm (jerk-limited) and end as canceled once it is still (then recover, unless recovering)."""
         if self.finished or self._stopping:
             return []
         self.outcome.canceled = True
         return self._fail(f"canceled during {self._phase}", sim_s)
+
+    @property
+    def recovering(self) -> bool:
+        return self._recovering
 
     def _guarded(self, handler, sim_s: float, wall_s: float) -> list:
         try:
@@ -208,6 +235,7 @@ class PickPlaceSequence:
         if not guarded_stop:
             check_trajectory(trajectory, self._limits, self._kin, self._cfg.table_z_m)
         self._motion = _Motion(trajectory, sim_s, guarded_stop)
+        self._still_since_s = None
         return [SendTrajectory(trajectory)]
 
     def _line_to(self, target_p: np.ndarray, speed_mps: float, sim_s: float) -> list:
@@ -230,7 +258,7 @@ class PickPlaceSequence:
         if elapsed < m.trajectory.duration_s:
             return False
         if m.guarded_stop:
-            still = float(np.max(np.abs(state.qd_radps))) < STILL_SPEED_RADPS
+            still = self._at_rest(sim_s)
             if not still and elapsed > m.trajectory.duration_s + self._cfg.settle_timeout_s:
                 raise SequenceFailure(f"arm did not come to rest during {self._phase}")
             return still
@@ -241,6 +269,31 @@ class PickPlaceSequence:
             raise SequenceFailure(f"arm did not reach the {self._phase} target {self._cfg.settle_timeout_s:.1f} s "
                                   f"after the trajectory ended (joint error {error:.3f} rad)")
         return False
+
+    def _max_speed_radps(self) -> float:
+        state = self._obs.state
+        return float(np.max(np.abs(state.qd_radps))) if state is not None else math.inf
+
+    def _at_rest(self, sim_s: float) -> bool:
+        """Every joint slower than still_speed_radps, continuously for rest_hold_s (robot clock).
+
+        One slow sample is not rest: a swinging joint passes through zero speed.
+        """
+        if self._max_speed_radps() >= self._cfg.still_speed_radps:
+            self._still_since_s = None
+            return False
+        if self._still_since_s is None:
+            self._still_since_s = sim_s
+        return sim_s - self._still_since_s >= self._cfg.rest_hold_s - 1e-9
+
+    def _at_observation(self) -> bool:
+        q_obs, state = self._cfg.observation_q_rad, self._obs.state
+        if q_obs is None or state is None:
+            return False
+        return float(np.max(np.abs(state.q_rad - np.asarray(q_obs)))) <= self._cfg.observation_tolerance_rad
+
+    def _rest_state(self) -> str:
+        return "observation_pose" if self._at_observation() else "at_rest"
 
     def _motion_active(self, sim_s: float) -> bool:
         return self._motion is not None and sim_s - self._motion.start_s < self._motion.trajectory.duration_s
@@ -371,44 +424,198 @@ class PickPlaceSequence:
             return []
         self._phase = "done"
         self.outcome.success = True
-        self._finish(sim_s)
+        self._finish(sim_s, self._rest_state())
         return []
 
     # --- endings --------------------------------------------------------------
     def _fail(self, reason: str, sim_s: float, wait_for_stop: bool = True) -> list:
-        self.outcome.failure_reason = reason
+        """Stop the arm; the run ends once it is at rest (or recovers first: _tick_stopping)."""
+        if self._recovering:  # the original reason stays; the recovery ends here
+            self._recovery_log.append(f"stopped: {reason}")
+            self._recovery_steps = []
+        else:
+            self.outcome.failure_reason = reason
+            self._failed_phase = self._phase
         commands = [CancelGripper()] if self._pending.gripper else []
         self._pending.gripper = False
         if self._motion_active(sim_s):
             commands += self._stop_motion(sim_s)
-        if wait_for_stop and self._motion is not None:
-            self._stopping = True
+        if not wait_for_stop:
+            self._finish(sim_s, "unknown")
+        elif self._motion is None and not self._needs_recovery():
+            # Nothing was commanded and nothing to recover: the arm is as the goal found it.
+            self._finish(sim_s, self._rest_state() if self._max_speed_radps() < self._cfg.still_speed_radps
+                         else "moving")
         else:
-            self._finish(sim_s)
+            self._stopping, self._stop_began_s, self._still_since_s = True, sim_s, None
         return commands
+
+    def _needs_recovery(self) -> bool:
+        return (not self._recovering and self._cfg.observation_q_rad is not None
+                and self._obs.state is not None and not self._at_observation())
 
     def _tick_stopping(self, sim_s: float, wall_s: float) -> list:
         try:
             self._watchdog(wall_s)
         except _DriverSilent as silent:
-            self.outcome.failure_reason += f"; then {silent}"
-            self._finish(sim_s)
+            if self._recovering:
+                self._recovery_log.append(f"then {silent}")
+            else:
+                self.outcome.failure_reason += f"; then {silent}"
+            self._finish(sim_s, "unknown")
             return []
-        m, state = self._motion, self._obs.state
-        elapsed = sim_s - m.start_s
-        still = state is not None and float(np.max(np.abs(state.qd_radps))) < STILL_SPEED_RADPS
-        if elapsed >= m.trajectory.duration_s and still:
-            self._finish(sim_s)
-        elif elapsed > m.trajectory.duration_s + STOP_TIMEOUT_S:
-            self.outcome.failure_reason += f" (arm still moving {STOP_TIMEOUT_S:.0f} s after the stop)"
-            self._finish(sim_s)
+        m = self._motion
+        stop_ends_s = m.start_s + m.trajectory.duration_s if m is not None else self._stop_began_s
+        if sim_s >= stop_ends_s and self._at_rest(sim_s):
+            self._stopping = False
+            if self._needs_recovery():
+                return self._guarded(self._begin_recovery, sim_s, wall_s)
+            self._finish(sim_s, self._rest_state())
+        elif sim_s > stop_ends_s + self._cfg.stop_timeout_s:
+            # Its own failure: whoever gets the result must know the arm may still be moving.
+            not_at_rest = (f"the arm did not come to rest: joints still at up to {self._max_speed_radps():.3f} rad/s "
+                           f"{self._cfg.stop_timeout_s:.1f} s after the stop")
+            if self._recovering:
+                self._recovery_log.append(not_at_rest)
+            else:
+                self.outcome.failure_reason = f"{not_at_rest} (stopped because: {self.outcome.failure_reason})"
+            self._finish(sim_s, "moving")
         return []
 
-    def _finish(self, sim_s: float) -> None:
-        self.outcome.phase_reached = self._phase if self._phase != "idle" else "pre_grasp"
+    # --- recovery: back to the observation pose after a failure or cancel ---------------
+    def _holds_object(self) -> bool:
+        """Failed while carrying (lift/transfer/place before the release) with the object still held."""
+        closed, state = self.outcome.gripper_width_closed_m, self._obs.state
+        if self._plan is None or state is None or not math.isfinite(closed) or self._placed_open_sent:
+            return False
+        if self._failed_phase not in ("lift", "transfer", "place"):
+            return False
+        return state.gripper_width_m >= max(MISSED_WIDTH_M, self._cfg.slip_width_fraction * closed)
+
+    def _begin_recovery(self, sim_s: float) -> list:
+        self._recovering, self._phase = True, RECOVER_PHASE
+        if self._holds_object():
+            self._recovery_steps = [self._step_carry, self._step_lower, self._step_release, self._step_retreat,
+                                    self._step_observe]
+        else:
+            self._recovery_steps = [self._step_open, self._step_lift, self._step_observe]
+        return self._next_recovery_step(sim_s)
+
+    def _next_recovery_step(self, sim_s: float) -> list:
+        while self._recovery_steps:
+            step = self._recovery_steps.pop(0)
+            self._holding_step = False
+            commands = step(sim_s)
+            if commands:
+                return commands
+        self._finish(sim_s, self._rest_state())
+        return []
+
+    def _tick_recover(self, sim_s: float) -> list:
+        if self._awaiting == "gripper":
+            result = self._gripper_result(sim_s, self._step_name)
+            if result is None:
+                return []
+            if not result[0]:
+                raise SequenceFailure(f"the hand did not open: {result[2] or 'no reason given'}")
+        else:
+            if self._holding_step:
+                self._check_held()
+            if not self._arrived(sim_s):
+                return []
+        self._recovery_log.append(self._step_name)
+        return self._next_recovery_step(sim_s)
+
+    def _recovery_motion(self, name: str, commands: list, holding: bool = False) -> list:
+        self._step_name, self._awaiting, self._holding_step = name, "motion", holding
+        return commands
+
+    def _step_open(self, sim_s: float) -> list:
+        if self._plan is None:  # nothing was grasped in this run: leave the hand as it is
+            return []
+        width = self._plan.gripper.pre_open_width_m
+        if self._obs.state.gripper_width_m >= width - NOT_CLOSED_TOLERANCE_M:
+            return []
+        self._step_name, self._awaiting = f"opened the hand to {width * 1000:.0f} mm", "gripper"
+        return self._send_gripper(MoveGripper(width, OPENING_SPEED_MPS), sim_s)
+
+    def _step_lift(self, sim_s: float) -> list:
+        z_now = float(self._kin.fk(self._obs.state.q_rad)[2, 3])
+        z_observe = float(self._kin.fk(np.asarray(self._cfg.observation_q_rad))[2, 3])
+        lift = min(self._cfg.observation_lift_m, max(0.0, z_observe - z_now))
+        if lift < 0.005:
+            return []
+        try:
+            commands = self._line_up(lift, sim_s)
+        except KinematicsError as error:  # then the joint motion alone (checked against the table)
+            self._recovery_log.append(f"no straight lift from here ({error})")
+            return []
+        return self._recovery_motion(f"lifted the hand {lift * 100:.0f} cm", commands)
+
+    def _step_observe(self, sim_s: float) -> list:
+        if self._at_observation():
+            return []
+        motion = plan_joint_motion(self._obs.state.q_rad, np.asarray(self._cfg.observation_q_rad, dtype=float),
+                                   self._limits, dt_s=self._cfg.sample_dt_s)
+        return self._recovery_motion("moved to the observation pose", self._send(motion, sim_s))
+
+    def _step_carry(self, sim_s: float) -> list:
+        q = self._obs.state.q_rad
+        approach_M = self._plan.place_M.copy()
+        approach_M[2, 3] += self._cfg.place_approach_height_m
+        try:  # a direct motion from wherever the stop left the arm
+            target = self._kin.ik(approach_M, q, restarts=0).q_rad
+        except KinematicsError:
+            target = self._plan.place_approach_q
+        motion = plan_joint_motion(q, target, self._limits, dt_s=self._cfg.sample_dt_s)
+        return self._recovery_motion("carried the held object over the place pose", self._send(motion, sim_s), True)
+
+    def _step_lower(self, sim_s: float) -> list:
+        commands = self._line_to(self._plan.place_M[:3, 3], self._cfg.line_speed_mps, sim_s)
+        return self._recovery_motion("lowered it to the place pose", commands, True)
+
+    def _step_release(self, sim_s: float) -> list:
+        self._placed_open_sent = True
+        self._step_name, self._awaiting = "released it there", "gripper"
+        return self._send_gripper(MoveGripper(self._plan.gripper.pre_open_width_m, OPENING_SPEED_MPS), sim_s)
+
+    def _step_retreat(self, sim_s: float) -> list:
+        return self._recovery_motion("retreated up", self._line_up(self._cfg.place_approach_height_m, sim_s))
+
+    def _finish(self, sim_s: float, arm_state: str) -> None:
+        phase = self._failed_phase or self._phase
+        self.outcome.phase_reached = phase if phase not in ("idle", RECOVER_PHASE) else "pre_grasp"
         self.outcome.duration_s = max(0.0, sim_s - self._start_s)
+        self.outcome.arm_state = arm_state
+        self.outcome.recovery = "; ".join(self._recovery_log)
         self._stopping = False
         self.finished = True
+
+
+class ObservationMove(PickPlaceSequence):
+    """Bring the arm to config.observation_q_rad before a camera frame is planned on.
+
+    TCP straight up by observation_lift_m (when below the observation pose), then a
+    joint motion; the hand is left as it is. Succeeds at the observation pose; any
+    failure stops the arm as in a pick (same events, commands and outcome).
+    """
+
+    def __init__(self, kin: PandaKinematics, config: SequenceConfig):
+        if config.observation_q_rad is None:
+            raise ValueError("ObservationMove needs config.observation_q_rad")
+        super().__init__(kin, config, None, None)
+
+    def _start(self, sim_s: float) -> list:
+        self._recovering, self._phase = True, RECOVER_PHASE
+        self._recovery_steps = [self._step_lift, self._step_observe]
+        return self._next_recovery_step(sim_s)
+
+    def _finish(self, sim_s: float, arm_state: str) -> None:
+        super()._finish(sim_s, arm_state)
+        self.outcome.success = arm_state == "observation_pose" and not self.outcome.canceled
+        if not self.outcome.success and not self.outcome.failure_reason:
+            self.outcome.failure_reason = (f"could not bring the arm to the observation pose: "
+                                           f"{self.outcome.recovery or arm_state}")
 
 
 class _DriverSilent(SequenceFailure):

@@ -15,7 +15,15 @@ from defgg_ros.control.trajectories import LIMITS_SAFETY_SCALE, SAMPLE_DT_S, Sam
 CELL_GRASP_HEIGHT_RULES = ("below_surface", "half_height")
 
 PHASES = ("pre_grasp", "descend", "close", "lift", "transfer", "place", "retreat", "done")
+# Feedback phase while the executor brings the arm back after a failure or cancel (not in phase_reached).
+RECOVER_PHASE = "recover"
 
+# Where a run left the arm (Outcome.arm_state, PickAndPlace result `arm_state`):
+#   observation_pose  at rest at the observation pose (out of the camera's view), holding nothing
+#   at_rest           at rest elsewhere (after a success: above the place pose; else where it stopped)
+#   moving            did not come to rest within stop_timeout_s of the stop (a failure of its own)
+#   unknown           no joint states (driver silent): nobody can tell
+ARM_STATES = ("observation_pose", "at_rest", "moving", "unknown")
 
 @dataclass(frozen=True)
 class SequenceConfig:
@@ -45,11 +53,24 @@ class SequenceConfig:
     # the held object sees a predefined path with real accelerations (the
     # paper's real-robot test); None: straight joint motion to the place.
     transfer_via_position_m: tuple | None = None
+    # The arm counts as at rest when every joint is slower than still_speed_radps for rest_hold_s
+    # (robot clock); a stop waits at most stop_timeout_s after its trajectory ended for that.
+    still_speed_radps: float = 0.02
+    rest_hold_s: float = 0.1
+    stop_timeout_s: float = 3.0
+    # After a failure or cancel the arm goes here (joint positions, out of the camera's view): hand
+    # opened first if it holds nothing (else the held object is placed first), TCP lifted straight up
+    # by observation_lift_m, then a joint motion. None: the arm stays where it stopped.
+    observation_q_rad: tuple | None = None
+    observation_lift_m: float = 0.12
+    # The arm is "at the observation pose" within this joint distance (rad, every joint).
+    observation_tolerance_rad: float = 0.05
 
     def validate(self) -> None:
         positive = ("pregrasp_height_m", "descent_speed_mps", "line_speed_mps", "lift_height_m",
                     "place_approach_height_m", "contact_force_threshold_n", "watchdog_timeout_s",
-                    "arrival_joint_atol_rad", "settle_timeout_s", "gripper_timeout_s", "sample_dt_s")
+                    "arrival_joint_atol_rad", "settle_timeout_s", "gripper_timeout_s", "sample_dt_s",
+                    "still_speed_radps", "rest_hold_s", "stop_timeout_s", "observation_tolerance_rad")
         for name in positive:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
@@ -64,6 +85,11 @@ class SequenceConfig:
         if self.grasp_height_rule not in CELL_GRASP_HEIGHT_RULES:
             raise ValueError(f"grasp_height_rule must be one of {CELL_GRASP_HEIGHT_RULES}, "
                              f"got {self.grasp_height_rule!r}")
+        q_obs = self.observation_q_rad
+        if q_obs is not None and (len(q_obs) != 7 or not all(math.isfinite(v) for v in q_obs)):
+            raise ValueError(f"observation_q_rad must be 7 finite joint positions, got {q_obs}")
+        if not (math.isfinite(self.observation_lift_m) and self.observation_lift_m >= 0):
+            raise ValueError(f"observation_lift_m must be >= 0, got {self.observation_lift_m}")
         if not 0.0 <= self.slip_width_fraction < 1.0:
             raise ValueError(f"slip_width_fraction must be in [0, 1), got {self.slip_width_fraction}")
 
@@ -134,6 +160,10 @@ class Outcome:
     held_after_lift: bool = False
     held_after_transfer: bool = False
     duration_s: float = 0.0
+    # Where the run left the arm (one of ARM_STATES) and, after a failure or cancel, what the
+    # recovery did ("" when nothing was needed), for a person to read.
+    arm_state: str = "unknown"
+    recovery: str = ""
 
 
 @dataclass

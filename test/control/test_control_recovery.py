@@ -1,0 +1,205 @@
+"""Recovery after a failure or cancel, and "stop means stopped" (issue 27.1, 27.4), on a fake clock.
+
+The arm must end at the observation pose (hand opened first when it holds nothing, the held object
+placed first when it holds one) and say so; a stop must wait until the arm is at rest, or report
+that it did not as a failure of its own.
+"""
+import numpy as np
+import pytest
+from support.control_fake_robot import TICK_S, FakeRobot, World, run
+
+from defgg_ros.constants import PANDA_READY_Q_RAD
+from defgg_ros.control.kinematics import PandaKinematics
+from defgg_ros.control.pick_place import ObservationMove, PickPlaceSequence
+from defgg_ros.control.sequence_types import (
+    ArmState,
+    GraspTarget,
+    MoveGripper,
+    PlaceTarget,
+    SendTrajectory,
+    SequenceConfig,
+)
+
+pytestmark = pytest.mark.unit
+
+GRASP = GraspTarget(position_m=(0.5, 0.05, 0.05), yaw_rad=0.4, width_m=0.05, youngs_modulus_pa=2e9)
+PLACE = PlaceTarget(position_m=(0.35, -0.45, 0.12))
+OBSERVE_Q = np.array(PANDA_READY_Q_RAD)
+CONFIG = SequenceConfig(watchdog_timeout_s=0.5, observation_q_rad=tuple(PANDA_READY_Q_RAD))
+
+
+@pytest.fixture(scope="module")
+def kin():
+    return PandaKinematics()
+
+
+def finish(sequence, robot, max_s=120.0):
+    while not sequence.finished and robot.sim_s < max_s:
+        robot.step(sequence)
+    assert sequence.finished, f"still in {sequence.phase}"
+
+
+def commands_after(robot, index):
+    return robot.sent[index:]
+
+
+def at_observation(robot):
+    return float(np.max(np.abs(robot.q - OBSERVE_Q))) < CONFIG.arrival_joint_atol_rad
+
+
+def test_cancel_mid_descend_opens_lifts_and_ends_at_the_observation_pose(kin):
+    sequence, robot = PickPlaceSequence(kin, CONFIG, GRASP, PLACE), FakeRobot(kin, World())
+    run(sequence, robot, until=lambda r, s: s.phase == "descend" and s.feedback(r.sim_s).phase_progress > 0.5)
+    robot.width_m = 0.03  # the hand partly closed (say, a finger caught): it must open before rising
+    stopped_at = len(robot.sent)
+    robot.apply(sequence.cancel(robot.sim_s, robot.sim_s), sequence)
+    tcp_at_cancel = kin.fk(robot.q)[:3, 3]
+    finish(sequence, robot)
+    out = sequence.outcome
+    assert out.canceled and not out.success
+    assert out.phase_reached == "descend" and "canceled during descend" in out.failure_reason
+    assert out.arm_state == "observation_pose" and at_observation(robot)
+    assert "opened the hand" in out.recovery and "moved to the observation pose" in out.recovery
+    # Order: the jerk-limited stop, the hand opens, then the motions (first straight up).
+    after = commands_after(robot, stopped_at)
+    kinds = [type(c).__name__ for c in after]
+    assert kinds[:4] == ["SendTrajectory", "MoveGripper", "SendTrajectory", "SendTrajectory"], kinds
+    lift = after[2].trajectory
+    start_tcp, end_tcp = kin.fk(lift.q_rad[0])[:3, 3], kin.fk(lift.final_q_rad)[:3, 3]
+    assert end_tcp[:2] == pytest.approx(start_tcp[:2], abs=2e-3)
+    assert end_tcp[2] - start_tcp[2] == pytest.approx(CONFIG.observation_lift_m, abs=2e-3)
+    assert start_tcp == pytest.approx(tcp_at_cancel, abs=0.02)
+
+
+def test_missed_grasp_opens_the_hand_before_leaving(kin):
+    sequence, robot = PickPlaceSequence(kin, CONFIG, GRASP, PLACE), FakeRobot(kin, World(object_width_m=None))
+    run(sequence, robot, max_s=120.0)
+    out = sequence.outcome
+    assert "missed" in out.failure_reason and out.phase_reached == "close"
+    assert out.arm_state == "observation_pose" and at_observation(robot)
+    opened = [c for c in robot.sent if isinstance(c, MoveGripper)]
+    assert opened[-1].width_m > 0.05 and robot.width_m == pytest.approx(opened[-1].width_m)
+
+
+def test_an_object_held_at_a_cancel_is_placed_before_the_arm_leaves(kin):
+    sequence, robot = PickPlaceSequence(kin, CONFIG, GRASP, PLACE), FakeRobot(kin, World(object_width_m=0.045))
+    run(sequence, robot, until=lambda r, s: s.phase == "transfer" and s.feedback(r.sim_s).phase_progress > 0.3)
+    robot.apply(sequence.cancel(robot.sim_s, robot.sim_s), sequence)
+    releases = []
+    while not sequence.finished and robot.sim_s < 120:
+        before = len(robot.sent)
+        robot.step(sequence)
+        for c in robot.sent[before:]:
+            if isinstance(c, MoveGripper):
+                releases.append(kin.fk(robot.q)[:3, 3])
+    out = sequence.outcome
+    assert out.canceled and out.phase_reached == "transfer" and not out.held_after_transfer
+    assert out.recovery.startswith("carried the held object"), out.recovery
+    assert "released it there" in out.recovery
+    (release_tcp,) = releases  # opened once, at the place pose
+    assert release_tcp == pytest.approx(PLACE.position_m, abs=3e-3)
+    assert out.arm_state == "observation_pose" and at_observation(robot)
+
+
+def test_a_dropped_object_is_not_carried_on(kin):
+    sequence, robot = PickPlaceSequence(kin, CONFIG, GRASP, PLACE), FakeRobot(kin, World(slip_at_phase="transfer"))
+    run(sequence, robot, max_s=120.0)
+    out = sequence.outcome
+    assert "dropped during transfer" in out.failure_reason
+    assert "carried" not in out.recovery and out.arm_state == "observation_pose"
+
+
+def test_without_an_observation_pose_the_arm_stays_where_it_stopped(kin):
+    config = SequenceConfig(watchdog_timeout_s=0.5)
+    sequence, robot = PickPlaceSequence(kin, config, GRASP, PLACE), FakeRobot(kin, World(object_width_m=None))
+    run(sequence, robot)
+    assert sequence.outcome.arm_state == "at_rest" and sequence.outcome.recovery == ""
+    assert not at_observation(robot)
+
+
+def test_driver_silent_during_recovery_reports_an_unknown_arm_state(kin):
+    sequence, robot = PickPlaceSequence(kin, CONFIG, GRASP, PLACE), FakeRobot(kin, World(object_width_m=None))
+    run(sequence, robot, until=lambda r, s: s.recovering and s.feedback(r.sim_s).phase == "recover"
+        and r.trajectory is not None and r.sim_s - r.trajectory_start_s > 0.2)
+    robot.world.silent = True
+    finish(sequence, robot)
+    out = sequence.outcome
+    assert out.arm_state == "unknown" and "driver silent" in out.recovery
+    assert "missed" in out.failure_reason
+
+
+class SwayingRobot(FakeRobot):
+    """After the stop trajectory ends the first joint keeps swinging for `sway_s` (reported joint
+    speed 0.2 cos(2 pi t) rad/s, through zero twice a second), as an arm ringing after a hard stop."""
+
+    def __init__(self, *args, sway_s: float, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.sway_s, self.sway_from_s = sway_s, None
+
+    def cancel(self, sequence):
+        self.apply(sequence.cancel(self.sim_s, self.sim_s), sequence)
+        self.sway_from_s = self.trajectory_start_s + self.trajectory.duration_s
+
+    def step(self, sequence):
+        report = sequence.on_joint_state
+
+        def swaying(state, wall_s):
+            t = self.sim_s - (self.sway_from_s if self.sway_from_s is not None else np.inf)
+            if 0.0 <= t < self.sway_s:
+                qd = state.qd_radps.copy()
+                qd[0] = 0.2 * np.cos(2 * np.pi * t)
+                state = ArmState(state.q_rad, qd, state.gripper_width_m)
+            report(state, wall_s)
+
+        sequence.on_joint_state = swaying
+        try:
+            super().step(sequence)
+        finally:
+            del sequence.on_joint_state
+
+
+@pytest.mark.parametrize("sway_s", [1.5, 10.0])
+def test_a_stop_ends_only_at_rest_or_says_it_did_not(kin, sway_s):
+    config = SequenceConfig(watchdog_timeout_s=0.5)  # no recovery: the stop alone
+    sequence = PickPlaceSequence(kin, config, GRASP, PLACE)
+    robot = SwayingRobot(kin, World(), sway_s=sway_s)
+    run(sequence, robot, until=lambda r, s: s.phase == "transfer" and s.feedback(r.sim_s).phase_progress > 0.4)
+    robot.cancel(sequence)
+    finish(sequence, robot)
+    out = sequence.outcome
+    sway_ends_s = robot.sway_from_s + sway_s
+    if sway_s < config.stop_timeout_s:
+        # Ended after the swinging stopped (not at one of its zero crossings), at rest.
+        assert robot.sim_s >= sway_ends_s + config.rest_hold_s - 2 * TICK_S
+        assert out.arm_state == "at_rest" and out.failure_reason == "canceled during transfer"
+    else:
+        assert robot.sim_s < sway_ends_s
+        assert out.arm_state == "moving"
+        assert out.failure_reason.startswith("the arm did not come to rest"), out.failure_reason
+        assert "canceled during transfer" in out.failure_reason
+
+
+def test_an_arm_that_keeps_moving_is_not_recovered(kin):
+    sequence = PickPlaceSequence(kin, CONFIG, GRASP, PLACE)
+    robot = SwayingRobot(kin, World(), sway_s=30.0)
+    run(sequence, robot, until=lambda r, s: s.phase == "descend" and s.feedback(r.sim_s).phase_progress > 0.5)
+    n = len(robot.sent)
+    robot.cancel(sequence)
+    finish(sequence, robot)
+    assert sequence.outcome.arm_state == "moving" and sequence.outcome.recovery == ""
+    assert len([c for c in robot.sent[n:] if isinstance(c, SendTrajectory)]) == 1  # the stop only
+
+
+def test_observation_move_from_over_the_table(kin):
+    over_table = PickPlaceSequence(kin, CONFIG, GRASP, PLACE)
+    robot = FakeRobot(kin, World())
+    run(over_table, robot, until=lambda r, s: s.phase == "close")
+    move = ObservationMove(kin, CONFIG)
+    robot.sent.clear()
+    run(move, robot)
+    assert move.outcome.success and move.outcome.arm_state == "observation_pose" and at_observation(robot)
+    assert not any(isinstance(c, MoveGripper) for c in robot.sent)  # the hand is left alone
+    again = ObservationMove(kin, CONFIG)
+    robot.sent.clear()
+    run(again, robot)
+    assert again.outcome.success and robot.sent == []
