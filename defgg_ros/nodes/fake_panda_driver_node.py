@@ -25,7 +25,6 @@ from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, Image, JointState
 from std_msgs.msg import Header, String
@@ -38,6 +37,7 @@ from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import depth_metres_to_msg, make_camera_info, numpy_to_image
 from defgg_ros.ros_action import destroy_actions
 from defgg_ros.ros_executor import ThreadedExecutor
+from defgg_ros.sessions.graph import use_large_message_transport
 from defgg_ros.sim.cell import CellSettings, SimCell
 from defgg_ros.sim.cell_camera import DepthNoise
 from defgg_ros.sim.cell_gripper import GripperCommandError
@@ -48,10 +48,9 @@ SCENE_TOPIC = "/fake_panda/scene"
 OBJECT_POSES_TOPIC = "/fake_panda/object_poses"
 CAPTURE_SERVICE = "/fake_panda/capture_depth"
 # Camera frames are published reliably (like realsense2_camera): best-effort
-# subscribers (the cell's nodes, qos.SENSOR_DATA) still match, and a client
-# that must not miss a frame (the demo, recorders) can subscribe reliably.
-IMAGE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=2, reliability=ReliabilityPolicy.RELIABLE,
-                       durability=DurabilityPolicy.VOLATILE)
+# subscribers still match, and reliable ones (the cell's nodes pick reliable
+# for a reliable publisher, qos.SensorSubscription) get lost fragments repaired.
+IMAGE_QOS = qos.IMAGE_PUBLISH
 # A trajectory stamp further than this from sim time is a wall-clock stamp
 # from a node without use_sim_time: start it now instead of never/at once.
 MAX_STAMP_OFFSET_S = 1.0
@@ -348,6 +347,7 @@ class FakePandaDriver(Node):
 
 
 def main(args=None):
+    use_large_message_transport()  # before the DDS participant starts (see node_main.run_node)
     rclpy.init(args=args)
     node = None
     try:

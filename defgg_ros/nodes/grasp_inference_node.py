@@ -137,11 +137,12 @@ class GraspInferenceNode(Node):
         self._grasp_pub = self.create_publisher(Grasp, p["best_grasp_topic"], qos.STATE)
         self._quality_pub = self.create_publisher(Image, p["quality_topic"], qos.SENSOR_DATA)
         self._marker_pub = self.create_publisher(MarkerArray, p["markers_topic"], qos.STATE)
-        self.create_subscription(Image, p["depth_topic"], lambda m: self._on_stream("depth", m), qos.SENSOR_DATA)
-        self.create_subscription(Image, p["stiffness_topic"], lambda m: self._on_stream("stiffness", m),
-                                 qos.SENSOR_DATA)
-        self.create_subscription(CameraInfo, p["camera_info_topic"], lambda m: self._on_stream("info", m),
-                                 qos.SENSOR_DATA)
+        # Reliability follows the publishers', and silence is logged (qos.SensorSubscription, issue 26).
+        self._stream_subs = [
+            qos.SensorSubscription(self, Image, p["depth_topic"], lambda m: self._on_stream("depth", m)),
+            qos.SensorSubscription(self, Image, p["stiffness_topic"], lambda m: self._on_stream("stiffness", m)),
+            qos.SensorSubscription(self, CameraInfo, p["camera_info_topic"], lambda m: self._on_stream("info", m),
+                                   warn_after_s=0.0)]
         self.create_service(PlanGrasp, p["plan_grasp_service"], self._on_plan_grasp)
         self.get_logger().info(f"loaded {model_path} (runtime {self.predictor.runtime}, "
                                f"stiffness {'on' if self.predictor.uses_stiffness else 'off'})")

@@ -5,6 +5,7 @@ import rclpy
 from rclpy.executors import ExternalShutdownException
 
 from defgg_ros.ros_executor import ThreadedExecutor
+from defgg_ros.sessions.graph import use_large_message_transport
 
 
 def run_node(name: str, make_node, startup_errors=(ValueError, OSError), threads: int = 1, args=None) -> None:
@@ -14,7 +15,19 @@ def run_node(name: str, make_node, startup_errors=(ValueError, OSError), threads
     prints one line naming the problem and exits with code 2; the same error
     raised while running is a bug and keeps its traceback. `threads` > 1
     spins a ThreadedExecutor (nodes with reentrant callback groups).
+
+    Before rclpy starts its DDS participant, the process takes the cell's
+    Fast DDS profile (defgg_ros/sessions/fastdds_profile.xml: 32 MB
+    shared-memory segments, 4 MB UDP buffers) unless the caller set one.
+    The profile belongs to the node, not to a launcher: a node started by
+    `ros2 run`, a launch file or a console script must receive camera-sized
+    messages with large buffers on its side even when the camera driver
+    runs with Fast DDS's defaults (bench/bench_transport.py: a best-effort
+    reader of a default 1280x720 publisher got 3 of 30 frames with the
+    defaults, 11 of 30 with the profile; the reliable reader that
+    qos.SensorSubscription picks for such a publisher gets 30 of 30).
     """
+    use_large_message_transport()
     rclpy.init(args=args)
     node = None
     try:

@@ -1,17 +1,41 @@
-"""Named QoS profiles of the cell, so publishers and subscribers always match.
+"""Named QoS profiles of the cell, and the camera-stream subscription that works with any driver.
 
-- SENSOR_DATA: camera streams (depth, colour, camera_info, stiffness image,
-  mask, quality image). Best effort, keep last 5, volatile: a late frame is
-  worthless, and a best-effort subscriber also matches a reliable publisher
-  (realsense2_camera's default), so subscribe with this one.
+- SENSOR_DATA: best effort, keep last 5, volatile (rclpy's sensor-data
+  profile), for readers that must match any image publisher (recorders).
+- IMAGE_PUBLISH: what the cell's own image publishers offer (the fake
+  camera, stiffness image, mask): reliable, keep last 2, volatile, like
+  realsense2_camera. Best-effort readers still match it, and reliable
+  readers get lost fragments of large frames repaired (see below).
 - LATCHED: state that a late joiner must still get (stiffness assignments,
   the scene description): reliable + transient local, keep last 1 — the
   "latched topic" of ROS 1.
 - STATE: robot state and results (joint states, wrench, best grasp,
   markers): reliable, keep last 10.
-- COMMAND: commands (joint trajectories): reliable, keep last 1 so a stale
-  command is never replayed after a newer one.
+- COMMAND: commands: reliable, keep last 1 so a stale command is never
+  replayed after a newer one.
+
+Camera streams are subscribed with `SensorSubscription`, not with a fixed
+profile. Why (issue 26, bench/bench_transport.py): a 1280x720 16UC1 frame is
+1.8 MB, which Fast DDS splits into ~28 fragments of 64 kB. With the
+publisher's default transports (512 kB shared-memory segments, ~208 kB UDP
+socket buffers) many fragments are dropped on the way; a best-effort reader
+never gets them again, so the whole frame is lost (3 of 30 frames arrived
+from a default-configured rclpy publisher at 30 Hz), while a reliable reader
+asks for the missing fragments and gets every frame (30 of 30). The
+publisher's transports are not ours to configure, so the reader must be
+reliable whenever the publisher is (realsense2_camera's default, the fake
+driver's); but a reliable reader does not match a best-effort publisher at
+all. Hence the subscription follows the publishers it sees, as rosbag2's
+recorder does: reliable when every publisher offers reliable, best effort
+otherwise (also before any publisher exists, since best effort matches both).
+It re-checks once a second and re-creates itself when that choice changes.
+
+The same subscription warns when no message arrived for `warn_after_s`
+(repeating at doubling intervals), naming the publishers it sees, so a
+silent camera or a QoS mismatch shows in the log instead of nothing.
 """
+import time
+
 from rclpy.qos import (
     DurabilityPolicy,
     HistoryPolicy,
@@ -21,6 +45,13 @@ from rclpy.qos import (
 )
 
 SENSOR_DATA = qos_profile_sensor_data
+
+IMAGE_PUBLISH = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=2,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
+)
 
 LATCHED = QoSProfile(
     history=HistoryPolicy.KEEP_LAST,
@@ -42,3 +73,89 @@ COMMAND = QoSProfile(
     reliability=ReliabilityPolicy.RELIABLE,
     durability=DurabilityPolicy.VOLATILE,
 )
+
+SENSOR_DEPTH = 5                 # frames kept per reader: a late frame is worthless
+RECHECK_PERIOD_S = 1.0           # how often the publishers' reliability is looked at again
+DEFAULT_WARN_AFTER_S = 5.0       # silence on a camera stream that is worth a warning
+
+
+def sensor_qos(reliability: ReliabilityPolicy) -> QoSProfile:
+    """Keep last SENSOR_DEPTH, volatile, with the given reliability."""
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=SENSOR_DEPTH, reliability=reliability,
+                      durability=DurabilityPolicy.VOLATILE)
+
+
+def reliability_for(publisher_reliabilities) -> ReliabilityPolicy:
+    """RELIABLE when there is at least one publisher and all offer RELIABLE, else BEST_EFFORT.
+
+    A best-effort reader matches every publisher, so it is the choice whenever one publisher is best
+    effort or none is known yet; a reliable reader repairs lost fragments of large frames.
+    """
+    offered = list(publisher_reliabilities)
+    if offered and all(r == ReliabilityPolicy.RELIABLE for r in offered):
+        return ReliabilityPolicy.RELIABLE
+    return ReliabilityPolicy.BEST_EFFORT
+
+
+class SensorSubscription:
+    """A camera-stream subscription whose reliability follows its publishers (see the module doc).
+
+    `warn_after_s` <= 0 turns the silence warning off. The node's clock is not used for the warning:
+    a stopped sim clock must not hide a silent camera, so it runs on the wall clock.
+    """
+
+    def __init__(self, node, msg_type, topic: str, callback, warn_after_s: float = DEFAULT_WARN_AFTER_S,
+                 callback_group=None):
+        self._node, self._msg_type, self._callback, self._group = node, msg_type, callback, callback_group
+        self.topic = topic
+        self._resolved = node.resolve_topic_name(topic)
+        self._warn_after_s = float(warn_after_s)
+        self._last_message = time.monotonic()
+        self._next_warning_s = self._warn_after_s
+        self._warned = False
+        self.subscription = None
+        self.reliability = None
+        self.messages_received = 0
+        self._update()
+        self._timer = node.create_timer(RECHECK_PERIOD_S, self._on_timer, callback_group=callback_group)
+
+    def _publisher_reliabilities(self):
+        try:
+            infos = self._node.get_publishers_info_by_topic(self._resolved)
+        except Exception:  # noqa: BLE001 - graph queries fail while the context shuts down
+            return []
+        return [info.qos_profile.reliability for info in infos]
+
+    def _update(self) -> None:
+        wanted = reliability_for(self._publisher_reliabilities())
+        if wanted == self.reliability:
+            return
+        if self.subscription is not None:
+            self._node.destroy_subscription(self.subscription)
+        self.subscription = self._node.create_subscription(self._msg_type, self.topic, self._on_message,
+                                                           sensor_qos(wanted), callback_group=self._group)
+        if self.reliability is not None:
+            self._node.get_logger().info(f"{self._resolved}: subscribed {wanted.name.lower()} now "
+                                         "(follows the publishers' reliability)")
+        self.reliability = wanted
+
+    def _on_message(self, msg) -> None:
+        self._last_message = time.monotonic()
+        self.messages_received += 1
+        if self._warned:
+            self._warned = False
+            self._next_warning_s = self._warn_after_s
+            self._node.get_logger().info(f"{self._resolved}: messages arrive again")
+        self._callback(msg)
+
+    def _on_timer(self) -> None:
+        self._update()
+        silent_s = time.monotonic() - self._last_message
+        if self._warn_after_s > 0 and silent_s >= self._next_warning_s:
+            offered = [r.name.lower() for r in self._publisher_reliabilities()]
+            self._node.get_logger().warning(
+                f"no message on {self._resolved} for {silent_s:.0f} s "
+                f"({len(offered)} publisher(s){': ' + ', '.join(offered) if offered else ''}; "
+                f"subscribed {self.reliability.name.lower()})")
+            self._warned = True
+            self._next_warning_s = silent_s * 2.0

@@ -79,11 +79,13 @@ class SegmentationNode(Node):
         self.frames_rejected = 0
         self.last_rejection = ""  # the latest skipped frame's reason (the log line is throttled)
         p = self._params()
-        self._stiffness_pub = self.create_publisher(Image, p["stiffness_topic"], qos.SENSOR_DATA)
-        self._mask_pub = self.create_publisher(Image, p["mask_topic"], qos.SENSOR_DATA)
+        self._stiffness_pub = self.create_publisher(Image, p["stiffness_topic"], qos.IMAGE_PUBLISH)
+        self._mask_pub = self.create_publisher(Image, p["mask_topic"], qos.IMAGE_PUBLISH)
         self._assign_pub = self.create_publisher(StiffnessAssignment, p["assignments_topic"], qos.LATCHED)
-        self.create_subscription(CameraInfo, p["camera_info_topic"], self._on_camera_info, qos.SENSOR_DATA)
-        self.create_subscription(Image, p["depth_topic"], self._on_depth, qos.SENSOR_DATA)
+        # Reliability follows the camera driver's, and silence is logged (qos.SensorSubscription, issue 26).
+        self._info_sub = qos.SensorSubscription(self, CameraInfo, p["camera_info_topic"], self._on_camera_info,
+                                                warn_after_s=0.0)
+        self._depth_sub = qos.SensorSubscription(self, Image, p["depth_topic"], self._on_depth)
         self.create_service(SetStiffness, p["set_stiffness_service"], self._on_set_stiffness)
         self.create_service(Trigger, p["capture_background_service"], self._on_capture_background)
         self.add_on_set_parameters_callback(self._on_set_parameters)
