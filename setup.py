@@ -37,7 +37,8 @@ setup(
     name=PACKAGE,
     version="0.1.0",
     packages=find_packages(exclude=["test", "test.*"]),
-    package_data={"defgg_ros.sim": ["tet_meshes/*.npz"], "defgg_ros.sessions": ["fastdds_profile.xml"]},
+    package_data={"defgg_ros.sim": ["tet_meshes/*.npz"], "defgg_ros.sessions": ["fastdds_profile.xml"],
+                  "defgg_ros.ros": ["params/*.yaml"]},
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),

@@ -174,7 +174,7 @@ def main(argv=None):
         prime_latest_frame(cell, frame_msgs)
         image_request = PlanGrasp.Request(depth=frame_msgs[0], stiffness=frame_msgs[1], camera_info=frame_msgs[2])
         from defgg_ros.nodes.grasp_inference_node import PARAMETERS
-        node_clearance_m = PARAMETERS["finger_clearance_opening_m"][0]   # the node's default
+        node_clearance_m = PARAMETERS["finger_clearance_opening_m"].default   # the node's default
         modes = {
             "bare predictor.predict": lambda: predictor.predict(depth_m, moduli_pa, camera_k, labels, top_k=1,
                                                                 finger_clearance_opening_m=node_clearance_m),

@@ -250,10 +250,12 @@ class DemoRun:
 
 
 def executor_params(node_set) -> dict:
-    """The executor's parameters from its params files (place pose, base frame), {} if none."""
+    """The executor's start-up parameters: its schema's defaults, then its params files (place pose, base frame)."""
     import yaml
 
-    params = {}
+    from defgg_ros.ros.parameters import defaults
+
+    params = defaults("executor_node")
     for entry in node_set.nodes:
         if entry.name == "executor_node":
             for path in entry.params_files:

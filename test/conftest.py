@@ -1,17 +1,147 @@
-"""Shared test set-up: ROS isolation per test process, rclpy fixtures, waits.
+"""Shared test set-up: markers, a per-test timeout, ROS isolation per test process, rclpy fixtures, waits.
 
 Each pytest process gets its own ROS_DOMAIN_ID and localhost-only discovery
 so parallel runs (and a cell running on the same machine) never cross-talk.
+
+Markers (every test gets exactly one kind; `make check` runs `-m "not e2e and not slow"`, the slow list below):
+  unit  pure Python/numpy/torch, no DDS, no PyBullet
+  ros   real rclpy nodes over real DDS in this process or a few child processes
+  sim   PyBullet (FEM trials, the simulated cell's physics)
+  e2e   whole cell or whole offline pipeline: several processes, tens of seconds to minutes
+A module may set `pytestmark = pytest.mark.<kind>`; otherwise the kind is derived from what the
+module uses (see `_kind_of`). Helpers shared between test modules live in test/support/ (a package;
+pytest puts test/ on sys.path because this conftest sits there, so no sys.path edits are needed).
+
+Timeout: every test phase (set-up, call, tear-down) is stopped after DEFGG_TEST_TIMEOUT_S seconds
+(default 300; e2e tests 900) or `@pytest.mark.timeout(seconds)`. pytest-timeout is not on the lock,
+so this is a SIGALRM timer; it is skipped when the pytest-timeout plugin is present.
 """
 import os
 import random
+import signal
 import time
+from pathlib import Path
 
 import pytest
 
 # Must happen before rclpy initialises its context.
 os.environ["ROS_DOMAIN_ID"] = str(random.Random(os.getpid()).randint(1, 100))
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+
+TEST_ROOT = Path(__file__).resolve().parent
+REPO_ROOT = TEST_ROOT.parent
+KINDS = ("unit", "ros", "sim", "e2e")
+DEFAULT_TIMEOUT_S = float(os.environ.get("DEFGG_TEST_TIMEOUT_S", "300"))
+E2E_TIMEOUT_S = max(DEFAULT_TIMEOUT_S, 900.0)
+# Whole-cell / whole-pipeline modules: kind e2e (minutes on a 2-core machine).
+E2E_MODULES = {
+    "test_demo.py",
+    "nodes/test_executor_e2e.py",
+    "sessions/test_sessions_replay.py",   # replays recorded sessions through the whole node graph
+}
+# Not e2e, but too slow for `make check` (a test of several seconds each here); `make test` runs them.
+SLOW_MODULES = {
+    "train/test_train_learning.py", "train/test_train_ddp.py", "train/test_train_resume.py",
+    "model/test_model_benches.py", "evaluation/test_mini_eval.py", "reliability/test_eval_kill.py",
+    "bringup/test_isolation.py", "bringup/test_bringup_supervision.py", "nodes/test_transport_default_publisher.py",
+    "sessions/test_sessions_record.py", "reliability/test_pick_faults.py",
+}
+_ROS_FIXTURES = {"rclpy_context", "executor", "inference_service"}
+_ROS_SOURCE_HINTS = ("import rclpy", "from rclpy", "defgg_ros.nodes.", "defgg_ros.bringup.supervisor",
+                     "defgg_ros.ros", "Bringup(")
+_SIM_SOURCE_HINTS = ("pybullet", "defgg_ros.sim", "defgg_ros.evaluation.runner")
+
+
+def pytest_configure(config):
+    for kind, what in (("unit", "pure Python, no DDS, no PyBullet"),
+                       ("ros", "real rclpy nodes over real DDS"),
+                       ("sim", "PyBullet physics"),
+                       ("e2e", "whole cell or whole offline pipeline (minutes)"),
+                       ("slow", "not e2e but too slow for make check"),
+                       ("timeout(seconds)", "per-phase time limit for this test")):
+        config.addinivalue_line("markers", f"{kind}: {what}")
+
+
+_module_kind_cache: dict = {}
+
+
+def _relative(path) -> str:
+    try:
+        return Path(path).resolve().relative_to(TEST_ROOT).as_posix()
+    except ValueError:
+        return Path(path).name
+
+
+def _kind_of(item) -> str:
+    """The test's kind from its module: listed e2e, else ros (rclpy fixtures or imports), else sim, else unit."""
+    relative = _relative(item.path)
+    if relative in E2E_MODULES:
+        return "e2e"
+    if _ROS_FIXTURES & set(getattr(item, "fixturenames", ())):
+        return "ros"
+    if relative not in _module_kind_cache:
+        source = Path(item.path).read_text(encoding="utf-8", errors="replace")
+        if any(hint in source for hint in _ROS_SOURCE_HINTS):
+            _module_kind_cache[relative] = "ros"
+        elif any(hint in source for hint in _SIM_SOURCE_HINTS):
+            _module_kind_cache[relative] = "sim"
+        else:
+            _module_kind_cache[relative] = "unit"
+    return _module_kind_cache[relative]
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        if not any(item.get_closest_marker(kind) for kind in KINDS):
+            item.add_marker(getattr(pytest.mark, _kind_of(item)))
+        if _relative(item.path) in SLOW_MODULES:
+            item.add_marker(pytest.mark.slow)
+
+
+def _timeout_of(item) -> float:
+    marker = item.get_closest_marker("timeout")
+    if marker is not None and marker.args:
+        return float(marker.args[0])
+    return E2E_TIMEOUT_S if item.get_closest_marker("e2e") else DEFAULT_TIMEOUT_S
+
+
+class PhaseTimeout(Exception):
+    """Raised in the test's main thread when a phase outlives its time limit."""
+
+
+def _run_with_alarm(item, phase: str):
+    """Arm SIGALRM for one phase; the handler fails the test with the phase and the limit."""
+    if item.config.pluginmanager.hasplugin("timeout") or not hasattr(signal, "setitimer"):
+        yield
+        return
+    limit_s = _timeout_of(item)
+
+    def on_alarm(signum, frame):
+        raise PhaseTimeout(f"{item.nodeid}: {phase} exceeded {limit_s:.0f} s (DEFGG_TEST_TIMEOUT_S / "
+                               "@pytest.mark.timeout)")
+
+    previous = signal.signal(signal.SIGALRM, on_alarm)
+    signal.setitimer(signal.ITIMER_REAL, limit_s)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_setup(item):
+    yield from _run_with_alarm(item, "set-up")
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_call(item):
+    yield from _run_with_alarm(item, "call")
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_teardown(item):
+    yield from _run_with_alarm(item, "tear-down")
 
 
 @pytest.fixture
@@ -42,6 +172,33 @@ def executor(rclpy_context):
         destroy_actions(node)  # plain client nodes too: rclpy's destroy_node leaves actions alive
         node.destroy_node()
     ex.shutdown(timeout_sec=2.0)
+
+
+@pytest.fixture(scope="session")
+def random_checkpoint(tmp_path_factory):
+    """Factory: random_checkpoint(seed=0, uses_stiffness=True) -> path of a randomly initialised
+    Def-GG-CNN checkpoint in the real format, written once per test session and arguments."""
+    from defgg_ros.model.checkpoint import make_random_checkpoint
+
+    made = {}
+
+    def make(seed: int = 0, uses_stiffness: bool = True) -> Path:
+        key = (seed, uses_stiffness)
+        if key not in made:
+            folder = tmp_path_factory.mktemp(f"checkpoint_seed{seed}")
+            made[key] = make_random_checkpoint(folder / "random.pt", seed=seed, uses_stiffness=uses_stiffness)
+        return made[key]
+
+    return make
+
+
+@pytest.fixture
+def executor_cell(rclpy_context):
+    """An ExecutorNode with quick motion parameters, a PickAndPlace client and a factory for the in-test
+    driver (test/support/executor_cell.py): (executor, executor node, action client, start_driver)."""
+    from support.executor_cell import run_cell
+
+    yield from run_cell(rclpy_context)
 
 
 @pytest.fixture

@@ -20,15 +20,13 @@ from builtin_interfaces.msg import Duration
 from defgg_interfaces.action import GripperGrasp, GripperMove, PickAndPlace
 from defgg_interfaces.srv import PlanGrasp
 from geometry_msgs.msg import WrenchStamped
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from defgg_ros import topics
-from defgg_ros.constants import PANDA_FINGER_JOINT_NAMES, PANDA_JOINT_NAMES, PREGRASP_HEIGHT_M
+from defgg_ros.constants import PANDA_FINGER_JOINT_NAMES, PANDA_JOINT_NAMES
 from defgg_ros.control.kinematics import PandaKinematics
 from defgg_ros.control.pick_place import PickPlaceSequence
 from defgg_ros.control.poses import PoseError, top_down_yaw
@@ -42,55 +40,15 @@ from defgg_ros.control.sequence_types import (
     SendTrajectory,
     SequenceConfig,
 )
-from defgg_ros.control.trajectories import LIMITS_SAFETY_SCALE, SAMPLE_DT_S
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import ConversionError, transform_from_pose
 from defgg_ros.nodes.node_main import run_node
+from defgg_ros.ros.parameters import declare_parameters, load_schema
 from defgg_ros.ros_action import ActionClient, destroy_actions
 from defgg_ros.ros_service import ServiceTimeout, call_idempotent
 
-_DEFAULTS = SequenceConfig()
-PARAMETERS = {
-    "action_name": (topics.PICK_AND_PLACE_ACTION, "PickAndPlace action served here."),
-    "joint_states_topic": (topics.JOINT_STATES, "In: sensor_msgs/JointState of the arm and fingers."),
-    "joint_trajectory_topic": (topics.JOINT_TRAJECTORY, "Out: trajectory_msgs/JointTrajectory for the arm."),
-    "external_wrench_topic": (topics.EXTERNAL_WRENCH, "In: geometry_msgs/WrenchStamped, external force (N)."),
-    "gripper_move_action": (topics.GRIPPER_MOVE_ACTION, "GripperMove action of the hand driver."),
-    "gripper_grasp_action": (topics.GRIPPER_GRASP_ACTION, "GripperGrasp action of the hand driver."),
-    "plan_grasp_service": (topics.PLAN_GRASP_SERVICE, "PlanGrasp service used when a goal sets plan_grasp."),
-    "base_frame": (topics.BASE_FRAME, "Frame of grasp and place poses (the arm's base)."),
-    "place_position_m": ([0.35, -0.45, 0.12], "Default place pose (the bin): TCP position [x, y, z] in base (m)."),
-    "place_yaw_rad": (0.0, "Default place pose: finger closing direction about the vertical (rad)."),
-    "table_z_m": (_DEFAULTS.table_z_m, "Height of the table surface in the base frame (m)."),
-    "limits_scale": (LIMITS_SAFETY_SCALE, "Fraction (0, 1] of the Panda's velocity/acceleration/jerk limits."),
-    "pregrasp_height_m": (PREGRASP_HEIGHT_M, "Pre-grasp height above the grasp (m)."),
-    "grasp_depth_below_surface_m": (_DEFAULTS.grasp_depth_below_surface_m,
-                                    "Fingertips go this far below the grasp point (on the surface) (m); "
-                                    "used by grasp_height_rule below_surface."),
-    "grasp_height_rule": (_DEFAULTS.grasp_height_rule,
-                          "Grasp TCP height: below_surface (grasp_depth_below_surface_m under the grasp "
-                          "point) or half_height (half the object height seen there, the rule of the "
-                          "simulated evaluation and of executor-height training data)."),
-    "descent_speed_mps": (_DEFAULTS.descent_speed_mps, "TCP speed of the guarded descent (m/s)."),
-    "line_speed_mps": (_DEFAULTS.line_speed_mps, "TCP speed of lift, place and retreat lines (m/s)."),
-    "lift_height_m": (_DEFAULTS.lift_height_m, "Lift height after closing (m)."),
-    "place_approach_height_m": (_DEFAULTS.place_approach_height_m, "Transfer ends this high above the place pose (m)."),
-    "contact_force_threshold_n": (_DEFAULTS.contact_force_threshold_n,
-                                  "External force change that counts as contact during the descent (N)."),
-    "watchdog_timeout_s": (_DEFAULTS.watchdog_timeout_s, "Abort when no joint states for this long (wall clock, s)."),
-    "arrival_joint_atol_rad": (_DEFAULTS.arrival_joint_atol_rad, "A motion has arrived within this joint error (rad)."),
-    "settle_timeout_s": (_DEFAULTS.settle_timeout_s, "Fail if not arrived this long after a trajectory ends (s)."),
-    "gripper_timeout_s": (_DEFAULTS.gripper_timeout_s, "Fail if a gripper command takes longer (robot clock, s)."),
-    "slip_width_fraction": (_DEFAULTS.slip_width_fraction,
-                            "Dropped if the held width falls below this fraction of the closed width."),
-    "use_transfer_via": (True, "Transfer through transfer_via_position_m without stopping (else a direct motion)."),
-    "transfer_via_position_m": ([0.45, -0.2, 0.3], "TCP position [x, y, z] in base the transfer passes (m)."),
-    "trajectory_sample_dt_s": (SAMPLE_DT_S, "Time between JointTrajectory points (s)."),
-    "default_youngs_modulus_pa": (2e6, "Modulus for the gripper rule when a grasp carries none (Pa)."),
-    "control_period_s": (0.01, "Control loop period (wall clock, s)."),
-    "server_wait_s": (5.0, "How long to wait for the gripper actions / grasp service to appear (s)."),
-    "plan_grasp_timeout_s": (20.0, "How long a PlanGrasp call may take (s)."),
-}
+# Names, types, defaults and bounds: defgg_ros/ros/params/executor_node.yaml.
+PARAMETERS = load_schema("executor_node")
 
 
 class GoalError(ValueError):
@@ -162,8 +120,7 @@ def place_target(pose_stamped, base_frame: str, default_position, default_yaw: f
 class ExecutorNode(Node):
     def __init__(self, **kwargs):
         super().__init__("executor_node", **kwargs)
-        for name, (default, description) in PARAMETERS.items():
-            self.declare_parameter(name, default, ParameterDescriptor(description=description))
+        declare_parameters(self)  # a value outside its schema raises ParameterError here
         p = self._params()
         self._config = self._sequence_config(p)  # invalid start-up parameters raise here
         self._kin = PandaKinematics()

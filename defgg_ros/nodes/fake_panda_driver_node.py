@@ -19,7 +19,6 @@ from pathlib import Path
 import rclpy
 from defgg_interfaces.action import GripperGrasp, GripperMove
 from geometry_msgs.msg import Pose, PoseArray, WrenchStamped
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy._rclpy_pybind11 import RCLError
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
@@ -31,10 +30,10 @@ from std_msgs.msg import Header, String
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
-from defgg_ros import topics
 from defgg_ros.constants import CAMERA_HEIGHT_PX, CAMERA_WIDTH_PX, PANDA_JOINT_NAMES
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import depth_metres_to_msg, make_camera_info, numpy_to_image
+from defgg_ros.ros.parameters import declare_parameters, load_schema
 from defgg_ros.ros_action import destroy_actions
 from defgg_ros.ros_executor import ThreadedExecutor
 from defgg_ros.sessions.graph import use_large_message_transport
@@ -69,41 +68,14 @@ def default_scene_file() -> str:
         return str(source)
 
 
-PARAMETERS = {
-    "scene_file": ("", "Scene YAML (sim_bringup/scenes/*.yaml); '' = the demo scene."),
-    "gui": (False, "Open PyBullet's GUI window (default: headless DIRECT)."),
-    "joint_state_rate_hz": (100.0, "Joint states, wrench and /clock per second of sim time (control period)."),
-    "depth_rate_hz": (2.0, "Depth + camera_info renders per second of sim time (TinyRenderer ~0.1-0.2 s each)."),
-    "render_while_moving": (False, "Also render periodic frames while the arm or gripper moves. Off: a render "
-                                   "stalls the sim thread (0.1-2 s wall on a loaded CPU), which reads as a "
-                                   "silent driver to the executor's watchdog; capture_depth always renders."),
-    "object_pose_rate_hz": (10.0, "Ground-truth object poses per second of sim time."),
-    "publish_color": (False, "Also publish an rgb8 colour image with each depth frame."),
-    "max_real_time_factor": (1.0, "Run at most this much faster than real time; 0 = as fast as possible."),
-    "depth_noise_coeff_per_m": (0.0, "Depth noise sigma = coeff * z^2 (m); 0 = noiseless. ~0.004 is D435-like."),
-    "depth_dropout_fraction": (0.0, "Fraction of depth pixels randomly invalid (0 in the message)."),
-    "depth_drop_edges": (False, "Invalidate pixels at depth jumps (stereo occlusion shadows)."),
-    "seed": (0, "Seed of the depth noise."),
-    "soft_always_active": (False, "Simulate soft objects as FEM all the time (default: only near the hand)."),
-    "rtf_log_period_s": (10.0, "Log the real-time factor this often (wall clock, s)."),
-    "base_frame": (topics.BASE_FRAME, "Frame of the robot base (world origin)."),
-    "camera_frame": (topics.CAMERA_OPTICAL_FRAME, "Frame id of depth images and camera_info."),
-    "joint_states_topic": (topics.JOINT_STATES, "Out: sensor_msgs/JointState."),
-    "joint_trajectory_topic": (topics.JOINT_TRAJECTORY, "In: trajectory_msgs/JointTrajectory for panda_joint1..7."),
-    "gripper_move_action": (topics.GRIPPER_MOVE_ACTION, "GripperMove action server."),
-    "gripper_grasp_action": (topics.GRIPPER_GRASP_ACTION, "GripperGrasp action server."),
-    "external_wrench_topic": (topics.EXTERNAL_WRENCH, "Out: WrenchStamped on hand + fingers, base frame."),
-    "depth_topic": (topics.DEPTH_IMAGE, "Out: 16UC1 depth in mm (0 = invalid)."),
-    "camera_info_topic": (topics.DEPTH_CAMERA_INFO, "Out: camera_info of the depth image."),
-    "color_topic": (topics.COLOR_IMAGE, "Out: rgb8 colour image (publish_color)."),
-}
+# Names, types, defaults and bounds: defgg_ros/ros/params/fake_panda_driver.yaml.
+PARAMETERS = load_schema("fake_panda_driver")
 
 
 class FakePandaDriver(Node):
     def __init__(self, **kwargs):
         super().__init__("fake_panda_driver", **kwargs)
-        for name, (default, description) in PARAMETERS.items():
-            self.declare_parameter(name, default, ParameterDescriptor(description=description))
+        declare_parameters(self)  # a value outside its schema raises ParameterError here
         self.cfg = {name: self.get_parameter(name).value for name in PARAMETERS}
         self._check_parameters()
         scene_path = self.cfg["scene_file"] or default_scene_file()

@@ -20,12 +20,10 @@ from pathlib import Path
 import numpy as np
 from defgg_interfaces.msg import Grasp
 from defgg_interfaces.srv import PlanGrasp
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image
 from visualization_msgs.msg import Marker, MarkerArray
 
-from defgg_ros import topics
 from defgg_ros.constants import GRIPPER_MAX_WIDTH_M
 from defgg_ros.model.inference import CheckpointError, GraspPredictor
 from defgg_ros.nodes import qos
@@ -49,10 +47,10 @@ from defgg_ros.perception.grasp_planning import (
     full_quality_image,
     labels_from_stiffness,
 )
-from defgg_ros.perception.segmentation import OBJECT_MAX_HEIGHT_M, OBJECT_MIN_AREA_PX, OBJECT_MIN_HEIGHT_M
 from defgg_ros.perception.stiffness_assignment import check_entries_fit_image, make_entry
-from defgg_ros.perception.stiffness_segmenter import DEFAULT_YOUNGS_MODULUS_PA, SegmenterConfig, run_segmenter
-from defgg_ros.perception.sync import DEFAULT_CACHE_SIZE, StampSynchronizer
+from defgg_ros.perception.stiffness_segmenter import SegmenterConfig, run_segmenter
+from defgg_ros.perception.sync import StampSynchronizer
+from defgg_ros.ros.parameters import declare_parameters, load_schema
 
 WARN_THROTTLE_S = 2.0
 MODEL_FILES = {True: "defgg_cnn.pt", False: "ggcnn_depth_only.pt"}
@@ -60,34 +58,8 @@ MODEL_FILES = {True: "defgg_cnn.pt", False: "ggcnn_depth_only.pt"}
 # (pi about x) — the cell's scene files use the same mount.
 DEFAULT_BASE_T_CAMERA = [0.5, 0.0, 0.40, 1.0, 0.0, 0.0, 0.0]
 
-PARAMETERS = {
-    "model_path": ("", "Checkpoint to load; '' = the shipped models/defgg_cnn.pt (or ggcnn_depth_only.pt)."),
-    "use_stiffness": (True, "true: Def-GG-CNN (depth + stiffness); false: the depth-only GG-CNN baseline."),
-    "num_threads": (1, "torch intra-op threads for the network (the cell's CPU is shared)."),
-    "base_T_camera": (DEFAULT_BASE_T_CAMERA, "Camera optical frame in the base frame: [x, y, z, qx, qy, qz, qw]."),
-    "base_frame": (topics.BASE_FRAME, "Frame of Grasp.pose_base and of the markers."),
-    "depth_topic": (topics.DEPTH_IMAGE, "Depth image in (16UC1 mm or 32FC1 m)."),
-    "camera_info_topic": (topics.DEPTH_CAMERA_INFO, "CameraInfo of the depth image."),
-    "stiffness_topic": (topics.STIFFNESS_IMAGE, "32FC1 Young's modulus image (Pa) with the depth's stamps."),
-    "best_grasp_topic": (topics.BEST_GRASP, "Out: the best grasp of each synchronised frame."),
-    "quality_topic": (topics.QUALITY_IMAGE, "Out: 32FC1 grasp quality map, depth-sized."),
-    "markers_topic": (topics.GRASP_MARKERS, "Out: MarkerArray, two finger boxes at the best grasp."),
-    "plan_grasp_service": (topics.PLAN_GRASP_SERVICE, "PlanGrasp service name."),
-    "publish_on_sync": (True, "Run the network on every synchronised frame and publish the outputs."),
-    "sync_cache_size": (DEFAULT_CACHE_SIZE, "Frames kept per stream while waiting for a stamp match."),
-    "default_youngs_modulus_pa": (DEFAULT_YOUNGS_MODULUS_PA,
-                                  "For request depth without stiffness: modulus of objects no entry addresses."),
-    "min_object_height_m": (OBJECT_MIN_HEIGHT_M, "Segmentation of request depth: min height above table (m)."),
-    "max_object_height_m": (OBJECT_MAX_HEIGHT_M, "Segmentation of request depth: max height above table (m)."),
-    "min_object_area_px": (OBJECT_MIN_AREA_PX, "Segmentation of request depth: min object area (px)."),
-    # The executor opens fully before it descends (control/gripper_rule.pre_grasp_opening_m; importing
-    # it here would pull the simulator into this node).
-    "finger_clearance_opening_m": (GRIPPER_MAX_WIDTH_M,
-                                   "Rank grasps whose finger pads, opened this wide (the executor's pre-grasp "
-                                   "opening), land beside the objects before those that land on one; 0 = off."),
-    "contact_angle": (False, "Re-choose each grasp's angle at its centre so both finger pads meet the object "
-                             "squarely (grasping/contact_angle.py); needs finger_clearance_opening_m > 0."),
-}
+# Names, types, defaults and bounds: defgg_ros/ros/params/grasp_inference_node.yaml.
+PARAMETERS = load_schema("grasp_inference_node")
 
 
 def default_model_path(use_stiffness: bool) -> Path:
@@ -112,8 +84,7 @@ class Frame:
 class GraspInferenceNode(Node):
     def __init__(self, **kwargs):
         super().__init__("grasp_inference_node", **kwargs)
-        for name, (default, description) in PARAMETERS.items():
-            self.declare_parameter(name, default, ParameterDescriptor(description=description, read_only=True))
+        declare_parameters(self)  # a value outside its schema raises ParameterError here
         p = {name: self.get_parameter(name).value for name in PARAMETERS}
         self._p = p
         self._base_T_camera = transform_from_list(p["base_T_camera"])

@@ -15,13 +15,12 @@ import threading
 import numpy as np
 from defgg_interfaces.msg import ObjectStiffness, StiffnessAssignment
 from defgg_interfaces.srv import SetStiffness
-from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import CameraInfo, Image
 from std_srvs.srv import Trigger
 
-from defgg_ros import topics
 from defgg_ros.atomic import atomic_path
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import (
@@ -32,43 +31,25 @@ from defgg_ros.nodes.conversions import (
     numpy_to_image,
 )
 from defgg_ros.nodes.node_main import run_node
-from defgg_ros.perception.segmentation import OBJECT_MAX_HEIGHT_M, OBJECT_MIN_AREA_PX, OBJECT_MIN_HEIGHT_M
 from defgg_ros.perception.stiffness_assignment import check_entries_fit_image, make_entry
 from defgg_ros.perception.stiffness_segmenter import (
-    DEFAULT_YOUNGS_MODULUS_PA,
     SegmenterConfig,
     entries_from_json,
     entries_to_dicts,
     run_segmenter,
 )
+from defgg_ros.ros.parameters import declare_parameters, load_schema
 
 WARN_THROTTLE_S = 2.0
 
-PARAMETERS = {
-    "depth_topic": (topics.DEPTH_IMAGE, "Depth image in (16UC1 mm or 32FC1 m)."),
-    "camera_info_topic": (topics.DEPTH_CAMERA_INFO, "CameraInfo of the depth image (intrinsics K)."),
-    "stiffness_topic": (topics.STIFFNESS_IMAGE, "Out: 32FC1 Young's modulus per pixel (Pa), 0 = background."),
-    "mask_topic": (topics.OBJECT_MASK, "Out: mono8 object labels, 0 = background."),
-    "assignments_topic": (topics.STIFFNESS_ASSIGNMENTS, "Out (latched): the stiffness assignments in force."),
-    "set_stiffness_service": (topics.SET_STIFFNESS_SERVICE, "SetStiffness service name."),
-    "default_youngs_modulus_pa": (DEFAULT_YOUNGS_MODULUS_PA, "Modulus of objects no entry addresses (Pa, > 0)."),
-    "objects_json": ("[]", 'Entries as JSON: [{"name": "sponge", "youngs_modulus_pa": 2e4, '
-                           '"roi": [x, y, w, h], "region_only": false}]; roi [0,0,0,0] = whole image.'),
-    "min_object_height_m": (OBJECT_MIN_HEIGHT_M, "Pixels lower than this above the table are background (m)."),
-    "max_object_height_m": (OBJECT_MAX_HEIGHT_M, "Pixels higher than this above the table (the robot) are ignored."),
-    "min_object_area_px": (OBJECT_MIN_AREA_PX, "Smaller connected components are dropped (pixels)."),
-    "background_depth_file": ("", "Optional .npy of an empty-scene depth in metres; '' = fit the table plane."),
-    "capture_background_service": ("/defgg/segmentation/capture_background",
-                                   "std_srvs/Trigger: use the latest depth frame as the empty-scene background."),
-    "background_save_file": ("", "Where capture_background also saves the capture (.npy); '' = keep in memory."),
-}
+# Names, types, defaults and bounds: defgg_ros/ros/params/segmentation_node.yaml.
+PARAMETERS = load_schema("segmentation_node")
 
 
 class SegmentationNode(Node):
     def __init__(self, **kwargs):
         super().__init__("segmentation_node", **kwargs)
-        for name, (default, description) in PARAMETERS.items():
-            self.declare_parameter(name, default, ParameterDescriptor(description=description))
+        declare_parameters(self)  # a value outside its schema raises ParameterError here
         self._lock = threading.Lock()
         self._captured_background = None  # from capture_background; a background_depth_file wins over it
         self._last_depth_m = None

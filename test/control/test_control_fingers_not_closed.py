@@ -1,5 +1,5 @@
 """A grasp whose fingers stop where they opened to is a finger on the object, not a held object."""
-from control_fake_robot import FakeRobot, World, run
+from support.control_fake_robot import FakeRobot, World, run
 
 from defgg_ros.constants import GRIPPER_MAX_WIDTH_M
 from defgg_ros.control.kinematics import PandaKinematics

@@ -3,7 +3,7 @@ import math
 
 import numpy as np
 import pytest
-from control_fake_robot import FakeRobot, World, run
+from support.control_fake_robot import FakeRobot, World, run
 
 from defgg_ros.control.kinematics import PandaKinematics
 from defgg_ros.control.pick_place import PickPlaceSequence

@@ -13,12 +13,12 @@ import pytest
 import rclpy
 from defgg_interfaces.action import PickAndPlace
 from defgg_interfaces.msg import Grasp
-from executor_support import send_goal, stop_driver_processes
 from geometry_msgs.msg import PoseArray
 from rclpy.context import Context
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
+from support.executor_goals import send_goal, stop_driver_processes
 
 from defgg_ros import topics
 from defgg_ros.control.kinematics import PandaKinematics

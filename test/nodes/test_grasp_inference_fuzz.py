@@ -6,7 +6,6 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from sensor_msgs.msg import Image
 
-from defgg_ros.model.checkpoint import make_random_checkpoint
 from defgg_ros.nodes.conversions import depth_metres_to_msg, make_camera_info, numpy_to_image
 from defgg_ros.perception.synthetic_scene import SceneObject, SyntheticScene, default_camera_k, render
 
@@ -102,8 +101,9 @@ malformed_requests = st.one_of(
 )
 
 
-def test_fuzzed_requests_are_refused_then_a_valid_one_is_served(executor, spin, tmp_path, inference_service, call):
-    checkpoint = make_random_checkpoint(tmp_path / "random.pt")
+def test_fuzzed_requests_are_refused_then_a_valid_one_is_served(executor, spin, random_checkpoint, inference_service,
+                                                                call):
+    checkpoint = random_checkpoint()
     _, _, client = inference_service("fuzz_client", model_path=str(checkpoint), plan_grasp_service=SERVICE)
     seen = []
 

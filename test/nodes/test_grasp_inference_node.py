@@ -13,7 +13,6 @@ from visualization_msgs.msg import MarkerArray
 from defgg_ros import topics
 from defgg_ros.constants import GRIPPER_MAX_WIDTH_M
 from defgg_ros.grasping.finger_clearance import fingers_clear
-from defgg_ros.model.checkpoint import make_random_checkpoint
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import (
     depth_metres_to_msg,
@@ -36,9 +35,9 @@ STIFFNESS_PA = np.where(TRUTH == 1, 2e4, np.where(TRUTH == 2, 2e9, 0.0)).astype(
 BASE_T_CAMERA = [0.5, 0.0, 0.40, 1.0, 0.0, 0.0, 0.0]
 
 
-@pytest.fixture(scope="module")
-def checkpoint(tmp_path_factory):
-    return make_random_checkpoint(tmp_path_factory.mktemp("ckpt") / "random.pt", seed=3)
+@pytest.fixture
+def checkpoint(random_checkpoint):
+    return random_checkpoint(seed=3)
 
 
 @pytest.fixture
@@ -224,8 +223,8 @@ def test_bad_requests_fail_cleanly_and_node_keeps_serving(cell, executor, spin, 
     assert response.success, response.message
 
 
-def test_depth_only_model_via_use_stiffness_false(executor, spin, tmp_path, inference_service, call):
-    checkpoint = make_random_checkpoint(tmp_path / "depth_only.pt", uses_stiffness=False)
+def test_depth_only_model_via_use_stiffness_false(executor, spin, random_checkpoint, inference_service, call):
+    checkpoint = random_checkpoint(uses_stiffness=False)
     node, _, client = inference_service("depth_only_client", model_path=str(checkpoint), use_stiffness=False,
                                         plan_grasp_service="/test/depth_only_plan")
     assert not node.predictor.uses_stiffness
@@ -272,7 +271,7 @@ def test_clearance_opening_is_the_executors_pre_grasp_opening():
     from defgg_ros.control.gripper_rule import pre_grasp_opening_m
     from defgg_ros.nodes.grasp_inference_node import PARAMETERS
 
-    assert PARAMETERS["finger_clearance_opening_m"][0] == pre_grasp_opening_m()
+    assert PARAMETERS["finger_clearance_opening_m"].default == pre_grasp_opening_m()
 
 
 def test_model_that_does_not_match_use_stiffness_is_refused(executor, checkpoint):

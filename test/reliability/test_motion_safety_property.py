@@ -9,21 +9,17 @@ something in the way stops there (force threshold), and a canceled run ends
 with the arm at rest. Runs on the fake-clock robot of test/control (real
 Pinocchio kinematics and Ruckig trajectories).
 """
-import sys
-from pathlib import Path
 
 import numpy as np
 from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
+from support.control_fake_robot import CONTACT_STIFFNESS_N_PER_M, FakeRobot, World, run
 
 from defgg_ros.control.kinematics import PandaKinematics
 from defgg_ros.control.pick_place import GRASP_MIN_HEIGHT_ABOVE_TABLE_M, PickPlaceSequence
 from defgg_ros.control.sequence_types import GraspTarget, PlaceTarget, SendTrajectory, SequenceConfig
 from defgg_ros.control.trajectories import panda_limits
 from defgg_ros.grasping.geometry import tcp_height_m
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "control"))
-from control_fake_robot import CONTACT_STIFFNESS_N_PER_M, FakeRobot, World, run  # noqa: E402
 
 KIN = PandaKinematics()
 CONFIG = SequenceConfig(watchdog_timeout_s=0.5)

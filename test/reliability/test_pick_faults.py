@@ -1,4 +1,4 @@
-"""Faults during a pick, over real DDS against the in-test driver of test/nodes/test_executor_node.py.
+"""Faults during a pick, over real DDS against the in-test driver of test/support/executor_cell.py.
 
 - the gripper closes on nothing -> the goal is aborted as a missed grasp;
 - the object slips out during the transfer -> aborted, "dropped during transfer";
@@ -9,14 +9,22 @@
   check: joint position, velocity, acceleration and jerk limits, TCP above
   the table, and the cancel's stop ends at rest.
 """
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
 from defgg_interfaces.action import PickAndPlace
 from rclpy.node import Node
+from support.executor_cell import (
+    FAST,
+    GRASP_XYZ,
+    KIN,
+    InTestDriver,
+    grasp_msg,
+    result_of,
+    send,
+    wait_driver_ready,
+)
 from trajectory_msgs.msg import JointTrajectory
 
 from defgg_ros import topics
@@ -28,19 +36,6 @@ from defgg_ros.constants import (
     PANDA_QDDD_MAX_RADPS3,
 )
 from defgg_ros.nodes import qos
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "nodes"))
-from test_executor_node import (  # noqa: E402  (the sibling test module holds the driver and fixture)
-    FAST,
-    GRASP_XYZ,
-    KIN,
-    InTestDriver,
-    cell,  # noqa: F401  (pytest fixture)
-    grasp_msg,
-    result_of,
-    send,
-    wait_driver_ready,
-)
 
 ABORTED, CANCELED = 6, 5  # action_msgs/GoalStatus
 REL_TOL = 1e-3  # the wire format rounds times to whole nanoseconds
@@ -85,8 +80,8 @@ def _check_on_the_wire(msg: JointTrajectory, table_z_m: float, scale: float):
     assert min(KIN.fk(qk)[2, 3] for qk in q) >= table_z_m
 
 
-def test_every_trajectory_on_the_wire_is_within_limits_for_a_pick_and_a_cancel(cell, spin):  # noqa: F811
-    ex, node, client, start_driver = cell
+def test_every_trajectory_on_the_wire_is_within_limits_for_a_pick_and_a_cancel(executor_cell, spin):
+    ex, node, client, start_driver = executor_cell
     seen = _recorder(ex)
     driver = start_driver(object_width_m=0.04, contact_height_m=GRASP_XYZ[2] + 0.01)
     wait_driver_ready(ex, spin, node)
@@ -108,8 +103,8 @@ def test_every_trajectory_on_the_wire_is_within_limits_for_a_pick_and_a_cancel(c
     assert np.allclose(stop.points[-1].accelerations, 0.0, atol=1e-9)
 
 
-def test_gripper_closing_on_nothing_is_a_missed_grasp_not_a_success(cell, spin):  # noqa: F811
-    ex, node, client, start_driver = cell
+def test_gripper_closing_on_nothing_is_a_missed_grasp_not_a_success(executor_cell, spin):
+    ex, node, client, start_driver = executor_cell
     start_driver(object_width_m=0.0)
     wait_driver_ready(ex, spin, node)
     response = result_of(ex, spin, send(ex, client, spin, PickAndPlace.Goal(grasp=grasp_msg())))
@@ -120,8 +115,8 @@ def test_gripper_closing_on_nothing_is_a_missed_grasp_not_a_success(cell, spin):
     assert response.result.gripper_width_closed_m < 0.004
 
 
-def test_object_slipping_out_during_transfer_is_reported(cell, spin):  # noqa: F811
-    ex, node, client, start_driver = cell
+def test_object_slipping_out_during_transfer_is_reported(executor_cell, spin):
+    ex, node, client, start_driver = executor_cell
     driver = SlippingDriver(ex.context, object_width_m=0.04)
     ex.add_node(driver)
     wait_driver_ready(ex, spin, node)
@@ -132,8 +127,8 @@ def test_object_slipping_out_during_transfer_is_reported(cell, spin):  # noqa: F
     assert response.result.phase_reached == "transfer"
 
 
-def test_driver_alive_but_silent_is_aborted_within_the_watchdog_time(cell, spin):  # noqa: F811
-    ex, node, client, start_driver = cell
+def test_driver_alive_but_silent_is_aborted_within_the_watchdog_time(executor_cell, spin):
+    ex, node, client, start_driver = executor_cell
     driver = start_driver()
     wait_driver_ready(ex, spin, node)
     handle = send(ex, client, spin, PickAndPlace.Goal(grasp=grasp_msg()))
@@ -150,8 +145,8 @@ def test_driver_alive_but_silent_is_aborted_within_the_watchdog_time(cell, spin)
 
 
 @pytest.mark.parametrize("xyz", [(1.3, 0.0, 0.05), (0.0, 0.0, 0.05), (0.5, 0.0, 1.2)])
-def test_unreachable_grasps_are_aborted_before_any_motion(cell, spin, xyz):  # noqa: F811
-    ex, node, client, start_driver = cell
+def test_unreachable_grasps_are_aborted_before_any_motion(executor_cell, spin, xyz):
+    ex, node, client, start_driver = executor_cell
     driver = start_driver()
     wait_driver_ready(ex, spin, node)
     response = result_of(ex, spin, send(ex, client, spin, PickAndPlace.Goal(grasp=grasp_msg(xyz=xyz))),

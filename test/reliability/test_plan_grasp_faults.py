@@ -19,7 +19,7 @@ from defgg_interfaces.msg import ObjectStiffness
 from defgg_interfaces.srv import PlanGrasp
 from rclpy.parameter import Parameter
 
-from defgg_ros.model.checkpoint import CheckpointError, make_random_checkpoint
+from defgg_ros.model.checkpoint import CheckpointError
 from defgg_ros.nodes.conversions import depth_metres_to_msg, make_camera_info, numpy_to_image
 from defgg_ros.nodes.grasp_inference_node import GraspInferenceNode
 from defgg_ros.perception.synthetic_scene import SceneObject, SyntheticScene, default_camera_k, render
@@ -32,9 +32,9 @@ EMPTY_M, _ = render(SyntheticScene(objects=()))
 BORDER_M, BORDER_TRUTH = render(SyntheticScene(objects=(SceneObject((0.32, 0.05), 0.05, (0.06, 0.05)),)))
 
 
-@pytest.fixture(scope="module")
-def checkpoint(tmp_path_factory):
-    return make_random_checkpoint(tmp_path_factory.mktemp("reliability_ckpt") / "random.pt", seed=11)
+@pytest.fixture
+def checkpoint(random_checkpoint):
+    return random_checkpoint(seed=11)
 
 
 @pytest.fixture
@@ -97,7 +97,7 @@ def _run_node(module, *params, timeout_s=60):
 @pytest.mark.parametrize("module,param,words", [
     ("defgg_ros.nodes.grasp_inference_node", "model_path:=/nonexistent/defgg.pt", "checkpoint file not found"),
     ("defgg_ros.nodes.segmentation_node", "background_depth_file:=/nonexistent/bg.npy", "No such file"),
-    ("defgg_ros.nodes.segmentation_node", "default_youngs_modulus_pa:=-1.0", "default Young's modulus"),
+    ("defgg_ros.nodes.segmentation_node", "default_youngs_modulus_pa:=-1.0", "modulus_pa = -1.0 must be > 0"),
     ("defgg_ros.nodes.executor_node", "limits_scale:=0.0", "limits_scale"),
     ("defgg_ros.nodes.fake_panda_driver_node", "scene_file:=/nonexistent/scene.yaml", "does not exist"),
 ])

@@ -4,7 +4,7 @@ from pathlib import Path
 
 import pytest
 import yaml
-from session_bag_helpers import metadata, write_small_session
+from support.session_bag_helpers import metadata, write_small_session
 
 from defgg_ros import topics
 from defgg_ros.sessions import session_topics as st

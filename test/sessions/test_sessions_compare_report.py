@@ -2,7 +2,7 @@
 import math
 
 import pytest
-from session_bag_helpers import grasp
+from support.session_bag_helpers import grasp
 
 from defgg_ros.sessions.compare import (
     GraspSummary,

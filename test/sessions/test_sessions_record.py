@@ -5,8 +5,8 @@ import re
 import threading
 
 import pytest
-from replay_process import run_replay
-from session_synthetic_camera import SyntheticCamera
+from support.replay_process import run_replay
+from support.session_synthetic_camera import SyntheticCamera
 
 from defgg_ros import topics
 from defgg_ros.nodes.grasp_inference_node import GraspInferenceNode

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from replay_process import run_replay
+from support.replay_process import run_replay
 
 from defgg_ros import topics
 from defgg_ros.sessions import session_topics as st
