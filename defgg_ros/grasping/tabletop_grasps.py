@@ -1,0 +1,306 @@
+"""Grasps on every object of a tabletop view, each one geometrically feasible (no rclpy).
+
+    grasps = plan_tabletop_grasps(view, predictor, youngs_modulus_pa_image, top_k=5)
+
+The network runs once on the view's height map (perception/tabletop.py) seen as a virtual top-down
+depth image at its training pixel scale, so one forward pass covers every object in the workspace
+and its width map is in training pixels whatever the camera. Per object, its best quality peaks
+are checked, and the first one that passes every rule below becomes the object's grasp; the
+objects are then ranked by quality, one grasp per object first (top-5 = five distinct objects when
+five are graspable), then further grasps on the same objects.
+
+Feasibility, in metres in the robot's frame, checked against what the camera saw (FreeSpace: a
+point is free when its camera ray reaches a surface behind it; points hidden behind objects, off
+the image or without a return are not):
+- the fingertips go down to `tip height` (the executor's rule: half the height seen at the grasp
+  centre, grasping/geometry.tcp_height_m, minus the fingertip's offset below the TCP);
+- the object's extent along the closing line is the run of points at the tip height through the
+  centre that are not free (the object, a touching neighbour, or its hidden far side); the opening must exceed it by CLEARANCE_M on each side and fit the hand's
+  GRIPPER_MAX_WIDTH_M: so no grasp on a face wider than the gripper (a cereal box's top);
+- both finger pads (thickness x pad width, just outside the opening) must land in free space at
+  the tip height (objects, neighbours, the robot, unseen space are not);
+- the closing direction is the network's angle when feasible, else the feasible direction nearest
+  to it (15 degree steps); the centre moves to the middle of the object's extent.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from defgg_ros.constants import (
+    CAMERA_HEIGHT_ABOVE_TABLE_M,
+    FINGER_PAD_WIDTH_M,
+    GRIPPER_MAX_WIDTH_M,
+    PANDA_FINGER_THICKNESS_M,
+    PANDA_FINGERTIP_BELOW_TCP_M,
+)
+from defgg_ros.grasping.geometry import tcp_height_m
+from defgg_ros.grasping.postprocess import find_peaks, maps_from_network
+from defgg_ros.model.preprocess import network_input
+from defgg_ros.perception.tabletop import CELL_M, TabletopView
+from defgg_ros.perception.tabletop_scenes import STEREO_BASELINE_M, SUBPIXEL_RMS_PX
+
+# Free space the fingers need between the object and each pad while closing.
+CLEARANCE_M = 0.006
+# A cell counts as material between (or under) the fingers when it stands this much above the tip.
+TIP_MARGIN_M = 0.003
+ANGLE_STEPS = 12                      # closing directions tried: 180 / 12 = 15 degrees apart
+PEAKS_PER_OBJECT = 3
+MAX_HALF_EXTENT_CELLS = int(math.ceil(GRIPPER_MAX_WIDTH_M / CELL_M))
+PAD_SAMPLES = 5
+PAD_BLOCKED_FRACTION = 0.1
+# A point is free when the surface seen along its ray lies this far behind it, plus three times the
+# sensor's depth noise at that distance.
+CARVING_TOLERANCE_M = 0.002
+
+
+@dataclass(frozen=True)
+class TabletopGrasp:
+    object_id: int
+    quality: float
+    position_base_m: tuple       # (x, y, z): the object's surface at the grasp centre, robot base frame
+    closing_direction_base: tuple  # unit (x, y, z) the fingers close along (horizontal on the table)
+    approach_direction_base: tuple  # unit, towards the table (minus the table normal)
+    width_m: float               # opening to command: >= extent + 2 clearance, <= the gripper's maximum
+    extent_m: float              # the object's extent along the closing line (what is between the fingers)
+    network_width_m: float
+    youngs_modulus_pa: float
+    cell_rc: tuple               # (row, col) in the height map
+
+
+def virtual_depth(view: TabletopView) -> np.ndarray:
+    """The height map as the top-down depth image the network was trained on (camera 0.40 m up)."""
+    return (CAMERA_HEIGHT_ABOVE_TABLE_M - view.grid_height_m).astype(np.float32)
+
+
+def grid_moduli(view: TabletopView, youngs_modulus_pa=None, default_pa: float = 2e6) -> np.ndarray:
+    """Young's modulus per height-map cell: the modulus of the pixel that gave the cell its height
+    (multi-material objects keep their parts), holes and pixels without one take their object's median."""
+    labels = view.grid_labels
+    out = np.zeros(labels.shape, np.float32)
+    if youngs_modulus_pa is None:
+        out[labels > 0] = default_pa
+        return out
+    flat = np.asarray(youngs_modulus_pa, np.float32).reshape(-1)
+    has = (view.grid_pixel >= 0) & (labels > 0)
+    out[has] = flat[view.grid_pixel[has]]
+    for label in view.object_ids:
+        mine = labels == label
+        values = out[mine & (out > 0)]
+        fill = float(np.median(values)) if values.size else default_pa
+        out[mine & (out <= 0)] = fill
+    return out
+
+
+@dataclass(frozen=True)
+class TabletopPlan:
+    grasps: list                 # TabletopGrasp, best first
+    quality_grid: np.ndarray     # the network's quality map over the height map
+
+    def quality_image(self, view: TabletopView) -> np.ndarray:
+        """The quality map seen from the camera (depth-sized, 0 off the objects' cells)."""
+        out = np.zeros(view.pixel_cell.shape, np.float32)
+        on = view.pixel_cell >= 0
+        out[on] = self.quality_grid.reshape(-1)[view.pixel_cell[on]]
+        return out
+
+
+def plan_tabletop_grasps(view: TabletopView, predictor, youngs_modulus_pa=None, top_k: int = 1,
+                         default_pa: float = 2e6) -> list:
+    """Up to top_k feasible grasps, one per object first (module docstring); [] when none is feasible."""
+    return plan_tabletop(view, predictor, youngs_modulus_pa, top_k, default_pa).grasps
+
+
+def plan_tabletop(view: TabletopView, predictor, youngs_modulus_pa=None, top_k: int = 1,
+                  default_pa: float = 2e6) -> TabletopPlan:
+    """plan_tabletop_grasps with the quality map (for display)."""
+    if not view.object_ids:
+        return TabletopPlan([], np.zeros(view.grid_height_m.shape, np.float32))
+    moduli = grid_moduli(view, youngs_modulus_pa, default_pa)
+    x = network_input(virtual_depth(view), moduli, predictor.uses_stiffness)
+    maps = maps_from_network(predictor.raw_maps(x), predictor.postprocess)
+    space = FreeSpace(view)
+    per_object = {}
+    for label in view.object_ids:
+        peaks = find_peaks(maps.q, predictor.postprocess.peak_min_distance_px, predictor.postprocess.q_threshold,
+                           view.grid_labels == label, top_k=PEAKS_PER_OBJECT)
+        found = []
+        for row, col in peaks:
+            angle, width_px = maps.at_pixel(row, col)
+            grasp = feasible_grasp(view, label, row, col, angle, width_px * CELL_M, float(maps.q[row, col]), moduli,
+                                   space)
+            if grasp is not None:
+                found.append(grasp)
+        if found:
+            per_object[label] = sorted(found, key=lambda g: -g.quality)
+    firsts = sorted((g[0] for g in per_object.values()), key=lambda g: -g.quality)
+    rest = sorted((g for gs in per_object.values() for g in gs[1:]), key=lambda g: -g.quality)
+    return TabletopPlan((firsts + rest)[:top_k], maps.q)
+
+
+def _tip_height_m(surface_height_m: float) -> float:
+    return tcp_height_m(surface_height_m, 0.0) - PANDA_FINGERTIP_BELOW_TCP_M
+
+
+class FreeSpace:
+    """Is a point of the robot frame seen to be empty? Its camera ray must reach a surface behind it
+    (space carving): a point the camera cannot see (behind an object, off the image, no return) is
+    not free. Stereo shadows and speckle holes take the farthest depth of their 5x5 neighbourhood
+    (a stereo shadow is, by its geometry, background)."""
+
+    def __init__(self, view: TabletopView):
+        depth = view.processed_depth_m
+        valid = np.isfinite(depth) & (depth > 0)
+        filled = cv2.dilate(np.where(valid, depth, 0).astype(np.float32), np.ones((5, 5), np.uint8))
+        self.depth = np.where(valid, depth, filled)
+        self.k = view.processed_k
+        camera_T_base = np.linalg.inv(view.base_T_camera)
+        self.rotation, self.translation = camera_T_base[:3, :3], camera_T_base[:3, 3]
+        self.table_normal, self.table_offset = np.asarray(view.table_normal), view.table_offset_m
+
+    def free(self, points_base: np.ndarray) -> np.ndarray:
+        p = points_base @ self.rotation.T + self.translation
+        z = p[:, 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u = np.rint(self.k[0, 0] * p[:, 0] / z + self.k[0, 2]).astype(np.int64)
+            v = np.rint(self.k[1, 1] * p[:, 1] / z + self.k[1, 2]).astype(np.int64)
+        h, w = self.depth.shape
+        seen = (z > 0) & (u >= 0) & (u < w) & (v >= 0) & (v < h)
+        observed = np.zeros(z.shape)
+        observed[seen] = self.depth[v[seen], u[seen]]
+        tolerance = CARVING_TOLERANCE_M + 3 * z * z * SUBPIXEL_RMS_PX / (self.k[0, 0] * STEREO_BASELINE_M)
+        return seen & (observed > z + tolerance)
+
+
+def feasible_grasp(view: TabletopView, label: int, row: int, col: int, angle_rad: float, network_width_m: float,
+                   quality: float, moduli: np.ndarray, space: FreeSpace) -> TabletopGrasp | None:
+    """The grasp at cell (row, col) with the feasible closing direction nearest the network's
+    angle (map angle: from columns towards rows), or None when no direction is feasible."""
+    surface = float(view.grid_height_m[row, col])
+    level = _tip_height_m(surface) + TIP_MARGIN_M
+    order = sorted(range(ANGLE_STEPS), key=lambda k: min(k, ANGLE_STEPS - k))
+    phis = angle_rad + np.array(order) * math.pi / ANGLE_STEPS
+    directions = np.stack([np.sin(phis), np.cos(phis)], axis=1)          # (row, col) per cell step
+    steps = np.arange(-MAX_HALF_EXTENT_CELLS, MAX_HALF_EXTENT_CELLS + 1)
+    across = np.stack([-directions[:, 1], directions[:, 0]], axis=1)
+    # Three lines across the band the pads sweep (centre and both pad edges): what lies between the
+    # fingers anywhere in that band must fit, so a box's corner is not taken for a narrow object.
+    offsets = np.array([0.0, -0.5, 0.5]) * FINGER_PAD_WIDTH_M / CELL_M
+    cells = (np.array([row, col], float)[None, None, None, :] + offsets[None, :, None, None] * across[:, None, None, :]
+             + steps[None, None, :, None] * directions[:, None, None, :])            # A x 3 x S x 2
+    free = space.free(_points(view, cells.reshape(-1, 2), level)).reshape(len(order), 3, steps.size)
+    for i in range(len(order)):
+        low, high = _band_extent(~free[i])
+        if low is None:
+            continue
+        extent_m = (high - low + 1) * CELL_M
+        needed = extent_m + 2 * CLEARANCE_M
+        if needed > GRIPPER_MAX_WIDTH_M:
+            continue
+        width = float(min(GRIPPER_MAX_WIDTH_M, max(needed, network_width_m)))
+        centre = np.array([row, col], float) + (low + high) / 2.0 * directions[i]
+        r, c = int(round(centre[0])), int(round(centre[1]))
+        if not (0 <= r < view.grid_labels.shape[0] and 0 <= c < view.grid_labels.shape[1]) \
+                or view.grid_labels[r, c] != label:
+            continue
+        if not _pads_free(view, space, level, centre, directions[i], width):
+            continue
+        return _grasp(view, label, quality, r, c, directions[i], width, extent_m, network_width_m, float(moduli[r, c]))
+    return None
+
+
+def _points(view: TabletopView, cells_rc: np.ndarray, height_m: float) -> np.ndarray:
+    """Base-frame points at height_m above the table over (fractional) height-map cells."""
+    x, y = view.cell_xy_m(cells_rc[:, 0], cells_rc[:, 1])
+    return np.stack([x, y, view.table_z_at(x, y) + height_m], axis=1)
+
+
+def _band_extent(occupied_lines: np.ndarray):
+    """(low, high) over the band's lines: the centre line's run must exist; the edge lines add their
+    runs through the middle sample when they have one."""
+    low, high = _extent_cells(occupied_lines[0])
+    if low is None:
+        return None, None
+    middle = occupied_lines.shape[1] // 2
+    for line in occupied_lines[1:]:
+        if line[middle]:
+            a, b = _extent_cells(line)
+            if a is None:
+                return None, None
+            low, high = min(low, a), max(high, b)
+    return low, high
+
+
+def _extent_cells(occupied: np.ndarray):
+    """(low, high) signed steps from the centre (the middle sample) to the ends of the occupied run
+    through it (a one-sample gap is bridged: noise), or (None, None) when the centre is free or the
+    run reaches past the gripper's width."""
+    centre = occupied.size // 2
+    if not occupied[centre]:
+        return None, None
+    free = ~occupied
+    gap = free & np.concatenate([free[1:], [True]])          # two free samples in a row end the run
+    gap_back = free & np.concatenate([[True], free[:-1]])
+    after = np.flatnonzero(gap[centre:])
+    before = np.flatnonzero(gap_back[:centre + 1][::-1])
+    if after.size == 0 or before.size == 0:
+        return None, None
+    return -(int(before[0]) - 1), int(after[0]) - 1
+
+
+def _pads_free(view, space: FreeSpace, level_m: float, centre, direction, width_m: float) -> bool:
+    """Both pads (thickness along the closing line just outside the opening, pad width across it)
+    over free space at the fingertips' level; PAD_BLOCKED_FRACTION of a pad's samples may fail (noise)."""
+    across = np.array([-direction[1], direction[0]])
+    s_along = (width_m / 2 + np.linspace(0.0, PANDA_FINGER_THICKNESS_M, PAD_SAMPLES)) / CELL_M
+    s_across = np.linspace(-FINGER_PAD_WIDTH_M / 2, FINGER_PAD_WIDTH_M / 2, PAD_SAMPLES) / CELL_M
+    a, b = (g.reshape(-1, 1) for g in np.meshgrid(s_along, s_across))
+    pads = [centre + side * a * direction + b * across for side in (-1.0, 1.0)]
+    free = space.free(_points(view, np.concatenate(pads), level_m)).reshape(2, -1)
+    return bool(np.all(np.mean(~free, axis=1) <= PAD_BLOCKED_FRACTION))
+
+
+def _grasp(view, label, quality, r, c, direction, width, extent_m, network_width_m, modulus) -> TabletopGrasp:
+    x, y = view.cell_xy_m(r, c)
+    z = float(view.table_z_at(x, y)) + float(view.grid_height_m[r, c])
+    normal = np.asarray(view.table_normal, float)
+    closing = np.array([direction[0], direction[1], 0.0])      # rows = +x, columns = +y
+    closing -= normal * (closing @ normal)
+    closing /= np.linalg.norm(closing)
+    return TabletopGrasp(object_id=int(label), quality=float(quality), position_base_m=(float(x), float(y), z),
+                         closing_direction_base=tuple(closing.tolist()),
+                         approach_direction_base=tuple((-normal).tolist()), width_m=float(width),
+                         extent_m=float(extent_m), network_width_m=float(network_width_m),
+                         youngs_modulus_pa=float(modulus), cell_rc=(int(r), int(c)))
+
+
+def base_T_grasp(grasp: TabletopGrasp) -> np.ndarray:
+    """4x4 grasp pose in the base frame: z = approach (down onto the table), x = closing direction."""
+    z = np.asarray(grasp.approach_direction_base)
+    x = np.asarray(grasp.closing_direction_base)
+    out = np.eye(4)
+    out[:3, :3] = np.stack([x, np.cross(z, x), z], axis=1)
+    out[:3, 3] = grasp.position_base_m
+    return out
+
+
+def image_projection(grasp: TabletopGrasp, base_T_camera, camera_k) -> dict:
+    """Where the grasp appears in the depth image: centre (u, v) px, closing angle from u towards v,
+    opening in pixels at the grasp's depth, and the centre in the camera frame (m)."""
+    camera_T_base = np.linalg.inv(np.asarray(base_T_camera, float))
+    p = np.asarray(grasp.position_base_m)
+    ends = [p + s * np.asarray(grasp.closing_direction_base) * grasp.width_m / 2 for s in (-1, 1)]
+    cam = [camera_T_base[:3, :3] @ q + camera_T_base[:3, 3] for q in (p, *ends)]
+    k = np.asarray(camera_k, float)
+    uv = [(k[0, 0] * q[0] / q[2] + k[0, 2], k[1, 1] * q[1] / q[2] + k[1, 2]) for q in cam]
+    du, dv = uv[2][0] - uv[1][0], uv[2][1] - uv[1][1]
+    angle = math.atan2(dv, du)
+    if angle > math.pi / 2:
+        angle -= math.pi
+    elif angle < -math.pi / 2:
+        angle += math.pi
+    return {"u_px": float(uv[0][0]), "v_px": float(uv[0][1]), "angle_rad": float(angle),
+            "width_px": float(math.hypot(du, dv)), "position_camera_m": tuple(float(c) for c in cam[0])}

@@ -1,0 +1,369 @@
+"""Tabletop perception in the robot's frame, for any camera pose and resolution (no rclpy).
+
+    view = perceive(depth_m, camera_k, base_T_camera, TabletopConfig())
+
+The camera pose `base_T_camera` (4x4, optical frame in the robot base frame) comes from TF or a
+parameter; everything below works in the base frame, so a tilted camera, a different mount height
+or another resolution sees the same scene:
+
+1. Table plane: RANSAC over the pixels inside the workspace's x/y range, hypotheses limited to
+   planes whose normal is within TABLE_MAX_TILT_DEG of the base z axis and whose height is within
+   table_z_tolerance_m of the expected table height; refined by least squares on the inliers.
+2. Foreground: valid pixels between min and max height above that plane, inside the workspace box
+   (base frame x/y, which excludes the robot's base and mounting plate and everything beside the
+   table), outside the robot keep-out cylinder around the base axis, and not masked by the robot
+   self-filter (perception/self_filter.py).
+3. Height map: the foreground points splatted (maximum height per cell) into an orthographic
+   top-down grid of the network's training pixel scale (CELL_M: the training camera's
+   0.40 m / 385 px), small holes (no return, shadows) closed. The grasp network sees this grid as
+   a virtual top-down depth image, so the opening in metres is cells x CELL_M whatever the camera.
+4. Objects: connected regions of the height map that no height jump larger than jump_m crosses.
+   Touching objects of different heights are cut at their common edge (a can against a box, a
+   bottle against a block), not only separated by gaps. Image labels are read back from the cells.
+   (Two flat tops at the same height that touch are one surface to any depth camera: one object.)
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from defgg_ros.constants import CAMERA_FX_PX, CAMERA_HEIGHT_ABOVE_TABLE_M
+from defgg_ros.perception.geometry import check_camera_matrix
+
+# The network was trained on top-down images from 0.40 m with fx = 385 px: 1.039 mm per pixel at
+# the table. The height map uses that cell size, so objects have their training size in pixels.
+CELL_M = CAMERA_HEIGHT_ABOVE_TABLE_M / CAMERA_FX_PX
+TABLE_MAX_TILT_DEG = 15.0
+PLANE_INLIER_M = 0.006
+PLANE_ITERATIONS = 80
+PLANE_SAMPLE_PIXELS = 6000
+# The height map reaches this far beyond the outermost object point: context for the network (the
+# finger pads are checked against the depth image itself, grasping/tabletop_grasps.py).
+GRID_MARGIN_M = 0.03
+# Cells whose smoothed height slope exceeds this are the flanks of round objects and the creases
+# where a round object meets a flat one: cut, so a bottle lying against a lower box stays apart.
+CREASE_SLOPE = math.tan(math.radians(40.0))
+# Pixels of object flanks and edges whose cell lost the object's label take it from a labelled cell
+# at most this far away (horizontal scatter of side-face points, depth noise along the ray).
+LABEL_REACH_M = 0.004
+# Frames with a larger focal length are read at every n-th pixel (processing_stride).
+FULL_RESOLUTION_MAX_FX_PX = 320.0
+# Labels travel as mono8.
+MAX_LABELS = 254
+
+
+class TabletopError(ValueError):
+    """A frame the tabletop perception cannot use (no table, bad pose...)."""
+
+
+@dataclass(frozen=True)
+class WorkspaceBox:
+    """The region objects are picked from, in the robot base frame (m). The default keeps clear of
+    the Panda's base (x < 0.2 m) and mounting plate and stays on the table in front of the robot."""
+    x_m: tuple = (0.22, 0.85)
+    y_m: tuple = (-0.40, 0.40)
+    min_height_m: float = 0.006        # above the table: thinner is noise or paper
+    max_height_m: float = 0.25         # higher is not a graspable object (the arm passing through)
+
+    def __post_init__(self):
+        if not (self.x_m[0] < self.x_m[1] and self.y_m[0] < self.y_m[1] and 0 < self.min_height_m < self.max_height_m):
+            raise ValueError(f"workspace box needs min < max on every axis, got {self}")
+
+
+@dataclass(frozen=True)
+class TabletopConfig:
+    workspace: WorkspaceBox = field(default_factory=WorkspaceBox)
+    table_z_m: float = 0.0             # expected table height in the base frame
+    table_z_tolerance_m: float = 0.10
+    robot_keepout_radius_m: float = 0.20   # around the base axis (also the arm's reach minimum)
+    jump_m: float = 0.008              # a height step this large between neighbour cells cuts objects
+    min_object_area_m2: float = 2.5e-4  # 16 x 16 mm: smaller blobs are speckle
+    hole_close_cells: int = 5          # holes up to this many cells wide inside objects are closed
+
+
+@dataclass
+class TabletopView:
+    base_T_camera: np.ndarray
+    camera_k: np.ndarray
+    table_normal: np.ndarray           # unit, base frame
+    table_offset_m: float              # n . p + d = 0
+    height_m: np.ndarray               # HxW float32 height above the table, NaN unknown
+    foreground: np.ndarray             # HxW bool: object pixels inside the workspace
+    labels: np.ndarray                 # HxW uint8 image labels, 0 = background
+    pixel_cell: np.ndarray             # HxW int32 flat cell index of each foreground pixel, -1 elsewhere
+    grid_origin_xy_m: tuple            # base-frame (x, y) of cell (0, 0)'s centre; row = +x? see cell_xy
+    grid_height_m: np.ndarray          # R x C float32 height map (0 = table)
+    grid_labels: np.ndarray            # R x C uint8 object labels
+    grid_pixel: np.ndarray             # R x C int32 flat image index that gave the cell's height, -1 none
+    object_ids: tuple = ()
+    areas_m2: dict = field(default_factory=dict)
+    processed_depth_m: np.ndarray | None = None   # the depth as processed (every stride-th pixel), flying pixels NaN
+    processed_k: np.ndarray | None = None         # K of processed_depth_m
+
+    def cell_xy_m(self, row, col):
+        """Base-frame (x, y) of a cell centre: rows run along +x, columns along +y."""
+        return (self.grid_origin_xy_m[0] + np.asarray(row) * CELL_M, self.grid_origin_xy_m[1] + np.asarray(col) * CELL_M)
+
+    def xy_to_cell(self, x_m, y_m):
+        return (np.rint((np.asarray(x_m) - self.grid_origin_xy_m[0]) / CELL_M).astype(int),
+                np.rint((np.asarray(y_m) - self.grid_origin_xy_m[1]) / CELL_M).astype(int))
+
+    def table_z_at(self, x_m, y_m):
+        n, d = self.table_normal, self.table_offset_m
+        return -(d + n[0] * x_m + n[1] * y_m) / n[2]
+
+
+def _pixel_rays(camera_k, shape):
+    k = check_camera_matrix(camera_k)
+    h, w = shape
+    xn = ((np.arange(w) - k[0, 2]) / k[0, 0]).astype(np.float32)
+    yn = ((np.arange(h) - k[1, 2]) / k[1, 1]).astype(np.float32)
+    return xn, yn
+
+
+def _base_coordinate(depth, xn, yn, rotation_row, translation):
+    """One base-frame coordinate of every pixel: z * (r0 xn + r1 yn + r2) + t (separable, no HxWx3)."""
+    return depth * (rotation_row[0] * xn[None, :] + (rotation_row[1] * yn + rotation_row[2])[:, None]) + translation
+
+
+def check_base_T_camera(base_T_camera) -> np.ndarray:
+    t = np.asarray(base_T_camera, dtype=np.float64)
+    if t.shape != (4, 4) or not np.all(np.isfinite(t)):
+        raise TabletopError(f"base_T_camera must be a finite 4x4 transform, got shape {t.shape}")
+    r = t[:3, :3]
+    if not np.allclose(r @ r.T, np.eye(3), atol=1e-4) or np.linalg.det(r) < 0:
+        raise TabletopError("base_T_camera's rotation is not a proper rotation")
+    return t
+
+
+def fit_table(depth, xn, yn, base_T_camera, config: TabletopConfig, rng_seed: int = 0):
+    """(unit normal, offset) of the table in the base frame: constrained RANSAC + least squares."""
+    h, w = depth.shape
+    stride = max(1, int(math.sqrt(h * w / PLANE_SAMPLE_PIXELS)))
+    d = depth[::stride, ::stride]
+    r, t = base_T_camera[:3, :3], base_T_camera[:3, 3]
+    pts = np.stack([_base_coordinate(d, xn[::stride], yn[::stride], r[i], t[i]) for i in range(3)], axis=-1)
+    ws = config.workspace
+    margin = 0.05
+    ok = np.isfinite(d) & (d > 0)
+    ok &= (pts[..., 0] > ws.x_m[0] - margin) & (pts[..., 0] < ws.x_m[1] + margin)
+    ok &= (pts[..., 1] > ws.y_m[0] - margin) & (pts[..., 1] < ws.y_m[1] + margin)
+    ok &= np.abs(pts[..., 2] - config.table_z_m) < config.table_z_tolerance_m
+    points = pts[ok].astype(np.float64)
+    if len(points) < 50:
+        raise TabletopError(f"no table in the workspace: only {len(points)} depth points lie within "
+                            f"{config.table_z_tolerance_m} m of the expected table height z = {config.table_z_m} m "
+                            "(check base_T_camera and the workspace box)")
+    rng = np.random.default_rng(rng_seed)
+    triples = points[rng.integers(0, len(points), size=(PLANE_ITERATIONS, 3))]
+    normals = np.cross(triples[:, 1] - triples[:, 0], triples[:, 2] - triples[:, 0])
+    norms = np.linalg.norm(normals, axis=1)
+    good = norms > 1e-9
+    normals = normals[good] / norms[good, None]
+    normals *= np.sign(normals[:, 2:3] + 1e-12)
+    offsets = -np.einsum("ij,ij->i", normals, triples[good, 0])
+    upright = normals[:, 2] > math.cos(math.radians(TABLE_MAX_TILT_DEG))
+    if not upright.any():
+        raise TabletopError("no table plane within 15 degrees of the base's horizontal")
+    normals, offsets = normals[upright], offsets[upright]
+    counts = np.count_nonzero(np.abs(points @ normals.T + offsets) < PLANE_INLIER_M, axis=0)
+    best = int(np.argmax(counts))
+    inliers = points[np.abs(points @ normals[best] + offsets[best]) < PLANE_INLIER_M]
+    centroid = inliers.mean(axis=0)
+    _, vectors = np.linalg.eigh((inliers - centroid).T @ (inliers - centroid))
+    normal = vectors[:, 0] * np.sign(vectors[2, 0] + 1e-12)
+    if normal[2] < math.cos(math.radians(TABLE_MAX_TILT_DEG)):
+        normal, centroid = normals[best], inliers.mean(axis=0)
+    return normal, -float(normal @ centroid)
+
+
+def processing_stride(camera_k) -> int:
+    """Pixels skipped per processed pixel: a 1280x720 D435 frame (fx ~645) is read at every 2nd
+    pixel, whose ~1.6 mm footprint at 0.5 m is still finer than the objects' features and about the
+    height map's 1.04 mm cells (holes closed); 640x480 and 848x480 frames are read whole."""
+    return max(1, int(check_camera_matrix(camera_k)[0, 0] // FULL_RESOLUTION_MAX_FX_PX))
+
+
+def perceive(depth_m, camera_k, base_T_camera, config: TabletopConfig = TabletopConfig(),
+             robot_mask=None) -> TabletopView:
+    """The table, the objects in the workspace and their height map (module docstring)."""
+    full = np.asarray(depth_m, dtype=np.float32)
+    if full.ndim != 2 or full.size == 0:
+        raise TabletopError(f"depth must be a non-empty HxW image in metres, got shape {full.shape}")
+    k_full = check_camera_matrix(camera_k)
+    pose = check_base_T_camera(base_T_camera)
+    stride = processing_stride(k_full)
+    depth = full[::stride, ::stride]
+    k = k_full.copy()
+    k[:2] /= stride
+    xn, yn = _pixel_rays(k, depth.shape)
+    normal, offset = fit_table(depth, xn, yn, pose, config)
+    # Height above the table of every pixel: n . (R p_cam + t) + d, separable in u and v.
+    n_cam = (pose[:3, :3].T @ normal).astype(np.float32)
+    term = n_cam[0] * xn[None, :] + (n_cam[1] * yn + n_cam[2])[:, None]
+    ws = config.workspace
+    with np.errstate(invalid="ignore"):
+        height = depth * term + np.float32(normal @ pose[:3, 3] + offset)
+        candidate = (height > ws.min_height_m) & (height < ws.max_height_m)
+    flying = flying_pixels(depth, config.jump_m)
+    candidate &= ~flying
+    if robot_mask is not None:
+        candidate &= ~np.asarray(robot_mask, bool)[::stride, ::stride]
+    vs, us = np.nonzero(candidate)
+    z = depth[vs, us]
+    r, t = pose[:3, :3].astype(np.float32), pose[:3, 3].astype(np.float32)
+    xr, yr = xn[us], yn[vs]
+    x = z * (r[0, 0] * xr + r[0, 1] * yr + r[0, 2]) + t[0]
+    y = z * (r[1, 0] * xr + r[1, 1] * yr + r[1, 2]) + t[1]
+    inside = (x > ws.x_m[0]) & (x < ws.x_m[1]) & (y > ws.y_m[0]) & (y < ws.y_m[1]) \
+        & (x * x + y * y > config.robot_keepout_radius_m ** 2)
+    vs, us, x, y = vs[inside], us[inside], x[inside], y[inside]
+    hgt = height[vs, us]
+    if x.size == 0:
+        raise TabletopError("no object in the workspace box (nothing between "
+                            f"{ws.min_height_m * 1000:.0f} mm and {ws.max_height_m * 1000:.0f} mm above the table)")
+    # The grid covers the objects' extent plus a margin (fingers land beside them), not the whole box.
+    margin = GRID_MARGIN_M
+    origin = (float(max(ws.x_m[0], x.min() - margin)), float(max(ws.y_m[0], y.min() - margin)))
+    rows_n = int(math.ceil((min(ws.x_m[1], x.max() + margin) - origin[0]) / CELL_M)) + 1
+    cols_n = int(math.ceil((min(ws.y_m[1], y.max() + margin) - origin[1]) / CELL_M)) + 1
+    rows = np.clip(np.rint((x - origin[0]) / CELL_M).astype(np.int32), 0, rows_n - 1)
+    cols = np.clip(np.rint((y - origin[1]) / CELL_M).astype(np.int32), 0, cols_n - 1)
+    cell = rows * cols_n + cols
+    full_pixel = (vs * stride) * full.shape[1] + us * stride
+    grid, owner = _splat_max(cell, hgt, full_pixel, rows_n * cols_n)
+    grid, owner = grid.reshape(rows_n, cols_n), owner.reshape(rows_n, cols_n)
+    grid = _close_holes(grid, config.hole_close_cells)
+    grid_labels, areas = _segment_grid(grid, config)
+    near_labels = _nearest_labels(grid_labels, grid > 0, LABEL_REACH_M / CELL_M)
+    processed_labels = np.zeros(depth.shape, np.uint8)
+    processed_labels[vs, us] = near_labels.reshape(-1)[cell]
+    processed_fg = np.zeros(depth.shape, bool)
+    processed_fg[vs, us] = True
+    pixel_cell = np.full(depth.shape, -1, np.int32)
+    pixel_cell[vs, us] = cell
+    labels, foreground = processed_labels, processed_fg
+    if stride > 1:
+        size = (full.shape[1], full.shape[0])
+        labels = cv2.resize(processed_labels, size, interpolation=cv2.INTER_NEAREST)
+        foreground = cv2.resize(processed_fg.view(np.uint8), size, interpolation=cv2.INTER_NEAREST) > 0
+        pixel_cell = cv2.resize(pixel_cell, size, interpolation=cv2.INTER_NEAREST)
+        height = cv2.resize(height, size, interpolation=cv2.INTER_NEAREST)
+    return TabletopView(pose, k_full, normal, offset, height, foreground, labels, pixel_cell, origin, grid,
+                        grid_labels, owner, tuple(sorted(areas)), areas, np.where(flying, np.nan, depth), k)
+
+
+def _nearest_labels(labels: np.ndarray, occupied: np.ndarray, reach_cells: float) -> np.ndarray:
+    """Occupied cells without a label take the nearest labelled cell's label within reach_cells."""
+    unlabelled = occupied & (labels == 0)
+    if not unlabelled.any() or not labels.any():
+        return labels
+    distance, index = cv2.distanceTransformWithLabels((labels == 0).astype(np.uint8), cv2.DIST_L2, 3,
+                                                      labelType=cv2.DIST_LABEL_PIXEL)
+    # DIST_LABEL_PIXEL numbers the zero-valued pixels of the source (our labelled cells) in raster order.
+    source_labels = np.concatenate([[0], labels[labels > 0]])
+    out = labels.copy()
+    take = unlabelled & (distance <= reach_cells)
+    out[take] = source_labels[index[take]]
+    return out
+
+
+def flying_pixels(depth: np.ndarray, jump_m: float) -> np.ndarray:
+    """Pixels whose depth lies between their 3x3 neighbours' extremes, far from both: the mixed
+    foreground/background returns a stereo camera gives at depth edges (they float in mid-air)."""
+    valid = np.isfinite(depth) & (depth > 0)
+    kernel = np.ones((3, 3), np.uint8)
+    high = cv2.dilate(np.where(valid, depth, 0).astype(np.float32), kernel)
+    low = cv2.erode(np.where(valid, depth, np.inf).astype(np.float32), kernel)
+    with np.errstate(invalid="ignore"):
+        return valid & (depth - low > jump_m) & (high - depth > jump_m)
+
+
+def _splat_max(cell, value, pixel, n_cells):
+    """Per cell the maximum value and a pixel that gave it (np.maximum.at: ~1 ms for 1e5 points)."""
+    grid = np.zeros(n_cells, np.float32)
+    np.maximum.at(grid, cell, value.astype(np.float32))
+    owner = np.full(n_cells, -1, np.int32)
+    top = value >= grid[cell]
+    owner[cell[top]] = pixel[top]
+    return grid, owner
+
+
+def _close_holes(grid: np.ndarray, size_cells: int) -> np.ndarray:
+    """Fill empty cells (0) enclosed by object cells with the highest neighbour: the cells between the
+    splatted points of a coarse or tilted camera, dropouts on dark parts, flying-pixel gaps."""
+    if size_cells < 2:
+        return grid
+    occupied = (grid > 0).astype(np.uint8)
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size_cells, size_cells))
+    closed = cv2.morphologyEx(occupied, cv2.MORPH_CLOSE, kernel) > 0
+    out = grid.copy()
+    fill = closed & (grid <= 0)
+    if fill.any():
+        # Grey closing: the holes get the level of the surface around them.
+        grey = cv2.morphologyEx(grid, cv2.MORPH_CLOSE, kernel)
+        out[fill] = grey[fill]
+    return out
+
+
+def _segment_grid(grid: np.ndarray, config: TabletopConfig):
+    """Labels of the height map: connected cells without a height jump > jump_m between them. The
+    lower cell of every jump is cut first, then given back to its neighbours of similar height."""
+    occupied = grid > 0
+    jump = config.jump_m
+    cut = np.zeros_like(occupied)
+    dv = grid[1:, :] - grid[:-1, :]
+    du = grid[:, 1:] - grid[:, :-1]
+    cut[:-1, :] |= dv > jump            # the cell above (row) is lower than the one below
+    cut[1:, :] |= -dv > jump
+    cut[:, :-1] |= du > jump
+    cut[:, 1:] |= -du > jump
+    smooth = cv2.GaussianBlur(grid, (0, 0), 1.5)
+    gv, gu = np.gradient(smooth, CELL_M)
+    cut |= gv * gv + gu * gu > CREASE_SLOPE ** 2
+    core = occupied & ~cut
+    count, raw, stats, _ = cv2.connectedComponentsWithStats(core.astype(np.uint8), connectivity=4)
+    min_cells = config.min_object_area_m2 / (CELL_M * CELL_M)
+    keep = [i for i in range(1, count) if stats[i, cv2.CC_STAT_AREA] >= min_cells * 0.5]
+    keep = sorted(keep, key=lambda i: -stats[i, cv2.CC_STAT_AREA])[:MAX_LABELS]
+    lut = np.zeros(count, np.uint8)
+    for new, old in enumerate(sorted(keep), start=1):
+        lut[old] = new
+    labels = lut[raw]
+    labels = _grow(labels, grid, occupied, jump, iterations=3)
+    out = np.zeros_like(labels)
+    areas = {}
+    next_label = 1
+    for label in range(1, int(labels.max()) + 1):
+        area = int(np.count_nonzero(labels == label)) * CELL_M * CELL_M
+        if area >= config.min_object_area_m2:
+            out[labels == label] = next_label
+            areas[next_label] = area
+            next_label += 1
+    return out, areas
+
+
+def _grow(labels, grid, occupied, jump, iterations):
+    """Give unlabelled occupied cells the label of a 4-neighbour whose height is within `jump`."""
+    h, w = labels.shape
+    for _ in range(iterations):
+        todo = occupied & (labels == 0)
+        if not todo.any():
+            break
+        new = labels.copy()
+        for dv, du in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+            src = np.zeros_like(labels)
+            src_h = np.zeros_like(grid)
+            ys = slice(max(dv, 0), h + min(dv, 0))
+            yd = slice(max(-dv, 0), h + min(-dv, 0))
+            xs = slice(max(du, 0), w + min(du, 0))
+            xd = slice(max(-du, 0), w + min(-du, 0))
+            src[yd, xd] = labels[ys, xs]
+            src_h[yd, xd] = grid[ys, xs]
+            take = todo & (new == 0) & (src > 0) & (np.abs(src_h - grid) <= jump)
+            new[take] = src[take]
+        labels = new
+    return labels
