@@ -5,7 +5,7 @@ way the nodes and tests spin (`spin()` in a thread, or `spin_once(0.05)` in a lo
 executor: callbacks run against the nominal count, the largest gap between two timer callbacks,
 how many gaps exceeded 0.1 s, and the process CPU time, for --rounds rounds: the stock executor
 falls into its stall in some runs and not in others. Run it on an otherwise idle machine: load
-hides the stock executor's problem (see defgg_ros/ros_executor.py).
+hides the stock executor's problem (see defgg_ros/ros/executor.py).
 
     .venv/bin/python bench/bench_executor_jitter.py [--seconds 10] [--threads 2] [--rounds 3]
 """
@@ -20,7 +20,7 @@ from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
-from defgg_ros.ros_executor import ThreadedExecutor
+from defgg_ros.ros.executor import ThreadedExecutor
 
 PERIOD_S = 0.01
 EXECUTORS = {"rclpy MultiThreadedExecutor": MultiThreadedExecutor, "defgg ThreadedExecutor": ThreadedExecutor}

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from defgg_ros.ros_domain import pick_private_domain
+from defgg_ros.ros.domain import pick_private_domain
 from defgg_ros.sessions.graph import FASTDDS_PROFILE_VARIABLE, use_large_message_transport
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -89,8 +89,8 @@ class Cell:
         from rclpy.node import Node
         from sensor_msgs.msg import CameraInfo, Image
 
-        from defgg_ros import topics
         from defgg_ros.nodes import qos
+        from defgg_ros.ros import topics
 
         self.node = Node(name, context=context)
         self.executor = make_executor(executor, context)

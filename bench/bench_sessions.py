@@ -17,7 +17,7 @@ import threading
 import time
 from pathlib import Path
 
-from defgg_ros.ros_domain import pick_private_domain
+from defgg_ros.ros.domain import pick_private_domain
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -28,7 +28,7 @@ def transport_child(n_frames: int) -> None:
     from sensor_msgs.msg import Image
 
     from defgg_ros.nodes import qos
-    from defgg_ros.ros_executor import ThreadedExecutor
+    from defgg_ros.ros.executor import ThreadedExecutor
     from defgg_ros.sessions.client import CellClient
     from defgg_ros.sessions.graph import NodeGraph, NodeSpec
     from defgg_ros.sessions.player import SessionPlayer

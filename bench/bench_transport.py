@@ -69,7 +69,7 @@ def subscriber_child(mode: str, frames: int, rate_hz: float) -> None:
 
 
 def run_pair(mode: str, own_profile: bool, args) -> int:
-    from defgg_ros.ros_domain import pick_private_domain
+    from defgg_ros.ros.domain import pick_private_domain
 
     base = {k: v for k, v in os.environ.items() if k not in ("FASTRTPS_DEFAULT_PROFILES_FILE",
                                                              "FASTDDS_DEFAULT_PROFILES_FILE")}

@@ -35,7 +35,7 @@ from defgg_ros.bringup.demo_geometry import (
 from defgg_ros.bringup.demo_report import FramePanels, PickRow, format_table, save_figure, write_summary
 from defgg_ros.bringup.node_set import NodeSetError, load_node_set
 from defgg_ros.bringup.supervisor import Bringup, BringupError
-from defgg_ros.ros_domain import ISOLATION_ENV, apply_domain_choice, default_domain_choice
+from defgg_ros.ros.domain import ISOLATION_ENV, apply_domain_choice, default_domain_choice
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_SCENE = ROOT / "sim_bringup" / "scenes" / "demo.yaml"

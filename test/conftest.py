@@ -160,12 +160,12 @@ def rclpy_context():
 
 @pytest.fixture
 def executor(rclpy_context):
-    """A ThreadedExecutor (defgg_ros.ros_executor) on the test's context; nodes added to it are destroyed after."""
-    from defgg_ros.ros_executor import ThreadedExecutor
+    """A ThreadedExecutor (defgg_ros.ros.executor) on the test's context; nodes added to it are destroyed after."""
+    from defgg_ros.ros.executor import ThreadedExecutor
 
     ex = ThreadedExecutor(num_threads=4, context=rclpy_context)
     yield ex
-    from defgg_ros.ros_action import destroy_actions
+    from defgg_ros.ros.action import destroy_actions
 
     for node in list(ex.get_nodes()):
         ex.remove_node(node)
@@ -209,8 +209,8 @@ def inference_service(executor):
     from rclpy.node import Node
     from rclpy.parameter import Parameter
 
-    from defgg_ros import topics
     from defgg_ros.nodes.grasp_inference_node import GraspInferenceNode
+    from defgg_ros.ros import topics
 
     def start(client_name: str, **parameters):
         node = GraspInferenceNode(context=executor.context, parameter_overrides=[
@@ -257,9 +257,9 @@ def spin():
 
 def call_service(executor, client, request, timeout_s: float, what: str):
     """Call `client` with an idempotent `request`, spinning `executor` here and re-sending it while
-    unanswered (defgg_ros.ros_service: Fast DDS can drop a response to a just-started client).
+    unanswered (defgg_ros.ros.service: Fast DDS can drop a response to a just-started client).
     Fails the test with `what` after `timeout_s`; returns the response."""
-    from defgg_ros.ros_service import ServiceTimeout, call_idempotent
+    from defgg_ros.ros.service import ServiceTimeout, call_idempotent
 
     def wait_until(predicate, wait_s):
         return _spin_while_not(executor, predicate, wait_s)

@@ -24,7 +24,7 @@ import time
 
 from defgg_ros.bringup.node_set import NodeSetError, load_node_set
 from defgg_ros.bringup.supervisor import DEFAULT_READY_TIMEOUT_S, Bringup, BringupError
-from defgg_ros.ros_domain import ISOLATION_ENV, apply_domain_choice, parse_domain_choice
+from defgg_ros.ros.domain import ISOLATION_ENV, apply_domain_choice, parse_domain_choice
 
 DRIVER = "fake_panda_driver"
 

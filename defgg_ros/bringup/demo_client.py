@@ -23,13 +23,13 @@ from std_msgs.msg import String
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from defgg_ros import topics
 from defgg_ros.constants import GRIPPER_MAX_WIDTH_M, PANDA_JOINT_NAMES
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import stamp_to_ns
 from defgg_ros.nodes.fake_panda_driver_node import CAPTURE_SERVICE, IMAGE_QOS, OBJECT_POSES_TOPIC, SCENE_TOPIC
-from defgg_ros.ros_action import ActionClient, destroy_actions
-from defgg_ros.ros_service import ServiceTimeout, call_idempotent
+from defgg_ros.ros import topics
+from defgg_ros.ros.action import ActionClient, destroy_actions
+from defgg_ros.ros.service import ServiceTimeout, call_idempotent
 
 
 class DemoError(RuntimeError):

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import yaml
 
-from defgg_ros.ros_domain import parse_domain_choice
+from defgg_ros.ros.domain import parse_domain_choice
 
 READY_KINDS = ("service", "action", "topic")
 

@@ -43,9 +43,9 @@ from defgg_ros.control.sequence_types import (
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import ConversionError, transform_from_pose
 from defgg_ros.nodes.node_main import run_node
+from defgg_ros.ros.action import ActionClient, destroy_actions
 from defgg_ros.ros.parameters import declare_parameters, load_schema
-from defgg_ros.ros_action import ActionClient, destroy_actions
-from defgg_ros.ros_service import ServiceTimeout, call_idempotent
+from defgg_ros.ros.service import ServiceTimeout, call_idempotent
 
 # Names, types, defaults and bounds: defgg_ros/ros/params/executor_node.yaml.
 PARAMETERS = load_schema("executor_node")

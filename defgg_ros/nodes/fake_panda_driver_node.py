@@ -2,7 +2,7 @@
 
 A thin adapter over `defgg_ros.sim.cell.SimCell` (PyBullet). It speaks the
 same names as the real cell (franka_ros2 + realsense2_camera, see
-defgg_ros/topics.py): joint states, joint trajectory controller topic,
+defgg_ros/ros/topics.py): joint states, joint trajectory controller topic,
 gripper move/grasp actions, external wrench, depth + camera_info; plus sim
 time on /clock and ground truth (/fake_panda/object_poses, /fake_panda/scene).
 
@@ -33,9 +33,9 @@ from trajectory_msgs.msg import JointTrajectory
 from defgg_ros.constants import CAMERA_HEIGHT_PX, CAMERA_WIDTH_PX, PANDA_JOINT_NAMES
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import depth_metres_to_msg, make_camera_info, numpy_to_image
+from defgg_ros.ros.action import destroy_actions
+from defgg_ros.ros.executor import ThreadedExecutor
 from defgg_ros.ros.parameters import declare_parameters, load_schema
-from defgg_ros.ros_action import destroy_actions
-from defgg_ros.ros_executor import ThreadedExecutor
 from defgg_ros.sessions.graph import use_large_message_transport
 from defgg_ros.sim.cell import CellSettings, SimCell
 from defgg_ros.sim.cell_camera import DepthNoise

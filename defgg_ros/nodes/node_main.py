@@ -4,7 +4,7 @@ import sys
 import rclpy
 from rclpy.executors import ExternalShutdownException
 
-from defgg_ros.ros_executor import ThreadedExecutor
+from defgg_ros.ros.executor import ThreadedExecutor
 from defgg_ros.sessions.graph import use_large_message_transport
 
 

@@ -10,9 +10,9 @@ import time
 from defgg_interfaces.action import GripperGrasp, PickAndPlace
 from defgg_interfaces.srv import PlanGrasp, SetStiffness
 
-from defgg_ros import topics
-from defgg_ros.ros_action import ActionClient
-from defgg_ros.ros_service import ServiceTimeout, call_idempotent
+from defgg_ros.ros import topics
+from defgg_ros.ros.action import ActionClient
+from defgg_ros.ros.service import ServiceTimeout, call_idempotent
 
 
 class CellCallError(RuntimeError):
@@ -31,7 +31,7 @@ def wait_future(future, timeout_s: float, what: str):
 
 
 def _call(client, request, timeout_s: float, what: str):
-    """An idempotent service call (re-sent while unanswered: defgg_ros/ros_service.py)."""
+    """An idempotent service call (re-sent while unanswered: defgg_ros/ros/service.py)."""
     try:
         return call_idempotent(client, request, timeout_s, what)
     except (ServiceTimeout, RuntimeError) as error:

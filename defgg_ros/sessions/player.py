@@ -18,9 +18,9 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import CameraInfo, Image, JointState
 
-from defgg_ros import topics
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import ns_to_stamp
+from defgg_ros.ros import topics
 from defgg_ros.sessions.client import CellCallError
 from defgg_ros.sessions.compare import GraspSummary, PickOutcome, Tolerances, grasp_problems, pick_problems
 from defgg_ros.sessions.report import Row, diff_text

@@ -30,10 +30,10 @@ from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo
 from tqdm import tqdm
 
-from defgg_ros import topics
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import camera_info_to_k
-from defgg_ros.ros_executor import ThreadedExecutor
+from defgg_ros.ros import topics
+from defgg_ros.ros.executor import ThreadedExecutor
 from defgg_ros.sessions import metadata as md
 from defgg_ros.sessions.bag import SessionBagError, SessionWriter
 from defgg_ros.sessions.client import CellCallError, CellClient

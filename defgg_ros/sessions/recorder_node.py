@@ -13,8 +13,8 @@ from rclpy.serialization import serialize_message
 from sensor_msgs.msg import CameraInfo, Image, JointState
 from std_msgs.msg import String
 
-from defgg_ros import topics
 from defgg_ros.nodes import qos
+from defgg_ros.ros import topics
 from defgg_ros.sessions import session_topics as st
 from defgg_ros.sessions.selector import FrameSelector, StampError, header_stamp_ns
 

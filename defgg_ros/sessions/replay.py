@@ -21,9 +21,9 @@ from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from tqdm import tqdm
 
-from defgg_ros import topics
-from defgg_ros.ros_domain import SAFE_DOMAIN_RANGE, pick_private_domain
-from defgg_ros.ros_executor import ThreadedExecutor
+from defgg_ros.ros import topics
+from defgg_ros.ros.domain import SAFE_DOMAIN_RANGE, pick_private_domain
+from defgg_ros.ros.executor import ThreadedExecutor
 from defgg_ros.sessions import metadata as md
 from defgg_ros.sessions import session_topics as st
 from defgg_ros.sessions.bag import SessionBagError, SessionWriter

@@ -9,7 +9,7 @@ replays like it was recorded.
 from dataclasses import dataclass
 from pathlib import Path
 
-from defgg_ros import topics
+from defgg_ros.ros import topics
 from defgg_ros.sessions import metadata as md
 from defgg_ros.sessions.graph import NodeSpec
 

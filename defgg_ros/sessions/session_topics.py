@@ -5,7 +5,7 @@ feeds a graph directly). Service calls and action goals are not topics; the
 recorder, acting as the client, writes them on `/defgg/session/...` topics
 with the srv/action part types.
 """
-from defgg_ros import topics
+from defgg_ros.ros import topics
 
 SESSION_PREFIX = "/defgg/session"
 METADATA = f"{SESSION_PREFIX}/metadata"                      # std_msgs/String, JSON (also in metadata.yaml)

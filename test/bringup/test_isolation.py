@@ -16,7 +16,7 @@ import time
 import pytest
 
 from defgg_ros.bringup.node_set import load_node_set
-from defgg_ros.ros_domain import LOCALHOST_RANGE, apply_domain_choice, parse_domain_choice
+from defgg_ros.ros.domain import LOCALHOST_RANGE, apply_domain_choice, parse_domain_choice
 
 pytestmark = pytest.mark.ros
 

@@ -6,7 +6,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from defgg_ros import topics
+from defgg_ros.ros import topics
 from defgg_ros.ros.parameters import ParameterError, ParameterSpec, check_value, defaults, load_schema
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -78,7 +78,7 @@ def test_name_defaults_are_the_topics_module(node):
         if spec.name.endswith(("_topic", "_service", "_action", "_frame")) or spec.name == "action_name":
             if spec.name in ("capture_background_service",):
                 continue  # the segmentation node's own service, not a cell interface
-            assert spec.default in names, f"{node}.{spec.name} = {spec.default!r} is not in defgg_ros/topics.py"
+            assert spec.default in names, f"{node}.{spec.name} = {spec.default!r} is not in defgg_ros/ros/topics.py"
 
 
 @pytest.mark.unit

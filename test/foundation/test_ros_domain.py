@@ -1,7 +1,7 @@
 """Private ROS domains stay in the port-safe range and never collide with the caller's."""
 import random
 
-from defgg_ros.ros_domain import SAFE_DOMAIN_RANGE, pick_private_domain
+from defgg_ros.ros.domain import SAFE_DOMAIN_RANGE, pick_private_domain
 
 
 def test_private_domains_are_safe_and_not_the_callers_own(monkeypatch):

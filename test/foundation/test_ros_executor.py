@@ -13,8 +13,8 @@ from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
-from defgg_ros.ros_action import ActionClient
-from defgg_ros.ros_executor import ThreadedExecutor
+from defgg_ros.ros.action import ActionClient
+from defgg_ros.ros.executor import ThreadedExecutor
 
 PERIOD_S = 0.01
 MESSAGES = 300  # 3 s at 100 Hz
@@ -94,7 +94,7 @@ def test_an_action_result_set_from_a_timer_reaches_the_client(executor, spin):
 def test_destroyed_action_server_stops_being_advertised(executor, spin):
     """rclpy's destroy_node leaves an action server advertised; destroy_actions takes it off the graph, as a
     stopped driver must (the executor would otherwise wait on a dead driver's gripper)."""
-    from defgg_ros.ros_action import destroy_actions
+    from defgg_ros.ros.action import destroy_actions
 
     client_node = Node("watcher", context=executor.context)
     client = ActionClient(client_node, GripperMove, "gripper_move_vanishing")

@@ -1,11 +1,11 @@
-"""call_idempotent re-sends a request that was lost on real DDS (defgg_ros/ros_service.py)."""
+"""call_idempotent re-sends a request that was lost on real DDS (defgg_ros/ros/service.py)."""
 import threading
 import time
 
 import pytest
 from std_srvs.srv import Trigger
 
-from defgg_ros.ros_service import ServiceTimeout, call_idempotent
+from defgg_ros.ros.service import ServiceTimeout, call_idempotent
 
 
 class LateServer:

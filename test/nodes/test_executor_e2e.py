@@ -20,13 +20,13 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 from support.executor_goals import send_goal, stop_driver_processes
 
-from defgg_ros import topics
 from defgg_ros.control.kinematics import PandaKinematics
 from defgg_ros.control.poses import matrix_to_quaternion, top_down_pose
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.executor_node import ExecutorNode
-from defgg_ros.ros_action import ActionClient
-from defgg_ros.ros_executor import ThreadedExecutor
+from defgg_ros.ros import topics
+from defgg_ros.ros.action import ActionClient
+from defgg_ros.ros.executor import ThreadedExecutor
 
 SCENE = Path(__file__).resolve().parents[2] / "sim_bringup" / "scenes" / "rigid_box.yaml"
 BOX_XY_M, BOX_YAW_RAD, BOX_SIZE_M = (0.5, 0.05), 0.3, 0.05   # as in rigid_box.yaml

@@ -14,9 +14,9 @@ from support.executor_cell import (
     wait_driver_ready,
 )
 
-from defgg_ros import topics
 from defgg_ros.grasping.geometry import tcp_height_m
 from defgg_ros.nodes.executor_node import PARAMETERS, ExecutorNode
+from defgg_ros.ros import topics
 
 
 def test_pick_and_place_with_contact_on_the_way_down(executor_cell, spin):

@@ -10,7 +10,6 @@ from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
 from visualization_msgs.msg import MarkerArray
 
-from defgg_ros import topics
 from defgg_ros.constants import GRIPPER_MAX_WIDTH_M
 from defgg_ros.grasping.finger_clearance import fingers_clear
 from defgg_ros.nodes import qos
@@ -24,6 +23,7 @@ from defgg_ros.nodes.conversions import (
 from defgg_ros.nodes.grasp_inference_node import GraspInferenceNode
 from defgg_ros.perception.geometry import quaternion_xyzw_to_matrix
 from defgg_ros.perception.synthetic_scene import SceneObject, SyntheticScene, default_camera_k, render
+from defgg_ros.ros import topics
 
 K = default_camera_k()
 SCENE = SyntheticScene(objects=(

@@ -14,9 +14,9 @@ import sys
 import pytest
 from rclpy.parameter import Parameter
 
-from defgg_ros import topics
 from defgg_ros.nodes.grasp_inference_node import GraspInferenceNode
 from defgg_ros.nodes.segmentation_node import SegmentationNode
+from defgg_ros.ros import topics
 
 pytestmark = pytest.mark.ros
 

@@ -27,7 +27,6 @@ from support.executor_cell import (
 )
 from trajectory_msgs.msg import JointTrajectory
 
-from defgg_ros import topics
 from defgg_ros.constants import (
     PANDA_Q_MAX_RAD,
     PANDA_Q_MIN_RAD,
@@ -36,6 +35,7 @@ from defgg_ros.constants import (
     PANDA_QDDD_MAX_RADPS3,
 )
 from defgg_ros.nodes import qos
+from defgg_ros.ros import topics
 
 ABORTED, CANCELED = 6, 5  # action_msgs/GoalStatus
 REL_TOL = 1e-3  # the wire format rounds times to whole nanoseconds

@@ -17,7 +17,6 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
 
-from defgg_ros import topics
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import (
     depth_metres_to_msg,
@@ -28,6 +27,7 @@ from defgg_ros.nodes.conversions import (
 )
 from defgg_ros.nodes.segmentation_node import SegmentationNode
 from defgg_ros.perception.synthetic_scene import SceneObject, SyntheticScene, default_camera_k, render
+from defgg_ros.ros import topics
 
 K = default_camera_k()
 DEPTH_M, TRUTH = render(SyntheticScene(objects=(SceneObject((0.0, 0.0), 0.05, (0.05, 0.04)),)))

@@ -4,7 +4,7 @@ import rclpy
 from rclpy.context import Context
 from rclpy.node import Node
 
-from defgg_ros.ros_domain import pick_private_domain
+from defgg_ros.ros.domain import pick_private_domain
 from defgg_ros.sessions import replay
 
 

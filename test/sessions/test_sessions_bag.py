@@ -6,7 +6,7 @@ import pytest
 import yaml
 from support.session_bag_helpers import metadata, write_small_session
 
-from defgg_ros import topics
+from defgg_ros.ros import topics
 from defgg_ros.sessions import session_topics as st
 from defgg_ros.sessions.bag import SessionBagError, SessionWriter, read_bag
 from defgg_ros.sessions.session import load_session

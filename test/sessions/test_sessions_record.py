@@ -8,10 +8,10 @@ import pytest
 from support.replay_process import run_replay
 from support.session_synthetic_camera import SyntheticCamera
 
-from defgg_ros import topics
 from defgg_ros.nodes.grasp_inference_node import GraspInferenceNode
 from defgg_ros.nodes.segmentation_node import SegmentationNode
-from defgg_ros.ros_domain import pick_private_domain
+from defgg_ros.ros import topics
+from defgg_ros.ros.domain import pick_private_domain
 from defgg_ros.sessions import record
 from defgg_ros.sessions import session_topics as st
 from defgg_ros.sessions.graph import FASTDDS_PROFILE, FASTDDS_PROFILE_VARIABLE

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from support.replay_process import run_replay
 
-from defgg_ros import topics
+from defgg_ros.ros import topics
 from defgg_ros.sessions import session_topics as st
 from defgg_ros.sessions.bag import SessionWriter, read_bag
 from defgg_ros.sessions.graph import FASTDDS_PROFILE, FASTDDS_PROFILE_VARIABLE

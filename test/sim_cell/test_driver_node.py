@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from rclpy.parameter import Parameter
 
-from defgg_ros import topics
 from defgg_ros.constants import CAMERA_HEIGHT_PX, CAMERA_WIDTH_PX, PANDA_READY_Q_RAD
+from defgg_ros.ros import topics
 
 SCENES = Path(__file__).resolve().parents[2] / "sim_bringup" / "scenes"
 TIMEOUT_S = 30.0
@@ -91,7 +91,7 @@ def test_trajectory_is_executed_in_sim_time(driver, client, executor, spin):
 def test_gripper_actions(driver, client, executor, spin):
     from defgg_interfaces.action import GripperGrasp, GripperMove
 
-    from defgg_ros.ros_action import ActionClient
+    from defgg_ros.ros.action import ActionClient
 
     move = ActionClient(client, GripperMove, topics.GRIPPER_MOVE_ACTION)
     grasp = ActionClient(client, GripperGrasp, topics.GRIPPER_GRASP_ACTION)

@@ -26,14 +26,14 @@ from rclpy.task import Future
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
-from defgg_ros import topics
 from defgg_ros.constants import PANDA_FINGER_JOINT_NAMES, PANDA_JOINT_NAMES, PANDA_READY_Q_RAD
 from defgg_ros.control.kinematics import PandaKinematics
 from defgg_ros.control.poses import matrix_to_quaternion, top_down_pose
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.executor_node import ExecutorNode
-from defgg_ros.ros_action import ActionClient, destroy_actions
-from defgg_ros.ros_executor import ThreadedExecutor
+from defgg_ros.ros import topics
+from defgg_ros.ros.action import ActionClient, destroy_actions
+from defgg_ros.ros.executor import ThreadedExecutor
 from support.executor_goals import send_goal
 
 TEST_ROOT = Path(__file__).resolve().parents[1]
