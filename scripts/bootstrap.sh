@@ -33,18 +33,37 @@ fi
 # point them at this interpreter's headers and numpy (idempotent rewrite).
 "$venv/bin/python" "$root/scripts/fix_rosidl_paths.py" "$venv"
 
-msg_stamp=$(cd "$root" && stamp_of msg_defs/CMakeLists.txt msg_defs/package.xml msg_defs/*/*)
-if ! fresh interfaces "$msg_stamp" || ! "$venv/bin/python" -c "import defgg_interfaces.msg" 2>/dev/null; then
-  say "building msg_defs (defgg_interfaces) into the venv"
-  build="$venv/build/defgg_interfaces"
+# Build one ament_cmake interface package from $1 (a folder of the repo) into the venv.
+build_interfaces() {
+  local src="$root/$1" name; name=$(basename "$1")
+  local build="$venv/build/$name"
+  say "building $1 ($name) into the venv"
   rm -rf "$build"; mkdir -p "$build"
-  AMENT_PREFIX_PATH="$venv" cmake -S "$root/msg_defs" -B "$build" \
+  AMENT_PREFIX_PATH="$venv" cmake -S "$src" -B "$build" \
     -DCMAKE_PREFIX_PATH="$venv" -DCMAKE_INSTALL_PREFIX="$venv" \
     -DPython3_EXECUTABLE="$venv/bin/python" -DBUILD_TESTING=OFF > "$build.log" 2>&1 \
     || { tail -30 "$build.log"; exit 1; }
   AMENT_PREFIX_PATH="$venv" make -C "$build" -j2 install >> "$build.log" 2>&1 \
     || { tail -30 "$build.log"; exit 1; }
+}
+
+msg_stamp=$(cd "$root" && stamp_of msg_defs/CMakeLists.txt msg_defs/package.xml msg_defs/*/*)
+if ! fresh interfaces "$msg_stamp" || ! "$venv/bin/python" -c "import defgg_interfaces.msg" 2>/dev/null; then
+  build_interfaces msg_defs
   mark interfaces "$msg_stamp"
+fi
+
+# The real cell's interface packages (franka_msgs, control_msgs, tf2_msgs) are not on PyPI: their
+# definitions in vendor_interfaces/ are built here for the venv only (colcon ignores that folder,
+# a ROS install uses the real packages; see vendor_interfaces/README.md).
+vendor_stamp=$(cd "$root" && stamp_of vendor_interfaces/*/CMakeLists.txt vendor_interfaces/*/package.xml \
+  vendor_interfaces/*/*/*)
+if ! fresh vendor_interfaces "$vendor_stamp" \
+    || ! "$venv/bin/python" -c "import franka_msgs.action, control_msgs.action, tf2_msgs.msg" 2>/dev/null; then
+  for package in tf2_msgs control_msgs franka_msgs; do
+    build_interfaces "vendor_interfaces/$package"
+  done
+  mark vendor_interfaces "$vendor_stamp"
 fi
 
 pkg_stamp=$(cd "$root" && stamp_of setup.py setup.cfg package.xml)
