@@ -16,7 +16,7 @@ from defgg_ros.data.labels import slips_in_a_direction
 RIGID_NOTE = (
     f"Moduli above {MAX_SOFT_BODY_YOUNGS_MODULUS_PA:.0e} Pa are simulated as rigid bodies: PyBullet's FEM "
     "was unstable for E >= 2e7 Pa on this machine (objects flung instead of lifted, fingers forced open; "
-    "../shared/notes/pybullet-fem-facts.md). At 2e9 Pa and 2-20 N over ~5 cm^2 the strain is ~1e-5, so "
+    "docs/pybullet_fem.md). At 2e9 Pa and 2-20 N over ~5 cm^2 the strain is ~1e-5, so "
     "a rigid body is physically fair.")
 
 
@@ -135,7 +135,8 @@ def _protocol_line(gen: dict) -> str:
             if settings["confident_stop"] else "no early stop on the measured mean")
     mesh = gen.get("sim_max_tet_nodes")
     return (f"Trial protocol{'' if recorded else ' (not recorded in the header: the generator of the time)'}: "
-            f"{_protocol_summary(settings)}; close settle {settings['close_settle_s']} s, lift {settings['lift_height_m'] * 100:.0f} cm in "
+            f"{_protocol_summary(settings)}; close settle {settings['close_settle_s']} s, "
+            f"lift {settings['lift_height_m'] * 100:.0f} cm in "
             f"{settings['lift_time_s']} s, hold {settings['hold_time_s']} s; {stop}; FEM mesh: "
             + (f"at most {mesh} nodes (soft bodies)" if mesh else "the shipped mesh")
             + ("; candidates at the evaluation's grasp height (--grasp-height executor)"

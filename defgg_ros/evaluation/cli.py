@@ -74,6 +74,9 @@ def _add_run(sub):
     p.add_argument("--quick", action="store_true",
                    help="smoke test only: 5x faster acceleration ramps, shorter lift (recorded in run.json and every "
                         "trial; not the paper's protocol, never for reported numbers)")
+    p.add_argument("--protocol", choices=("defgraspsim", "legacy"), default=None,
+                   help="trial protocol (docs/dataset.md, 'Trial protocols'): defgraspsim (default for a new folder) "
+                        "or legacy (results up to sim_v4); a folder being resumed keeps its own")
     p.add_argument("--plan-only", action="store_true",
                    help="only render and plan every view's grasps into OUT/plans.json (no simulation; cheap), "
                         "for the diagnostics of the report")
@@ -147,6 +150,9 @@ def _add_others(sub):
                         "the height the evaluation executes a model's grasp at (comparable to the models; use a "
                         "new --out folder)")
     p.add_argument("--max-trials", type=int, default=None, help="stop after simulating this many trials")
+    p.add_argument("--protocol", choices=("defgraspsim", "legacy"), default=None,
+                   help="trial protocol (docs/dataset.md, 'Trial protocols'): defgraspsim (default for a new folder) "
+                        "or legacy (results up to sim_v4); a folder being resumed keeps its own")
     p.add_argument("--summary-only", action="store_true", help="only rewrite OUT/ceiling.md")
 
     p = sub.add_parser("card", help="(re)write models/<name>.md from its provenance, weights and evaluation")
@@ -236,6 +242,22 @@ def write_manifest(out_dir, args, model_paths, predictors, objects, argv, settin
     write_json_atomic(Path(out_dir) / report_mod.MANIFEST_FILE, merge_manifest(out_dir, manifest))
 
 
+def resolve_protocol(out_dir, requested: str | None, records_file: str | None = None) -> str:
+    """The trial protocol of a run: as requested; else the folder's own when it holds trials (those made
+    before the setting existed are legacy); else the default (TrialSettings.protocol, defgraspsim)."""
+    from defgg_ros.atomic import read_jsonl
+    from defgg_ros.evaluation.store import RESULTS_FILE
+    from defgg_ros.sim.trial import TrialSettings
+
+    if requested is not None:
+        return requested
+    path = Path(out_dir) / (records_file or RESULTS_FILE)
+    if path.is_file():
+        for record in read_jsonl(path):
+            return (record.get("trial_settings") or {}).get("protocol", "legacy")
+    return TrialSettings.protocol
+
+
 def check_same_protocol(out_dir, settings, tasks) -> None:
     """Trials of one folder share one protocol per task: finished trials are skipped by key, so a run
     with other trial settings (e.g. before the 0.6 s lift of 2026-11-24) would silently mix them. Only
@@ -290,7 +312,8 @@ def cmd_run(args, argv) -> int:
     model_paths = parse_models(args.model or DEFAULT_MODELS)
     predictors = load_predictors(model_paths)
     objects = eval_objects(args)
-    settings = runner.quick_trial_settings() if args.quick else runner.eval_trial_settings()
+    protocol = resolve_protocol(args.out, args.protocol)
+    settings = runner.quick_trial_settings(protocol) if args.quick else runner.eval_trial_settings(protocol)
     check_same_protocol(args.out, settings, args.tasks)
     write_manifest(args.out, args, model_paths, predictors, objects, argv, settings)
     plan = runner.EvalPlan(objects, predictors, build_views(args, predictors, objects), args.grasps,
@@ -427,7 +450,8 @@ def cmd_ceiling(args, argv) -> int:
         trials = ceiling.plan_trials(shapes, args.moduli, args.candidates, args.task, args.seed,
                                      args.sim_max_tet_nodes, args.grasp_height)
         ceiling.record_command(args.out, "defgg-eval " + " ".join(shlex.quote(a) for a in argv))
-        ceiling.run(args.out, trials, args.task, eval_trial_settings(), args.max_trials,
+        protocol = resolve_protocol(args.out, args.protocol, ceiling.RESULTS_FILE)
+        ceiling.run(args.out, trials, args.task, eval_trial_settings(protocol), args.max_trials,
                     progress=lambda n, total, key: print(f"[{n}/{total}] {key}", flush=True),
                     grasp_height=args.grasp_height)
     print(ceiling.write_table(args.out, args.candidates))

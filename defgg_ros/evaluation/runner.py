@@ -43,13 +43,14 @@ STATUS_NO_GRASP = "no_grasp"   # the model proposed fewer grasps than asked: a f
 EVAL_TWIST_OSCILLATION_RADPS = 40.0
 
 
-def eval_trial_settings() -> TrialSettings:
+def eval_trial_settings(protocol: str | None = None) -> TrialSettings:
     """The tasks' protocol: the generator's trial (same close, lift and ramp rates) with the shake ramped
     only to the task's 25 m/s^2 (0.25 s at the generator's 100 m/s^3), the twist oscillating
     (EVAL_TWIST_OSCILLATION_RADPS), and each task stopped at the first direction/axis that is not held (the
-    grasp has failed; the rest is recorded as unmeasured)."""
+    grasp has failed; the rest is recorded as unmeasured). `protocol`: sim.trial.PROTOCOLS (None: the default)."""
     rate_mps3 = SHAKE_ACCEL_LIMIT_MPS2 / TrialSettings().shake_ramp_time_s
-    return TrialSettings(stop_direction_when_lost=True, stop_when_label_decided=False,
+    return TrialSettings(protocol=protocol or TrialSettings.protocol, stop_direction_when_lost=True,
+                         stop_when_label_decided=False,
                          shake_limit_mps2=SHAKE_POSITIVE_THRESHOLD_MPS2,
                          shake_ramp_time_s=SHAKE_POSITIVE_THRESHOLD_MPS2 / rate_mps3,
                          shake_fail_below_mps2=SHAKE_POSITIVE_THRESHOLD_MPS2,
@@ -57,9 +58,9 @@ def eval_trial_settings() -> TrialSettings:
                          twist_fail_below_radps2=TWIST_ACCEL_LIMIT_RADPS2)
 
 
-def quick_trial_settings() -> TrialSettings:
+def quick_trial_settings(protocol: str | None = None) -> TrialSettings:
     """Smoke-test protocol: the same tasks with 5x faster ramps and a shorter lift. Never for reported numbers."""
-    return replace(eval_trial_settings(), lift_time_s=0.2, hold_time_s=0.05, shake_ramp_time_s=0.05,
+    return replace(eval_trial_settings(protocol), lift_time_s=0.2, hold_time_s=0.05, shake_ramp_time_s=0.05,
                    twist_ramp_time_s=0.1)
 
 

@@ -1,6 +1,6 @@
 """PyBullet FEM simulation shared by the dataset generator, the evaluation and the fake driver.
 
-No rclpy here. Settings come from ../shared/notes/pybullet-fem-facts.md
+No rclpy here. Settings come from docs/pybullet_fem.md
 (measured on this machine) and are explained where they are used.
 
 API overview (stable):

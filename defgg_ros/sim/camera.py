@@ -23,6 +23,7 @@ from defgg_ros.constants import (
     CAMERA_NEAR_M,
     NETWORK_INPUT_SIZE_PX,
 )
+from defgg_ros.sim import physics
 
 
 @dataclass(frozen=True)
@@ -76,7 +77,7 @@ class TopDownCamera:
             self.width_px, self.height_px, view, proj, renderer=p.ER_TINY_RENDERER,
             flags=p.ER_SEGMENTATION_MASK_OBJECT_AND_LINKINDEX, physicsClientId=client)
         d = np.asarray(depth_buf, dtype=np.float64).reshape(self.height_px, self.width_px)
-        depth = CAMERA_FAR_M * CAMERA_NEAR_M / (CAMERA_FAR_M - (CAMERA_FAR_M - CAMERA_NEAR_M) * d)
+        depth = physics.depth_from_buffer_m(d, CAMERA_NEAR_M, CAMERA_FAR_M)
         return depth.astype(np.float32), np.asarray(seg, dtype=np.int64).reshape(self.height_px, self.width_px)
 
 

@@ -20,6 +20,7 @@ from defgg_ros.constants import (
     CAMERA_NEAR_M,
     CAMERA_WIDTH_PX,
 )
+from defgg_ros.sim import physics
 
 # Noise sigma = coefficient * z^2: stereo depth error grows with the square of
 # the distance; 0.004/m gives ~0.6 mm at 0.4 m, in the range of a D435 there.
@@ -50,8 +51,7 @@ def camera_matrix() -> np.ndarray:
 
 def buffer_to_depth_m(depth_buffer, near_m=CAMERA_NEAR_M, far_m=CAMERA_FAR_M) -> np.ndarray:
     """OpenGL depth buffer values in [0, 1] -> metric z along the optical axis."""
-    d = np.asarray(depth_buffer, dtype=np.float64)
-    return far_m * near_m / (far_m - (far_m - near_m) * d)
+    return physics.depth_from_buffer_m(depth_buffer, near_m, far_m)
 
 
 def depth_m_to_mm_u16(depth_m) -> np.ndarray:

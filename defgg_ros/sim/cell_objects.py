@@ -1,8 +1,7 @@
 """Bodies of the simulated cell: world reset, table, bin, scene objects, hand contacts.
 
-Soft objects are FEM bodies with the settings that were stable on this
-machine (../shared/notes/pybullet-fem-facts.md): Neo-Hookean, damping 0.01,
-margin 2 mm, friction 0.8, face contact; their tetrahedral meshes come from
+Soft objects are FEM bodies of the physics core (physics.py, the same
+settings as the grasp trials' objects); their tetrahedral meshes come from
 the FEM library (`defgg_ros.sim.meshes`, `defgg_ros.sim.shapes`). Objects
 stiffer than MAX_SOFT_BODY_YOUNGS_MODULUS_PA are rigid bodies (FEM at
 E >= 2e7 Pa flung objects and forced the fingers open in the probe).
@@ -10,27 +9,21 @@ E >= 2e7 Pa flung objects and forced the fingers open in the probe).
 import numpy as np
 import pybullet as p
 
-from defgg_ros.sim import world
+from defgg_ros.sim import physics
+from defgg_ros.sim.physics import SoftBodyError, reset_world, soft_nodes_m  # noqa: F401 - the cell's names
 from defgg_ros.sim.scene_spec import BinSpec, ObjectSpec, SceneSpec
 
-FRICTION = 0.8
-GRAVITY_MPS2 = 9.81
-SPARSE_SDF_VOXEL_M = 0.01
-NEO_HOOKEAN_DAMPING = 0.01
-SOFT_COLLISION_MARGIN_M = 0.002
+FRICTION = physics.DEFAULT_FRICTION
+SOFT_COLLISION_MARGIN_M = physics.SOFT_COLLISION_MARGIN_M
 TABLE_RGBA = (0.55, 0.45, 0.35, 1.0)
 BIN_RGBA = (0.3, 0.3, 0.35, 1.0)
 # Dropped from slightly above the table so nothing starts in penetration.
 SPAWN_GAP_M = 0.002
 
 
-class SoftBodyError(RuntimeError):
-    """PyBullet refused or broke a soft body."""
-
-
 def soft_time_step_s(youngs_modulus_pa: float) -> float:
     """The FEM library's stable step for one soft object (5e-4 s up to 2e5 Pa, 2.5e-4 s above)."""
-    return world.time_step_for([youngs_modulus_pa])
+    return physics.time_step_for([youngs_modulus_pa])
 
 
 def time_step_for_scene(scene: SceneSpec, rigid_step_s: float) -> float:
@@ -39,23 +32,8 @@ def time_step_for_scene(scene: SceneSpec, rigid_step_s: float) -> float:
     return min(steps, default=rigid_step_s)
 
 
-def reset_world(client: int, deformable: bool, time_step_s: float) -> None:
-    if deformable:
-        p.resetSimulation(p.RESET_USE_DEFORMABLE_WORLD, physicsClientId=client)
-        p.setPhysicsEngineParameter(sparseSdfVoxelSize=SPARSE_SDF_VOXEL_M, physicsClientId=client)
-    else:
-        p.resetSimulation(physicsClientId=client)
-    # Gravity is zero after a (deformable) reset: set it afterwards.
-    p.setGravity(0, 0, -GRAVITY_MPS2, physicsClientId=client)
-    p.setTimeStep(time_step_s, physicsClientId=client)
-
-
 def _static_box(client, half_extents, position, rgba):
-    col = p.createCollisionShape(p.GEOM_BOX, halfExtents=half_extents, physicsClientId=client)
-    vis = p.createVisualShape(p.GEOM_BOX, halfExtents=half_extents, rgbaColor=rgba, physicsClientId=client)
-    body = p.createMultiBody(0, col, vis, position, physicsClientId=client)
-    p.changeDynamics(body, -1, lateralFriction=FRICTION, physicsClientId=client)
-    return body
+    return physics.static_box(client, half_extents, position, rgba, FRICTION)
 
 
 def add_table(client: int, scene: SceneSpec) -> int:
@@ -90,8 +68,7 @@ def add_rigid_object(client: int, spec: ObjectSpec) -> int:
     position = [spec.position_xy_m[0], spec.position_xy_m[1], spec.height_m / 2 + SPAWN_GAP_M]
     col, vis = _rigid_shapes(client, spec)
     body = p.createMultiBody(spec.mass_kg, col, vis, position, orientation, physicsClientId=client)
-    p.changeDynamics(body, -1, lateralFriction=FRICTION, rollingFriction=1e-4, spinningFriction=1e-3,
-                     physicsClientId=client)
+    physics.set_friction(client, body, [-1], FRICTION, rollingFriction=1e-4, spinningFriction=1e-3)
     return body
 
 
@@ -121,21 +98,12 @@ def centred_surface_mesh(spec: ObjectSpec):
 
 
 def load_soft_body(client: int, spec: ObjectSpec, tet, position, orientation) -> int:
-    """The FEM body of a tet mesh with the probe's stable settings (Neo-Hookean, damping 0.01)."""
-    e_pa, nu = spec.youngs_modulus_pa, spec.poisson_ratio
-    body = p.loadSoftBody(
-        str(tet.vtk_path), basePosition=position, baseOrientation=orientation, scale=1.0, mass=spec.mass_kg,
-        useNeoHookean=1, NeoHookeanMu=e_pa / (2 * (1 + nu)), NeoHookeanLambda=e_pa * nu / ((1 + nu) * (1 - 2 * nu)),
-        NeoHookeanDamping=NEO_HOOKEAN_DAMPING, collisionMargin=SOFT_COLLISION_MARGIN_M, frictionCoeff=FRICTION,
-        useFaceContact=1, useSelfCollision=0, physicsClientId=client)
-    if body < 0:
-        raise SoftBodyError(f"PyBullet could not load the soft body of {spec.name!r} ({tet.vtk_path})")
-    return body
-
-
-def soft_nodes_m(client: int, body: int) -> np.ndarray:
-    _, vertices = p.getMeshData(body, -1, flags=p.MESH_DATA_SIMULATION_MESH, physicsClientId=client)
-    return np.asarray(vertices, dtype=float)
+    """The FEM body of a tet mesh with the physics core's settings, the same as a grasp trial's object."""
+    parameters = physics.soft_body_parameters(spec.youngs_modulus_pa, spec.poisson_ratio, spec.mass_kg, FRICTION)
+    try:
+        return physics.load_soft_body(client, tet.vtk_path, position, orientation, parameters)
+    except SoftBodyError as exc:
+        raise SoftBodyError(f"{spec.name!r}: {exc}") from exc
 
 
 def _force_on_a(c):

@@ -27,10 +27,11 @@ from defgg_ros.constants import (
     PANDA_FINGERTIP_BELOW_TCP_M,
     PANDA_HAND_PALM_SIZE_M,
 )
+from defgg_ros.sim.physics import DEFAULT_FRICTION
 
 PALM_MASS_KG = 0.5
 FINGER_MASS_KG = 0.005
-FINGER_FRICTION = 0.8
+FINGER_FRICTION = DEFAULT_FRICTION
 HOLD_FORCE_N = 2000.0     # constraint force holding the palm at its target
 GEAR_FORCE_N = 500.0
 # Finger lock (DefGraspSim's protocol locks both finger joints after pickup). With the gear kept and a

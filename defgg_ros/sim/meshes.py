@@ -10,7 +10,7 @@ version of the same object have the same shape.
 
 Why coarse: a soft body in contact costs ~12x its free-space step and the
 cost grows with the node count (129 nodes ~6 ms/step, 500 nodes ~25 ms/step,
-measured in ../shared/notes/pybullet-fem-facts.md). We aim at
+measured in docs/pybullet_fem.md). We aim at
 TARGET_MAX_NODES nodes and coarsen until we get there.
 """
 from __future__ import annotations

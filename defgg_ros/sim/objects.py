@@ -1,10 +1,10 @@
 """Objects: geometry (ObjectShape), material (ObjectSpec) and loading into PyBullet.
 
 Soft or rigid: a part with E <= MAX_SOFT_BODY_YOUNGS_MODULUS_PA becomes an
-FEM soft body (Neo-Hookean, the stable settings of world.py). Stiffer parts
+FEM soft body (Neo-Hookean, the physics core's settings: physics.py). Stiffer parts
 become rigid bodies, because PyBullet's FEM was unstable for E >= 2e7 Pa on
 this machine (objects flung, fingers forced open; see
-../shared/notes/pybullet-fem-facts.md and docs/dataset.md). At 2e9 Pa and
+docs/pybullet_fem.md and docs/dataset.md). At 2e9 Pa and
 2-20 N over ~5 cm^2 the strain is ~1e-5, so a rigid body is physically fair.
 
 Multi-material objects have two parts. PyBullet gives one material per soft
@@ -24,17 +24,14 @@ import pybullet as p
 import trimesh
 
 from defgg_ros.constants import MAX_SOFT_BODY_YOUNGS_MODULUS_PA, POISSON_RATIO, TRAINING_YOUNGS_MODULI_PA
-from defgg_ros.sim import library, meshes
+from defgg_ros.sim import library, meshes, physics
 from defgg_ros.stiffness import check_youngs_modulus
 
 # One density for every object: water-like, as the FEM probe's 96 g box.
 DEFAULT_DENSITY_KG_M3 = 1000.0
 # Soft nodes closer than this to a rigid part are anchored to it (multi-material).
 ANCHOR_DISTANCE_M = 0.003
-# Neo-Hookean damping: 0 exploded even in a drop test (FEM notes).
-NEO_HOOKEAN_DAMPING = 0.01
-SOFT_COLLISION_MARGIN_M = 0.002
-OBJECT_FRICTION = 0.8
+OBJECT_FRICTION = physics.DEFAULT_FRICTION
 # Objects are loaded this far above the table so they never start in contact.
 DROP_GAP_M = 0.0005
 
@@ -324,18 +321,10 @@ def _quat(pose):
 
 
 def _load_soft(client, tet, mass_kg, youngs_modulus_pa, poisson_ratio, world_T_object, friction) -> int:
-    mu = youngs_modulus_pa / (2 * (1 + poisson_ratio))
-    lam = youngs_modulus_pa * poisson_ratio / ((1 + poisson_ratio) * (1 - 2 * poisson_ratio))
+    parameters = physics.soft_body_parameters(youngs_modulus_pa, poisson_ratio, mass_kg, friction)
     with meshes._stdout_silenced():  # loadSoftBody prints node/tet counts from C
-        return _load_soft_quiet(client, tet, mass_kg, mu, lam, world_T_object, friction)
-
-
-def _load_soft_quiet(client, tet, mass_kg, mu, lam, world_T_object, friction) -> int:
-    return p.loadSoftBody(
-        str(tet.vtk_path), basePosition=world_T_object[:3, 3].tolist(), baseOrientation=_quat(world_T_object),
-        mass=mass_kg, useNeoHookean=1, NeoHookeanMu=mu, NeoHookeanLambda=lam,
-        NeoHookeanDamping=NEO_HOOKEAN_DAMPING, collisionMargin=SOFT_COLLISION_MARGIN_M,
-        frictionCoeff=friction, useFaceContact=1, useSelfCollision=0, physicsClientId=client)
+        return physics.load_soft_body(client, tet.vtk_path, world_T_object[:3, 3].tolist(), _quat(world_T_object),
+                                      parameters)
 
 
 def _load_rigid(client, tets, masses, world_T_object, friction) -> int:
@@ -357,8 +346,7 @@ def _load_rigid(client, tets, masses, world_T_object, friction) -> int:
         linkOrientations=[[0, 0, 0, 1]] * extra, linkInertialFramePositions=[c.tolist() for c in coms[1:]],
         linkInertialFrameOrientations=[[0, 0, 0, 1]] * extra, linkParentIndices=[0] * extra,
         linkJointTypes=[p.JOINT_FIXED] * extra, linkJointAxis=[[0, 0, 1]] * extra, physicsClientId=client)
-    for link in range(-1, extra):
-        p.changeDynamics(body, link, lateralFriction=friction, physicsClientId=client)
+    physics.set_friction(client, body, range(-1, extra), friction)
     return body
 
 

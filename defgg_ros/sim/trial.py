@@ -41,7 +41,7 @@ from defgg_ros.constants import (
 )
 from defgg_ros.data.format import STATUS_EXPLODED, STATUS_LIFT_FAILED, STATUS_OK, STATUS_TIMEOUT
 from defgg_ros.sim import hand as hand_mod
-from defgg_ros.sim import objects, world
+from defgg_ros.sim import objects, physics, world
 from defgg_ros.sim.hand import world_T_hand
 
 # Trial protocols (docs/dataset.md, "Trial protocols"). legacy: fem_v1-v4's (gravity on, grip force
@@ -52,13 +52,7 @@ from defgg_ros.sim.hand import world_T_hand
 PROTOCOL_LEGACY = "legacy"
 PROTOCOL_DEFGRASPSIM = "defgraspsim"
 PROTOCOLS = (PROTOCOL_LEGACY, PROTOCOL_DEFGRASPSIM)
-# Material per protocol: the pads' and the object's friction coefficients (Bullet multiplies them: the
-# effective mu of a finger contact is their product) and Poisson's ratio. DefGraspSim: mu 0.7, nu 0.3.
-PROTOCOL_MATERIAL = {
-    PROTOCOL_LEGACY: {"finger_friction": hand_mod.FINGER_FRICTION, "object_friction": objects.OBJECT_FRICTION,
-                      "poisson_ratio": None},          # None: the ObjectSpec's own (constants.POISSON_RATIO)
-    PROTOCOL_DEFGRASPSIM: {"finger_friction": 1.0, "object_friction": 0.7, "poisson_ratio": 0.3},
-}
+# Each protocol's material: physics.MATERIALS (the physics core's material table).
 TABLE_AWAY_Z_M = -1.0   # where the defgraspsim pickup moves the table (DefGraspSim lowers its platform)
 
 # Grasp force rule (per finger): 2 N at E = 2e4 Pa plus 0.5 N per decade of E,
@@ -182,7 +176,9 @@ class TrialSettings:
 
     def material(self) -> dict:
         """finger_friction, object_friction, effective_friction (their product) and poisson_ratio."""
-        m = dict(PROTOCOL_MATERIAL[self.protocol])
+        material = physics.MATERIALS[self.protocol]
+        m = {"finger_friction": material.finger_friction, "object_friction": material.object_friction,
+             "poisson_ratio": material.poisson_ratio}
         if self.object_friction is not None:
             m["object_friction"] = self.object_friction
         if self.poisson_ratio is not None:
@@ -303,14 +299,19 @@ class _Trial:
         self.ref_offset = self.object_in_hand()
         if not self.held():
             raise _Abort(STATUS_LIFT_FAILED, "object not held after lift")
-        if self.defgraspsim and all(pt.soft for pt in self.obj.parts):
-            # A rigid body stores no elastic squeeze: between locked fingers it kept ~1e-4 N and slid off
-            # (an artefact), so the rigid stand-in of 2e9 Pa stays held with force F/2 instead.
+        if self.defgraspsim:
+            self.hold_fingers_for_tests()
+        self.squeeze_after_lock_n = self.hand.finger_forces_n()
+        self.saved = (self.obj.save_state(), self.hand.save_state())
+
+    def hold_fingers_for_tests(self):
+        """defgraspsim: lock the fingers on a soft object. A rigid body stores no elastic squeeze: between
+        locked fingers it kept ~1e-4 N and slid off (an artefact), so the rigid stand-in of 2e9 Pa stays
+        held with force F/2 instead (bench/bench_finger_lock.py)."""
+        if all(pt.soft for pt in self.obj.parts):
             self.hand.lock_fingers()
             self.fingers_locked = True
             self.step(self.check_steps)
-        self.squeeze_after_lock_n = self.hand.finger_forces_n()
-        self.saved = (self.obj.save_state(), self.hand.save_state())
 
     def _lift(self):
         """legacy: lift the object off the table with a smooth 0.6 s profile, then hold."""
@@ -448,8 +449,8 @@ class _Trial:
 def comparable_protocol(recorded: dict) -> dict:
     """A recorded TrialSettings dict in the form two protocols are compared in (resuming a dataset or an
     evaluation folder): fields added after it was recorded get the value they implicitly had then
-    (LEGACY_CONFIDENT_SETTINGS, LEGACY_TWIST_SETTINGS, LEGACY_PROTOCOL_SETTINGS), and the surrogate's knobs drop out when the
-    surrogate is off."""
+    (LEGACY_CONFIDENT_SETTINGS, LEGACY_TWIST_SETTINGS, LEGACY_PROTOCOL_SETTINGS), and the surrogate's knobs
+    drop out when the surrogate is off."""
     full = {**LEGACY_CONFIDENT_SETTINGS, **LEGACY_TWIST_SETTINGS, **LEGACY_PROTOCOL_SETTINGS, **recorded}
     if not full.get("confident_stop"):
         for key in LEGACY_CONFIDENT_SETTINGS:
