@@ -67,16 +67,17 @@ PROTOCOLS = DEFAULT_PROTOCOLS + tuple(MESH_VARIANTS) + tuple(VARIANTS) + tuple(
     p + CONF40 for p in ("fast", "fast_coarse", "fast_coarse80", "fast_lift03"))
 
 
-def protocol_settings(name: str):
+def protocol_settings(name: str, trial_protocol: str = "legacy"):
+    """The TrialSettings of a bench protocol (naive, fast, ...) under a trial protocol (sim.trial.PROTOCOLS)."""
     from dataclasses import replace
 
     from defgg_ros.sim.trial import LEGACY_CONFIDENT_SETTINGS, TrialSettings
 
     if name.endswith(CONF40):
-        return replace(protocol_settings(name.removesuffix(CONF40)), **LEGACY_CONFIDENT_SETTINGS)
+        return replace(protocol_settings(name.removesuffix(CONF40), trial_protocol), **LEGACY_CONFIDENT_SETTINGS)
     if name in VARIANTS:
-        return replace(TrialSettings.fast(), **VARIANTS[name])
-    return getattr(TrialSettings, MESH_VARIANTS.get(name, name))()
+        return replace(TrialSettings.fast(), protocol=trial_protocol, **VARIANTS[name])
+    return replace(getattr(TrialSettings, MESH_VARIANTS.get(name, name))(), protocol=trial_protocol)
 
 
 def protocol_shape(name: str, object_name: str, youngs_modulus_pa: float):
@@ -118,7 +119,8 @@ def run(args):
     from defgg_ros.sim.trial import run_grasp_trial
 
     torch.set_num_threads(1)
-    done = {(r["trial"], r["protocol"]) for r in read_jsonl(args.results)}
+    done = {(r["trial"], r["protocol"]) for r in read_jsonl(args.results)
+            if r.get("trial_protocol", "legacy") == args.trial_protocol}
     client = world.connect()
     jobs = sample_jobs(args.objects, args.moduli, args.grasps, args.seed, args.grasp_height)
     # rigid first (cheap), then soft: a partial run already has every E
@@ -128,12 +130,13 @@ def run(args):
         for proto in args.protocols:
             if (trial, proto) in done:
                 continue
-            settings = protocol_settings(proto)
+            settings = protocol_settings(proto, args.trial_protocol)
             shape = protocol_shape(proto, name, e)
             out = run_grasp_trial(objects.ObjectSpec(shape, e), grasp, ("shake",), settings, client=client)
             mean = out.shake_mean_mps2
             label = False if out.status == "lift_failed" else (None if mean is None else mean >= 25.0)
             append_jsonl(args.results, {"trial": trial, "protocol": proto, "object": name, "E": e,
+                                        "trial_protocol": args.trial_protocol,
                                         "grasp_height": args.grasp_height,
                                         "status": out.status, "label": label, "mean": mean,
                                         "accels": out.shake_accels_mps2, "measured": out.shake_measured,
@@ -143,16 +146,17 @@ def run(args):
                   flush=True)
 
 
-def summarize(results_paths):
+def summarize(results_paths, trial_protocol="legacy"):
     """Tables over one results file, or pooled over several (trials keyed by file, so the same
-    trial name in two samples with different seeds stays two trials)."""
+    trial name in two samples with different seeds stays two trials), of one trial protocol (rows
+    measured before the setting existed are legacy)."""
     rows, by = [], defaultdict(dict)
     for path in results_paths:
-        part = read_jsonl(path)
+        part = [r for r in read_jsonl(path) if r.get("trial_protocol", "legacy") == trial_protocol]
         rows += part
         for r in part:
             by[(str(path), r["trial"])][r["protocol"]] = r
-    print(f"results: {', '.join(map(str, results_paths))} ({len(rows)} trial runs)")
+    print(f"results: {', '.join(map(str, results_paths))} ({len(rows)} trial runs, trial protocol {trial_protocol})")
     print("| E (Pa) | protocol | trials | CPU s/trial | labelled/CPU-h | naive on the same trials | speed-up vs naive "
           "| agreement with naive |")
     print("|---|---|---|---|---|---|---|---|")
@@ -233,13 +237,15 @@ def main(argv=None):
                     help="where the sampled candidates' TCP goes (defgg-datagen --grasp-height; default contacts, "
                          "the rule of every sample measured before 2026-11-26)")
     ap.add_argument("--results", type=Path, default=HERE / "results" / "datagen_sample.jsonl")
+    ap.add_argument("--trial-protocol", choices=("defgraspsim", "legacy"), default="legacy",
+                    help="the trial protocol every bench protocol runs under (default legacy: the committed samples)")
     ap.add_argument("--summary-only", action="store_true")
     ap.add_argument("--pool-with", nargs="+", type=Path, default=(), metavar="RESULTS",
                     help="print the tables pooled over --results and these results files (other samples)")
     args = ap.parse_args(argv)
     if not args.summary_only:
         run(args)
-    summarize([args.results, *args.pool_with])
+    summarize([args.results, *args.pool_with], args.trial_protocol)
 
 
 if __name__ == "__main__":

@@ -19,7 +19,7 @@ from pathlib import Path
 import torch
 
 from defgg_ros.atomic import atomic_path, write_json_atomic, write_text_atomic
-from defgg_ros.data.datagen import recorded_grasp_height
+from defgg_ros.data.datagen import recorded_grasp_height, recorded_protocol
 from defgg_ros.data.format import read_trials
 from defgg_ros.model.checkpoint import load_checkpoint
 
@@ -149,7 +149,9 @@ def _data_section(prov) -> list:
                   f"written). Reproduce the training: `mkdir -p runs/frozen && tar xzf {prov['data_archive']} -C "
                   f"runs/frozen`, then the training command above with `--data runs/frozen/train_data`.", ""]
     if header:
-        lines += [f"Generator settings (`dataset.json`, written by `defgg-datagen`): `{json.dumps(header)}`", ""]
+        lines += [f"Trial protocol of the labels: **{recorded_protocol(header)}** (docs/dataset.md, 'Trial "
+                  "protocols').", "",
+                  f"Generator settings (`dataset.json`, written by `defgg-datagen`): `{json.dumps(header)}`", ""]
         if "n_candidates" in header and recorded_grasp_height(header) == "contacts":   # defgg-datagen's
             lines += ["Known limitation of these labels: the candidates sit at their contacts' height, anywhere up "
                       "the object's side, while the evaluation executes a grasp at half the height seen at its "
