@@ -36,8 +36,16 @@ TRIES = {
     "b_defgraspsim_mu04": ("(a) with effective friction 0.4: friction carries less, geometry more",
                            {"protocol": "defgraspsim", "object_friction": 0.4}, {}),
     "b_defgraspsim_mu03": ("(a) with effective friction 0.3", {"protocol": "defgraspsim", "object_friction": 0.3}, {}),
+    "c_defgraspsim_fine": ("(a) on finer soft meshes (at most 500 nodes instead of 220), nu 0.3",
+                           {"protocol": "defgraspsim"}, {"sim_max_tet_nodes": 500}),
+    "d_defgraspsim_twist": ("(a) with the twist in the label (shake positive and mean twist >= 250 rad/s^2; "
+                            "oscillating twist as the evaluation's)",
+                            {"protocol": "defgraspsim", "twist_oscillation_radps": 40.0},
+                            {"tests": ("shake", "twist")}),
     "legacy": ("fem_v4's protocol on the pilot set (the baseline)", {"protocol": "legacy"}, {}),
 }
+# The label rule a try's signal is computed with (data/signal.py LABEL_RULES); default shake.
+LABEL_RULE = {"d_defgraspsim_twist": "shake_and_twist"}
 
 
 def seed_candidates(folder: Path) -> None:
@@ -71,7 +79,7 @@ def run_try(name: str, workers: int, progress: bool) -> dict:
                         workers=workers, settings=dict(settings), grasp_height="executor",
                         **extras)
     counts = generate(cfg, progress_bar=progress)
-    report = signal_report(read_trial_records(folder))
+    report = signal_report(read_trial_records(folder), LABEL_RULE.get(name, "shake"))
     report["try"] = {"name": name, "what": what, "settings": cfg.settings, "extras": extras,
                      "cpu_h": cpu_hours(folder)}
     write_json_atomic(folder / "signal.json", report)

@@ -49,6 +49,9 @@ class DatagenConfig:
     ray_address: str | None = None
     settings: dict = field(default_factory=dict)   # TrialSettings overrides
     sim_max_tet_nodes: int | None = None           # None: simulate on the shipped mesh
+    # Tests each trial runs; the label reads the shake. ("shake", "twist") also records the twist
+    # (the signal pilots' try of a twist-aware label, data/signal.py LABEL_RULES).
+    tests: tuple = ("shake",)
     # constants.GRASP_HEIGHT_RULES; executor since 2026-11-26: each label is of the grasp the evaluation
     # and the cell perform (results/notes_height.md). A resumed dataset keeps its own (resolve_grasp_height).
     grasp_height: str = "executor"
@@ -56,6 +59,10 @@ class DatagenConfig:
 
     def header(self) -> dict:
         d = asdict(self)
+        if tuple(self.tests) == ("shake",):
+            d.pop("tests")          # headers before the option exist without it: keep them comparable
+        else:
+            d["tests"] = list(self.tests)
         d.pop("out")
         d.pop("workers")
         d.pop("ray_address")
@@ -90,6 +97,7 @@ class TrialJob:
     seed: int
     settings: dict
     sim_max_tet_nodes: int | None = None
+    tests: tuple = ("shake",)
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -175,7 +183,8 @@ def plan(cfg: DatagenConfig, writer: DatasetWriter, progress=None) -> list:
                 tid = trial_id_for(sid, i)
                 if tid not in done:
                     jobs.append(TrialJob(tid, sid, name, e, i, cands[i]["grasp"], cands[i]["rect"],
-                                         object_seed(cfg.seed, tid), cfg.settings, cfg.sim_max_tet_nodes))
+                                         object_seed(cfg.seed, tid), cfg.settings, cfg.sim_max_tet_nodes,
+                                         tuple(cfg.tests)))
     return jobs
 
 
@@ -191,7 +200,7 @@ def run_trial_job(job: dict) -> dict:
                                      job.sim_max_tet_nodes)
     spec = objects.ObjectSpec(shape, job.youngs_modulus_pa)
     grasp = WorldGrasp(tuple(job.grasp["position_m"]), job.grasp["yaw_rad"], job.grasp["width_m"])
-    outcome = run_grasp_trial(spec, grasp, ("shake",), settings, client=_worker_client(world))
+    outcome = run_grasp_trial(spec, grasp, tuple(job.tests), settings, client=_worker_client(world))
     sim = dict(outcome.sim, shake_measured=outcome.shake_measured, sim_steps=outcome.sim_steps,
                tet_nodes=[len(t.nodes_m) for t in shape.tet_parts])
     record = TrialRecord(
@@ -199,6 +208,7 @@ def run_trial_job(job: dict) -> dict:
         youngs_modulus_pa=job.youngs_modulus_pa, candidate_index=job.candidate_index,
         rect=GraspRect(**job.rect), position_m=list(grasp.position_m), yaw_rad=grasp.yaw_rad,
         width_m=grasp.width_m, status=outcome.status, shake_accels_mps2=outcome.shake_accels_mps2,
+        twist_accels_radps2=outcome.twist_accels_radps2,
         grasp_force_n=outcome.grasp_force_n, seed=job.seed, cpu_s=outcome.cpu_s, sim=sim, note=outcome.note)
     return record.to_json()
 

@@ -84,6 +84,9 @@ def build_signal_parser() -> argparse.ArgumentParser:
     ap.add_argument("--json", type=Path, default=None, help="also write the figures as JSON here")
     ap.add_argument("--md", type=Path, default=None, help="also write the Markdown report here")
     ap.add_argument("--title", default=None, help="heading of the Markdown report (default: the folder name)")
+    ap.add_argument("--label", choices=("shake", "shake_and_twist"), default="shake",
+                    help="label rule: the dataset's (shake mean >= 25 m/s^2, default) or that and a mean twist "
+                         ">= 250 rad/s^2 (needs trials with the twist recorded)")
     return ap
 
 
@@ -93,7 +96,7 @@ def signal_main(argv) -> int:
 
     args = build_signal_parser().parse_args(argv)
     try:
-        report = signal_report(read_trial_records(args.folder))
+        report = signal_report(read_trial_records(args.folder), args.label)
     except (SignalError, OSError, ValueError, KeyError) as exc:
         print(f"defgg-datagen signal: error: {exc}", file=sys.stderr)
         return 2

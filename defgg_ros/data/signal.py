@@ -32,6 +32,11 @@ from defgg_ros.constants import MAX_SOFT_BODY_YOUNGS_MODULUS_PA, SHAKE_POSITIVE_
 
 LABELLED = ("ok", "lift_failed")
 TOP_K = 5
+# Label rules: "shake" = the dataset's label (mean held acceleration >= 25 m/s^2); "shake_and_twist" = that
+# and a mean held angular acceleration over the six twist axes >= half the paper's 500 rad/s^2 limit (the
+# shake's rule for the twist: contact area matters most in torsion).
+LABEL_RULES = ("shake", "shake_and_twist")
+TWIST_POSITIVE_THRESHOLD_RADPS2 = 250.0
 # PyBullet multiplies the two bodies' friction coefficients; fem_v1-v4 used 0.8 on both (legacy).
 LEGACY_EFFECTIVE_FRICTION = 0.64
 
@@ -64,13 +69,25 @@ def held_mps2(record: dict) -> float | None:
     return float(np.mean(accels))
 
 
-def is_positive(record: dict) -> bool | None:
+def is_positive(record: dict, label_rule: str = "shake") -> bool | None:
+    """The label of a record under a label rule (None for a simulation failure)."""
     value = held_mps2(record)
-    return None if value is None else value >= SHAKE_POSITIVE_THRESHOLD_MPS2
+    if value is None:
+        return None
+    if label_rule == "shake_and_twist":
+        twist = record.get("twist_accels_radps2")
+        if record["status"] == "ok" and not twist:
+            raise SignalError(f"{record.get('trial_id', record['scene_id'])}: no twist recorded, so the "
+                              "shake_and_twist label cannot be computed")
+        return value >= SHAKE_POSITIVE_THRESHOLD_MPS2 and (
+            record["status"] == "ok" and float(np.mean(twist)) >= TWIST_POSITIVE_THRESHOLD_RADPS2)
+    return value >= SHAKE_POSITIVE_THRESHOLD_MPS2
 
 
-def signal_report(records: list[dict]) -> dict:
-    """Every figure of the report, as plain JSON-able numbers."""
+def signal_report(records: list[dict], label_rule: str = "shake") -> dict:
+    """Every figure of the report, as plain JSON-able numbers, under a label rule (LABEL_RULES)."""
+    if label_rule not in LABEL_RULES:
+        raise SignalError(f"unknown label rule {label_rule!r}; known: {', '.join(LABEL_RULES)}")
     rows = [r for r in records if held_mps2(r) is not None]
     if not rows:
         raise SignalError("no labelled trial (ok or lift_failed) among the records")
@@ -78,12 +95,13 @@ def signal_report(records: list[dict]) -> dict:
     return {
         "trials": len(records),
         "labelled": len(rows),
+        "label_rule": label_rule,
         "moduli_pa": moduli,
         "protocols": sorted({_protocol_of(r) for r in rows}),
-        "positive_rate": _positive_rates(rows, moduli),
+        "positive_rate": _positive_rates(rows, moduli, label_rule),
         "within_scene_share": _within_scene_shares(rows, moduli),
-        "candidates": _candidate_figures(rows, moduli),
-        "oracle": _oracle_figures(rows, moduli),
+        "candidates": _candidate_figures(rows, moduli, label_rule),
+        "oracle": _oracle_figures(rows, moduli, label_rule),
         "friction_limit_spearman": _friction_limit_spearman(rows, moduli),
     }
 
@@ -92,10 +110,10 @@ def _protocol_of(record: dict) -> str:
     return str(record.get("sim", {}).get("settings", {}).get("protocol", "legacy"))
 
 
-def _positive_rates(rows, moduli) -> dict:
+def _positive_rates(rows, moduli, label_rule) -> dict:
     out = {}
     for e in moduli:
-        labels = [is_positive(r) for r in rows if float(r["youngs_modulus_pa"]) == e]
+        labels = [is_positive(r, label_rule) for r in rows if float(r["youngs_modulus_pa"]) == e]
         out[_key(e)] = {"n": len(labels), "positive": sum(labels), "rate": sum(labels) / len(labels)}
     return out
 
@@ -120,16 +138,17 @@ def _within_share(rows) -> float | None:
     return float(np.mean([np.var(vs) for vs in by_scene.values()])) / total
 
 
-def _label_table(rows, moduli) -> dict:
+def _label_table(rows, moduli, label_rule) -> dict:
     """(object, candidate) -> {E: label} for candidates labelled at every modulus."""
     table = defaultdict(dict)
     for r in rows:
-        table[(r["object_name"], int(r["candidate_index"]))][float(r["youngs_modulus_pa"])] = is_positive(r)
+        table[(r["object_name"], int(r["candidate_index"]))][float(r["youngs_modulus_pa"])] = is_positive(
+            r, label_rule)
     return {k: v for k, v in table.items() if len(v) == len(moduli)}
 
 
-def _candidate_figures(rows, moduli) -> dict:
-    table = _label_table(rows, moduli)
+def _candidate_figures(rows, moduli, label_rule) -> dict:
+    table = _label_table(rows, moduli, label_rule)
     n = len(table)
     if n == 0 or len(moduli) < 2:
         return {"n": n}
@@ -146,9 +165,9 @@ def _candidate_figures(rows, moduli) -> dict:
             "soft_neg_rigid_pos": converse / n, "same_label_every_soft_modulus": same_soft / n}
 
 
-def _oracle_figures(rows, moduli) -> dict:
+def _oracle_figures(rows, moduli, label_rule) -> dict:
     """Stiffness-aware vs stiffness-blind oracle success (fractions), best grasp and best TOP_K."""
-    table = _label_table(rows, moduli)
+    table = _label_table(rows, moduli, label_rule)
     by_object = defaultdict(dict)
     for (obj, cand), labels in table.items():
         by_object[obj][cand] = labels
@@ -216,7 +235,7 @@ def render_markdown(report: dict, title: str = "Signal report") -> str:
     """The report as Markdown (the dataset card embeds it)."""
     lines = [f"## {title}", "",
              f"{report['labelled']} labelled of {report['trials']} trials; protocol(s): "
-             f"{', '.join(report['protocols'])}.", "",
+             f"{', '.join(report['protocols'])}; label rule: {report.get('label_rule', 'shake')}.", "",
              "| E (Pa) | labelled | positive | within-scene share of held-acceleration variance |",
              "|---|---|---|---|"]
     for e in report["moduli_pa"]:

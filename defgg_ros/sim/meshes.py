@@ -38,6 +38,9 @@ COARSENING_STEPS = ((0.12, 5e-3), (0.15, 1e-2), (0.2, 1.5e-2), (0.25, 2e-2))
 # TARGET_MAX_NODES (the data generator's FEM mesh, docs/dataset.md): the
 # default meshes stay exactly what they were.
 EXTRA_COARSENING_STEPS = ((0.35, 3e-2), (0.5, 4e-2), (0.7, 5e-2))
+# Finer steps, only for simulation meshes asked to be finer than TARGET_MAX_NODES (the signal pilots'
+# try of ~500-node soft meshes): the first of these within the bound is taken.
+REFINING_STEPS = ((0.06, 1.5e-3), (0.08, 2.5e-3), (0.1, 3.5e-3))
 # A step coarser than the default may lose at most this fraction of the finest step's volume:
 # coarsening shrinks curved surfaces (a 42-node sphere had 14 % less volume,
 # hence mass) and collapsed the mug's thin wall (-95 %); then the mesh stays
@@ -187,6 +190,8 @@ def _run_ftetwild(mesh, max_nodes: int = TARGET_MAX_NODES):
     faces = np.asarray(mesh.faces, dtype=np.int32)
     nodes = tets = reference_volume = None
     steps = COARSENING_STEPS + (EXTRA_COARSENING_STEPS if max_nodes < TARGET_MAX_NODES else ())
+    if max_nodes > TARGET_MAX_NODES:
+        steps = REFINING_STEPS + COARSENING_STEPS
     for fac, eps in steps:
         step_nodes, step_tets = pytetwild.tetrahedralize(verts, faces, edge_length_fac=fac, coarsen=True,
                                                          epsilon=eps, num_threads=1, quiet=True)

@@ -73,3 +73,15 @@ def test_cli_refuses_a_folder_without_trials(tmp_path, capsys):
     assert "no trial files" in capsys.readouterr().err
     with pytest.raises(SignalError):
         signal_report([rec("A", 0, 2e4, 1.0, status="exploded")])
+
+
+def test_shake_and_twist_rule_needs_both_and_refuses_records_without_a_twist():
+    held = rec("A", 0, 2e4, 30.0)
+    weak_twist = dict(held, twist_accels_radps2=[100.0] * 6)
+    strong_twist = dict(held, twist_accels_radps2=[400.0] * 6)
+    records = [weak_twist, dict(strong_twist, candidate_index=1)]
+    r = signal_report(records, "shake_and_twist")
+    assert r["label_rule"] == "shake_and_twist" and r["positive_rate"]["2e4"]["positive"] == 1
+    assert signal_report(records)["positive_rate"]["2e4"]["positive"] == 2
+    with pytest.raises(SignalError, match="no twist recorded"):
+        signal_report([held], "shake_and_twist")
