@@ -12,8 +12,9 @@ import time
 import numpy as np
 import rclpy
 from builtin_interfaces.msg import Duration
-from defgg_interfaces.action import GripperMove, PickAndPlace
+from defgg_interfaces.action import PickAndPlace
 from defgg_interfaces.srv import PlanGrasp, SetStiffness
+from franka_msgs.action import Move
 from geometry_msgs.msg import PoseArray
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
@@ -55,7 +56,7 @@ class DemoClient:
         self._joints = None
         n.create_subscription(JointState, topics.JOINT_STATES, self._on_joints, qos.STATE)
         self._trajectory_pub = n.create_publisher(JointTrajectory, topics.JOINT_TRAJECTORY, qos.COMMAND)
-        self.gripper_move_client = ActionClient(n, GripperMove, topics.GRIPPER_MOVE_ACTION)
+        self.gripper_move_client = ActionClient(n, Move, topics.GRIPPER_MOVE_ACTION)
         self.set_stiffness_client = n.create_client(SetStiffness, topics.SET_STIFFNESS_SERVICE)
         self.plan_client = n.create_client(PlanGrasp, topics.PLAN_GRASP_SERVICE)
         self.pick_client = ActionClient(n, PickAndPlace, topics.PICK_AND_PLACE_ACTION)
@@ -97,10 +98,10 @@ class DemoClient:
                    "the arm to reach the observation pose")
 
     def open_gripper(self, timeout_s=60.0):
-        """Open the hand fully (GripperMove); returns its result."""
+        """Open the hand fully (franka_msgs Move); returns its result."""
         self._wait(self.gripper_move_client.server_is_ready, timeout_s, "the gripper move action")
         handle = self._wait_future(self.gripper_move_client.send_goal_async(
-            GripperMove.Goal(width=GRIPPER_MAX_WIDTH_M, speed=0.1)), timeout_s, "the gripper goal response")
+            Move.Goal(width=GRIPPER_MAX_WIDTH_M, speed=0.1)), timeout_s, "the gripper goal response")
         return self._wait_future(handle.get_result_async(), timeout_s, "the gripper result").result
 
     def _on_depth(self, msg):

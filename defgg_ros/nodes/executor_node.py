@@ -1,7 +1,9 @@
 """executor_node: the PickAndPlace action server, a thin adapter over the pure sequence.
 
 All decisions live in `defgg_ros.control.pick_place.PickPlaceSequence`; this
-node only translates: goals and grasps in, JointTrajectory messages and
+node only translates: goals and grasps in, FollowJointTrajectory goals to
+the arm's joint_trajectory_controller and franka_msgs Move/Grasp goals to
+franka_ros2's gripper node (docs/real_cell.md) and
 gripper action goals out, joint states / external wrench / gripper results
 back into the sequence, feedback and results to the client.
 
@@ -17,8 +19,11 @@ import time
 
 import numpy as np
 from builtin_interfaces.msg import Duration
-from defgg_interfaces.action import GripperGrasp, GripperMove, PickAndPlace
+from control_msgs.action import FollowJointTrajectory
+from defgg_interfaces.action import PickAndPlace
 from defgg_interfaces.srv import PlanGrasp
+from franka_msgs.action import Grasp, Move
+from franka_msgs.msg import GraspEpsilon
 from geometry_msgs.msg import WrenchStamped
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
@@ -43,6 +48,7 @@ from defgg_ros.control.sequence_types import (
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import ConversionError, transform_from_pose
 from defgg_ros.nodes.node_main import run_node
+from defgg_ros.ros import topics
 from defgg_ros.ros.action import ActionClient, destroy_actions
 from defgg_ros.ros.parameters import declare_parameters, load_schema
 from defgg_ros.ros.service import ServiceTimeout, call_idempotent
@@ -55,10 +61,11 @@ class GoalError(ValueError):
     """A goal the executor cannot work with (the message says why)."""
 
 
-def trajectory_to_msg(trajectory, frame_id: str) -> JointTrajectory:
+def trajectory_to_msg(trajectory, frame_id: str, joint_names=PANDA_JOINT_NAMES) -> JointTrajectory:
+    """The trajectory (arm joints 1..7 in order) for a joint_trajectory_controller; stamp 0 = start on receipt."""
     msg = JointTrajectory()
-    msg.header.frame_id = frame_id  # stamp zero: start on receipt
-    msg.joint_names = list(PANDA_JOINT_NAMES)
+    msg.header.frame_id = frame_id
+    msg.joint_names = list(joint_names)
     for t, q, qd, qdd in zip(trajectory.times_s, trajectory.q_rad, trajectory.qd_radps, trajectory.qdd_radps2):
         # Split whole nanoseconds, so rounding can never carry into a wrong second.
         sec, nanosec = divmod(int(round(float(t) * 1e9)), 1_000_000_000)
@@ -68,15 +75,17 @@ def trajectory_to_msg(trajectory, frame_id: str) -> JointTrajectory:
     return msg
 
 
-def joint_state_to_arm(msg: JointState) -> ArmState:
+def joint_state_to_arm(msg: JointState, joint_names=PANDA_JOINT_NAMES,
+                       finger_names=PANDA_FINGER_JOINT_NAMES) -> ArmState:
+    """Arm joints 1..7 (any order, other joints ignored) and the finger width (NaN without both fingers)."""
     index = {name: i for i, name in enumerate(msg.name)}
-    missing = [n for n in PANDA_JOINT_NAMES if n not in index]
+    missing = [n for n in joint_names if n not in index]
     if missing:
         raise GoalError(f"joint state lacks {missing}")
-    q = np.array([msg.position[index[n]] for n in PANDA_JOINT_NAMES])
+    q = np.array([msg.position[index[n]] for n in joint_names])
     has_velocity = len(msg.velocity) == len(msg.name)
-    qd = np.array([msg.velocity[index[n]] for n in PANDA_JOINT_NAMES]) if has_velocity else np.zeros(7)
-    fingers = [msg.position[index[n]] for n in PANDA_FINGER_JOINT_NAMES if n in index]
+    qd = np.array([msg.velocity[index[n]] for n in joint_names]) if has_velocity else np.zeros(7)
+    fingers = [msg.position[index[n]] for n in finger_names if n in index]
     width = float(sum(fingers)) if len(fingers) == 2 else float("nan")
     return ArmState(q, qd, width)
 
@@ -132,13 +141,19 @@ class ExecutorNode(Node):
         self._gripper_goal = None
         self._last_state: tuple[ArmState, float] | None = None
         self._last_force = np.zeros(3)
-        self._traj_pub = self.create_publisher(JointTrajectory, p["joint_trajectory_topic"], qos.COMMAND)
+        names = topics.arm_names(p["arm_id"])  # ValueError on a malformed arm_id
+        self._arm_joints, self._finger_joints = names["joints"], names["fingers"]
+        self._arm_goal = None       # handle of the running FollowJointTrajectory goal
+        self._arm_goal_serial = 0   # the newest goal sent; a result of an older one is ignored
+        self._gripper_feedback_width_m = float("nan")
+        self._arm_client = ActionClient(self, FollowJointTrajectory, p["arm_trajectory_action"],
+                                        callback_group=self._group)
         self.create_subscription(JointState, p["joint_states_topic"], self._on_joint_state, qos.STATE,
                                  callback_group=self._group)
         self.create_subscription(WrenchStamped, p["external_wrench_topic"], self._on_wrench, qos.STATE,
                                  callback_group=self._group)
-        self._move_client = ActionClient(self, GripperMove, p["gripper_move_action"], callback_group=self._group)
-        self._grasp_client = ActionClient(self, GripperGrasp, p["gripper_grasp_action"], callback_group=self._group)
+        self._move_client = ActionClient(self, Move, p["gripper_move_action"], callback_group=self._group)
+        self._grasp_client = ActionClient(self, Grasp, p["gripper_grasp_action"], callback_group=self._group)
         self._plan_client = self.create_client(PlanGrasp, p["plan_grasp_service"], callback_group=self._group)
         self._server = ActionServer(self, PickAndPlace, p["action_name"], self._execute, callback_group=self._group,
                                     goal_callback=self._on_goal, cancel_callback=lambda _: CancelResponse.ACCEPT)
@@ -175,7 +190,7 @@ class ExecutorNode(Node):
     # --- inputs -------------------------------------------------------------
     def _on_joint_state(self, msg: JointState):
         try:
-            state = joint_state_to_arm(msg)
+            state = joint_state_to_arm(msg, self._arm_joints, self._finger_joints)
         except (GoalError, IndexError) as error:
             self.get_logger().warning(f"ignoring joint state: {error}", throttle_duration_sec=2.0)
             return
@@ -212,14 +227,14 @@ class ExecutorNode(Node):
                 self._kin, self._config, grasp_target(grasp, p["base_frame"], p["default_youngs_modulus_pa"]),
                 place_target(goal_handle.request.place_pose, p["base_frame"], p["place_position_m"],
                              p["place_yaw_rad"]))
-            self._wait_for_gripper(p["server_wait_s"])
+            self._wait_for_servers(p["server_wait_s"])
             return self._run(goal_handle, sequence, result)
         except (GoalError, ValueError) as error:
             return self._abort(goal_handle, result, str(error), started)
         except Exception as error:  # noqa: BLE001 - a bug must not take the action server down
             self.get_logger().error(f"pick-and-place failed unexpectedly: {error!r}")
             with self._lock:
-                self._traj_pub.publish(JointTrajectory(joint_names=list(PANDA_JOINT_NAMES)))  # hold
+                self._hold_arm()
             return self._abort(goal_handle, result, f"internal error: {error!r}", started)
         finally:
             with self._lock:
@@ -248,10 +263,11 @@ class ExecutorNode(Node):
             raise GoalError(f"grasp planning failed: {response.message or 'no grasp returned'}")
         return response.grasps[0]
 
-    def _wait_for_gripper(self, timeout_s: float):
-        for client, name in ((self._move_client, "gripper_move_action"), (self._grasp_client, "gripper_grasp_action")):
+    def _wait_for_servers(self, timeout_s: float):
+        for client, name in ((self._arm_client, "arm_trajectory_action"), (self._move_client, "gripper_move_action"),
+                             (self._grasp_client, "gripper_grasp_action")):
             if not client.wait_for_server(timeout_sec=timeout_s):
-                raise GoalError(f"gripper action {self._params()[name]} is not available")
+                raise GoalError(f"action server {self.resolve_topic_name(self._params()[name])} is not available")
 
     # --- the control loop ---------------------------------------------------
     def _clocks(self) -> tuple[float, float]:
@@ -304,25 +320,74 @@ class ExecutorNode(Node):
         """Execute the sequence's commands (called with the lock held)."""
         for command in commands:
             if isinstance(command, SendTrajectory):
-                self._traj_pub.publish(trajectory_to_msg(command.trajectory, self._params()["base_frame"]))
+                self._send_arm(command.trajectory)
             elif isinstance(command, MoveGripper):
-                goal = GripperMove.Goal(width=command.width_m, speed=command.speed_mps)
+                goal = Move.Goal(width=command.width_m, speed=command.speed_mps)
                 self._send_gripper(sequence, self._move_client, goal)
             elif isinstance(command, GraspGripper):
                 c = command.command
-                goal = GripperGrasp.Goal(width=c.width_m, epsilon_inner=c.epsilon_inner_m,
-                                         epsilon_outer=c.epsilon_outer_m, speed=c.speed_mps, force=c.force_n)
+                epsilon = GraspEpsilon(inner=c.epsilon_inner_m, outer=c.epsilon_outer_m)
+                goal = Grasp.Goal(width=c.width_m, epsilon=epsilon, speed=c.speed_mps, force=c.force_n)
                 self._send_gripper(sequence, self._grasp_client, goal)
             elif isinstance(command, CancelGripper) and self._gripper_goal is not None:
                 self._gripper_goal.cancel_goal_async()
                 self._gripper_goal = None
 
+    def _send_arm(self, trajectory) -> None:
+        """Send a trajectory as a FollowJointTrajectory goal (lock held); it replaces the running one.
+
+        The joint_trajectory_controller starts a goal stamped 0 on receipt and blends it from where the
+        arm is, so each new command replaces the previous goal there. The sequence watches the joint
+        states for arrival; a rejected or aborted goal is logged here (the sequence then fails on its
+        settle timeout, naming the phase).
+        """
+        self._arm_goal_serial += 1
+        serial = self._arm_goal_serial
+        goal = FollowJointTrajectory.Goal(
+            trajectory=trajectory_to_msg(trajectory, self._params()["base_frame"], self._arm_joints))
+
+        def on_result(future):
+            result = future.result().result
+            if serial == self._arm_goal_serial and result.error_code != FollowJointTrajectory.Result.SUCCESSFUL:
+                self.get_logger().error(f"arm trajectory failed (error_code {result.error_code}): "
+                                        f"{result.error_string}")
+
+        def on_goal(future):
+            handle = future.result()
+            if not handle.accepted:
+                self.get_logger().error("the arm's trajectory controller rejected a trajectory goal")
+                return
+            with self._lock:
+                if serial == self._arm_goal_serial:
+                    self._arm_goal = handle
+            handle.get_result_async().add_done_callback(on_result)
+
+        self._arm_client.send_goal_async(goal).add_done_callback(on_goal)
+
+    def _hold_arm(self) -> None:
+        """Stop the arm where it is (lock held): cancel the running goal; the controller then holds position."""
+        self._arm_goal_serial += 1
+        if self._arm_goal is not None:
+            self._arm_goal.cancel_goal_async()
+            self._arm_goal = None
+
+    def _gripper_width_m(self) -> float:
+        """The finger width now: from the joint states, else the gripper's last feedback (franka_msgs results
+        carry no width)."""
+        state = self._last_state[0] if self._last_state is not None else None
+        if state is not None and math.isfinite(state.gripper_width_m):
+            return state.gripper_width_m
+        return self._gripper_feedback_width_m
+
     def _send_gripper(self, sequence: PickPlaceSequence, client: ActionClient, goal):
+        def on_feedback(feedback_msg):
+            self._gripper_feedback_width_m = float(feedback_msg.feedback.current_width)
+
         def on_result(future):
             result = future.result().result
             with self._lock:
                 if self._sequence is sequence:  # a late result of an earlier goal must not leak in
-                    sequence.on_gripper_result(result.success, result.width, result.error)
+                    sequence.on_gripper_result(result.success, self._gripper_width_m(), result.error)
 
         def on_goal(future):
             handle = future.result()
@@ -335,7 +400,7 @@ class ExecutorNode(Node):
                 self._gripper_goal = handle
             handle.get_result_async().add_done_callback(on_result)
 
-        client.send_goal_async(goal).add_done_callback(on_goal)
+        client.send_goal_async(goal, feedback_callback=on_feedback).add_done_callback(on_goal)
 
 
 def main(args=None):

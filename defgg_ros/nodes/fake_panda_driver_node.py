@@ -1,10 +1,15 @@
 """fake_panda_driver: the simulated Panda + RealSense cell as ROS interfaces.
 
 A thin adapter over `defgg_ros.sim.cell.SimCell` (PyBullet). It speaks the
-same names as the real cell (franka_ros2 + realsense2_camera, see
-defgg_ros/ros/topics.py): joint states, joint trajectory controller topic,
-gripper move/grasp actions, external wrench, depth + camera_info; plus sim
-time on /clock and ground truth (/fake_panda/object_poses, /fake_panda/scene).
+same interfaces as the real cell (franka_ros2 + realsense2_camera, see
+defgg_ros/ros/topics.py and docs/real_cell.md): joint states, the arm's
+joint_trajectory_controller (control_msgs/action/FollowJointTrajectory and
+its JointTrajectory topic), franka_gripper's franka_msgs/action/{Grasp, Move,
+Homing}, the external wrench, depth + camera_info, and the camera's pose as
+a calibrated cell publishes it (base -> camera optical frame on /tf_static);
+plus sim time on /clock and ground truth (fake_panda/object_poses,
+fake_panda/scene). Joint names follow franka_ros2's `<arm_id>_joint1..7`
+(parameter arm_id: panda or fr3; the simulated arm is a Panda either way).
 
 Threads: one sim thread owns PyBullet, advances sim time in control periods
 and publishes; ROS callbacks (trajectory, gripper goals) hand commands to it
@@ -17,8 +22,10 @@ import time
 from pathlib import Path
 
 import rclpy
-from defgg_interfaces.action import GripperGrasp, GripperMove
-from geometry_msgs.msg import Pose, PoseArray, WrenchStamped
+from control_msgs.action import FollowJointTrajectory
+from defgg_ros.sessions.graph import use_large_message_transport
+from franka_msgs.action import Grasp, Homing, Move
+from geometry_msgs.msg import Pose, PoseArray, TransformStamped, WrenchStamped
 from rclpy._rclpy_pybind11 import RCLError
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
@@ -28,24 +35,27 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, Image, JointState
 from std_msgs.msg import Header, String
 from std_srvs.srv import Trigger
-from trajectory_msgs.msg import JointTrajectory
+from tf2_msgs.msg import TFMessage
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from defgg_ros.constants import CAMERA_HEIGHT_PX, CAMERA_WIDTH_PX, PANDA_JOINT_NAMES
+from defgg_ros.constants import CAMERA_HEIGHT_PX, CAMERA_WIDTH_PX, GRIPPER_MAX_WIDTH_M
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import depth_metres_to_msg, make_camera_info, numpy_to_image
+from defgg_ros.ros import topics
 from defgg_ros.ros.action import destroy_actions
 from defgg_ros.ros.executor import ThreadedExecutor
 from defgg_ros.ros.parameters import declare_parameters, load_schema
-from defgg_ros.sessions.graph import use_large_message_transport
 from defgg_ros.sim.cell import CellSettings, SimCell
 from defgg_ros.sim.cell_camera import DepthNoise
 from defgg_ros.sim.cell_gripper import GripperCommandError
 from defgg_ros.sim.cell_trajectory import TrajectoryError
 from defgg_ros.sim.scene_spec import SceneError, load_scene
 
-SCENE_TOPIC = "/fake_panda/scene"
-OBJECT_POSES_TOPIC = "/fake_panda/object_poses"
-CAPTURE_SERVICE = "/fake_panda/capture_depth"
+SCENE_TOPIC = topics.FAKE_SCENE
+OBJECT_POSES_TOPIC = topics.FAKE_OBJECT_POSES
+CAPTURE_SERVICE = topics.FAKE_CAPTURE_SERVICE
+HOMING_SPEED_MPS = 0.1        # franka_gripper's default speed
+FEEDBACK_PERIOD_S = 0.1       # FollowJointTrajectory feedback while a goal runs (wall clock)
 # Camera frames are published reliably (like realsense2_camera): best-effort
 # subscribers still match, and reliable ones (the cell's nodes pick reliable
 # for a reliable publisher, qos.SensorSubscription) get lost fragments repaired.
@@ -92,6 +102,10 @@ class FakePandaDriver(Node):
             f"step {self.cell.time_step_s * 1e3:.2f} ms, {'GUI' if settings.gui else 'headless'}")
         self._lock = threading.Lock()
         self._waiters = {}           # gripper token -> [threading.Event, GripperOutcome | None]
+        self._advanced = threading.Condition()  # notified after every control period of the sim thread
+        self._arm_goal_serial = 0    # the newest FollowJointTrajectory goal; older ones are replaced
+        names = topics.arm_names(self.cfg["arm_id"])  # ValueError on a malformed arm_id
+        self._arm_joints, self._finger_joints = names["joints"], names["fingers"]
         self._capture_requested = False
         self._running = True
         self._create_interfaces()
@@ -107,7 +121,7 @@ class FakePandaDriver(Node):
 
     def _create_interfaces(self):
         cfg, group = self.cfg, ReentrantCallbackGroup()
-        self.pub_clock = self.create_publisher(Clock, "/clock", qos.STATE)
+        self.pub_clock = self.create_publisher(Clock, topics.CLOCK, qos.STATE)
         self.pub_joints = self.create_publisher(JointState, cfg["joint_states_topic"], qos.STATE)
         self.pub_wrench = self.create_publisher(WrenchStamped, cfg["external_wrench_topic"], qos.STATE)
         self.pub_depth = self.create_publisher(Image, cfg["depth_topic"], IMAGE_QOS)
@@ -116,14 +130,32 @@ class FakePandaDriver(Node):
         self.pub_poses = self.create_publisher(PoseArray, OBJECT_POSES_TOPIC, qos.STATE)
         self.pub_scene = self.create_publisher(String, SCENE_TOPIC, qos.LATCHED)
         self.pub_scene.publish(String(data=json.dumps(self._scene_description())))
+        # The arm's joint_trajectory_controller: the action (what the executor uses) and its topic.
         self.create_subscription(JointTrajectory, cfg["joint_trajectory_topic"], self._on_trajectory, qos.COMMAND,
                                  callback_group=group)
+        ActionServer(self, FollowJointTrajectory, cfg["arm_trajectory_action"], execute_callback=self._execute_arm,
+                     callback_group=group, goal_callback=self._on_arm_goal,
+                     cancel_callback=lambda _goal: CancelResponse.ACCEPT)
         self.create_service(Trigger, CAPTURE_SERVICE, self._on_capture, callback_group=group)
-        for action_type, name, execute in ((GripperMove, cfg["gripper_move_action"], self._execute_move),
-                                           (GripperGrasp, cfg["gripper_grasp_action"], self._execute_grasp)):
+        for action_type, name, execute in ((Move, cfg["gripper_move_action"], self._execute_move),
+                                           (Grasp, cfg["gripper_grasp_action"], self._execute_grasp),
+                                           (Homing, cfg["gripper_homing_action"], self._execute_homing)):
             ActionServer(self, action_type, name, execute_callback=execute, callback_group=group,
                          goal_callback=lambda _goal: GoalResponse.ACCEPT,
                          cancel_callback=lambda _goal: CancelResponse.ACCEPT)
+        # The camera's extrinsic as a calibrated cell publishes it (a static transform, latched).
+        self.pub_tf_static = self.create_publisher(TFMessage, topics.TF_STATIC, qos.LATCHED)
+        self.pub_tf_static.publish(TFMessage(transforms=[self._camera_transform()]))
+
+    def _camera_transform(self) -> TransformStamped:
+        """base_frame -> camera_frame from the scene's camera pose (stamp 0: valid at all times)."""
+        t = TransformStamped()
+        t.header.frame_id, t.child_frame_id = self.cfg["base_frame"], self.cfg["camera_frame"]
+        xyz, quat = self.cell.scene.base_xyz_camera_m, self.cell.scene.base_quat_camera_xyzw
+        t.transform.translation.x, t.transform.translation.y, t.transform.translation.z = (float(v) for v in xyz)
+        r = t.transform.rotation
+        r.x, r.y, r.z, r.w = (float(v) for v in quat)
+        return t
 
     def _scene_description(self) -> dict:
         scene = self.cell.scene.to_json_dict()
@@ -141,14 +173,81 @@ class FakePandaDriver(Node):
         except (TrajectoryError, ValueError) as exc:
             self.get_logger().error(f"rejected joint trajectory: {exc}")
 
+    def _on_arm_goal(self, goal) -> GoalResponse:
+        """Reject what the joint_trajectory_controller rejects: no points, unknown or missing joints."""
+        try:
+            if not goal.trajectory.points:
+                raise TrajectoryError("the trajectory has no points")
+            self._trajectory_points(goal.trajectory)
+        except (TrajectoryError, ValueError) as exc:
+            self.get_logger().error(f"rejected FollowJointTrajectory goal: {exc}")
+            return GoalResponse.REJECT
+        return GoalResponse.ACCEPT
+
+    def _execute_arm(self, goal_handle):
+        """Follow the goal's trajectory in sim time; a newer goal replaces it, a cancel holds the arm."""
+        request, result = goal_handle.request, FollowJointTrajectory.Result()
+        try:
+            points = self._trajectory_points(request.trajectory)
+            with self._lock:
+                start_s = self._start_time_s(request.trajectory.header.stamp)
+                self.cell.command_trajectory(points, start_s)
+                self._arm_goal_serial += 1
+                serial = self._arm_goal_serial
+        except (TrajectoryError, ValueError) as exc:
+            result.error_code, result.error_string = FollowJointTrajectory.Result.INVALID_GOAL, str(exc)
+            goal_handle.abort()
+            return result
+        tolerance = request.goal_time_tolerance
+        end_s = start_s + points[-1][0] + tolerance.sec + tolerance.nanosec * 1e-9
+        next_feedback = 0.0
+        while self.cell.time_s < end_s:
+            if serial != self._arm_goal_serial:
+                result.error_code = FollowJointTrajectory.Result.INVALID_GOAL
+                result.error_string = "replaced by a newer trajectory goal"
+                goal_handle.abort()
+                return result
+            if goal_handle.is_cancel_requested or not self._running:
+                with self._lock:
+                    if serial == self._arm_goal_serial:
+                        self.cell.command_trajectory([])  # hold where the arm is, like the controller
+                goal_handle.canceled()
+                return result
+            if time.monotonic() >= next_feedback:
+                next_feedback = time.monotonic() + FEEDBACK_PERIOD_S
+                goal_handle.publish_feedback(self._arm_feedback())
+            with self._advanced:
+                self._advanced.wait(0.05)  # until the sim thread has advanced a control period
+        result.error_code = FollowJointTrajectory.Result.SUCCESSFUL
+        goal_handle.succeed()
+        return result
+
+    def _arm_feedback(self):
+        with self._lock:
+            now_s = self.cell.time_s
+            joints = self.cell.joint_state()
+            q_des, qd_des = self.cell.tracker.sample(now_s)
+        feedback = FollowJointTrajectory.Feedback(header=self._stamp(now_s, self.cfg["base_frame"]),
+                                                  joint_names=list(self._arm_joints))
+        q, qd = joints.positions[:7], joints.velocities[:7]
+        feedback.actual = JointTrajectoryPoint(positions=q.tolist(), velocities=qd.tolist())
+        feedback.desired = JointTrajectoryPoint(positions=[float(v) for v in q_des],
+                                                velocities=[float(v) for v in qd_des])
+        feedback.error = JointTrajectoryPoint(positions=[float(d - a) for d, a in zip(q_des, q)],
+                                              velocities=[float(d - a) for d, a in zip(qd_des, qd)])
+        return feedback
+
     def _trajectory_points(self, msg: JointTrajectory) -> list:
+        """(t, q, qd, qdd) in the simulated arm's joint order; JointTrajectory joint names in any order."""
         if not msg.points:
             return []
         names = list(msg.joint_names)
-        missing = [n for n in PANDA_JOINT_NAMES if n not in names]
-        if missing:
-            raise TrajectoryError(f"joint_names lack {missing} (got {names})")
-        order = [names.index(n) for n in PANDA_JOINT_NAMES]
+        unknown = [n for n in names if n not in self._arm_joints]
+        missing = [n for n in self._arm_joints if n not in names]
+        if missing or unknown:
+            raise TrajectoryError(f"joint_names lack {missing} / have unknown {unknown} (got {names}; "
+                                  f"this arm is {self.cfg['arm_id']}: {list(self._arm_joints)})")
+        order = [names.index(n) for n in self._arm_joints]
 
         def pick(values):
             return [values[i] for i in order] if len(values) == len(names) else None
@@ -174,37 +273,39 @@ class FakePandaDriver(Node):
 
     def _execute_move(self, goal_handle):
         g = goal_handle.request
-        return self._run_gripper(goal_handle, GripperMove.Result, GripperMove.Feedback,
-                                 lambda: self.cell.gripper_move(g.width, g.speed))
+        return self._run_gripper(goal_handle, Move, lambda: self.cell.gripper_move(g.width, g.speed))
 
     def _execute_grasp(self, goal_handle):
         g = goal_handle.request
-        return self._run_gripper(goal_handle, GripperGrasp.Result, GripperGrasp.Feedback,
-                                 lambda: self.cell.gripper_grasp(g.width, g.epsilon_inner, g.epsilon_outer,
-                                                                 g.speed, g.force))
+        return self._run_gripper(goal_handle, Grasp, lambda: self.cell.gripper_grasp(
+            g.width, g.epsilon.inner, g.epsilon.outer, g.speed, g.force))
 
-    def _run_gripper(self, goal_handle, result_type, feedback_type, start):
-        result = result_type()
+    def _execute_homing(self, goal_handle):
+        """franka_gripper's homing opens fully to calibrate; the simulated fingers need no calibration."""
+        return self._run_gripper(goal_handle, Homing,
+                                 lambda: self.cell.gripper_move(GRIPPER_MAX_WIDTH_M, HOMING_SPEED_MPS))
+
+    def _run_gripper(self, goal_handle, action_type, start):
+        """franka_msgs result (success, error) and feedback (current_width) of one gripper goal."""
+        result = action_type.Result()
         try:
             with self._lock:
                 token = start()
                 waiter = self._waiters[token] = [threading.Event(), None]
         except GripperCommandError as exc:
             result.success, result.error = False, str(exc)
-            result.width = self.cell.gripper_width_m()
             goal_handle.abort()
             return result
         while not waiter[0].wait(0.05):
             if goal_handle.is_cancel_requested or not self._running:
                 with self._lock:  # stop where the fingers are
-                    self.cell.gripper_move(min(self.cell.gripper_width_m(), 0.08), 0.1)
+                    self.cell.gripper_move(min(self.cell.gripper_width_m(), GRIPPER_MAX_WIDTH_M), 0.1)
                 result.success, result.error = False, "canceled"
-                result.width = self.cell.gripper_width_m()
                 goal_handle.canceled()
                 return result
-            goal_handle.publish_feedback(feedback_type(current_width=self.cell.gripper_width_m()))
+            goal_handle.publish_feedback(action_type.Feedback(current_width=self.cell.gripper_width_m()))
         outcome = waiter[1]
-        result.success, result.error, result.width = outcome.success, outcome.error, outcome.width_m
+        result.success, result.error = outcome.success, outcome.error
         if outcome.success:
             goal_handle.succeed()
         else:
@@ -228,6 +329,8 @@ class FakePandaDriver(Node):
                 frame = self.cell.render_depth(self.cfg["publish_color"]) if render else None
                 poses = self.cell.object_poses() if now_s >= next_pose_s else None
             self._finish_gripper(outcomes)
+            with self._advanced:
+                self._advanced.notify_all()
             if frame is not None:
                 self._capture_requested = False
                 next_depth_s = now_s + 1.0 / self.cfg["depth_rate_hz"]
@@ -282,7 +385,7 @@ class FakePandaDriver(Node):
     def _publish_state(self, now_s, joints, force, torque):
         header = self._stamp(now_s, self.cfg["base_frame"])
         self.pub_clock.publish(Clock(clock=header.stamp))
-        self.pub_joints.publish(JointState(header=header, name=list(joints.names),
+        self.pub_joints.publish(JointState(header=header, name=[*self._arm_joints, *self._finger_joints],
                                            position=joints.positions.tolist(), velocity=joints.velocities.tolist(),
                                            effort=joints.efforts.tolist()))
         wrench = WrenchStamped(header=header)

@@ -79,9 +79,9 @@ RECHECK_PERIOD_S = 1.0           # how often the publishers' reliability is look
 DEFAULT_WARN_AFTER_S = 5.0       # silence on a camera stream that is worth a warning
 
 
-def sensor_qos(reliability: ReliabilityPolicy) -> QoSProfile:
-    """Keep last SENSOR_DEPTH, volatile, with the given reliability."""
-    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=SENSOR_DEPTH, reliability=reliability,
+def sensor_qos(reliability: ReliabilityPolicy, depth: int = SENSOR_DEPTH) -> QoSProfile:
+    """Keep last `depth` (default SENSOR_DEPTH), volatile, with the given reliability."""
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth, reliability=reliability,
                       durability=DurabilityPolicy.VOLATILE)
 
 
@@ -100,13 +100,15 @@ def reliability_for(publisher_reliabilities) -> ReliabilityPolicy:
 class SensorSubscription:
     """A camera-stream subscription whose reliability follows its publishers (see the module doc).
 
-    `warn_after_s` <= 0 turns the silence warning off. The node's clock is not used for the warning:
-    a stopped sim clock must not hide a silent camera, so it runs on the wall clock.
+    `warn_after_s` <= 0 turns the silence warning off; `depth` is the reader's keep-last history.
+    The node's clock is not used for the warning: a stopped sim clock must not hide a silent camera,
+    so it runs on the wall clock.
     """
 
     def __init__(self, node, msg_type, topic: str, callback, warn_after_s: float = DEFAULT_WARN_AFTER_S,
-                 callback_group=None):
+                 callback_group=None, depth: int = SENSOR_DEPTH):
         self._node, self._msg_type, self._callback, self._group = node, msg_type, callback, callback_group
+        self._depth = int(depth)
         self.topic = topic
         self._resolved = node.resolve_topic_name(topic)
         self._warn_after_s = float(warn_after_s)
@@ -133,7 +135,7 @@ class SensorSubscription:
         if self.subscription is not None:
             self._node.destroy_subscription(self.subscription)
         self.subscription = self._node.create_subscription(self._msg_type, self.topic, self._on_message,
-                                                           sensor_qos(wanted), callback_group=self._group)
+                                                           sensor_qos(wanted, self._depth), callback_group=self._group)
         if self.reliability is not None:
             self._node.get_logger().info(f"{self._resolved}: subscribed {wanted.name.lower()} now "
                                          "(follows the publishers' reliability)")

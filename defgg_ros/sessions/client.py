@@ -7,12 +7,13 @@ feedback/result is written into the session bag.
 import threading
 import time
 
-from defgg_interfaces.action import GripperGrasp, PickAndPlace
+from defgg_interfaces.action import PickAndPlace
 from defgg_interfaces.srv import PlanGrasp, SetStiffness
+from franka_msgs.action import Grasp
 
-from defgg_ros.ros import topics
 from defgg_ros.ros.action import ActionClient
 from defgg_ros.ros.service import ServiceTimeout, call_idempotent
+from defgg_ros.sessions.session_topics import topics  # absolute names (bag channels)
 
 
 class CellCallError(RuntimeError):
@@ -45,7 +46,7 @@ class CellClient:
         self.plan_client = node.create_client(PlanGrasp, topics.PLAN_GRASP_SERVICE)
         self.stiffness_client = node.create_client(SetStiffness, topics.SET_STIFFNESS_SERVICE)
         self.pick_client = ActionClient(node, PickAndPlace, topics.PICK_AND_PLACE_ACTION)
-        self.gripper_client = ActionClient(node, GripperGrasp, topics.GRIPPER_GRASP_ACTION)
+        self.gripper_client = ActionClient(node, Grasp, topics.GRIPPER_GRASP_ACTION)
 
     def wait_for_servers(self, timeout_s: float, pick: bool, alive=lambda: None) -> None:
         """Wait until the services (and the pick action) exist; `alive()` raises if a process died."""

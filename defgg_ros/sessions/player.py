@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from defgg_interfaces.action import PickAndPlace
 from defgg_interfaces.msg import Grasp, StiffnessAssignment
 from defgg_interfaces.srv import PlanGrasp
+from defgg_ros.sessions.client import CellCallError
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
@@ -20,12 +21,11 @@ from sensor_msgs.msg import CameraInfo, Image, JointState
 
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import ns_to_stamp
-from defgg_ros.ros import topics
-from defgg_ros.sessions.client import CellCallError
 from defgg_ros.sessions.compare import GraspSummary, PickOutcome, Tolerances, grasp_problems, pick_problems
 from defgg_ros.sessions.report import Row, diff_text
 from defgg_ros.sessions.selector import restamp
 from defgg_ros.sessions.session import Frame, Session, stamp_ns
+from defgg_ros.sessions.session_topics import topics  # absolute names (bag channels)
 
 # Re-send a frame this often while waiting: camera topics are best effort, a frame can be lost.
 RESEND_PERIOD_S = 1.5

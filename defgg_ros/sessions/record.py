@@ -25,6 +25,8 @@ import rclpy
 from defgg_interfaces.action import PickAndPlace
 from defgg_interfaces.msg import ObjectStiffness
 from defgg_interfaces.srv import PlanGrasp
+from defgg_ros.sessions.client import CellCallError, CellClient
+from defgg_ros.sessions.graph import use_large_message_transport
 from rclpy.context import Context
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo
@@ -32,17 +34,15 @@ from tqdm import tqdm
 
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import camera_info_to_k
-from defgg_ros.ros import topics
 from defgg_ros.ros.executor import ThreadedExecutor
 from defgg_ros.sessions import metadata as md
 from defgg_ros.sessions.bag import SessionBagError, SessionWriter
-from defgg_ros.sessions.client import CellCallError, CellClient
 from defgg_ros.sessions.compare import GraspSummary, PickOutcome, Tolerances
-from defgg_ros.sessions.graph import use_large_message_transport
 from defgg_ros.sessions.params import CELL_NODES, PERCEPTION_NODES, fetch_all
 from defgg_ros.sessions.recorder_node import SessionRecorder
 from defgg_ros.sessions.scene_stiffness import scene_stiffness_entries
 from defgg_ros.sessions.selector import DEFAULT_DEPTH_PERIOD_S, DEFAULT_JOINT_STATE_PERIOD_S, FrameSelector
+from defgg_ros.sessions.session_topics import topics  # absolute names (bag channels)
 from defgg_ros.sim.scene_spec import SceneError, load_scene
 
 FRESH_FRAME_TIMEOUT_S = 60.0

@@ -17,19 +17,18 @@ from dataclasses import replace
 from pathlib import Path
 
 import rclpy
+from defgg_ros.sessions.client import CellCallError, CellClient
+from defgg_ros.sessions.graph import GraphError, NodeGraph, use_large_message_transport
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from tqdm import tqdm
 
-from defgg_ros.ros import topics
 from defgg_ros.ros.domain import SAFE_DOMAIN_RANGE, pick_private_domain
 from defgg_ros.ros.executor import ThreadedExecutor
 from defgg_ros.sessions import metadata as md
 from defgg_ros.sessions import session_topics as st
 from defgg_ros.sessions.bag import SessionBagError, SessionWriter
-from defgg_ros.sessions.client import CellCallError, CellClient
 from defgg_ros.sessions.compare import Tolerances
-from defgg_ros.sessions.graph import GraphError, NodeGraph, use_large_message_transport
 from defgg_ros.sessions.params import PERCEPTION_NODES
 from defgg_ros.sessions.player import Replay, ReplayOptions, SessionPlayer
 from defgg_ros.sessions.recorder_node import SessionRecorder
@@ -37,6 +36,7 @@ from defgg_ros.sessions.replay_graph import graph_specs, resolve_model
 from defgg_ros.sessions.report import format_table, regression_message
 from defgg_ros.sessions.selector import FrameSelector
 from defgg_ros.sessions.session import load_session
+from defgg_ros.sessions.session_topics import topics  # absolute names (bag channels)
 
 EXIT_OK, EXIT_REGRESSION, EXIT_ERROR, EXIT_INTERRUPTED = 0, 1, 2, 130
 STARTUP_TIMEOUT_S = 90.0

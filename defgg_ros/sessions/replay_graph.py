@@ -9,9 +9,10 @@ replays like it was recorded.
 from dataclasses import dataclass
 from pathlib import Path
 
-from defgg_ros.ros import topics
-from defgg_ros.sessions import metadata as md
 from defgg_ros.sessions.graph import NodeSpec
+
+from defgg_ros.sessions import metadata as md
+from defgg_ros.sessions.session_topics import topics  # absolute names (bag channels)
 
 MODELS_DIR = Path(__file__).resolve().parents[2] / "models"
 # Recorded parameters re-applied in the replay (topic names are not: the player uses the defaults).

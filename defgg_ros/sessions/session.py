@@ -10,10 +10,10 @@ No rclpy here: payloads are raw CDR (BagMessage) plus decoded views.
 """
 from dataclasses import dataclass, field
 
-from defgg_ros.ros import topics
 from defgg_ros.sessions import session_topics as st
 from defgg_ros.sessions.bag import BagMessage, SessionBagError, read_bag
 from defgg_ros.sessions.selector import restamp
+from defgg_ros.sessions.session_topics import topics  # absolute names (bag channels)
 
 FORMAT = "defgg_session/1"
 

@@ -5,7 +5,22 @@ feeds a graph directly). Service calls and action goals are not topics; the
 recorder, acting as the client, writes them on `/defgg/session/...` topics
 with the srv/action part types.
 """
-from defgg_ros.ros import topics
+from types import SimpleNamespace
+
+from defgg_ros.ros import topics as _names
+
+
+def absolute(name: str) -> str:
+    """The name at the root namespace: what rosbag2 writes as a channel name."""
+    return name if name.startswith("/") else "/" + name
+
+
+# Sessions record and replay a cell at the root namespace, and a bag's channels carry absolute names
+# (as rosbag2 writes them); the names in defgg_ros/ros/topics.py are relative (resolved in a node's
+# namespace), so the sessions code uses these absolute forms of them.
+topics = SimpleNamespace(**{key: absolute(value) for key, value in vars(_names).items()
+                            if key.isupper() and isinstance(value, str)
+                            and not key.endswith("_FRAME") and key != "DEFAULT_ARM_ID"})
 
 SESSION_PREFIX = "/defgg/session"
 METADATA = f"{SESSION_PREFIX}/metadata"                      # std_msgs/String, JSON (also in metadata.yaml)
@@ -15,7 +30,7 @@ PICK_GOAL = f"{SESSION_PREFIX}/pick_goal"
 PICK_FEEDBACK = f"{SESSION_PREFIX}/pick_feedback"
 PICK_RESULT = f"{SESSION_PREFIX}/pick_result"
 # The fake driver's latched scene description (JSON), recorded when present.
-DRIVER_SCENE = "/fake_panda/scene"
+DRIVER_SCENE = topics.FAKE_SCENE
 
 TOPIC_TYPES = {
     topics.DEPTH_IMAGE: "sensor_msgs/msg/Image",

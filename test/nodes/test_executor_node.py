@@ -82,11 +82,12 @@ def test_driver_killed_mid_trajectory_aborts_then_serves_again(executor_cell, sp
     start_driver(own_process=True)
     spin(ex, lambda: node._last_state[1] > silent_since_s, 30.0, "joint states from the restarted driver")
     # Action discovery of a new process can take tens of seconds on a loaded 2-core machine.
-    spin(ex, lambda: node._move_client.server_is_ready() and node._grasp_client.server_is_ready(), 60.0,
-         "the restarted driver's gripper actions (discovery)")
+    spin(ex, lambda: node._move_client.server_is_ready() and node._grasp_client.server_is_ready()
+         and node._arm_client.server_is_ready(), 60.0, "the restarted driver's arm and gripper actions (discovery)")
     again = send(ex, client, spin, PickAndPlace.Goal(grasp=grasp_msg()))
     assert again.accepted
-    spin(ex, lambda: start_driver.trajectories_seen, 5.0, "a trajectory for the new goal")
+    spin(ex, lambda: np.max(np.abs(node._last_state[0].qd_radps)) > 0.05, 10.0,
+         "the restarted driver moving the arm for the new goal")
     spin(ex, again.cancel_goal_async(), 5.0, "cancel response")
     assert result_of(ex, spin, again).status == 5
 

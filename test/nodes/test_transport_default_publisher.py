@@ -82,7 +82,8 @@ def test_default_publisher_frames_reach_segmentation_and_inference(executor, spi
         executor.add_node(node)
     stamps = set()
     counted = qos.SensorSubscription(counter, Image, topics.DEPTH_IMAGE,
-                                     lambda m: stamps.add((m.header.stamp.sec, m.header.stamp.nanosec)))
+                                     lambda m: stamps.add((m.header.stamp.sec, m.header.stamp.nanosec)),
+                                     depth=FRAMES)  # keeps every frame even while the nodes hog the CPU
     seg_depth = segmentation._depth_sub
     inf_depth = inference._stream_subs[0]
     assert inf_depth.topic == topics.DEPTH_IMAGE

@@ -6,10 +6,10 @@ import pytest
 import yaml
 from support.session_bag_helpers import metadata, write_small_session
 
-from defgg_ros.ros import topics
 from defgg_ros.sessions import session_topics as st
 from defgg_ros.sessions.bag import SessionBagError, SessionWriter, read_bag
 from defgg_ros.sessions.session import load_session
+from defgg_ros.sessions.session_topics import topics  # absolute names (bag channels)
 
 
 def test_round_trip_is_mcap_with_zstd_chunks_and_metadata_twice(tmp_path):

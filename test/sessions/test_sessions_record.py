@@ -10,12 +10,12 @@ from support.session_synthetic_camera import SyntheticCamera
 
 from defgg_ros.nodes.grasp_inference_node import GraspInferenceNode
 from defgg_ros.nodes.segmentation_node import SegmentationNode
-from defgg_ros.ros import topics
 from defgg_ros.ros.domain import pick_private_domain
+from defgg_ros.ros.transport import FASTDDS_PROFILE, FASTDDS_PROFILE_VARIABLE
 from defgg_ros.sessions import record
 from defgg_ros.sessions import session_topics as st
-from defgg_ros.sessions.graph import FASTDDS_PROFILE, FASTDDS_PROFILE_VARIABLE
 from defgg_ros.sessions.session import load_session, stamp_ns
+from defgg_ros.sessions.session_topics import topics  # absolute names (bag channels)
 
 PRIVATE_DOMAIN = pick_private_domain(rng=random.Random(os.getpid()))
 

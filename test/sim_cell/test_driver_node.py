@@ -89,28 +89,122 @@ def test_trajectory_is_executed_in_sim_time(driver, client, executor, spin):
 
 
 def test_gripper_actions(driver, client, executor, spin):
-    from defgg_interfaces.action import GripperGrasp, GripperMove
+    """franka_ros2's gripper contract: franka_msgs Move/Grasp/Homing, result (success, error), feedback width."""
+    from franka_msgs.action import Grasp, Homing, Move
+    from franka_msgs.msg import GraspEpsilon
+    from sensor_msgs.msg import JointState
 
+    from defgg_ros.nodes import qos
     from defgg_ros.ros.action import ActionClient
 
-    move = ActionClient(client, GripperMove, topics.GRIPPER_MOVE_ACTION)
-    grasp = ActionClient(client, GripperGrasp, topics.GRIPPER_GRASP_ACTION)
-    spin(executor, lambda: move.server_is_ready() and grasp.server_is_ready(), TIMEOUT_S, "gripper servers")
+    joints = _latest(client, JointState, topics.JOINT_STATES, qos.STATE)
+    move = ActionClient(client, Move, topics.GRIPPER_MOVE_ACTION)
+    grasp = ActionClient(client, Grasp, topics.GRIPPER_GRASP_ACTION)
+    homing = ActionClient(client, Homing, topics.GRIPPER_HOMING_ACTION)
+    spin(executor, lambda: joints and move.server_is_ready() and grasp.server_is_ready() and homing.server_is_ready(),
+         TIMEOUT_S, "gripper servers")
+    widths = []
 
     def run(action, goal):
-        handle = spin(executor, action.send_goal_async(goal), TIMEOUT_S, "goal accepted")
+        handle = spin(executor, action.send_goal_async(goal, feedback_callback=lambda f: widths.append(
+            f.feedback.current_width)), TIMEOUT_S, "goal accepted")
         assert handle.accepted
         return spin(executor, handle.get_result_async(), TIMEOUT_S, "gripper result").result
 
-    result = run(move, GripperMove.Goal(width=0.03, speed=0.1))
+    def finger_width():
+        return sum(joints[-1].position[7:9])
+
+    result = run(move, Move.Goal(width=0.03, speed=0.1))
     assert result.success, result.error
-    assert result.width == pytest.approx(0.03, abs=0.002)
+    assert widths and finger_width() == pytest.approx(0.03, abs=0.002)
     # Nothing between the fingers: a grasp for a 5 cm object closes fully and fails.
-    result = run(grasp, GripperGrasp.Goal(width=0.05, epsilon_inner=0.005, epsilon_outer=0.005, speed=0.1,
-                                          force=20.0))
+    result = run(grasp, Grasp.Goal(width=0.05, epsilon=GraspEpsilon(inner=0.005, outer=0.005), speed=0.1,
+                                   force=20.0))
     assert not result.success and "outside" in result.error
-    result = run(move, GripperMove.Goal(width=0.2, speed=0.1))
+    result = run(move, Move.Goal(width=0.2, speed=0.1))
     assert not result.success and "width" in result.error
+    result = run(homing, Homing.Goal())
+    assert result.success, result.error
+    spin(executor, lambda: finger_width() > 0.07, TIMEOUT_S, "the fingers fully open after homing")
+
+
+def test_follow_joint_trajectory_action(driver, client, executor, spin):
+    """The joint_trajectory_controller's contract: accept, follow in sim time, succeed; reject bad goals."""
+    from builtin_interfaces.msg import Duration
+    from control_msgs.action import FollowJointTrajectory
+    from sensor_msgs.msg import JointState
+    from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+    from defgg_ros.constants import PANDA_JOINT_NAMES
+    from defgg_ros.nodes import qos
+    from defgg_ros.ros.action import ActionClient
+
+    joints = _latest(client, JointState, topics.JOINT_STATES, qos.STATE)
+    arm = ActionClient(client, FollowJointTrajectory, topics.ARM_TRAJECTORY_ACTION)
+    spin(executor, lambda: joints and arm.server_is_ready(), TIMEOUT_S, "the arm's trajectory action")
+    goal_q = np.array(joints[-1].position[:7]) + [0.1, -0.1, 0.0, 0.1, 0.0, 0.1, -0.1]
+    feedback = []
+    goal = FollowJointTrajectory.Goal(trajectory=JointTrajectory(
+        joint_names=list(PANDA_JOINT_NAMES),
+        points=[JointTrajectoryPoint(positions=goal_q.tolist(), time_from_start=Duration(sec=1))]))
+    handle = spin(executor, arm.send_goal_async(goal, feedback_callback=feedback.append), TIMEOUT_S, "acceptance")
+    assert handle.accepted
+    result = spin(executor, handle.get_result_async(), TIMEOUT_S, "the trajectory's result").result
+    assert result.error_code == FollowJointTrajectory.Result.SUCCESSFUL, result.error_string
+    assert feedback and list(feedback[-1].feedback.joint_names) == list(PANDA_JOINT_NAMES)
+    spin(executor, lambda: np.abs(np.array(joints[-1].position[:7]) - goal_q).max() < 0.01, TIMEOUT_S,
+         "the arm at the goal")
+    for bad in (JointTrajectory(joint_names=[f"fr3_joint{i}" for i in range(1, 8)],     # another arm's joints
+                                points=[JointTrajectoryPoint(positions=[0.0] * 7, time_from_start=Duration(sec=1))]),
+                JointTrajectory(joint_names=list(PANDA_JOINT_NAMES))):                  # no points
+        handle = spin(executor, arm.send_goal_async(FollowJointTrajectory.Goal(trajectory=bad)), TIMEOUT_S,
+                      "the goal response")
+        assert not handle.accepted
+
+
+def test_fr3_arm_id_names_the_joints_and_the_camera_pose_is_on_tf_static(executor, rclpy_context, client, spin):
+    """arm_id fr3: fr3_joint* in joint states and the FR3 controller's action name; the camera's extrinsic
+    (the scene's base_T_camera) comes latched on /tf_static like a calibrated cell's."""
+    from builtin_interfaces.msg import Duration
+    from control_msgs.action import FollowJointTrajectory
+    from sensor_msgs.msg import JointState
+    from tf2_msgs.msg import TFMessage
+    from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+    from defgg_ros.nodes import qos
+    from defgg_ros.nodes.fake_panda_driver_node import FakePandaDriver
+    from defgg_ros.ros.action import ActionClient
+    from defgg_ros.sim.scene_spec import load_scene
+
+    names = topics.arm_names("fr3")
+    node = FakePandaDriver(context=rclpy_context, parameter_overrides=[
+        Parameter("scene_file", value=str(SCENES / "rigid_box.yaml")), Parameter("max_real_time_factor", value=0.0),
+        Parameter("arm_id", value="fr3"), Parameter("base_frame", value=names["base_frame"]),
+        Parameter("arm_trajectory_action", value=names["trajectory_action"])])
+    executor.add_node(node)
+    try:
+        joints = _latest(client, JointState, topics.JOINT_STATES, qos.STATE)
+        static = _latest(client, TFMessage, topics.TF_STATIC, qos.LATCHED)
+        arm = ActionClient(client, FollowJointTrajectory, "fr3_arm_controller/follow_joint_trajectory")
+        spin(executor, lambda: joints and static and arm.server_is_ready(), TIMEOUT_S, "fr3 joint states, tf, action")
+        assert list(joints[-1].name) == [*names["joints"], *names["fingers"]]
+        goal_q = np.array(joints[-1].position[:7]) + 0.05
+        handle = spin(executor, arm.send_goal_async(FollowJointTrajectory.Goal(trajectory=JointTrajectory(
+            joint_names=list(names["joints"]),
+            points=[JointTrajectoryPoint(positions=goal_q.tolist(), time_from_start=Duration(sec=1))]))),
+            TIMEOUT_S, "acceptance")
+        assert handle.accepted
+        spin(executor, lambda: np.abs(np.array(joints[-1].position[:7]) - goal_q).max() < 0.01, TIMEOUT_S,
+             "the fr3-named goal executed")
+        (t,) = static[-1].transforms
+        scene = load_scene(SCENES / "rigid_box.yaml")
+        assert (t.header.frame_id, t.child_frame_id) == ("fr3_link0", topics.CAMERA_OPTICAL_FRAME)
+        xyz = (t.transform.translation.x, t.transform.translation.y, t.transform.translation.z)
+        np.testing.assert_allclose(xyz, scene.base_xyz_camera_m, atol=1e-9)
+        r = t.transform.rotation
+        np.testing.assert_allclose((r.x, r.y, r.z, r.w), scene.base_quat_camera_xyzw, atol=1e-9)
+    finally:
+        node.shutdown()
 
 
 def test_camera_scene_and_object_poses(driver, client, executor, spin):

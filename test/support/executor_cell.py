@@ -1,11 +1,14 @@
 """The executor node's test cell: a small in-test driver node and a fixture that wires it to a real
 ExecutorNode over real DDS (used by test/nodes/test_executor_node.py and test/reliability/test_pick_faults.py).
 
-The driver is a real rclpy node (not a mock of the executor): it publishes /joint_states by following
-the commanded JointTrajectory in wall time, serves the two gripper actions (fingers move at the
-commanded speed and stop on an object of a given width) and publishes an external wrench that rises
-when the TCP goes below a contact height. Killing it = destroying it. Run as
-`python -m support.executor_cell` (from test/) it is the restarted driver process.
+The driver is a real rclpy node (not a mock of the executor) serving the real cell's contract: it
+publishes joint_states by following the trajectory of the latest control_msgs FollowJointTrajectory
+goal in wall time (a newer goal replaces it, a cancel holds the arm), serves franka_ros2's gripper
+actions franka_msgs Move and Grasp (fingers move at the commanded speed and stop on an object of a
+given width) and publishes an external wrench that rises when the TCP goes below a contact height.
+Every trajectory goal it receives is kept in `trajectory_msgs` (what the executor put on the wire).
+Killing it = destroying it. Run as `python -m support.executor_cell` (from test/) it is the restarted
+driver process.
 """
 import math
 import os
@@ -15,16 +18,18 @@ from pathlib import Path
 
 import numpy as np
 import rclpy
-from defgg_interfaces.action import GripperGrasp, GripperMove, PickAndPlace
+from control_msgs.action import FollowJointTrajectory
+from defgg_interfaces.action import PickAndPlace
 from defgg_interfaces.msg import Grasp
+from franka_msgs.action import Grasp as GripperGrasp
+from franka_msgs.action import Move as GripperMove
 from geometry_msgs.msg import WrenchStamped
-from rclpy.action import ActionServer
+from rclpy.action import ActionServer, CancelResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.task import Future
 from sensor_msgs.msg import JointState
-from trajectory_msgs.msg import JointTrajectory
 
 from defgg_ros.constants import PANDA_FINGER_JOINT_NAMES, PANDA_JOINT_NAMES, PANDA_READY_Q_RAD
 from defgg_ros.control.kinematics import PandaKinematics
@@ -59,11 +64,13 @@ class InTestDriver(Node):
         self.width_m = 0.0
         self.points, self.started_s = None, 0.0
         self.gripper = None  # (target_width, speed, future)
-        self.trajectories_received = 0
+        self.trajectory_msgs = []  # every trajectory goal received, in order
+        self.arm_goal = None       # (goal handle, Future of its outcome) of the running trajectory goal
         group = ReentrantCallbackGroup()
         self.joint_pub = self.create_publisher(JointState, topics.JOINT_STATES, qos.STATE)
         self.wrench_pub = self.create_publisher(WrenchStamped, topics.EXTERNAL_WRENCH, qos.STATE)
-        self.create_subscription(JointTrajectory, topics.JOINT_TRAJECTORY, self.on_trajectory, qos.COMMAND)
+        ActionServer(self, FollowJointTrajectory, topics.ARM_TRAJECTORY_ACTION, self.on_follow, callback_group=group,
+                     cancel_callback=lambda _goal: CancelResponse.ACCEPT)
         ActionServer(self, GripperMove, topics.GRIPPER_MOVE_ACTION, self.on_move, callback_group=group)
         ActionServer(self, GripperGrasp, topics.GRIPPER_GRASP_ACTION, self.on_grasp, callback_group=group)
         self.create_timer(DRIVER_PERIOD_S, self.step)
@@ -77,22 +84,48 @@ class InTestDriver(Node):
     def now_s(self):
         return self.get_clock().now().nanoseconds * 1e-9
 
-    def on_trajectory(self, msg):
-        self.trajectories_received += 1
-        if not msg.points:
-            self.points = None
-            self.qd = np.zeros(7)
-            return
+    async def on_follow(self, goal_handle):
+        """A joint_trajectory_controller's goal: replaces the running one; canceled = hold where the arm is."""
+        msg = goal_handle.request.trajectory
+        self.trajectory_msgs.append(msg)
+        result = FollowJointTrajectory.Result()
+        if list(msg.joint_names) != list(PANDA_JOINT_NAMES) or not msg.points:
+            result.error_code, result.error_string = FollowJointTrajectory.Result.INVALID_JOINTS, "bad joints"
+            goal_handle.abort()
+            return result
+        if self.arm_goal is not None:
+            self.arm_goal[1].set_result("replaced")
+        future = Future()
+        self.arm_goal = (goal_handle, future)
         times = np.array([p.time_from_start.sec + 1e-9 * p.time_from_start.nanosec for p in msg.points])
         self.points = (times, np.array([p.positions for p in msg.points]), np.array([p.velocities for p in msg.points]))
         self.started_s = self.now_s()
+        outcome = await future
+        if outcome == "done":
+            goal_handle.succeed()
+        elif outcome == "canceled":
+            goal_handle.canceled()
+        else:
+            result.error_string = "replaced by a newer goal"
+            goal_handle.abort()
+        return result
 
-    def step(self):
+    def step_arm(self):
+        if self.arm_goal is not None and self.arm_goal[0].is_cancel_requested:
+            self.points, self.qd = None, np.zeros(7)  # hold
+            self.arm_goal[1].set_result("canceled")
+            self.arm_goal = None
         if self.points is not None:
             times, q, qd = self.points
             t = min(self.now_s() - self.started_s, times[-1])
             self.q = np.array([np.interp(t, times, q[:, j]) for j in range(7)])
             self.qd = np.array([np.interp(t, times, qd[:, j]) for j in range(7)]) if t < times[-1] else np.zeros(7)
+            if t >= times[-1] and self.arm_goal is not None:
+                self.arm_goal[1].set_result("done")
+                self.arm_goal = None
+
+    def step(self):
+        self.step_arm()
         self.step_gripper()
         stamp = self.get_clock().now().to_msg()
         state = JointState(name=list(PANDA_JOINT_NAMES) + list(PANDA_FINGER_JOINT_NAMES))
@@ -122,16 +155,16 @@ class InTestDriver(Node):
         self.gripper = (goal_handle.request.width, goal_handle.request.speed, future)
         width = await future
         goal_handle.succeed()
-        return GripperMove.Result(success=True, width=width)
+        return GripperMove.Result(success=abs(width - goal_handle.request.width) < 1e-6)
 
     async def on_grasp(self, goal_handle):
         future = Future()
         self.gripper = (self.object_width_m or 0.0, goal_handle.request.speed, future)
         width = await future
         request = goal_handle.request
-        ok = request.width - request.epsilon_inner <= width <= request.width + request.epsilon_outer
+        ok = request.width - request.epsilon.inner <= width <= request.width + request.epsilon.outer
         goal_handle.succeed()
-        return GripperGrasp.Result(success=ok, width=width, error="" if ok else "fingers stopped outside epsilon")
+        return GripperGrasp.Result(success=ok, error="" if ok else "fingers stopped outside epsilon")
 
 
 def grasp_msg(xyz=GRASP_XYZ, yaw=0.3, width_m=0.05, modulus_pa=2e9):
@@ -157,8 +190,6 @@ def run_cell(rclpy_context):
     ex.add_node(client_node)
 
     children = []
-    trajectories_seen = []   # what the executor sends, seen from the test (the driver process is not ours)
-    client_node.create_subscription(JointTrajectory, topics.JOINT_TRAJECTORY, trajectories_seen.append, qos.COMMAND)
 
     def start_driver(own_process=False, **kwargs):
         """A driver in the test's executor, or (own_process) a real driver process (this module run
@@ -169,13 +200,10 @@ def run_cell(rclpy_context):
             ex.add_node(driver)
             return driver
         assert not kwargs, "the driver process takes the default arguments"
-        trajectories_seen.clear()
         child = subprocess.Popen([sys.executable, "-m", "support.executor_cell"], cwd=TEST_ROOT,
                                  env=dict(os.environ))
         children.append(child)
         return child
-
-    start_driver.trajectories_seen = trajectories_seen
 
     yield ex, node, client, start_driver
     for n in list(ex.get_nodes()):

@@ -6,11 +6,11 @@ from rclpy.serialization import serialize_message
 from std_msgs.msg import Header
 
 from defgg_ros.nodes.conversions import depth_metres_to_msg, make_camera_info, ns_to_stamp
-from defgg_ros.ros import topics
 from defgg_ros.sessions import session_topics as st
 from defgg_ros.sessions.bag import SessionWriter
 from defgg_ros.sessions.compare import Tolerances
 from defgg_ros.sessions.metadata import make_metadata
+from defgg_ros.sessions.session_topics import topics  # absolute names (bag channels)
 
 REPO = __import__("pathlib").Path(__file__).resolve().parents[2]
 K = np.array([[385.0, 0, 31.5], [0, 385.0, 23.5], [0, 0, 1]])
