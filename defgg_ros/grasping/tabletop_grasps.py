@@ -19,8 +19,10 @@ the image or without a return are not):
   GRIPPER_MAX_WIDTH_M: so no grasp on a face wider than the gripper (a cereal box's top);
 - both finger pads (thickness x pad width, just outside the opening) must land in free space at
   the tip height (objects, neighbours, the robot, unseen space are not);
-- the closing direction is the network's angle when feasible, else the feasible direction nearest
-  to it (15 degree steps); the centre moves to the middle of the object's extent.
+- the closing direction: across the object's faces (the axes of its footprint's minimum-area
+  rectangle, the one nearer the network's angle first) when feasible, else the network's angle or
+  the feasible direction nearest it (15 degree steps); the centre moves to the middle of the
+  object's extent.
 """
 from __future__ import annotations
 
@@ -49,6 +51,8 @@ CLEARANCE_M = 0.006
 TIP_MARGIN_M = 0.003
 ANGLE_STEPS = 12                      # closing directions tried: 180 / 12 = 15 degrees apart
 PEAKS_PER_OBJECT = 3
+DISTINCT_CELLS = 5
+DISTINCT_ANGLE_DEG = 20.0
 MAX_HALF_EXTENT_CELLS = int(math.ceil(GRIPPER_MAX_WIDTH_M / CELL_M))
 PAD_SAMPLES = 5
 PAD_BLOCKED_FRACTION = 0.1
@@ -115,8 +119,9 @@ def plan_tabletop_grasps(view: TabletopView, predictor, youngs_modulus_pa=None, 
 
 
 def plan_tabletop(view: TabletopView, predictor, youngs_modulus_pa=None, top_k: int = 1,
-                  default_pa: float = 2e6) -> TabletopPlan:
-    """plan_tabletop_grasps with the quality map (for display)."""
+                  default_pa: float = 2e6, targets=None) -> TabletopPlan:
+    """plan_tabletop_grasps with the quality map (for display). targets: the object labels to grasp
+    (None = all); the others are still obstacles."""
     if not view.object_ids:
         return TabletopPlan([], np.zeros(view.grid_height_m.shape, np.float32))
     moduli = grid_moduli(view, youngs_modulus_pa, default_pa)
@@ -124,21 +129,30 @@ def plan_tabletop(view: TabletopView, predictor, youngs_modulus_pa=None, top_k: 
     maps = maps_from_network(predictor.raw_maps(x), predictor.postprocess)
     space = FreeSpace(view)
     per_object = {}
-    for label in view.object_ids:
+    for label in view.object_ids if targets is None else [t for t in view.object_ids if t in targets]:
         peaks = find_peaks(maps.q, predictor.postprocess.peak_min_distance_px, predictor.postprocess.q_threshold,
-                           view.grid_labels == label, top_k=PEAKS_PER_OBJECT)
+                           view.grid_labels == label, top_k=max(PEAKS_PER_OBJECT, top_k), fill=True)
+        faces = object_face_angles(view, label)
         found = []
         for row, col in peaks:
             angle, width_px = maps.at_pixel(row, col)
             grasp = feasible_grasp(view, label, row, col, angle, width_px * CELL_M, float(maps.q[row, col]), moduli,
-                                   space)
-            if grasp is not None:
+                                   space, faces)
+            if grasp is not None and all(_distinct(grasp, other) for other in found):
                 found.append(grasp)
         if found:
             per_object[label] = sorted(found, key=lambda g: -g.quality)
     firsts = sorted((g[0] for g in per_object.values()), key=lambda g: -g.quality)
     rest = sorted((g for gs in per_object.values() for g in gs[1:]), key=lambda g: -g.quality)
     return TabletopPlan((firsts + rest)[:top_k], maps.q)
+
+
+def _distinct(a: TabletopGrasp, b: TabletopGrasp) -> bool:
+    """Two grasps of one object are alternatives when their centres or closing directions differ
+    (peaks on one chord slide to the same middle)."""
+    apart = max(abs(a.cell_rc[0] - b.cell_rc[0]), abs(a.cell_rc[1] - b.cell_rc[1])) >= DISTINCT_CELLS
+    cos = abs(float(np.dot(a.closing_direction_base, b.closing_direction_base)))
+    return apart or cos < math.cos(math.radians(DISTINCT_ANGLE_DEG))
 
 
 def _tip_height_m(surface_height_m: float) -> float:
@@ -175,14 +189,37 @@ class FreeSpace:
         return seen & (observed > z + tolerance)
 
 
+def object_face_angles(view: TabletopView, label: int) -> tuple:
+    """The two closing directions across an object's faces (map angles, from columns towards rows):
+    the axes of its cells' minimum-area rectangle. Pads meeting a face squarely hold; the network's
+    regressed angle is noise on square tops (the two right directions average out)."""
+    rows, cols = np.nonzero(view.grid_labels == label)
+    if rows.size < 5:
+        return ()
+    (_, _), (_, _), degrees = cv2.minAreaRect(np.stack([cols, rows], axis=1).astype(np.float32))
+    a = math.radians(degrees)
+    return (a, a + math.pi / 2)
+
+
+def candidate_angles(angle_rad: float, face_angles=()) -> np.ndarray:
+    """Closing directions to try, in order: the faces' normals nearest the network's angle first, then
+    the network's angle and 15 degree steps away from it."""
+    def off(a):
+        d = (a - angle_rad) % math.pi
+        return min(d, math.pi - d)
+    faces = sorted(face_angles, key=off)
+    steps = sorted(range(ANGLE_STEPS), key=lambda k: min(k, ANGLE_STEPS - k))
+    return np.array(list(faces) + [angle_rad + k * math.pi / ANGLE_STEPS for k in steps])
+
+
 def feasible_grasp(view: TabletopView, label: int, row: int, col: int, angle_rad: float, network_width_m: float,
-                   quality: float, moduli: np.ndarray, space: FreeSpace) -> TabletopGrasp | None:
-    """The grasp at cell (row, col) with the feasible closing direction nearest the network's
-    angle (map angle: from columns towards rows), or None when no direction is feasible."""
+                   quality: float, moduli: np.ndarray, space: FreeSpace, face_angles=()) -> TabletopGrasp | None:
+    """The grasp at cell (row, col) with the first feasible closing direction of candidate_angles
+    (map angles: from columns towards rows), or None when no direction is feasible."""
     surface = float(view.grid_height_m[row, col])
     level = _tip_height_m(surface) + TIP_MARGIN_M
-    order = sorted(range(ANGLE_STEPS), key=lambda k: min(k, ANGLE_STEPS - k))
-    phis = angle_rad + np.array(order) * math.pi / ANGLE_STEPS
+    phis = candidate_angles(angle_rad, face_angles)
+    order = range(len(phis))
     directions = np.stack([np.sin(phis), np.cos(phis)], axis=1)          # (row, col) per cell step
     steps = np.arange(-MAX_HALF_EXTENT_CELLS, MAX_HALF_EXTENT_CELLS + 1)
     across = np.stack([-directions[:, 1], directions[:, 0]], axis=1)

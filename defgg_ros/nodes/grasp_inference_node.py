@@ -12,7 +12,6 @@ Thin adapter over defgg_ros.model.inference.GraspPredictor:
   segmentation node does). Every bad request gets success=false + reason.
 """
 import dataclasses
-import sys
 import threading
 import time
 from pathlib import Path
@@ -20,11 +19,15 @@ from pathlib import Path
 import numpy as np
 from defgg_interfaces.msg import Grasp
 from defgg_interfaces.srv import PlanGrasp
+from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
-from sensor_msgs.msg import CameraInfo, Image
+from sensor_msgs.msg import CameraInfo, Image, JointState
+from std_msgs.msg import Header
 from visualization_msgs.msg import Marker, MarkerArray
 
 from defgg_ros.constants import GRIPPER_MAX_WIDTH_M
+from defgg_ros.grasping.tabletop_grasps import base_T_grasp, image_projection
+from defgg_ros.grasping.tabletop_planner import TabletopPlanner
 from defgg_ros.model.inference import CheckpointError, GraspPredictor
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import (
@@ -49,8 +52,11 @@ from defgg_ros.perception.grasp_planning import (
 )
 from defgg_ros.perception.stiffness_assignment import check_entries_fit_image, make_entry
 from defgg_ros.perception.stiffness_segmenter import SegmenterConfig, run_segmenter
+from defgg_ros.perception.self_filter import RobotSelfFilter
 from defgg_ros.perception.sync import StampSynchronizer
+from defgg_ros.perception.tabletop import TabletopConfig, WorkspaceBox
 from defgg_ros.ros.parameters import declare_parameters, load_schema
+from defgg_ros.ros.share import share_path
 
 WARN_THROTTLE_S = 2.0
 MODEL_FILES = {True: "defgg_cnn.pt", False: "ggcnn_depth_only.pt"}
@@ -64,10 +70,7 @@ PARAMETERS = load_schema("grasp_inference_node")
 
 def default_model_path(use_stiffness: bool) -> Path:
     """The shipped checkpoint: the source tree's models/ or the installed share/defgg_ros/models/."""
-    name = MODEL_FILES[bool(use_stiffness)]
-    candidates = [Path(__file__).resolve().parents[2] / "models" / name,
-                  Path(sys.prefix) / "share" / "defgg_ros" / "models" / name]
-    return next((c for c in candidates if c.is_file()), candidates[0])
+    return share_path("models", MODEL_FILES[bool(use_stiffness)])
 
 
 @dataclasses.dataclass(frozen=True)
@@ -78,7 +81,8 @@ class Frame:
     depth_m: np.ndarray             # HxW float32, NaN = invalid
     youngs_modulus_pa: np.ndarray   # HxW float32, 0 = background
     camera_k: np.ndarray            # 3x3
-    labels: np.ndarray              # HxW uint8 object labels, 0 = background
+    labels: np.ndarray | None       # HxW uint8 object labels, 0 = background (camera_crop planner only)
+    entries: tuple = ()             # request `objects` (tabletop planner: assigned to the perceived objects)
 
 
 class GraspInferenceNode(Node):
@@ -99,6 +103,8 @@ class GraspInferenceNode(Node):
         self._segmenter = SegmenterConfig(float(p["default_youngs_modulus_pa"]), (),
                                           float(p["min_object_height_m"]), int(p["min_object_area_px"]),
                                           max_height_m=float(p["max_object_height_m"]))
+        self._tabletop = self._tabletop_planner(p) if p["planner"] == "tabletop" else None
+        self._joint_positions = None    # name -> rad, for the self-filter
         self._predict_lock = threading.Lock()
         self._state_lock = threading.Lock()
         self._sync = StampSynchronizer(("depth", "stiffness", "info"), int(p["sync_cache_size"]))
@@ -114,9 +120,31 @@ class GraspInferenceNode(Node):
             qos.SensorSubscription(self, Image, p["stiffness_topic"], lambda m: self._on_stream("stiffness", m)),
             qos.SensorSubscription(self, CameraInfo, p["camera_info_topic"], lambda m: self._on_stream("info", m),
                                    warn_after_s=0.0)]
+        if self._tabletop is not None and self._tabletop.self_filter is not None:
+            self.create_subscription(JointState, p["joint_states_topic"], self._on_joint_states, qos.SENSOR_DATA)
         self.create_service(PlanGrasp, p["plan_grasp_service"], self._on_plan_grasp)
         self.get_logger().info(f"loaded {model_path} (runtime {self.predictor.runtime}, "
                                f"stiffness {'on' if self.predictor.uses_stiffness else 'off'})")
+
+    def _tabletop_planner(self, p) -> TabletopPlanner:
+        box = [float(v) for v in p["workspace_box_m"]]
+        workspace = WorkspaceBox((box[0], box[1]), (box[2], box[3]), float(p["min_object_height_m"]),
+                                 float(p["max_object_height_m"]))
+        robot = RobotSelfFilter(float(p["self_filter_margin_m"])) if p["self_filter"] else None
+        return TabletopPlanner(self.predictor, TabletopConfig(workspace=workspace, table_z_m=float(p["table_z_m"])),
+                               float(p["default_youngs_modulus_pa"]), robot)
+
+    def base_T_camera_for(self, header) -> np.ndarray:
+        """The camera optical frame in the base frame for a frame with this header (4x4). The seam for
+        a TF lookup of base_frame -> header.frame_id at header.stamp; the `base_T_camera` parameter is
+        the fallback."""
+        return self._base_T_camera
+
+    def _on_joint_states(self, msg: JointState):
+        if len(msg.name) == len(msg.position):
+            positions = dict(zip(msg.name, msg.position))
+            with self._state_lock:
+                self._joint_positions = {**(self._joint_positions or {}), **positions}
 
     # --- streams ------------------------------------------------------------
     def _on_stream(self, stream: str, msg):
@@ -143,7 +171,10 @@ class GraspInferenceNode(Node):
         except ValueError as exc:
             self._warn(f"no grasp for frame: {exc}")
             return
-        quality = full_quality_image(prediction.q, prediction.crop_offset_px, frame.depth_m.shape)
+        if self._tabletop is not None:
+            quality = prediction.plan.quality_image(prediction.view)
+        else:
+            quality = full_quality_image(prediction.q, prediction.crop_offset_px, frame.depth_m.shape)
         self._quality_pub.publish(numpy_to_image(quality, "32FC1", frame.header))
         if grasps:
             self._grasp_pub.publish(grasps[0])
@@ -195,6 +226,8 @@ class GraspInferenceNode(Node):
         camera_k = camera_info_to_k(info_msg)
         depth_m = depth_msg_to_metres(depth_msg)
         youngs_modulus_pa = stiffness_msg_to_pa(stiffness_msg)
+        if self._tabletop is not None:      # objects come from the depth; the image gives their moduli
+            return Frame(depth_msg.header, depth_m, youngs_modulus_pa, camera_k, None)
         return Frame(depth_msg.header, depth_m, youngs_modulus_pa, camera_k, labels_from_stiffness(youngs_modulus_pa))
 
     def _frame_from_objects(self, depth_msg, info_msg, objects) -> Frame:
@@ -204,6 +237,8 @@ class GraspInferenceNode(Node):
         entries = tuple(make_entry(o.name, o.youngs_modulus_pa, (o.roi.x_offset, o.roi.y_offset, o.roi.width,
                                    o.roi.height), o.region_only) for o in objects)
         check_entries_fit_image(entries, depth_msg.width, depth_msg.height)
+        if self._tabletop is not None:
+            return Frame(depth_msg.header, depth_m, None, camera_k, None, entries)
         config = dataclasses.replace(self._segmenter, entries=entries)
         out = run_segmenter(config, depth_m, camera_k)
         if not out.segmentation.object_ids:
@@ -211,6 +246,8 @@ class GraspInferenceNode(Node):
         return Frame(depth_msg.header, depth_m, out.youngs_modulus_pa, camera_k, out.labels)
 
     def _plan(self, frame: Frame, top_k: int):
+        if self._tabletop is not None:
+            return self._plan_tabletop(frame, top_k)
         if not np.any(frame.labels):
             raise PlanningError("the stiffness image has no object pixel (all background)")
         start = time.perf_counter()
@@ -231,6 +268,34 @@ class GraspInferenceNode(Node):
                 self._warn(f"grasp width {candidate.width_m * 1000:.0f} mm clipped to the hand's "
                            f"{GRIPPER_MAX_WIDTH_M * 1000:.0f} mm")
         return prediction, grasps, seconds
+
+    def _plan_tabletop(self, frame: Frame, top_k: int):
+        base_T_camera = self.base_T_camera_for(frame.header)
+        with self._state_lock:
+            joints = self._joint_positions
+        start = time.perf_counter()
+        with self._predict_lock:
+            result = self._tabletop.plan(frame.depth_m, frame.camera_k, base_T_camera, top_k,
+                                         frame.youngs_modulus_pa, frame.entries, joints)
+        seconds = time.perf_counter() - start
+        grasps = [self._tabletop_grasp_msg(g, frame, base_T_camera) for g in result.grasps]
+        return result, grasps, seconds
+
+    def _tabletop_grasp_msg(self, grasp, frame: Frame, base_T_camera) -> Grasp:
+        b_T_g = base_T_grasp(grasp)
+        image = image_projection(grasp, base_T_camera, frame.camera_k)
+        msg = Grasp(header=frame.header)
+        msg.pose_camera = PoseStamped(header=frame.header, pose=pose_from_transform(np.linalg.inv(base_T_camera) @ b_T_g))
+        msg.pose_base = PoseStamped(header=Header(stamp=frame.header.stamp, frame_id=self._p["base_frame"]),
+                                    pose=pose_from_transform(b_T_g))
+        msg.width_m = float(grasp.width_m)
+        msg.quality = float(grasp.quality)
+        msg.angle_rad = image["angle_rad"]
+        msg.center_u_px, msg.center_v_px = image["u_px"], image["v_px"]
+        msg.width_px = image["width_px"]
+        msg.youngs_modulus_pa = float(grasp.youngs_modulus_pa)
+        msg.object_id = int(grasp.object_id)
+        return msg
 
     # --- visualisation ------------------------------------------------------
     def _markers(self, grasp: Grasp) -> MarkerArray:

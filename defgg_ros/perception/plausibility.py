@@ -81,9 +81,10 @@ def check_moduli_plausible(youngs_modulus_pa, what: str = "stiffness image", bac
     low, high = values.min(), values.max()
     if np.isnan(low) or np.isnan(high) or np.isinf(high) or low == -np.inf:
         raise InvalidYoungsModulus(f"{what} contains NaN or infinite moduli (must be finite Pa)")
-    if low < 0 or (low == 0 and not background_allowed):
-        raise InvalidYoungsModulus(f"{what} contains moduli <= 0 Pa (min {float(low):g})"
-                                   + (", 0 = background" if background_allowed else ""))
+    if low < 0:
+        raise InvalidYoungsModulus(f"{what} contains negative moduli (min {float(low):g} Pa)")
+    if low == 0 and not background_allowed:
+        raise InvalidYoungsModulus(f"{what} must be > 0 Pa, got 0")
     if high > PLAUSIBLE_YOUNGS_MODULUS_MAX_PA:
         raise InvalidYoungsModulus(f"{what} holds {float(high):g} Pa, outside the plausible range "
                                    f"{plausible_range_text()} (wrong unit?)")

@@ -223,7 +223,7 @@ def perceive(depth_m, camera_k, base_T_camera, config: TabletopConfig = Tabletop
     vs, us, x, y = vs[inside], us[inside], x[inside], y[inside]
     hgt = height[vs, us]
     if x.size == 0:
-        raise TabletopError("no object in the workspace box (nothing between "
+        raise TabletopError("no object found above the table in the workspace box (nothing between "
                             f"{ws.min_height_m * 1000:.0f} mm and {ws.max_height_m * 1000:.0f} mm above the table)")
     # The grid covers the objects' extent plus a margin (fingers land beside them), not the whole box.
     margin = GRID_MARGIN_M

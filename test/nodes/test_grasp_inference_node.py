@@ -42,7 +42,10 @@ def checkpoint(random_checkpoint):
 
 @pytest.fixture
 def cell(checkpoint, inference_service):
-    return inference_service("grasp_test_client", model_path=str(checkpoint), base_T_camera=BASE_T_CAMERA)
+    # These tests pin the camera_crop planner's contract (quality order, 300 px minimum); the tabletop
+    # planner's is tested in test/perception/test_tabletop_node.py.
+    return inference_service("grasp_test_client", model_path=str(checkpoint), base_T_camera=BASE_T_CAMERA,
+                             planner="camera_crop")
 
 
 def plan(executor, call, client, request, timeout_s=20.0):
@@ -234,7 +237,7 @@ def test_depth_only_model_via_use_stiffness_false(executor, spin, random_checkpo
 
 
 def test_finger_clearance_ranking_can_be_switched_off(executor, spin, checkpoint, inference_service, call):
-    _, _, client = inference_service("clearance_off_client", model_path=str(checkpoint),
+    _, _, client = inference_service("clearance_off_client", model_path=str(checkpoint), planner="camera_crop",
                                      base_T_camera=BASE_T_CAMERA, finger_clearance_opening_m=0.0,
                                      plan_grasp_service="/test/clearance_off_plan")
     response = plan(executor, call, client, image_request(top_k=5))
@@ -246,6 +249,7 @@ def test_finger_clearance_ranking_can_be_switched_off(executor, spin, checkpoint
 def test_square_contacts_turn_the_grasps_to_the_box_faces(executor, spin, checkpoint, inference_service, call):
     import cv2
     _, _, client = inference_service("contact_client", model_path=str(checkpoint), base_T_camera=BASE_T_CAMERA,
+                                     planner="camera_crop",
                                      contact_angle=True, plan_grasp_service="/test/contact_plan")
     box_only = numpy_to_image(np.where(TRUTH == 1, 2e4, 0.0).astype(np.float32), "32FC1", header())
     response = plan(executor, call, client, image_request(top_k=3, stiffness=box_only))

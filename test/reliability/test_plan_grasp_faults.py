@@ -29,7 +29,7 @@ K = default_camera_k()
 INFO = make_camera_info(K, 640, 480)
 EMPTY_M, _ = render(SyntheticScene(objects=()))
 # A 6 x 5 cm box whose right part lies outside the image (the image spans +-0.33 m at the table).
-BORDER_M, BORDER_TRUTH = render(SyntheticScene(objects=(SceneObject((0.32, 0.05), 0.05, (0.06, 0.05)),)))
+BORDER_M, BORDER_TRUTH = render(SyntheticScene(objects=(SceneObject((0.30, 0.05), 0.05, (0.06, 0.05)),), walls=True))
 
 
 @pytest.fixture

@@ -1,0 +1,96 @@
+"""Depth (+ stiffness or per-object moduli) + camera pose -> feasible grasps in the robot frame (no rclpy).
+
+The one entry the grasp service uses for the tabletop planner: the robot self-filter (when joint
+positions are given), tabletop perception, the moduli (an image, or SetStiffness-style entries
+assigned to the perceived objects), the network on the height map and the feasibility rules.
+
+The camera pose is an argument (`base_T_camera`, 4x4): the node passes what TF says (or its
+`base_T_camera` parameter as the fallback), so this module never needs to know where it came from.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from defgg_ros.grasping.tabletop_grasps import TabletopPlan, plan_tabletop
+from defgg_ros.perception.self_filter import RobotSelfFilter
+from defgg_ros.perception.stiffness_assignment import assign_stiffness
+from defgg_ros.perception.tabletop import TabletopConfig, TabletopView, perceive
+
+
+class NoFeasibleGrasp(ValueError):
+    """Objects were found, but none can be grasped (reason in the message)."""
+
+
+@dataclass(frozen=True)
+class TabletopResult:
+    view: TabletopView
+    plan: TabletopPlan
+    youngs_modulus_pa: np.ndarray    # HxW, what the planner used (0 = background)
+    robot_mask: np.ndarray | None    # HxW bool, the self-filter's pixels (None: not applied)
+
+    @property
+    def grasps(self) -> list:
+        return self.plan.grasps
+
+
+def object_centroids_px(labels: np.ndarray, object_ids) -> dict:
+    """label -> (u, v) pixel centroid of its image pixels (for ROI-addressed stiffness entries)."""
+    out = {}
+    for label in object_ids:
+        vs, us = np.nonzero(labels == label)
+        if vs.size:
+            out[int(label)] = (float(us.mean()), float(vs.mean()))
+    return out
+
+
+# A perceived object is a grasp target of a stiffness image when at least this share of its pixels
+# carries a modulus there (the segmentation node paints the same objects; a client may paint one).
+MARKED_FRACTION = 0.2
+
+
+def objects_with_moduli(view: TabletopView, youngs_modulus_pa) -> set:
+    """The perceived objects a stiffness image gives a modulus to (the rest stay obstacles)."""
+    moduli = np.asarray(youngs_modulus_pa)
+    labels = view.labels
+    on = labels > 0
+    count = np.bincount(labels[on], minlength=256)
+    marked = np.bincount(labels[on & (moduli > 0)], minlength=256)
+    return {int(label) for label in view.object_ids if count[label] and marked[label] >= MARKED_FRACTION * count[label]}
+
+
+class TabletopPlanner:
+    def __init__(self, predictor, config: TabletopConfig = TabletopConfig(), default_youngs_modulus_pa: float = 2e6,
+                 self_filter: RobotSelfFilter | None = None):
+        self.predictor = predictor
+        self.config = config
+        self.default_youngs_modulus_pa = float(default_youngs_modulus_pa)
+        self.self_filter = self_filter
+
+    def plan(self, depth_m, camera_k, base_T_camera, top_k: int = 1, youngs_modulus_pa=None, entries=(),
+             joint_positions: dict | None = None) -> TabletopResult:
+        """Raises ValueError subclasses: TabletopError (no table, no object), NoFeasibleGrasp."""
+        robot = None
+        if self.self_filter is not None and joint_positions:
+            robot = self.self_filter.mask(joint_positions, base_T_camera, camera_k, depth_m)
+        view = perceive(depth_m, camera_k, base_T_camera, self.config, robot)
+        if not view.object_ids:
+            raise NoFeasibleGrasp("no object found above the table in the workspace box (blobs smaller than "
+                                  f"{self.config.min_object_area_m2 * 1e4:.1f} cm^2 are ignored)")
+        targets = None
+        if youngs_modulus_pa is None:
+            youngs_modulus_pa, _ = assign_stiffness(view.labels, object_centroids_px(view.labels, view.object_ids),
+                                                    entries, self.default_youngs_modulus_pa)
+        else:
+            targets = objects_with_moduli(view, youngs_modulus_pa)
+            if not targets:
+                raise NoFeasibleGrasp(f"the stiffness image has no object pixel on any of the "
+                                      f"{len(view.object_ids)} object(s) found in the depth (all background)")
+        plan = plan_tabletop(view, self.predictor, youngs_modulus_pa, top_k, self.default_youngs_modulus_pa, targets)
+        if not plan.grasps:
+            raise NoFeasibleGrasp(
+                f"no feasible grasp on the {len(view.object_ids)} object(s) in the workspace: each is wider than "
+                "the gripper's opening minus clearance along every closing direction, or a finger would land on "
+                "a neighbour or on space the camera cannot see")
+        return TabletopResult(view, plan, np.asarray(youngs_modulus_pa, np.float32), robot)
