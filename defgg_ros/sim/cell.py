@@ -23,7 +23,7 @@ from defgg_ros.constants import (
     PANDA_JOINT_NAMES,
     PANDA_READY_Q_RAD,
 )
-from defgg_ros.sim import cell_objects, cell_soft
+from defgg_ros.sim import cell_objects, cell_soft, physics
 from defgg_ros.sim.cell_camera import DepthCamera, DepthNoise, camera_matrix
 from defgg_ros.sim.cell_gripper import GripperController, GripperOutcome
 from defgg_ros.sim.cell_trajectory import TrajectoryTracker, make_waypoints
@@ -132,13 +132,9 @@ class SimCell:
             p.resetJointState(self.robot, j, q, 0.0, physicsClientId=c)
         for j in self.finger_joints:
             p.resetJointState(self.robot, j, GRIPPER_MAX_WIDTH_M / 2, 0.0, physicsClientId=c)
-        # PyBullet ignores <mimic>: couple the fingers with a gear constraint
-        # (without it the fingers and the object slide sideways together).
-        gear = p.createConstraint(self.robot, self.finger_joints[0], self.robot, self.finger_joints[1],
-                                  p.JOINT_GEAR, [1, 0, 0], [0, 0, 0], [0, 0, 0], physicsClientId=c)
-        p.changeConstraint(gear, gearRatio=-1, erp=0.1, maxForce=200, physicsClientId=c)
-        for link in self.finger_joints:
-            p.changeDynamics(self.robot, link, lateralFriction=cell_objects.FRICTION, physicsClientId=c)
+        physics.couple_fingers(c, self.robot, self.finger_joints[0], self.finger_joints[1], max_force_n=200,
+                               erp=0.1)
+        physics.set_friction(c, self.robot, self.finger_joints, cell_objects.FRICTION)
         self.tracker = TrajectoryTracker(q0)
         self.gripper = GripperController(GRIPPER_MAX_WIDTH_M)
 

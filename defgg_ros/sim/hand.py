@@ -27,6 +27,7 @@ from defgg_ros.constants import (
     PANDA_FINGERTIP_BELOW_TCP_M,
     PANDA_HAND_PALM_SIZE_M,
 )
+from defgg_ros.sim import physics
 from defgg_ros.sim.physics import DEFAULT_FRICTION
 
 PALM_MASS_KG = 0.5
@@ -200,9 +201,7 @@ def create_hand(client: int, world_T_tcp: np.ndarray, opening_m: float = GRIPPER
     hold = p.createConstraint(body, -1, -1, -1, p.JOINT_FIXED, [0, 0, 0], [0, 0, 0],
                               world_T_tcp[:3, 3].tolist(), childFrameOrientation=_quat(world_T_tcp),
                               physicsClientId=client)
-    gear = p.createConstraint(body, 0, body, 1, p.JOINT_GEAR, [1, 0, 0], [0, 0, 0], [0, 0, 0],
-                              physicsClientId=client)
-    p.changeConstraint(gear, gearRatio=-1, maxForce=GEAR_FORCE_N, erp=0.2, physicsClientId=client)
+    gear = physics.couple_fingers(client, body, 0, 1, GEAR_FORCE_N, erp=0.2)
     hand = Hand(client, body, hold, gear)
     hand.move_to(world_T_tcp)
     hand.set_opening(opening_m)

@@ -120,6 +120,16 @@ def set_friction(client: int, body: int, links, friction: float, **extra) -> Non
         p.changeDynamics(body, link, lateralFriction=friction, physicsClientId=client, **extra)
 
 
+def couple_fingers(client: int, body: int, finger_a: int, finger_b: int, max_force_n: float, erp: float) -> int:
+    """Keep two prismatic fingers of `body` symmetric (q_a = q_b): PyBullet ignores the URDF <mimic>,
+    and without the coupling fingers and object slid sideways together and scores halved. Returns the
+    constraint id (removeConstraint frees them, e.g. to lock each finger on its own)."""
+    gear = p.createConstraint(body, finger_a, body, finger_b, p.JOINT_GEAR, [1, 0, 0], [0, 0, 0], [0, 0, 0],
+                              physicsClientId=client)
+    p.changeConstraint(gear, gearRatio=-1, maxForce=max_force_n, erp=erp, physicsClientId=client)
+    return gear
+
+
 def static_box(client: int, half_extents, position, rgba, friction: float = DEFAULT_FRICTION) -> int:
     """A fixed box (table, wall)."""
     col = p.createCollisionShape(p.GEOM_BOX, halfExtents=list(half_extents), physicsClientId=client)
