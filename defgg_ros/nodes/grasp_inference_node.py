@@ -57,6 +57,7 @@ from defgg_ros.perception.sync import StampSynchronizer
 from defgg_ros.perception.tabletop import TabletopConfig, WorkspaceBox
 from defgg_ros.ros.parameters import declare_parameters, load_schema
 from defgg_ros.ros.share import share_path
+from defgg_ros.ros.tf import TfBroadcaster, transform_msg
 
 WARN_THROTTLE_S = 2.0
 MODEL_FILES = {True: "defgg_cnn.pt", False: "ggcnn_depth_only.pt"}
@@ -114,6 +115,7 @@ class GraspInferenceNode(Node):
         self._grasp_pub = self.create_publisher(Grasp, p["best_grasp_topic"], qos.STATE)
         self._quality_pub = self.create_publisher(Image, p["quality_topic"], qos.SENSOR_DATA)
         self._marker_pub = self.create_publisher(MarkerArray, p["markers_topic"], qos.STATE)
+        self._tf_broadcaster = TfBroadcaster(self)  # the planned grasp as TF frame grasp_frame
         # Reliability follows the publishers', and silence is logged (qos.SensorSubscription, issue 26).
         self._stream_subs = [
             qos.SensorSubscription(self, Image, p["depth_topic"], lambda m: self._on_stream("depth", m)),
@@ -179,6 +181,7 @@ class GraspInferenceNode(Node):
         if grasps:
             self._grasp_pub.publish(grasps[0])
             self._marker_pub.publish(self._markers(grasps[0]))
+            self._publish_grasp_frame(grasps[0])
 
     # --- PlanGrasp ----------------------------------------------------------
     def _on_plan_grasp(self, request, response):
@@ -197,9 +200,22 @@ class GraspInferenceNode(Node):
         response.grasps = grasps
         response.inference_time_s = seconds
         best = grasps[0]
+        self._publish_grasp_frame(best)
         response.message = (f"{len(grasps)} grasp(s); best q={best.quality:.3f} at ({best.center_u_px:.0f}, "
                             f"{best.center_v_px:.0f}) px, width {best.width_m * 1000:.1f} mm, object {best.object_id}")
         return response
+
+    def _publish_grasp_frame(self, grasp: Grasp) -> None:
+        """The grasp's TCP pose as TF frame `grasp_frame` under the base frame (on /tf), so rviz and
+        `ros2 run tf2_ros tf2_echo <base> defgg_grasp` show where the executor would be sent."""
+        pose = grasp.pose_base
+        try:
+            base_T_grasp = transform_from_pose(pose.pose)
+        except ValueError as exc:
+            self._warn(f"grasp frame not published: {exc}")
+            return
+        self._tf_broadcaster.send(transform_msg(pose.header.frame_id or self._p["base_frame"], self._p["grasp_frame"],
+                                                base_T_grasp, pose.header.stamp))
 
     def _frame_from_request(self, request) -> Frame:
         if _unset(request.depth):

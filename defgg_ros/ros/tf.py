@@ -1,0 +1,204 @@
+"""A small TF listener and broadcaster over tf2_msgs/TFMessage, for a venv without tf2_ros.
+
+tf2_ros (the C++ buffer and its Python wrapper) is not on PyPI; tf2_msgs is (built from
+vendor_interfaces/ into the venv; on a ROS install the real package). The cell needs little of tf2:
+the camera is fixed in the cell, so the latest transform of each frame is enough (no time
+interpolation), and frames form a tree (each child has one parent), as in tf2.
+
+- `TransformTree`: the pure part (no rclpy): add TransformStamped messages, look up
+  `target_T_source` (4x4) along the tree, like tf2's lookupTransform(target, source).
+- `TfListener(node)`: subscribes /tf and /tf_static with tf2_ros's QoS and fills a TransformTree;
+  `lookup(target, source)` raises LookupError naming the missing link.
+- `base_T_camera(listener, base_frame, camera_frame, fallback)`: what perception uses: the camera
+  optical frame's pose in the robot base, from TF when known, else the fallback (the parameter).
+- `transform_msg(parent, child, parent_T_child, stamp)`: a TransformStamped from a 4x4 matrix.
+
+Not supported (say so rather than guess): a camera moving relative to the base (eye-in-hand)
+needs transforms at the image's stamp; this tree keeps only the latest transform of each frame.
+"""
+import threading
+
+import numpy as np
+
+TF_TOPIC = "/tf"            # absolute, as tf2_ros uses them; remap for a namespaced robot
+TF_STATIC_TOPIC = "/tf_static"
+
+
+class TransformTree:
+    """Latest parent_T_child per child frame; lookups compose along the tree."""
+
+    def __init__(self):
+        self._lock = threading.Lock()
+        self._edges = {}  # child -> (parent, parent_T_child 4x4, stamp_ns, static)
+
+    def add(self, transform, static: bool = False) -> None:
+        """Insert a geometry_msgs/TransformStamped. Raises ValueError on a malformed one (nothing changes)."""
+        parent, child = transform.header.frame_id.lstrip("/"), transform.child_frame_id.lstrip("/")
+        if not parent or not child or parent == child:
+            raise ValueError(f"transform needs two different frame ids, got '{parent}' -> '{child}'")
+        matrix = matrix_from_transform(transform.transform)
+        stamp_ns = transform.header.stamp.sec * 1_000_000_000 + transform.header.stamp.nanosec
+        with self._lock:
+            if self._would_loop(parent, child):
+                raise ValueError(f"transform {parent} -> {child} would close a loop in the TF tree")
+            self._edges[child] = (parent, matrix, stamp_ns, bool(static))
+
+    def add_message(self, tf_message, static: bool = False) -> list[str]:
+        """Insert every transform of a tf2_msgs/TFMessage; returns the problems of the ones skipped."""
+        problems = []
+        for transform in tf_message.transforms:
+            try:
+                self.add(transform, static)
+            except ValueError as error:
+                problems.append(str(error))
+        return problems
+
+    def frames(self) -> set[str]:
+        with self._lock:
+            return set(self._edges) | {parent for parent, *_ in self._edges.values()}
+
+    def lookup(self, target_frame: str, source_frame: str) -> np.ndarray:
+        """target_T_source (4x4): maps points in source_frame to target_frame. LookupError if not connected."""
+        target_frame, source_frame = target_frame.lstrip("/"), source_frame.lstrip("/")
+        with self._lock:
+            root_t, root_T_target = self._to_root(target_frame)
+            root_s, root_T_source = self._to_root(source_frame)
+        if root_t != root_s:
+            known = ", ".join(sorted(self.frames())) or "none"
+            raise LookupError(f"no TF path from '{source_frame}' to '{target_frame}' "
+                              f"(their trees end at '{root_s}' and '{root_t}'; frames known: {known})")
+        return np.linalg.inv(root_T_target) @ root_T_source
+
+    def _to_root(self, frame: str):
+        """(root frame, root_T_frame) following parents (lock held)."""
+        matrix, seen = np.eye(4), {frame}
+        while frame in self._edges:
+            parent, parent_T_child, _, _ = self._edges[frame]
+            matrix = parent_T_child @ matrix
+            frame = parent
+            if frame in seen:  # cannot happen through add(); guards a corrupted tree
+                raise LookupError(f"TF loop at '{frame}'")
+            seen.add(frame)
+        return frame, matrix
+
+    def _would_loop(self, parent: str, child: str) -> bool:
+        frame = parent
+        while frame in self._edges:
+            if frame == child:
+                return True
+            frame = self._edges[frame][0]
+        return frame == child
+
+
+def matrix_from_transform(transform) -> np.ndarray:
+    """4x4 from a geometry_msgs/Transform. ValueError on non-finite values or a zero quaternion."""
+    t, r = transform.translation, transform.rotation
+    xyz = np.array([t.x, t.y, t.z], dtype=float)
+    quat = np.array([r.x, r.y, r.z, r.w], dtype=float)
+    norm = float(np.linalg.norm(quat))
+    if not (np.all(np.isfinite(xyz)) and np.all(np.isfinite(quat))) or norm < 1e-6:
+        raise ValueError(f"transform has non-finite values or a zero quaternion: {xyz.tolist()}, {quat.tolist()}")
+    x, y, z, w = quat / norm
+    matrix = np.eye(4)
+    matrix[:3, :3] = [[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                      [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                      [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]]
+    matrix[:3, 3] = xyz
+    return matrix
+
+
+def quaternion_from_matrix(rotation: np.ndarray) -> tuple[float, float, float, float]:
+    """(x, y, z, w) of a 3x3 rotation matrix (Shepperd's method, w >= 0)."""
+    m = np.asarray(rotation, dtype=float)
+    trace = np.trace(m)
+    if trace > 0:
+        s = 2.0 * np.sqrt(trace + 1.0)
+        q = (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s, 0.25 * s
+    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
+        s = 2.0 * np.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
+        q = 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s, (m[2, 1] - m[1, 2]) / s
+    elif m[1, 1] > m[2, 2]:
+        s = 2.0 * np.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2])
+        q = (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s, (m[0, 2] - m[2, 0]) / s
+    else:
+        s = 2.0 * np.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1])
+        q = (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s, (m[1, 0] - m[0, 1]) / s
+    q = np.array(q) / np.linalg.norm(q)
+    if q[3] < 0:
+        q = -q
+    return tuple(float(v) for v in q)
+
+
+def transform_msg(parent_frame: str, child_frame: str, parent_T_child: np.ndarray, stamp=None):
+    """geometry_msgs/TransformStamped of a 4x4 matrix (stamp: builtin_interfaces/Time, default zero)."""
+    from geometry_msgs.msg import TransformStamped
+
+    msg = TransformStamped()
+    msg.header.frame_id, msg.child_frame_id = parent_frame, child_frame
+    if stamp is not None:
+        msg.header.stamp = stamp
+    matrix = np.asarray(parent_T_child, dtype=float)
+    t = msg.transform.translation
+    t.x, t.y, t.z = (float(v) for v in matrix[:3, 3])
+    r = msg.transform.rotation
+    r.x, r.y, r.z, r.w = quaternion_from_matrix(matrix[:3, :3])
+    return msg
+
+
+def tf_qos(static: bool):
+    """tf2_ros's QoS: /tf reliable, volatile, keep last 100; /tf_static reliable, transient local, keep last 100
+    (a static broadcaster's latched depth-1 writer matches it)."""
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL if static else DurabilityPolicy.VOLATILE)
+
+
+class TfListener:
+    """Fills a TransformTree from /tf and /tf_static (latest transform per frame)."""
+
+    def __init__(self, node, tree: TransformTree | None = None, callback_group=None):
+        from tf2_msgs.msg import TFMessage
+
+        self.tree = tree or TransformTree()
+        self._node = node
+        node.create_subscription(TFMessage, TF_TOPIC, lambda m: self._on_message(m, False), tf_qos(False),
+                                 callback_group=callback_group)
+        node.create_subscription(TFMessage, TF_STATIC_TOPIC, lambda m: self._on_message(m, True), tf_qos(True),
+                                 callback_group=callback_group)
+
+    def _on_message(self, msg, static: bool) -> None:
+        for problem in self.tree.add_message(msg, static):
+            self._node.get_logger().warning(f"ignoring a transform: {problem}", throttle_duration_sec=5.0)
+
+    def lookup(self, target_frame: str, source_frame: str) -> np.ndarray:
+        """target_T_source (4x4); LookupError when TF does not connect the two frames (yet)."""
+        return self.tree.lookup(target_frame, source_frame)
+
+
+def base_T_camera(source, base_frame: str, camera_frame: str, fallback: np.ndarray | None = None):
+    """(base_T_camera 4x4, where it came from: 'tf' or 'parameter').
+
+    `source` is a TfListener or TransformTree. Without a TF path from camera_frame to base_frame the
+    fallback is returned, or LookupError raised when there is none.
+    """
+    try:
+        return source.lookup(base_frame, camera_frame), "tf"
+    except LookupError:
+        if fallback is None:
+            raise
+        return np.asarray(fallback, dtype=float), "parameter"
+
+
+class TfBroadcaster:
+    """Publishes transforms on /tf (moving frames, e.g. the planned grasp) or /tf_static (latched)."""
+
+    def __init__(self, node, static: bool = False):
+        from tf2_msgs.msg import TFMessage
+
+        self._msg_type = TFMessage
+        self._pub = node.create_publisher(TFMessage, TF_STATIC_TOPIC if static else TF_TOPIC,
+                                          tf_qos(static) if static else tf_qos(False))
+
+    def send(self, *transforms) -> None:
+        self._pub.publish(self._msg_type(transforms=list(transforms)))
