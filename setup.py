@@ -37,8 +37,7 @@ setup(
     name=PACKAGE,
     version="0.1.0",
     packages=find_packages(exclude=["test", "test.*"]),
-    package_data={"defgg_ros.sim": ["tet_meshes/*.npz"], "defgg_ros.sessions": ["fastdds_profile.xml"],
-                  "defgg_ros.ros": ["params/*.yaml"]},
+    package_data={"defgg_ros.sim": ["tet_meshes/*.npz"], "defgg_ros.ros": ["params/*.yaml", "fastdds_profile.xml"]},
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),

@@ -14,7 +14,6 @@ Targets (issue 5): PlanGrasp p99 <= 15 ms, overhead <= 1.3x the bare call.
 """
 import argparse
 import os
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -22,7 +21,8 @@ from pathlib import Path
 import numpy as np
 
 from defgg_ros.ros.domain import pick_private_domain
-from defgg_ros.sessions.graph import FASTDDS_PROFILE_VARIABLE, use_large_message_transport
+from defgg_ros.ros.launcher import NodeProcess
+from defgg_ros.ros.transport import FASTDDS_PROFILE_VARIABLE, use_large_message_transport
 
 ROOT = Path(__file__).resolve().parents[1]
 TARGET_P99_MS = 15.0
@@ -53,12 +53,12 @@ def scene():
     return depth_m, moduli[truth], truth, default_camera_k()
 
 
-def start_node(model: str, threads: int) -> subprocess.Popen:
+def start_node(model: str, threads: int) -> NodeProcess:
     """grasp_inference_node in its own process; publish_on_sync off so only PlanGrasp costs CPU."""
     cmd = [sys.executable, "-m", "defgg_ros.nodes.grasp_inference_node", "--ros-args",
            "-p", f"model_path:={model}", "-p", f"num_threads:={threads}", "-p", "publish_on_sync:=false",
            "--log-level", "warn"]
-    return subprocess.Popen(cmd, cwd=ROOT)
+    return NodeProcess("grasp_inference_node", cmd, cwd=ROOT)
 
 
 def rss_mb(pid: int) -> float:
@@ -137,7 +137,7 @@ def prime_latest_frame(cell, frame_msgs, deadline_s=60.0):
 def wait_for_node(cell, proc, deadline_s=120.0):
     deadline = time.monotonic() + deadline_s
     while not cell.client.wait_for_service(timeout_sec=0.5):
-        if proc.poll() is not None or time.monotonic() > deadline:
+        if proc.returncode() is not None or time.monotonic() > deadline:
             raise RuntimeError("grasp_inference_node did not come up")
 
 
@@ -193,17 +193,8 @@ def main(argv=None):
                         in_node[name].append(result.inference_time_s)
         report(times, in_node, args, predictor.runtime)
     finally:
-        stop_node(proc)
+        proc.stop()
         context.try_shutdown()
-
-
-def stop_node(proc):
-    proc.terminate()
-    try:
-        proc.wait(timeout=15)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait(timeout=15)
 
 
 def _ok(response):

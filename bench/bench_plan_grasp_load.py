@@ -30,7 +30,7 @@ from bench_plan_grasp import (
 
 from defgg_ros.nodes.grasp_inference_node import default_model_path
 from defgg_ros.ros.domain import pick_private_domain
-from defgg_ros.sessions.graph import use_large_message_transport
+from defgg_ros.ros.transport import use_large_message_transport
 
 
 def parse_args(argv=None):

@@ -2,7 +2,7 @@
 
 1. transport: a segmentation_node process gets N 640x480 depth frames (0.6 MB, best effort) from this
    process and answers each with a 1.2 MB stiffness image; counts the answers with Fast DDS's default
-   transports and with defgg_ros/sessions/fastdds_profile.xml (each variant in a fresh child process,
+   transports and with defgg_ros/ros/fastdds_profile.xml (each variant in a fresh child process,
    because the profile is read when the DDS participant starts).
 2. replay: `defgg-replay` over each committed session (sim_bringup/sessions), wall time per session.
 
@@ -28,10 +28,10 @@ def transport_child(n_frames: int) -> None:
     from sensor_msgs.msg import Image
 
     from defgg_ros.nodes import qos
+    from defgg_ros.ros.cell_client import CellClient
     from defgg_ros.ros.executor import ThreadedExecutor
-    from defgg_ros.sessions.client import CellClient
-    from defgg_ros.sessions.graph import NodeGraph, NodeSpec
     from defgg_ros.sessions.player import SessionPlayer
+    from defgg_ros.sessions.replay_nodes import NodeGraph, NodeSpec
     from defgg_ros.sessions.session import load_session
 
     frames = load_session(REPO / "sim_bringup" / "sessions" / "soft_objects").frames
@@ -56,7 +56,7 @@ def transport_child(n_frames: int) -> None:
 
 def transport(n_frames: int) -> None:
     for name, profile in (("default transports", None),
-                          ("fastdds_profile.xml", str(REPO / "defgg_ros" / "sessions" / "fastdds_profile.xml"))):
+                          ("fastdds_profile.xml", str(REPO / "defgg_ros" / "ros" / "fastdds_profile.xml"))):
         env = {k: v for k, v in os.environ.items() if k != "FASTRTPS_DEFAULT_PROFILES_FILE"}
         env.update(ROS_DOMAIN_ID=str(pick_private_domain()), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
         if profile:

@@ -4,7 +4,7 @@ The publisher is a plain rclpy node in its own process with Fast DDS's defaults 
 environment of ours) and the default QoS (reliable, keep last 10), 30 Hz, like realsense2_camera.
 The subscriber, in another process, is varied: its QoS (best effort = qos_profile_sensor_data, as the
 nodes used before issue 26; reliable; the adaptive choice of defgg_ros.nodes.qos) and its own
-Fast DDS set-up (defaults, or defgg_ros/sessions/fastdds_profile.xml as the nodes now set for themselves).
+Fast DDS set-up (defaults, or defgg_ros/ros/fastdds_profile.xml as the nodes now set for themselves).
 
     .venv/bin/python bench/bench_transport.py [--frames 60] [--width 1280 --height 720] [--rate-hz 30]
 """
@@ -16,7 +16,7 @@ import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
-PROFILE = REPO / "defgg_ros" / "sessions" / "fastdds_profile.xml"
+PROFILE = REPO / "defgg_ros" / "ros" / "fastdds_profile.xml"
 TOPIC = "/camera/camera/depth/image_rect_raw"
 
 

@@ -36,10 +36,11 @@ from defgg_ros.bringup.demo_report import FramePanels, PickRow, format_table, sa
 from defgg_ros.bringup.node_set import NodeSetError, load_node_set
 from defgg_ros.bringup.supervisor import Bringup, BringupError
 from defgg_ros.ros.domain import ISOLATION_ENV, apply_domain_choice, default_domain_choice
+from defgg_ros.ros.share import share_path
 
-ROOT = Path(__file__).resolve().parents[1]
-DEFAULT_SCENE = ROOT / "sim_bringup" / "scenes" / "demo.yaml"
-DEFAULT_MODEL = ROOT / "models" / "defgg_cnn.pt"
+ROOT = Path(__file__).resolve().parents[1]  # runs/ of the working copy
+DEFAULT_SCENE = share_path("sim_bringup", "scenes", "demo.yaml")
+DEFAULT_MODEL = share_path("models", "defgg_cnn.pt")
 DRIVER, INFERENCE = "fake_panda_driver", "grasp_inference_node"
 # Before each camera frame the arm goes to the ready pose, which is out of the
 # camera's view: first straight up by this much, then in joint space.
@@ -126,9 +127,7 @@ class DemoRun:
         depth, info = self.client.fresh_frame(0.0)
         k = camera_info_to_k(info)
         entries = _stiffness_msgs(self.scene, self.client.object_positions(), k, (info.width, info.height), names)
-        response = self.client.set_stiffness(entries)
-        if not response.success:
-            raise BringupError(f"SetStiffness refused the scene's moduli: {response.message}")
+        self.client.set_stiffness(entries)  # CellCallError when the segmentation node refuses the moduli
 
     def pick(self, index: int, remaining: set, progress) -> PickRow:
         obj = self.scene["objects"][index]
@@ -203,7 +202,7 @@ class DemoRun:
         panel.quality = full_quality_image(prediction.q, prediction.crop_offset_px, depth_m.shape)
         request = PlanGrasp.Request(depth=depth_msg, camera_info=info, top_k=1,
                                     stiffness=numpy_to_image(stiffness_pa, "32FC1", depth_msg.header))
-        response = self.client.plan_grasp(request)
+        response = self.client.plan(request)
         if not response.success or not response.grasps:
             row.failure_reason = f"PlanGrasp: {response.message}"
             return None
@@ -265,7 +264,8 @@ def executor_params(node_set) -> dict:
 
 
 def run_demo(args, out_dir: Path, log) -> int:
-    from defgg_ros.bringup.demo_client import DemoClient, DemoError
+    from defgg_ros.bringup.demo_client import DemoClient
+    from defgg_ros.ros.cell_client import CellCallError
 
     overrides = {DRIVER: {"scene_file": str(Path(args.scene).resolve()), "gui": bool(args.gui),
                           "max_real_time_factor": float(args.max_rtf)},
@@ -285,7 +285,7 @@ def run_demo(args, out_dir: Path, log) -> int:
         wanted = args.objects.split(",") if args.objects else names
         unknown = set(wanted) - set(names)
         if unknown:
-            raise DemoError(f"--objects {sorted(unknown)} not in the scene (has {names})")
+            raise CellCallError(f"--objects {sorted(unknown)} not in the scene (has {names})")
         run.assign_stiffness(set(names))
         remaining = set(names)
         with tqdm([names.index(n) for n in wanted], desc="picking", unit="object") as progress:
@@ -298,7 +298,7 @@ def run_demo(args, out_dir: Path, log) -> int:
                     remaining.discard(names[index])
         panels = run.panels
         code = 0
-    except (BringupError, DemoError, NodeSetError) as exc:
+    except (BringupError, CellCallError, NodeSetError) as exc:
         print(f"defgg-demo: {exc}", file=sys.stderr)
         code = 1
     finally:

@@ -1,10 +1,12 @@
 """The demo's ROS side: one client node that talks to the running cell.
 
-Every call spins the node's own executor in the calling thread until its
-answer is there (bounded by a timeout; DemoError says what did not answer).
-Spinning where the request is sent avoids rclpy's race in which an action
-goal response arriving before the client registered the request is dropped
-("Ignoring unexpected goal response"), seen with a background spin thread.
+The cell's calls (PlanGrasp, SetStiffness, PickAndPlace) go through the one cell client
+(defgg_ros/ros/cell_client.py); this adds what only the simulated cell offers: the scene and
+ground-truth object poses, fresh depth frames on request, direct arm and gripper moves.
+Every wait spins the node's own executor in the calling thread until its answer is there
+(bounded by a timeout; CellCallError says what did not answer). Spinning where the request is
+sent avoids rclpy's race in which an action goal response arriving before the client registered
+the request is dropped ("Ignoring unexpected goal response"), seen with a background spin thread.
 """
 import json
 import time
@@ -13,8 +15,8 @@ import numpy as np
 import rclpy
 from builtin_interfaces.msg import Duration
 from defgg_interfaces.action import PickAndPlace
-from defgg_interfaces.srv import PlanGrasp, SetStiffness
 from franka_msgs.action import Move
+from defgg_interfaces.srv import PlanGrasp
 from geometry_msgs.msg import PoseArray
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
@@ -30,11 +32,8 @@ from defgg_ros.nodes.conversions import stamp_to_ns
 from defgg_ros.nodes.fake_panda_driver_node import CAPTURE_SERVICE, IMAGE_QOS, OBJECT_POSES_TOPIC, SCENE_TOPIC
 from defgg_ros.ros import topics
 from defgg_ros.ros.action import ActionClient, destroy_actions
+from defgg_ros.ros.cell_client import CellCallError, CellClient
 from defgg_ros.ros.service import ServiceTimeout, call_idempotent
-
-
-class DemoError(RuntimeError):
-    """The cell did not answer as expected."""
 
 
 class DemoClient:
@@ -57,11 +56,9 @@ class DemoClient:
         n.create_subscription(JointState, topics.JOINT_STATES, self._on_joints, qos.STATE)
         self._trajectory_pub = n.create_publisher(JointTrajectory, topics.JOINT_TRAJECTORY, qos.COMMAND)
         self.gripper_move_client = ActionClient(n, Move, topics.GRIPPER_MOVE_ACTION)
-        self.set_stiffness_client = n.create_client(SetStiffness, topics.SET_STIFFNESS_SERVICE)
-        self.plan_client = n.create_client(PlanGrasp, topics.PLAN_GRASP_SERVICE)
-        self.pick_client = ActionClient(n, PickAndPlace, topics.PICK_AND_PLACE_ACTION)
         self._executor = SingleThreadedExecutor(context=self._context)
         self._executor.add_node(n)
+        self.cell = CellClient(n, spin_until=self._spin_until)
 
     # ---- subscriptions -----------------------------------------------------
     def _store(self, setter):
@@ -120,7 +117,7 @@ class DemoClient:
 
     def _wait(self, predicate, timeout_s, what):
         if not self._spin_until(predicate, timeout_s):
-            raise DemoError(f"timed out after {timeout_s:.0f} s waiting for {what}")
+            raise CellCallError(f"timed out after {timeout_s:.0f} s waiting for {what}")
 
     def _spin_until(self, predicate, timeout_s) -> bool:
         """Spin until predicate() holds (True) or `timeout_s` passes (False)."""
@@ -165,32 +162,21 @@ class DemoClient:
     # ---- calls -----------------------------------------------------------------
     def _call(self, client, request, timeout_s, what):
         self._wait(client.service_is_ready, timeout_s, f"the {what} service")
-        # Both services called here are idempotent: re-sent while unanswered (ros_service.py).
+        # capture_depth is idempotent: re-sent while unanswered (defgg_ros/ros/service.py).
         try:
             return call_idempotent(client, request, timeout_s, f"the answer of {what}", wait_until=self._spin_until)
         except (ServiceTimeout, RuntimeError) as error:
-            raise DemoError(str(error)) from None
+            raise CellCallError(str(error)) from None
 
     def set_stiffness(self, objects, default_youngs_modulus_pa=0.0, timeout_s=30.0):
-        request = SetStiffness.Request(objects=objects, default_youngs_modulus_pa=default_youngs_modulus_pa)
-        return self._call(self.set_stiffness_client, request, timeout_s, "SetStiffness")
+        return self.cell.set_stiffness(objects, default_youngs_modulus_pa, timeout_s)
 
-    def plan_grasp(self, request: PlanGrasp.Request, timeout_s=60.0):
-        return self._call(self.plan_client, request, timeout_s, "PlanGrasp")
+    def plan(self, request: PlanGrasp.Request, timeout_s=60.0):
+        return self.cell.plan(request, timeout_s)
 
     def pick(self, goal: PickAndPlace.Goal, on_feedback=None, timeout_s=600.0):
         """Send a PickAndPlace goal and wait for its result (PickAndPlace.Result)."""
-        self._wait(self.pick_client.server_is_ready, 30.0, "the PickAndPlace action server")
-        callback = (lambda msg: on_feedback(msg.feedback)) if on_feedback else None
-        handle = self._wait_future(self.pick_client.send_goal_async(goal, feedback_callback=callback), 30.0,
-                                   "the PickAndPlace goal response")
-        if not handle.accepted:
-            raise DemoError("PickAndPlace goal rejected (executor busy?)")
-        try:
-            return self._wait_future(handle.get_result_async(), timeout_s, "the PickAndPlace result").result
-        except DemoError:
-            handle.cancel_goal_async()
-            raise
+        return self.cell.pick(goal, on_feedback, timeout_s)
 
     def close(self):
         self._executor.shutdown(timeout_sec=2.0)

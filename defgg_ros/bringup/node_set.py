@@ -19,6 +19,7 @@ from pathlib import Path
 import yaml
 
 from defgg_ros.ros.domain import parse_domain_choice
+from defgg_ros.ros.share import share_path
 
 READY_KINDS = ("service", "action", "topic")
 
@@ -54,15 +55,7 @@ class NodeSet:
 
 def config_dir() -> Path:
     """sim_bringup/config of the source tree (or of the installed share folder)."""
-    source = Path(__file__).resolve().parents[2] / "sim_bringup" / "config"
-    if source.is_dir():
-        return source
-    try:
-        from ament_index_python.packages import get_package_share_directory
-
-        return Path(get_package_share_directory("defgg_ros")) / "sim_bringup" / "config"
-    except Exception:  # no ament index (plain pip install): report the source path
-        return source
+    return share_path("sim_bringup", "config")
 
 
 def resolve_set_path(set_name_or_path: str) -> Path:

@@ -8,8 +8,8 @@ import time
 from dataclasses import dataclass
 
 from defgg_ros.bringup.node_set import NodeSet, node_command
-from defgg_ros.bringup.processes import ManagedProcess
-from defgg_ros.sessions.graph import use_large_message_transport
+from defgg_ros.ros.launcher import NodeProcess, stop_all
+from defgg_ros.ros.transport import use_large_message_transport
 
 DEFAULT_READY_TIMEOUT_S = 120.0
 
@@ -49,16 +49,16 @@ class Bringup:
 
     def start(self) -> None:
         # Large shared-memory segments: with the default transports camera-sized messages between
-        # processes were mostly lost (defgg_ros/sessions/fastdds_profile.xml).
+        # processes were mostly lost (defgg_ros/ros/fastdds_profile.xml).
         use_large_message_transport()
         unknown = set(self._overrides) - {n.name for n in self.node_set.nodes}
         if unknown:
             raise BringupError(f"parameter overrides for nodes not in set {self.node_set.name}: {sorted(unknown)}")
         for entry in self.node_set.nodes:
             argv = node_command(entry, self.node_set.use_sim_time, self._overrides.get(entry.name))
-            self.processes[entry.name] = ManagedProcess(entry.name, argv, out=self._out)
+            self.processes[entry.name] = NodeProcess(entry.name, argv, out=self._out)
         for name, argv in self._extra.items():
-            self.processes[name] = ManagedProcess(name, argv, out=self._out)
+            self.processes[name] = NodeProcess(name, argv, out=self._out)
 
     def failed_node(self) -> NodeExit | None:
         """The first process that has exited, if any."""
@@ -107,8 +107,5 @@ class Bringup:
             probe.close()
 
     def stop(self) -> dict:
-        """Stop every process (reverse start order); returns name -> exit code."""
-        codes = {}
-        for name in reversed(list(self.processes)):
-            codes[name] = self.processes[name].stop()
-        return codes
+        """Stop every process (reverse start order, the launcher's shutdown rule); returns name -> exit code."""
+        return stop_all(reversed(list(self.processes.values())))

@@ -19,11 +19,9 @@ clock. It is throttled to at most `max_real_time_factor`.
 import json
 import threading
 import time
-from pathlib import Path
 
 import rclpy
 from control_msgs.action import FollowJointTrajectory
-from defgg_ros.sessions.graph import use_large_message_transport
 from franka_msgs.action import Grasp, Homing, Move
 from geometry_msgs.msg import Pose, PoseArray, TransformStamped, WrenchStamped
 from rclpy._rclpy_pybind11 import RCLError
@@ -45,6 +43,8 @@ from defgg_ros.ros import topics
 from defgg_ros.ros.action import destroy_actions
 from defgg_ros.ros.executor import ThreadedExecutor
 from defgg_ros.ros.parameters import declare_parameters, load_schema
+from defgg_ros.ros.share import share_path
+from defgg_ros.ros.transport import use_large_message_transport
 from defgg_ros.sim.cell import CellSettings, SimCell
 from defgg_ros.sim.cell_camera import DepthNoise
 from defgg_ros.sim.cell_gripper import GripperCommandError
@@ -67,15 +67,7 @@ MAX_STAMP_OFFSET_S = 1.0
 
 def default_scene_file() -> str:
     """sim_bringup/scenes/demo.yaml of the source tree, else of the installed share folder."""
-    source = Path(__file__).resolve().parents[2] / "sim_bringup" / "scenes" / "demo.yaml"
-    if source.is_file():
-        return str(source)
-    try:
-        from ament_index_python.packages import get_package_share_directory
-
-        return str(Path(get_package_share_directory("defgg_ros")) / "sim_bringup" / "scenes" / "demo.yaml")
-    except Exception:  # ament index absent (pip install): keep the source path in the error
-        return str(source)
+    return str(share_path("sim_bringup", "scenes", "demo.yaml"))
 
 
 # Names, types, defaults and bounds: defgg_ros/ros/params/fake_panda_driver.yaml.

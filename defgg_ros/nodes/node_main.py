@@ -5,7 +5,7 @@ import rclpy
 from rclpy.executors import ExternalShutdownException
 
 from defgg_ros.ros.executor import ThreadedExecutor
-from defgg_ros.sessions.graph import use_large_message_transport
+from defgg_ros.ros.transport import use_large_message_transport
 
 
 def run_node(name: str, make_node, startup_errors=(ValueError, OSError), threads: int = 1, args=None) -> None:
@@ -17,7 +17,7 @@ def run_node(name: str, make_node, startup_errors=(ValueError, OSError), threads
     spins a ThreadedExecutor (nodes with reentrant callback groups).
 
     Before rclpy starts its DDS participant, the process takes the cell's
-    Fast DDS profile (defgg_ros/sessions/fastdds_profile.xml: 32 MB
+    Fast DDS profile (defgg_ros/ros/fastdds_profile.xml: 32 MB
     shared-memory segments, 4 MB UDP buffers) unless the caller set one.
     The profile belongs to the node, not to a launcher: a node started by
     `ros2 run`, a launch file or a console script must receive camera-sized

@@ -4,7 +4,7 @@ from concurrent.futures import ThreadPoolExecutor
 from rcl_interfaces.srv import GetParameters, ListParameters
 from rclpy.parameter import parameter_value_to_python
 
-from defgg_ros.sessions.client import CellCallError, wait_future
+from defgg_ros.ros.cell_client import CellCallError, wait_future
 
 # The cell's nodes whose parameters a session records.
 CELL_NODES = ("segmentation_node", "grasp_inference_node", "executor_node", "fake_panda_driver")

@@ -13,7 +13,6 @@ from dataclasses import dataclass
 from defgg_interfaces.action import PickAndPlace
 from defgg_interfaces.msg import Grasp, StiffnessAssignment
 from defgg_interfaces.srv import PlanGrasp
-from defgg_ros.sessions.client import CellCallError
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
@@ -21,6 +20,7 @@ from sensor_msgs.msg import CameraInfo, Image, JointState
 
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import ns_to_stamp
+from defgg_ros.ros.cell_client import CellCallError
 from defgg_ros.sessions.compare import GraspSummary, PickOutcome, Tolerances, grasp_problems, pick_problems
 from defgg_ros.sessions.report import Row, diff_text
 from defgg_ros.sessions.selector import restamp
@@ -204,7 +204,7 @@ class Replay:
         if self.recorder is not None:
             self.recorder.record_pick_goal(goal, time.time_ns())
         on_feedback = self.recorder.record_pick_feedback if self.recorder is not None else None
-        result = self.client.pick(goal, self.options.pick_timeout_s, on_feedback)
+        result = self.client.pick(goal, on_feedback, timeout_s=self.options.pick_timeout_s)
         self.player.restore(result.grasp_used)
         if self.recorder is not None:
             self.recorder.record_pick_result(result)

@@ -25,8 +25,6 @@ import rclpy
 from defgg_interfaces.action import PickAndPlace
 from defgg_interfaces.msg import ObjectStiffness
 from defgg_interfaces.srv import PlanGrasp
-from defgg_ros.sessions.client import CellCallError, CellClient
-from defgg_ros.sessions.graph import use_large_message_transport
 from rclpy.context import Context
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo
@@ -34,7 +32,9 @@ from tqdm import tqdm
 
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import camera_info_to_k
+from defgg_ros.ros.cell_client import CellCallError, CellClient
 from defgg_ros.ros.executor import ThreadedExecutor
+from defgg_ros.ros.transport import use_large_message_transport
 from defgg_ros.sessions import metadata as md
 from defgg_ros.sessions.bag import SessionBagError, SessionWriter
 from defgg_ros.sessions.compare import GraspSummary, PickOutcome, Tolerances

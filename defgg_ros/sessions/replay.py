@@ -17,14 +17,14 @@ from dataclasses import replace
 from pathlib import Path
 
 import rclpy
-from defgg_ros.sessions.client import CellCallError, CellClient
-from defgg_ros.sessions.graph import GraphError, NodeGraph, use_large_message_transport
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from tqdm import tqdm
 
+from defgg_ros.ros.cell_client import CellCallError, CellClient
 from defgg_ros.ros.domain import SAFE_DOMAIN_RANGE, pick_private_domain
 from defgg_ros.ros.executor import ThreadedExecutor
+from defgg_ros.ros.transport import use_large_message_transport
 from defgg_ros.sessions import metadata as md
 from defgg_ros.sessions import session_topics as st
 from defgg_ros.sessions.bag import SessionBagError, SessionWriter
@@ -33,6 +33,7 @@ from defgg_ros.sessions.params import PERCEPTION_NODES
 from defgg_ros.sessions.player import Replay, ReplayOptions, SessionPlayer
 from defgg_ros.sessions.recorder_node import SessionRecorder
 from defgg_ros.sessions.replay_graph import graph_specs, resolve_model
+from defgg_ros.sessions.replay_nodes import GraphError, NodeGraph
 from defgg_ros.sessions.report import format_table, regression_message
 from defgg_ros.sessions.selector import FrameSelector
 from defgg_ros.sessions.session import load_session

@@ -9,12 +9,12 @@ replays like it was recorded.
 from dataclasses import dataclass
 from pathlib import Path
 
-from defgg_ros.sessions.graph import NodeSpec
-
+from defgg_ros.ros.share import share_path
 from defgg_ros.sessions import metadata as md
+from defgg_ros.sessions.replay_nodes import NodeSpec
 from defgg_ros.sessions.session_topics import topics  # absolute names (bag channels)
 
-MODELS_DIR = Path(__file__).resolve().parents[2] / "models"
+MODELS_DIR = share_path("models")
 # Recorded parameters re-applied in the replay (topic names are not: the player uses the defaults).
 REPLAYED_PARAMETERS = {
     "segmentation_node": ("default_youngs_modulus_pa", "min_object_height_m", "min_object_area_px"),

@@ -8,7 +8,7 @@ set -euo pipefail
 cd "$(dirname "$0")/../.."
 HERE=sim_bringup/sessions
 export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-211} ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
-export FASTRTPS_DEFAULT_PROFILES_FILE=${FASTRTPS_DEFAULT_PROFILES_FILE:-$PWD/defgg_ros/sessions/fastdds_profile.xml}
+export FASTRTPS_DEFAULT_PROFILES_FILE=${FASTRTPS_DEFAULT_PROFILES_FILE:-$PWD/defgg_ros/ros/fastdds_profile.xml}
 
 record() {  # name, then defgg-record options
   local name=$1; shift

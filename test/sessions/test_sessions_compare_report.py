@@ -84,7 +84,7 @@ def test_pure_session_modules_do_not_import_rclpy():
     import subprocess
     import sys
     modules = ["interfaces", "bag", "session", "selector", "compare", "report", "metadata", "scene_stiffness",
-               "replay_graph", "graph"]
+               "replay_graph", "replay_nodes"]
     code = ("import sys\n" + "".join(f"import defgg_ros.sessions.{m}\n" for m in modules)
             + "bad = [m for m in sys.modules if m.split('.')[0] in ('rclpy', 'torch')]\nprint(bad)\n"
             + "sys.exit(1 if bad else 0)")

@@ -1,0 +1,109 @@
+"""Node processes: the one way the bringup, the session replays, the tests and the benches start and stop
+a node in a child process.
+
+Each process runs in its own session (process group): a terminal's Ctrl-C reaches only the parent,
+which then stops its children in order, and stopping one never touches anything else. Its output is
+either forwarded line by line as "[name] line" (the bringup, the demo) or appended to a log file (a
+replay's run folder); either way the last lines are kept for error reports.
+
+One shutdown rule (`NodeProcess.stop`): SIGINT to the group (rclpy shuts down cleanly), then SIGTERM
+after SIGINT_GRACE_S, then SIGKILL after SIGTERM_GRACE_S.
+"""
+import collections
+import os
+import signal
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+from defgg_ros.ros.transport import FASTDDS_PROFILE, FASTDDS_PROFILE_VARIABLE
+
+SIGINT_GRACE_S = 10.0
+SIGTERM_GRACE_S = 5.0
+SIGKILL_WAIT_S = 5.0
+TAIL_LINES = 30
+
+
+def child_env(domain_id: int | None = None, base: dict | None = None) -> dict:
+    """The environment of a node process: unbuffered output (a node's last words reach the log when it
+    dies), the cell's Fast DDS profile unless one is set, and optionally a private localhost-only domain."""
+    env = dict(os.environ if base is None else base)
+    env.setdefault("PYTHONUNBUFFERED", "1")
+    env.setdefault("RCUTILS_LOGGING_BUFFERED_STREAM", "0")  # ROS logs to a pipe are block-buffered otherwise
+    env.setdefault("RCUTILS_COLORIZED_OUTPUT", "0")
+    env.setdefault(FASTDDS_PROFILE_VARIABLE, str(FASTDDS_PROFILE))
+    if domain_id is not None:
+        env.update(ROS_DOMAIN_ID=str(domain_id), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    return env
+
+
+class NodeProcess:
+    """One child process. out: a text stream for "[name] line" forwarding (default stdout); log_path: append
+    the output to this file instead."""
+
+    def __init__(self, name: str, argv: list, env: dict | None = None, out=None, log_path=None, cwd=None):
+        self.name = name
+        self.argv = list(argv)
+        self.log_path = Path(log_path) if log_path is not None else None
+        self._tail = collections.deque(maxlen=TAIL_LINES)
+        self._out = out or sys.stdout
+        self._reader = None
+        env = child_env(base=env)
+        if self.log_path is not None:
+            with open(self.log_path, "ab") as log:
+                self.popen = subprocess.Popen(self.argv, stdout=log, stderr=subprocess.STDOUT,
+                                              stdin=subprocess.DEVNULL, env=env, cwd=cwd, start_new_session=True)
+        else:
+            self.popen = subprocess.Popen(self.argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                          stdin=subprocess.DEVNULL, env=env, cwd=cwd, start_new_session=True,
+                                          text=True, bufsize=1)
+            self._reader = threading.Thread(target=self._forward, name=f"log-{name}", daemon=True)
+            self._reader.start()
+
+    @property
+    def pid(self) -> int:
+        return self.popen.pid
+
+    @property
+    def tail(self) -> list:
+        """The last TAIL_LINES lines of output."""
+        if self.log_path is not None:
+            text = self.log_path.read_text(encoding="utf-8", errors="replace") if self.log_path.exists() else ""
+            return text.splitlines()[-TAIL_LINES:]
+        return list(self._tail)
+
+    def _forward(self):
+        for line in self.popen.stdout:
+            line = line.rstrip("\n")
+            self._tail.append(line)
+            print(f"[{self.name}] {line}", file=self._out, flush=True)
+
+    def returncode(self):
+        """None while running, else the exit code (negative: killed by that signal)."""
+        return self.popen.poll()
+
+    def stop(self) -> int:
+        """SIGINT, then SIGTERM, then SIGKILL to this process's group; returns the exit code."""
+        for sig, grace_s in ((signal.SIGINT, SIGINT_GRACE_S), (signal.SIGTERM, SIGTERM_GRACE_S),
+                             (signal.SIGKILL, SIGKILL_WAIT_S)):
+            if self.popen.poll() is not None:
+                break
+            try:
+                os.killpg(self.popen.pid, sig)
+            except ProcessLookupError:
+                break
+            try:
+                self.popen.wait(timeout=grace_s)
+            except subprocess.TimeoutExpired:
+                continue
+        code = self.popen.wait()
+        if self._reader is not None:
+            self._reader.join(timeout=2.0)
+        return code
+
+
+def stop_all(processes) -> dict:
+    """Stop these NodeProcesses one after the other, in the order given (callers pass reverse start order);
+    returns name -> exit code."""
+    return {process.name: process.stop() for process in processes}
