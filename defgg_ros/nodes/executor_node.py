@@ -13,6 +13,7 @@ reentrant callback group on a multi-threaded executor; subscriptions and
 action-client callbacks feed the sequence under one lock. One goal at a
 time: goals arriving while busy are rejected (the reason is logged).
 """
+import dataclasses
 import math
 import threading
 import time
@@ -33,7 +34,8 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from defgg_ros.constants import PANDA_FINGER_JOINT_NAMES, PANDA_JOINT_NAMES
 from defgg_ros.control.kinematics import PandaKinematics
-from defgg_ros.control.pick_place import PickPlaceSequence
+from defgg_ros.control.observation import ObservationWatch, arm_state_of
+from defgg_ros.control.pick_place import ObservationMove, PickPlaceSequence
 from defgg_ros.control.poses import PoseError, top_down_yaw
 from defgg_ros.control.sequence_types import (
     ArmState,
@@ -46,7 +48,7 @@ from defgg_ros.control.sequence_types import (
     SequenceConfig,
 )
 from defgg_ros.nodes import qos
-from defgg_ros.nodes.conversions import ConversionError, transform_from_pose
+from defgg_ros.nodes.conversions import ConversionError, stamp_to_ns, transform_from_pose
 from defgg_ros.nodes.node_main import run_node
 from defgg_ros.ros import topics
 from defgg_ros.ros.action import ActionClient, destroy_actions
@@ -132,6 +134,8 @@ class ExecutorNode(Node):
         declare_parameters(self)  # a value outside its schema raises ParameterError here
         p = self._params()
         self._config = self._sequence_config(p)  # invalid start-up parameters raise here
+        # Since when the arm rests at the observation pose: plan_grasp goals plan only on later frames.
+        self._watch = ObservationWatch(p["observation_q_rad"], p["observation_tolerance_rad"])
         self._kin = PandaKinematics()
         self._group = ReentrantCallbackGroup()
         self._lock = threading.Lock()
@@ -178,7 +182,11 @@ class ExecutorNode(Node):
             arrival_joint_atol_rad=float(p["arrival_joint_atol_rad"]),
             settle_timeout_s=float(p["settle_timeout_s"]), gripper_timeout_s=float(p["gripper_timeout_s"]),
             slip_width_fraction=float(p["slip_width_fraction"]), sample_dt_s=float(p["trajectory_sample_dt_s"]),
-            transfer_via_position_m=via)
+            transfer_via_position_m=via, still_speed_radps=float(p["still_speed_radps"]),
+            rest_hold_s=float(p["rest_hold_s"]), stop_timeout_s=float(p["stop_timeout_s"]),
+            observation_q_rad=tuple(float(v) for v in p["observation_q_rad"]) if p["recover_after_failure"] else None,
+            observation_lift_m=float(p["observation_lift_m"]),
+            observation_tolerance_rad=float(p["observation_tolerance_rad"]))
         config.validate()
         return config
 
@@ -194,8 +202,10 @@ class ExecutorNode(Node):
         except (GoalError, IndexError) as error:
             self.get_logger().warning(f"ignoring joint state: {error}", throttle_duration_sec=2.0)
             return
+        stamp_ns = stamp_to_ns(msg.header.stamp) or self.get_clock().now().nanoseconds
         with self._lock:
             self._last_state = (state, time.monotonic())
+            self._watch.update(state.q_rad, stamp_ns * 1e-9)
             if self._sequence is not None:
                 self._sequence.on_joint_state(state, self._last_state[1])
 
@@ -221,6 +231,10 @@ class ExecutorNode(Node):
         started = time.monotonic()
         result = PickAndPlace.Result()
         try:
+            if goal_handle.request.plan_grasp:
+                moved = self._observe_before_planning(goal_handle)
+                if moved is not None and not moved.success:
+                    return self._finish(goal_handle, moved, result)
             result.grasp_used = grasp = self._resolve_grasp(goal_handle.request)
             p = self._params()
             sequence = PickPlaceSequence(
@@ -244,6 +258,11 @@ class ExecutorNode(Node):
         result.success, result.failure_reason = False, reason
         result.phase_reached = result.phase_reached or "pre_grasp"
         result.duration_s = time.monotonic() - started
+        with self._lock:  # the arm did not move for this goal (or a bug stopped it): say how it is now
+            state = self._last_state[0] if self._last_state is not None else None
+        result.arm_state = arm_state_of(state.q_rad if state else None, state.qd_radps if state else None,
+                                        self._watch.observation_q_rad, self._config.observation_tolerance_rad,
+                                        self._config.still_speed_radps)
         self.get_logger().warning(f"pick-and-place aborted: {reason}")
         goal_handle.abort()
         return result
@@ -254,14 +273,45 @@ class ExecutorNode(Node):
         p = self._params()
         if not self._plan_client.wait_for_service(timeout_sec=p["server_wait_s"]):
             raise GoalError(f"grasp service {p['plan_grasp_service']} is not available")
-        try:  # planning on the latest frame is idempotent: re-sent while unanswered (ros_service.py)
-            response = call_idempotent(self._plan_client, PlanGrasp.Request(top_k=1),
-                                       p["plan_grasp_timeout_s"], "grasp service")
-        except (ServiceTimeout, RuntimeError) as error:
-            raise GoalError(str(error)) from None
-        if not response.success or not response.grasps:
-            raise GoalError(f"grasp planning failed: {response.message or 'no grasp returned'}")
-        return response.grasps[0]
+        # Only a grasp from a frame taken while the arm rested at the observation pose: an older frame
+        # may show the arm (after a cancel it stood over the table), and a grasp on it lands on the hand.
+        deadline = time.monotonic() + float(p["fresh_frame_timeout_s"])
+        while True:
+            try:  # planning on the latest frame is idempotent: re-sent while unanswered (ros_service.py)
+                response = call_idempotent(self._plan_client, PlanGrasp.Request(top_k=1),
+                                           p["plan_grasp_timeout_s"], "grasp service")
+            except (ServiceTimeout, RuntimeError) as error:
+                raise GoalError(str(error)) from None
+            grasp = response.grasps[0] if response.success and response.grasps else None
+            frame_s = stamp_to_ns(grasp.header.stamp) * 1e-9 if grasp is not None else None
+            with self._lock:
+                clear = frame_s is not None and self._watch.frame_is_clear(frame_s)
+                arrived_s = self._watch.since_s
+            if clear:
+                return grasp
+            if arrived_s is None:
+                raise GoalError("not planning: the arm left the observation pose, so it may be in the camera's view")
+            if time.monotonic() >= deadline:
+                if grasp is not None:
+                    raise GoalError(f"not planning on a view with the arm in it: no camera frame taken after the "
+                                    f"arm reached the observation pose within {p['fresh_frame_timeout_s']:.0f} s "
+                                    f"(newest frame {arrived_s - frame_s:.1f} s older)")
+                raise GoalError(f"grasp planning failed: {response.message or 'no grasp returned'}")
+            if self._shutdown.wait(0.2):  # the camera's next frame is on its way
+                raise GoalError("executor is shutting down")
+
+    def _observe_before_planning(self, goal_handle):
+        """Bring the arm to the observation pose unless it rests there; the move's outcome (None: no move)."""
+        with self._lock:
+            if self._watch.at_observation():
+                return None
+        config = dataclasses.replace(self._config, observation_q_rad=tuple(self._watch.observation_q_rad))
+        move = ObservationMove(self._kin, config)
+        self._drive(goal_handle, move)
+        if not move.outcome.success and not move.outcome.canceled:
+            reason = move.outcome.failure_reason
+            move.outcome.failure_reason = f"not planning with the arm in the camera's view: {reason}"
+        return move.outcome
 
     def _wait_for_servers(self, timeout_s: float):
         for client, name in ((self._arm_client, "arm_trajectory_action"), (self._move_client, "gripper_move_action"),
@@ -274,6 +324,11 @@ class ExecutorNode(Node):
         return self.get_clock().now().nanoseconds * 1e-9, time.monotonic()
 
     def _run(self, goal_handle, sequence: PickPlaceSequence, result):
+        self._drive(goal_handle, sequence)
+        return self._finish(goal_handle, sequence.outcome, result)
+
+    def _drive(self, goal_handle, sequence: PickPlaceSequence) -> None:
+        """Run the control loop until the sequence finishes (a cancel request goes to the sequence)."""
         period = float(self._params()["control_period_s"])
         with self._lock:
             self._sequence = sequence
@@ -294,12 +349,11 @@ class ExecutorNode(Node):
             goal_handle.publish_feedback(PickAndPlace.Feedback(
                 phase=feedback.phase, phase_progress=feedback.phase_progress,
                 gripper_width_m=feedback.gripper_width_m, external_force_n=feedback.external_force_n))
-        return self._finish(goal_handle, sequence.outcome, result)
 
     def _finish(self, goal_handle, outcome, result):
         for field in ("success", "failure_reason", "phase_reached", "contact_detected", "contact_height_m",
                       "gripper_width_closed_m", "gripper_force_n", "held_after_lift", "held_after_transfer",
-                      "duration_s"):
+                      "duration_s", "arm_state", "recovery"):
             setattr(result, field, getattr(outcome, field))
         if outcome.success:
             goal_handle.succeed()
@@ -309,7 +363,8 @@ class ExecutorNode(Node):
             goal_handle.abort()
         # Two call sites on purpose: rclpy refuses to change the severity of
         # one logging call site between calls.
-        summary = f"(phase {outcome.phase_reached}, {outcome.duration_s:.1f} s)"
+        summary = f"(phase {outcome.phase_reached}, {outcome.duration_s:.1f} s, arm {outcome.arm_state}" + (
+            f"; recovery: {outcome.recovery})" if outcome.recovery else ")")
         if outcome.success:
             self.get_logger().info(f"pick-and-place done {summary}")
         else:

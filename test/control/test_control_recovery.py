@@ -203,3 +203,22 @@ def test_observation_move_from_over_the_table(kin):
     robot.sent.clear()
     run(again, robot)
     assert again.outcome.success and robot.sent == []
+
+
+def test_observation_watch_clears_only_frames_taken_after_the_arm_arrived():
+    from defgg_ros.control.observation import ObservationWatch, arm_state_of
+
+    watch = ObservationWatch(OBSERVE_Q, 0.05)
+    away = OBSERVE_Q + np.array([0.3, 0, 0, 0, 0, 0, 0])
+    watch.update(away, 10.0)
+    assert not watch.at_observation() and not watch.frame_is_clear(10.0)
+    watch.update(OBSERVE_Q + 0.01, 12.0)
+    watch.update(OBSERVE_Q, 13.0)
+    assert watch.since_s == 12.0
+    assert not watch.frame_is_clear(11.9) and watch.frame_is_clear(12.0)
+    watch.update(away, 14.0)  # left again: no frame is clear until it is back
+    assert not watch.frame_is_clear(15.0)
+    assert arm_state_of(OBSERVE_Q, np.zeros(7), OBSERVE_Q, 0.05, 0.02) == "observation_pose"
+    assert arm_state_of(away, np.zeros(7), OBSERVE_Q, 0.05, 0.02) == "at_rest"
+    assert arm_state_of(away, np.full(7, 0.1), OBSERVE_Q, 0.05, 0.02) == "moving"
+    assert arm_state_of(None, None, OBSERVE_Q, 0.05, 0.02) == "unknown"

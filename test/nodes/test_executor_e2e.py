@@ -20,6 +20,7 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 from support.executor_goals import send_goal, stop_driver_processes
 
+from defgg_ros.constants import PANDA_READY_Q_RAD
 from defgg_ros.control.kinematics import PandaKinematics
 from defgg_ros.control.poses import matrix_to_quaternion, top_down_pose
 from defgg_ros.nodes import qos
@@ -152,12 +153,22 @@ def test_cancel_mid_descent_stops_the_arm(cell, spin):
         return feedback and feedback[-1].phase == "descend" and tcp_z < pregrasp_z - 0.005
 
     spin(ex, descending, TIMEOUT_S, "the descent to be under way")
+    canceled_at = len(seen["joints"])
     spin(ex, handle.cancel_goal_async(), 10.0, "cancel response")
     response = spin(ex, handle.get_result_async(), TIMEOUT_S, "canceled result")
     assert response.status == 5  # STATUS_CANCELED
     assert "canceled during descend" in response.result.failure_reason
-    last = seen["joints"][-1]
-    assert np.max(np.abs(last.velocity[:7])) < 0.02
+    # Then it recovered (issue 27.1): back at the observation pose, at rest, and the result says so.
+    assert response.result.arm_state == "observation_pose", response.result.recovery
+    assert "moved to the observation pose" in response.result.recovery
+    # Reported at rest, so every joint state from the result on shows the arm still (issue 27.4).
+    after_result = len(seen["joints"])
+    spin(ex, lambda: len(seen["joints"]) > after_result + 20, 10.0, "joint states after the result")
+    for state in seen["joints"][after_result:]:
+        assert np.max(np.abs(np.array(state.position[:7]) - PANDA_READY_Q_RAD)) < 0.05
+        assert np.max(np.abs(state.velocity[:7])) < 0.02, state.velocity
+    # Where the stop brought it to rest first, before the recovery moved it.
+    last = next(j for j in seen["joints"][canceled_at:] if np.max(np.abs(j.velocity[:7])) < 0.02)
     # Stopped below the pre-grasp (25 mm above the top face) and no lower than the grasp (18 mm below
     # it): on a loaded machine the cancel may land after the descent reached the grasp pose, so the
     # grasp height itself is allowed. What must not happen is what follows the descent: close or lift.

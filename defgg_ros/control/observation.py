@@ -1,0 +1,47 @@
+"""Is the camera's view clear of the arm? The observation pose and where a goal left the arm.
+
+The camera looks down on the table; with the arm anywhere over it, a depth frame shows the hand,
+and a grasp planned on it lands on the hand (issue 27: grasps at the hand's height after a cancel).
+The executor therefore plans only on frames taken while the arm rested at the observation pose:
+`ObservationWatch` follows the joint states and says since when (robot clock) the arm has been
+there without a break; a frame stamped before that may show the arm. Pure: no ROS.
+"""
+import numpy as np
+
+
+def at_pose(q_rad, pose_q_rad, tolerance_rad: float) -> bool:
+    """Every joint within tolerance_rad of pose_q_rad."""
+    return float(np.max(np.abs(np.asarray(q_rad, dtype=float) - np.asarray(pose_q_rad, dtype=float)))) <= tolerance_rad
+
+
+def arm_state_of(q_rad, qd_radps, observation_q_rad, tolerance_rad: float, still_speed_radps: float) -> str:
+    """One of sequence_types.ARM_STATES from a single joint state (no state: unknown)."""
+    if q_rad is None:
+        return "unknown"
+    if float(np.max(np.abs(np.asarray(qd_radps, dtype=float)))) >= still_speed_radps:
+        return "moving"
+    if observation_q_rad is not None and at_pose(q_rad, observation_q_rad, tolerance_rad):
+        return "observation_pose"
+    return "at_rest"
+
+
+class ObservationWatch:
+    """Since when (robot clock, s) has the arm been at the observation pose without a break?"""
+
+    def __init__(self, observation_q_rad, tolerance_rad: float):
+        self.observation_q_rad = np.asarray(observation_q_rad, dtype=float)
+        self.tolerance_rad = float(tolerance_rad)
+        self.since_s: float | None = None
+
+    def update(self, q_rad, stamp_s: float) -> None:
+        if not at_pose(q_rad, self.observation_q_rad, self.tolerance_rad):
+            self.since_s = None
+        elif self.since_s is None:
+            self.since_s = float(stamp_s)
+
+    def at_observation(self) -> bool:
+        return self.since_s is not None
+
+    def frame_is_clear(self, frame_stamp_s: float) -> bool:
+        """Was a frame stamped frame_stamp_s taken while the arm rested at the observation pose?"""
+        return self.since_s is not None and frame_stamp_s >= self.since_s
