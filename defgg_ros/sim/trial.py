@@ -53,6 +53,7 @@ PROTOCOL_LEGACY = "legacy"
 PROTOCOL_DEFGRASPSIM = "defgraspsim"
 PROTOCOLS = (PROTOCOL_LEGACY, PROTOCOL_DEFGRASPSIM)
 # Each protocol's material: physics.MATERIALS (the physics core's material table).
+FINGER_HOLDS = ("force", "lock")
 TABLE_AWAY_Z_M = -1.0   # where the defgraspsim pickup moves the table (DefGraspSim lowers its platform)
 
 # Grasp force rule (per finger): 2 N at E = 2e4 Pa plus 0.5 N per decade of E,
@@ -73,7 +74,8 @@ CONFIDENT_MARGIN_MPS2 = 20.0
 LEGACY_CONFIDENT_SETTINGS = {"confident_min_directions": 4, "confident_margin_mps2": 40.0}
 LEGACY_TWIST_SETTINGS = {"twist_oscillation_radps": None}   # before 2026-11-25: the one-way twist
 # Before 2026-11-26 every trial ran the legacy protocol on its own material.
-LEGACY_PROTOCOL_SETTINGS = {"protocol": "legacy", "object_friction": None, "poisson_ratio": None}
+LEGACY_PROTOCOL_SETTINGS = {"protocol": "legacy", "object_friction": None, "poisson_ratio": None,
+                            "finger_hold": "force"}
 # Energy blow-up: kinetic energy per kg = v_rms^2 / 2. The fastest real motion in a trial is the
 # twist at its limit (500 rad/s^2 ramped over 0.5 s: 125 rad/s, ~6 m/s at 5 cm); 30 m/s RMS over
 # all nodes (450 J/kg) is far beyond it and only reached by a diverging FEM solve.
@@ -165,6 +167,12 @@ class TrialSettings:
     # (the pads' stays the protocol's) and Poisson's ratio.
     object_friction: float | None = None
     poisson_ratio: float | None = None
+    # defgraspsim: how the fingers hold after the pickup. "force": each finger keeps pushing with F/2 (the
+    # default: it keeps the squeeze DefGraspSim's locked joints keep); "lock": DefGraspSim's joint lock,
+    # soft objects only. PyBullet's soft-rigid contact stores no penetration force, so a locked finger keeps
+    # only what the object's own compression pushes back: 90 % of F/2 at 2e4 Pa, ~50 % at 2e5, 0 at 2e6 Pa
+    # on box_small (bench/bench_finger_lock.py), which made stiff soft objects slip out as an artefact.
+    finger_hold: str = "force"
 
     def __post_init__(self):
         if self.protocol not in PROTOCOLS:
@@ -173,6 +181,8 @@ class TrialSettings:
             raise ValueError(f"object_friction must be in (0, 2], got {self.object_friction}")
         if self.poisson_ratio is not None and not 0.0 <= self.poisson_ratio < 0.5:
             raise ValueError(f"poisson_ratio must be in [0, 0.5), got {self.poisson_ratio}")
+        if self.finger_hold not in FINGER_HOLDS:
+            raise ValueError(f"finger_hold must be one of {', '.join(FINGER_HOLDS)}, got {self.finger_hold!r}")
 
     def material(self) -> dict:
         """finger_friction, object_friction, effective_friction (their product) and poisson_ratio."""
@@ -305,10 +315,10 @@ class _Trial:
         self.saved = (self.obj.save_state(), self.hand.save_state())
 
     def hold_fingers_for_tests(self):
-        """defgraspsim: lock the fingers on a soft object. A rigid body stores no elastic squeeze: between
-        locked fingers it kept ~1e-4 N and slid off (an artefact), so the rigid stand-in of 2e9 Pa stays
-        held with force F/2 instead (bench/bench_finger_lock.py)."""
-        if all(pt.soft for pt in self.obj.parts):
+        """defgraspsim: with finger_hold "lock", lock the fingers on a soft object. A rigid body stores no
+        elastic squeeze: between locked fingers it kept ~1e-4 N and slid off (an artefact), so the rigid
+        stand-in of 2e9 Pa stays held with force F/2 in any case (bench/bench_finger_lock.py)."""
+        if self.settings.finger_hold == "lock" and all(pt.soft for pt in self.obj.parts):
             self.hand.lock_fingers()
             self.fingers_locked = True
             self.step(self.check_steps)
