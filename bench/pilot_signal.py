@@ -32,7 +32,8 @@ GATE_GAP_POINTS, GATE_WITHIN_SHARE = 5.0, 0.30
 
 # name -> (what it tries, TrialSettings overrides, datagen extras)
 TRIES = {
-    "a_defgraspsim": ("DefGraspSim's protocol: mu 0.7, nu 0.3", {"protocol": "defgraspsim"}, {}),
+    "a_defgraspsim": ("DefGraspSim's protocol: mu 0.7, nu 0.3, fingers force-held at F/2",
+                      {"protocol": "defgraspsim"}, {}),
     "b_defgraspsim_mu04": ("(a) with effective friction 0.4: friction carries less, geometry more",
                            {"protocol": "defgraspsim", "object_friction": 0.4}, {}),
     "b_defgraspsim_mu03": ("(a) with effective friction 0.3", {"protocol": "defgraspsim", "object_friction": 0.3}, {}),
