@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from defgg_ros.constants import GRASP_HEIGHT_FRACTION, PANDA_FINGERTIP_BELOW_TCP_M, TABLE_CLEARANCE_M
-from defgg_ros.model.preprocess import InvalidInputError
+from defgg_ros.errors import InvalidInputError
 
 
 class InvalidCameraError(InvalidInputError):

@@ -12,6 +12,7 @@ import cv2
 import numpy as np
 
 from defgg_ros.constants import NETWORK_INPUT_SIZE_PX
+from defgg_ros.errors import InvalidInputError  # defined below the cores; model callers find it here too
 from defgg_ros.stiffness import ENCODING_NAME as STIFFNESS_ENCODING_NAME
 from defgg_ros.stiffness import encode_stiffness_image
 
@@ -23,10 +24,6 @@ __all__ = [
     "DEPTH_ENCODING_NAME", "STIFFNESS_ENCODING_NAME", "InvalidInputError", "InvalidDepthError",
     "invalid_depth_mask", "inpaint_depth", "encode_depth", "network_input", "crop_origin", "crop",
 ]
-
-
-class InvalidInputError(ValueError):
-    """Images or camera parameters that cannot be turned into a grasp."""
 
 
 class InvalidDepthError(InvalidInputError):
