@@ -15,14 +15,16 @@ the image or without a return are not):
 - the fingertips go down to `tip height` (the executor's rule: half the height seen at the grasp
   centre, grasping/geometry.tcp_height_m, minus the fingertip's offset below the TCP);
 - the object's extent along the closing line is the run of points at the tip height through the
-  centre that are not free (the object, a touching neighbour, or its hidden far side); the opening must exceed it by CLEARANCE_M on each side and fit the hand's
+  centre that are not free (the object, a touching neighbour, or its hidden far side), over the
+  band the pads sweep; the opening is that extent plus CLEARANCE_M on each side (geometric, so the
+  same object gets the same opening at any resolution; the network's width is kept for reference); the opening must exceed it by CLEARANCE_M on each side and fit the hand's
   GRIPPER_MAX_WIDTH_M: so no grasp on a face wider than the gripper (a cereal box's top);
 - both finger pads (thickness x pad width, just outside the opening) must land in free space at
   the tip height (objects, neighbours, the robot, unseen space are not);
-- the closing direction: across the object's faces (the axes of its footprint's minimum-area
-  rectangle, the one nearer the network's angle first) when feasible, else the network's angle or
-  the feasible direction nearest it (15 degree steps); the centre moves to the middle of the
-  object's extent.
+- the closing direction: the feasible one with the narrowest extent (within OPENING_TIE_M), ties
+  in this order: across the object's faces (the axes of its footprint's minimum-area rectangle,
+  the one nearer the network's angle first), the network's angle, 15 degree steps away from it;
+  the centre moves to the middle of the object's extent.
 """
 from __future__ import annotations
 
@@ -42,7 +44,7 @@ from defgg_ros.constants import (
 from defgg_ros.grasping.geometry import tcp_height_m
 from defgg_ros.grasping.postprocess import find_peaks, maps_from_network
 from defgg_ros.model.preprocess import network_input
-from defgg_ros.perception.tabletop import CELL_M, TabletopView
+from defgg_ros.perception.tabletop import CELL_M, TabletopView, fill_holes
 from defgg_ros.perception.tabletop_scenes import STEREO_BASELINE_M, SUBPIXEL_RMS_PX
 
 # Free space the fingers need between the object and each pad while closing.
@@ -55,7 +57,11 @@ DISTINCT_CELLS = 5
 DISTINCT_ANGLE_DEG = 20.0
 MAX_HALF_EXTENT_CELLS = int(math.ceil(GRIPPER_MAX_WIDTH_M / CELL_M))
 PAD_SAMPLES = 5
-PAD_BLOCKED_FRACTION = 0.1
+PAD_BLOCKED_FRACTION = 0.0
+# Samples along the closing line, in height-map cells (half a cell: the extent to ~0.5 mm).
+LINE_STEP_CELLS = 0.5
+# Closing directions whose extents differ by less than this count as equally narrow.
+OPENING_TIE_M = 0.003
 # A point is free when the surface seen along its ray lies this far behind it, plus three times the
 # sensor's depth noise at that distance.
 CARVING_TOLERANCE_M = 0.002
@@ -68,9 +74,9 @@ class TabletopGrasp:
     position_base_m: tuple       # (x, y, z): the object's surface at the grasp centre, robot base frame
     closing_direction_base: tuple  # unit (x, y, z) the fingers close along (horizontal on the table)
     approach_direction_base: tuple  # unit, towards the table (minus the table normal)
-    width_m: float               # opening to command: >= extent + 2 clearance, <= the gripper's maximum
+    width_m: float               # opening to command: extent + 2 clearance (<= the gripper's maximum)
     extent_m: float              # the object's extent along the closing line (what is between the fingers)
-    network_width_m: float
+    network_width_m: float       # the network's width at the peak (training pixels x CELL_M), for reference
     youngs_modulus_pa: float
     cell_rc: tuple               # (row, col) in the height map
 
@@ -162,18 +168,17 @@ def _tip_height_m(surface_height_m: float) -> float:
 class FreeSpace:
     """Is a point of the robot frame seen to be empty? Its camera ray must reach a surface behind it
     (space carving): a point the camera cannot see (behind an object, off the image, no return) is
-    not free. Stereo shadows and speckle holes take the farthest depth of their 5x5 neighbourhood
-    (a stereo shadow is, by its geometry, background)."""
+    not free. Read on the full-resolution depth, each pixel as the farthest of its 3x3 neighbourhood:
+    mixed (flying) pixels at an object's edge do not count as surface, and the object's outline is
+    found to a pixel at every resolution. Pixels without a return: fill_holes."""
 
     def __init__(self, view: TabletopView):
-        depth = view.processed_depth_m
-        valid = np.isfinite(depth) & (depth > 0)
-        filled = cv2.dilate(np.where(valid, depth, 0).astype(np.float32), np.ones((5, 5), np.uint8))
-        self.depth = np.where(valid, depth, filled)
-        self.k = view.processed_k
+        depth = fill_holes(view.depth_m)
+        known = np.where(np.isfinite(depth), depth, 0).astype(np.float32)
+        self.depth = np.where(np.isfinite(depth), cv2.dilate(known, np.ones((3, 3), np.uint8)), 0.0)
+        self.k = view.camera_k
         camera_T_base = np.linalg.inv(view.base_T_camera)
         self.rotation, self.translation = camera_T_base[:3, :3], camera_T_base[:3, 3]
-        self.table_normal, self.table_offset = np.asarray(view.table_normal), view.table_offset_m
 
     def free(self, points_base: np.ndarray) -> np.ndarray:
         p = points_base @ self.rotation.T + self.translation
@@ -221,7 +226,8 @@ def feasible_grasp(view: TabletopView, label: int, row: int, col: int, angle_rad
     phis = candidate_angles(angle_rad, face_angles)
     order = range(len(phis))
     directions = np.stack([np.sin(phis), np.cos(phis)], axis=1)          # (row, col) per cell step
-    steps = np.arange(-MAX_HALF_EXTENT_CELLS, MAX_HALF_EXTENT_CELLS + 1)
+    reach = int(math.ceil(MAX_HALF_EXTENT_CELLS / LINE_STEP_CELLS))
+    steps = np.arange(-reach, reach + 1) * LINE_STEP_CELLS
     across = np.stack([-directions[:, 1], directions[:, 0]], axis=1)
     # Three lines across the band the pads sweep (centre and both pad edges): what lies between the
     # fingers anywhere in that band must fit, so a box's corner is not taken for a narrow object.
@@ -229,16 +235,19 @@ def feasible_grasp(view: TabletopView, label: int, row: int, col: int, angle_rad
     cells = (np.array([row, col], float)[None, None, None, :] + offsets[None, :, None, None] * across[:, None, None, :]
              + steps[None, None, :, None] * directions[:, None, None, :])            # A x 3 x S x 2
     free = space.free(_points(view, cells.reshape(-1, 2), level)).reshape(len(order), 3, steps.size)
-    for i in range(len(order)):
+    fitting = []
+    for i in order:
         low, high = _band_extent(~free[i])
         if low is None:
             continue
-        extent_m = (high - low + 1) * CELL_M
-        needed = extent_m + 2 * CLEARANCE_M
-        if needed > GRIPPER_MAX_WIDTH_M:
-            continue
-        width = float(min(GRIPPER_MAX_WIDTH_M, max(needed, network_width_m)))
-        centre = np.array([row, col], float) + (low + high) / 2.0 * directions[i]
+        extent_m = (high - low + 1) * LINE_STEP_CELLS * CELL_M
+        if extent_m + 2 * CLEARANCE_M <= GRIPPER_MAX_WIDTH_M:
+            fitting.append((round(extent_m / OPENING_TIE_M), i, low, high, extent_m))
+    # The narrowest fitting direction first (the most room in the hand, and the same choice at every
+    # resolution); among near-equal ones, the candidate order (faces, then the network's angle).
+    for _, i, low, high, extent_m in sorted(fitting):
+        width = float(extent_m + 2 * CLEARANCE_M)   # geometric: the same object, the same opening
+        centre = np.array([row, col], float) + (low + high) / 2.0 * LINE_STEP_CELLS * directions[i]
         r, c = int(round(centre[0])), int(round(centre[1]))
         if not (0 <= r < view.grid_labels.shape[0] and 0 <= c < view.grid_labels.shape[1]) \
                 or view.grid_labels[r, c] != label:
@@ -290,7 +299,7 @@ def _extent_cells(occupied: np.ndarray):
 
 def _pads_free(view, space: FreeSpace, level_m: float, centre, direction, width_m: float) -> bool:
     """Both pads (thickness along the closing line just outside the opening, pad width across it)
-    over free space at the fingertips' level; PAD_BLOCKED_FRACTION of a pad's samples may fail (noise)."""
+    over free space at the fingertips' level (PAD_BLOCKED_FRACTION of a pad's samples may fail)."""
     across = np.array([-direction[1], direction[0]])
     s_along = (width_m / 2 + np.linspace(0.0, PANDA_FINGER_THICKNESS_M, PAD_SAMPLES)) / CELL_M
     s_across = np.linspace(-FINGER_PAD_WIDTH_M / 2, FINGER_PAD_WIDTH_M / 2, PAD_SAMPLES) / CELL_M

@@ -51,6 +51,8 @@ CREASE_SLOPE = math.tan(math.radians(40.0))
 LABEL_REACH_M = 0.004
 # Frames with a larger focal length are read at every n-th pixel (processing_stride).
 FULL_RESOLUTION_MAX_FX_PX = 320.0
+# A hole whose right neighbour is this much nearer than its left one is a stereo shadow (fill_holes).
+SHADOW_JUMP_M = 0.005
 # Labels travel as mono8.
 MAX_LABELS = 254
 
@@ -100,8 +102,7 @@ class TabletopView:
     grid_pixel: np.ndarray             # R x C int32 flat image index that gave the cell's height, -1 none
     object_ids: tuple = ()
     areas_m2: dict = field(default_factory=dict)
-    processed_depth_m: np.ndarray | None = None   # the depth as processed (every stride-th pixel), flying pixels NaN
-    processed_k: np.ndarray | None = None         # K of processed_depth_m
+    depth_m: np.ndarray | None = None             # the full-resolution depth (NaN = no return)
 
     def cell_xy_m(self, row, col):
         """Base-frame (x, y) of a cell centre: rows run along +x, columns along +y."""
@@ -196,7 +197,9 @@ def perceive(depth_m, camera_k, base_T_camera, config: TabletopConfig = Tabletop
     k_full = check_camera_matrix(camera_k)
     pose = check_base_T_camera(base_T_camera)
     stride = processing_stride(k_full)
-    depth = full[::stride, ::stride]
+    # Holes inside a surface (a dark object's missing returns, speckle) take the surface's depth;
+    # stereo shadows take the background's (fill_holes).
+    depth = fill_holes(full[::stride, ::stride])
     k = k_full.copy()
     k[:2] /= stride
     xn, yn = _pixel_rays(k, depth.shape)
@@ -253,7 +256,7 @@ def perceive(depth_m, camera_k, base_T_camera, config: TabletopConfig = Tabletop
         pixel_cell = cv2.resize(pixel_cell, size, interpolation=cv2.INTER_NEAREST)
         height = cv2.resize(height, size, interpolation=cv2.INTER_NEAREST)
     return TabletopView(pose, k_full, normal, offset, height, foreground, labels, pixel_cell, origin, grid,
-                        grid_labels, owner, tuple(sorted(areas)), areas, np.where(flying, np.nan, depth), k)
+                        grid_labels, owner, tuple(sorted(areas)), areas, full)
 
 
 def _nearest_labels(labels: np.ndarray, occupied: np.ndarray, reach_cells: float) -> np.ndarray:
@@ -269,6 +272,31 @@ def _nearest_labels(labels: np.ndarray, occupied: np.ndarray, reach_cells: float
     take = unlabelled & (distance <= reach_cells)
     out[take] = source_labels[index[take]]
     return out
+
+
+def fill_holes(depth_m: np.ndarray) -> np.ndarray:
+    """Depth with its holes filled along the rows. A stereo camera whose left imager is the depth
+    reference leaves a shadow (no return) just left of a foreground edge, over background: a hole
+    whose nearest valid pixel on the right is nearer than the one on the left by more than
+    SHADOW_JUMP_M takes the left (background) depth. Any other hole (speckle, a dark object's missing
+    returns) takes the nearer of its two neighbours, so it is never emptier than what surrounds it.
+    Rows without any return stay NaN."""
+    depth = np.asarray(depth_m, np.float32)
+    valid = np.isfinite(depth) & (depth > 0)
+    if valid.all():
+        return depth
+    h, w = depth.shape
+    columns = np.arange(w)
+    left = np.maximum.accumulate(np.where(valid, columns, -1), axis=1)
+    right = np.minimum.accumulate(np.where(valid, columns, w)[:, ::-1], axis=1)[:, ::-1]
+    rows = np.arange(h)[:, None]
+    padded = np.concatenate([depth, np.full((h, 1), np.nan, np.float32)], axis=1)   # index w -> NaN
+    left_depth = np.where(left >= 0, padded[rows, np.where(left >= 0, left, w)], np.nan)
+    right_depth = padded[rows, right]
+    with np.errstate(invalid="ignore"):
+        shadow = right_depth < left_depth - SHADOW_JUMP_M
+        other = np.fmin(left_depth, right_depth)
+    return np.where(valid, depth, np.where(shadow, left_depth, other)).astype(np.float32)
 
 
 def flying_pixels(depth: np.ndarray, jump_m: float) -> np.ndarray:

@@ -88,6 +88,12 @@ class Box:
                     corners.append((xy[0], xy[1], z))
         return np.array(corners)
 
+    def contains(self, points) -> np.ndarray:
+        """Which base-frame points (N x 3) lie inside (ground truth for tests)."""
+        r = rotation_about_z(self.yaw_rad)
+        local = (np.asarray(points, float) - np.array([*self.center_xy_m, self.z_bottom_m + self.size_m[2] / 2])) @ r
+        return np.all(np.abs(local) <= np.asarray(self.size_m) / 2, axis=1)
+
     def intersect(self, origin, rays):
         """(t, normal) of rays (N x 3, camera-depth scaled) with the box; t = inf on a miss."""
         r = rotation_about_z(self.yaw_rad)
@@ -121,6 +127,12 @@ class Cylinder:
         c, r = self.center_xy_m, self.radius_m
         return np.array([(c[0] + sx * r, c[1] + sy * r, z) for sx in (-1, 1) for sy in (-1, 1)
                          for z in (self.z_bottom_m, self.z_bottom_m + self.height_m)])
+
+    def contains(self, points) -> np.ndarray:
+        p = np.asarray(points, float)
+        d = p[:, :2] - np.asarray(self.center_xy_m)
+        return (np.einsum("ij,ij->i", d, d) <= self.radius_m ** 2) & (p[:, 2] >= self.z_bottom_m) \
+            & (p[:, 2] <= self.z_bottom_m + self.height_m)
 
     def intersect(self, origin, rays):
         o = origin - np.array([*self.center_xy_m, 0.0])
@@ -160,6 +172,11 @@ class LyingCylinder:
         return Box(self.center_xy_m, (self.length_m, 2 * self.radius_m, 2 * self.radius_m),
                    self.yaw_rad).bounds_corners()
 
+    def contains(self, points) -> np.ndarray:
+        r = rotation_about_z(self.yaw_rad)
+        local = (np.asarray(points, float) - np.array([*self.center_xy_m, self.radius_m])) @ r
+        return (local[:, 1] ** 2 + local[:, 2] ** 2 <= self.radius_m ** 2) & (np.abs(local[:, 0]) <= self.length_m / 2)
+
     def intersect(self, origin, rays):
         r = rotation_about_z(self.yaw_rad)
         centre = np.array([*self.center_xy_m, self.radius_m])
@@ -188,6 +205,10 @@ class Sphere:
     def bounds_corners(self) -> np.ndarray:
         c, r = np.asarray(self.center_m), self.radius_m
         return np.array([c + (sx * r, sy * r, sz * r) for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+
+    def contains(self, points) -> np.ndarray:
+        d = np.asarray(points, float) - np.asarray(self.center_m)
+        return np.einsum("ij,ij->i", d, d) <= self.radius_m ** 2
 
     def intersect(self, origin, rays):
         o = origin - np.asarray(self.center_m)
