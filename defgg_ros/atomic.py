@@ -1,4 +1,5 @@
 """Write files so that a crash never leaves a half-written one behind."""
+import gzip
 import json
 import os
 import tempfile
@@ -6,12 +7,38 @@ from contextlib import contextmanager
 from pathlib import Path
 
 
+# A secret file (credentials, tokens) stays readable by its owner only.
+SECRET_MODE = 0o600
+
+
+def default_file_mode() -> int:
+    """The mode open() gives a new file here: 0o666 minus the process umask (0o644 with umask 022).
+
+    Read from /proc (Linux) so the umask is never changed, not even for an instant; elsewhere the
+    classic set-and-restore.
+    """
+    try:
+        with open("/proc/self/status", encoding="ascii") as status:
+            for line in status:
+                if line.startswith("Umask:"):
+                    return 0o666 & ~int(line.split()[1], 8)
+    except (OSError, ValueError):
+        pass
+    umask = os.umask(0o022)
+    os.umask(umask)
+    return 0o666 & ~umask
+
+
 @contextmanager
-def atomic_path(path):
+def atomic_path(path, secret: bool = False):
     """Yield a temporary path beside `path`; rename it over `path` on success.
 
     The temporary file is removed when the body raises, so readers only ever
-    see the old file or the complete new one.
+    see the old file or the complete new one. The file gets the mode of any
+    other new file (mkstemp alone would leave 0600: run.json, summary.json and
+    checkpoints were private while their neighbours were 0644), or SECRET_MODE
+    when `secret`. The mode is set before the rename, so the file never appears
+    at `path` with another.
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -21,6 +48,7 @@ def atomic_path(path):
         yield Path(tmp)
         with open(tmp, "rb") as f:
             os.fsync(f.fileno())
+        os.chmod(tmp, SECRET_MODE if secret else default_file_mode())
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
@@ -28,13 +56,13 @@ def atomic_path(path):
         raise
 
 
-def write_text_atomic(path, text: str) -> None:
-    with atomic_path(path) as tmp:
+def write_text_atomic(path, text: str, secret: bool = False) -> None:
+    with atomic_path(path, secret=secret) as tmp:
         Path(tmp).write_text(text, encoding="utf-8")
 
 
-def write_json_atomic(path, obj) -> None:
-    write_text_atomic(path, json.dumps(obj, indent=2, sort_keys=True) + "\n")
+def write_json_atomic(path, obj, secret: bool = False) -> None:
+    write_text_atomic(path, json.dumps(obj, indent=2, sort_keys=True) + "\n", secret=secret)
 
 
 def append_jsonl(path, record: dict) -> None:
@@ -52,12 +80,12 @@ def append_jsonl(path, record: dict) -> None:
 
 
 def read_jsonl(path) -> list:
-    """Read the complete records of a JSON-lines file (skip a torn last line)."""
+    """Read the complete records of a JSON-lines file, plain or gzip-compressed (*.gz); skip a torn last line."""
     path = Path(path)
     if not path.exists():
         return []
     records = []
-    with open(path, encoding="utf-8") as f:
+    with (gzip.open(path, "rt", encoding="utf-8") if path.suffix == ".gz" else open(path, encoding="utf-8")) as f:
         lines = f.read().split("\n")
     for i, line in enumerate(lines):
         if not line.strip():
@@ -69,3 +97,15 @@ def read_jsonl(path) -> list:
                 continue
             raise ValueError(f"{path}: corrupt record on line {i + 1}") from None
     return records
+
+
+def compress_jsonl(path) -> Path:
+    """Replace a finished JSON-lines file by <path>.gz (the same records; written atomically, then the
+    original removed). Returns the new path."""
+    path = Path(path)
+    out = path.with_name(path.name + ".gz")
+    data = path.read_bytes()
+    with atomic_path(out) as tmp, open(tmp, "wb") as raw, gzip.GzipFile(fileobj=raw, mode="wb", mtime=0) as gz:
+        gz.write(data)
+    path.unlink()
+    return out

@@ -29,6 +29,8 @@ grip force FOS*m*g/mu, fingers locked after pickup, lost when either finger lets
 
 Signal report (do the labels carry "stiffness changes which grasp is good"?):
   defgg-datagen signal datasets/fem_v4 [--json out.json] [--md out.md]
+Seal a finished dataset (compress its trial files; the fingerprint stays):
+  defgg-datagen seal datasets/fem_v4
 """
 
 
@@ -90,6 +92,29 @@ def build_signal_parser() -> argparse.ArgumentParser:
     return ap
 
 
+def seal_main(argv) -> int:
+    from defgg_ros.data.format import DatasetError, dataset_fingerprint, seal_trials
+
+    ap = argparse.ArgumentParser(prog="defgg-datagen seal",
+                                 description="Compress a finished dataset's trial files (trials/*.jsonl -> .jsonl.gz). "
+                                             "Records and fingerprint stay the same; a sealed dataset is never "
+                                             "resumed.")
+    ap.add_argument("folder", type=Path)
+    args = ap.parse_args(argv)
+    try:
+        before = dataset_fingerprint(args.folder)
+        n = seal_trials(args.folder)
+        after = dataset_fingerprint(args.folder)
+    except (DatasetError, OSError) as exc:
+        print(f"defgg-datagen seal: error: {exc}", file=sys.stderr)
+        return 2
+    if before != after:
+        print(f"defgg-datagen seal: fingerprint changed ({before} -> {after})", file=sys.stderr)
+        return 1
+    print(json.dumps({"sealed_files": n, "fingerprint": after}))
+    return 0
+
+
 def signal_main(argv) -> int:
     from defgg_ros.atomic import write_json_atomic, write_text_atomic
     from defgg_ros.data.signal import SignalError, read_trial_records, render_markdown, signal_report
@@ -113,6 +138,8 @@ def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     if argv[:1] == ["signal"]:
         return signal_main(argv[1:])
+    if argv[:1] == ["seal"]:
+        return seal_main(argv[1:])
     args = build_parser().parse_args(argv)
     from defgg_ros.data.datagen import DatagenConfig, generate, resolve_grasp_height, resolve_protocol
     from defgg_ros.data.format import DatasetError

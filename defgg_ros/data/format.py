@@ -10,7 +10,8 @@ Layout (format version 1)::
 
     <root>/dataset.json             format, version, generator settings
     <root>/scenes/<scene_id>.npz    one rendered scene per object x modulus
-    <root>/trials/<scene_id>.jsonl  one JSON record per grasp trial
+    <root>/trials/<scene_id>.jsonl  one JSON record per grasp trial (.jsonl.gz once sealed: complete,
+                                    compressed, read the same way, never appended to)
     <root>/card.md                  generated dataset card
 
 Scene arrays: ``depth_m`` (float32 HxW, metres along the optical axis),
@@ -33,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from defgg_ros.atomic import append_jsonl, atomic_path, read_jsonl, write_json_atomic
+from defgg_ros.atomic import append_jsonl, atomic_path, compress_jsonl, read_jsonl, write_json_atomic
 from defgg_ros.constants import SHAKE_POSITIVE_THRESHOLD_MPS2
 
 FORMAT_NAME = "defgg-dataset"
@@ -179,10 +180,32 @@ class DatasetWriter:
         return path
 
     def append_trial(self, trial: TrialRecord) -> None:
-        append_jsonl(self.root / "trials" / f"{trial.scene_id}.jsonl", trial.to_json())
+        path = trials_path(self.root, trial.scene_id)
+        if path.suffix == ".gz":
+            raise DatasetError(f"{path}: the scene's trials are sealed (compressed, complete); write a new dataset")
+        append_jsonl(path, trial.to_json())
 
     def finished_trial_ids(self, scene_id: str) -> set:
-        return {r["trial_id"] for r in read_jsonl(self.root / "trials" / f"{scene_id}.jsonl")}
+        return {r["trial_id"] for r in read_jsonl(trials_path(self.root, scene_id))}
+
+
+def trials_path(root, scene_id: str) -> Path:
+    """The trial file of a scene: sealed (.jsonl.gz) when there is one, else the growing .jsonl."""
+    plain = Path(root) / "trials" / f"{scene_id}.jsonl"
+    sealed = plain.with_name(plain.name + ".gz")
+    return sealed if sealed.exists() else plain
+
+
+def seal_trials(root) -> int:
+    """Compress every scene's trial file of a finished dataset (records unchanged, so is the fingerprint);
+    returns how many files were sealed."""
+    check_header(root)
+    paths = sorted((Path(root) / "trials").glob("*.jsonl"))
+    for path in paths:
+        if path.with_name(path.name + ".gz").exists():
+            raise DatasetError(f"{path}: both plain and sealed trial files exist; remove one")
+        compress_jsonl(path)
+    return len(paths)
 
 
 def check_header(root) -> dict:
@@ -222,7 +245,7 @@ def read_scene(path) -> Scene:
 
 
 def read_trials(root, scene_id: str) -> list:
-    path = Path(root) / "trials" / f"{scene_id}.jsonl"
+    path = trials_path(root, scene_id)
     try:
         return [TrialRecord.from_json(r) for r in read_jsonl(path)]
     except (ValueError, TypeError, KeyError) as exc:
@@ -239,6 +262,6 @@ def dataset_fingerprint(root) -> str:
     h = hashlib.sha256()
     for scene_id in list_scene_ids(root):
         h.update((Path(root) / "scenes" / f"{scene_id}.npz").read_bytes())
-        for r in sorted(read_jsonl(Path(root) / "trials" / f"{scene_id}.jsonl"), key=lambda r: r["trial_id"]):
+        for r in sorted(read_jsonl(trials_path(root, scene_id)), key=lambda r: r["trial_id"]):
             h.update(json.dumps(r, sort_keys=True).encode())
     return h.hexdigest()[:16]

@@ -246,12 +246,12 @@ def resolve_protocol(out_dir, requested: str | None, records_file: str | None = 
     """The trial protocol of a run: as requested; else the folder's own when it holds trials (those made
     before the setting existed are legacy); else the default (TrialSettings.protocol, defgraspsim)."""
     from defgg_ros.atomic import read_jsonl
-    from defgg_ros.evaluation.store import RESULTS_FILE
+    from defgg_ros.evaluation.store import results_path
     from defgg_ros.sim.trial import TrialSettings
 
     if requested is not None:
         return requested
-    path = Path(out_dir) / (records_file or RESULTS_FILE)
+    path = Path(out_dir) / records_file if records_file else results_path(out_dir)
     if path.is_file():
         for record in read_jsonl(path):
             return (record.get("trial_settings") or {}).get("protocol", "legacy")
@@ -264,10 +264,10 @@ def check_same_protocol(out_dir, settings, tasks) -> None:
     what a task reads is compared (sim.trial.task_protocol): a new twist ramp leaves the shake trials."""
     from dataclasses import asdict
 
-    from defgg_ros.evaluation.store import RESULTS_FILE, read_results
+    from defgg_ros.evaluation.store import read_results, results_path
     from defgg_ros.sim.trial import protocol_differences
 
-    path = Path(out_dir) / RESULTS_FILE
+    path = results_path(out_dir)
     if not path.is_file():
         return
     records = read_results(path)
@@ -356,7 +356,7 @@ def write_diagnostics(out_dir, data_root) -> None:
     predicted quality ranks each view's grasps (if it ran more than one rank)."""
     from defgg_ros.evaluation import diagnose
     from defgg_ros.evaluation.runner import PLANS_FILE
-    from defgg_ros.evaluation.store import RESULTS_FILE, read_results
+    from defgg_ros.evaluation.store import read_results, results_path
 
     out_dir = Path(out_dir)
     path = out_dir / "diagnostics.json"
@@ -364,7 +364,7 @@ def write_diagnostics(out_dir, data_root) -> None:
     labels = diagnose.label_stats(data_root) if data_root else old.get("labels")
     plans_path = out_dir / PLANS_FILE
     shifts = diagnose.plan_shifts(json.loads(plans_path.read_text())) if plans_path.is_file() else None
-    results = out_dir / RESULTS_FILE
+    results = results_path(out_dir)
     records = read_results(results) if results.is_file() else []
     replicates, ranking = diagnose.replicate_flips(records), diagnose.quality_ranking(records)
     twist_axes = diagnose.twist_by_axis(records)

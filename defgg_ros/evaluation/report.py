@@ -14,7 +14,7 @@ from pathlib import Path
 from defgg_ros.atomic import write_json_atomic, write_text_atomic
 from defgg_ros.constants import TRAINING_YOUNGS_MODULI_PA
 from defgg_ros.evaluation import figures, paired, ranks, tables
-from defgg_ros.evaluation.store import RESULTS_FILE, read_results
+from defgg_ros.evaluation.store import read_results, results_path
 
 MANIFEST_FILE = "run.json"
 SUMMARY_FILE = "summary.json"
@@ -62,7 +62,7 @@ def write_outputs(out_dir) -> dict:
     out_dir = Path(out_dir)
     manifest = read_manifest(out_dir)
     models, shas, labels = _models(manifest)
-    records = tables.current(read_results(out_dir / RESULTS_FILE), shas)
+    records = tables.current(read_results(results_path(out_dir)), shas)
     sets = list(manifest["objects"])
     moduli = _moduli(manifest)
     tdir = out_dir / TABLES_DIR

@@ -8,6 +8,7 @@ fingerprint, so ``defgg-train --data <extracted>`` sees the same data.
 """
 from __future__ import annotations
 
+import gzip
 import io
 import json
 import tarfile
@@ -16,6 +17,7 @@ from pathlib import Path
 
 from defgg_ros.atomic import atomic_path
 from defgg_ros.data.dataset import manifest_fingerprint
+from defgg_ros.data.format import trials_path
 
 
 class SnapshotError(RuntimeError):
@@ -27,7 +29,8 @@ def _trial_lines(path: Path, n: int) -> bytes:
         return b""
     if not path.is_file():
         raise SnapshotError(f"{path}: missing, the run used {n} records of it")
-    lines = path.read_bytes().split(b"\n")
+    data = path.read_bytes()
+    lines = (gzip.decompress(data) if path.suffix == ".gz" else data).split(b"\n")
     complete = [ln for ln in lines[:-1] if ln.strip()] if lines else []
     if len(complete) < n:
         raise SnapshotError(f"{path}: has {len(complete)} complete records, the run used {n}")
@@ -69,7 +72,7 @@ def write_merged_snapshot(parts, out_path, top: str = "train_data") -> tuple:
                 for sid in sorted(manifest):
                     _add(tar, f"{top}/scenes/{sid}.npz", (root / "scenes" / f"{sid}.npz").read_bytes())
                     _add(tar, f"{top}/trials/{sid}.jsonl",
-                         _trial_lines(root / "trials" / f"{sid}.jsonl", int(manifest[sid])))
+                         _trial_lines(trials_path(root, sid), int(manifest[sid])))
         whole = {sid: n for _, manifest, _ in parts for sid, n in manifest.items()}
         with tempfile.TemporaryDirectory() as extracted:
             with tarfile.open(tmp, "r:gz") as tar:

@@ -53,14 +53,23 @@ def repair_torn_tail(path) -> int:
         return size - keep
 
 
+def results_path(out_dir) -> Path:
+    """An evaluation folder's results file: trials.jsonl, or trials.jsonl.gz once sealed (compressed,
+    complete: read the same way, never appended to)."""
+    plain = Path(out_dir) / RESULTS_FILE
+    sealed = plain.with_name(plain.name + ".gz")
+    return sealed if sealed.exists() and not plain.exists() else plain
+
+
 class ResultStore:
     """Append-only trial records keyed by ``record["key"]``."""
 
     def __init__(self, out_dir):
         self.out_dir = Path(out_dir)
-        self.path = self.out_dir / RESULTS_FILE
+        self.path = results_path(self.out_dir)
         self.out_dir.mkdir(parents=True, exist_ok=True)
-        self.torn_bytes_removed = repair_torn_tail(self.path)
+        self.sealed = self.path.suffix == ".gz"
+        self.torn_bytes_removed = 0 if self.sealed else repair_torn_tail(self.path)
         self._records = {}
         for i, rec in enumerate(read_results(self.path)):
             self._records[rec["key"]] = rec
@@ -92,6 +101,9 @@ class ResultStore:
         key = record.get("key")
         if not key:
             raise ResultsError("a trial record needs a non-empty 'key'")
+        if self.sealed:
+            raise ResultsError(f"{self.path}: the folder's results are sealed (compressed, complete); "
+                               "evaluate into a new --out folder")
         if key in self._records:
             return False
         record = {**record, "record_version": RECORD_VERSION}
