@@ -6,7 +6,6 @@ import tempfile
 from contextlib import contextmanager
 from pathlib import Path
 
-
 # A secret file (credentials, tokens) stays readable by its owner only.
 SECRET_MODE = 0o600
 
