@@ -45,6 +45,12 @@ SLOW_MODULES = {
     "model/test_model_benches.py", "evaluation/test_mini_eval.py", "reliability/test_eval_kill.py",
     "bringup/test_isolation.py", "bringup/test_bringup_supervision.py", "nodes/test_transport_default_publisher.py",
     "sessions/test_sessions_record.py", "reliability/test_pick_faults.py",
+    "sim/test_trial.py", "sim/test_trial_protocols.py", "data/test_datagen.py", "reliability/test_eval_trial_error.py",
+    "reliability/test_offline_faults.py", "reliability/test_motion_safety_property.py", "nodes/test_executor_node.py",
+    "nodes/test_grasp_inference_cell.py", "control/test_control_pick_in_cell.py", "evaluation/test_ship_and_card.py",
+    "evaluation/test_eval_protocol.py", "perception/test_tabletop_scenes.py", "sessions/test_replay_domain.py",
+    # a module's single slow test: "path::test name"
+    "reliability/test_plan_grasp_faults.py::test_a_node_with_bad_start_up_files_or_parameters_exits_2_with_one_clear_line",
 }
 _ROS_FIXTURES = {"rclpy_context", "executor", "inference_service"}
 _ROS_SOURCE_HINTS = ("import rclpy", "from rclpy", "defgg_ros.nodes.", "defgg_ros.bringup.supervisor",
@@ -94,7 +100,8 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if not any(item.get_closest_marker(kind) for kind in KINDS):
             item.add_marker(getattr(pytest.mark, _kind_of(item)))
-        if _relative(item.path) in SLOW_MODULES:
+        relative = _relative(item.path)
+        if relative in SLOW_MODULES or f"{relative}::{item.originalname}" in SLOW_MODULES:
             item.add_marker(pytest.mark.slow)
 
 
