@@ -49,7 +49,6 @@ setup(
     maintainer_email="maintainers@defgg-ros.org",
     description="Stiffness-aware grasp synthesis (Def-GG-CNN) for a Franka Panda cell.",
     license="Apache-2.0",
-    tests_require=["pytest"],
     entry_points={
         "console_scripts": [f"{name} = {target}" for name, target in {**NODES, **TOOLS}.items()],
     },

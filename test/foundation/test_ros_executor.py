@@ -6,8 +6,7 @@ queued thousands of times, a 100 Hz timer firing a few times a second, action re
 import threading
 from collections import Counter
 
-import pytest
-from defgg_interfaces.action import GripperMove
+from franka_msgs.action import Move as GripperMove
 from rclpy.action import ActionServer
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
@@ -72,7 +71,7 @@ def test_an_action_result_set_from_a_timer_reaches_the_client(executor, spin):
         pending.append(done)
         width = await done
         goal_handle.succeed()
-        return GripperMove.Result(success=True, width=width)
+        return GripperMove.Result(success=abs(width - goal_handle.request.width) < 1e-9)
 
     def tick():
         while pending:
@@ -88,7 +87,7 @@ def test_an_action_result_set_from_a_timer_reaches_the_client(executor, spin):
         handle = spin(threaded, client.send_goal_async(GripperMove.Goal(width=0.04, speed=0.1)), 5.0, f"goal {i}")
         assert handle.accepted
         result = spin(threaded, handle.get_result_async(), 5.0, f"result {i}").result
-        assert result.success and result.width == pytest.approx(0.04)
+        assert result.success
 
 
 def test_destroyed_action_server_stops_being_advertised(executor, spin):
