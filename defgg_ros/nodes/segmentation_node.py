@@ -18,7 +18,7 @@ from defgg_interfaces.srv import SetStiffness
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from sensor_msgs.msg import CameraInfo, Image
+from sensor_msgs.msg import CameraInfo, Image, JointState
 from std_srvs.srv import Trigger
 
 from defgg_ros.atomic import atomic_path
@@ -31,6 +31,9 @@ from defgg_ros.nodes.conversions import (
     numpy_to_image,
 )
 from defgg_ros.nodes.node_main import run_node
+from defgg_ros.perception.geometry import transform_from_list
+from defgg_ros.perception.self_filter import RobotSelfFilter
+from defgg_ros.perception.tabletop import TabletopConfig, WorkspaceBox
 from defgg_ros.perception.stiffness_assignment import check_entries_fit_image, make_entry
 from defgg_ros.perception.stiffness_segmenter import (
     SegmenterConfig,
@@ -53,7 +56,12 @@ class SegmentationNode(Node):
         self._lock = threading.Lock()
         self._captured_background = None  # from capture_background; a background_depth_file wins over it
         self._last_depth_m = None
-        self._config = self._config_from(self._params())  # invalid start-up parameters raise here
+        self._joint_positions = None    # name -> rad, for the self-filter
+        start = self._params()
+        self._base_T_camera = transform_from_list(start["base_T_camera"])
+        self._self_filter = (RobotSelfFilter(float(start["self_filter_margin_m"]))
+                             if start["self_filter"] and start["segmentation"] == "tabletop" else None)
+        self._config = self._config_from(start)  # invalid start-up parameters raise here
         self._camera_k = None
         self._image_size = None
         self.frames_processed = 0
@@ -67,6 +75,8 @@ class SegmentationNode(Node):
         self._info_sub = qos.SensorSubscription(self, CameraInfo, p["camera_info_topic"], self._on_camera_info,
                                                 warn_after_s=0.0)
         self._depth_sub = qos.SensorSubscription(self, Image, p["depth_topic"], self._on_depth)
+        if self._self_filter is not None:
+            self.create_subscription(JointState, p["joint_states_topic"], self._on_joint_states, qos.SENSOR_DATA)
         self.create_service(SetStiffness, p["set_stiffness_service"], self._on_set_stiffness)
         self.create_service(Trigger, p["capture_background_service"], self._on_capture_background)
         self.add_on_set_parameters_callback(self._on_set_parameters)
@@ -79,9 +89,33 @@ class SegmentationNode(Node):
         background = self._captured_background
         if p["background_depth_file"]:
             background = np.load(p["background_depth_file"], allow_pickle=False).astype(np.float32)
+        tabletop = None
+        if p["segmentation"] == "tabletop":
+            box = [float(v) for v in p["workspace_box_m"]]
+            tabletop = TabletopConfig(workspace=WorkspaceBox((box[0], box[1]), (box[2], box[3]),
+                                                             float(p["min_object_height_m"]),
+                                                             float(p["max_object_height_m"])),
+                                      table_z_m=float(p["table_z_m"]))
         return SegmenterConfig(float(p["default_youngs_modulus_pa"]), entries_from_json(p["objects_json"]),
                                float(p["min_object_height_m"]), int(p["min_object_area_px"]), background,
-                               float(p["max_object_height_m"]))
+                               float(p["max_object_height_m"]), tabletop, self._base_T_camera)
+
+    def base_T_camera_for(self, header) -> np.ndarray:
+        """The camera optical frame in the base frame for this depth frame (4x4): the seam for a TF
+        lookup (base frame -> header.frame_id); the `base_T_camera` parameter is the fallback."""
+        return self._base_T_camera
+
+    def _on_joint_states(self, msg: JointState):
+        if len(msg.name) == len(msg.position):
+            with self._lock:
+                self._joint_positions = {**(self._joint_positions or {}), **dict(zip(msg.name, msg.position))}
+
+    def _robot_mask(self, depth_m, camera_k, base_T_camera):
+        with self._lock:
+            joints = self._joint_positions
+        if self._self_filter is None or not joints:
+            return None
+        return self._self_filter.mask(joints, base_T_camera, camera_k, depth_m)
 
     def _on_set_parameters(self, params) -> SetParametersResult:
         merged = self._params()
@@ -111,7 +145,9 @@ class SegmentationNode(Node):
             self._last_depth_m = depth_m
             with self._lock:
                 config = self._config
-            out = run_segmenter(config, depth_m, camera_k)
+            base_T_camera = self.base_T_camera_for(msg.header)
+            robot = self._robot_mask(depth_m, camera_k, base_T_camera) if config.tabletop is not None else None
+            out = run_segmenter(config, depth_m, camera_k, robot, base_T_camera)
         except ValueError as exc:
             self.frames_rejected += 1
             self.last_rejection = str(exc)

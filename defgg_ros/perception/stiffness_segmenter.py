@@ -16,6 +16,7 @@ from defgg_ros.perception.segmentation import (
     SegmentationResult,
     segment_objects,
 )
+from defgg_ros.perception.tabletop import TabletopConfig, perceive
 from defgg_ros.perception.stiffness_assignment import (
     StiffnessEntry,
     assign_stiffness,
@@ -37,6 +38,10 @@ class SegmenterConfig:
     min_area_px: int = OBJECT_MIN_AREA_PX
     background_depth_m: np.ndarray | None = field(default=None, compare=False)
     max_height_m: float = OBJECT_MAX_HEIGHT_M
+    # Tabletop segmentation in the robot frame (perception/tabletop.py) when both are set and no
+    # empty-scene capture is in use: touching objects apart, the workspace box, the self-filter.
+    tabletop: TabletopConfig | None = None
+    base_T_camera: np.ndarray | None = field(default=None, compare=False)
 
     def __post_init__(self):
         check_plausible_modulus(self.default_youngs_modulus_pa, "default Young's modulus")
@@ -54,13 +59,31 @@ class SegmenterOutput:
     per_object: dict                # label -> (entry name, Pa) of the whole-object assignment
 
 
-def run_segmenter(config: SegmenterConfig, depth_m: np.ndarray, camera_k) -> SegmenterOutput:
-    """Segment float32 metres depth and paint the moduli; raises ValueError subclasses."""
-    result = segment_objects(depth_m, camera_k, config.background_depth_m,
-                             config.min_height_m, int(config.min_area_px), config.max_height_m)
+def run_segmenter(config: SegmenterConfig, depth_m: np.ndarray, camera_k, robot_mask=None,
+                  base_T_camera=None) -> SegmenterOutput:
+    """Segment float32 metres depth and paint the moduli; raises ValueError subclasses.
+    base_T_camera (4x4) overrides config.base_T_camera (the node's TF lookup)."""
+    pose = base_T_camera if base_T_camera is not None else config.base_T_camera
+    if config.tabletop is not None and pose is not None and config.background_depth_m is None:
+        result = tabletop_segmentation(config.tabletop, depth_m, camera_k, pose, robot_mask)
+    else:
+        result = segment_objects(depth_m, camera_k, config.background_depth_m,
+                                 config.min_height_m, int(config.min_area_px), config.max_height_m)
     image, per_object = assign_stiffness(result.labels, result.centroids_px, config.entries,
                                          config.default_youngs_modulus_pa)
     return SegmenterOutput(image, result.labels, result, per_object)
+
+
+def tabletop_segmentation(tabletop: TabletopConfig, depth_m, camera_k, base_T_camera, robot_mask=None):
+    """perception/tabletop.py's objects as a SegmentationResult (labels, heights, centroids, areas)."""
+    view = perceive(depth_m, camera_k, base_T_camera, tabletop, robot_mask)
+    centroids, areas = {}, {}
+    for label in view.object_ids:
+        vs, us = np.nonzero(view.labels == label)
+        if vs.size:
+            centroids[int(label)] = (float(us.mean()), float(vs.mean()))
+            areas[int(label)] = int(vs.size)
+    return SegmentationResult(view.labels, view.height_m, tuple(sorted(centroids)), centroids, areas, None)
 
 
 def entries_from_dicts(items) -> tuple[StiffnessEntry, ...]:

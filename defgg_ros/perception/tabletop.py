@@ -225,9 +225,10 @@ def perceive(depth_m, camera_k, base_T_camera, config: TabletopConfig = Tabletop
         & (x * x + y * y > config.robot_keepout_radius_m ** 2)
     vs, us, x, y = vs[inside], us[inside], x[inside], y[inside]
     hgt = height[vs, us]
-    if x.size == 0:
-        raise TabletopError("no object found above the table in the workspace box (nothing between "
-                            f"{ws.min_height_m * 1000:.0f} mm and {ws.max_height_m * 1000:.0f} mm above the table)")
+    empty = x.size == 0
+    if empty:     # an empty table: a view without objects (callers that need one say so)
+        x, y = np.array([0.5 * sum(ws.x_m)], np.float32), np.array([0.5 * sum(ws.y_m)], np.float32)
+        vs, us, hgt = np.zeros(1, np.int64), np.zeros(1, np.int64), np.zeros(1, np.float32)
     # The grid covers the objects' extent plus a margin (fingers land beside them), not the whole box.
     margin = GRID_MARGIN_M
     origin = (float(max(ws.x_m[0], x.min() - margin)), float(max(ws.y_m[0], y.min() - margin)))
@@ -245,9 +246,9 @@ def perceive(depth_m, camera_k, base_T_camera, config: TabletopConfig = Tabletop
     processed_labels = np.zeros(depth.shape, np.uint8)
     processed_labels[vs, us] = near_labels.reshape(-1)[cell]
     processed_fg = np.zeros(depth.shape, bool)
-    processed_fg[vs, us] = True
+    processed_fg[vs, us] = not empty
     pixel_cell = np.full(depth.shape, -1, np.int32)
-    pixel_cell[vs, us] = cell
+    pixel_cell[vs, us] = -1 if empty else cell
     labels, foreground = processed_labels, processed_fg
     if stride > 1:
         size = (full.shape[1], full.shape[0])
