@@ -18,7 +18,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from defgg_ros.evaluation.store import RESULTS_FILE, read_results  # noqa: E402
+from defgg_ros.evaluation.store import read_results, results_path  # noqa: E402
 
 
 def main(argv=None) -> int:
@@ -27,7 +27,7 @@ def main(argv=None) -> int:
     p.add_argument("--plan", nargs=5, type=int, metavar=("OBJECTS", "MODULI", "GRASPS", "MODELS", "TASKS"),
                    help="size of a full experiment to extrapolate CPU-hours for")
     args = p.parse_args(argv)
-    records = read_results(Path(args.results) / RESULTS_FILE)
+    records = read_results(results_path(args.results))
     ran = [r for r in records if r.get("reused_from") is None and r.get("cpu_s") is not None]
     groups = defaultdict(list)
     for r in ran:

@@ -45,7 +45,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from defgg_ros.constants import GRIPPER_MAX_FORCE_N, TWIST_ACCEL_LIMIT_RADPS2  # noqa: E402
 from defgg_ros.evaluation.sources import named_set  # noqa: E402
-from defgg_ros.evaluation.store import RESULTS_FILE, read_results  # noqa: E402
+from defgg_ros.evaluation.store import read_results, results_path  # noqa: E402
 from defgg_ros.sim import hand as hand_mod  # noqa: E402
 from defgg_ros.sim import trial as trial_mod  # noqa: E402
 from defgg_ros.sim import world  # noqa: E402
@@ -173,7 +173,7 @@ def main(argv=None) -> int:
     ap.add_argument("--variants", nargs="+", default=list(DEFAULT_VARIANTS))
     ap.add_argument("--model", default=None, help="only this model's trials (default: every model's)")
     args = ap.parse_args(argv)
-    path = Path(args.results) if args.results.endswith(".jsonl") else Path(args.results) / RESULTS_FILE
+    path = Path(args.results) if args.results.endswith((".jsonl", ".jsonl.gz")) else results_path(args.results)
     records = [r for r in read_results(path)
                if r["task"] == "twist" and r["experiment"] == "main" and r.get("grasp") and r["rank"] == 0
                and r.get("reused_from") is None and any(abs(r["youngs_modulus_pa"] - e) < 1 for e in args.moduli)
@@ -183,7 +183,7 @@ def main(argv=None) -> int:
     print(f"{len(records)} recorded twist trials at E = {', '.join(f'{e:.0e}' for e in args.moduli)} Pa; "
           f"limit {TWIST_ACCEL_LIMIT_RADPS2:.0f} rad/s^2 about each of {len(TWIST_AXES)} hand axes")
     client = world.connect()
-    base = TrialSettings(**records[0]["trial_settings"])
+    base = TrialSettings.from_record(records[0]["trial_settings"])
     for name in args.variants:
         held_all, lifted, reproduced, per_axis, forces = 0, 0, 0, [[] for _ in TWIST_AXES], set()
         integrity = HandIntegrity()

@@ -35,7 +35,7 @@ GRID = [(4, 40.0), (3, 30.0), (3, 25.0), (3, 20.0), (4, 20.0), (3, 15.0), (4, 15
 
 def dataset_trials(folder: Path):
     """(measured prefix of held accelerations, label) of every soft trial that reached the shake."""
-    for path in sorted((folder / "trials").glob("*.jsonl")):
+    for path in sorted((folder / "trials").glob("*.jsonl*")):      # plain or sealed (.jsonl.gz)
         for r in read_jsonl(path):
             if r["status"] != "ok" or r["shake_accels_mps2"] is None or r["youngs_modulus_pa"] >= SOFT_BELOW_PA:
                 continue

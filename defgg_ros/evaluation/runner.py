@@ -167,7 +167,7 @@ def run_trial_payload(payload: dict) -> dict:
     grasp = WorldGrasp(tuple(payload["grasp"][0]), payload["grasp"][1], payload["grasp"][2])
     task = payload["task"]
     wall0 = time.monotonic()
-    out = run_grasp_trial(spec, grasp, tests=(task,), settings=TrialSettings(**payload["settings"]),
+    out = run_grasp_trial(spec, grasp, tests=(task,), settings=TrialSettings.from_record(payload["settings"]),
                           client=_WORKER_CLIENT, object_yaw_rad=payload["yaw"])
     accels = out.shake_accels_mps2 if task == "shake" else out.twist_accels_radps2
     return {"status": out.status, "accels": accels,

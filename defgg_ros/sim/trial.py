@@ -213,6 +213,12 @@ class TrialSettings:
         return cls(confident_stop=True)
 
     @classmethod
+    def from_record(cls, recorded: dict) -> TrialSettings:
+        """The settings a trial record's `trial_settings` describe; fields it predates get the value they
+        implicitly had then (a record without a protocol ran the legacy one)."""
+        return cls(**{**LEGACY_PROTOCOL_SETTINGS, **recorded})
+
+    @classmethod
     def legacy(cls) -> TrialSettings:
         """fem_v4's generator settings exactly (the legacy protocol, its confident stop)."""
         return cls(confident_stop=True, protocol=PROTOCOL_LEGACY)

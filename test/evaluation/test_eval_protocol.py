@@ -70,7 +70,8 @@ def test_the_twist_limit_bench_reruns_a_recorded_trial(tmp_path):
               "object_yaw_rad": 0.5242208014656741,
               "grasp": {"position_m": [-0.017507142339433943, -0.0018428570883614675, 0.04525001049041749],
                         "yaw_rad": 0.27020367980003357, "width_m": 0.04324560849507959},
-              "trial_settings": _settings(twist_oscillation_radps=None), "accels": [225.0, 0, 0, 0, 0, 0]}
+              "trial_settings": _settings(twist_oscillation_radps=None, protocol="legacy"),
+              "accels": [225.0, 0, 0, 0, 0, 0]}
     results = _folder(tmp_path, [record]) / "trials.jsonl"
     bench = Path(__file__).resolve().parents[2] / "bench" / "bench_twist_limit.py"
     done = subprocess.run([sys.executable, str(bench), str(results), "--variants", "as_eval", "osc_40"],
