@@ -1,7 +1,15 @@
 """PyBullet FEM simulation shared by the dataset generator, the evaluation and the fake driver.
 
-No rclpy here. Settings come from docs/pybullet_fem.md
-(measured on this machine) and are explained where they are used.
+No rclpy here. Settings come from docs/pybullet_fem.md (measured on this machine).
+
+Layers (imports point down only):
+- the physics core, ``physics``: material table (``MATERIALS``), world reset, soft-body parameters and
+  loading, finger coupling, friction, static bodies, depth-buffer conversion. Every PyBullet setting that
+  decides how a body behaves lives here, so the labels and the demo run the same physics.
+- geometry and meshes: ``shapes``, ``library``, ``meshes`` (no PyBullet state).
+- the grasp trials (data generator, evaluation): ``world``, ``objects``, ``hand``, ``camera``,
+  ``sampler``, ``trial`` (the trial protocols, docs/dataset.md "Trial protocols").
+- the simulated cell (fake Panda + RealSense driver): ``scene_spec``, ``cell`` and its ``cell_*`` parts.
 
 API overview (stable):
 
