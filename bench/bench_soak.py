@@ -42,18 +42,12 @@ class Waiter:
         return future.result()
 
 
-def schedule(duration_s: float, max_idle_s: float, cancel_fraction: float, rng: random.Random) -> list:
-    """[(kind, idle_after_s)]: kind 'goal' or 'cancel'; the idle gaps include max_idle_s once."""
-    gaps = [0.0, 1.0, 5.0, 30.0, 120.0, 390.0, 600.0]
-    gaps = [g for g in gaps if g < max_idle_s] + [max_idle_s]
-    plan, budget, longest_done = [], duration_s, False
-    while budget > 0:
-        kind = "cancel" if rng.random() < cancel_fraction else "goal"
-        gap = max_idle_s if not longest_done and len(plan) == 2 else rng.choice(gaps)
-        longest_done |= gap == max_idle_s
-        plan.append((kind, gap))
-        budget -= gap + (15.0 if kind == "cancel" else 45.0)  # rough goal time, to size the plan
-    return plan
+def next_step(index: int, max_idle_s: float, cancel_fraction: float, rng: random.Random) -> tuple:
+    """(kind, idle_after_s) of goal `index`: kind 'goal' or 'cancel'; the third goal is followed by the
+    longest idle gap (max_idle_s), the others by gaps drawn from 0 s up to it."""
+    gaps = [g for g in (0.0, 1.0, 5.0, 30.0, 120.0, 390.0, 600.0) if g < max_idle_s] + [max_idle_s]
+    kind = "cancel" if rng.random() < cancel_fraction else "goal"
+    return kind, max_idle_s if index == 2 else rng.choice(gaps)
 
 
 def place_goal(index: int):
@@ -93,13 +87,12 @@ def main(argv=None) -> int:
     from defgg_ros.ros.executor import ThreadedExecutor
 
     rng = random.Random(args.seed)
-    plan = schedule(args.duration, args.max_idle, args.cancel_fraction, rng)
     stats = Counter()
     result_s, cancel_s, arm_states, outcomes, problems = [], [], Counter(), Counter(), []
     started = time.monotonic()
     with open(args.log, "w") as log, Bringup(load_node_set("sim_cell"),
                                              {"fake_panda_driver": {"scene_file": str(SCENE)}}, out=log) as cell:
-        print(f"bench_soak: cell ready in {cell.wait_ready(180.0):.1f} s; {len(plan)} goals planned over "
+        print(f"bench_soak: cell ready in {cell.wait_ready(180.0):.1f} s; goals for "
               f"{args.duration:.0f} s, idle gaps up to {args.max_idle:.0f} s; node logs in {args.log}", flush=True)
         context = Context()
         rclpy.init(context=context)
@@ -112,9 +105,10 @@ def main(argv=None) -> int:
         try:
             if not client.wait_for_server(timeout_sec=60.0):
                 raise SystemExit("bench_soak: the pick-and-place action server did not appear")
-            for index, (kind, idle_s) in enumerate(plan):
-                if time.monotonic() - started > args.duration:
-                    break
+            index = -1
+            while time.monotonic() - started < args.duration:
+                index += 1
+                kind, idle_s = next_step(index, args.max_idle, args.cancel_fraction, rng)
                 dead = cell.failed_node()
                 if dead is not None:
                     problems.append(dead.describe())
