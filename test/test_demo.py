@@ -83,6 +83,9 @@ def test_demo_cli_writes_its_outputs_and_agrees_with_the_ground_truth(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "defgg_ros.demo", "--scene", str(SCENES / "rigid_box.yaml"),
                            "--out", str(out)], capture_output=True, text=True, timeout=600, cwd=ROOT)
     assert proc.returncode == 0, proc.stdout + proc.stderr
+    # Isolation by default (issue 27.6): the first line names a private domain, localhost-only discovery.
+    first = proc.stdout.splitlines()[0]
+    assert first.startswith("defgg-demo: ROS domain ") and "(private" in first and "localhost only" in first, first
     assert "wooden_block" in proc.stdout and "phase reached" in proc.stdout
     summary = json.loads((out / "summary.json").read_text())
     (row,) = summary["objects"]
