@@ -97,12 +97,30 @@ def grid_moduli(view: TabletopView, youngs_modulus_pa=None, default_pa: float = 
     flat = np.asarray(youngs_modulus_pa, np.float32).reshape(-1)
     has = (view.grid_pixel >= 0) & (labels > 0)
     out[has] = flat[view.grid_pixel[has]]
-    for label in view.object_ids:
-        mine = labels == label
-        values = out[mine & (out > 0)]
+    for label, box in label_boxes(labels).items():
+        mine = labels[box] == label
+        window = out[box]
+        values = window[mine & (window > 0)]
         fill = float(np.median(values)) if values.size else default_pa
-        out[mine & (out <= 0)] = fill
+        window[mine & (window <= 0)] = fill
     return out
+
+
+def label_boxes(labels: np.ndarray) -> dict:
+    """label -> (row slice, column slice) of its bounding box, from one pass over the image."""
+    rows, cols = np.nonzero(labels)
+    if rows.size == 0:
+        return {}
+    values = labels[rows, cols].astype(np.int64)
+    n = int(values.max()) + 1
+    r0, c0 = np.full(n, labels.shape[0]), np.full(n, labels.shape[1])
+    r1, c1 = np.full(n, -1), np.full(n, -1)
+    np.minimum.at(r0, values, rows)
+    np.minimum.at(c0, values, cols)
+    np.maximum.at(r1, values, rows)
+    np.maximum.at(c1, values, cols)
+    return {int(v): (slice(int(r0[v]), int(r1[v]) + 1), slice(int(c0[v]), int(c1[v]) + 1))
+            for v in range(1, n) if r1[v] >= 0}
 
 
 @dataclass(frozen=True)
@@ -134,23 +152,42 @@ def plan_tabletop(view: TabletopView, predictor, youngs_modulus_pa=None, top_k: 
     x = network_input(virtual_depth(view), moduli, predictor.uses_stiffness)
     maps = maps_from_network(predictor.raw_maps(x), predictor.postprocess)
     space = FreeSpace(view)
+    d, threshold = predictor.postprocess.peak_min_distance_px, predictor.postprocess.q_threshold
+    labels = view.object_ids if targets is None else [t for t in view.object_ids if t in targets]
+    # Objects in the order of their best quality: a grasp on an object never scores above its best
+    # peak, so once top_k objects have a grasp better than the next object's best peak, stop.
+    boxes = label_boxes(view.grid_labels)
+    labels = [label for label in labels if label in boxes]
+    best_q = {label: float(maps.q[boxes[label]][view.grid_labels[boxes[label]] == label].max()) for label in labels}
     per_object = {}
-    for label in view.object_ids if targets is None else [t for t in view.object_ids if t in targets]:
-        peaks = find_peaks(maps.q, predictor.postprocess.peak_min_distance_px, predictor.postprocess.q_threshold,
-                           view.grid_labels == label, top_k=max(PEAKS_PER_OBJECT, top_k), fill=True)
-        faces = object_face_angles(view, label)
-        found = []
-        for row, col in peaks:
-            angle, width_px = maps.at_pixel(row, col)
-            grasp = feasible_grasp(view, label, row, col, angle, width_px * CELL_M, float(maps.q[row, col]), moduli,
-                                   space, faces)
-            if grasp is not None and all(_distinct(grasp, other) for other in found):
-                found.append(grasp)
+    for label in sorted(labels, key=lambda lab: -best_q[lab]):
+        firsts = sorted((g[0].quality for g in per_object.values()), reverse=True)
+        if len(firsts) >= top_k and firsts[top_k - 1] >= best_q[label]:
+            break
+        found = _object_grasps(view, label, boxes[label], maps, moduli, space, d, threshold, top_k)
         if found:
-            per_object[label] = sorted(found, key=lambda g: -g.quality)
+            per_object[label] = found
     firsts = sorted((g[0] for g in per_object.values()), key=lambda g: -g.quality)
     rest = sorted((g for gs in per_object.values() for g in gs[1:]), key=lambda g: -g.quality)
     return TabletopPlan((firsts + rest)[:top_k], maps.q)
+
+
+def _object_grasps(view, label, box, maps, moduli, space, min_distance_px, threshold, top_k) -> list:
+    """An object's feasible grasps, best first: its quality peaks in order, the first feasible one,
+    then (for top_k > 1) distinct alternatives. box: the object's bounding box in the height map."""
+    peaks = find_peaks(maps.q[box], min_distance_px, threshold, view.grid_labels[box] == label,
+                       top_k=max(PEAKS_PER_OBJECT, top_k), fill=True)
+    faces = object_face_angles(view, label, box)
+    found = []
+    for row, col in ((r + box[0].start, c + box[1].start) for r, c in peaks):
+        angle, width_px = maps.at_pixel(row, col)
+        grasp = feasible_grasp(view, label, row, col, angle, width_px * CELL_M, float(maps.q[row, col]), moduli,
+                               space, faces)
+        if grasp is not None and all(_distinct(grasp, other) for other in found):
+            found.append(grasp)
+            if len(found) >= top_k:
+                break
+    return sorted(found, key=lambda g: -g.quality)
 
 
 def _distinct(a: TabletopGrasp, b: TabletopGrasp) -> bool:
@@ -173,7 +210,7 @@ class FreeSpace:
     found to a pixel at every resolution. Pixels without a return: fill_holes."""
 
     def __init__(self, view: TabletopView):
-        depth = fill_holes(view.depth_m)
+        depth = view.filled_depth_m if view.filled_depth_m is not None else fill_holes(view.depth_m)
         known = np.where(np.isfinite(depth), depth, 0).astype(np.float32)
         self.depth = np.where(np.isfinite(depth), cv2.dilate(known, np.ones((3, 3), np.uint8)), 0.0)
         self.k = view.camera_k
@@ -194,11 +231,12 @@ class FreeSpace:
         return seen & (observed > z + tolerance)
 
 
-def object_face_angles(view: TabletopView, label: int) -> tuple:
+def object_face_angles(view: TabletopView, label: int, box=None) -> tuple:
     """The two closing directions across an object's faces (map angles, from columns towards rows):
     the axes of its cells' minimum-area rectangle. Pads meeting a face squarely hold; the network's
     regressed angle is noise on square tops (the two right directions average out)."""
-    rows, cols = np.nonzero(view.grid_labels == label)
+    box = box or (slice(None), slice(None))
+    rows, cols = np.nonzero(view.grid_labels[box] == label)
     if rows.size < 5:
         return ()
     (_, _), (_, _), degrees = cv2.minAreaRect(np.stack([cols, rows], axis=1).astype(np.float32))
@@ -235,14 +273,10 @@ def feasible_grasp(view: TabletopView, label: int, row: int, col: int, angle_rad
     cells = (np.array([row, col], float)[None, None, None, :] + offsets[None, :, None, None] * across[:, None, None, :]
              + steps[None, None, :, None] * directions[:, None, None, :])            # A x 3 x S x 2
     free = space.free(_points(view, cells.reshape(-1, 2), level)).reshape(len(order), 3, steps.size)
-    fitting = []
-    for i in order:
-        low, high = _band_extent(~free[i])
-        if low is None:
-            continue
-        extent_m = (high - low + 1) * LINE_STEP_CELLS * CELL_M
-        if extent_m + 2 * CLEARANCE_M <= GRIPPER_MAX_WIDTH_M:
-            fitting.append((round(extent_m / OPENING_TIE_M), i, low, high, extent_m))
+    ok, lows, highs = band_extents(~free)
+    extents = (highs - lows + 1) * LINE_STEP_CELLS * CELL_M
+    fitting = [(round(extents[i] / OPENING_TIE_M), i, int(lows[i]), int(highs[i]), float(extents[i]))
+               for i in order if ok[i] and extents[i] + 2 * CLEARANCE_M <= GRIPPER_MAX_WIDTH_M]
     # The narrowest fitting direction first (the most room in the hand, and the same choice at every
     # resolution); among near-equal ones, the candidate order (faces, then the network's angle).
     for _, i, low, high, extent_m in sorted(fitting):
@@ -264,37 +298,33 @@ def _points(view: TabletopView, cells_rc: np.ndarray, height_m: float) -> np.nda
     return np.stack([x, y, view.table_z_at(x, y) + height_m], axis=1)
 
 
-def _band_extent(occupied_lines: np.ndarray):
-    """(low, high) over the band's lines: the centre line's run must exist; the edge lines add their
-    runs through the middle sample when they have one."""
-    low, high = _extent_cells(occupied_lines[0])
-    if low is None:
-        return None, None
-    middle = occupied_lines.shape[1] // 2
-    for line in occupied_lines[1:]:
-        if line[middle]:
-            a, b = _extent_cells(line)
-            if a is None:
-                return None, None
-            low, high = min(low, a), max(high, b)
-    return low, high
+def band_extents(occupied: np.ndarray):
+    """Per closing direction, (low, high) signed sample steps from the centre (the middle sample) to
+    the ends of what lies between the fingers, over the band's lines (A x L x S occupied samples):
+    each line's occupied run through the middle (a one-sample gap is bridged: noise); the centre
+    line (index 0) must have one, the edge lines add theirs when they have one. A direction is
+    unusable (ok False) when the centre is free or a run reaches past the sampled width."""
+    a, l, n = occupied.shape
+    centre = n // 2
+    free = ~occupied
+    gap = free & np.concatenate([free[..., 1:], np.ones((a, l, 1), bool)], axis=2)   # two free in a row
+    gap_back = free & np.concatenate([np.ones((a, l, 1), bool), free[..., :-1]], axis=2)
+    after, before = gap[..., centre:], gap_back[..., :centre + 1][..., ::-1]
+    has_after, has_before = after.any(axis=2), before.any(axis=2)
+    high = np.argmax(after, axis=2) - 1
+    low = -(np.argmax(before, axis=2) - 1)
+    through = occupied[..., centre]
+    complete = through & has_after & has_before
+    ok = complete[:, 0] & np.all(complete | ~through, axis=1)
+    low = np.where(through, low, 0).min(axis=1)
+    high = np.where(through, high, 0).max(axis=1)
+    return ok, low, high
 
 
 def _extent_cells(occupied: np.ndarray):
-    """(low, high) signed steps from the centre (the middle sample) to the ends of the occupied run
-    through it (a one-sample gap is bridged: noise), or (None, None) when the centre is free or the
-    run reaches past the gripper's width."""
-    centre = occupied.size // 2
-    if not occupied[centre]:
-        return None, None
-    free = ~occupied
-    gap = free & np.concatenate([free[1:], [True]])          # two free samples in a row end the run
-    gap_back = free & np.concatenate([[True], free[:-1]])
-    after = np.flatnonzero(gap[centre:])
-    before = np.flatnonzero(gap_back[:centre + 1][::-1])
-    if after.size == 0 or before.size == 0:
-        return None, None
-    return -(int(before[0]) - 1), int(after[0]) - 1
+    """band_extents for one line: (low, high) or (None, None)."""
+    ok, low, high = band_extents(np.asarray(occupied, bool)[None, None, :])
+    return (int(low[0]), int(high[0])) if ok[0] else (None, None)
 
 
 def _pads_free(view, space: FreeSpace, level_m: float, centre, direction, width_m: float) -> bool:

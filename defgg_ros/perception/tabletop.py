@@ -46,6 +46,9 @@ GRID_MARGIN_M = 0.03
 # Cells whose smoothed height slope exceeds this are the flanks of round objects and the creases
 # where a round object meets a flat one: cut, so a bottle lying against a lower box stays apart.
 CREASE_SLOPE = math.tan(math.radians(40.0))
+# Cells cut at noise steps take a labelled neighbour's label this far away when they continue its
+# surface (height within jump_m per cell of distance).
+GROW_REACH_M = 0.008
 # Pixels of object flanks and edges whose cell lost the object's label take it from a labelled cell
 # at most this far away (horizontal scatter of side-face points, depth noise along the ray).
 LABEL_REACH_M = 0.004
@@ -103,6 +106,7 @@ class TabletopView:
     object_ids: tuple = ()
     areas_m2: dict = field(default_factory=dict)
     depth_m: np.ndarray | None = None             # the full-resolution depth (NaN = no return)
+    filled_depth_m: np.ndarray | None = None      # fill_holes(depth_m), when perceive computed it
 
     def cell_xy_m(self, row, col):
         """Base-frame (x, y) of a cell centre: rows run along +x, columns along +y."""
@@ -242,6 +246,9 @@ def perceive(depth_m, camera_k, base_T_camera, config: TabletopConfig = Tabletop
     grid, owner = grid.reshape(rows_n, cols_n), owner.reshape(rows_n, cols_n)
     grid = _close_holes(grid, config.hole_close_cells)
     grid_labels, areas = _segment_grid(grid, config)
+    # Cells cut at jumps and creases and the side-face points around an object take the nearest
+    # object's label within LABEL_REACH_M.
+    grid_labels = _nearest_labels(grid_labels, grid > 0, GROW_REACH_M / CELL_M, grid, config.jump_m)
     near_labels = _nearest_labels(grid_labels, grid > 0, LABEL_REACH_M / CELL_M)
     processed_labels = np.zeros(depth.shape, np.uint8)
     processed_labels[vs, us] = near_labels.reshape(-1)[cell]
@@ -257,21 +264,29 @@ def perceive(depth_m, camera_k, base_T_camera, config: TabletopConfig = Tabletop
         pixel_cell = cv2.resize(pixel_cell, size, interpolation=cv2.INTER_NEAREST)
         height = cv2.resize(height, size, interpolation=cv2.INTER_NEAREST)
     return TabletopView(pose, k_full, normal, offset, height, foreground, labels, pixel_cell, origin, grid,
-                        grid_labels, owner, tuple(sorted(areas)), areas, full)
+                        grid_labels, owner, tuple(sorted(areas)), areas, full, depth if stride == 1 else None)
 
 
-def _nearest_labels(labels: np.ndarray, occupied: np.ndarray, reach_cells: float) -> np.ndarray:
-    """Occupied cells without a label take the nearest labelled cell's label within reach_cells."""
+def _nearest_labels(labels: np.ndarray, occupied: np.ndarray, reach_cells: float, grid=None,
+                    jump_m: float | None = None) -> np.ndarray:
+    """Occupied cells without a label take the nearest labelled cell's label within reach_cells; with
+    a grid, only when their height differs from that cell's by at most jump_m per cell of distance
+    (they continue its surface: cells cut at noise steps, not a neighbour's wall)."""
     unlabelled = occupied & (labels == 0)
     if not unlabelled.any() or not labels.any():
         return labels
     distance, index = cv2.distanceTransformWithLabels((labels == 0).astype(np.uint8), cv2.DIST_L2, 3,
                                                       labelType=cv2.DIST_LABEL_PIXEL)
     # DIST_LABEL_PIXEL numbers the zero-valued pixels of the source (our labelled cells) in raster order.
-    source_labels = np.concatenate([[0], labels[labels > 0]])
-    out = labels.copy()
+    sources = np.concatenate([[0], np.flatnonzero(labels > 0)])
     take = unlabelled & (distance <= reach_cells)
-    out[take] = source_labels[index[take]]
+    source = sources[index[take]]
+    keep = np.ones(source.shape, bool)
+    if grid is not None:
+        keep = np.abs(grid[take] - grid.reshape(-1)[source]) <= jump_m * np.maximum(distance[take], 1.0)
+    out = labels.copy()
+    rows, cols = np.nonzero(take)
+    out[rows[keep], cols[keep]] = labels.reshape(-1)[source[keep]]
     return out
 
 
@@ -362,7 +377,6 @@ def _segment_grid(grid: np.ndarray, config: TabletopConfig):
     for new, old in enumerate(sorted(keep), start=1):
         lut[old] = new
     labels = lut[raw]
-    labels = _grow(labels, grid, occupied, jump, iterations=3)
     out = np.zeros_like(labels)
     areas = {}
     next_label = 1
@@ -373,26 +387,3 @@ def _segment_grid(grid: np.ndarray, config: TabletopConfig):
             areas[next_label] = area
             next_label += 1
     return out, areas
-
-
-def _grow(labels, grid, occupied, jump, iterations):
-    """Give unlabelled occupied cells the label of a 4-neighbour whose height is within `jump`."""
-    h, w = labels.shape
-    for _ in range(iterations):
-        todo = occupied & (labels == 0)
-        if not todo.any():
-            break
-        new = labels.copy()
-        for dv, du in ((1, 0), (-1, 0), (0, 1), (0, -1)):
-            src = np.zeros_like(labels)
-            src_h = np.zeros_like(grid)
-            ys = slice(max(dv, 0), h + min(dv, 0))
-            yd = slice(max(-dv, 0), h + min(-dv, 0))
-            xs = slice(max(du, 0), w + min(du, 0))
-            xd = slice(max(-du, 0), w + min(-du, 0))
-            src[yd, xd] = labels[ys, xs]
-            src_h[yd, xd] = grid[ys, xs]
-            take = todo & (new == 0) & (src > 0) & (np.abs(src_h - grid) <= jump)
-            new[take] = src[take]
-        labels = new
-    return labels
