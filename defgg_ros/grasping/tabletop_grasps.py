@@ -17,8 +17,9 @@ the image or without a return are not):
 - the object's extent along the closing line is the run of points at the tip height through the
   centre that are not free (the object, a touching neighbour, or its hidden far side), over the
   band the pads sweep; the opening is that extent plus CLEARANCE_M on each side (geometric, so the
-  same object gets the same opening at any resolution; the network's width is kept for reference); the opening must exceed it by CLEARANCE_M on each side and fit the hand's
-  GRIPPER_MAX_WIDTH_M: so no grasp on a face wider than the gripper (a cereal box's top);
+  same object gets the same opening at any resolution; the network's width is kept for reference),
+  and must fit the hand's GRIPPER_MAX_WIDTH_M: so no grasp on a face wider than the gripper (a
+  cereal box's top);
 - both finger pads (thickness x pad width, just outside the opening) must land in free space at
   the tip height (objects, neighbours, the robot, unseen space are not);
 - the closing direction: the feasible one with the narrowest extent (within OPENING_TIE_M), ties

@@ -61,10 +61,10 @@ def objects_with_moduli(view: TabletopView, youngs_modulus_pa) -> set:
 
 
 class TabletopPlanner:
-    def __init__(self, predictor, config: TabletopConfig = TabletopConfig(), default_youngs_modulus_pa: float = 2e6,
+    def __init__(self, predictor, config: TabletopConfig | None = None, default_youngs_modulus_pa: float = 2e6,
                  self_filter: RobotSelfFilter | None = None):
         self.predictor = predictor
-        self.config = config
+        self.config = config or TabletopConfig()
         self.default_youngs_modulus_pa = float(default_youngs_modulus_pa)
         self.self_filter = self_filter
 

@@ -50,9 +50,9 @@ from defgg_ros.perception.grasp_planning import (
     full_quality_image,
     labels_from_stiffness,
 )
+from defgg_ros.perception.self_filter import RobotSelfFilter
 from defgg_ros.perception.stiffness_assignment import check_entries_fit_image, make_entry
 from defgg_ros.perception.stiffness_segmenter import SegmenterConfig, run_segmenter
-from defgg_ros.perception.self_filter import RobotSelfFilter
 from defgg_ros.perception.sync import StampSynchronizer
 from defgg_ros.perception.tabletop import TabletopConfig, WorkspaceBox
 from defgg_ros.ros.parameters import declare_parameters, load_schema
@@ -301,7 +301,8 @@ class GraspInferenceNode(Node):
         b_T_g = base_T_grasp(grasp)
         image = image_projection(grasp, base_T_camera, frame.camera_k)
         msg = Grasp(header=frame.header)
-        msg.pose_camera = PoseStamped(header=frame.header, pose=pose_from_transform(np.linalg.inv(base_T_camera) @ b_T_g))
+        camera_T_grasp = np.linalg.inv(base_T_camera) @ b_T_g
+        msg.pose_camera = PoseStamped(header=frame.header, pose=pose_from_transform(camera_T_grasp))
         msg.pose_base = PoseStamped(header=Header(stamp=frame.header.stamp, frame_id=self._p["base_frame"]),
                                     pose=pose_from_transform(b_T_g))
         msg.width_m = float(grasp.width_m)

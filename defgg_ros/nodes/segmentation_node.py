@@ -33,7 +33,6 @@ from defgg_ros.nodes.conversions import (
 from defgg_ros.nodes.node_main import run_node
 from defgg_ros.perception.geometry import transform_from_list
 from defgg_ros.perception.self_filter import RobotSelfFilter
-from defgg_ros.perception.tabletop import TabletopConfig, WorkspaceBox
 from defgg_ros.perception.stiffness_assignment import check_entries_fit_image, make_entry
 from defgg_ros.perception.stiffness_segmenter import (
     SegmenterConfig,
@@ -41,6 +40,7 @@ from defgg_ros.perception.stiffness_segmenter import (
     entries_to_dicts,
     run_segmenter,
 )
+from defgg_ros.perception.tabletop import TabletopConfig, WorkspaceBox
 from defgg_ros.ros.parameters import declare_parameters, load_schema
 
 WARN_THROTTLE_S = 2.0

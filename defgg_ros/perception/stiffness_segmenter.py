@@ -16,13 +16,13 @@ from defgg_ros.perception.segmentation import (
     SegmentationResult,
     segment_objects,
 )
-from defgg_ros.perception.tabletop import TabletopConfig, perceive
 from defgg_ros.perception.stiffness_assignment import (
     StiffnessEntry,
     assign_stiffness,
     check_plausible_modulus,
     make_entry,
 )
+from defgg_ros.perception.tabletop import TabletopConfig, perceive
 
 # Objects nobody described get a mid-range modulus: 2e6 Pa (firm rubber) is
 # the geometric middle of the paper's soft moduli (2e4..2e9 Pa in decades),

@@ -4,8 +4,8 @@ For tests and benchmarks of the perception path without PyBullet: each
 pixel's ray is intersected with the table plane and with each object: with
 `walls`, a prism standing on the table (its top at the object's height, its
 walls along the optical axis), so objects away from the image centre show
-their walls like real ones; without, the original top-only approximation. perception/tabletop_scenes.py renders full scenes
-(any camera pose, RealSense noise).
+their walls like real ones; without, the original top-only approximation.
+perception/tabletop_scenes.py renders full scenes (any camera pose, RealSense noise).
 """
 from dataclasses import dataclass, field
 

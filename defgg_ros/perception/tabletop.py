@@ -1,6 +1,6 @@
 """Tabletop perception in the robot's frame, for any camera pose and resolution (no rclpy).
 
-    view = perceive(depth_m, camera_k, base_T_camera, TabletopConfig())
+    view = perceive(depth_m, camera_k, base_T_camera)    # TabletopConfig() by default
 
 The camera pose `base_T_camera` (4x4, optical frame in the robot base frame) comes from TF or a
 parameter; everything below works in the base frame, so a tilted camera, a different mount height
@@ -110,7 +110,8 @@ class TabletopView:
 
     def cell_xy_m(self, row, col):
         """Base-frame (x, y) of a cell centre: rows run along +x, columns along +y."""
-        return (self.grid_origin_xy_m[0] + np.asarray(row) * CELL_M, self.grid_origin_xy_m[1] + np.asarray(col) * CELL_M)
+        return (self.grid_origin_xy_m[0] + np.asarray(row) * CELL_M,
+                self.grid_origin_xy_m[1] + np.asarray(col) * CELL_M)
 
     def xy_to_cell(self, x_m, y_m):
         return (np.rint((np.asarray(x_m) - self.grid_origin_xy_m[0]) / CELL_M).astype(int),
@@ -192,9 +193,10 @@ def processing_stride(camera_k) -> int:
     return max(1, int(check_camera_matrix(camera_k)[0, 0] // FULL_RESOLUTION_MAX_FX_PX))
 
 
-def perceive(depth_m, camera_k, base_T_camera, config: TabletopConfig = TabletopConfig(),
+def perceive(depth_m, camera_k, base_T_camera, config: TabletopConfig | None = None,
              robot_mask=None) -> TabletopView:
     """The table, the objects in the workspace and their height map (module docstring)."""
+    config = config or TabletopConfig()
     full = np.asarray(depth_m, dtype=np.float32)
     if full.ndim != 2 or full.size == 0:
         raise TabletopError(f"depth must be a non-empty HxW image in metres, got shape {full.shape}")

@@ -4,11 +4,9 @@ grasp_inference_node with the joint states published over DDS."""
 import numpy as np
 import pytest
 from defgg_interfaces.srv import PlanGrasp
-from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 
-from defgg_ros.ros import topics
 from defgg_ros.constants import PANDA_JOINT_NAMES
 from defgg_ros.control.kinematics import PandaKinematics
 from defgg_ros.grasping.tabletop_grasps import image_projection, plan_tabletop_grasps
@@ -19,6 +17,7 @@ from defgg_ros.perception import tabletop_scenes as ts
 from defgg_ros.perception.geometry import transform_to_xyz_quaternion
 from defgg_ros.perception.self_filter import RobotSelfFilter
 from defgg_ros.perception.tabletop import perceive
+from defgg_ros.ros import topics
 
 MODEL_PATH = __import__("pathlib").Path(__file__).resolve().parents[2] / "models" / "defgg_cnn.pt"
 BLOCK = ts.Box((0.56, -0.08), (0.05, 0.04, 0.05), yaw_rad=0.4, name="block")

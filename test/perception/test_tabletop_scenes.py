@@ -12,7 +12,7 @@ from defgg_ros.grasping.geometry import tcp_height_m
 from defgg_ros.grasping.tabletop_grasps import image_projection, plan_tabletop_grasps
 from defgg_ros.model.inference import GraspPredictor
 from defgg_ros.perception import tabletop_scenes as ts
-from defgg_ros.perception.tabletop import CELL_M, TabletopError, WorkspaceBox, TabletopConfig, perceive
+from defgg_ros.perception.tabletop import CELL_M, TabletopConfig, TabletopError, WorkspaceBox, perceive
 
 MODEL = GraspPredictor.from_checkpoint(__import__("pathlib").Path(__file__).resolve().parents[2] / "models" /
                                        "defgg_cnn.pt", num_threads=1)
