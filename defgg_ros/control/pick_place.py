@@ -429,7 +429,11 @@ class PickPlaceSequence:
     # --- endings --------------------------------------------------------------
     def _fail(self, reason: str, sim_s: float, wait_for_stop: bool = True) -> list:
         """Stop the arm; the run ends once it is at rest (or recovers first: _tick_stopping)."""
-        if self._recovering:  # the original reason stays; the recovery ends here
+        if self._recovering and self._holding_step and not self._holds_object():
+            # The carried object fell out: from here on it is a recovery holding nothing.
+            self._recovery_log.append(f"stopped: {reason}")
+            self._recovery_steps = [self._step_open, self._step_lift, self._step_observe]
+        elif self._recovering:  # the original reason stays; the recovery ends here
             self._recovery_log.append(f"stopped: {reason}")
             self._recovery_steps = []
         else:
@@ -469,6 +473,8 @@ class PickPlaceSequence:
             self._stopping = False
             if self._needs_recovery():
                 return self._guarded(self._begin_recovery, sim_s, wall_s)
+            if self._recovering and self._recovery_steps:  # the recovery goes on after a dropped object
+                return self._guarded(self._next_recovery_step, sim_s, wall_s)
             self._finish(sim_s, self._rest_state())
         elif sim_s > stop_ends_s + self._cfg.stop_timeout_s:
             # Its own failure: whoever gets the result must know the arm may still be moving.
@@ -575,8 +581,10 @@ class PickPlaceSequence:
         return self._recovery_motion("carried the held object over the place pose", self._send(motion, sim_s), True)
 
     def _step_lower(self, sim_s: float) -> list:
+        # Not watched for a slip, like the pick's own place: an object touching down at the place
+        # pose is pushed up between the fingers, and the closing fingers would read as a drop.
         commands = self._line_to(self._plan.place_M[:3, 3], self._cfg.line_speed_mps, sim_s)
-        return self._recovery_motion("lowered it to the place pose", commands, True)
+        return self._recovery_motion("lowered it to the place pose", commands)
 
     def _step_release(self, sim_s: float) -> list:
         self._placed_open_sent = True

@@ -101,6 +101,18 @@ def test_an_object_held_at_a_cancel_is_placed_before_the_arm_leaves(kin):
     assert out.arm_state == "observation_pose" and at_observation(robot)
 
 
+def test_an_object_dropped_while_carried_back_ends_as_a_recovery_holding_nothing(kin):
+    sequence = PickPlaceSequence(kin, CONFIG, GRASP, PLACE)
+    robot = FakeRobot(kin, World(object_width_m=0.045, slip_at_phase="recover"))
+    run(sequence, robot, until=lambda r, s: s.phase == "transfer" and s.feedback(r.sim_s).phase_progress > 0.3)
+    robot.apply(sequence.cancel(robot.sim_s, robot.sim_s), sequence)
+    finish(sequence, robot)
+    out = sequence.outcome
+    assert "stopped: object dropped during recover" in out.recovery, out.recovery
+    assert "opened the hand" in out.recovery and out.recovery.endswith("moved to the observation pose")
+    assert out.arm_state == "observation_pose" and at_observation(robot)
+
+
 def test_a_dropped_object_is_not_carried_on(kin):
     sequence, robot = PickPlaceSequence(kin, CONFIG, GRASP, PLACE), FakeRobot(kin, World(slip_at_phase="transfer"))
     run(sequence, robot, max_s=120.0)
