@@ -23,9 +23,11 @@ def run_node(name: str, make_node, startup_errors=(ValueError, OSError), threads
     `ros2 run`, a launch file or a console script must receive camera-sized
     messages with large buffers on its side even when the camera driver
     runs with Fast DDS's defaults (bench/bench_transport.py: a best-effort
-    reader of a default 1280x720 publisher got 3 of 30 frames with the
-    defaults, 11 of 30 with the profile; the reliable reader that
-    qos.SensorSubscription picks for such a publisher gets 30 of 30).
+    reader of a default 1280x720 publisher at 30 Hz got 3-11 of 30 frames,
+    with or without the profile on its side; the reliable reader that
+    qos.SensorSubscription picks for such a publisher gets 30 of 30). The
+    profile matters for the cell's own camera-sized messages between its
+    processes (docs/sessions.md).
     """
     use_large_message_transport()
     rclpy.init(args=args)

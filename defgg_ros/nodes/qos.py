@@ -19,7 +19,7 @@ profile. Why (issue 26, bench/bench_transport.py): a 1280x720 16UC1 frame is
 1.8 MB, which Fast DDS splits into ~28 fragments of 64 kB. With the
 publisher's default transports (512 kB shared-memory segments, ~208 kB UDP
 socket buffers) many fragments are dropped on the way; a best-effort reader
-never gets them again, so the whole frame is lost (3 of 30 frames arrived
+never gets them again, so the whole frame is lost (3-11 of 30 frames arrived
 from a default-configured rclpy publisher at 30 Hz), while a reliable reader
 asks for the missing fragments and gets every frame (30 of 30). The
 publisher's transports are not ours to configure, so the reader must be
