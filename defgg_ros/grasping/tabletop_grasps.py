@@ -206,28 +206,32 @@ def _tip_height_m(surface_height_m: float) -> float:
 class FreeSpace:
     """Is a point of the robot frame seen to be empty? Its camera ray must reach a surface behind it
     (space carving): a point the camera cannot see (behind an object, off the image, no return) is
-    not free. Read on the full-resolution depth, each pixel as the farthest of its 3x3 neighbourhood:
-    mixed (flying) pixels at an object's edge do not count as surface, and the object's outline is
-    found to a pixel at every resolution. Pixels without a return: fill_holes."""
+    not free. Read on the full-resolution depth (pixels without a return: fill_holes). For an object's
+    extent each pixel reads as the farthest of its 3x3 neighbourhood (lenient: mixed, flying pixels at
+    the edge are not surface, the outline is found to a pixel at every resolution; the clearance
+    covers that pixel); for the finger pads as the nearest (strict: a pad touching an edge is blocked)."""
 
     def __init__(self, view: TabletopView):
         depth = view.filled_depth_m if view.filled_depth_m is not None else fill_holes(view.depth_m)
-        known = np.where(np.isfinite(depth), depth, 0).astype(np.float32)
-        self.depth = np.where(np.isfinite(depth), cv2.dilate(known, np.ones((3, 3), np.uint8)), 0.0)
+        finite = np.isfinite(depth)
+        kernel = np.ones((3, 3), np.uint8)
+        self.depth = np.where(finite, cv2.dilate(np.where(finite, depth, 0).astype(np.float32), kernel), 0.0)
+        self.strict_depth = np.where(finite, cv2.erode(np.where(finite, depth, np.inf).astype(np.float32), kernel), 0.0)
         self.k = view.camera_k
         camera_T_base = np.linalg.inv(view.base_T_camera)
         self.rotation, self.translation = camera_T_base[:3, :3], camera_T_base[:3, 3]
 
-    def free(self, points_base: np.ndarray) -> np.ndarray:
+    def free(self, points_base: np.ndarray, strict: bool = False) -> np.ndarray:
+        depth = self.strict_depth if strict else self.depth
         p = points_base @ self.rotation.T + self.translation
         z = p[:, 2]
         with np.errstate(divide="ignore", invalid="ignore"):
             u = np.rint(self.k[0, 0] * p[:, 0] / z + self.k[0, 2]).astype(np.int64)
             v = np.rint(self.k[1, 1] * p[:, 1] / z + self.k[1, 2]).astype(np.int64)
-        h, w = self.depth.shape
+        h, w = depth.shape
         seen = (z > 0) & (u >= 0) & (u < w) & (v >= 0) & (v < h)
         observed = np.zeros(z.shape)
-        observed[seen] = self.depth[v[seen], u[seen]]
+        observed[seen] = depth[v[seen], u[seen]]
         tolerance = CARVING_TOLERANCE_M + 3 * z * z * SUBPIXEL_RMS_PX / (self.k[0, 0] * STEREO_BASELINE_M)
         return seen & (observed > z + tolerance)
 
@@ -336,7 +340,7 @@ def _pads_free(view, space: FreeSpace, level_m: float, centre, direction, width_
     s_across = np.linspace(-FINGER_PAD_WIDTH_M / 2, FINGER_PAD_WIDTH_M / 2, PAD_SAMPLES) / CELL_M
     a, b = (g.reshape(-1, 1) for g in np.meshgrid(s_along, s_across))
     pads = [centre + side * a * direction + b * across for side in (-1.0, 1.0)]
-    free = space.free(_points(view, np.concatenate(pads), level_m)).reshape(2, -1)
+    free = space.free(_points(view, np.concatenate(pads), level_m), strict=True).reshape(2, -1)
     return bool(np.all(np.mean(~free, axis=1) <= PAD_BLOCKED_FRACTION))
 
 
