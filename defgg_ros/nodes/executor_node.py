@@ -297,7 +297,7 @@ class ExecutorNode(Node):
                                     f"arm reached the observation pose within {p['fresh_frame_timeout_s']:.0f} s "
                                     f"(newest frame {arrived_s - frame_s:.1f} s older)")
                 raise GoalError(f"grasp planning failed: {response.message or 'no grasp returned'}")
-            if self._shutdown.wait(0.2):  # the camera's next frame is on its way
+            if self._shutdown.wait(0.5):  # the camera's next frame is on its way (each try runs the network)
                 raise GoalError("executor is shutting down")
 
     def _observe_before_planning(self, goal_handle):
