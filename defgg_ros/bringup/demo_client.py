@@ -15,8 +15,8 @@ import numpy as np
 import rclpy
 from builtin_interfaces.msg import Duration
 from defgg_interfaces.action import PickAndPlace
-from franka_msgs.action import Move
 from defgg_interfaces.srv import PlanGrasp
+from franka_msgs.action import Move
 from geometry_msgs.msg import PoseArray
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
