@@ -145,6 +145,21 @@ class DemoRun:
             row.final_position_m = tuple(round(float(c), 4) for c in position)
         return row
 
+    def final_check(self, rows, indices, settle_s=1.0, timeout_s=20.0):
+        """Where every picked object ended once the cell is still: a later pick can knock an earlier
+        object out of the bin, and one checked right after its own pick may still be rolling."""
+        deadline = time.monotonic() + timeout_s
+        previous = np.array(self.client.object_positions())
+        still_since = time.monotonic()
+        while time.monotonic() < deadline and time.monotonic() - still_since < settle_s:
+            now = np.array(self.client.object_positions())
+            if np.abs(now - previous).max() > 0.002:
+                still_since = time.monotonic()
+            previous = now
+        for row, index in zip(rows, indices):
+            row.in_bin = in_bin(previous[index], self.scene.get("bin"))
+            row.final_position_m = tuple(round(float(c), 4) for c in previous[index])
+
     def observe_pose(self):
         """Open the hand, lift the TCP straight up, go to the ready pose (clear of the camera's view).
 
@@ -296,6 +311,7 @@ def run_demo(args, out_dir: Path, log) -> int:
                 rows.append(run.pick(index, remaining, progress))
                 if rows[-1].in_bin:
                     remaining.discard(names[index])
+        run.final_check(rows, [names.index(n) for n in wanted])
         panels = run.panels
         code = 0
     except (BringupError, CellCallError, NodeSetError) as exc:
