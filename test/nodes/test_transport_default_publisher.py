@@ -45,8 +45,8 @@ while time.monotonic() < deadline:
         break
     time.sleep(0.1)
 time.sleep(0.5)
-depth_mm = np.full((height, width), 600, np.uint16)            # a table 0.6 m away
-depth_mm[300:420, 560:720] = 540                               # a 6 cm tall box on it
+depth_mm = np.full((height, width), 400, np.uint16)            # the table, 0.4 m under the default camera pose
+depth_mm[300:420, 560:720] = 350                               # a 5 cm tall box on it
 fx = 631.0
 for i in range(frames):
     stamp_ns = 1_000_000_000 + i * 33_333_333
