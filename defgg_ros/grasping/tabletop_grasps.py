@@ -206,18 +206,22 @@ def _tip_height_m(surface_height_m: float) -> float:
 class FreeSpace:
     """Is a point of the robot frame seen to be empty? Its camera ray must reach a surface behind it
     (space carving): a point the camera cannot see (behind an object, off the image, no return) is
-    not free. Read on the full-resolution depth (pixels without a return: fill_holes). For an object's
+    not free. Read on the depth as perception read it (every stride-th pixel, holes filled: fill_holes;
+    a 1280x720 frame at 640x360, ~1.6 mm per pixel at 0.5 m). For an object's
     extent each pixel reads as the farthest of its 3x3 neighbourhood (lenient: mixed, flying pixels at
     the edge are not surface, the outline is found to a pixel at every resolution; the clearance
     covers that pixel); for the finger pads as the nearest (strict: a pad touching an edge is blocked)."""
 
     def __init__(self, view: TabletopView):
-        depth = view.filled_depth_m if view.filled_depth_m is not None else fill_holes(view.depth_m)
+        if view.filled_depth_m is not None:
+            depth, self.k = view.filled_depth_m, view.filled_k
+        else:
+            depth, self.k = fill_holes(view.depth_m), view.camera_k
         finite = np.isfinite(depth)
         kernel = np.ones((3, 3), np.uint8)
         self.depth = np.where(finite, cv2.dilate(np.where(finite, depth, 0).astype(np.float32), kernel), 0.0)
         self.strict_depth = np.where(finite, cv2.erode(np.where(finite, depth, np.inf).astype(np.float32), kernel), 0.0)
-        self.k = view.camera_k
+        self.sensor_fx = float(view.camera_k[0, 0])   # the noise is the sensor's, not the read stride's
         camera_T_base = np.linalg.inv(view.base_T_camera)
         self.rotation, self.translation = camera_T_base[:3, :3], camera_T_base[:3, 3]
 
@@ -232,7 +236,7 @@ class FreeSpace:
         seen = (z > 0) & (u >= 0) & (u < w) & (v >= 0) & (v < h)
         observed = np.zeros(z.shape)
         observed[seen] = depth[v[seen], u[seen]]
-        tolerance = CARVING_TOLERANCE_M + 3 * z * z * SUBPIXEL_RMS_PX / (self.k[0, 0] * STEREO_BASELINE_M)
+        tolerance = CARVING_TOLERANCE_M + 3 * z * z * SUBPIXEL_RMS_PX / (self.sensor_fx * STEREO_BASELINE_M)
         return seen & (observed > z + tolerance)
 
 

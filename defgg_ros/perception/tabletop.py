@@ -45,7 +45,7 @@ PLANE_SAMPLE_PIXELS = 6000
 GRID_MARGIN_M = 0.03
 # Cells whose smoothed height slope exceeds this are the flanks of round objects and the creases
 # where a round object meets a flat one: cut, so a bottle lying against a lower box stays apart.
-CREASE_SLOPE = math.tan(math.radians(40.0))
+CREASE_SLOPE = math.tan(math.radians(30.0))
 # Cells cut at noise steps take a labelled neighbour's label this far away when they continue its
 # surface (height within jump_m per cell of distance).
 GROW_REACH_M = 0.008
@@ -106,7 +106,8 @@ class TabletopView:
     object_ids: tuple = ()
     areas_m2: dict = field(default_factory=dict)
     depth_m: np.ndarray | None = None             # the full-resolution depth (NaN = no return)
-    filled_depth_m: np.ndarray | None = None      # fill_holes(depth_m), when perceive computed it
+    filled_depth_m: np.ndarray | None = None      # fill_holes of every stride-th pixel (what perceive read)
+    filled_k: np.ndarray | None = None            # K of filled_depth_m
 
     def cell_xy_m(self, row, col):
         """Base-frame (x, y) of a cell centre: rows run along +x, columns along +y."""
@@ -250,8 +251,8 @@ def perceive(depth_m, camera_k, base_T_camera, config: TabletopConfig | None = N
     grid_labels, areas = _segment_grid(grid, config)
     # Cells cut at jumps and creases and the side-face points around an object take the nearest
     # object's label within LABEL_REACH_M.
-    grid_labels = _nearest_labels(grid_labels, grid > 0, GROW_REACH_M / CELL_M, grid, config.jump_m)
-    near_labels = _nearest_labels(grid_labels, grid > 0, LABEL_REACH_M / CELL_M)
+    grid_labels, near_labels = _nearest_labels(grid_labels, grid > 0, grid, config.jump_m, GROW_REACH_M / CELL_M,
+                                               LABEL_REACH_M / CELL_M)
     processed_labels = np.zeros(depth.shape, np.uint8)
     processed_labels[vs, us] = near_labels.reshape(-1)[cell]
     processed_fg = np.zeros(depth.shape, bool)
@@ -266,30 +267,35 @@ def perceive(depth_m, camera_k, base_T_camera, config: TabletopConfig | None = N
         pixel_cell = cv2.resize(pixel_cell, size, interpolation=cv2.INTER_NEAREST)
         height = cv2.resize(height, size, interpolation=cv2.INTER_NEAREST)
     return TabletopView(pose, k_full, normal, offset, height, foreground, labels, pixel_cell, origin, grid,
-                        grid_labels, owner, tuple(sorted(areas)), areas, full, depth if stride == 1 else None)
+                        grid_labels, owner, tuple(sorted(areas)), areas, full, depth, k)
 
 
-def _nearest_labels(labels: np.ndarray, occupied: np.ndarray, reach_cells: float, grid=None,
-                    jump_m: float | None = None) -> np.ndarray:
-    """Occupied cells without a label take the nearest labelled cell's label within reach_cells; with
-    a grid, only when their height differs from that cell's by at most jump_m per cell of distance
-    (they continue its surface: cells cut at noise steps, not a neighbour's wall)."""
+def _nearest_labels(labels: np.ndarray, occupied: np.ndarray, grid: np.ndarray, jump_m: float,
+                    grow_cells: float, reach_cells: float) -> tuple:
+    """(grid labels, labels for pixels), from one distance transform to the nearest labelled cell.
+    Grid: occupied cells without a label take the nearest one's within grow_cells when their height
+    differs from that cell's by at most jump_m per cell of distance (they continue its surface: cells
+    cut at noise steps, not a neighbour's wall). Pixels: any occupied cell within reach_cells takes it
+    (an object's side faces scatter a few millimetres around its outline)."""
     unlabelled = occupied & (labels == 0)
     if not unlabelled.any() or not labels.any():
-        return labels
+        return labels, labels
     distance, index = cv2.distanceTransformWithLabels((labels == 0).astype(np.uint8), cv2.DIST_L2, 3,
                                                       labelType=cv2.DIST_LABEL_PIXEL)
     # DIST_LABEL_PIXEL numbers the zero-valued pixels of the source (our labelled cells) in raster order.
     sources = np.concatenate([[0], np.flatnonzero(labels > 0)])
-    take = unlabelled & (distance <= reach_cells)
-    source = sources[index[take]]
-    keep = np.ones(source.shape, bool)
-    if grid is not None:
-        keep = np.abs(grid[take] - grid.reshape(-1)[source]) <= jump_m * np.maximum(distance[take], 1.0)
-    out = labels.copy()
-    rows, cols = np.nonzero(take)
-    out[rows[keep], cols[keep]] = labels.reshape(-1)[source[keep]]
-    return out
+    flat_labels = labels.reshape(-1)
+    near = unlabelled & (distance <= max(grow_cells, reach_cells))
+    rows, cols = np.nonzero(near)
+    source = sources[index[rows, cols]]
+    d = distance[rows, cols]
+    continues = (d <= grow_cells) & (np.abs(grid[rows, cols] - grid.reshape(-1)[source]) <= jump_m * np.maximum(d, 1.0))
+    grown = labels.copy()
+    grown[rows[continues], cols[continues]] = flat_labels[source[continues]]
+    for_pixels = grown.copy()
+    reach = (d <= reach_cells) & ~continues
+    for_pixels[rows[reach], cols[reach]] = flat_labels[source[reach]]
+    return grown, for_pixels
 
 
 def fill_holes(depth_m: np.ndarray) -> np.ndarray:
