@@ -118,8 +118,10 @@ class GraspInferenceNode(Node):
         self._tf_broadcaster = TfBroadcaster(self)  # the planned grasp as TF frame grasp_frame
         # Reliability follows the publishers', and silence is logged (qos.SensorSubscription, issue 26).
         self._stream_subs = [
-            qos.SensorSubscription(self, Image, p["depth_topic"], lambda m: self._on_stream("depth", m)),
-            qos.SensorSubscription(self, Image, p["stiffness_topic"], lambda m: self._on_stream("stiffness", m)),
+            qos.SensorSubscription(self, Image, p["depth_topic"], lambda m: self._on_stream("depth", m),
+                                   warn_after_s=float(p["stream_timeout_s"])),
+            qos.SensorSubscription(self, Image, p["stiffness_topic"], lambda m: self._on_stream("stiffness", m),
+                                   warn_after_s=float(p["stream_timeout_s"])),
             qos.SensorSubscription(self, CameraInfo, p["camera_info_topic"], lambda m: self._on_stream("info", m),
                                    warn_after_s=0.0)]
         if self._tabletop is not None and self._tabletop.self_filter is not None:

@@ -132,10 +132,13 @@ class SensorSubscription:
         wanted = reliability_for(self._publisher_reliabilities())
         if wanted == self.reliability:
             return
-        if self.subscription is not None:
-            self._node.destroy_subscription(self.subscription)
+        # The new reader first, then the old one goes: the new one needs a moment to match the
+        # publishers, and a frame the old one still receives meanwhile is not lost.
+        old = self.subscription
         self.subscription = self._node.create_subscription(self._msg_type, self.topic, self._on_message,
                                                            sensor_qos(wanted, self._depth), callback_group=self._group)
+        if old is not None:
+            self._node.destroy_subscription(old)
         if self.reliability is not None:
             self._node.get_logger().info(f"{self._resolved}: subscribed {wanted.name.lower()} now "
                                          "(follows the publishers' reliability)")

@@ -74,7 +74,8 @@ class SegmentationNode(Node):
         # Reliability follows the camera driver's, and silence is logged (qos.SensorSubscription, issue 26).
         self._info_sub = qos.SensorSubscription(self, CameraInfo, p["camera_info_topic"], self._on_camera_info,
                                                 warn_after_s=0.0)
-        self._depth_sub = qos.SensorSubscription(self, Image, p["depth_topic"], self._on_depth)
+        self._depth_sub = qos.SensorSubscription(self, Image, p["depth_topic"], self._on_depth,
+                                                 warn_after_s=float(p["stream_timeout_s"]))
         if self._self_filter is not None:
             self.create_subscription(JointState, p["joint_states_topic"], self._on_joint_states, qos.SENSOR_DATA)
         self.create_service(SetStiffness, p["set_stiffness_service"], self._on_set_stiffness)
