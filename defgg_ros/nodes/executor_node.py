@@ -149,6 +149,7 @@ class ExecutorNode(Node):
         self._arm_joints, self._finger_joints = names["joints"], names["fingers"]
         self._arm_goal = None       # handle of the running FollowJointTrajectory goal
         self._arm_goal_serial = 0   # the newest goal sent; a result of an older one is ignored
+        self._held_serial = -1      # _arm_goal_serial when the arm was last told to hold
         self._gripper_feedback_width_m = float("nan")
         self._arm_client = ActionClient(self, FollowJointTrajectory, p["arm_trajectory_action"],
                                         callback_group=self._group)
@@ -415,6 +416,8 @@ class ExecutorNode(Node):
             with self._lock:
                 if serial == self._arm_goal_serial:
                     self._arm_goal = handle
+                elif self._held_serial == self._arm_goal_serial:
+                    handle.cancel_goal_async()  # accepted after a stop was requested: it must not run
             handle.get_result_async().add_done_callback(on_result)
 
         self._arm_client.send_goal_async(goal).add_done_callback(on_goal)
@@ -422,6 +425,7 @@ class ExecutorNode(Node):
     def _hold_arm(self) -> None:
         """Stop the arm where it is (lock held): cancel the running goal; the controller then holds position."""
         self._arm_goal_serial += 1
+        self._held_serial = self._arm_goal_serial
         if self._arm_goal is not None:
             self._arm_goal.cancel_goal_async()
             self._arm_goal = None
