@@ -24,7 +24,6 @@ from bench_plan_grasp import (
     rss_mb,
     scene,
     start_node,
-    stop_node,
     wait_for_node,
 )
 
@@ -111,8 +110,8 @@ def main(argv=None):
     from rclpy.context import Context
     from tqdm import tqdm
 
-    depth_m, moduli_pa, _, camera_k = scene()
-    proc = start_node(args.model, args.threads)
+    depth_m, moduli_pa, camera_k, base_T_camera = scene(640, 480)   # the generated cluttered table
+    proc = start_node(args.model, args.threads, base_T_camera, "tabletop")
     context = Context()
     rclpy.init(context=context)
     try:
@@ -138,7 +137,7 @@ def main(argv=None):
             load, seconds = run_round(executor, clients, requests, args, rng)
             report(round_index, load, seconds, args, rss_mb(proc.pid))
     finally:
-        stop_node(proc)
+        proc.stop()
         context.try_shutdown()
 
 
