@@ -273,16 +273,27 @@ def feasible_grasp(view: TabletopView, label: int, row: int, col: int, angle_rad
     phis = candidate_angles(angle_rad, face_angles)
     order = range(len(phis))
     directions = np.stack([np.sin(phis), np.cos(phis)], axis=1)          # (row, col) per cell step
-    reach = int(math.ceil(MAX_HALF_EXTENT_CELLS / LINE_STEP_CELLS))
+    # A run longer than the widest fitting extent is not needed to the end: sample that far each side.
+    reach = int(math.ceil((GRIPPER_MAX_WIDTH_M - 2 * CLEARANCE_M) / CELL_M / LINE_STEP_CELLS)) + 2
     steps = np.arange(-reach, reach + 1) * LINE_STEP_CELLS
     across = np.stack([-directions[:, 1], directions[:, 0]], axis=1)
     # Three lines across the band the pads sweep (centre and both pad edges): what lies between the
-    # fingers anywhere in that band must fit, so a box's corner is not taken for a narrow object.
+    # fingers anywhere in that band must fit, so a box's corner is not taken for a narrow object. The
+    # centre line first for every direction; the edge lines only where the centre line's run fits.
     offsets = np.array([0.0, -0.5, 0.5]) * FINGER_PAD_WIDTH_M / CELL_M
-    cells = (np.array([row, col], float)[None, None, None, :] + offsets[None, :, None, None] * across[:, None, None, :]
-             + steps[None, None, :, None] * directions[:, None, None, :])            # A x 3 x S x 2
-    free = space.free(_points(view, cells.reshape(-1, 2), level)).reshape(len(order), 3, steps.size)
+    centre = np.array([row, col], float)
+    free = np.ones((len(order), 3, steps.size), bool)
+    line = centre + steps[None, :, None] * directions[:, None, :]                      # A x S x 2
+    free[:, 0] = space.free(_points(view, line.reshape(-1, 2), level)).reshape(len(order), steps.size)
+    ok0, low0, high0 = band_extents(~free[:, :1])
+    fits0 = ok0 & ((high0 - low0 + 1) * LINE_STEP_CELLS * CELL_M + 2 * CLEARANCE_M <= GRIPPER_MAX_WIDTH_M)
+    if fits0.any():
+        idx = np.flatnonzero(fits0)
+        edges = (centre + offsets[None, 1:, None, None] * across[idx, None, None, :]
+                 + steps[None, None, :, None] * directions[idx, None, None, :])       # a x 2 x S x 2
+        free[idx, 1:] = space.free(_points(view, edges.reshape(-1, 2), level)).reshape(idx.size, 2, steps.size)
     ok, lows, highs = band_extents(~free)
+    ok &= fits0
     extents = (highs - lows + 1) * LINE_STEP_CELLS * CELL_M
     fitting = [(round(extents[i] / OPENING_TIE_M), i, int(lows[i]), int(highs[i]), float(extents[i]))
                for i in order if ok[i] and extents[i] + 2 * CLEARANCE_M <= GRIPPER_MAX_WIDTH_M]
