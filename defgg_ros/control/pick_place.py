@@ -72,6 +72,8 @@ GRASP_BELOW_TABLE_TOLERANCE_M = 0.02
 # a finger rests on the object (the grasp centre is off the object). Without
 # this the gripper reported success and the pick failed later as a "slip".
 NOT_CLOSED_TOLERANCE_M = 0.003
+# A held object's fingers may creep (a soft object relaxing); opening further than this means it is gone.
+OPENED_WIDTH_TOLERANCE_M = 0.010
 
 
 class SequenceFailure(Exception):
@@ -325,6 +327,12 @@ class PickPlaceSequence:
         if width < threshold:
             raise SequenceFailure(f"object dropped during {self._phase}: the gripper width fell from "
                                   f"{closed * 1000:.1f} mm to {width * 1000:.1f} mm (slipped out)")
+        if width > closed + OPENED_WIDTH_TOLERANCE_M:
+            # Force-closed fingers do not open by themselves: something pushed them apart, and the
+            # object is gone (seen in the simulated cell: 51 -> 79 mm mid-transfer, the block flung
+            # off, yet reported "held after transfer").
+            raise SequenceFailure(f"object lost during {self._phase}: the fingers opened from "
+                                  f"{closed * 1000:.1f} mm to {width * 1000:.1f} mm")
 
     # --- phases ---------------------------------------------------------------
     def _tick_pre_grasp(self, sim_s: float) -> list:
@@ -495,7 +503,8 @@ class PickPlaceSequence:
             return False
         if self._failed_phase not in ("lift", "transfer", "place"):
             return False
-        return state.gripper_width_m >= max(MISSED_WIDTH_M, self._cfg.slip_width_fraction * closed)
+        width = state.gripper_width_m
+        return max(MISSED_WIDTH_M, self._cfg.slip_width_fraction * closed) <= width <= closed + OPENED_WIDTH_TOLERANCE_M
 
     def _begin_recovery(self, sim_s: float) -> list:
         self._recovering, self._phase = True, RECOVER_PHASE

@@ -234,3 +234,14 @@ def test_observation_watch_clears_only_frames_taken_after_the_arm_arrived():
     assert arm_state_of(away, np.zeros(7), OBSERVE_Q, 0.05, 0.02) == "at_rest"
     assert arm_state_of(away, np.full(7, 0.1), OBSERVE_Q, 0.05, 0.02) == "moving"
     assert arm_state_of(None, None, OBSERVE_Q, 0.05, 0.02) == "unknown"
+
+
+def test_fingers_pushed_open_while_carrying_is_a_lost_object_not_a_success(kin):
+    sequence, robot = PickPlaceSequence(kin, CONFIG, GRASP, PLACE), FakeRobot(kin, World(object_width_m=0.045))
+    run(sequence, robot, until=lambda r, s: s.phase == "transfer" and s.feedback(r.sim_s).phase_progress > 0.3)
+    robot.width_m = 0.075  # the fingers spring open mid-transfer (the simulated cell did: 51 -> 79 mm)
+    finish(sequence, robot)
+    out = sequence.outcome
+    assert not out.success and not out.held_after_transfer
+    assert out.failure_reason.startswith("object lost during transfer: the fingers opened from 45.0 mm to 75.0 mm")
+    assert "carried" not in out.recovery and out.arm_state == "observation_pose"
