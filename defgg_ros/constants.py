@@ -95,3 +95,12 @@ GRASP_HEIGHT_FRACTION = 0.5
 # Where a training candidate's TCP goes (sim.sampler): "contacts" = at the sampled contacts' height
 # (the datasets up to fem_v3), "executor" = at tcp_height_m, the height the evaluation executes a grasp at.
 GRASP_HEIGHT_RULES = ("contacts", "executor")
+
+# --- Simulation -------------------------------------------------------------
+GRAVITY_MPS2 = 9.81
+# Outcome of a simulated grasp trial. Only "ok" and "lift_failed" become labels; simulation failures
+# (exploded, timeout) are recorded but never used for training or counted as grasp outcomes.
+STATUS_OK = "ok"
+STATUS_LIFT_FAILED = "lift_failed"
+STATUS_EXPLODED = "exploded"
+STATUS_TIMEOUT = "timeout"

@@ -29,8 +29,8 @@ from defgg_ros.constants import (
     YOUNGS_MODULUS_MIN_PA,
 )
 
-# Defined by the dataset generator: the force its labels were made with.
-from defgg_ros.sim.trial import grasp_force_n as label_grasp_force_n
+# The legacy labels' force (defgg_ros/grip_force.py), the one the executor grasps with.
+from defgg_ros.grip_force import grasp_force_n as label_grasp_force_n
 
 # Closing speeds (opening rate, franka_gripper allows up to 0.1 m/s).
 SOFT_CLOSING_SPEED_MPS = 0.02

@@ -125,7 +125,7 @@ def _coverage_lines(rows, planned) -> list[str]:
 
 
 def _protocol_line(gen: dict) -> str:
-    from defgg_ros.data.datagen import effective_trial_settings, recorded_grasp_height
+    from defgg_ros.data.header import effective_trial_settings, recorded_grasp_height
     from defgg_ros.sim.trial import comparable_protocol
 
     recorded = gen.get("trial_settings")

@@ -25,6 +25,7 @@ from defgg_ros.atomic import append_jsonl, write_json_atomic
 from defgg_ros.constants import GRASP_CANDIDATES_PER_OBJECT, TRAINING_YOUNGS_MODULI_PA
 from defgg_ros.data.format import TRIAL_ERRORS_FILE as ERRORS_FILE
 from defgg_ros.data.format import DatasetWriter, GraspRect, Scene, TrialRecord, scene_id_for
+from defgg_ros.data.header import effective_trial_settings, recorded_grasp_height, recorded_protocol  # noqa: F401
 
 CANDIDATE_FILE_VERSION = 1
 # The coarse FEM mesh measured against the shipped one (up to 220 nodes):
@@ -72,17 +73,6 @@ class DatagenConfig:
         d["objects"] = list(self.objects)
         d["trial_settings"] = effective_trial_settings(self.settings)
         return d
-
-
-def effective_trial_settings(overrides: dict, legacy: bool = False) -> dict:
-    """Every TrialSettings field of the generator's protocol with these overrides (legacy: the
-    pre-2026-11-24 lift and the pre-2026-11-25 confident stop)."""
-    from defgg_ros.sim.trial import LEGACY_CONFIDENT_SETTINGS, LEGACY_LIFT_SETTINGS, TrialSettings
-
-    base = TrialSettings.fast()
-    if legacy:
-        base = replace(base, **LEGACY_LIFT_SETTINGS, **LEGACY_CONFIDENT_SETTINGS)
-    return asdict(replace(base, **overrides))
 
 
 @dataclass(frozen=True)
@@ -282,12 +272,6 @@ def _execute_ray(payloads, cfg, on_result) -> None:
             ray.shutdown()
 
 
-def recorded_grasp_height(generator: dict) -> str:
-    """The candidates' height rule a dataset header's generator settings record (headers before
-    2026-11-26 lack it: their candidates sat at the contacts' height)."""
-    return generator.get("grasp_height", "contacts")
-
-
 def resolve_grasp_height(out, requested: str | None) -> str:
     """The candidates' height rule of a run: as requested; else the dataset's own when resuming one,
     else executor (DatagenConfig's default)."""
@@ -298,11 +282,6 @@ def resolve_grasp_height(out, requested: str | None) -> str:
     if (Path(out) / "dataset.json").exists():
         return recorded_grasp_height(check_header(out).get("generator", {}))
     return DatagenConfig.grasp_height
-
-
-def recorded_protocol(generator: dict) -> str:
-    """The trial protocol a dataset header records (headers before 2026-11-26 lack it: legacy)."""
-    return (generator.get("trial_settings") or {}).get("protocol", "legacy")
 
 
 def resolve_protocol(out, requested: str | None) -> str:

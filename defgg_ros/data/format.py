@@ -28,24 +28,26 @@ from __future__ import annotations
 
 import hashlib
 import json
-import math
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from defgg_ros.atomic import append_jsonl, atomic_path, compress_jsonl, read_jsonl, write_json_atomic
-from defgg_ros.constants import SHAKE_POSITIVE_THRESHOLD_MPS2
+from defgg_ros.constants import (  # noqa: F401 - the statuses are part of this format
+    SHAKE_POSITIVE_THRESHOLD_MPS2,
+    STATUS_EXPLODED,
+    STATUS_LIFT_FAILED,
+    STATUS_OK,
+    STATUS_TIMEOUT,
+)
+from defgg_ros.grasping.rectangles import GraspRect  # noqa: F401 - the rect of every trial record
 
 FORMAT_NAME = "defgg-dataset"
 FORMAT_VERSION = 1
 SCENE_ARRAYS = ("depth_m", "youngs_modulus_pa", "object_mask", "camera_k", "base_T_camera")
 # Trial outcomes. Only "ok" and "lift_failed" become labels; simulation
 # failures are recorded but never used for training.
-STATUS_OK = "ok"
-STATUS_LIFT_FAILED = "lift_failed"
-STATUS_EXPLODED = "exploded"
-STATUS_TIMEOUT = "timeout"
 LABELLED_STATUSES = (STATUS_OK, STATUS_LIFT_FAILED)
 # Trials that raised (a bug or damaged input, not a simulation outcome) go to this file in the run's
 # folder (generator and evaluation alike) instead of ending the run; the next run retries them.
@@ -61,24 +63,6 @@ def scene_id_for(object_name: str, youngs_modulus_pa: float) -> str:
     if "/" in object_name or object_name.startswith("."):
         raise ValueError(f"bad object name {object_name!r}")
     return f"{object_name}__E{youngs_modulus_pa:.0e}"
-
-
-@dataclass
-class GraspRect:
-    center_u_px: float
-    center_v_px: float
-    angle_rad: float
-    width_px: float
-    finger_height_px: float
-
-    def corners(self) -> np.ndarray:
-        """4x2 (u, v) corners; the width runs along the angle direction."""
-        c, s = math.cos(self.angle_rad), math.sin(self.angle_rad)
-        along = np.array([c, s]) * self.width_px / 2.0
-        across = np.array([-s, c]) * self.finger_height_px / 2.0
-        centre = np.array([self.center_u_px, self.center_v_px])
-        return np.stack([centre - along - across, centre + along - across,
-                         centre + along + across, centre - along + across])
 
 
 @dataclass

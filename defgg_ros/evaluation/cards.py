@@ -19,8 +19,8 @@ from pathlib import Path
 import torch
 
 from defgg_ros.atomic import atomic_path, write_json_atomic, write_text_atomic
-from defgg_ros.data.datagen import recorded_grasp_height, recorded_protocol
 from defgg_ros.data.format import read_trials
+from defgg_ros.data.header import recorded_grasp_height, recorded_protocol
 from defgg_ros.model.checkpoint import load_checkpoint
 
 PROVENANCE_SUFFIX = ".train.json"

@@ -74,6 +74,13 @@ def write_outputs(out_dir) -> dict:
         cells = tables.main_table(records, task, sets, models, moduli, expected)
         write_text_atomic(tdir / f"{task}.md", tables.main_table_markdown(cells, task, sets, models, moduli, labels))
         write_text_atomic(tdir / f"{task}.csv", tables.main_table_csv(cells, task, sets, models, moduli))
+        if any("success_every_direction" in r for r in records if r.get("task") == task):
+            every = tables.main_table(records, task, sets, models, moduli, expected, field="success_every_direction")
+            write_text_atomic(tdir / f"{task}_every_direction.md", tables.main_table_markdown(
+                every, task, sets, models, moduli, labels, title=f"**{task.capitalize()} task, held in every "
+                "direction** (the second column): success rate in % (successes/graded trials)"))
+            summary["tasks"][f"{task}_every_direction"] = {
+                f"{s}|{m}": _cell_json(every[(tables.ALL_STIFFNESSES, s, m)]) for s in sets for m in models}
         summary["tasks"][task] = {f"{s}|{m}": _cell_json(cells[(tables.ALL_STIFFNESSES, s, m)])
                                   for s in sets for m in models}
         summary["tasks"][task].update({f"{s}|{m}|{e:g}": _cell_json(cells[(e, s, m)])

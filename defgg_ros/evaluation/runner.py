@@ -26,7 +26,7 @@ from defgg_ros.evaluation import scene as scene_mod
 from defgg_ros.evaluation.planning import plan_world_grasp
 from defgg_ros.evaluation.sources import make_spec, shape_from_ref
 from defgg_ros.evaluation.store import ResultStore
-from defgg_ros.evaluation.tasks import task_success
+from defgg_ros.evaluation.tasks import shake_success_rule, task_success
 from defgg_ros.sim.trial import TrialSettings, WorldGrasp, run_grasp_trial
 
 STATUS_NO_GRASP = "no_grasp"   # the model proposed fewer grasps than asked: a failed grasp
@@ -48,8 +48,15 @@ def eval_trial_settings(protocol: str | None = None) -> TrialSettings:
     only to the task's 25 m/s^2 (0.25 s at the generator's 100 m/s^3), the twist oscillating
     (EVAL_TWIST_OSCILLATION_RADPS), and each task stopped at the first direction/axis that is not held (the
     grasp has failed; the rest is recorded as unmeasured). `protocol`: sim.trial.PROTOCOLS (None: the default)."""
+    protocol = protocol or TrialSettings.protocol
+    if protocol == "defgraspsim":
+        # the label's own criterion: every direction ramped to 50 m/s^2 until lost (the mean and the
+        # every-direction rate both need every direction measured), the twist as before
+        return TrialSettings(protocol=protocol, stop_direction_when_lost=True, stop_when_label_decided=False,
+                             twist_oscillation_radps=EVAL_TWIST_OSCILLATION_RADPS,
+                             twist_fail_below_radps2=TWIST_ACCEL_LIMIT_RADPS2)
     rate_mps3 = SHAKE_ACCEL_LIMIT_MPS2 / TrialSettings().shake_ramp_time_s
-    return TrialSettings(protocol=protocol or TrialSettings.protocol, stop_direction_when_lost=True,
+    return TrialSettings(protocol=protocol, stop_direction_when_lost=True,
                          stop_when_label_decided=False,
                          shake_limit_mps2=SHAKE_POSITIVE_THRESHOLD_MPS2,
                          shake_ramp_time_s=SHAKE_POSITIVE_THRESHOLD_MPS2 / rate_mps3,
@@ -170,9 +177,11 @@ def run_trial_payload(payload: dict) -> dict:
     out = run_grasp_trial(spec, grasp, tests=(task,), settings=TrialSettings.from_record(payload["settings"]),
                           client=_WORKER_CLIENT, object_yaw_rad=payload["yaw"])
     accels = out.shake_accels_mps2 if task == "shake" else out.twist_accels_radps2
+    rule = shake_success_rule(payload["settings"].get("protocol", "legacy")) if task == "shake" else "every"
+    extra = {"success_every_direction": task_success(task, out.status, accels)} if rule != "every" else {}
     return {"status": out.status, "accels": accels,
             "measured": out.shake_measured if task == "shake" else out.twist_measured,
-            "success": task_success(task, out.status, accels), "grasp_force_n": out.grasp_force_n,
+            "success": task_success(task, out.status, accels, rule), **extra, "grasp_force_n": out.grasp_force_n,
             "cpu_s": out.cpu_s, "wall_s": time.monotonic() - wall0, "sim_steps": out.sim_steps,
             "time_step_s": out.sim.get("time_step_s"), "soft": out.sim.get("soft"), "note": out.note}
 
@@ -205,7 +214,8 @@ def pending_work(plan: EvalPlan, store: ResultStore, client: int, show_progress:
         grasp = planned[job.rank] if job.rank < len(planned) else None
         rec = _base_record(job, plan, obj, grasp)
         if grasp is None:
-            ready.append({**rec, "status": STATUS_NO_GRASP, "success": False, "accels": None, "sim_key": None,
+            ready.append({**rec, "status": STATUS_NO_GRASP, "success": False, "success_every_direction": False,
+                          "accels": None, "sim_key": None,
                           "reused_from": None, "note": f"model proposed only {len(planned)} grasps"})
             continue
         key = jobs_mod.sim_key(obj.set_name, obj.name, rec["part_moduli_pa"], rec["object_yaw_rad"],
@@ -218,7 +228,7 @@ def pending_work(plan: EvalPlan, store: ResultStore, client: int, show_progress:
     return ready, to_run
 
 
-_OUTCOME_FIELDS = ("status", "accels", "measured", "success", "grasp_force_n", "cpu_s",
+_OUTCOME_FIELDS = ("status", "accels", "measured", "success", "success_every_direction", "grasp_force_n", "cpu_s",
                    "wall_s", "sim_steps", "time_step_s", "soft", "note")
 
 

@@ -13,8 +13,13 @@ procedure and withstands the task's acceleration limit:
 
 The training label is weaker (mean held acceleration over the directions
 >= 25 m/s^2 with a ramp to 50 m/s^2); the task needs every direction, so the
-evaluation ramps to 25 m/s^2 and stops at the first direction that fails
+legacy evaluation ramps to 25 m/s^2 and stops at the first direction that fails
 (runner.eval_trial_settings).
+
+Under the defgraspsim protocol the shake's success is the label's own criterion
+(SUCCESS_RULES "mean": held through the pickup, mean held acceleration over the
+16 directions >= 25 m/s^2, each ramped to 50 m/s^2) and the every-direction rate
+is the second column (record field "success_every_direction").
 
 A lift failure is a failed grasp. Simulation failures (explosion, time-out)
 are not grasp outcomes: ``success`` is None and tables count them apart.
@@ -25,6 +30,8 @@ from defgg_ros.constants import SHAKE_POSITIVE_THRESHOLD_MPS2, TWIST_ACCEL_LIMIT
 from defgg_ros.data.format import STATUS_LIFT_FAILED, STATUS_OK
 
 TASKS = ("shake", "twist")
+# "every": held at the limit in every direction/axis; "mean": the shake label's rule (mean held >= 25 m/s^2).
+SUCCESS_RULES = ("every", "mean")
 # The ramp records the last value it checked before the loss; a value within
 # this fraction of the limit counts as "held at the limit" (ramp granularity).
 LIMIT_TOLERANCE = 1e-6
@@ -40,13 +47,16 @@ def check_task(task: str) -> str:
     return task
 
 
-def task_success(task: str, status: str, accels: list | None) -> bool | None:
+def task_success(task: str, status: str, accels: list | None, rule: str = "every") -> bool | None:
     """True/False for a grasp outcome, None when the simulation itself failed.
 
     accels: per-direction held accelerations (shake, m/s^2) or per-axis held
-    angular accelerations (twist, rad/s^2) of an "ok" trial.
+    angular accelerations (twist, rad/s^2) of an "ok" trial. rule: SUCCESS_RULES
+    ("mean" applies to the shake only).
     """
     check_task(task)
+    if rule not in SUCCESS_RULES or (rule == "mean" and task != "shake"):
+        raise TaskError(f"success rule {rule!r} does not apply to the {task} task")
     if status == STATUS_LIFT_FAILED:
         return False
     if status != STATUS_OK:
@@ -54,5 +64,12 @@ def task_success(task: str, status: str, accels: list | None) -> bool | None:
     if not accels:
         raise TaskError(f"{task} trial with status ok but no accelerations recorded")
     limit = SHAKE_POSITIVE_THRESHOLD_MPS2 if task == "shake" else TWIST_ACCEL_LIMIT_RADPS2
+    if rule == "mean":
+        return bool(sum(accels) / len(accels) >= limit * (1 - LIMIT_TOLERANCE))
     return bool(min(accels) >= limit * (1 - LIMIT_TOLERANCE))
+
+
+def shake_success_rule(protocol: str) -> str:
+    """The shake's success rule of an evaluation under a trial protocol (legacy: every direction)."""
+    return "mean" if protocol == "defgraspsim" else "every"
 

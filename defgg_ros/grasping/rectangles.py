@@ -7,14 +7,33 @@ ground-truth rectangle with IoU > 0.25 and their angles differ by less than
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
 
-from defgg_ros.data.format import GraspRect
-
 IOU_THRESHOLD = 0.25
 ANGLE_THRESHOLD_RAD = math.radians(30.0)
+
+
+@dataclass
+class GraspRect:
+    """A grasp in image space: centre (px), angle from the u axis towards v (rad), opening width and
+    finger height (px)."""
+    center_u_px: float
+    center_v_px: float
+    angle_rad: float
+    width_px: float
+    finger_height_px: float
+
+    def corners(self) -> np.ndarray:
+        """4x2 (u, v) corners; the width runs along the angle direction."""
+        c, s = math.cos(self.angle_rad), math.sin(self.angle_rad)
+        along = np.array([c, s]) * self.width_px / 2.0
+        across = np.array([-s, c]) * self.finger_height_px / 2.0
+        centre = np.array([self.center_u_px, self.center_v_px])
+        return np.stack([centre - along - across, centre + along - across,
+                         centre + along + across, centre - along + across])
 
 
 def angle_difference_rad(a_rad: float, b_rad: float) -> float:

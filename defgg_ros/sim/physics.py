@@ -17,10 +17,9 @@ from dataclasses import dataclass
 import numpy as np
 import pybullet as p
 
-from defgg_ros.constants import MAX_SOFT_BODY_YOUNGS_MODULUS_PA, POISSON_RATIO
+from defgg_ros.constants import GRAVITY_MPS2, MAX_SOFT_BODY_YOUNGS_MODULUS_PA, POISSON_RATIO
 from defgg_ros.stiffness import check_youngs_modulus
 
-GRAVITY_MPS2 = 9.81
 SPARSE_SDF_VOXEL_SIZE_M = 0.01
 # (upper E bound in Pa, time step in s); first match wins.
 TIME_STEPS_S = ((2e5, 5e-4), (MAX_SOFT_BODY_YOUNGS_MODULUS_PA, 2.5e-4))

@@ -28,8 +28,8 @@ from defgg_ros.constants import (
     PREGRASP_HEIGHT_M,
     TABLE_CLEARANCE_M,
 )
-from defgg_ros.data.format import GraspRect
 from defgg_ros.grasping.geometry import tcp_height_m
+from defgg_ros.grasping.rectangles import GraspRect
 from defgg_ros.sim import hand as hand_mod
 from defgg_ros.sim.camera import TopDownCamera
 from defgg_ros.sim.trial import OPENING_CLEARANCE_M, WorldGrasp

@@ -32,14 +32,17 @@ from dataclasses import asdict, dataclass, field, replace
 import numpy as np
 
 from defgg_ros.constants import (
-    GRIPPER_MAX_FORCE_N,
     GRIPPER_MAX_WIDTH_M,
     SHAKE_ACCEL_LIMIT_MPS2,
     SHAKE_DIRECTIONS,
     SHAKE_POSITIVE_THRESHOLD_MPS2,
+    STATUS_EXPLODED,
+    STATUS_LIFT_FAILED,
+    STATUS_OK,
+    STATUS_TIMEOUT,
     TWIST_ACCEL_LIMIT_RADPS2,
 )
-from defgg_ros.data.format import STATUS_EXPLODED, STATUS_LIFT_FAILED, STATUS_OK, STATUS_TIMEOUT
+from defgg_ros.grip_force import defgraspsim_finger_force_n, factor_of_safety, grasp_force_n  # noqa: F401
 from defgg_ros.sim import hand as hand_mod
 from defgg_ros.sim import objects, physics, world
 from defgg_ros.sim.hand import world_T_hand
@@ -56,12 +59,6 @@ PROTOCOLS = (PROTOCOL_LEGACY, PROTOCOL_DEFGRASPSIM)
 FINGER_HOLDS = ("force", "lock")
 TABLE_AWAY_Z_M = -1.0   # where the defgraspsim pickup moves the table (DefGraspSim lowers its platform)
 
-# Grasp force rule (per finger): 2 N at E = 2e4 Pa plus 0.5 N per decade of E,
-# as DefGraspSim grew the force with log E: soft objects are squeezed
-# gently, stiff ones firmly. 2 N was the probe's force (stable at every E).
-FORCE_AT_SOFTEST_N = 2.0
-FORCE_PER_DECADE_N = 0.5
-FORCE_REFERENCE_E_PA = 2e4
 OPENING_CLEARANCE_M = 0.01      # fingers open this much wider than the grasp width (5 mm a side)
 LOSS_DISTANCE_M = 0.02          # object moved this far relative to the hand = no longer held
 # Confident stop (the surrogate): after k >= CONFIDENT_MIN_DIRECTIONS directions, stop when the
@@ -81,23 +78,6 @@ LEGACY_PROTOCOL_SETTINGS = {"protocol": "legacy", "object_friction": None, "pois
 # all nodes (450 J/kg) is far beyond it and only reached by a diverging FEM solve.
 MAX_RMS_NODE_SPEED_MPS = 30.0
 TWIST_AXES = ((1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1))
-
-
-def grasp_force_n(youngs_modulus_pa: float) -> float:
-    """The legacy protocol's force per finger (N), independent of the object's mass."""
-    decades = math.log10(max(youngs_modulus_pa, FORCE_REFERENCE_E_PA) / FORCE_REFERENCE_E_PA)
-    return float(min(FORCE_AT_SOFTEST_N + FORCE_PER_DECADE_N * decades, GRIPPER_MAX_FORCE_N))
-
-
-def factor_of_safety(youngs_modulus_pa: float) -> float:
-    """DefGraspSim's FOS = 1 + log10(E) / 10 (1.43 at 2e4 Pa ... 1.93 at 2e9 Pa)."""
-    return 1.0 + math.log10(youngs_modulus_pa) / 10.0
-
-
-def defgraspsim_finger_force_n(youngs_modulus_pa: float, mass_kg: float, friction: float) -> float:
-    """Force per finger (N) of the defgraspsim protocol: half of FOS * m * g / mu, capped at the hand's."""
-    total = factor_of_safety(youngs_modulus_pa) * mass_kg * world.GRAVITY_MPS2 / friction
-    return float(min(total / 2.0, GRIPPER_MAX_FORCE_N))
 
 
 def shake_directions(n: int = SHAKE_DIRECTIONS) -> np.ndarray:

@@ -20,17 +20,12 @@ ROS_MODULES = ("rclpy", "rosidl_runtime_py", "rosbag2_py")
 # Cycles that remain, each as the set of packages it joins, with who owns the fix. Each is an xfail
 # of its own (strict: it fails once the cycle is gone, so the entry is removed with the fix).
 KNOWN_PACKAGE_CYCLES = {
-    frozenset({"grasping", "model", "perception", "control", "data", "sim"}):
+    frozenset({"grasping", "model", "perception", "control"}):
         "model.inference holds the grasp ranking policy (model -> grasping; the perception helper moves it to "
-        "grasping/); grasping.tabletop_grasps uses model.preprocess.network_input; grasping.rectangles <-> "
-        "data.labels and sim.sampler/trial <-> data.format (sim/ and data/ are being refactored); "
-        "control.gripper_rule -> sim.trial.grasp_force_n (sim/); grasping.tabletop_* -> perception -> "
-        "perception.self_filter -> control.kinematics -> control.pick_place -> grasping.geometry",
+        "grasping/); grasping.tabletop_grasps uses model.preprocess.network_input; grasping.tabletop_* -> "
+        "perception -> perception.self_filter -> control.kinematics -> control.pick_place -> grasping.geometry",
 }
-KNOWN_MODULE_CYCLES = {
-    frozenset({"defgg_ros.data.card", "defgg_ros.data.datagen"}): "data/card.py <-> data/datagen.py (data/ is "
-                                                                   "being refactored)",
-}
+KNOWN_MODULE_CYCLES = {}
 
 
 def _module_name(path: Path) -> str:

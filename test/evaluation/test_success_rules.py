@@ -1,0 +1,26 @@
+"""Success rules of the evaluation: the legacy every-direction shake, the defgraspsim label criterion."""
+import pytest
+
+from defgg_ros.evaluation.runner import eval_trial_settings
+from defgg_ros.evaluation.tasks import TaskError, shake_success_rule, task_success
+
+pytestmark = pytest.mark.unit
+
+
+def test_mean_rule_is_the_label_criterion_and_every_is_the_strict_column():
+    accels = [50.0] * 8 + [10.0] * 8          # mean 30: a positive label, yet 8 directions failed
+    assert task_success("shake", "ok", accels, "mean") is True
+    assert task_success("shake", "ok", accels, "every") is False
+    assert task_success("shake", "lift_failed", None, "mean") is False
+    assert task_success("shake", "exploded", None, "mean") is None
+    with pytest.raises(TaskError, match="does not apply"):
+        task_success("twist", "ok", [500.0] * 6, "mean")
+
+
+def test_defgraspsim_evaluation_measures_every_direction_to_the_label_limit():
+    s = eval_trial_settings("defgraspsim")
+    assert s.protocol == "defgraspsim" and shake_success_rule(s.protocol) == "mean"
+    assert s.shake_limit_mps2 == 50.0 and s.shake_fail_below_mps2 is None
+    assert s.stop_direction_when_lost and not s.stop_when_label_decided and not s.confident_stop
+    legacy = eval_trial_settings("legacy")
+    assert legacy.shake_limit_mps2 == 25.0 and shake_success_rule(legacy.protocol) == "every"
