@@ -11,17 +11,20 @@ the reason. No rclpy here.
 """
 import json
 import os
+import re
 import shutil
 import tempfile
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from functools import lru_cache
 from pathlib import Path
 
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
 from rosbags.rosbag2 import Reader, Writer
 from rosbags.rosbag2.enums import CompressionFormat, CompressionMode, StoragePlugin
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from defgg_ros.sessions import session_topics as st
-from defgg_ros.sessions.interfaces import session_typestore
+from defgg_ros.sessions.interfaces import PACKAGE, session_typestore
 
 CUSTOM_DATA_KEY = "defgg_session"
 BAG_VERSION = 9
@@ -37,10 +40,40 @@ class BagMessage:
     msgtype: str
     log_time_ns: int
     raw: bytes
+    msgdef: str = field(default="", compare=False, repr=False)   # the definition the bag recorded
 
     def decode(self):
-        """The message as a rosbags dataclass (same field names as the rclpy message)."""
+        """The message as a rosbags dataclass (same field names as the rclpy message). Our own interfaces
+        decode with the definition the bag recorded: a bag made before a message gained fields (e.g. the
+        PickAndPlace result's arm_state) still reads, with the fields it had."""
+        if self.msgdef and self.msgtype.startswith(f"{PACKAGE}/"):
+            return recorded_typestore(self.msgtype, self.msgdef).deserialize_cdr(self.raw, self.msgtype)
         return session_typestore().deserialize_cdr(self.raw, self.msgtype)
+
+
+@lru_cache(maxsize=64)
+def recorded_typestore(msgtype: str, msgdef: str):
+    """Jazzy's types plus `msgtype` and the types it uses, as a bag's ros2msg definition gives them (the
+    main definition, then '=====' separated 'MSG: pkg/Name' sections)."""
+    store = get_typestore(Stores.ROS2_JAZZY)
+    sections = re.split(r"^=+\s*$", msgdef.replace("\r", ""), flags=re.M)
+    types = {}
+    for i, text in enumerate(sections):
+        if i == 0:
+            name, body = msgtype, text
+        else:
+            header, _, body = text.strip("\n").partition("\n")
+            name = header.removeprefix("MSG:").strip()
+            if name.count("/") == 1:
+                name = name.replace("/", "/msg/")
+        if name in store.fielddefs and not name.startswith(f"{PACKAGE}/"):
+            continue                        # a standard type: Jazzy's definition
+        package, _, stem = name.split("/")
+        parsed = get_types_from_msg(body, f"{package}/msg/{stem}")   # relative field types resolve to msg/
+        types.update({k: v for k, v in parsed.items() if k != f"{package}/msg/{stem}"})
+        types[name] = parsed[f"{package}/msg/{stem}"]
+    store.register(types)
+    return store
 
 
 def _qos(latched: bool) -> Qos:
@@ -78,14 +111,17 @@ class SessionWriter:
         self.counts = {}
         self.write(st.METADATA, serialize_string(json.dumps(metadata, sort_keys=True)), log_time_ns)
 
-    def write(self, topic: str, raw: bytes, log_time_ns: int, msgtype: str | None = None) -> None:
+    def write(self, topic: str, raw: bytes, log_time_ns: int, msgtype: str | None = None,
+              msgdef: str = "") -> None:
+        """Append one serialized message. `msgdef`: the definition `raw` was made with, when it is not the
+        installed one (copying a recorded message of an older layout)."""
         msgtype = msgtype or st.TOPIC_TYPES.get(topic)
         if msgtype is None:
             raise SessionBagError(f"no message type known for topic {topic!r}; pass msgtype")
         if topic not in self._connections:
+            typestore = recorded_typestore(msgtype, msgdef) if msgdef else session_typestore()
             self._connections[topic] = self._writer.add_connection(
-                topic, msgtype, typestore=session_typestore(),
-                offered_qos_profiles=[_qos(topic in st.LATCHED_TOPICS)])
+                topic, msgtype, typestore=typestore, offered_qos_profiles=[_qos(topic in st.LATCHED_TOPICS)])
         self._writer.write(self._connections[topic], int(log_time_ns), bytes(raw))
         self.counts[topic] = self.counts.get(topic, 0) + 1
 
@@ -122,7 +158,7 @@ def read_bag(path) -> tuple[dict, list[BagMessage]]:
     try:
         with Reader(path) as reader:
             expected = reader.message_count
-            messages = [BagMessage(c.topic, c.msgtype, t, bytes(raw))
+            messages = [BagMessage(c.topic, c.msgtype, t, bytes(raw), _definition(c))
                         for c, t, raw in reader.messages()]
     except SessionBagError:
         raise
@@ -134,6 +170,11 @@ def read_bag(path) -> tuple[dict, list[BagMessage]]:
                               f"{len(messages)}; the bag is truncated — re-record it")
     messages.sort(key=lambda m: m.log_time_ns)
     return _metadata(path, messages), messages
+
+
+def _definition(connection) -> str:
+    msgdef = getattr(connection, "msgdef", None)
+    return getattr(msgdef, "data", "") or ""
 
 
 def _metadata(path: Path, messages: list[BagMessage]) -> dict:

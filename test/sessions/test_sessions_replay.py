@@ -117,7 +117,7 @@ def test_a_pick_that_no_longer_succeeds_is_a_regression(tmp_path):
     writer = SessionWriter(tmp_path / "rigid_objects", meta, messages[0].log_time_ns)
     for m in messages:
         if m.topic != st.METADATA:
-            writer.write(m.topic, m.raw, m.log_time_ns, m.msgtype)
+            writer.write(m.topic, m.raw, m.log_time_ns, m.msgtype, m.msgdef)
     code, text = run_replay(writer.close())
     assert code == 1, text
     report = text.split("REGRESSION in session rigid_objects")[1]
