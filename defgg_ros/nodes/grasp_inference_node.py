@@ -57,7 +57,8 @@ from defgg_ros.perception.sync import StampSynchronizer
 from defgg_ros.perception.tabletop import TabletopConfig, WorkspaceBox
 from defgg_ros.ros.parameters import declare_parameters, load_schema
 from defgg_ros.ros.share import share_path
-from defgg_ros.ros.tf import TfBroadcaster, transform_msg
+from defgg_ros.ros.tf import TfBroadcaster, TfListener, transform_msg
+from defgg_ros.ros.tf import base_T_camera as camera_pose
 
 WARN_THROTTLE_S = 2.0
 MODEL_FILES = {True: "defgg_cnn.pt", False: "ggcnn_depth_only.pt"}
@@ -116,6 +117,8 @@ class GraspInferenceNode(Node):
         self._quality_pub = self.create_publisher(Image, p["quality_topic"], qos.SENSOR_DATA)
         self._marker_pub = self.create_publisher(MarkerArray, p["markers_topic"], qos.STATE)
         self._tf_broadcaster = TfBroadcaster(self)  # the planned grasp as TF frame grasp_frame
+        self._tf = TfListener(self)                 # base -> camera from the cell's TF, parameter as fallback
+        self._camera_pose_source = None
         # Reliability follows the publishers', and silence is logged (qos.SensorSubscription, issue 26).
         self._stream_subs = [
             qos.SensorSubscription(self, Image, p["depth_topic"], lambda m: self._on_stream("depth", m),
@@ -139,10 +142,14 @@ class GraspInferenceNode(Node):
                                float(p["default_youngs_modulus_pa"]), robot)
 
     def base_T_camera_for(self, header) -> np.ndarray:
-        """The camera optical frame in the base frame for a frame with this header (4x4). The seam for
-        a TF lookup of base_frame -> header.frame_id at header.stamp; the `base_T_camera` parameter is
-        the fallback."""
-        return self._base_T_camera
+        """The camera optical frame in the base frame for a frame with this header (4x4): TF's base_frame ->
+        header.frame_id (latest), else the `base_T_camera` parameter; the first frame of each source is logged."""
+        pose, source = camera_pose(self._tf, self._p["base_frame"], header.frame_id, self._base_T_camera)
+        if source != self._camera_pose_source:
+            self._camera_pose_source = source
+            self.get_logger().info(f"camera pose {self._p['base_frame']} -> {header.frame_id or '(no frame id)'} "
+                                   f"from {'TF' if source == 'tf' else 'the base_T_camera parameter'}")
+        return pose
 
     def _on_joint_states(self, msg: JointState):
         if len(msg.name) == len(msg.position):
@@ -279,8 +286,8 @@ class GraspInferenceNode(Node):
         if prediction.candidates[0].fingers_clear is False:
             self._warn("no grasp among the best peaks lets both fingers land beside the objects")
         seconds = time.perf_counter() - start
-        grasps = [grasp_to_msg(c, frame.header, self._base_T_camera, self._p["base_frame"])
-                  for c in prediction.candidates]
+        base_T_camera = self.base_T_camera_for(frame.header)
+        grasps = [grasp_to_msg(c, frame.header, base_T_camera, self._p["base_frame"]) for c in prediction.candidates]
         for candidate in prediction.candidates:
             if candidate.width_m > GRIPPER_MAX_WIDTH_M:
                 self._warn(f"grasp width {candidate.width_m * 1000:.0f} mm clipped to the hand's "
