@@ -57,8 +57,7 @@ from defgg_ros.perception.sync import StampSynchronizer
 from defgg_ros.perception.tabletop import TabletopConfig, WorkspaceBox
 from defgg_ros.ros.parameters import declare_parameters, load_schema
 from defgg_ros.ros.share import share_path
-from defgg_ros.ros.tf import TfBroadcaster, TfListener, transform_msg
-from defgg_ros.ros.tf import base_T_camera as camera_pose
+from defgg_ros.ros.tf import CameraPose, TfBroadcaster, transform_msg
 
 WARN_THROTTLE_S = 2.0
 MODEL_FILES = {True: "defgg_cnn.pt", False: "ggcnn_depth_only.pt"}
@@ -117,8 +116,7 @@ class GraspInferenceNode(Node):
         self._quality_pub = self.create_publisher(Image, p["quality_topic"], qos.SENSOR_DATA)
         self._marker_pub = self.create_publisher(MarkerArray, p["markers_topic"], qos.STATE)
         self._tf_broadcaster = TfBroadcaster(self)  # the planned grasp as TF frame grasp_frame
-        self._tf = TfListener(self)                 # base -> camera from the cell's TF, parameter as fallback
-        self._camera_pose_source = None
+        self._camera_pose = CameraPose(self, self._base_T_camera)   # TF, the parameter as fallback
         # Reliability follows the publishers', and silence is logged (qos.SensorSubscription, issue 26).
         self._stream_subs = [
             qos.SensorSubscription(self, Image, p["depth_topic"], lambda m: self._on_stream("depth", m),
@@ -144,12 +142,7 @@ class GraspInferenceNode(Node):
     def base_T_camera_for(self, header) -> np.ndarray:
         """The camera optical frame in the base frame for a frame with this header (4x4): TF's base_frame ->
         header.frame_id (latest), else the `base_T_camera` parameter; the first frame of each source is logged."""
-        pose, source = camera_pose(self._tf, self._p["base_frame"], header.frame_id, self._base_T_camera)
-        if source != self._camera_pose_source:
-            self._camera_pose_source = source
-            self.get_logger().info(f"camera pose {self._p['base_frame']} -> {header.frame_id or '(no frame id)'} "
-                                   f"from {'TF' if source == 'tf' else 'the base_T_camera parameter'}")
-        return pose
+        return self._camera_pose.lookup(self._p["base_frame"], header.frame_id)
 
     def _on_joint_states(self, msg: JointState):
         if len(msg.name) == len(msg.position):

@@ -42,8 +42,7 @@ from defgg_ros.perception.stiffness_segmenter import (
 )
 from defgg_ros.perception.tabletop import TabletopConfig, WorkspaceBox
 from defgg_ros.ros.parameters import declare_parameters, load_schema
-from defgg_ros.ros.tf import TfListener
-from defgg_ros.ros.tf import base_T_camera as camera_pose
+from defgg_ros.ros.tf import CameraPose
 
 WARN_THROTTLE_S = 2.0
 
@@ -82,8 +81,7 @@ class SegmentationNode(Node):
             self.create_subscription(JointState, p["joint_states_topic"], self._on_joint_states, qos.SENSOR_DATA)
         self.create_service(SetStiffness, p["set_stiffness_service"], self._on_set_stiffness)
         self.create_service(Trigger, p["capture_background_service"], self._on_capture_background)
-        self._tf = TfListener(self)                 # base -> camera from the cell's TF, parameter as fallback
-        self._camera_pose_source = None
+        self._camera_pose = CameraPose(self, self._base_T_camera)   # TF, the parameter as fallback
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._publish_assignments()
 
@@ -108,13 +106,7 @@ class SegmentationNode(Node):
     def base_T_camera_for(self, header) -> np.ndarray:
         """The camera optical frame in the base frame for this depth frame (4x4): TF's base_frame ->
         header.frame_id (latest), else the `base_T_camera` parameter; the first frame of each source is logged."""
-        base_frame = self.get_parameter("base_frame").value
-        pose, source = camera_pose(self._tf, base_frame, header.frame_id, self._base_T_camera)
-        if source != self._camera_pose_source:
-            self._camera_pose_source = source
-            self.get_logger().info(f"camera pose {base_frame} -> {header.frame_id or '(no frame id)'} from "
-                                   f"{'TF' if source == 'tf' else 'the base_T_camera parameter'}")
-        return pose
+        return self._camera_pose.lookup(self.get_parameter("base_frame").value, header.frame_id)
 
     def _on_joint_states(self, msg: JointState):
         if len(msg.name) == len(msg.position):

@@ -202,3 +202,22 @@ class TfBroadcaster:
 
     def send(self, *transforms) -> None:
         self._pub.publish(self._msg_type(transforms=list(transforms)))
+
+
+class CameraPose:
+    """A node's camera pose per frame: TF's base_frame -> the frame's camera frame (latest transform), else
+    a fallback (the base_T_camera parameter); each change of source is logged once."""
+
+    def __init__(self, node, fallback: np.ndarray):
+        self._listener = TfListener(node)
+        self._fallback = np.asarray(fallback, dtype=float)
+        self._logger = node.get_logger()
+        self._source = None
+
+    def lookup(self, base_frame: str, camera_frame: str) -> np.ndarray:
+        pose, source = base_T_camera(self._listener, base_frame, camera_frame, self._fallback)
+        if source != self._source:
+            self._source = source
+            self._logger.info(f"camera pose {base_frame} -> {camera_frame or '(no frame id)'} from "
+                              f"{'TF' if source == 'tf' else 'the base_T_camera parameter'}")
+        return pose
