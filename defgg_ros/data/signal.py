@@ -20,14 +20,13 @@ be recomputed by anyone. Figures, per the issue that asked for them (docs/datase
 """
 from __future__ import annotations
 
-import gzip
-import json
 import math
 from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
 
+from defgg_ros.atomic import read_jsonl
 from defgg_ros.constants import MAX_SOFT_BODY_YOUNGS_MODULUS_PA, SHAKE_POSITIVE_THRESHOLD_MPS2
 
 LABELLED = ("ok", "lift_failed")
@@ -46,17 +45,13 @@ class SignalError(ValueError):
 
 
 def read_trial_records(root) -> list[dict]:
-    """Every trial record (dict) under <root>/trials, plain or gzip-compressed JSON lines."""
+    """Every complete trial record (dict) under <root>/trials, plain or sealed (gzip) JSON lines; a torn
+    last line of a growing file (a run killed mid-write) is skipped."""
     folder = Path(root) / "trials"
     files = sorted(folder.glob("*.jsonl")) + sorted(folder.glob("*.jsonl.gz"))
     if not files:
         raise SignalError(f"no trial files in {folder}")
-    records = []
-    for path in files:
-        opener = gzip.open if path.suffix == ".gz" else open
-        with opener(path, "rt", encoding="utf-8") as fh:
-            records += [json.loads(line) for line in fh if line.strip()]
-    return records
+    return [record for path in files for record in read_jsonl(path)]
 
 
 def held_mps2(record: dict) -> float | None:

@@ -29,7 +29,7 @@ nodes:
     module: defgg_ros.nodes.fake_panda_driver_node
     params: [{config / 'fake_panda_driver.yaml'}]
     overrides: {{scene_file: {ROOT / 'sim_bringup' / 'scenes' / driver_scene}}}
-    ready: {{action: /panda_gripper/grasp}}
+    ready: {{action: /franka_gripper/grasp}}
   - name: segmentation_node
     module: defgg_ros.nodes.segmentation_node
     params: [{config / 'segmentation_node.yaml'}]
