@@ -167,8 +167,8 @@ def main(argv=None):
     from rclpy.context import Context
     from tqdm import tqdm
 
-    from defgg_ros.grasping.tabletop_planner import TabletopPlanner
     from defgg_ros.model.inference import GraspPredictor
+    from defgg_ros.planning.tabletop_planner import TabletopPlanner
 
     torch.set_num_threads(args.threads)
     scenes = {mode: scene(*mode) for mode in modes}

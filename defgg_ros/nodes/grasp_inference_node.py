@@ -26,8 +26,6 @@ from std_msgs.msg import Header
 from visualization_msgs.msg import Marker, MarkerArray
 
 from defgg_ros.constants import GRIPPER_MAX_WIDTH_M
-from defgg_ros.grasping.tabletop_grasps import base_T_grasp, image_projection
-from defgg_ros.grasping.tabletop_planner import TabletopPlanner
 from defgg_ros.model.inference import CheckpointError, GraspPredictor
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import (
@@ -55,6 +53,8 @@ from defgg_ros.perception.stiffness_assignment import check_entries_fit_image, m
 from defgg_ros.perception.stiffness_segmenter import SegmenterConfig, run_segmenter
 from defgg_ros.perception.sync import StampSynchronizer
 from defgg_ros.perception.tabletop import TabletopConfig, WorkspaceBox
+from defgg_ros.planning.tabletop_grasps import base_T_grasp, image_projection
+from defgg_ros.planning.tabletop_planner import TabletopPlanner
 from defgg_ros.ros.parameters import declare_parameters, load_schema
 from defgg_ros.ros.share import share_path
 from defgg_ros.ros.tf import CameraPose, TfBroadcaster, transform_msg

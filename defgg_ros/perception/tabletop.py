@@ -41,7 +41,7 @@ PLANE_INLIER_M = 0.006
 PLANE_ITERATIONS = 80
 PLANE_SAMPLE_PIXELS = 6000
 # The height map reaches this far beyond the outermost object point: context for the network (the
-# finger pads are checked against the depth image itself, grasping/tabletop_grasps.py).
+# finger pads are checked against the depth image itself, planning/tabletop_grasps.py).
 GRID_MARGIN_M = 0.03
 # Cells whose smoothed height slope exceeds this are the flanks of round objects and the creases
 # where a round object meets a flat one: cut, so a bottle lying against a lower box stays apart.

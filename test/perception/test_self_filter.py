@@ -9,7 +9,6 @@ from std_msgs.msg import Header
 
 from defgg_ros.constants import PANDA_JOINT_NAMES
 from defgg_ros.control.kinematics import PandaKinematics
-from defgg_ros.grasping.tabletop_grasps import image_projection, plan_tabletop_grasps
 from defgg_ros.model.inference import GraspPredictor
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import depth_metres_to_msg, make_camera_info
@@ -17,6 +16,7 @@ from defgg_ros.perception import tabletop_scenes as ts
 from defgg_ros.perception.geometry import transform_to_xyz_quaternion
 from defgg_ros.perception.self_filter import RobotSelfFilter
 from defgg_ros.perception.tabletop import perceive
+from defgg_ros.planning.tabletop_grasps import image_projection, plan_tabletop_grasps
 from defgg_ros.ros import topics
 
 MODEL_PATH = __import__("pathlib").Path(__file__).resolve().parents[2] / "models" / "defgg_cnn.pt"

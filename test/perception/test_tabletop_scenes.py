@@ -9,10 +9,10 @@ import pytest
 
 from defgg_ros.constants import GRIPPER_MAX_WIDTH_M, PANDA_FINGER_THICKNESS_M, PANDA_FINGERTIP_BELOW_TCP_M
 from defgg_ros.grasping.geometry import tcp_height_m
-from defgg_ros.grasping.tabletop_grasps import image_projection, plan_tabletop_grasps
 from defgg_ros.model.inference import GraspPredictor
 from defgg_ros.perception import tabletop_scenes as ts
 from defgg_ros.perception.tabletop import CELL_M, TabletopConfig, TabletopError, WorkspaceBox, perceive
+from defgg_ros.planning.tabletop_grasps import image_projection, plan_tabletop_grasps
 
 MODEL = GraspPredictor.from_checkpoint(__import__("pathlib").Path(__file__).resolve().parents[2] / "models" /
                                        "defgg_cnn.pt", num_threads=1)

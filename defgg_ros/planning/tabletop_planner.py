@@ -13,10 +13,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from defgg_ros.grasping.tabletop_grasps import TabletopPlan, plan_tabletop
 from defgg_ros.perception.self_filter import RobotSelfFilter
 from defgg_ros.perception.stiffness_assignment import assign_stiffness
 from defgg_ros.perception.tabletop import TabletopConfig, TabletopView, perceive
+from defgg_ros.planning.tabletop_grasps import TabletopPlan, plan_tabletop
 
 
 class NoFeasibleGrasp(ValueError):
