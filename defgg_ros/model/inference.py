@@ -13,17 +13,15 @@ the maps are returned in that window's coordinates with its offset.
 from __future__ import annotations
 
 import dataclasses
-import math
 from dataclasses import dataclass
 
 import numpy as np
 import torch
 
 from defgg_ros.grasping.config import DEFAULT_POSTPROCESS, PostProcessConfig
-from defgg_ros.grasping.contact_angle import square_contact_angle
-from defgg_ros.grasping.finger_clearance import clear_centre_shift_px, clear_grasps_first
 from defgg_ros.grasping.geometry import check_camera_k, pixel_to_camera, width_px_to_m
-from defgg_ros.grasping.postprocess import GraspMaps, apart, grasps_from_maps, maps_from_network
+from defgg_ros.grasping.postprocess import GraspMaps, maps_from_network
+from defgg_ros.grasping.ranking import CLEARANCE_POOL, rank_grasps  # noqa: F401 - CLEARANCE_POOL: callers
 from defgg_ros.model.checkpoint import CheckpointError, load_checkpoint, network_from_checkpoint
 from defgg_ros.model.preprocess import (
     InvalidInputError,
@@ -36,9 +34,6 @@ from defgg_ros.model.preprocess import (
 from defgg_ros.model.runtime import compile_for_inference
 from defgg_ros.perception.plausibility import check_moduli_plausible
 from defgg_ros.stiffness import InvalidYoungsModulus
-
-# Peaks considered when grasps whose fingers land beside the objects are ranked first.
-CLEARANCE_POOL = 10
 
 __all__ = ["GraspPredictor", "GraspPrediction", "GraspCandidate", "CheckpointError",
            "InvalidInputError", "InvalidYoungsModulus"]
@@ -151,45 +146,11 @@ class GraspPredictor:
         maps = maps_from_network(self.raw_maps(network_input(depth_crop, moduli_crop, self.uses_stiffness)),
                                  self.postprocess)
         mask_crop = None if mask is None else crop(mask, origin, self.input_size_px)
-        grasps, clear = self._ranked(maps, depth_crop, mask_crop, k[0, 0], top_k, finger_clearance_opening_m,
-                                     contact_angle)
+        grasps, clear = rank_grasps(maps, self.postprocess, depth_crop, mask_crop, k[0, 0], top_k,
+                                    finger_clearance_opening_m, contact_angle)
         candidates = [dataclasses.replace(self._candidate(g, origin, depth_crop, moduli_crop, mask_crop, k),
                                           fingers_clear=c) for g, c in zip(grasps, clear)]
         return GraspPrediction(maps=maps, crop_offset_px=origin, candidates=candidates)
-
-    def _ranked(self, maps, depth_crop, mask_crop, fx_px: float, top_k: int, opening_m: float,
-                contact_angle: bool) -> tuple:
-        """(top_k grasps in crop pixels, fingers-clear flags): the maxima, then fill ranks; with an
-        opening, the clear ones first (slid); with contact_angle, squared. No two within the peak
-        distance of each other, so a caller asking for alternatives gets distinct grasps."""
-        cfg, d = self.postprocess, self.postprocess.peak_min_distance_px
-        check_clearance = opening_m > 0 and mask_crop is not None
-        allowed = None if mask_crop is None else mask_crop > 0
-        grasps = grasps_from_maps(maps, cfg, allowed, max(top_k, CLEARANCE_POOL) if check_clearance else top_k)
-        n_maxima = len(grasps)
-        clear = [None] * n_maxima
-        if check_clearance:
-            grasps, clear = clear_grasps_first(grasps, depth_crop, mask_crop, opening_m, fx_px, needed=top_k,
-                                               apart_px=d)
-        square = check_clearance and contact_angle
-        # Squaring may slide a grasp onto a better one: keep reserves to replace it (top_k > 1 only).
-        wanted = top_k + CLEARANCE_POOL if square and top_k > 1 else top_k
-        if len(grasps) < wanted:
-            extra = _more_ranks(maps, cfg, allowed, n_maxima, grasps, wanted)
-            grasps, clear = grasps + extra, clear + [None] * len(extra)
-        if not square:
-            return grasps[:top_k], clear[:top_k]
-        out = []
-        for g, c in zip(grasps, clear):     # ~1 ms each (bench/bench_finger_clearance.py)
-            sg, sc = _square_contacts(g, c, depth_crop, mask_crop, opening_m, fx_px)
-            if apart(sg, [o[0] for o in out], d):
-                out.append((sg, sc))
-            if len(out) == top_k:
-                break
-        for g, c in zip(grasps, clear):     # too few distinct squared ones: the rest as they are
-            if len(out) < top_k and apart(g, [o[0] for o in out], d):
-                out.append((g, c))
-        return [o[0] for o in out], [o[1] for o in out]
 
     @staticmethod
     def _candidate(g, origin, depth_crop, moduli_crop, mask_crop, k) -> GraspCandidate:
@@ -201,31 +162,6 @@ class GraspPredictor:
             width_m=float(width_px_to_m(g.width_px, z, k[0, 0])), quality=g.quality, depth_m=z,
             position_camera_m=tuple(float(c) for c in pixel_to_camera(u, v, z, k)),
             youngs_modulus_pa=float(moduli_crop[g.center_v_px, g.center_u_px]), object_id=obj)
-
-
-def _more_ranks(maps, config: PostProcessConfig, allowed, n_maxima: int, grasps: list, wanted: int) -> list:
-    """Ranks after the first n_maxima maxima (those that gave `grasps`): further maxima, then
-    find_peaks' fill picks, best first, skipping any within the peak distance of a grasp (the
-    clearance slide moves grasps), so no two are near-duplicates."""
-    d = config.peak_min_distance_px
-    out = []
-    for g in grasps_from_maps(maps, config, allowed, wanted + n_maxima, fill=True)[n_maxima:]:
-        if len(grasps) + len(out) >= wanted:
-            break
-        if apart(g, grasps + out, d):
-            out.append(g)
-    return out
-
-
-def _square_contacts(g, clear: bool, depth_crop, mask_crop, opening_m: float, fx_px: float) -> tuple:
-    """(grasp, fingers clear) after grasping/contact_angle.py, or the input when that would lose clearance."""
-    angle, u, v, _score = square_contact_angle(depth_crop, mask_crop, g.center_u_px, g.center_v_px, g.angle_rad,
-                                               opening_m, fx_px)
-    shift = clear_centre_shift_px(depth_crop, mask_crop, u, v, angle, opening_m, fx_px)
-    if shift is None:
-        return (g, clear) if clear else (dataclasses.replace(g, angle_rad=angle, center_u_px=u, center_v_px=v), False)
-    u, v = int(round(u + shift * math.cos(angle))), int(round(v + shift * math.sin(angle)))
-    return dataclasses.replace(g, angle_rad=angle, center_u_px=u, center_v_px=v), True
 
 
 def _check_moduli(youngs_modulus_pa, shape) -> np.ndarray:
