@@ -68,11 +68,15 @@ def test_cancel_mid_descend_then_pick_again_picks_the_object(cell, executor, spi
     recovery_on, client, seen, log_path, bringup = cell
     feedback = []
     handle = _goal(executor, spin, client, feedback)
-    spin(executor, lambda: feedback and feedback[-1].phase == "descend" and feedback[-1].phase_progress > 0.3,
+    result = handle.get_result_async()
+    spin(executor, lambda: result.done() or (feedback and feedback[-1].phase == "descend"
+                                             and feedback[-1].phase_progress > 0.3),
          PICK_TIMEOUT_S, "the descent to be under way")
-    spin(executor, handle.cancel_goal_async(), 30.0, "the cancel response")
-    canceled = spin(executor, handle.get_result_async(), PICK_TIMEOUT_S, "the canceled goal's result")
     log = log_path.read_text
+    assert not result.done(), ("the first pick ended before its descent", result.result().result.failure_reason,
+                               [f.phase for f in feedback][-5:], log()[-3000:])
+    spin(executor, handle.cancel_goal_async(), 30.0, "the cancel response")
+    canceled = spin(executor, result, PICK_TIMEOUT_S, "the canceled goal's result")
     assert canceled.status == 5, canceled.result.failure_reason  # STATUS_CANCELED
     first = canceled.result
     assert "canceled during descend" in first.failure_reason and first.phase_reached == "descend"
