@@ -89,7 +89,7 @@ def test_cancel_mid_descend_then_pick_again_picks_the_object(cell, executor, spi
         assert first.arm_state == "at_rest" and first.recovery == ""
         assert _tcp_z(seen["joints"][-1]) < 0.2
 
-    feedback.clear()
+    feedback = []   # a new list: the canceled goal's late feedback still lands in the old one
     handle = _goal(executor, spin, client, feedback)
     second = spin(executor, handle.get_result_async(), PICK_TIMEOUT_S, "the second pick's result").result
     phases = list(dict.fromkeys(f.phase for f in feedback))
