@@ -42,7 +42,7 @@ from defgg_ros.constants import (
     STATUS_TIMEOUT,
     TWIST_ACCEL_LIMIT_RADPS2,
 )
-from defgg_ros.grip_force import defgraspsim_finger_force_n, factor_of_safety, grasp_force_n  # noqa: F401
+from defgg_ros.grip_force import defgraspsim_finger_force_n, grasp_force_n
 from defgg_ros.sim import hand as hand_mod
 from defgg_ros.sim import objects, physics, world
 from defgg_ros.sim.hand import world_T_hand
@@ -51,11 +51,11 @@ from defgg_ros.sim.hand import world_T_hand
 # 2 N + 0.5 N per decade a finger, fingers force-held, lost when both fingers let go or the centroid moved
 # 20 mm). defgraspsim: the protocol of the paper's labels (NVlabs/DefGraspSim): zero gravity once the
 # object has settled, total grip force FOS * m * g / mu with FOS = 1 + log10(E) / 10, the table moved away
-# for the pickup, fingers locked after it, lost as soon as either finger has no contact.
+# for the pickup, fingers held after it (TrialSettings.finger_hold), lost as soon as either finger has no
+# contact. Each protocol's material is in the physics core's table, physics.MATERIALS.
 PROTOCOL_LEGACY = "legacy"
 PROTOCOL_DEFGRASPSIM = "defgraspsim"
 PROTOCOLS = (PROTOCOL_LEGACY, PROTOCOL_DEFGRASPSIM)
-# Each protocol's material: physics.MATERIALS (the physics core's material table).
 FINGER_HOLDS = ("force", "lock")
 TABLE_AWAY_Z_M = -1.0   # where the defgraspsim pickup moves the table (DefGraspSim lowers its platform)
 
@@ -143,7 +143,7 @@ class TrialSettings:
     shake_directions: int = SHAKE_DIRECTIONS   # fewer only in tests
     # PROTOCOLS; records made before the field existed are legacy (comparable_protocol).
     protocol: str = PROTOCOL_DEFGRASPSIM
-    # Material overrides (None: the protocol's, PROTOCOL_MATERIAL): the object's friction coefficient
+    # Material overrides (None: the protocol's, physics.MATERIALS): the object's friction coefficient
     # (the pads' stays the protocol's) and Poisson's ratio.
     object_friction: float | None = None
     poisson_ratio: float | None = None
@@ -167,14 +167,11 @@ class TrialSettings:
     def material(self) -> dict:
         """finger_friction, object_friction, effective_friction (their product) and poisson_ratio."""
         material = physics.MATERIALS[self.protocol]
-        m = {"finger_friction": material.finger_friction, "object_friction": material.object_friction,
-             "poisson_ratio": material.poisson_ratio}
         if self.object_friction is not None:
-            m["object_friction"] = self.object_friction
+            material = replace(material, object_friction=self.object_friction)
         if self.poisson_ratio is not None:
-            m["poisson_ratio"] = self.poisson_ratio
-        m["effective_friction"] = m["finger_friction"] * m["object_friction"]
-        return m
+            material = replace(material, poisson_ratio=self.poisson_ratio)
+        return {**asdict(material), "effective_friction": material.effective_friction}
 
     @classmethod
     def naive(cls) -> TrialSettings:
@@ -297,7 +294,7 @@ class _Trial:
             raise _Abort(STATUS_LIFT_FAILED, "object not held after lift")
         if self.defgraspsim:
             self.hold_fingers_for_tests()
-        self.squeeze_after_lock_n = self.hand.finger_forces_n()
+        self.squeeze_after_pickup_n = self.hand.finger_forces_n()
         self.saved = (self.obj.save_state(), self.hand.save_state())
 
     def hold_fingers_for_tests(self):
@@ -324,7 +321,6 @@ class _Trial:
 
     def _pickup_without_gravity(self):
         """defgraspsim: the squeeze has settled; move the table away and hold (the hand stays put)."""
-        self.squeeze_before_pickup_n = self.hand.finger_forces_n()
         self.world.move_table(TABLE_AWAY_Z_M)
         self.step(self.seconds(self.settings.hold_time_s))
         self.lifted_tcp = self.tcp.copy()
@@ -333,7 +329,7 @@ class _Trial:
         """What the trial really did, read back from the engine after the pickup (recorded per trial)."""
         return {"gravity_during_test_mps2": self.world.gravity(), "finger_force_set_n": self.force_n,
                 "fingers_locked": self.fingers_locked,
-                "squeeze_after_pickup_n": [round(f, 6) for f in self.squeeze_after_lock_n],
+                "squeeze_after_pickup_n": [round(f, 6) for f in self.squeeze_after_pickup_n],
                 "loss_rule": "either_finger" if self.defgraspsim else "both_fingers_or_20mm"}
 
     def held(self) -> bool:
