@@ -27,16 +27,21 @@ from pathlib import Path
 import numpy as np
 
 from defgg_ros.atomic import read_jsonl
-from defgg_ros.constants import MAX_SOFT_BODY_YOUNGS_MODULUS_PA, SHAKE_POSITIVE_THRESHOLD_MPS2
+from defgg_ros.constants import (
+    MAX_SOFT_BODY_YOUNGS_MODULUS_PA,
+    SHAKE_POSITIVE_THRESHOLD_MPS2,
+    STATUS_LIFT_FAILED,
+    STATUS_OK,
+)
 
-LABELLED = ("ok", "lift_failed")
 TOP_K = 5
 # Label rules: "shake" = the dataset's label (mean held acceleration >= 25 m/s^2); "shake_and_twist" = that
 # and a mean held angular acceleration over the six twist axes >= half the paper's 500 rad/s^2 limit (the
 # shake's rule for the twist: contact area matters most in torsion).
 LABEL_RULES = ("shake", "shake_and_twist")
 TWIST_POSITIVE_THRESHOLD_RADPS2 = 250.0
-# PyBullet multiplies the two bodies' friction coefficients; fem_v1-v4 used 0.8 on both (legacy).
+# For records that do not state it (fem_v1-v4): 0.8 x 0.8, sim.physics.MATERIALS["legacy"] (not imported:
+# this report reads records without loading PyBullet).
 LEGACY_EFFECTIVE_FRICTION = 0.64
 
 
@@ -56,10 +61,10 @@ def read_trial_records(root) -> list[dict]:
 
 def held_mps2(record: dict) -> float | None:
     """Mean held acceleration of a labelled trial (0 for a lift failure), None for a sim failure."""
-    if record["status"] == "lift_failed":
+    if record["status"] == STATUS_LIFT_FAILED:
         return 0.0
     accels = record.get("shake_accels_mps2")
-    if record["status"] != "ok" or not accels:
+    if record["status"] != STATUS_OK or not accels:
         return None
     return float(np.mean(accels))
 
@@ -71,11 +76,11 @@ def is_positive(record: dict, label_rule: str = "shake") -> bool | None:
         return None
     if label_rule == "shake_and_twist":
         twist = record.get("twist_accels_radps2")
-        if record["status"] == "ok" and not twist:
+        if record["status"] == STATUS_OK and not twist:
             raise SignalError(f"{record.get('trial_id', record['scene_id'])}: no twist recorded, so the "
                               "shake_and_twist label cannot be computed")
         return value >= SHAKE_POSITIVE_THRESHOLD_MPS2 and (
-            record["status"] == "ok" and float(np.mean(twist)) >= TWIST_POSITIVE_THRESHOLD_RADPS2)
+            record["status"] == STATUS_OK and float(np.mean(twist)) >= TWIST_POSITIVE_THRESHOLD_RADPS2)
     return value >= SHAKE_POSITIVE_THRESHOLD_MPS2
 
 

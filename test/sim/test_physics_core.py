@@ -38,3 +38,9 @@ def test_material_table_friction_is_the_product_of_both_bodies():
     assert physics.MATERIALS["legacy"].effective_friction == pytest.approx(0.64)
     assert physics.MATERIALS["defgraspsim"].effective_friction == pytest.approx(0.7)
     assert physics.MATERIALS["defgraspsim"].poisson_ratio == 0.3
+
+
+def test_the_signal_reports_legacy_friction_is_the_material_tables():
+    from defgg_ros.data.signal import LEGACY_EFFECTIVE_FRICTION
+
+    assert LEGACY_EFFECTIVE_FRICTION == pytest.approx(physics.MATERIALS["legacy"].effective_friction)
