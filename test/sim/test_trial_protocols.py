@@ -92,3 +92,25 @@ def test_records_without_a_protocol_compare_as_legacy():
         recorded.pop(key)
     assert trial.comparable_protocol(recorded) == trial.comparable_protocol(dataclasses.asdict(TrialSettings.legacy()))
     assert trial.comparable_protocol(recorded) != trial.comparable_protocol(dataclasses.asdict(TrialSettings.fast()))
+
+
+@pytest.mark.parametrize("trial_id", ["pyramid__E2e+04__g037", "egad_train_06_c4__E2e+09__g000",
+                                      "ycb_banana__E2e+04__g014"])
+def test_legacy_protocol_reproduces_fem_v4_trials_exactly(trial_id):
+    """A soft positive, a rigid and a lift failure of datasets/fem_v4, rerun from their records."""
+    from pathlib import Path
+
+    from defgg_ros.data.datagen import run_trial_job
+    from defgg_ros.data.format import read_trials
+
+    root = Path(__file__).resolve().parents[2] / "datasets" / "fem_v4"
+    rec = next(t for t in read_trials(root, trial_id.rsplit("__", 1)[0]) if t.trial_id == trial_id)
+    job = dict(trial_id=rec.trial_id, scene_id=rec.scene_id, object_name=rec.object_name,
+               youngs_modulus_pa=rec.youngs_modulus_pa, candidate_index=rec.candidate_index,
+               grasp={"position_m": rec.position_m, "yaw_rad": rec.yaw_rad, "width_m": rec.width_m},
+               rect=dataclasses.asdict(rec.rect), seed=rec.seed,
+               settings={**rec.sim["settings"], "protocol": "legacy"})
+    out = run_trial_job(job)
+    assert out["status"] == rec.status
+    assert out["shake_accels_mps2"] == rec.shake_accels_mps2
+    assert out["sim"]["sim_steps"] == rec.sim["sim_steps"]
