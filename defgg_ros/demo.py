@@ -316,6 +316,7 @@ def run_demo(args, out_dir: Path, log) -> int:
         code = 0
     except (BringupError, CellCallError, NodeSetError) as exc:
         print(f"defgg-demo: {exc}", file=sys.stderr)
+        _explain_dead_node(bringup)
         code = 1
     finally:
         if client is not None:
@@ -323,6 +324,18 @@ def run_demo(args, out_dir: Path, log) -> int:
         bringup.stop()
     _report(out_dir, rows, panels, args, time.monotonic() - started)
     return code
+
+
+def _explain_dead_node(bringup) -> None:
+    """A call that timed out is often a node that died: name it and show its last lines (else every node's)."""
+    dead = bringup.failed_node()
+    if dead is not None:
+        tail = "\n".join(bringup.processes[dead.name].tail)
+        print(f"defgg-demo: {dead.describe()}; its last lines:\n{tail}", file=sys.stderr)
+        return
+    for name, process in bringup.processes.items():   # all alive: what each said last
+        last = "\n  ".join(process.tail[-3:]) or "(nothing)"
+        print(f"defgg-demo: {name} is running; its last lines:\n  {last}", file=sys.stderr)
 
 
 def _report(out_dir, rows, panels, args, wall_s):

@@ -1,6 +1,7 @@
 """The demo's pure helpers: image geometry against the real cell camera, bin check, table, summary, picture."""
 import json
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -126,3 +127,29 @@ def test_bin_place_points_are_distinct_quadrant_centres_inside_the_bin():
     assert bin_place_xy(bin_dict, 4) == points[0]
     with pytest.raises(ValueError, match="slot"):
         bin_place_xy(bin_dict, -1)
+
+
+def test_a_failed_demo_names_the_node_that_died_with_its_last_lines(tmp_path, capsys):
+    """A timed-out call is reported with the dead node's own last words (real child processes)."""
+    import io
+    import time
+
+    from defgg_ros.bringup.node_set import NodeSet
+    from defgg_ros.bringup.supervisor import Bringup
+    from defgg_ros.demo import _explain_dead_node
+
+    crash = [sys.executable, "-c", "print('loading the model'); print('CUDA? no: out of memory'); raise SystemExit(3)"]
+    idle = [sys.executable, "-c", "import time; print('spinning'); time.sleep(30)"]
+    empty = NodeSet("none", True, (), tmp_path)
+    with Bringup(empty, extra={"idle_node": idle}, out=io.StringIO()) as alive:
+        deadline = time.monotonic() + 20
+        while not alive.processes["idle_node"].tail and time.monotonic() < deadline:
+            time.sleep(0.05)
+        _explain_dead_node(alive)
+        assert "idle_node is running; its last lines:\n  spinning" in capsys.readouterr().err
+    with Bringup(empty, extra={"inference": crash}, out=io.StringIO()) as cell:
+        cell.processes["inference"].popen.wait(timeout=20)
+        time.sleep(0.2)   # the log reader thread catches up with the exited process's output
+        _explain_dead_node(cell)
+    err = capsys.readouterr().err
+    assert "node inference died (exit code 3); its last lines:" in err and "out of memory" in err
