@@ -15,6 +15,8 @@ be recomputed by anyone. Figures, per the issue that asked for them (docs/datase
 - the oracle gap: success of a stiffness-aware oracle (the best candidates per object x E) minus a
   stiffness-blind one (the same candidates for every E of an object, best on average over the moduli),
   for the best grasp and the best five; both choose among the candidates labelled at every modulus;
+- near the threshold: the share of labelled trials held within 2.5 m/s^2 (10 %) of 25 m/s^2, whose labels
+  a small change in the measurement flips (bench/bench_label_repeatability.py measures how often it does);
 - the friction limit: Spearman correlation, over the softest modulus's scenes, between 2 mu F / m (the
   tangential acceleration friction alone can hold) and the scene's mean held acceleration.
 """
@@ -35,6 +37,7 @@ from defgg_ros.constants import (
 )
 
 TOP_K = 5
+NEAR_THRESHOLD_BAND_MPS2 = 2.5    # +-10 % of the 25 m/s^2 threshold
 # Label rules: "shake" = the dataset's label (mean held acceleration >= 25 m/s^2); "shake_and_twist" = that
 # and a mean held angular acceleration over the six twist axes >= half the paper's 500 rad/s^2 limit (the
 # shake's rule for the twist: contact area matters most in torsion).
@@ -103,6 +106,7 @@ def signal_report(records: list[dict], label_rule: str = "shake") -> dict:
         "candidates": _candidate_figures(rows, moduli, label_rule),
         "oracle": _oracle_figures(rows, moduli, label_rule),
         "friction_limit_spearman": _friction_limit_spearman(rows, moduli),
+        "near_threshold": _near_threshold_shares(rows, moduli),
     }
 
 
@@ -115,6 +119,18 @@ def _positive_rates(rows, moduli, label_rule) -> dict:
     for e in moduli:
         labels = [is_positive(r, label_rule) for r in rows if float(r["youngs_modulus_pa"]) == e]
         out[_key(e)] = {"n": len(labels), "positive": sum(labels), "rate": sum(labels) / len(labels)}
+    return out
+
+
+def _near_threshold_shares(rows, moduli) -> dict:
+    """Share of the labelled trials (all, and per modulus) whose held acceleration lies within
+    NEAR_THRESHOLD_BAND_MPS2 of the threshold: labels a 10 % change in the measurement would flip."""
+    def share(vals):
+        return float(np.mean([abs(v - SHAKE_POSITIVE_THRESHOLD_MPS2) < NEAR_THRESHOLD_BAND_MPS2 for v in vals]))
+
+    out = {"band_mps2": NEAR_THRESHOLD_BAND_MPS2, "all": share([held_mps2(r) for r in rows])}
+    for e in moduli:
+        out[_key(e)] = share([held_mps2(r) for r in rows if float(r["youngs_modulus_pa"]) == e])
     return out
 
 
@@ -254,6 +270,11 @@ def render_markdown(report: dict, title: str = "Signal report") -> str:
             lines.append(f"- Oracle, {label}: stiffness-aware {_pct(o[name]['aware'])}, stiffness-blind "
                          f"{_pct(o[name]['blind'])}: **gap {o[name]['gap_points']:.1f} points** "
                          f"({o['objects']} objects).")
+    near = report.get("near_threshold")
+    if near:
+        per_e = ", ".join(f"{e:.0e}: {_pct(near[_key(e)])}" for e in report["moduli_pa"])
+        lines.append(f"- Held within {near['band_mps2']:g} m/s^2 of the 25 m/s^2 threshold (labels a 10 % change "
+                     f"flips): **{_pct(near['all'])}** ({per_e}).")
     rho = report["friction_limit_spearman"]
     if rho is not None:
         lines.append(f"- Spearman (softest E, per scene) between the friction limit 2 mu F / m and the mean "

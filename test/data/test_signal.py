@@ -47,6 +47,14 @@ def test_within_scene_share_is_zero_when_only_the_object_matters_and_one_when_on
     assert signal_report(only_grasp)["within_scene_share"]["soft"] == pytest.approx(1.0)
 
 
+def test_near_threshold_share_counts_held_accelerations_within_the_band():
+    # 2e4: 23.0 and 27.4 inside +-2.5 of 25, 30.0 and a lift failure (0) outside; 2e9: 22.6 inside, 45 outside.
+    records = [rec("A", 0, 2e4, 23.0), rec("A", 1, 2e4, 27.4), rec("A", 2, 2e4, 30.0),
+               rec("A", 3, 2e4, 0.0, status="lift_failed"), rec("A", 0, 2e9, 22.6), rec("A", 1, 2e9, 45.0)]
+    near = signal_report(records)["near_threshold"]
+    assert near["2e4"] == 0.5 and near["2e9"] == 0.5 and near["all"] == pytest.approx(0.5)
+
+
 def test_spearman_with_ties():
     assert spearman([1, 2, 3, 4], [10, 20, 30, 40]) == pytest.approx(1.0)
     assert spearman([1, 2, 3, 4], [4, 3, 2, 1]) == pytest.approx(-1.0)
