@@ -87,9 +87,10 @@ def virtual_depth(view: TabletopView) -> np.ndarray:
     return (CAMERA_HEIGHT_ABOVE_TABLE_M - view.grid_height_m).astype(np.float32)
 
 
-def grid_moduli(view: TabletopView, youngs_modulus_pa=None, default_pa: float = 2e6) -> np.ndarray:
+def grid_moduli(view: TabletopView, youngs_modulus_pa=None, default_pa: float = 2e6, boxes=None) -> np.ndarray:
     """Young's modulus per height-map cell: the modulus of the pixel that gave the cell its height
-    (multi-material objects keep their parts), holes and pixels without one take their object's median."""
+    (multi-material objects keep their parts), holes and pixels without one take their object's median.
+    boxes: label_boxes(view.grid_labels), when the caller has them."""
     labels = view.grid_labels
     out = np.zeros(labels.shape, np.float32)
     if youngs_modulus_pa is None:
@@ -98,7 +99,7 @@ def grid_moduli(view: TabletopView, youngs_modulus_pa=None, default_pa: float = 
     flat = np.asarray(youngs_modulus_pa, np.float32).reshape(-1)
     has = (view.grid_pixel >= 0) & (labels > 0)
     out[has] = flat[view.grid_pixel[has]]
-    for label, box in label_boxes(labels).items():
+    for label, box in (label_boxes(labels) if boxes is None else boxes).items():
         mine = labels[box] == label
         window = out[box]
         values = window[mine & (window > 0)]
@@ -108,20 +109,23 @@ def grid_moduli(view: TabletopView, youngs_modulus_pa=None, default_pa: float = 
 
 
 def label_boxes(labels: np.ndarray) -> dict:
-    """label -> (row slice, column slice) of its bounding box, from one pass over the image."""
-    rows, cols = np.nonzero(labels)
-    if rows.size == 0:
+    """label -> (row slice, column slice) of its bounding box: the labelled cells sorted by label (a
+    stable radix sort of uint8), each label's first and last cell its first and last row, a reduceat
+    its columns."""
+    width = labels.shape[1]
+    flat = labels.reshape(-1)
+    index = np.flatnonzero(flat)
+    if index.size == 0:
         return {}
-    values = labels[rows, cols].astype(np.int64)
-    n = int(values.max()) + 1
-    r0, c0 = np.full(n, labels.shape[0]), np.full(n, labels.shape[1])
-    r1, c1 = np.full(n, -1), np.full(n, -1)
-    np.minimum.at(r0, values, rows)
-    np.minimum.at(c0, values, cols)
-    np.maximum.at(r1, values, rows)
-    np.maximum.at(c1, values, cols)
-    return {int(v): (slice(int(r0[v]), int(r1[v]) + 1), slice(int(c0[v]), int(c1[v]) + 1))
-            for v in range(1, n) if r1[v] >= 0}
+    values = flat[index]
+    order = np.argsort(values, kind="stable")
+    index, values = index[order], values[order]
+    starts = np.flatnonzero(np.concatenate([[True], values[1:] != values[:-1]]))
+    ends = np.append(starts[1:], index.size) - 1
+    rows, cols = np.divmod(index, width)
+    c0, c1 = np.minimum.reduceat(cols, starts), np.maximum.reduceat(cols, starts)
+    return {int(values[a]): (slice(int(rows[a]), int(rows[b]) + 1), slice(int(lo), int(hi) + 1))
+            for a, b, lo, hi in zip(starts, ends, c0, c1)}
 
 
 @dataclass(frozen=True)
@@ -149,7 +153,8 @@ def plan_tabletop(view: TabletopView, predictor, youngs_modulus_pa=None, top_k: 
     (None = all); the others are still obstacles."""
     if not view.object_ids:
         return TabletopPlan([], np.zeros(view.grid_height_m.shape, np.float32))
-    moduli = grid_moduli(view, youngs_modulus_pa, default_pa)
+    boxes = label_boxes(view.grid_labels)
+    moduli = grid_moduli(view, youngs_modulus_pa, default_pa, boxes)
     x = network_input(virtual_depth(view), moduli, predictor.uses_stiffness)
     maps = maps_from_network(predictor.raw_maps(x), predictor.postprocess)
     space = FreeSpace(view)
@@ -157,7 +162,6 @@ def plan_tabletop(view: TabletopView, predictor, youngs_modulus_pa=None, top_k: 
     labels = view.object_ids if targets is None else [t for t in view.object_ids if t in targets]
     # Objects in the order of their best quality: a grasp on an object never scores above its best
     # peak, so once top_k objects have a grasp better than the next object's best peak, stop.
-    boxes = label_boxes(view.grid_labels)
     labels = [label for label in labels if label in boxes]
     best_q = {label: float(maps.q[boxes[label]][view.grid_labels[boxes[label]] == label].max()) for label in labels}
     per_object = {}
@@ -217,21 +221,24 @@ class FreeSpace:
             depth, self.k = view.filled_depth_m, view.filled_k
         else:
             depth, self.k = fill_holes(view.depth_m), view.camera_k
+        depth = np.asarray(depth, np.float32)
         finite = np.isfinite(depth)
         kernel = np.ones((3, 3), np.uint8)
-        self.depth = np.where(finite, cv2.dilate(np.where(finite, depth, 0).astype(np.float32), kernel), 0.0)
-        self.strict_depth = np.where(finite, cv2.erode(np.where(finite, depth, np.inf).astype(np.float32), kernel), 0.0)
+        if finite.all():     # the usual case after fill_holes (only a row without any return stays NaN)
+            self.depth, self.strict_depth = cv2.dilate(depth, kernel), cv2.erode(depth, kernel)
+        else:
+            self.depth = np.where(finite, cv2.dilate(np.where(finite, depth, 0), kernel), 0.0)
+            self.strict_depth = np.where(finite, cv2.erode(np.where(finite, depth, np.inf), kernel), 0.0)
         self.sensor_fx = float(view.camera_k[0, 0])   # the noise is the sensor's, not the read stride's
         camera_T_base = np.linalg.inv(view.base_T_camera)
         self.rotation, self.translation = camera_T_base[:3, :3], camera_T_base[:3, 3]
 
     def free(self, points_base: np.ndarray, strict: bool = False) -> np.ndarray:
         depth = self.strict_depth if strict else self.depth
-        p = points_base @ self.rotation.T + self.translation
-        z = p[:, 2]
+        x, y, z = (_rotate_row(points_base, self.rotation[i]) + self.translation[i] for i in range(3))
         with np.errstate(divide="ignore", invalid="ignore"):
-            u = np.rint(self.k[0, 0] * p[:, 0] / z + self.k[0, 2]).astype(np.int64)
-            v = np.rint(self.k[1, 1] * p[:, 1] / z + self.k[1, 2]).astype(np.int64)
+            u = np.rint(self.k[0, 0] * x / z + self.k[0, 2]).astype(np.int64)
+            v = np.rint(self.k[1, 1] * y / z + self.k[1, 2]).astype(np.int64)
         h, w = depth.shape
         seen = (z > 0) & (u >= 0) & (u < w) & (v >= 0) & (v < h)
         observed = np.zeros(z.shape)
@@ -240,15 +247,26 @@ class FreeSpace:
         return seen & (observed > z + tolerance)
 
 
+def _rotate_row(points: np.ndarray, row: np.ndarray) -> np.ndarray:
+    """points (N x 3) . row, written out: N x 3 @ 3 x 3 goes to multi-threaded BLAS, slow on busy cores."""
+    return points[:, 0] * row[0] + points[:, 1] * row[1] + points[:, 2] * row[2]
+
+
 def object_face_angles(view: TabletopView, label: int, box=None) -> tuple:
     """The two closing directions across an object's faces (map angles, from columns towards rows):
     the axes of its cells' minimum-area rectangle. Pads meeting a face squarely hold; the network's
     regressed angle is noise on square tops (the two right directions average out)."""
     box = box or (slice(None), slice(None))
-    rows, cols = np.nonzero(view.grid_labels[box] == label)
-    if rows.size < 5:
+    mine = view.grid_labels[box] == label
+    if np.count_nonzero(mine) < 5:
         return ()
-    (_, _), (_, _), degrees = cv2.minAreaRect(np.stack([cols, rows], axis=1).astype(np.float32))
+    # Each row's first and last cell: every other cell lies between them, so the hull (all that the
+    # rectangle depends on) is the same, from ~2 sqrt(n) points instead of n.
+    rows = np.flatnonzero(mine.any(axis=1))
+    first = np.argmax(mine[rows], axis=1)
+    last = mine.shape[1] - 1 - np.argmax(mine[rows, ::-1], axis=1)
+    outline = np.stack([np.concatenate([first, last]), np.concatenate([rows, rows])], axis=1)
+    (_, _), (_, _), degrees = cv2.minAreaRect(outline.astype(np.float32))
     a = math.radians(degrees)
     return (a, a + math.pi / 2)
 
