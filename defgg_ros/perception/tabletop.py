@@ -232,24 +232,26 @@ def perceive(depth_m, camera_k, base_T_camera, config: TabletopConfig | None = N
     with np.errstate(invalid="ignore"):
         height = depth * term + np.float32(normal @ pose[:3, 3] + offset)
         candidate = (height > ws.min_height_m) & (height < ws.max_height_m)
-    flying = flying_pixels(depth, config.jump_m)
-    candidate &= ~flying
     if robot_mask is not None:
         candidate &= ~np.asarray(robot_mask, bool)[::stride, ::stride]
-    vs, us = np.nonzero(candidate)
-    z = depth[vs, us]
+    # Flat pixel indices from here on (a fifth of the frame; 2-D fancy indexing costs twice as much).
+    index = np.flatnonzero(candidate)
+    index = index[~_flying_at(depth, index, config.jump_m)]
+    z = depth.reshape(-1)[index]
+    vs, us = np.divmod(index, depth.shape[1])
     r, t = pose[:3, :3].astype(np.float32), pose[:3, 3].astype(np.float32)
     xr, yr = xn[us], yn[vs]
     x = z * (r[0, 0] * xr + r[0, 1] * yr + r[0, 2]) + t[0]
     y = z * (r[1, 0] * xr + r[1, 1] * yr + r[1, 2]) + t[1]
     inside = (x > ws.x_m[0]) & (x < ws.x_m[1]) & (y > ws.y_m[0]) & (y < ws.y_m[1]) \
         & (x * x + y * y > config.robot_keepout_radius_m ** 2)
-    vs, us, x, y = vs[inside], us[inside], x[inside], y[inside]
-    hgt = height[vs, us]
+    index, vs, us, x, y = index[inside], vs[inside], us[inside], x[inside], y[inside]
+    hgt = height.reshape(-1)[index]
     empty = x.size == 0
     if empty:     # an empty table: a view without objects (callers that need one say so)
         x, y = np.array([0.5 * sum(ws.x_m)], np.float32), np.array([0.5 * sum(ws.y_m)], np.float32)
-        vs, us, hgt = np.zeros(1, np.int64), np.zeros(1, np.int64), np.zeros(1, np.float32)
+        index, vs, us, hgt = (np.zeros(1, np.int64), np.zeros(1, np.int64), np.zeros(1, np.int64),
+                              np.zeros(1, np.float32))
     # The grid covers the objects' extent plus a margin (fingers land beside them), not the whole box.
     margin = GRID_MARGIN_M
     origin = (float(max(ws.x_m[0], x.min() - margin)), float(max(ws.y_m[0], y.min() - margin)))
@@ -268,11 +270,11 @@ def perceive(depth_m, camera_k, base_T_camera, config: TabletopConfig | None = N
     grid_labels, near_labels = _nearest_labels(grid_labels, grid > 0, grid, config.jump_m, GROW_REACH_M / CELL_M,
                                                LABEL_REACH_M / CELL_M)
     processed_labels = np.zeros(depth.shape, np.uint8)
-    processed_labels[vs, us] = near_labels.reshape(-1)[cell]
+    processed_labels.reshape(-1)[index] = near_labels.reshape(-1)[cell]
     processed_fg = np.zeros(depth.shape, bool)
-    processed_fg[vs, us] = not empty
+    processed_fg.reshape(-1)[index] = not empty
     pixel_cell = np.full(depth.shape, -1, np.int32)
-    pixel_cell[vs, us] = -1 if empty else cell
+    pixel_cell.reshape(-1)[index] = -1 if empty else cell
     labels, foreground = processed_labels, processed_fg
     if stride > 1:
         size = (full.shape[1], full.shape[0])
@@ -351,12 +353,26 @@ def fill_holes(depth_m: np.ndarray) -> np.ndarray:
 def flying_pixels(depth: np.ndarray, jump_m: float) -> np.ndarray:
     """Pixels whose depth lies between their 3x3 neighbours' extremes, far from both: the mixed
     foreground/background returns a stereo camera gives at depth edges (they float in mid-air)."""
-    valid = np.isfinite(depth) & (depth > 0)
-    kernel = np.ones((3, 3), np.uint8)
-    high = cv2.dilate(np.where(valid, depth, 0).astype(np.float32), kernel)
-    low = cv2.erode(np.where(valid, depth, np.inf).astype(np.float32), kernel)
+    depth = np.asarray(depth, np.float32)
+    return _flying_at(depth, np.arange(depth.size), jump_m).reshape(depth.shape)
+
+
+def _flying_at(depth: np.ndarray, index: np.ndarray, jump_m: float) -> np.ndarray:
+    """flying_pixels(depth, jump_m) at the flat pixel indices `index` only."""
+    valid_all = depth.min() > 0      # NaN propagates through min: no NaN and no pixel <= 0
+    flat = depth.reshape(-1)
+    z = flat[index]
     with np.errstate(invalid="ignore"):
-        return valid & (depth - low > jump_m) & (high - depth > jump_m)
+        valid = (z > 0) & (z < np.inf)
+    kernel = np.ones((3, 3), np.uint8)
+    if valid_all:
+        high, low = cv2.dilate(depth, kernel), cv2.erode(depth, kernel)
+    else:
+        valid_map = np.isfinite(depth) & (depth > 0)
+        high = cv2.dilate(np.where(valid_map, depth, 0).astype(np.float32), kernel)
+        low = cv2.erode(np.where(valid_map, depth, np.inf).astype(np.float32), kernel)
+    with np.errstate(invalid="ignore"):
+        return valid & (z - low.reshape(-1)[index] > jump_m) & (high.reshape(-1)[index] - z > jump_m)
 
 
 def _splat_max(cell, value, pixel, n_cells):

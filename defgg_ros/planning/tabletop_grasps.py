@@ -316,18 +316,26 @@ def feasible_grasp(view: TabletopView, label: int, row: int, col: int, angle_rad
     fitting = [(round(extents[i] / OPENING_TIE_M), i, int(lows[i]), int(highs[i]), float(extents[i]))
                for i in order if ok[i] and extents[i] + 2 * CLEARANCE_M <= GRIPPER_MAX_WIDTH_M]
     # The narrowest fitting direction first (the most room in the hand, and the same choice at every
-    # resolution); among near-equal ones, the candidate order (faces, then the network's angle).
-    for _, i, low, high, extent_m in sorted(fitting):
-        width = float(extent_m + 2 * CLEARANCE_M)   # geometric: the same object, the same opening
-        centre = np.array([row, col], float) + (low + high) / 2.0 * LINE_STEP_CELLS * directions[i]
-        r, c = int(round(centre[0])), int(round(centre[1]))
-        if not (0 <= r < view.grid_labels.shape[0] and 0 <= c < view.grid_labels.shape[1]) \
-                or view.grid_labels[r, c] != label:
-            continue
-        if not _pads_free(view, space, level, centre, directions[i], width):
-            continue
-        return _grasp(view, label, quality, r, c, directions[i], width, extent_m, network_width_m, float(moduli[r, c]))
-    return None
+    # resolution); among near-equal ones, the candidate order (faces, then the network's angle). The
+    # first whose middle is on the object and whose pads are free wins (all checked in one pass).
+    if not fitting:
+        return None
+    _, index, lows, highs, extents_m = (np.array(column) for column in zip(*sorted(fitting)))
+    widths = extents_m + 2 * CLEARANCE_M           # geometric: the same object, the same opening
+    centres = np.array([row, col], float) + ((lows + highs) / 2.0 * LINE_STEP_CELLS)[:, None] * directions[index]
+    rc = np.rint(centres).astype(np.int64)
+    rows_n, cols_n = view.grid_labels.shape
+    on = (rc[:, 0] >= 0) & (rc[:, 0] < rows_n) & (rc[:, 1] >= 0) & (rc[:, 1] < cols_n)
+    on[on] = view.grid_labels[rc[on, 0], rc[on, 1]] == label
+    if not on.any():
+        return None
+    on[on] = _pads_free(view, space, level, centres[on], directions[index[on]], widths[on])
+    if not on.any():
+        return None
+    k = int(np.argmax(on))
+    r, c, i = int(rc[k, 0]), int(rc[k, 1]), int(index[k])
+    return _grasp(view, label, quality, r, c, directions[i], float(widths[k]), float(extents_m[k]), network_width_m,
+                  float(moduli[r, c]))
 
 
 def _points(view: TabletopView, cells_rc: np.ndarray, height_m: float) -> np.ndarray:
@@ -365,16 +373,22 @@ def _extent_cells(occupied: np.ndarray):
     return (int(low[0]), int(high[0])) if ok[0] else (None, None)
 
 
-def _pads_free(view, space: FreeSpace, level_m: float, centre, direction, width_m: float) -> bool:
-    """Both pads (thickness along the closing line just outside the opening, pad width across it)
-    over free space at the fingertips' level (PAD_BLOCKED_FRACTION of a pad's samples may fail)."""
-    across = np.array([-direction[1], direction[0]])
-    s_along = (width_m / 2 + np.linspace(0.0, PANDA_FINGER_THICKNESS_M, PAD_SAMPLES)) / CELL_M
+def _pads_free(view, space: FreeSpace, level_m: float, centres, directions, widths_m) -> np.ndarray:
+    """Per grasp (n centres in cells, unit closing directions, openings in m): both pads (thickness
+    along the closing line just outside the opening, pad width across it) over free space at the
+    fingertips' level (PAD_BLOCKED_FRACTION of a pad's samples may fail)."""
+    centres, directions = np.asarray(centres, float), np.asarray(directions, float)
+    across = np.stack([-directions[:, 1], directions[:, 0]], axis=1)
+    thickness = np.linspace(0.0, PANDA_FINGER_THICKNESS_M, PAD_SAMPLES)
+    s_along = (np.asarray(widths_m, float)[:, None] / 2 + thickness) / CELL_M
     s_across = np.linspace(-FINGER_PAD_WIDTH_M / 2, FINGER_PAD_WIDTH_M / 2, PAD_SAMPLES) / CELL_M
-    a, b = (g.reshape(-1, 1) for g in np.meshgrid(s_along, s_across))
-    pads = [centre + side * a * direction + b * across for side in (-1.0, 1.0)]
-    free = space.free(_points(view, np.concatenate(pads), level_m), strict=True).reshape(2, -1)
-    return bool(np.all(np.mean(~free, axis=1) <= PAD_BLOCKED_FRACTION))
+    # Sample k = (across index) * PAD_SAMPLES + (along index), as np.meshgrid(along, across) orders them.
+    a = np.broadcast_to(s_along[:, None, :], (len(centres), PAD_SAMPLES, PAD_SAMPLES)).reshape(len(centres), -1, 1)
+    b = np.repeat(s_across, PAD_SAMPLES)[None, :, None]
+    pads = [centres[:, None, :] + side * a * directions[:, None, :] + b * across[:, None, :] for side in (-1.0, 1.0)]
+    points = np.stack(pads, axis=1).reshape(-1, 2)                            # n x 2 pads x samples
+    free = space.free(_points(view, points, level_m), strict=True).reshape(len(centres), 2, -1)
+    return np.all(np.mean(~free, axis=2) <= PAD_BLOCKED_FRACTION, axis=1)
 
 
 def _grasp(view, label, quality, r, c, direction, width, extent_m, network_width_m, modulus) -> TabletopGrasp:
