@@ -24,6 +24,7 @@ or another resolution sees the same scene:
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -96,10 +97,13 @@ class TabletopView:
     camera_k: np.ndarray
     table_normal: np.ndarray           # unit, base frame
     table_offset_m: float              # n . p + d = 0
-    height_m: np.ndarray               # HxW float32 height above the table, NaN unknown
-    foreground: np.ndarray             # HxW bool: object pixels inside the workspace
-    labels: np.ndarray                 # HxW uint8 image labels, 0 = background
-    pixel_cell: np.ndarray             # HxW int32 flat cell index of each foreground pixel, -1 elsewhere
+    # The per-pixel images at the read stride (processing_stride); the full-resolution ones (height_m,
+    # foreground, labels, pixel_cell below) are made from them when first read: a 1280x720 frame's
+    # four nearest-neighbour upscales cost ~3 ms, and planning reads only the labels.
+    processed_height_m: np.ndarray     # float32 height above the table, NaN unknown
+    processed_foreground: np.ndarray   # bool: object pixels inside the workspace
+    processed_labels: np.ndarray       # uint8 image labels, 0 = background
+    processed_pixel_cell: np.ndarray   # int32 flat cell index of each foreground pixel, -1 elsewhere
     grid_origin_xy_m: tuple            # base-frame (x, y) of cell (0, 0)'s centre; row = +x? see cell_xy
     grid_height_m: np.ndarray          # R x C float32 height map (0 = table)
     grid_labels: np.ndarray            # R x C uint8 object labels
@@ -109,6 +113,31 @@ class TabletopView:
     depth_m: np.ndarray | None = None             # the full-resolution depth (NaN = no return)
     filled_depth_m: np.ndarray | None = None      # fill_holes of every stride-th pixel (what perceive read)
     filled_k: np.ndarray | None = None            # K of filled_depth_m
+
+    @functools.cached_property
+    def height_m(self) -> np.ndarray:
+        """HxW float32 height above the table, NaN unknown."""
+        return self._full_resolution(self.processed_height_m)
+
+    @functools.cached_property
+    def foreground(self) -> np.ndarray:
+        """HxW bool: object pixels inside the workspace."""
+        return self._full_resolution(self.processed_foreground.view(np.uint8)) > 0
+
+    @functools.cached_property
+    def labels(self) -> np.ndarray:
+        """HxW uint8 image labels, 0 = background."""
+        return self._full_resolution(self.processed_labels)
+
+    @functools.cached_property
+    def pixel_cell(self) -> np.ndarray:
+        """HxW int32 flat cell index of each foreground pixel, -1 elsewhere."""
+        return self._full_resolution(self.processed_pixel_cell)
+
+    def _full_resolution(self, image: np.ndarray) -> np.ndarray:
+        if image.shape == self.depth_m.shape:
+            return image
+        return cv2.resize(image, self.depth_m.shape[::-1], interpolation=cv2.INTER_NEAREST)
 
     def cell_xy_m(self, row, col):
         """Base-frame (x, y) of a cell centre: rows run along +x, columns along +y."""
@@ -275,14 +304,7 @@ def perceive(depth_m, camera_k, base_T_camera, config: TabletopConfig | None = N
     processed_fg.reshape(-1)[index] = not empty
     pixel_cell = np.full(depth.shape, -1, np.int32)
     pixel_cell.reshape(-1)[index] = -1 if empty else cell
-    labels, foreground = processed_labels, processed_fg
-    if stride > 1:
-        size = (full.shape[1], full.shape[0])
-        labels = cv2.resize(processed_labels, size, interpolation=cv2.INTER_NEAREST)
-        foreground = cv2.resize(processed_fg.view(np.uint8), size, interpolation=cv2.INTER_NEAREST) > 0
-        pixel_cell = cv2.resize(pixel_cell, size, interpolation=cv2.INTER_NEAREST)
-        height = cv2.resize(height, size, interpolation=cv2.INTER_NEAREST)
-    return TabletopView(pose, k_full, normal, offset, height, foreground, labels, pixel_cell, origin, grid,
+    return TabletopView(pose, k_full, normal, offset, height, processed_fg, processed_labels, pixel_cell, origin, grid,
                         grid_labels, owner, tuple(sorted(areas)), areas, full, depth, k)
 
 

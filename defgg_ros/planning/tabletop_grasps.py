@@ -87,45 +87,58 @@ def virtual_depth(view: TabletopView) -> np.ndarray:
     return (CAMERA_HEIGHT_ABOVE_TABLE_M - view.grid_height_m).astype(np.float32)
 
 
-def grid_moduli(view: TabletopView, youngs_modulus_pa=None, default_pa: float = 2e6, boxes=None) -> np.ndarray:
+def grid_moduli(view: TabletopView, youngs_modulus_pa=None, default_pa: float = 2e6, cells=None) -> np.ndarray:
     """Young's modulus per height-map cell: the modulus of the pixel that gave the cell its height
     (multi-material objects keep their parts), holes and pixels without one take their object's median.
-    boxes: label_boxes(view.grid_labels), when the caller has them."""
+    cells: label_cells(view.grid_labels), when the caller has them."""
     labels = view.grid_labels
     out = np.zeros(labels.shape, np.float32)
     if youngs_modulus_pa is None:
         out[labels > 0] = default_pa
         return out
     flat = np.asarray(youngs_modulus_pa, np.float32).reshape(-1)
-    has = (view.grid_pixel >= 0) & (labels > 0)
-    out[has] = flat[view.grid_pixel[has]]
-    for label, box in (label_boxes(labels) if boxes is None else boxes).items():
-        mine = labels[box] == label
-        window = out[box]
-        values = window[mine & (window > 0)]
-        fill = float(np.median(values)) if values.size else default_pa
-        window[mine & (window <= 0)] = fill
+    cells = label_cells(labels) if cells is None else cells
+    pixel = view.grid_pixel.reshape(-1)[cells.index]
+    values = np.where(pixel >= 0, flat[np.maximum(pixel, 0)], np.float32(0.0))
+    for start, end in zip(cells.starts, cells.ends):
+        mine = values[start:end]                 # a view: filled in place
+        known = mine[mine > 0]
+        mine[mine <= 0] = float(np.median(known)) if known.size else default_pa
+    out.reshape(-1)[cells.index] = values
     return out
 
 
-def label_boxes(labels: np.ndarray) -> dict:
-    """label -> (row slice, column slice) of its bounding box: the labelled cells sorted by label (a
-    stable radix sort of uint8), each label's first and last cell its first and last row, a reduceat
-    its columns."""
-    width = labels.shape[1]
+@dataclass(frozen=True)
+class LabelCells:
+    """The labelled cells of a label image grouped by label: their flat indices sorted by label (a
+    stable radix sort of uint8, so each label's cells stay in raster order) and each label's
+    [start, end) among them."""
+    index: np.ndarray
+    labels: np.ndarray
+    starts: np.ndarray
+    ends: np.ndarray
+
+
+def label_cells(labels: np.ndarray) -> LabelCells:
     flat = labels.reshape(-1)
     index = np.flatnonzero(flat)
-    if index.size == 0:
-        return {}
     values = flat[index]
     order = np.argsort(values, kind="stable")
     index, values = index[order], values[order]
-    starts = np.flatnonzero(np.concatenate([[True], values[1:] != values[:-1]]))
-    ends = np.append(starts[1:], index.size) - 1
-    rows, cols = np.divmod(index, width)
-    c0, c1 = np.minimum.reduceat(cols, starts), np.maximum.reduceat(cols, starts)
-    return {int(values[a]): (slice(int(rows[a]), int(rows[b]) + 1), slice(int(lo), int(hi) + 1))
-            for a, b, lo, hi in zip(starts, ends, c0, c1)}
+    starts = np.flatnonzero(np.concatenate([[True], values[1:] != values[:-1]])) if index.size else index
+    return LabelCells(index, values[starts], starts, np.append(starts[1:], index.size).astype(np.int64))
+
+
+def label_boxes(labels: np.ndarray, cells: LabelCells | None = None) -> dict:
+    """label -> (row slice, column slice) of its bounding box: each label's first and last cell (raster
+    order) its first and last row, a reduceat its columns."""
+    cells = label_cells(labels) if cells is None else cells
+    if cells.index.size == 0:
+        return {}
+    rows, cols = np.divmod(cells.index, labels.shape[1])
+    c0, c1 = np.minimum.reduceat(cols, cells.starts), np.maximum.reduceat(cols, cells.starts)
+    return {int(label): (slice(int(rows[a]), int(rows[b - 1]) + 1), slice(int(lo), int(hi) + 1))
+            for label, a, b, lo, hi in zip(cells.labels, cells.starts, cells.ends, c0, c1)}
 
 
 @dataclass(frozen=True)
@@ -153,8 +166,9 @@ def plan_tabletop(view: TabletopView, predictor, youngs_modulus_pa=None, top_k: 
     (None = all); the others are still obstacles."""
     if not view.object_ids:
         return TabletopPlan([], np.zeros(view.grid_height_m.shape, np.float32))
-    boxes = label_boxes(view.grid_labels)
-    moduli = grid_moduli(view, youngs_modulus_pa, default_pa, boxes)
+    cells = label_cells(view.grid_labels)
+    boxes = label_boxes(view.grid_labels, cells)
+    moduli = grid_moduli(view, youngs_modulus_pa, default_pa, cells)
     x = network_input(virtual_depth(view), moduli, predictor.uses_stiffness)
     maps = maps_from_network(predictor.raw_maps(x), predictor.postprocess)
     space = FreeSpace(view)

@@ -54,9 +54,8 @@ def objects_with_moduli(view: TabletopView, youngs_modulus_pa) -> set:
     """The perceived objects a stiffness image gives a modulus to (the rest stay obstacles)."""
     moduli = np.asarray(youngs_modulus_pa)
     labels = view.labels
-    on = labels > 0
-    count = np.bincount(labels[on], minlength=256)
-    marked = np.bincount(labels[on & (moduli > 0)], minlength=256)
+    count = np.bincount(labels.reshape(-1), minlength=256)    # label 0 (background) is never read
+    marked = np.bincount(labels[moduli > 0], minlength=256)
     return {int(label) for label in view.object_ids if count[label] and marked[label] >= MARKED_FRACTION * count[label]}
 
 
