@@ -24,6 +24,7 @@ centre (x, y) and closing direction, the contacts found again on that line (the 
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import random
 import sys
@@ -85,15 +86,16 @@ def eval_height_grasp(trial, data_root):
     return offset_m, WorldGrasp(tuple(float(v) for v in (p1 + p2) / 2), trial.yaw_rad, float(width_m))
 
 
-def rerun(trial, grasp) -> dict:
-    from dataclasses import replace
-
+def rerun(trial, grasp, sim_max_tet_nodes=None) -> dict:
+    """The trial again under its recorded settings (a record without a protocol ran the legacy one), on
+    the mesh the generator simulated (`sim_max_tet_nodes` from the dataset header)."""
     from defgg_ros.sim import objects
     from defgg_ros.sim.trial import TrialSettings, run_grasp_trial
 
-    recorded = dict(trial.sim.get("settings") or {})
-    settings = replace(TrialSettings.fast(), **recorded)
-    spec = objects.ObjectSpec(objects.get_shape(trial.object_name), trial.youngs_modulus_pa)
+    settings = TrialSettings.from_record(dict(trial.sim.get("settings") or {}))
+    shape = objects.simulation_shape(objects.get_shape(trial.object_name), trial.youngs_modulus_pa,
+                                     sim_max_tet_nodes)
+    spec = objects.ObjectSpec(shape, trial.youngs_modulus_pa)
     out = run_grasp_trial(spec, grasp, ("shake",), settings)
     return {"status": out.status, "shake_accels_mps2": out.shake_accels_mps2,
             "shake_measured": out.shake_measured, "cpu_s": out.cpu_s}
@@ -104,6 +106,8 @@ def run(args) -> None:
     from defgg_ros.sim.trial import WorldGrasp
 
     done = {(r["trial_id"], r["variant"]) for r in read_jsonl(args.results)}
+    header = json.loads((Path(args.data) / "dataset.json").read_text(encoding="utf-8"))
+    max_tet_nodes = header["generator"].get("sim_max_tet_nodes")
     trials = [t for pair in soft_scene_pairs(args.data, args.scenes, args.seed) for t in pair]
     jobs = [(t, "nudge") for t in trials] + [(t, "same") for t in trials[:args.same]] + \
         [(t, "eval_height") for t in trials]
@@ -125,7 +129,7 @@ def run(args) -> None:
             grasp = WorldGrasp(tuple(t.position_m), t.yaw_rad, t.width_m)
         else:
             grasp = nudged_grasp(t, args.shift_mm, args.turn_deg, args.seed)
-        out = rerun(t, grasp)
+        out = rerun(t, grasp, max_tet_nodes)
         accels = out["shake_accels_mps2"]
         label = None if out["status"] not in ("ok", "lift_failed") else \
             bool(accels is not None and sum(accels) / len(accels) >= SHAKE_POSITIVE_THRESHOLD_MPS2)
