@@ -155,9 +155,10 @@ def _protocol_summary(settings: dict) -> str:
     nu = material["poisson_ratio"]
     nu_text = f"nu {nu}" if nu is not None else "nu of the object (0.4)"
     if settings["protocol"] == PROTOCOL_DEFGRASPSIM:
+        hold = ("locked after it (soft bodies; the rigid stand-in held with F/2)"
+                if settings.get("finger_hold") == "lock" else "held with F/2 each after it")
         rule = ("**defgraspsim** (zero gravity after settling, grip force FOS*m*g/mu split over the fingers, table "
-                "moved away for the pickup, fingers locked after it (rigid stand-in held with F/2), lost when either "
-                "finger has no contact)")
+                f"moved away for the pickup, fingers {hold}, lost when either finger has no contact)")
     else:
         rule = ("**legacy** (gravity on, 2 N + 0.5 N per decade a finger, fingers force-held, lost when both fingers "
                 "let go or the centroid moved 20 mm)")
@@ -168,6 +169,10 @@ def signal_section(root) -> list[str]:
     """The signal report of the dataset's trials, as card lines (empty when there is nothing to report)."""
     from defgg_ros.data.signal import SignalError, read_trial_records, render_markdown, signal_report
 
+    header = json.loads((Path(root) / "dataset.json").read_text(encoding="utf-8"))
+    if "shake" not in header["generator"].get("tests", ["shake"]):
+        return ["", "No signal report: these trials ran no shake (a twist-only pilot takes its shake from "
+                    "another folder, bench/pilot_signal.py)."]
     try:
         return ["", render_markdown(signal_report(read_trial_records(root)), "Signal report (defgg-datagen signal)")]
     except SignalError:
