@@ -197,11 +197,14 @@ def _object_grasps(view, label, box, maps, moduli, space, min_distance_px, thres
     peaks = find_peaks(maps.q[box], min_distance_px, threshold, view.grid_labels[box] == label,
                        top_k=max(PEAKS_PER_OBJECT, top_k), fill=True)
     faces = object_face_angles(view, label, box)
+    cells = [(r + box[0].start, c + box[1].start) for r, c in peaks]
+    at = [maps.at_pixel(row, col) for row, col in cells]
+    # Every peak's centre lines in one free-space pass: a wide object's peaks all end there.
+    probes = _centre_lines(view, space, cells, [angle for angle, _ in at], faces)
     found = []
-    for row, col in ((r + box[0].start, c + box[1].start) for r, c in peaks):
-        angle, width_px = maps.at_pixel(row, col)
-        grasp = feasible_grasp(view, label, row, col, angle, width_px * CELL_M, float(maps.q[row, col]), moduli,
-                               space, faces)
+    for (row, col), (_, width_px), probe in zip(cells, at, probes):
+        grasp = _feasible_from_centre_lines(view, label, row, col, probe, width_px * CELL_M, float(maps.q[row, col]),
+                                            moduli, space)
         if grasp is not None and all(_distinct(grasp, other) for other in found):
             found.append(grasp)
             if len(found) >= top_k:
@@ -300,30 +303,52 @@ def feasible_grasp(view: TabletopView, label: int, row: int, col: int, angle_rad
                    quality: float, moduli: np.ndarray, space: FreeSpace, face_angles=()) -> TabletopGrasp | None:
     """The grasp at cell (row, col) with the first feasible closing direction of candidate_angles
     (map angles: from columns towards rows), or None when no direction is feasible."""
-    surface = float(view.grid_height_m[row, col])
-    level = _tip_height_m(surface) + TIP_MARGIN_M
-    phis = candidate_angles(angle_rad, face_angles)
-    order = range(len(phis))
-    directions = np.stack([np.sin(phis), np.cos(phis)], axis=1)          # (row, col) per cell step
-    # A run longer than the widest fitting extent is not needed to the end: sample that far each side.
-    reach = int(math.ceil((GRIPPER_MAX_WIDTH_M - 2 * CLEARANCE_M) / CELL_M / LINE_STEP_CELLS)) + 2
-    steps = np.arange(-reach, reach + 1) * LINE_STEP_CELLS
+    probe = _centre_lines(view, space, [(row, col)], [angle_rad], face_angles)[0]
+    return _feasible_from_centre_lines(view, label, row, col, probe, network_width_m, quality, moduli, space)
+
+
+# Samples along a closing line, in cells from the centre: a run longer than the widest fitting extent
+# is not needed to the end, so they reach that far each side.
+_REACH = int(math.ceil((GRIPPER_MAX_WIDTH_M - 2 * CLEARANCE_M) / CELL_M / LINE_STEP_CELLS)) + 2
+_STEPS = np.arange(-_REACH, _REACH + 1) * LINE_STEP_CELLS
+
+
+def _centre_lines(view: TabletopView, space: FreeSpace, cells, angles, face_angles) -> list:
+    """Per grasp centre (row, col) with the network's angle there: (fingertip level, closing
+    directions (A x 2, candidate_angles order), free samples along each direction's centre line
+    (A x S)), all centres' samples in one free-space pass."""
+    levels = [_tip_height_m(float(view.grid_height_m[r, c])) + TIP_MARGIN_M for r, c in cells]
+    directions = np.stack([np.stack([np.sin(phis), np.cos(phis)], axis=1)        # (row, col) per cell step
+                           for phis in (candidate_angles(a, face_angles) for a in angles)])
+    centres = np.asarray(cells, float)
+    lines = centres[:, None, None, :] + _STEPS[None, None, :, None] * directions[:, :, None, :]   # P x A x S x 2
+    heights = np.repeat(np.asarray(levels, float), lines[0, ..., 0].size)
+    free = space.free(_points(view, lines.reshape(-1, 2), heights)).reshape(lines.shape[:3])
+    return [(level, d, f) for level, d, f in zip(levels, directions, free)]
+
+
+def _feasible_from_centre_lines(view, label, row, col, probe, network_width_m, quality, moduli,
+                                space) -> TabletopGrasp | None:
+    """feasible_grasp from the peak's _centre_lines."""
+    level, directions, free_centre = probe
+    order = range(len(directions))
+    steps = _STEPS
     across = np.stack([-directions[:, 1], directions[:, 0]], axis=1)
     # Three lines across the band the pads sweep (centre and both pad edges): what lies between the
     # fingers anywhere in that band must fit, so a box's corner is not taken for a narrow object. The
     # centre line first for every direction; the edge lines only where the centre line's run fits.
     offsets = np.array([0.0, -0.5, 0.5]) * FINGER_PAD_WIDTH_M / CELL_M
     centre = np.array([row, col], float)
-    free = np.ones((len(order), 3, steps.size), bool)
-    line = centre + steps[None, :, None] * directions[:, None, :]                      # A x S x 2
-    free[:, 0] = space.free(_points(view, line.reshape(-1, 2), level)).reshape(len(order), steps.size)
-    ok0, low0, high0 = band_extents(~free[:, :1])
+    ok0, low0, high0 = band_extents(~free_centre[:, None, :])
     fits0 = ok0 & ((high0 - low0 + 1) * LINE_STEP_CELLS * CELL_M + 2 * CLEARANCE_M <= GRIPPER_MAX_WIDTH_M)
-    if fits0.any():
-        idx = np.flatnonzero(fits0)
-        edges = (centre + offsets[None, 1:, None, None] * across[idx, None, None, :]
-                 + steps[None, None, :, None] * directions[idx, None, None, :])       # a x 2 x S x 2
-        free[idx, 1:] = space.free(_points(view, edges.reshape(-1, 2), level)).reshape(idx.size, 2, steps.size)
+    if not fits0.any():      # no centre line fits: nothing below can (ok &= fits0)
+        return None
+    free = np.ones((len(order), 3, steps.size), bool)
+    free[:, 0] = free_centre
+    idx = np.flatnonzero(fits0)
+    edges = (centre + offsets[None, 1:, None, None] * across[idx, None, None, :]
+             + steps[None, None, :, None] * directions[idx, None, None, :])       # a x 2 x S x 2
+    free[idx, 1:] = space.free(_points(view, edges.reshape(-1, 2), level)).reshape(idx.size, 2, steps.size)
     ok, lows, highs = band_extents(~free)
     ok &= fits0
     extents = (highs - lows + 1) * LINE_STEP_CELLS * CELL_M
@@ -352,8 +377,8 @@ def feasible_grasp(view: TabletopView, label: int, row: int, col: int, angle_rad
                   float(moduli[r, c]))
 
 
-def _points(view: TabletopView, cells_rc: np.ndarray, height_m: float) -> np.ndarray:
-    """Base-frame points at height_m above the table over (fractional) height-map cells."""
+def _points(view: TabletopView, cells_rc: np.ndarray, height_m) -> np.ndarray:
+    """Base-frame points at height_m (one, or one per cell) above the table over (fractional) height-map cells."""
     x, y = view.cell_xy_m(cells_rc[:, 0], cells_rc[:, 1])
     return np.stack([x, y, view.table_z_at(x, y) + height_m], axis=1)
 
