@@ -315,24 +315,27 @@ def _nearest_labels(labels: np.ndarray, occupied: np.ndarray, grid: np.ndarray, 
     differs from that cell's by at most jump_m per cell of distance (they continue its surface: cells
     cut at noise steps, not a neighbour's wall). Pixels: any occupied cell within reach_cells takes it
     (an object's side faces scatter a few millimetres around its outline)."""
-    unlabelled = occupied & (labels == 0)
-    if not unlabelled.any() or not labels.any():
+    background = labels == 0
+    flat_labels = labels.reshape(-1)
+    # Flat indices of the occupied cells without a label (a few per cent of the grid).
+    cells = np.flatnonzero(occupied.reshape(-1) & background.reshape(-1))
+    if cells.size == 0 or background.all():
         return labels, labels
-    distance, index = cv2.distanceTransformWithLabels((labels == 0).astype(np.uint8), cv2.DIST_L2, 3,
+    distance, index = cv2.distanceTransformWithLabels(background.view(np.uint8), cv2.DIST_L2, 3,
                                                       labelType=cv2.DIST_LABEL_PIXEL)
     # DIST_LABEL_PIXEL numbers the zero-valued pixels of the source (our labelled cells) in raster order.
-    sources = np.concatenate([[0], np.flatnonzero(labels > 0)])
-    flat_labels = labels.reshape(-1)
-    near = unlabelled & (distance <= max(grow_cells, reach_cells))
-    rows, cols = np.nonzero(near)
-    source = sources[index[rows, cols]]
-    d = distance[rows, cols]
-    continues = (d <= grow_cells) & (np.abs(grid[rows, cols] - grid.reshape(-1)[source]) <= jump_m * np.maximum(d, 1.0))
+    sources = np.concatenate([[0], np.flatnonzero(flat_labels)])
+    d = distance.reshape(-1)[cells]
+    near = d <= max(grow_cells, reach_cells)
+    cells, d = cells[near], d[near]
+    source = sources[index.reshape(-1)[cells]]
+    flat_grid = grid.reshape(-1)
+    continues = (d <= grow_cells) & (np.abs(flat_grid[cells] - flat_grid[source]) <= jump_m * np.maximum(d, 1.0))
     grown = labels.copy()
-    grown[rows[continues], cols[continues]] = flat_labels[source[continues]]
+    grown.reshape(-1)[cells[continues]] = flat_labels[source[continues]]
     for_pixels = grown.copy()
     reach = (d <= reach_cells) & ~continues
-    for_pixels[rows[reach], cols[reach]] = flat_labels[source[reach]]
+    for_pixels.reshape(-1)[cells[reach]] = flat_labels[source[reach]]
     return grown, for_pixels
 
 
