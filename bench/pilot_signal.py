@@ -150,7 +150,8 @@ def baselines() -> list:
 
 def summary() -> str:
     rows = ["| try | what | labelled | positive 2e4/2e5/2e6/2e9 | within-scene (soft) | soft+ & rigid- | "
-            "oracle gap best / top5 (points) | gate | CPU-h |", "|---|---|---|---|---|---|---|---|---|"]
+            "oracle gap best / top5 (points) | near threshold | gate | CPU-h |",
+            "|---|---|---|---|---|---|---|---|---|---|"]
     total = 0.0
     tries = [json.loads(path.read_text(encoding="utf-8")) for path in sorted(PILOTS.glob("*/signal.json"))]
     for r in baselines() + tries:
@@ -161,7 +162,8 @@ def summary() -> str:
         if r in tries:
             total += r["try"]["cpu_h"]
         rows.append(f"| {r['try']['name']} | {r['try']['what']} | {r['labelled']} | {pos} % | {100 * share:.1f} % | "
-                    f"{100 * r['candidates']['soft_pos_rigid_neg']:.1f} % | {gap:.1f} / {top:.1f} | {gate} | "
+                    f"{100 * r['candidates']['soft_pos_rigid_neg']:.1f} % | {gap:.1f} / {top:.1f} | "
+                    f"{100 * r['near_threshold']['all']:.0f} % | {gate} | "
                     f"{r['try']['cpu_h']:.2f} |")
     rows.append(f"\nPilot CPU so far: {total:.2f} CPU-h (budget ~8; the fem_v4 rows are its recorded CPU, not pilots).")
     return "\n".join(rows)
