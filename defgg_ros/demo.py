@@ -31,6 +31,7 @@ from defgg_ros.bringup.demo_geometry import (
     object_roi,
     part_roi,
     project_base_points,
+    release_tcp_z,
 )
 from defgg_ros.bringup.demo_report import FramePanels, PickRow, format_table, save_figure, write_summary
 from defgg_ros.bringup.node_set import NodeSetError, load_node_set
@@ -235,7 +236,8 @@ class DemoRun:
                 row.phase_reached = feedback.phase
                 progress.set_postfix_str(f"{row.name}: {feedback.phase}")
 
-        goal = PickAndPlace.Goal(plan_grasp=False, grasp=grasp, place_pose=self._place_pose())
+        goal = PickAndPlace.Goal(plan_grasp=False, grasp=grasp,
+                                 place_pose=self._place_pose(grasp.pose_base.pose))
         result = self.client.pick(goal, on_feedback, timeout_s=self.pick_timeout_s)
         self.placed += bool(result.held_after_transfer)
         row.success, row.held_after_transfer = result.success, result.held_after_transfer
@@ -245,8 +247,11 @@ class DemoRun:
             row.failure_reason = "the executor returned an empty result (its error is in cell.log)"
         row.sim_duration_s = result.duration_s
 
-    def _place_pose(self):
-        """Each object into its own quadrant of the bin, at the executor's release height.
+    def _place_pose(self, grasp_pose):
+        """Each object into its own quadrant of the bin, released just above the bin's floor
+        (demo_geometry.release_tcp_z; at most the executor's configured release height), with the hand
+        turned as it was at the grasp: a transfer that turns the hand about the vertical spun a soft block
+        between the low-force fingers until its diagonal pried them open (bench/README.md).
 
         An empty frame (no bin in the scene, or no release height) leaves it to the executor.
         """
@@ -258,8 +263,9 @@ class DemoRun:
             pose.header.frame_id = p["base_frame"]
             x, y = bin_place_xy(self.scene["bin"], self.placed)
             pose.pose.position.x, pose.pose.position.y = x, y
-            pose.pose.position.z = float(p["place_position_m"][2])
-            pose.pose.orientation.w = 1.0  # identity: keep the executor's place yaw
+            pose.pose.position.z = release_tcp_z(grasp_pose.position.z, self.scene["bin"],
+                                                 float(p["place_position_m"][2]))
+            pose.pose.orientation = grasp_pose.orientation
         return pose
 
 

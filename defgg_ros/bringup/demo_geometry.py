@@ -117,3 +117,24 @@ def part_roi(obj: dict, position_base_m, base_t_camera, camera_k, image_wh) -> t
     lo = np.clip(np.floor(uv.min(axis=0)), 0, np.array(image_wh) - 1).astype(int)
     hi = np.clip(np.ceil(uv.max(axis=0)), 0, np.array(image_wh)).astype(int)
     return int(lo[0]), int(lo[1]), int(hi[0] - lo[0]), int(hi[1] - lo[1])
+
+
+# Release: the object's lowest point at least this far above the bin floor (the table). From the fixed 0.12 m
+# release a 5 cm soft block fell ~7 cm, bounced and came to rest on a wall's top (bench/README.md).
+RELEASE_DROP_M = 0.03
+# The palm's underside stays this far above the walls' top: it is wider (0.204 m along the closing
+# direction) than a quadrant, so it passes over a wall while the fingers are inside.
+PALM_WALL_CLEARANCE_M = 0.01
+
+
+def release_tcp_z(grasp_point_z_m: float, bin_dict: dict, max_z_m: float) -> float:
+    """TCP height at the release. The grasp point lies on the object's top surface and the executor's TCP
+    went down to it or lower, so the object hangs at most grasp_point_z below the TCP (it stood on the
+    table, the bin's floor): a TCP at grasp_point_z + RELEASE_DROP_M lets it drop at most that far plus
+    the grasp's depth. Never lower than the palm's clearance over the walls, never higher than the
+    executor's configured release height."""
+    from defgg_ros.constants import PANDA_FINGER_LENGTH_M, PANDA_FINGERTIP_BELOW_TCP_M
+
+    palm_above_tcp_m = PANDA_FINGER_LENGTH_M - PANDA_FINGERTIP_BELOW_TCP_M
+    lowest = bin_dict["inner_size_m"][2] + PALM_WALL_CLEARANCE_M - palm_above_tcp_m
+    return float(min(max_z_m, max(grasp_point_z_m + RELEASE_DROP_M, lowest)))

@@ -153,3 +153,16 @@ def test_a_failed_demo_names_the_node_that_died_with_its_last_lines(tmp_path, ca
         _explain_dead_node(cell)
     err = capsys.readouterr().err
     assert "node inference died (exit code 3); its last lines:" in err and "out of memory" in err
+
+
+def test_release_height_keeps_the_drop_short_and_the_palm_over_the_walls():
+    from defgg_ros.bringup.demo_geometry import RELEASE_DROP_M, release_tcp_z
+    from defgg_ros.constants import PANDA_FINGER_LENGTH_M, PANDA_FINGERTIP_BELOW_TCP_M
+
+    bin_dict = {"center_xy_m": [0.35, -0.45], "inner_size_m": [0.22, 0.22, 0.06]}
+    assert release_tcp_z(0.05, bin_dict, 0.12) == pytest.approx(0.05 + RELEASE_DROP_M)   # a 5 cm block
+    assert release_tcp_z(0.15, bin_dict, 0.12) == 0.12                                    # capped
+    flat = release_tcp_z(0.0, bin_dict, 0.12)                                             # a flat object
+    assert flat + PANDA_FINGER_LENGTH_M - PANDA_FINGERTIP_BELOW_TCP_M > 0.06              # palm above the walls
+    tall_walls = dict(bin_dict, inner_size_m=[0.22, 0.22, 0.2])
+    assert release_tcp_z(0.05, tall_walls, 0.3) > 0.2 - (PANDA_FINGER_LENGTH_M - PANDA_FINGERTIP_BELOW_TCP_M)
