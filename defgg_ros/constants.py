@@ -25,6 +25,9 @@ SHAKE_DIRECTIONS = 16
 SHAKE_ACCEL_LIMIT_MPS2 = 50.0
 SHAKE_POSITIVE_THRESHOLD_MPS2 = 25.0
 TWIST_ACCEL_LIMIT_RADPS2 = 500.0
+# The twist part of the pilots' shake_and_twist label (data/signal.py): mean held angular acceleration
+# over the six axes >= half the paper's 500 rad/s^2 limit.
+TWIST_POSITIVE_THRESHOLD_RADPS2 = 250.0
 GRASP_CANDIDATES_PER_OBJECT = 200
 EVAL_GRASPS_PER_OBJECT = 5
 

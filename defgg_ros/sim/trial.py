@@ -41,6 +41,7 @@ from defgg_ros.constants import (
     STATUS_OK,
     STATUS_TIMEOUT,
     TWIST_ACCEL_LIMIT_RADPS2,
+    TWIST_POSITIVE_THRESHOLD_RADPS2,
 )
 from defgg_ros.grip_force import defgraspsim_finger_force_n, grasp_force_n
 from defgg_ros.sim import hand as hand_mod
@@ -425,9 +426,15 @@ class _Trial:
             fail_below = self.settings.twist_fail_below_radps2
             if fail_below is not None and values[-1] < fail_below:
                 break
+            decided = twist_label_decided(values) if self.settings.stop_when_label_decided else None
+            if decided is not None:
+                measured = len(values)
+                values += [decided] * (len(TWIST_AXES) - len(values))
+                return values, [True] * measured + [False] * (len(TWIST_AXES) - measured)
         # Axes skipped after a failure: 0, flagged in twist_measured.
         return values + [0.0] * (len(TWIST_AXES) - len(values)), [True] * len(values) + [False] * (
             len(TWIST_AXES) - len(values))
+
 
     def _turn(self, axis_w, state, alpha_radps2, dt_s):
         """Integrate the hand's angular acceleration about axis_w over dt_s and move the palm's target."""
@@ -469,6 +476,21 @@ def protocol_differences(records, settings: dict, task: str) -> list:
             if differ:
                 return differ
     return []
+
+
+def twist_label_decided(values) -> float | None:
+    """Once the mean over the twist axes is certain to reach TWIST_POSITIVE_THRESHOLD_RADPS2 or to miss it,
+    the value that fills the remaining axes without changing that (0, or the limit); else None. The
+    generator's exact stop (stop_when_label_decided; the evaluation measures every axis), as the shake's."""
+    left = len(TWIST_AXES) - len(values)
+    if not left:
+        return None
+    need = TWIST_POSITIVE_THRESHOLD_RADPS2 * len(TWIST_AXES)
+    if sum(values) >= need:
+        return 0.0
+    if sum(values) + TWIST_ACCEL_LIMIT_RADPS2 * left < need:
+        return TWIST_ACCEL_LIMIT_RADPS2
+    return None
 
 
 def rms_speed_mps(before: list | None, after: list, dt_s: float) -> float:

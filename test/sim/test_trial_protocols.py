@@ -114,3 +114,14 @@ def test_legacy_protocol_reproduces_fem_v4_trials_exactly(trial_id):
     assert out["status"] == rec.status
     assert out["shake_accels_mps2"] == rec.shake_accels_mps2
     assert out["sim"]["sim_steps"] == rec.sim["sim_steps"]
+
+
+@pytest.mark.unit
+def test_twist_stop_fills_the_remaining_axes_only_once_the_label_is_certain():
+    from defgg_ros.sim.trial import twist_label_decided
+
+    assert twist_label_decided([500.0, 500.0, 500.0]) == 0.0                # 1500 reached: positive whatever follows
+    assert twist_label_decided([500.0, 500.0, 400.0]) is None               # 1400 + up to 1500 more: open
+    assert twist_label_decided([0.0, 0.0, 0.0, 490.0]) == 500.0             # 490 + 1000 < 1500: negative
+    assert twist_label_decided([0.0, 0.0, 0.0, 500.0]) is None              # 500 + 1000 = 1500: could still pass
+    assert twist_label_decided([100.0] * 6) is None                         # nothing left to fill
