@@ -24,7 +24,6 @@ centre (x, y) and closing direction, the contacts found again on that line (the 
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import random
 import sys
@@ -37,6 +36,7 @@ sys.path.insert(0, str(HERE.parent))
 import numpy as np  # noqa: E402
 
 from defgg_ros.atomic import append_jsonl, read_jsonl  # noqa: E402
+from defgg_ros.data.format import check_header  # noqa: E402
 from defgg_ros.data.labels import measured_mean_mps2  # noqa: E402
 
 
@@ -106,8 +106,7 @@ def run(args) -> None:
     from defgg_ros.sim.trial import WorldGrasp
 
     done = {(r["trial_id"], r["variant"]) for r in read_jsonl(args.results)}
-    header = json.loads((Path(args.data) / "dataset.json").read_text(encoding="utf-8"))
-    max_tet_nodes = header["generator"].get("sim_max_tet_nodes")
+    max_tet_nodes = check_header(args.data)["generator"].get("sim_max_tet_nodes")
     trials = [t for pair in soft_scene_pairs(args.data, args.scenes, args.seed) for t in pair]
     jobs = [(t, "nudge") for t in trials] + [(t, "same") for t in trials[:args.same]] + \
         [(t, "eval_height") for t in trials]

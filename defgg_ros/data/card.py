@@ -169,8 +169,7 @@ def signal_section(root) -> list[str]:
     """The signal report of the dataset's trials, as card lines (empty when there is nothing to report)."""
     from defgg_ros.data.signal import SignalError, read_trial_records, render_markdown, signal_report
 
-    header = json.loads((Path(root) / "dataset.json").read_text(encoding="utf-8"))
-    if "shake" not in header["generator"].get("tests", ["shake"]):
+    if "shake" not in check_header(root)["generator"].get("tests", ["shake"]):
         return ["", "No signal report: these trials ran no shake (a twist-only pilot takes its shake from "
                     "another folder, bench/pilot_signal.py)."]
     try:

@@ -370,7 +370,6 @@ class _Trial:
         g = self.gravity
         dirs = shake_directions(self.settings.shake_directions)
         values, measured = [], []
-        need = SHAKE_POSITIVE_THRESHOLD_MPS2 * len(dirs)
         for d in dirs:
             self.restore()
 
@@ -391,19 +390,17 @@ class _Trial:
                 values += [0.0] * left
                 measured += [False] * left
                 break
-            if self.settings.stop_when_label_decided and left:
-                if sum(values) >= need:
-                    values += [0.0] * left       # held accelerations are >= 0: positive is certain
-                elif sum(values) + SHAKE_ACCEL_LIMIT_MPS2 * left < need:
-                    values += [SHAKE_ACCEL_LIMIT_MPS2] * left   # cannot reach the threshold
-                measured += [False] * (len(values) - len(measured))
-                if len(values) == len(dirs):
-                    break
+            fill = label_decided_fill(values, len(dirs), SHAKE_POSITIVE_THRESHOLD_MPS2, SHAKE_ACCEL_LIMIT_MPS2) \
+                if self.settings.stop_when_label_decided else None
+            if fill is not None:
+                values += [fill] * left
+                measured += [False] * left
+                break
         self.world.set_gravity(g)
         return values, measured
 
     def twist(self):
-        values = []
+        values, fill = [], 0.0     # axes skipped after a failure hold 0
         osc = self.settings.twist_oscillation_radps
         for axis in TWIST_AXES:
             self.restore()
@@ -426,15 +423,14 @@ class _Trial:
             fail_below = self.settings.twist_fail_below_radps2
             if fail_below is not None and values[-1] < fail_below:
                 break
-            decided = twist_label_decided(values) if self.settings.stop_when_label_decided else None
+            decided = label_decided_fill(values, len(TWIST_AXES), TWIST_POSITIVE_THRESHOLD_RADPS2,
+                                         TWIST_ACCEL_LIMIT_RADPS2) if self.settings.stop_when_label_decided else None
             if decided is not None:
-                measured = len(values)
-                values += [decided] * (len(TWIST_AXES) - len(values))
-                return values, [True] * measured + [False] * (len(TWIST_AXES) - measured)
-        # Axes skipped after a failure: 0, flagged in twist_measured.
-        return values + [0.0] * (len(TWIST_AXES) - len(values)), [True] * len(values) + [False] * (
-            len(TWIST_AXES) - len(values))
-
+                fill = decided
+                break
+        # Skipped axes hold `fill`, flagged in twist_measured.
+        left = len(TWIST_AXES) - len(values)
+        return values + [fill] * left, [True] * len(values) + [False] * left
 
     def _turn(self, axis_w, state, alpha_radps2, dt_s):
         """Integrate the hand's angular acceleration about axis_w over dt_s and move the palm's target."""
@@ -478,18 +474,19 @@ def protocol_differences(records, settings: dict, task: str) -> list:
     return []
 
 
-def twist_label_decided(values) -> float | None:
-    """Once the mean over the twist axes is certain to reach TWIST_POSITIVE_THRESHOLD_RADPS2 or to miss it,
-    the value that fills the remaining axes without changing that (0, or the limit); else None. The
-    generator's exact stop (stop_when_label_decided; the evaluation measures every axis), as the shake's."""
-    left = len(TWIST_AXES) - len(values)
+def label_decided_fill(values, total: int, threshold: float, limit: float) -> float | None:
+    """The generator's exact stop (stop_when_label_decided; the evaluation measures everything), shared by
+    the shake's directions and the twist's axes: once the mean over `total` tests is certain to reach
+    `threshold` (held values are >= 0) or to miss it (each holds at most `limit`), the value that fills the
+    remaining tests without changing that (0, or the limit); else None."""
+    left = total - len(values)
     if not left:
         return None
-    need = TWIST_POSITIVE_THRESHOLD_RADPS2 * len(TWIST_AXES)
+    need = threshold * total
     if sum(values) >= need:
         return 0.0
-    if sum(values) + TWIST_ACCEL_LIMIT_RADPS2 * left < need:
-        return TWIST_ACCEL_LIMIT_RADPS2
+    if sum(values) + limit * left < need:
+        return limit
     return None
 
 

@@ -149,7 +149,9 @@ def test_a_failed_demo_names_the_node_that_died_with_its_last_lines(tmp_path, ca
         assert "idle_node is running; its last lines:\n  spinning" in capsys.readouterr().err
     with Bringup(empty, extra={"inference": crash}, out=io.StringIO()) as cell:
         cell.processes["inference"].popen.wait(timeout=20)
-        time.sleep(0.2)   # the log reader thread catches up with the exited process's output
+        deadline = time.monotonic() + 20      # the log reader thread catches up with the exited process's output
+        while len(cell.processes["inference"].tail) < 2 and time.monotonic() < deadline:
+            time.sleep(0.05)
         _explain_dead_node(cell)
     err = capsys.readouterr().err
     assert "node inference died (exit code 3); its last lines:" in err and "out of memory" in err

@@ -97,10 +97,14 @@ def test_shake_and_twist_rule_needs_both_and_refuses_records_without_a_twist():
 
 def test_card_has_no_signal_report_for_trials_without_a_shake(tmp_path):
     from defgg_ros.data.card import signal_section
+    from defgg_ros.data.format import FORMAT_NAME, FORMAT_VERSION
+
+    def header(generator):
+        return json.dumps({"format": FORMAT_NAME, "version": FORMAT_VERSION, "generator": generator})
 
     (tmp_path / "trials").mkdir()
     (tmp_path / "trials" / "A__2e+04.jsonl").write_text(json.dumps(rec("A", 0, 2e4, 30.0)) + "\n")
-    (tmp_path / "dataset.json").write_text(json.dumps({"generator": {"tests": ["twist"]}}))
+    (tmp_path / "dataset.json").write_text(header({"tests": ["twist"]}))
     assert "ran no shake" in "\n".join(signal_section(tmp_path))
-    (tmp_path / "dataset.json").write_text(json.dumps({"generator": {}}))
+    (tmp_path / "dataset.json").write_text(header({}))
     assert "Signal report" in "\n".join(signal_section(tmp_path))

@@ -118,7 +118,11 @@ def test_legacy_protocol_reproduces_fem_v4_trials_exactly(trial_id):
 
 @pytest.mark.unit
 def test_twist_stop_fills_the_remaining_axes_only_once_the_label_is_certain():
-    from defgg_ros.sim.trial import twist_label_decided
+    from defgg_ros.constants import TWIST_ACCEL_LIMIT_RADPS2, TWIST_POSITIVE_THRESHOLD_RADPS2
+    from defgg_ros.sim.trial import TWIST_AXES, label_decided_fill
+
+    def twist_label_decided(values):
+        return label_decided_fill(values, len(TWIST_AXES), TWIST_POSITIVE_THRESHOLD_RADPS2, TWIST_ACCEL_LIMIT_RADPS2)
 
     assert twist_label_decided([500.0, 500.0, 500.0]) == 0.0                # 1500 reached: positive whatever follows
     assert twist_label_decided([500.0, 500.0, 400.0]) is None               # 1400 + up to 1500 more: open
