@@ -34,8 +34,11 @@ GATE_GAP_POINTS, GATE_WITHIN_SHARE = 5.0, 0.30
 TRIES = {
     "a_defgraspsim": ("DefGraspSim's protocol: mu 0.7, nu 0.3, fingers force-held at F/2",
                       {"protocol": "defgraspsim"}, {}),
-    "b_defgraspsim_mu04": ("(a) with effective friction 0.4: friction carries less, geometry more",
-                           {"protocol": "defgraspsim", "object_friction": 0.4}, {}),
+    # (b) as the issue words it: with the force rule's mu following the friction, mu * F = FOS * m * g stays
+    # the same and only the squeeze grows; so the force keeps (a)'s mu 0.7 and friction alone holds 4/7 of (a).
+    "b_defgraspsim_mu04": ("(a) with effective friction 0.4 but the grip force of mu 0.7: friction alone holds "
+                           "FOS*g*0.4/0.7 (8-11 m/s^2), the rest must come from geometry",
+                           {"protocol": "defgraspsim", "object_friction": 0.4, "grip_force_friction": 0.7}, {}),
     "b_defgraspsim_mu03": ("(a) with effective friction 0.3", {"protocol": "defgraspsim", "object_friction": 0.3}, {}),
     "c_defgraspsim_fine": ("(a) on finer soft meshes (at most 500 nodes instead of 220), nu 0.3",
                            {"protocol": "defgraspsim"}, {"sim_max_tet_nodes": 500}),

@@ -157,8 +157,10 @@ def _protocol_summary(settings: dict) -> str:
     if settings["protocol"] == PROTOCOL_DEFGRASPSIM:
         hold = ("locked after it (soft bodies; the rigid stand-in held with F/2)"
                 if settings.get("finger_hold") == "lock" else "held with F/2 each after it")
-        rule = ("**defgraspsim** (zero gravity after settling, grip force FOS*m*g/mu split over the fingers, table "
-                f"moved away for the pickup, fingers {hold}, lost when either finger has no contact)")
+        mu = settings.get("grip_force_friction")
+        force_mu = f" with mu {mu} (not the contact's)" if mu else ""
+        rule = (f"**defgraspsim** (zero gravity after settling, grip force FOS*m*g/mu{force_mu} split over the "
+                f"fingers, table moved away for the pickup, fingers {hold}, lost when either finger has no contact)")
     else:
         rule = ("**legacy** (gravity on, 2 N + 0.5 N per decade a finger, fingers force-held, lost when both fingers "
                 "let go or the centroid moved 20 mm)")

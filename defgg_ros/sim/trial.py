@@ -73,7 +73,7 @@ LEGACY_CONFIDENT_SETTINGS = {"confident_min_directions": 4, "confident_margin_mp
 LEGACY_TWIST_SETTINGS = {"twist_oscillation_radps": None}   # before 2026-11-25: the one-way twist
 # Before 2026-11-26 every trial ran the legacy protocol on its own material.
 LEGACY_PROTOCOL_SETTINGS = {"protocol": "legacy", "object_friction": None, "poisson_ratio": None,
-                            "finger_hold": "force"}
+                            "finger_hold": "force", "grip_force_friction": None}
 # Energy blow-up: kinetic energy per kg = v_rms^2 / 2. The fastest real motion in a trial is the
 # twist at its limit (500 rad/s^2 ramped over 0.5 s: 125 rad/s, ~6 m/s at 5 cm); 30 m/s RMS over
 # all nodes (450 J/kg) is far beyond it and only reached by a diverging FEM solve.
@@ -154,6 +154,11 @@ class TrialSettings:
     # only what the object's own compression pushes back: 90 % of F/2 at 2e4 Pa, ~50 % at 2e5, 0 at 2e6 Pa
     # on box_small (bench/bench_finger_lock.py), which made stiff soft objects slip out as an artefact.
     finger_hold: str = "force"
+    # defgraspsim: the friction coefficient the grip force rule F = FOS * m * g / mu divides by. None: the
+    # effective friction, so mu * F = FOS * m * g whatever the friction (DefGraspSim's rule). A value above the
+    # real friction squeezes as if the contact were grippier than it is: friction alone then holds less than
+    # FOS * g and the rest must come from the grasp's geometry (pilot b, bench/pilots/README.md).
+    grip_force_friction: float | None = None
 
     def __post_init__(self):
         if self.protocol not in PROTOCOLS:
@@ -162,6 +167,8 @@ class TrialSettings:
             raise ValueError(f"object_friction must be in (0, 2], got {self.object_friction}")
         if self.poisson_ratio is not None and not 0.0 <= self.poisson_ratio < 0.5:
             raise ValueError(f"poisson_ratio must be in [0, 0.5), got {self.poisson_ratio}")
+        if self.grip_force_friction is not None and not 0.0 < self.grip_force_friction <= 2.0:
+            raise ValueError(f"grip_force_friction must be in (0, 2], got {self.grip_force_friction}")
         if self.finger_hold not in FINGER_HOLDS:
             raise ValueError(f"finger_hold must be one of {', '.join(FINGER_HOLDS)}, got {self.finger_hold!r}")
 
@@ -239,7 +246,8 @@ class _Trial:
                                        friction=self.material["object_friction"])
         softest = min(spec.part_moduli_pa())
         if self.defgraspsim:
-            self.force_n = defgraspsim_finger_force_n(softest, self.obj.mass_kg, self.material["effective_friction"])
+            rule_friction = settings.grip_force_friction or self.material["effective_friction"]
+            self.force_n = defgraspsim_finger_force_n(softest, self.obj.mass_kg, rule_friction)
             self.gravity = np.zeros(3)      # during the squeeze, the pickup and the tests
         else:
             self.force_n = grasp_force_n(softest)

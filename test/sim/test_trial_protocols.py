@@ -40,6 +40,19 @@ def test_defgraspsim_soft_trial_records_zero_gravity_weight_force_hold_and_eithe
     assert all(f > 0.5 * out.grasp_force_n for f in sim["squeeze_after_pickup_n"]), sim["squeeze_after_pickup_n"]
 
 
+def test_grip_force_friction_squeezes_as_if_the_contact_were_grippier():
+    """Pilot b: the object's friction 0.4, the force rule's mu 0.7: friction alone holds FOS*g*0.4/0.7."""
+    settings = dataclasses.replace(QUICK, protocol="defgraspsim", object_friction=0.4, grip_force_friction=0.7)
+    out = run_grasp_trial(box(2e5), CENTRED, ("shake",), settings)
+    assert out.status == STATUS_OK, out.note
+    assert out.sim["effective_friction"] == pytest.approx(0.4)
+    total = (1 + math.log10(2e5) / 10) * out.sim["mass_kg"] * world.GRAVITY_MPS2 / 0.7
+    assert out.grasp_force_n == pytest.approx(total / 2)
+    own_friction = dataclasses.replace(settings, grip_force_friction=None)
+    by_own_friction = run_grasp_trial(box(2e5), CENTRED, ("shake",), own_friction)
+    assert by_own_friction.grasp_force_n == pytest.approx(out.grasp_force_n * 0.7 / 0.4)
+
+
 def test_defgraspsim_rigid_stand_in_is_force_held_not_locked():
     out = run_grasp_trial(box(2e9), CENTRED, ("shake",), dataclasses.replace(QUICK, protocol="defgraspsim"))
     assert out.status == STATUS_OK, out.note
@@ -81,6 +94,8 @@ def test_protocol_and_material_are_validated():
         TrialSettings(protocol="isaac")
     with pytest.raises(ValueError, match="object_friction"):
         TrialSettings(object_friction=0.0)
+    with pytest.raises(ValueError, match="grip_force_friction"):
+        TrialSettings(grip_force_friction=-0.7)
     with pytest.raises(ValueError, match="finger_hold"):
         TrialSettings(finger_hold="glue")
     assert TrialSettings(protocol="defgraspsim", object_friction=0.4).material()["effective_friction"] == 0.4
@@ -88,7 +103,7 @@ def test_protocol_and_material_are_validated():
 
 def test_records_without_a_protocol_compare_as_legacy():
     recorded = dataclasses.asdict(TrialSettings.legacy())
-    for key in ("protocol", "object_friction", "poisson_ratio"):
+    for key in ("protocol", "object_friction", "poisson_ratio", "grip_force_friction"):
         recorded.pop(key)
     assert trial.comparable_protocol(recorded) == trial.comparable_protocol(dataclasses.asdict(TrialSettings.legacy()))
     assert trial.comparable_protocol(recorded) != trial.comparable_protocol(dataclasses.asdict(TrialSettings.fast()))
