@@ -223,8 +223,8 @@ class PickPlaceSequence:
         try:
             check_workspace(place_p, self._cfg.table_z_m)
             check_workspace(approach_p, self._cfg.table_z_m)
-            approach, place_yaw = self._kin.top_down_ik(approach_p, _finite("place yaw", self._place.yaw_rad),
-                                                        pregrasp.q_rad)
+            wanted_yaw = yaw if self._place.yaw_rad is None else _finite("place yaw", self._place.yaw_rad)
+            approach, place_yaw = self._kin.top_down_ik(approach_p, wanted_yaw, pregrasp.q_rad)
             place_M = top_down_pose(place_p, place_yaw)
             self._kin.ik(place_M, approach.q_rad)
         except KinematicsError as error:

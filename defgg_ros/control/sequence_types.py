@@ -105,7 +105,10 @@ class GraspTarget:
 @dataclass(frozen=True)
 class PlaceTarget:
     position_m: tuple          # TCP where the object is released, base frame
-    yaw_rad: float = 0.0
+    # Closing direction about the vertical at the release. None: the grasp's, so the wrist does not turn
+    # on the way; a turn spins an object held with a low grip force between the pads (it pried a 3 N grasp
+    # of a 5 cm block open, CHANGELOG 2026-11-27).
+    yaw_rad: float | None = 0.0
 
 
 @dataclass(frozen=True)

@@ -105,11 +105,11 @@ def grasp_target(grasp, base_frame: str, default_modulus_pa: float) -> GraspTarg
     return GraspTarget(tuple(base_M_tcp[:3, 3]), yaw, float(grasp.width_m), float(modulus))
 
 
-def place_target(pose_stamped, base_frame: str, default_position, default_yaw: float) -> PlaceTarget:
+def place_target(pose_stamped, base_frame: str, default_position, default_yaw: float | None) -> PlaceTarget:
     """Place pose of a goal; an empty frame_id means the configured bin.
 
     The orientation is a top-down TCP orientation; an identity (or all-zero)
-    quaternion means 'position only' and keeps the default yaw.
+    quaternion means 'position only' and keeps the default yaw (None: the grasp's).
     """
     frame = pose_stamped.header.frame_id
     if frame == "":
@@ -241,7 +241,7 @@ class ExecutorNode(Node):
             sequence = PickPlaceSequence(
                 self._kin, self._config, grasp_target(grasp, p["base_frame"], p["default_youngs_modulus_pa"]),
                 place_target(goal_handle.request.place_pose, p["base_frame"], p["place_position_m"],
-                             p["place_yaw_rad"]))
+                             None if p["place_keep_grasp_yaw"] else p["place_yaw_rad"]))
             self._wait_for_servers(p["server_wait_s"])
             return self._run(goal_handle, sequence, result)
         except (GoalError, ValueError) as error:

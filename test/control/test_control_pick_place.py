@@ -74,6 +74,17 @@ def test_pre_grasp_is_25_mm_above_the_grasp_point_with_fingers_closing_along_the
     assert abs(closing_axis @ [math.cos(GRASP.yaw_rad), math.sin(GRASP.yaw_rad), 0.0]) == pytest.approx(1.0, abs=1e-4)
 
 
+@pytest.mark.parametrize("place_yaw_rad, expected_yaw_rad", [(None, GRASP.yaw_rad), (0.0, 0.0), (-1.0, -1.0)])
+def test_place_yaw_is_the_grasp_s_when_none_else_as_asked(kin, place_yaw_rad, expected_yaw_rad):
+    """None keeps the wrist's yaw from grasp to release (a turn spins a lightly held object)."""
+    place = PlaceTarget(PLACE.position_m, place_yaw_rad)
+    sequence, robot = make(kin, place=place), FakeRobot(kin, World(object_width_m=0.045))
+    run(sequence, robot, until=lambda r, s: s.phase == "retreat")
+    closing_axis = kin.fk(robot.q)[:3, 0]
+    expected = [math.cos(expected_yaw_rad), math.sin(expected_yaw_rad), 0.0]
+    assert abs(closing_axis @ expected) == pytest.approx(1.0, abs=1e-4)
+
+
 def test_contact_during_descent_stops_the_descent_there(kin):
     surface_z = GRASP_TCP_Z_M + 0.012
     sequence, robot = make(kin), FakeRobot(kin, World(contact_height_m=surface_z))
