@@ -247,6 +247,36 @@ def _pct(x) -> str:
     return "n/a" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{100 * x:.1f} %"
 
 
+# What a report says the labels can carry: the pilots' gate (bench/pilot_signal.py), and the share of trials
+# near the threshold above which a within-scene share is mostly label noise (fem_v4: 24 %, pilot a: 60 %).
+CARRY_GAP_POINTS, CARRY_WITHIN_SHARE, NOISY_NEAR_SHARE = 5.0, 0.30, 0.40
+
+
+def what_labels_carry(report: dict) -> list[str]:
+    """Plain statements, from the report's figures alone, of what a network trained on these labels can and
+    cannot learn from them (the dataset card prints them under the report)."""
+    rates = {e: report["positive_rate"][_key(e)]["rate"] for e in report["moduli_pa"]}
+    rate_text = " / ".join(f"{100 * r:.0f}" for r in rates.values())
+    lines = [f"- Can carry: how often a grasp of an object holds at each modulus ({rate_text} % positive at "
+             f"{' / '.join(f'{e:.0e}' for e in rates)} Pa) and which objects are hard to hold."]
+    o, within = report["oracle"], report["within_scene_share"]["soft"]
+    if o.get("objects"):
+        gap = max(o["best"]["gap_points"], o[f"top{TOP_K}"]["gap_points"])
+        carries = gap >= CARRY_GAP_POINTS and within is not None and within >= CARRY_WITHIN_SHARE
+        verdict = "Can" if carries else "Cannot"
+        lines.append(f"- {verdict} carry \"stiffness changes which grasp is good\": a perfect stiffness-aware choice "
+                     f"of grasps beats a perfect stiffness-blind one by at most {gap:.1f} points (best grasp or "
+                     f"best {TOP_K}; the bar is {CARRY_GAP_POINTS:g} points with a within-scene share of "
+                     f"{100 * CARRY_WITHIN_SHARE:.0f} %, here {_pct(within)}). "
+                     + ("" if carries else "A stiffness input can then add little over depth alone on these labels."))
+    near = report.get("near_threshold")
+    if near and near["all"] is not None and near["all"] >= NOISY_NEAR_SHARE:
+        lines.append(f"- Noisy: {_pct(near['all'])} of the trials are held within {near['band_mps2']:g} m/s^2 of the "
+                     f"threshold, where a 10 % change flips the label; the within-scene share is then mostly that "
+                     f"noise, not where the object is grasped.")
+    return lines
+
+
 def render_markdown(report: dict, title: str = "Signal report") -> str:
     """The report as Markdown (the dataset card embeds it)."""
     lines = [f"## {title}", "",
@@ -279,4 +309,5 @@ def render_markdown(report: dict, title: str = "Signal report") -> str:
     if rho is not None:
         lines.append(f"- Spearman (softest E, per scene) between the friction limit 2 mu F / m and the mean "
                      f"held acceleration: {rho:.2f}.")
+    lines += ["", "What these labels can and cannot carry:", "", *what_labels_carry(report)]
     return "\n".join(lines) + "\n"

@@ -5,7 +5,7 @@ import json
 import pytest
 
 from defgg_ros.data import datagen_cli
-from defgg_ros.data.signal import SignalError, read_trial_records, signal_report, spearman
+from defgg_ros.data.signal import SignalError, read_trial_records, signal_report, spearman, what_labels_carry
 
 pytestmark = pytest.mark.unit
 
@@ -38,6 +38,18 @@ def test_oracle_gap_and_reversals_of_a_pinch_versus_cage_object():
     assert c["softest_pos_rigid_neg_count"] == 1 and c["soft_neg_rigid_pos"] == 0.25
     assert c["monotone"] == 0.75
     assert r["positive_rate"]["2e4"]["rate"] == 0.5 and r["positive_rate"]["2e9"]["rate"] == 0.5
+
+
+def test_what_labels_carry_follows_the_gap_the_within_share_and_the_near_threshold_share():
+    pinch_or_cage = what_labels_carry(signal_report(reversal_records()))
+    assert pinch_or_cage[1].startswith('- Can carry "stiffness changes which grasp is good"'), pinch_or_cage
+    assert "25.0 points" in pinch_or_cage[1] and not any(line.startswith("- Noisy") for line in pinch_or_cage)
+    # the same candidates hold at every modulus, every hold near 25 m/s^2: no gap, noisy labels
+    same_everywhere = [rec(o, i, e, 24.0 + i) for o in "AB" for i in range(3) for e in (2e4, 2e9)]
+    lines = what_labels_carry(signal_report(same_everywhere))
+    assert lines[1].startswith('- Cannot carry') and "0.0 points" in lines[1], lines
+    assert lines[-1].startswith("- Noisy: 100.0 %"), lines
+    assert "67 / 67 % positive" in lines[0], lines[0]
 
 
 def test_within_scene_share_is_zero_when_only_the_object_matters_and_one_when_only_the_grasp_does():
