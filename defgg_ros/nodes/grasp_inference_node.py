@@ -10,7 +10,16 @@ Thin adapter over defgg_ros.model.inference.GraspPredictor:
   otherwise the request's depth + camera_info with either its stiffness
   image or its `objects` (then the depth is segmented here exactly like the
   segmentation node does). Every bad request gets success=false + reason.
+- tabletop planner with `perceive_on_arrival`: each synchronised frame is
+  perceived as it arrives (perception, moduli, network; a worker thread,
+  perception/frame_worker.py: only the newest waiting frame is kept), and an
+  empty PlanGrasp only searches a perceived frame for grasps: the newest
+  perceived one when no newer frame arrived or it arrived at most
+  `max_frame_age_s` before the request, else the latest frame (waiting for
+  its perception, or perceiving it here when the worker has not started it).
+  The grasps are those the synchronous path gives for the same frame.
 """
+import contextlib
 import dataclasses
 import threading
 import time
@@ -41,6 +50,7 @@ from defgg_ros.nodes.conversions import (
     transform_from_pose,
 )
 from defgg_ros.nodes.node_main import run_node
+from defgg_ros.perception.frame_worker import LatestFrameWorker, WorkerClosed
 from defgg_ros.perception.grasp_planning import (
     PlanningError,
     check_top_k,
@@ -60,6 +70,8 @@ from defgg_ros.ros.share import share_path
 from defgg_ros.ros.tf import CameraPose, TfBroadcaster, transform_msg
 
 WARN_THROTTLE_S = 2.0
+# An empty PlanGrasp waits at most this long for the perception of the latest frame.
+PERCEPTION_WAIT_S = 30.0
 MODEL_FILES = {True: "defgg_cnn.pt", False: "ggcnn_depth_only.pt"}
 # Camera 0.40 m above the table at (0.5, 0, 0) in panda_link0, looking down
 # (pi about x) — the cell's scene files use the same mount.
@@ -84,6 +96,16 @@ class Frame:
     camera_k: np.ndarray            # 3x3
     labels: np.ndarray | None       # HxW uint8 object labels, 0 = background (camera_crop planner only)
     entries: tuple = ()             # request `objects` (tabletop planner: assigned to the perceived objects)
+
+
+@dataclasses.dataclass(frozen=True)
+class PerceivedFrame:
+    """A frame through the tabletop planner's request-independent part (TabletopPlanner.prepare)."""
+
+    frame: Frame
+    base_T_camera: np.ndarray
+    prepared: object                # planning.tabletop_planner.PreparedFrame
+    seconds: float                  # wall time of the preparation
 
 
 class GraspInferenceNode(Node):
@@ -112,6 +134,8 @@ class GraspInferenceNode(Node):
         self._latest_frame = None
         self._latest_info = None
         self.synced_frames = 0
+        self.skipped_frames = 0         # synchronised, but not convertible (wrong sizes, encodings)
+        self._worker = None
         self._grasp_pub = self.create_publisher(Grasp, p["best_grasp_topic"], qos.STATE)
         self._quality_pub = self.create_publisher(Image, p["quality_topic"], qos.SENSOR_DATA)
         self._marker_pub = self.create_publisher(MarkerArray, p["markers_topic"], qos.STATE)
@@ -128,6 +152,10 @@ class GraspInferenceNode(Node):
         if self._tabletop is not None and self._tabletop.self_filter is not None:
             self.create_subscription(JointState, p["joint_states_topic"], self._on_joint_states, qos.SENSOR_DATA)
         self.create_service(PlanGrasp, p["plan_grasp_service"], self._on_plan_grasp)
+        # Perception on arrival (tabletop planner): a worker thread prepares each synchronised frame.
+        if self._tabletop is not None and p["perceive_on_arrival"]:
+            self._worker = LatestFrameWorker(self._perceive, self._publish_perceived if p["publish_on_sync"] else None,
+                                             on_error=self._on_worker_error)
         self.get_logger().info(f"loaded {model_path} (runtime {self.predictor.runtime}, "
                                f"stiffness {'on' if self.predictor.uses_stiffness else 'off'})")
 
@@ -162,11 +190,15 @@ class GraspInferenceNode(Node):
             frame = self._frame_from_images(matched["depth"], matched["info"], matched["stiffness"])
         except ValueError as exc:
             self._warn(f"skipping synchronised frame: {exc}")
+            with self._state_lock:
+                self.skipped_frames += 1
             return
         with self._state_lock:
             self._latest_frame = frame
             self.synced_frames += 1
-        if self._p["publish_on_sync"]:
+        if self._worker is not None:
+            self._worker.submit(frame)
+        elif self._p["publish_on_sync"]:
             self._plan_and_publish(frame)
 
     def _plan_and_publish(self, frame: Frame):
@@ -175,6 +207,9 @@ class GraspInferenceNode(Node):
         except ValueError as exc:
             self._warn(f"no grasp for frame: {exc}")
             return
+        self._publish_outputs(frame, prediction, grasps)
+
+    def _publish_outputs(self, frame: Frame, prediction, grasps):
         if self._tabletop is not None:
             quality = prediction.plan.quality_image(prediction.view)
         else:
@@ -185,12 +220,68 @@ class GraspInferenceNode(Node):
             self._marker_pub.publish(self._markers(grasps[0]))
             self._publish_grasp_frame(grasps[0])
 
+    # --- perception on arrival (tabletop planner) ---------------------------
+    def _perceive(self, frame: Frame, checkpoint) -> PerceivedFrame:
+        """The worker's (or a request's) preparation of a synchronised frame; raises ValueError for a frame
+        without table, objects or moduli on them (requests then answer with that reason)."""
+        base_T_camera = self.base_T_camera_for(frame.header)
+        with self._state_lock:
+            joints = self._joint_positions
+        start = time.perf_counter()
+        prepared = self._tabletop.prepare(frame.depth_m, frame.camera_k, base_T_camera, frame.youngs_modulus_pa,
+                                          frame.entries, joints, checkpoint)
+        return PerceivedFrame(frame, base_T_camera, prepared, time.perf_counter() - start)
+
+    def _publish_perceived(self, done, checkpoint):
+        """publish_on_sync with perception on arrival: the best grasp of each frame the worker perceived."""
+        try:
+            perceived = done.value()
+            checkpoint()
+            result, grasps = self._search(perceived, 1)
+        except ValueError as exc:
+            self._warn(f"no grasp for frame: {exc}")
+            return
+        self._publish_outputs(done.frame, result, grasps)
+
+    def _on_worker_error(self, frame, exc):
+        self.get_logger().error(f"perception on arrival failed unexpectedly: {exc!r}")
+
+    def _search(self, perceived: PerceivedFrame, top_k: int):
+        result = self._tabletop.search(perceived.prepared, top_k)
+        grasps = [self._tabletop_grasp_msg(g, perceived.frame, perceived.base_T_camera) for g in result.grasps]
+        return result, grasps
+
+    def _plan_latest_perceived(self, top_k: int):
+        """An empty request with perception on arrival: (grasps, seconds, summary) from a perceived frame."""
+        start = time.perf_counter()
+        try:
+            done = self._worker.latest(float(self._p["max_frame_age_s"]), PERCEPTION_WAIT_S)
+        except (TimeoutError, WorkerClosed) as exc:
+            raise PlanningError(f"the latest frame could not be perceived: {exc}") from exc
+        if done is None:
+            raise PlanningError(NO_FRAME_YET)
+        waited = time.perf_counter() - start
+        perceived = done.value()
+        with self._worker.priority():
+            _, grasps = self._search(perceived, top_k)
+        seconds = time.perf_counter() - start
+        worker = self._worker
+        note = (f"; frame perceived on arrival ({perceived.seconds * 1e3:.1f} ms; waited {waited * 1e3:.1f} ms, "
+                f"searched {(seconds - waited) * 1e3:.1f} ms; {worker.prepared} of {worker.submitted} "
+                f"synchronised frames perceived)")
+        return grasps, seconds, note
+
     # --- PlanGrasp ----------------------------------------------------------
     def _on_plan_grasp(self, request, response):
+        note = ""
         try:
             top_k = check_top_k(request.top_k)
-            frame = self._frame_from_request(request)
-            _, grasps, seconds = self._plan(frame, top_k)
+            if self._worker is not None and _unset(request.depth) and _unset(request.stiffness) \
+                    and not request.objects:
+                grasps, seconds, note = self._plan_latest_perceived(top_k)
+            else:
+                frame = self._frame_from_request(request)
+                _, grasps, seconds = self._plan(frame, top_k)
         except ValueError as exc:  # ConversionError, PlanningError, predictor and segmentation errors
             response.success, response.message = False, str(exc) or type(exc).__name__
             return response
@@ -204,7 +295,8 @@ class GraspInferenceNode(Node):
         best = grasps[0]
         self._publish_grasp_frame(best)
         response.message = (f"{len(grasps)} grasp(s); best q={best.quality:.3f} at ({best.center_u_px:.0f}, "
-                            f"{best.center_v_px:.0f}) px, width {best.width_m * 1000:.1f} mm, object {best.object_id}")
+                            f"{best.center_v_px:.0f}) px, width {best.width_m * 1000:.1f} mm, object {best.object_id}"
+                            f"{note}")
         return response
 
     def _publish_grasp_frame(self, grasp: Grasp) -> None:
@@ -226,8 +318,7 @@ class GraspInferenceNode(Node):
             with self._state_lock:
                 frame = self._latest_frame
             if frame is None:
-                raise PlanningError("empty request depth and no synchronised depth + stiffness + camera_info "
-                                    "received yet; send depth and camera_info in the request")
+                raise PlanningError(NO_FRAME_YET)
             return frame
         info = request.camera_info
         if info.width == 0 and info.height == 0:
@@ -288,16 +379,13 @@ class GraspInferenceNode(Node):
         return prediction, grasps, seconds
 
     def _plan_tabletop(self, frame: Frame, top_k: int):
-        base_T_camera = self.base_T_camera_for(frame.header)
-        with self._state_lock:
-            joints = self._joint_positions
+        """Synchronously: perceive and search (the same steps as the worker's, in one go). With perception on
+        arrival the worker waits at its checkpoints meanwhile."""
         start = time.perf_counter()
-        with self._predict_lock:
-            result = self._tabletop.plan(frame.depth_m, frame.camera_k, base_T_camera, top_k,
-                                         frame.youngs_modulus_pa, frame.entries, joints)
-        seconds = time.perf_counter() - start
-        grasps = [self._tabletop_grasp_msg(g, frame, base_T_camera) for g in result.grasps]
-        return result, grasps, seconds
+        with self._worker.priority() if self._worker is not None else contextlib.nullcontext():
+            perceived = self._perceive(frame, None)
+            result, grasps = self._search(perceived, top_k)
+        return result, grasps, time.perf_counter() - start
 
     def _tabletop_grasp_msg(self, grasp, frame: Frame, base_T_camera) -> Grasp:
         b_T_g = base_T_grasp(grasp)
@@ -330,6 +418,29 @@ class GraspInferenceNode(Node):
 
     def _warn(self, text: str):
         self.get_logger().warning(text, throttle_duration_sec=WARN_THROTTLE_S)
+
+    @property
+    def latest_stamp_ns(self) -> int | None:
+        """Stamp of the latest synchronised frame (None before the first)."""
+        with self._state_lock:
+            frame = self._latest_frame
+        return None if frame is None else stamp_to_ns(frame.header.stamp)
+
+    @property
+    def perception_counts(self) -> dict:
+        """Perception on arrival: frames submitted, perceived, dropped unstarted, stopped as superseded."""
+        w = self._worker
+        return {} if w is None else {"submitted": w.submitted, "perceived": w.prepared, "dropped": w.dropped,
+                                     "superseded": w.superseded}
+
+    def destroy_node(self):
+        if self._worker is not None:
+            self._worker.close()
+        return super().destroy_node()
+
+
+NO_FRAME_YET = ("empty request depth and no synchronised depth + stiffness + camera_info received yet; send depth "
+                "and camera_info in the request")
 
 
 def _unset(image: Image) -> bool:

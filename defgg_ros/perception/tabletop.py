@@ -238,9 +238,11 @@ def processing_stride(camera_k) -> int:
 
 
 def perceive(depth_m, camera_k, base_T_camera, config: TabletopConfig | None = None,
-             robot_mask=None) -> TabletopView:
-    """The table, the objects in the workspace and their height map (module docstring)."""
+             robot_mask=None, checkpoint=None) -> TabletopView:
+    """The table, the objects in the workspace and their height map (module docstring).
+    checkpoint: called between stages (perception on arrival pauses there while a request runs)."""
     config = config or TabletopConfig()
+    checkpoint = checkpoint or _no_checkpoint
     full = np.asarray(depth_m, dtype=np.float32)
     if full.ndim != 2 or full.size == 0:
         raise TabletopError(f"depth must be a non-empty HxW image in metres, got shape {full.shape}")
@@ -254,6 +256,7 @@ def perceive(depth_m, camera_k, base_T_camera, config: TabletopConfig | None = N
     k[:2] /= stride
     xn, yn = _pixel_rays(k, depth.shape)
     normal, offset = fit_table(depth, xn, yn, pose, config)
+    checkpoint()
     # Height above the table of every pixel: n . (R p_cam + t) + d, separable in u and v.
     n_cam = (pose[:3, :3].T @ normal).astype(np.float32)
     term = n_cam[0] * xn[None, :] + (n_cam[1] * yn + n_cam[2])[:, None]
@@ -289,11 +292,14 @@ def perceive(depth_m, camera_k, base_T_camera, config: TabletopConfig | None = N
     rows = np.clip(np.rint((x - origin[0]) / CELL_M).astype(np.int32), 0, rows_n - 1)
     cols = np.clip(np.rint((y - origin[1]) / CELL_M).astype(np.int32), 0, cols_n - 1)
     cell = rows * cols_n + cols
+    checkpoint()
     full_pixel = (vs * stride) * full.shape[1] + us * stride
     grid, owner = _splat_max(cell, hgt, full_pixel, rows_n * cols_n)
     grid, owner = grid.reshape(rows_n, cols_n), owner.reshape(rows_n, cols_n)
     grid = _close_holes(grid, config.hole_close_cells)
+    checkpoint()
     grid_labels, areas = _segment_grid(grid, config)
+    checkpoint()
     # Cells cut at jumps and creases and the side-face points around an object take the nearest
     # object's label within LABEL_REACH_M.
     grid_labels, near_labels = _nearest_labels(grid_labels, grid > 0, grid, config.jump_m, GROW_REACH_M / CELL_M,
@@ -306,6 +312,10 @@ def perceive(depth_m, camera_k, base_T_camera, config: TabletopConfig | None = N
     pixel_cell.reshape(-1)[index] = -1 if empty else cell
     return TabletopView(pose, k_full, normal, offset, height, processed_fg, processed_labels, pixel_cell, origin, grid,
                         grid_labels, owner, tuple(sorted(areas)), areas, full, depth, k)
+
+
+def _no_checkpoint() -> None:
+    pass
 
 
 def _nearest_labels(labels: np.ndarray, occupied: np.ndarray, grid: np.ndarray, jump_m: float,

@@ -163,27 +163,63 @@ def plan_tabletop_grasps(view: TabletopView, predictor, youngs_modulus_pa=None, 
 def plan_tabletop(view: TabletopView, predictor, youngs_modulus_pa=None, top_k: int = 1,
                   default_pa: float = 2e6, targets=None) -> TabletopPlan:
     """plan_tabletop_grasps with the quality map (for display). targets: the object labels to grasp
-    (None = all); the others are still obstacles."""
+    (None = all); the others are still obstacles. The same as search_tabletop(prepare_tabletop(...))."""
+    return search_tabletop(prepare_tabletop(view, predictor, youngs_modulus_pa, default_pa), top_k, targets)
+
+
+@dataclass(frozen=True)
+class TabletopNetworkView:
+    """What planning needs from one view that does not depend on the request (prepare_tabletop): the
+    network's maps over the height map, each object's box and best quality, the moduli per cell and
+    the free space. Read-only once made: several searches (any top_k, targets) may share it."""
+    view: TabletopView
+    maps: object                 # grasping.postprocess.GraspMaps over the height map
+    moduli: np.ndarray           # R x C Young's modulus per cell (grid_moduli)
+    boxes: dict                  # label -> (row slice, column slice) in the height map
+    best_q: dict                 # label -> the object's best quality on its own cells
+    space: FreeSpace | None
+    min_distance_px: int
+    q_threshold: float
+
+
+def prepare_tabletop(view: TabletopView, predictor, youngs_modulus_pa=None, default_pa: float = 2e6,
+                     checkpoint=None) -> TabletopNetworkView:
+    """The request-independent part of plan_tabletop: moduli per cell, the network on the height map, the
+    free space. checkpoint: called between stages (perception on arrival pauses there while a request runs)."""
+    d, threshold = predictor.postprocess.peak_min_distance_px, predictor.postprocess.q_threshold
     if not view.object_ids:
-        return TabletopPlan([], np.zeros(view.grid_height_m.shape, np.float32))
+        return TabletopNetworkView(view, None, np.zeros(view.grid_height_m.shape, np.float32), {}, {}, None,
+                                   d, threshold)
     cells = label_cells(view.grid_labels)
     boxes = label_boxes(view.grid_labels, cells)
     moduli = grid_moduli(view, youngs_modulus_pa, default_pa, cells)
     x = network_input(virtual_depth(view), moduli, predictor.uses_stiffness)
-    maps = maps_from_network(predictor.raw_maps(x), predictor.postprocess)
-    space = FreeSpace(view)
-    d, threshold = predictor.postprocess.peak_min_distance_px, predictor.postprocess.q_threshold
+    raw = predictor.raw_maps(x)        # torch releases the interpreter here: no checkpoint before it
+    if checkpoint is not None:
+        checkpoint()
+    maps = maps_from_network(raw, predictor.postprocess)
+    best_q = {label: float(maps.q[boxes[label]][view.grid_labels[boxes[label]] == label].max())
+              for label in view.object_ids if label in boxes}
+    return TabletopNetworkView(view, maps, moduli, boxes, best_q, FreeSpace(view), d, threshold)
+
+
+def search_tabletop(prepared: TabletopNetworkView, top_k: int = 1, targets=None) -> TabletopPlan:
+    """The request's part of plan_tabletop: each object's feasible grasps, objects in quality order."""
+    view, maps = prepared.view, prepared.maps
+    if maps is None:
+        return TabletopPlan([], np.zeros(view.grid_height_m.shape, np.float32))
+    boxes, best_q = prepared.boxes, prepared.best_q
     labels = view.object_ids if targets is None else [t for t in view.object_ids if t in targets]
     # Objects in the order of their best quality: a grasp on an object never scores above its best
     # peak, so once top_k objects have a grasp better than the next object's best peak, stop.
     labels = [label for label in labels if label in boxes]
-    best_q = {label: float(maps.q[boxes[label]][view.grid_labels[boxes[label]] == label].max()) for label in labels}
     per_object = {}
     for label in sorted(labels, key=lambda lab: -best_q[lab]):
         firsts = sorted((g[0].quality for g in per_object.values()), reverse=True)
         if len(firsts) >= top_k and firsts[top_k - 1] >= best_q[label]:
             break
-        found = _object_grasps(view, label, boxes[label], maps, moduli, space, d, threshold, top_k)
+        found = _object_grasps(view, label, boxes[label], maps, prepared.moduli, prepared.space,
+                               prepared.min_distance_px, prepared.q_threshold, top_k)
         if found:
             per_object[label] = found
     firsts = sorted((g[0] for g in per_object.values()), key=lambda g: -g.quality)

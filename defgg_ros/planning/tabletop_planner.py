@@ -16,7 +16,7 @@ import numpy as np
 from defgg_ros.perception.self_filter import RobotSelfFilter
 from defgg_ros.perception.stiffness_assignment import assign_stiffness
 from defgg_ros.perception.tabletop import TabletopConfig, TabletopView, perceive
-from defgg_ros.planning.tabletop_grasps import TabletopPlan, plan_tabletop
+from defgg_ros.planning.tabletop_grasps import TabletopNetworkView, TabletopPlan, prepare_tabletop, search_tabletop
 
 
 class NoFeasibleGrasp(ValueError):
@@ -59,6 +59,15 @@ def objects_with_moduli(view: TabletopView, youngs_modulus_pa) -> set:
     return {int(label) for label in view.object_ids if count[label] and marked[label] >= MARKED_FRACTION * count[label]}
 
 
+@dataclass(frozen=True)
+class PreparedFrame:
+    """TabletopPlanner.prepare's result: one frame perceived and through the network, not yet searched."""
+    network: TabletopNetworkView
+    targets: set | None              # object labels to grasp (None = all)
+    youngs_modulus_pa: np.ndarray    # HxW, what the planner used (0 = background)
+    robot_mask: np.ndarray | None    # HxW bool, the self-filter's pixels (None: not applied)
+
+
 class TabletopPlanner:
     def __init__(self, predictor, config: TabletopConfig | None = None, default_youngs_modulus_pa: float = 2e6,
                  self_filter: RobotSelfFilter | None = None):
@@ -69,11 +78,20 @@ class TabletopPlanner:
 
     def plan(self, depth_m, camera_k, base_T_camera, top_k: int = 1, youngs_modulus_pa=None, entries=(),
              joint_positions: dict | None = None) -> TabletopResult:
-        """Raises ValueError subclasses: TabletopError (no table, no object), NoFeasibleGrasp."""
+        """Raises ValueError subclasses: TabletopError (no table, no object), NoFeasibleGrasp.
+        The same as search(prepare(...), top_k)."""
+        return self.search(self.prepare(depth_m, camera_k, base_T_camera, youngs_modulus_pa, entries,
+                                        joint_positions), top_k)
+
+    def prepare(self, depth_m, camera_k, base_T_camera, youngs_modulus_pa=None, entries=(),
+                joint_positions: dict | None = None, checkpoint=None) -> PreparedFrame:
+        """Everything of plan() that depends on the frame only, not on top_k: the self-filter, perception,
+        the moduli, the network on the height map, the free space. Raises what plan() raises for a frame
+        without table or objects. checkpoint: called between stages (perception/frame_worker.py)."""
         robot = None
         if self.self_filter is not None and joint_positions:
             robot = self.self_filter.mask(joint_positions, base_T_camera, camera_k, depth_m)
-        view = perceive(depth_m, camera_k, base_T_camera, self.config, robot)
+        view = perceive(depth_m, camera_k, base_T_camera, self.config, robot, checkpoint)
         if not view.object_ids:
             raise NoFeasibleGrasp("no object found above the table in the workspace box (blobs smaller than "
                                   f"{self.config.min_object_area_m2 * 1e4:.1f} cm^2 are ignored)")
@@ -86,10 +104,19 @@ class TabletopPlanner:
             if not targets:
                 raise NoFeasibleGrasp(f"the stiffness image has no object pixel on any of the "
                                       f"{len(view.object_ids)} object(s) found in the depth (all background)")
-        plan = plan_tabletop(view, self.predictor, youngs_modulus_pa, top_k, self.default_youngs_modulus_pa, targets)
+        if checkpoint is not None:
+            checkpoint()
+        network = prepare_tabletop(view, self.predictor, youngs_modulus_pa, self.default_youngs_modulus_pa,
+                                   checkpoint)
+        return PreparedFrame(network, targets, np.asarray(youngs_modulus_pa, np.float32), robot)
+
+    def search(self, prepared: PreparedFrame, top_k: int = 1) -> TabletopResult:
+        """The grasps of a prepared frame (any number of searches may share one PreparedFrame)."""
+        plan = search_tabletop(prepared.network, top_k, prepared.targets)
+        view = prepared.network.view
         if not plan.grasps:
             raise NoFeasibleGrasp(
                 f"no feasible grasp on the {len(view.object_ids)} object(s) in the workspace: each is wider than "
                 "the gripper's opening minus clearance along every closing direction, or a finger would land on "
                 "a neighbour or on space the camera cannot see")
-        return TabletopResult(view, plan, np.asarray(youngs_modulus_pa, np.float32), robot)
+        return TabletopResult(view, plan, prepared.youngs_modulus_pa, prepared.robot_mask)

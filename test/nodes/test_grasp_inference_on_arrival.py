@@ -1,0 +1,159 @@
+"""Perception on arrival in grasp_inference_node (tabletop planner), over real DDS with the shipped model.
+
+A node that perceives each streamed frame as it arrives and a node that plans everything inside PlanGrasp
+(perceive_on_arrival false) receive the same stream; for the same frame their grasps must be identical,
+and identical to a request carrying that frame's images. Also: max_frame_age_s 0 answers from the latest
+synchronised frame, a frame perception cannot use gives its reason and the node keeps serving."""
+from pathlib import Path
+
+import numpy as np
+import pytest
+from defgg_interfaces.msg import Grasp
+from defgg_interfaces.srv import PlanGrasp
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import CameraInfo, Image
+from std_msgs.msg import Header
+
+from defgg_ros.nodes import qos
+from defgg_ros.nodes.conversions import depth_metres_to_msg, make_camera_info, numpy_to_image, stamp_to_ns
+from defgg_ros.nodes.grasp_inference_node import GraspInferenceNode
+from defgg_ros.perception import tabletop_scenes as ts
+from defgg_ros.perception.geometry import transform_to_xyz_quaternion
+from defgg_ros.ros import topics
+
+MODEL_PATH = Path(__file__).resolve().parents[2] / "models" / "defgg_cnn.pt"
+SYNC_SERVICE = "/test/plan_grasp_synchronous"
+TIMEOUT_S = 60.0
+MODULI = np.zeros(256, np.float32)
+MODULI[1:9] = [2e4, 2e9, 2e6, 2e5, 2e7, 2e6, 2e4, 2e8]     # per object, as bench/bench_plan_grasp.py
+
+
+@pytest.fixture(scope="module")
+def frames():
+    """The cluttered table at 640x480 under two noise seeds: (depth m, moduli Pa, K, base_T_camera) each."""
+    scene = ts.cluttered_table(640, 480)
+    out = []
+    for seed in (1, 2):
+        frame = ts.render(scene, seed=seed)
+        out.append((frame.depth_m, MODULI[frame.labels], frame.camera_k, frame.base_T_camera))
+    return out
+
+
+def camera_messages(frame, stamp_sec: int, depth_m=None):
+    depth, moduli, k, _ = frame
+    depth = depth if depth_m is None else depth_m
+    header = Header(frame_id="camera_depth_optical_frame")
+    header.stamp.sec = stamp_sec
+    h, w = depth.shape
+    return {"depth": depth_metres_to_msg(depth, "16UC1", header),
+            "stiffness": numpy_to_image(moduli, "32FC1", header),
+            "info": make_camera_info(k, w, h, header)}
+
+
+@pytest.fixture
+def cell(executor, frames, inference_service):
+    """(node perceiving on arrival, its client, node planning synchronously, its client, probe node)."""
+    xyz, quat = transform_to_xyz_quaternion(frames[0][3])
+    pose = [*xyz.tolist(), *quat.tolist()]
+
+    def parameters(**extra):
+        return {"model_path": str(MODEL_PATH), "base_T_camera": pose, **extra}
+
+    arrival, probe, arrival_client = inference_service("on_arrival_probe", **parameters(max_frame_age_s=0.0))
+    # The same node in another namespace, on the same camera topics.
+    inputs = {"depth_topic": topics.DEPTH_IMAGE, "stiffness_topic": topics.STIFFNESS_IMAGE,
+              "camera_info_topic": topics.DEPTH_CAMERA_INFO}
+    synchronous = GraspInferenceNode(
+        context=executor.context, cli_args=["--ros-args", "-r", "__ns:=/synchronous"],
+        parameter_overrides=[Parameter(name, value=value) for name, value in parameters(
+            perceive_on_arrival=False, publish_on_sync=False, plan_grasp_service=SYNC_SERVICE,
+            **{name: f"/{topic}" for name, topic in inputs.items()}).items()])
+    executor.add_node(synchronous)
+    sync_client = probe.create_client(PlanGrasp, SYNC_SERVICE)
+    assert sync_client.wait_for_service(timeout_sec=10.0)
+    return arrival, arrival_client, synchronous, sync_client, probe
+
+
+class Camera:
+    """Publishes frames on the node's input topics, resending (discovery, best effort) until a condition holds."""
+
+    def __init__(self, probe: Node, executor, spin):
+        self.pubs = {"depth": probe.create_publisher(Image, topics.DEPTH_IMAGE, qos.SENSOR_DATA),
+                     "stiffness": probe.create_publisher(Image, topics.STIFFNESS_IMAGE, qos.SENSOR_DATA),
+                     "info": probe.create_publisher(CameraInfo, topics.DEPTH_CAMERA_INFO, qos.SENSOR_DATA)}
+        self.executor, self.spin = executor, spin
+
+    def stream_until(self, messages: dict, done, what: str):
+        ticks = [0]
+
+        def check():
+            ticks[0] += 1
+            if ticks[0] % 10 == 1:
+                for name in ("stiffness", "info", "depth"):
+                    self.pubs[name].publish(messages[name])
+            return done()
+
+        self.spin(self.executor, check, TIMEOUT_S, what)
+
+
+def latest_is(node, stamp_sec: int):
+    return lambda: node.latest_stamp_ns == stamp_sec * 10**9
+
+
+def ask(executor, call, client, request=None, top_k=1):
+    request = request or PlanGrasp.Request()
+    request.top_k = top_k
+    return call(executor, client, request, TIMEOUT_S, "plan_grasp response")
+
+
+def assert_same_grasps(a, b, what):
+    assert a.success and b.success, (a.message, b.message)
+    assert len(a.grasps) == len(b.grasps) and a.grasps, what
+    for index, (x, y) in enumerate(zip(a.grasps, b.grasps)):
+        assert x == y, f"{what}: grasp {index} differs:\n{x}\n{y}"
+
+
+def test_grasps_on_arrival_are_those_of_the_synchronous_path_for_the_same_frame(cell, frames, executor, spin, call):
+    arrival, arrival_client, synchronous, sync_client, probe = cell
+    published = []
+    probe.create_subscription(Grasp, topics.BEST_GRASP, published.append, qos.STATE)
+    camera = Camera(probe, executor, spin)
+    one = camera_messages(frames[0], 1)
+    camera.stream_until(one, lambda: latest_is(synchronous, 1)() and any(
+        stamp_to_ns(g.header.stamp) == 10**9 for g in published), "frame 1 synchronised by both, its grasp published")
+    reference = ask(executor, call, sync_client)
+    best = next(g for g in published if stamp_to_ns(g.header.stamp) == 10**9)
+    assert reference.success and reference.grasps[0] == best, "publish_on_sync on arrival: the best grasp differs"
+    # A newer frame: with max_frame_age_s 0 the answer comes from it, perceived or not yet.
+    two = camera_messages(frames[1], 2)
+    camera.stream_until(two, lambda: latest_is(arrival, 2)() and latest_is(synchronous, 2)(),
+                        "frame 2 synchronised by both")
+    for top_k in (3, 1, 5):
+        on_arrival = ask(executor, call, arrival_client, top_k=top_k)
+        assert all(stamp_to_ns(g.header.stamp) == 2 * 10**9 for g in on_arrival.grasps), on_arrival.message
+        assert "perceived on arrival" in on_arrival.message
+        assert_same_grasps(on_arrival, ask(executor, call, sync_client, top_k=top_k), f"top_k {top_k}")
+        in_request = PlanGrasp.Request(depth=two["depth"], stiffness=two["stiffness"], camera_info=two["info"])
+        assert_same_grasps(on_arrival, ask(executor, call, arrival_client, in_request, top_k),
+                           f"top_k {top_k}, images in the request")
+    assert arrival.perception_counts["perceived"] >= 2 and synchronous.perception_counts == {}
+
+
+def test_a_frame_without_table_gives_its_reason_and_the_node_keeps_serving(cell, frames, executor, spin, call):
+    arrival, arrival_client, _, _, probe = cell
+    camera = Camera(probe, executor, spin)
+    wall = np.full(frames[0][0].shape, 0.25, np.float32)     # a board 25 cm before the lens: no table
+    camera.stream_until(camera_messages(frames[0], 3, wall), latest_is(arrival, 3), "the frame without table")
+    response = ask(executor, call, arrival_client)
+    assert not response.success and "no table" in response.message, response.message
+    # A malformed frame on the stream is skipped; the next good one is served.
+    good = camera_messages(frames[0], 4)
+    camera.stream_until(good, latest_is(arrival, 4), "a good frame")
+    bad = camera_messages(frames[0], 5)
+    bad["stiffness"] = numpy_to_image(frames[0][1][:240, :320], "32FC1", bad["stiffness"].header)
+    camera.stream_until(bad, lambda: arrival.skipped_frames > 0, "the malformed frame skipped")
+    response = ask(executor, call, arrival_client)
+    assert response.success, response.message
+    assert {stamp_to_ns(g.header.stamp) for g in response.grasps} == {4 * 10**9}
+    assert arrival.latest_stamp_ns == 4 * 10**9

@@ -1,0 +1,221 @@
+"""LatestFrameWorker (perception on arrival): which frame a request gets, drops, errors, priority, close.
+
+The worker's prepare function is driven by events, so every case is deterministic; the waits below only
+guard against a hang (no assertion depends on how long anything took)."""
+import threading
+
+import pytest
+
+from defgg_ros.perception.frame_worker import LatestFrameWorker, WorkerClosed
+
+GUARD_S = 20.0
+
+
+class Clock:
+    def __init__(self):
+        self.now = 100.0
+
+    def __call__(self):
+        return self.now
+
+
+class Prepare:
+    """prepare(frame, checkpoint): records the frame and its thread; frames in `hold` wait for their release
+    event between two checkpoints; frames named 'bad' raise ValueError, 'boom' RuntimeError."""
+
+    def __init__(self, hold=()):
+        self.started = {}                 # frame -> threading.Event set when its preparation starts
+        self.release = {f: threading.Event() for f in hold}
+        self.threads = {}
+        self.passed_checkpoint = {}       # frame -> Event: got past its first checkpoint
+        self.calls = []
+
+    def event(self, table, frame):
+        return table.setdefault(frame, threading.Event())
+
+    def __call__(self, frame, checkpoint):
+        self.calls.append(frame)
+        self.threads[frame] = threading.current_thread()
+        self.event(self.started, frame).set()
+        if frame in self.release:
+            assert self.release[frame].wait(GUARD_S), f"{frame} never released"
+        checkpoint()
+        self.event(self.passed_checkpoint, frame).set()
+        if frame == "bad":
+            raise ValueError("no table in the workspace")
+        if frame == "boom":
+            raise RuntimeError("a bug")
+        return f"result of {frame}"
+
+
+def wait(event, what):
+    assert event.wait(GUARD_S), f"timed out waiting for {what}"
+
+
+@pytest.fixture
+def make():
+    workers = []
+
+    def build(prepare, **kwargs):
+        worker = LatestFrameWorker(prepare, **kwargs)
+        workers.append(worker)
+        return worker
+
+    yield build
+    for worker in workers:
+        worker.close()
+
+
+def prepared_frames(worker, count):
+    """Block until the worker has prepared `count` frames."""
+    with worker._cond:
+        assert worker._cond.wait_for(lambda: worker.prepared >= count, GUARD_S), "frames not prepared"
+
+
+def test_nothing_submitted_gives_none_and_each_frame_is_prepared_once_in_the_worker(make):
+    prepare = Prepare()
+    worker = make(prepare)
+    assert worker.latest(0.1) is None
+    worker.submit("a")
+    prepared_frames(worker, 1)
+    done = worker.latest(0.0)
+    assert (done.seq, done.frame, done.value()) == (1, "a", "result of a")
+    assert prepare.threads["a"] is worker._thread
+    assert worker.latest(0.0) is done and prepare.calls == ["a"]     # asked again: not prepared again
+
+
+def test_frames_arriving_faster_than_perception_keep_only_the_newest(make):
+    prepare = Prepare(hold=("a",))
+    worker = make(prepare)
+    worker.submit("a")
+    wait(prepare.event(prepare.started, "a"), "a to start")
+    for frame in ("b", "c", "d"):
+        worker.submit(frame)
+    prepare.release["a"].set()
+    prepared_frames(worker, 2)
+    assert prepare.calls == ["a", "d"] and worker.dropped == 2
+    assert worker.latest(0.0).frame == "d"
+
+
+def test_a_fresh_perceived_frame_answers_while_a_newer_one_is_being_perceived(make):
+    clock = Clock()
+    prepare = Prepare(hold=("b",))
+    worker = make(prepare, clock=clock)
+    worker.submit("a")
+    prepared_frames(worker, 1)
+    clock.now += 0.05
+    worker.submit("b")
+    wait(prepare.event(prepare.started, "b"), "b to start")
+    assert worker.latest(0.1).frame == "a"          # a arrived 0.05 s ago: fresh enough, no waiting
+    prepare.release["b"].set()
+
+
+def test_a_stale_perceived_frame_makes_the_request_wait_for_the_latest_one(make):
+    clock = Clock()
+    prepare = Prepare(hold=("b",))
+    worker = make(prepare, clock=clock)
+    worker.submit("a")
+    prepared_frames(worker, 1)
+    clock.now += 0.5
+    worker.submit("b")
+    wait(prepare.event(prepare.started, "b"), "b to start")
+    answer = {}
+    request = threading.Thread(target=lambda: answer.setdefault("done", worker.latest(0.1)))
+    request.start()
+    request.join(0.2)
+    assert request.is_alive(), "the request must wait for b, not answer from the stale a"
+    prepare.release["b"].set()
+    request.join(GUARD_S)
+    assert answer["done"].frame == "b" and prepare.threads["b"] is worker._thread
+
+
+def test_max_age_zero_always_answers_from_the_latest_frame(make):
+    prepare = Prepare(hold=("b",))
+    worker = make(prepare)
+    worker.submit("a")
+    prepared_frames(worker, 1)
+    worker.submit("b")
+    wait(prepare.event(prepare.started, "b"), "b to start")
+    threading.Timer(0.05, prepare.release["b"].set).start()
+    assert worker.latest(0.0).frame == "b"
+
+
+def test_an_unstarted_latest_frame_is_perceived_by_the_request_and_the_worker_drops_its_older_one(make):
+    clock = Clock()
+    prepare = Prepare(hold=("a",))
+    worker = make(prepare, clock=clock)
+    worker.submit("a")
+    wait(prepare.event(prepare.started, "a"), "a to start")
+    worker.submit("b")                     # waits behind a
+    done = worker.latest(0.1)              # nothing perceived yet: the request takes b itself
+    assert done.frame == "b" and prepare.threads["b"] is threading.current_thread()
+    prepare.release["a"].set()
+    with worker._cond:
+        assert worker._cond.wait_for(lambda: worker.superseded == 1, GUARD_S)
+    assert "a" not in prepare.passed_checkpoint       # a stopped at its checkpoint: b is newer
+    assert worker.latest(0.1) is done and worker.prepared == 1
+
+
+def test_bad_frames_give_their_error_and_the_worker_goes_on(make):
+    errors = []
+    prepare = Prepare()
+    worker = make(prepare, on_error=lambda frame, exc: errors.append((frame, exc)))
+    worker.submit("bad")
+    prepared_frames(worker, 1)
+    with pytest.raises(ValueError, match="no table"):
+        worker.latest(0.0).value()
+    worker.submit("boom")
+    prepared_frames(worker, 2)
+    with pytest.raises(RuntimeError, match="internal error.*a bug"):
+        worker.latest(0.0).value()
+    assert [frame for frame, _ in errors] == ["boom"]
+    worker.submit("good")
+    prepared_frames(worker, 3)
+    assert worker.latest(0.0).value() == "result of good"
+
+
+def test_the_worker_waits_at_its_checkpoints_while_a_request_has_priority(make):
+    prepare = Prepare(hold=("a",))
+    worker = make(prepare)
+    worker.submit("a")
+    wait(prepare.event(prepare.started, "a"), "a to start")
+    with worker.priority():
+        prepare.release["a"].set()
+        assert not prepare.event(prepare.passed_checkpoint, "a").wait(0.2)
+        worker.submit("b")
+        assert not prepare.event(prepare.started, "b").wait(0.2), "no new frame is started under priority"
+    wait(prepare.event(prepare.passed_checkpoint, "a"), "a past its checkpoint once priority ended")
+    wait(prepare.event(prepare.passed_checkpoint, "b"), "b once priority ended")
+
+
+def test_on_prepared_runs_in_the_worker_for_each_frame_it_prepared(make):
+    seen, both = [], threading.Event()
+
+    def on_prepared(done, checkpoint):
+        seen.append((done.frame, checkpoint(), threading.current_thread()))
+        if len(seen) == 2:
+            both.set()
+
+    worker = make(Prepare(), on_prepared=on_prepared)
+    worker.submit("a")
+    prepared_frames(worker, 1)
+    worker.submit("b")
+    wait(both, "on_prepared of both frames")
+    assert seen == [("a", None, worker._thread), ("b", None, worker._thread)]
+
+
+def test_close_ends_waiting_requests_and_refuses_new_frames(make):
+    clock = Clock()
+    prepare = Prepare(hold=("b",))
+    worker = make(prepare, clock=clock)
+    worker.submit("a")
+    prepared_frames(worker, 1)
+    clock.now += 1.0
+    worker.submit("b")
+    wait(prepare.event(prepare.started, "b"), "b to start")
+    threading.Timer(0.05, worker.close).start()
+    with pytest.raises(WorkerClosed):
+        worker.latest(0.1)
+    prepare.release["b"].set()
+    with pytest.raises(WorkerClosed):
+        worker.submit("c")
