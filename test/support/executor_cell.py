@@ -205,15 +205,21 @@ def run_cell(rclpy_context):
         children.append(child)
         return child
 
-    yield ex, node, client, start_driver
-    for n in list(ex.get_nodes()):
-        ex.remove_node(n)
-        destroy_actions(n)
-        n.destroy_node()
-    ex.shutdown(timeout_sec=2.0)
-    for child in children:
-        child.terminate()
-        child.wait(timeout=10)
+    try:
+        yield ex, node, client, start_driver
+        for n in list(ex.get_nodes()):
+            ex.remove_node(n)
+            destroy_actions(n)
+            n.destroy_node()
+        ex.shutdown(timeout_sec=2.0)
+    finally:   # a failing teardown above must not leave a driver process running after the tests
+        for child in children:
+            child.terminate()
+            try:
+                child.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                child.kill()
+                child.wait()
 
 
 def send(ex, client, spin, goal, feedback=None):
