@@ -3,20 +3,28 @@
 Starts grasp_inference_node as its own process (like the cell runs it; default planner: tabletop),
 on a private ROS_DOMAIN_ID, with `base_T_camera` set to the scene's camera. Scenes: the generated
 cluttered table (perception/tabletop_scenes.py: eight objects, some touching, a tilted D435 with
-the robot's base in view, sensor noise) at 640x480 and 1280x720 (--modes). Per mode, alternates
-per iteration:
+the robot's base in view, sensor noise) at 640x480 and 1280x720 (--modes).
+A camera process streams the scene at --camera-hz (30, like the D435) for the whole run: depth
+(16UC1), stiffness (32FC1) and camera_info, reliable like realsense2_camera, a new stamp (the wall
+clock) on every frame and the noise seed alternating between two renders, so the node always has a
+new frame to perceive and no answer comes from a cache of the frame before (--camera-hz 0: one frame
+published once, the old bench). Per mode, alternates per iteration:
   bare     TabletopPlanner.plan on the same frame in this process (perception, network on the
            height map, feasibility), so the difference is what the service adds (DDS, conversions)
-  latest   PlanGrasp with an empty request (the node plans on its latest
-           synchronised depth + stiffness + camera_info)
+  latest   PlanGrasp with an empty request (the node plans on its latest synchronised frame;
+           with perceive_on_arrival, the default, it only searches a frame perceived on arrival)
   images   PlanGrasp carrying depth (16UC1), stiffness (32FC1) and camera_info
 Interleaving keeps the comparison fair while other jobs load the machine.
-Prints median / p99 / max per mode, the node's own planning time, the load average, and the
-targets (issue 26): PlanGrasp p99 <= 15 ms at 640x480, <= 33 ms at 1280x720 (30 Hz).
+Prints median / p99 / max per mode, the node's own planning time, the load average, the targets
+(issue 26): PlanGrasp p99 <= 15 ms at 640x480, <= 33 ms at 1280x720 (30 Hz); and how many frames per
+second the camera sent, the node synchronised and the node perceived (from the latest-frame answers'
+messages), with the age of the frame each latest-frame answer came from (request time - its stamp).
 --planner camera_crop measures the original 300x300-window path on the same frames.
 """
 import argparse
+import multiprocessing
 import os
+import re
 import sys
 import time
 from pathlib import Path
@@ -42,29 +50,40 @@ def parse_args(argv=None):
     parser.add_argument("--modes", default="640x480,1280x720", help="resolutions, comma-separated WxH")
     parser.add_argument("--planner", choices=("tabletop", "camera_crop"), default="tabletop")
     parser.add_argument("--top-k", type=int, default=1, help="grasps per request")
+    parser.add_argument("--camera-hz", type=float, default=30.0, help="frames per second streamed; 0: one frame")
+    parser.add_argument("--perceive-on-arrival", choices=("true", "false"), default="true",
+                        help="the node's perceive_on_arrival parameter")
+    parser.add_argument("--publish-on-sync", choices=("true", "false"), default="true",
+                        help="the node's publish_on_sync parameter (the cell's: true, the best grasp of every frame "
+                             "perceived is published; a top_k 1 request then reuses that frame's search)")
+    parser.add_argument("--max-frame-age", type=float, default=None, help="the node's max_frame_age_s (its default)")
     return parser.parse_args(argv)
 
 
-def scene(width_px: int, height_px: int):
+def scene(width_px: int, height_px: int, seed: int | None = None):
     """The generated cluttered table at this resolution: (depth m, moduli Pa, camera K, base_T_camera)."""
     from defgg_ros.perception import tabletop_scenes as ts
 
-    frame = ts.render(ts.cluttered_table(width_px, height_px), seed=width_px)
+    frame = ts.render(ts.cluttered_table(width_px, height_px), seed=width_px if seed is None else seed)
     # A modulus per object (2e4 .. 2e9 Pa, the paper's decades), 0 on the table and the robot.
     lut = np.zeros(256, np.float32)
     lut[1:9] = [2e4, 2e9, 2e6, 2e5, 2e7, 2e6, 2e4, 2e8]
     return frame.depth_m, lut[frame.labels], frame.camera_k, frame.base_T_camera
 
 
-def start_node(model: str, threads: int, base_T_camera, planner: str) -> NodeProcess:
-    """grasp_inference_node in its own process; publish_on_sync off so only PlanGrasp costs CPU."""
+def start_node(model: str, threads: int, base_T_camera, planner: str, perceive_on_arrival: str = "true",
+               publish_on_sync: str = "true", max_frame_age_s: float | None = None) -> NodeProcess:
+    """grasp_inference_node in its own process, with the cell's parameters unless told otherwise."""
     from defgg_ros.perception.geometry import transform_to_xyz_quaternion
 
     xyz, quat = transform_to_xyz_quaternion(base_T_camera)
     pose = ",".join(f"{v:.9f}" for v in (*xyz, *quat))
     cmd = [sys.executable, "-m", "defgg_ros.nodes.grasp_inference_node", "--ros-args",
-           "-p", f"model_path:={model}", "-p", f"num_threads:={threads}", "-p", "publish_on_sync:=false",
-           "-p", f"base_T_camera:=[{pose}]", "-p", f"planner:={planner}", "--log-level", "warn"]
+           "-p", f"model_path:={model}", "-p", f"num_threads:={threads}", "-p", f"publish_on_sync:={publish_on_sync}",
+           "-p", f"base_T_camera:=[{pose}]", "-p", f"planner:={planner}",
+           "-p", f"perceive_on_arrival:={perceive_on_arrival}", "--log-level", "warn"]
+    if max_frame_age_s is not None:
+        cmd[-2:-2] = ["-p", f"max_frame_age_s:={max_frame_age_s}"]
     return NodeProcess("grasp_inference_node", cmd, cwd=ROOT)
 
 
@@ -128,17 +147,75 @@ def messages(depth_m, moduli_pa, camera_k, stamp_sec=1):
 
 
 def prime_latest_frame(cell, frame_msgs, deadline_s=60.0):
-    """Publish one synchronised frame until an empty PlanGrasp request succeeds."""
+    """Until an empty PlanGrasp request succeeds: publish one synchronised frame (frame_msgs), or let the
+    camera process stream (frame_msgs None)."""
     from defgg_interfaces.srv import PlanGrasp
 
     deadline = time.monotonic() + deadline_s
     while time.monotonic() < deadline:
-        for pub, msg in zip(cell.pubs, frame_msgs):
-            pub.publish(msg)
+        if frame_msgs is not None:
+            for pub, msg in zip(cell.pubs, frame_msgs):
+                pub.publish(msg)
         cell.executor.spin_once(timeout_sec=0.1)
         if cell.call(PlanGrasp.Request()).success:
             return
-    raise RuntimeError("the node never synchronised the published frame")
+    raise RuntimeError("the node never synchronised a published frame")
+
+
+def camera_main(renders, hz: float, stop, sent) -> None:
+    """The camera process: publish renders[i % len(renders)] (depth m, moduli Pa, K) at `hz`, each frame
+    stamped with the wall clock; a frame whose time has passed is skipped, as a camera does. sent: a
+    shared counter of frames published."""
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.node import Node
+    from sensor_msgs.msg import CameraInfo, Image
+
+    from defgg_ros.nodes import qos
+    from defgg_ros.ros import topics
+
+    context = Context()
+    rclpy.init(context=context)
+    try:
+        node = Node("bench_camera", context=context)
+        pubs = [node.create_publisher(Image, topics.DEPTH_IMAGE, qos.IMAGE_PUBLISH),
+                node.create_publisher(Image, topics.STIFFNESS_IMAGE, qos.IMAGE_PUBLISH),
+                node.create_publisher(CameraInfo, topics.DEPTH_CAMERA_INFO, qos.IMAGE_PUBLISH)]
+        frames = [messages(*render) for render in renders]
+        period, start, tick = 1.0 / hz, time.monotonic(), 0
+        while not stop.is_set():
+            tick = max(tick + 1, int((time.monotonic() - start) / period))    # late: skip, do not queue
+            delay = start + tick * period - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)
+            now_ns = time.time_ns()
+            for pub, msg in zip(pubs, frames[tick % len(frames)]):
+                msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(now_ns, 10**9)
+                pub.publish(msg)
+            with sent.get_lock():
+                sent.value += 1
+        node.destroy_node()
+    finally:
+        context.try_shutdown()
+
+
+class Camera:
+    """camera_main in its own process (spawned: a fresh interpreter, like a camera driver)."""
+
+    def __init__(self, renders, hz: float):
+        ctx = multiprocessing.get_context("spawn")
+        self.stop, self.sent = ctx.Event(), ctx.Value("q", 0)
+        self.process = ctx.Process(target=camera_main, args=(renders, hz, self.stop, self.sent), daemon=True)
+        self.process.start()
+
+    def close(self):
+        self.stop.set()
+        self.process.join(10.0)
+        if self.process.is_alive():
+            self.process.terminate()
+
+
+PERCEIVED = re.compile(r"waited ([\d.]+) ms, searched ([\d.]+) ms; (\d+) of (\d+) synchronised frames perceived")
 
 
 def wait_for_node(cell, proc, deadline_s=120.0):
@@ -175,15 +252,20 @@ def main(argv=None):
     base_T_camera = scenes[modes[0]][3]
     predictor = GraspPredictor.from_checkpoint(args.model)
     planner = TabletopPlanner(predictor)
-    proc = start_node(args.model, args.threads, base_T_camera, args.planner)
+    proc = start_node(args.model, args.threads, base_T_camera, args.planner, args.perceive_on_arrival,
+                      args.publish_on_sync, args.max_frame_age)
     context = Context()
     rclpy.init(context=context)
+    camera = None
     try:
         cell = Cell(context, executor=args.client_executor)
         wait_for_node(cell, proc)
         for stamp, (mode, (depth_m, moduli_pa, camera_k, _)) in enumerate(scenes.items(), start=1):
             frame_msgs = messages(depth_m, moduli_pa, camera_k, stamp_sec=stamp)
-            prime_latest_frame(cell, frame_msgs)
+            if args.camera_hz > 0:     # the bench's frame and another noise seed of the scene, alternating
+                other = scene(*mode, seed=mode[0] + 1)
+                camera = Camera([(depth_m, moduli_pa, camera_k), other[:3]], args.camera_hz)
+            prime_latest_frame(cell, None if camera else frame_msgs)
             image_request = PlanGrasp.Request(depth=frame_msgs[0], stiffness=frame_msgs[1],
                                               camera_info=frame_msgs[2], top_k=args.top_k)
             if args.planner == "tabletop":
@@ -200,10 +282,11 @@ def main(argv=None):
             times = {name: [] for name in fns}
             in_node = {name: [] for name in fns}  # the node's own planning time (response.inference_time_s)
             cpu = []   # the bare call's CPU time in this process: less sensitive to other jobs than wall time
+            stream = Stream(camera)
             for i in tqdm(range(args.warmup + args.calls), desc=f"{mode[0]}x{mode[1]}", unit="round",
                           mininterval=5):
                 for name, fn in fns.items():
-                    start, start_cpu = time.perf_counter(), time.process_time()
+                    start, start_cpu, start_ns = time.perf_counter(), time.process_time(), time.time_ns()
                     result = fn()
                     if i >= args.warmup:
                         times[name].append(time.perf_counter() - start)
@@ -211,10 +294,62 @@ def main(argv=None):
                             cpu.append(time.process_time() - start_cpu)
                         if hasattr(result, "inference_time_s"):
                             in_node[name].append(result.inference_time_s)
+                        if name == "PlanGrasp (latest frame)":
+                            stream.answer(result, start_ns)
             report(mode, times, in_node, args, predictor.runtime, cpu)
+            stream.report()
+            if camera is not None:
+                camera.close()
+                camera = None
     finally:
+        if camera is not None:
+            camera.close()
         proc.stop()
         context.try_shutdown()
+
+
+class Stream:
+    """Frames per second the camera sent, the node synchronised and perceived over the timed calls, and the
+    age of the frame each latest-frame answer came from (request time - its stamp: the camera's wall clock)."""
+
+    def __init__(self, camera):
+        self.camera = camera
+        self.first = self.last = None        # (time, camera sent, node synchronised, node perceived)
+        self.ages_s, self.waits_ms, self.searches_ms = [], [], []
+
+
+    def answer(self, response, request_ns):
+        if self.camera is None:
+            return
+        from defgg_ros.nodes.conversions import stamp_to_ns
+
+        self.ages_s.append((request_ns - stamp_to_ns(response.grasps[0].header.stamp)) / 1e9)
+        match = PERCEIVED.search(response.message)
+        if match is None:     # perceive_on_arrival false: no counts in the answer
+            return
+        waited, searched, perceived, synchronised = match.groups()
+        self.waits_ms.append(float(waited))
+        self.searches_ms.append(float(searched))
+        sample = (time.monotonic(), self.camera.sent.value, int(synchronised), int(perceived))
+        self.first = self.first or sample
+        self.last = sample
+
+    def report(self):
+        if self.camera is None:
+            return
+        ages = np.asarray(self.ages_s) * 1e3
+        print(f"latest-frame answers: age of the frame used (request - stamp) median {np.median(ages):.1f} ms, "
+              f"p99 {np.percentile(ages, 99):.1f} ms, max {ages.max():.1f} ms")
+        if self.first is None or self.last[0] <= self.first[0]:
+            print("(no perception counts: perceive_on_arrival is off)")
+            return
+        span = self.last[0] - self.first[0]
+        sent, synced, perceived = (b - a for a, b in zip(self.first[1:], self.last[1:]))
+        print(f"camera sent {sent / span:.1f} frames/s, the node synchronised {synced / span:.1f}/s and perceived "
+              f"{perceived / span:.1f}/s ({perceived / max(synced, 1):.0%} of them) over {span:.0f} s")
+        print(f"inside the node per latest-frame answer: waiting for a perceived frame median "
+              f"{np.median(self.waits_ms):.2f} ms (p99 {np.percentile(self.waits_ms, 99):.2f}), search median "
+              f"{np.median(self.searches_ms):.2f} ms (p99 {np.percentile(self.searches_ms, 99):.2f})")
 
 
 def _ok(response):
@@ -227,7 +362,9 @@ def report(mode, times, in_node, args, runtime, cpu):
     target = TARGET_P99_MS.get(mode)
     print(f"\n{mode[0]}x{mode[1]}: PlanGrasp latency, planner {args.planner}, top_k {args.top_k}, {args.calls} calls "
           f"per mode, torch threads {args.threads}, runtime {runtime}, client executor {args.client_executor}, "
-          f"Fast DDS profile {Path(os.environ.get(FASTDDS_PROFILE_VARIABLE, 'built-in')).name}, "
+          f"Fast DDS profile {Path(os.environ.get(FASTDDS_PROFILE_VARIABLE, 'built-in')).name}, camera "
+          f"{args.camera_hz:g} Hz, perceive_on_arrival {args.perceive_on_arrival}, publish_on_sync "
+          f"{args.publish_on_sync}, max_frame_age_s {'default' if args.max_frame_age is None else args.max_frame_age}, "
           f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
     print(f"{'mode':32s} {'median ms':>10s} {'p99 ms':>8s} {'max ms':>8s}")
     for name, seconds in times.items():

@@ -19,7 +19,6 @@ Thin adapter over defgg_ros.model.inference.GraspPredictor:
   its perception, or perceiving it here when the worker has not started it).
   The grasps are those the synchronous path gives for the same frame.
 """
-import contextlib
 import dataclasses
 import threading
 import time
@@ -98,6 +97,34 @@ class Frame:
     entries: tuple = ()             # request `objects` (tabletop planner: assigned to the perceived objects)
 
 
+class _Searches:
+    """One frame's searches by top_k, each made once by whoever asks first (the worker's publish_on_sync
+    search for top_k 1, or a request); a later asker of the same top_k waits for it and gets the same grasps."""
+
+    def __init__(self):
+        self._lock = threading.Lock()
+        self._entries = {}          # top_k -> [done Event, (result, grasps), error]
+
+    def get(self, top_k: int, search):
+        with self._lock:
+            entry = self._entries.get(top_k)
+            mine = entry is None
+            if mine:
+                entry = self._entries[top_k] = [threading.Event(), None, None]
+        if mine:
+            try:
+                entry[1] = search()
+            except Exception as exc:  # noqa: BLE001 - every asker gets the same error
+                entry[2] = exc
+            finally:
+                entry[0].set()
+        else:
+            entry[0].wait()
+        if entry[2] is not None:
+            raise entry[2]
+        return entry[1]
+
+
 @dataclasses.dataclass(frozen=True)
 class PerceivedFrame:
     """A frame through the tabletop planner's request-independent part (TabletopPlanner.prepare)."""
@@ -106,6 +133,7 @@ class PerceivedFrame:
     base_T_camera: np.ndarray
     prepared: object                # planning.tabletop_planner.PreparedFrame
     seconds: float                  # wall time of the preparation
+    searches: _Searches = dataclasses.field(default_factory=_Searches, compare=False)
 
 
 class GraspInferenceNode(Node):
@@ -133,7 +161,8 @@ class GraspInferenceNode(Node):
         self._sync = StampSynchronizer(("depth", "stiffness", "info"), int(p["sync_cache_size"]))
         self._latest_frame = None
         self._latest_info = None
-        self.synced_frames = 0
+        self._latest_stamp_ns = None
+        self.synced_frames = 0          # frames matched by stamp
         self.skipped_frames = 0         # synchronised, but not convertible (wrong sizes, encodings)
         self._worker = None
         self._grasp_pub = self.create_publisher(Grasp, p["best_grasp_topic"], qos.STATE)
@@ -154,7 +183,8 @@ class GraspInferenceNode(Node):
         self.create_service(PlanGrasp, p["plan_grasp_service"], self._on_plan_grasp)
         # Perception on arrival (tabletop planner): a worker thread prepares each synchronised frame.
         if self._tabletop is not None and p["perceive_on_arrival"]:
-            self._worker = LatestFrameWorker(self._perceive, self._publish_perceived if p["publish_on_sync"] else None,
+            self._worker = LatestFrameWorker(self._perceive_on_arrival, float(p["max_frame_age_s"]),
+                                             self._publish_perceived if p["publish_on_sync"] else None,
                                              on_error=self._on_worker_error)
         self.get_logger().info(f"loaded {model_path} (runtime {self.predictor.runtime}, "
                                f"stiffness {'on' if self.predictor.uses_stiffness else 'off'})")
@@ -186,20 +216,36 @@ class GraspInferenceNode(Node):
             matched = self._sync.add(stream, stamp_to_ns(msg.header.stamp), msg)
         if matched is None:
             return
-        try:
-            frame = self._frame_from_images(matched["depth"], matched["info"], matched["stiffness"])
-        except ValueError as exc:
-            self._warn(f"skipping synchronised frame: {exc}")
+        stamp_ns = stamp_to_ns(matched["depth"].header.stamp)
+        if self._worker is not None:
+            # The worker converts the frames it takes (frames it drops are never converted): this thread only
+            # matches stamps, so a PlanGrasp request does not queue behind conversions.
             with self._state_lock:
-                self.skipped_frames += 1
+                self.synced_frames += 1
+                self._latest_stamp_ns = stamp_ns
+            self._worker.submit(matched)
+            return
+        try:
+            frame = self._convert_matched(matched)
+        except ValueError:
             return
         with self._state_lock:
             self._latest_frame = frame
+            self._latest_stamp_ns = stamp_ns
             self.synced_frames += 1
-        if self._worker is not None:
-            self._worker.submit(frame)
-        elif self._p["publish_on_sync"]:
+        if self._p["publish_on_sync"]:
             self._plan_and_publish(frame)
+
+    def _convert_matched(self, matched) -> Frame:
+        """A synchronised depth + camera_info + stiffness as a Frame; a frame that cannot be converted is
+        warned about, counted (skipped_frames) and raises ValueError."""
+        try:
+            return self._frame_from_images(matched["depth"], matched["info"], matched["stiffness"])
+        except ValueError as exc:
+            self._warn(f"unusable synchronised frame: {exc}")
+            with self._state_lock:
+                self.skipped_frames += 1
+            raise
 
     def _plan_and_publish(self, frame: Frame):
         try:
@@ -222,7 +268,7 @@ class GraspInferenceNode(Node):
 
     # --- perception on arrival (tabletop planner) ---------------------------
     def _perceive(self, frame: Frame, checkpoint) -> PerceivedFrame:
-        """The worker's (or a request's) preparation of a synchronised frame; raises ValueError for a frame
+        """The preparation of a synchronised frame (TabletopPlanner.prepare); raises ValueError for a frame
         without table, objects or moduli on them (requests then answer with that reason)."""
         base_T_camera = self.base_T_camera_for(frame.header)
         with self._state_lock:
@@ -232,30 +278,47 @@ class GraspInferenceNode(Node):
                                           frame.entries, joints, checkpoint)
         return PerceivedFrame(frame, base_T_camera, prepared, time.perf_counter() - start)
 
+    def _perceive_on_arrival(self, matched: dict, checkpoint) -> PerceivedFrame:
+        """The worker's preparation of a synchronised frame: conversion (a frame that cannot be converted is a
+        perceived frame with that error: requests answer with it), perception; with publish_on_sync also
+        its top_k 1 search (which it publishes), before requests see the frame, so a top_k 1 request finds
+        it made."""
+        perceived = self._perceive(self._convert_matched(matched), checkpoint)
+        if self._p["publish_on_sync"]:
+            checkpoint()
+            try:
+                self._search(perceived, 1)
+            except ValueError:      # no feasible grasp: kept for the requests, warned when publishing
+                pass
+        return perceived
+
     def _publish_perceived(self, done, checkpoint):
         """publish_on_sync with perception on arrival: the best grasp of each frame the worker perceived."""
         try:
             perceived = done.value()
-            checkpoint()
             result, grasps = self._search(perceived, 1)
         except ValueError as exc:
             self._warn(f"no grasp for frame: {exc}")
             return
-        self._publish_outputs(done.frame, result, grasps)
+        checkpoint()
+        self._publish_outputs(perceived.frame, result, grasps)
 
     def _on_worker_error(self, frame, exc):
         self.get_logger().error(f"perception on arrival failed unexpectedly: {exc!r}")
 
     def _search(self, perceived: PerceivedFrame, top_k: int):
-        result = self._tabletop.search(perceived.prepared, top_k)
-        grasps = [self._tabletop_grasp_msg(g, perceived.frame, perceived.base_T_camera) for g in result.grasps]
-        return result, grasps
+        """(TabletopResult, Grasp messages) of a perceived frame, searched once per top_k (_Searches)."""
+        def search():
+            result = self._tabletop.search(perceived.prepared, top_k)
+            return result, [self._tabletop_grasp_msg(g, perceived.frame, perceived.base_T_camera)
+                            for g in result.grasps]
+        return perceived.searches.get(top_k, search)
 
     def _plan_latest_perceived(self, top_k: int):
         """An empty request with perception on arrival: (grasps, seconds, summary) from a perceived frame."""
         start = time.perf_counter()
         try:
-            done = self._worker.latest(float(self._p["max_frame_age_s"]), PERCEPTION_WAIT_S)
+            done = self._worker.latest(PERCEPTION_WAIT_S)
         except (TimeoutError, WorkerClosed) as exc:
             raise PlanningError(f"the latest frame could not be perceived: {exc}") from exc
         if done is None:
@@ -379,12 +442,11 @@ class GraspInferenceNode(Node):
         return prediction, grasps, seconds
 
     def _plan_tabletop(self, frame: Frame, top_k: int):
-        """Synchronously: perceive and search (the same steps as the worker's, in one go). With perception on
-        arrival the worker waits at its checkpoints meanwhile."""
+        """Synchronously: perceive and search (the same steps as the worker's, in one go). The worker goes on
+        meanwhile: pausing it for a whole perception would leave the latest frame unperceived."""
         start = time.perf_counter()
-        with self._worker.priority() if self._worker is not None else contextlib.nullcontext():
-            perceived = self._perceive(frame, None)
-            result, grasps = self._search(perceived, top_k)
+        perceived = self._perceive(frame, None)
+        result, grasps = self._search(perceived, top_k)
         return result, grasps, time.perf_counter() - start
 
     def _tabletop_grasp_msg(self, grasp, frame: Frame, base_T_camera) -> Grasp:
@@ -423,8 +485,7 @@ class GraspInferenceNode(Node):
     def latest_stamp_ns(self) -> int | None:
         """Stamp of the latest synchronised frame (None before the first)."""
         with self._state_lock:
-            frame = self._latest_frame
-        return None if frame is None else stamp_to_ns(frame.header.stamp)
+            return self._latest_stamp_ns
 
     @property
     def perception_counts(self) -> dict:

@@ -1,14 +1,14 @@
 """Perception on arrival: a worker thread prepares each frame as it arrives, requests take the result (no rclpy).
 
-    worker = LatestFrameWorker(prepare)      # prepare(frame, checkpoint) -> result; ValueError: a bad frame
+    worker = LatestFrameWorker(prepare, max_age_s=0.2)   # prepare(frame, checkpoint) -> result; ValueError: bad
     worker.submit(frame)                     # from the subscription callback, every synchronised frame
-    done = worker.latest(max_age_s=0.1)      # in a request: a PreparedFrame (None: no frame yet)
+    done = worker.latest()                   # in a request: a PreparedFrame (None: no frame yet)
     with worker.priority():                  # the request's own work; the worker waits at its checkpoints
         answer(done.value())
 
 Rules (docs/perception.md, "Latency"):
 - Only the newest unprocessed frame is kept: a frame submitted while another waits replaces it (dropped).
-- `latest(max_age_s)` answers from the newest prepared frame when it is the newest submitted frame or was
+- `latest()` answers from the newest prepared frame when it is the newest submitted frame or was
   submitted at most max_age_s before the call (clock: time.monotonic, when the frame was submitted, not its
   stamp). Otherwise from the newest submitted frame: the call waits for the worker when the worker is on it,
   else takes it from the queue and prepares it itself. So an answer never comes from a frame older than
@@ -17,6 +17,8 @@ Rules (docs/perception.md, "Latency"):
 - While a request holds `priority()` the worker waits at its next checkpoint (the prepare function calls
   `checkpoint()` between its stages), so the request's work does not share the interpreter with it; a frame
   that a request prepared itself makes the worker drop the older frame it was on at its next checkpoint.
+  A frame that became older than max_age_s while the worker waited is dropped when a newer frame waits
+  (no request could use it any more).
 """
 from __future__ import annotations
 
@@ -54,18 +56,21 @@ def _no_checkpoint() -> None:
 
 
 class LatestFrameWorker:
-    def __init__(self, prepare, on_prepared=None, name: str = "perception_on_arrival", clock=time.monotonic,
-                 on_error=None):
-        """prepare(frame, checkpoint) -> result. on_prepared(prepared, checkpoint): called in the worker thread
+    def __init__(self, prepare, max_age_s: float, on_prepared=None, name: str = "perception_on_arrival",
+                 clock=time.monotonic, on_error=None):
+        """prepare(frame, checkpoint) -> result. max_age_s: the freshness rule's age (module docstring).
+        on_prepared(prepared, checkpoint): called in the worker thread
         after each frame it prepared is stored (e.g. publish its grasps). on_error(frame, exception): an
         unexpected (non-ValueError) exception of prepare; the frame's requests get it as their error."""
         self._prepare = prepare
+        self.max_age_s = float(max_age_s)
         self._on_prepared = on_prepared
         self._on_error = on_error
         self._clock = clock
         self._cond = threading.Condition()
         self._pending = None          # (seq, frame, submitted_s) not started yet
         self._in_flight = 0           # seq the worker is preparing, 0: none
+        self._in_flight_submitted_s = 0.0
         self._done = None             # the newest PreparedFrame
         self._claimed = 0             # the newest seq a request took from the queue
         self._priority = 0            # requests holding priority()
@@ -91,7 +96,7 @@ class LatestFrameWorker:
             return self.submitted
 
     # --- consumer --------------------------------------------------------------------------------
-    def latest(self, max_age_s: float, timeout_s: float = 30.0) -> PreparedFrame | None:
+    def latest(self, timeout_s: float = 30.0) -> PreparedFrame | None:
         """The prepared frame to answer a request from (module docstring); None when nothing was submitted.
         Raises TimeoutError when the worker does not finish the frame within timeout_s, WorkerClosed."""
         now = self._clock()
@@ -100,7 +105,7 @@ class LatestFrameWorker:
             if newest == 0:
                 return None
             done = self._done
-            if done is not None and (done.seq == newest or now - done.submitted_s <= max_age_s):
+            if done is not None and (done.seq == newest or now - done.submitted_s <= self.max_age_s):
                 return done
             if self._pending is not None and self._pending[0] == newest:
                 claimed, self._pending = self._pending, None
@@ -143,10 +148,14 @@ class LatestFrameWorker:
     # --- worker ----------------------------------------------------------------------------------
     def _checkpoint(self) -> None:
         with self._cond:
+            paused = self._priority > 0
             self._cond.wait_for(lambda: self._closed or self._priority == 0)
             if self._closed:
                 raise WorkerClosed("the perception worker is closed")
             if max(self._claimed, self._done.seq if self._done is not None else 0) > self._in_flight:
+                raise _Superseded
+            if paused and self._pending is not None \
+                    and self._clock() - self._in_flight_submitted_s > self.max_age_s:
                 raise _Superseded
 
     def _prepare_and_store(self, item, checkpoint) -> PreparedFrame:
@@ -175,7 +184,7 @@ class LatestFrameWorker:
                 if self._closed:
                     return
                 item, self._pending = self._pending, None
-                self._in_flight = item[0]
+                self._in_flight, self._in_flight_submitted_s = item[0], item[2]
             try:
                 prepared = self._prepare_and_store(item, self._checkpoint)
                 if self._on_prepared is not None:

@@ -140,20 +140,23 @@ def test_grasps_on_arrival_are_those_of_the_synchronous_path_for_the_same_frame(
     assert arrival.perception_counts["perceived"] >= 2 and synchronous.perception_counts == {}
 
 
-def test_a_frame_without_table_gives_its_reason_and_the_node_keeps_serving(cell, frames, executor, spin, call):
+def test_unusable_frames_give_their_reason_and_the_node_keeps_serving(cell, frames, executor, spin, call):
     arrival, arrival_client, _, _, probe = cell
     camera = Camera(probe, executor, spin)
     wall = np.full(frames[0][0].shape, 0.25, np.float32)     # a board 25 cm before the lens: no table
     camera.stream_until(camera_messages(frames[0], 3, wall), latest_is(arrival, 3), "the frame without table")
     response = ask(executor, call, arrival_client)
     assert not response.success and "no table" in response.message, response.message
-    # A malformed frame on the stream is skipped; the next good one is served.
-    good = camera_messages(frames[0], 4)
-    camera.stream_until(good, latest_is(arrival, 4), "a good frame")
+    camera.stream_until(camera_messages(frames[0], 4), latest_is(arrival, 4), "a good frame")
+    response = ask(executor, call, arrival_client)
+    assert response.success and {stamp_to_ns(g.header.stamp) for g in response.grasps} == {4 * 10**9}
+    # A frame that cannot be converted (the stiffness image's size is not the depth's) is the latest frame:
+    # requests answer with its reason until a good frame follows.
     bad = camera_messages(frames[0], 5)
     bad["stiffness"] = numpy_to_image(frames[0][1][:240, :320], "32FC1", bad["stiffness"].header)
-    camera.stream_until(bad, lambda: arrival.skipped_frames > 0, "the malformed frame skipped")
+    camera.stream_until(bad, lambda: latest_is(arrival, 5)() and arrival.skipped_frames > 0, "the malformed frame")
     response = ask(executor, call, arrival_client)
-    assert response.success, response.message
-    assert {stamp_to_ns(g.header.stamp) for g in response.grasps} == {4 * 10**9}
-    assert arrival.latest_stamp_ns == 4 * 10**9
+    assert not response.success and "stiffness is 320x240" in response.message, response.message
+    camera.stream_until(camera_messages(frames[1], 6), latest_is(arrival, 6), "a good frame again")
+    response = ask(executor, call, arrival_client)
+    assert response.success and {stamp_to_ns(g.header.stamp) for g in response.grasps} == {6 * 10**9}

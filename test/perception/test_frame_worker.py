@@ -56,8 +56,8 @@ def wait(event, what):
 def make():
     workers = []
 
-    def build(prepare, **kwargs):
-        worker = LatestFrameWorker(prepare, **kwargs)
+    def build(prepare, max_age_s=0.1, **kwargs):
+        worker = LatestFrameWorker(prepare, max_age_s, **kwargs)
         workers.append(worker)
         return worker
 
@@ -74,19 +74,19 @@ def prepared_frames(worker, count):
 
 def test_nothing_submitted_gives_none_and_each_frame_is_prepared_once_in_the_worker(make):
     prepare = Prepare()
-    worker = make(prepare)
-    assert worker.latest(0.1) is None
+    worker = make(prepare, max_age_s=0.0)
+    assert worker.latest() is None
     worker.submit("a")
     prepared_frames(worker, 1)
-    done = worker.latest(0.0)
+    done = worker.latest()
     assert (done.seq, done.frame, done.value()) == (1, "a", "result of a")
     assert prepare.threads["a"] is worker._thread
-    assert worker.latest(0.0) is done and prepare.calls == ["a"]     # asked again: not prepared again
+    assert worker.latest() is done and prepare.calls == ["a"]     # asked again: not prepared again
 
 
 def test_frames_arriving_faster_than_perception_keep_only_the_newest(make):
     prepare = Prepare(hold=("a",))
-    worker = make(prepare)
+    worker = make(prepare, max_age_s=0.0)
     worker.submit("a")
     wait(prepare.event(prepare.started, "a"), "a to start")
     for frame in ("b", "c", "d"):
@@ -94,7 +94,7 @@ def test_frames_arriving_faster_than_perception_keep_only_the_newest(make):
     prepare.release["a"].set()
     prepared_frames(worker, 2)
     assert prepare.calls == ["a", "d"] and worker.dropped == 2
-    assert worker.latest(0.0).frame == "d"
+    assert worker.latest().frame == "d"
 
 
 def test_a_fresh_perceived_frame_answers_while_a_newer_one_is_being_perceived(make):
@@ -106,7 +106,7 @@ def test_a_fresh_perceived_frame_answers_while_a_newer_one_is_being_perceived(ma
     clock.now += 0.05
     worker.submit("b")
     wait(prepare.event(prepare.started, "b"), "b to start")
-    assert worker.latest(0.1).frame == "a"          # a arrived 0.05 s ago: fresh enough, no waiting
+    assert worker.latest().frame == "a"          # a arrived 0.05 s ago: fresh enough, no waiting
     prepare.release["b"].set()
 
 
@@ -120,7 +120,7 @@ def test_a_stale_perceived_frame_makes_the_request_wait_for_the_latest_one(make)
     worker.submit("b")
     wait(prepare.event(prepare.started, "b"), "b to start")
     answer = {}
-    request = threading.Thread(target=lambda: answer.setdefault("done", worker.latest(0.1)))
+    request = threading.Thread(target=lambda: answer.setdefault("done", worker.latest()))
     request.start()
     request.join(0.2)
     assert request.is_alive(), "the request must wait for b, not answer from the stale a"
@@ -131,13 +131,13 @@ def test_a_stale_perceived_frame_makes_the_request_wait_for_the_latest_one(make)
 
 def test_max_age_zero_always_answers_from_the_latest_frame(make):
     prepare = Prepare(hold=("b",))
-    worker = make(prepare)
+    worker = make(prepare, max_age_s=0.0)
     worker.submit("a")
     prepared_frames(worker, 1)
     worker.submit("b")
     wait(prepare.event(prepare.started, "b"), "b to start")
     threading.Timer(0.05, prepare.release["b"].set).start()
-    assert worker.latest(0.0).frame == "b"
+    assert worker.latest().frame == "b"
 
 
 def test_an_unstarted_latest_frame_is_perceived_by_the_request_and_the_worker_drops_its_older_one(make):
@@ -147,36 +147,39 @@ def test_an_unstarted_latest_frame_is_perceived_by_the_request_and_the_worker_dr
     worker.submit("a")
     wait(prepare.event(prepare.started, "a"), "a to start")
     worker.submit("b")                     # waits behind a
-    done = worker.latest(0.1)              # nothing perceived yet: the request takes b itself
+    done = worker.latest()              # nothing perceived yet: the request takes b itself
     assert done.frame == "b" and prepare.threads["b"] is threading.current_thread()
     prepare.release["a"].set()
     with worker._cond:
         assert worker._cond.wait_for(lambda: worker.superseded == 1, GUARD_S)
-    assert "a" not in prepare.passed_checkpoint       # a stopped at its checkpoint: b is newer
-    assert worker.latest(0.1) is done and worker.prepared == 1
+    assert not prepare.event(prepare.passed_checkpoint, "a").is_set()   # a stopped at its checkpoint: b is newer
+    assert worker.latest() is done and worker.prepared == 1
 
 
 def test_bad_frames_give_their_error_and_the_worker_goes_on(make):
     errors = []
     prepare = Prepare()
-    worker = make(prepare, on_error=lambda frame, exc: errors.append((frame, exc)))
+    worker = make(prepare, max_age_s=0.0, on_error=lambda frame, exc: errors.append((frame, exc)))
     worker.submit("bad")
     prepared_frames(worker, 1)
     with pytest.raises(ValueError, match="no table"):
-        worker.latest(0.0).value()
+        worker.latest().value()
     worker.submit("boom")
     prepared_frames(worker, 2)
     with pytest.raises(RuntimeError, match="internal error.*a bug"):
-        worker.latest(0.0).value()
+        worker.latest().value()
     assert [frame for frame, _ in errors] == ["boom"]
     worker.submit("good")
     prepared_frames(worker, 3)
-    assert worker.latest(0.0).value() == "result of good"
+    assert worker.latest().value() == "result of good"
 
 
-def test_the_worker_waits_at_its_checkpoints_while_a_request_has_priority(make):
+@pytest.mark.parametrize("paused_s", [0.05, 0.5])
+def test_the_worker_waits_at_its_checkpoints_while_a_request_has_priority(make, paused_s):
+    """And drops its frame there when it became older than max_age_s (0.1 s) meanwhile and a newer one waits."""
+    clock = Clock()
     prepare = Prepare(hold=("a",))
-    worker = make(prepare)
+    worker = make(prepare, clock=clock)
     worker.submit("a")
     wait(prepare.event(prepare.started, "a"), "a to start")
     with worker.priority():
@@ -184,8 +187,11 @@ def test_the_worker_waits_at_its_checkpoints_while_a_request_has_priority(make):
         assert not prepare.event(prepare.passed_checkpoint, "a").wait(0.2)
         worker.submit("b")
         assert not prepare.event(prepare.started, "b").wait(0.2), "no new frame is started under priority"
-    wait(prepare.event(prepare.passed_checkpoint, "a"), "a past its checkpoint once priority ended")
+        clock.now += paused_s
     wait(prepare.event(prepare.passed_checkpoint, "b"), "b once priority ended")
+    stale = paused_s > worker.max_age_s
+    assert prepare.event(prepare.passed_checkpoint, "a").is_set() is not stale
+    assert worker.superseded == int(stale)
 
 
 def test_on_prepared_runs_in_the_worker_for_each_frame_it_prepared(make):
@@ -215,7 +221,7 @@ def test_close_ends_waiting_requests_and_refuses_new_frames(make):
     wait(prepare.event(prepare.started, "b"), "b to start")
     threading.Timer(0.05, worker.close).start()
     with pytest.raises(WorkerClosed):
-        worker.latest(0.1)
+        worker.latest()
     prepare.release["b"].set()
     with pytest.raises(WorkerClosed):
         worker.submit("c")
