@@ -1,6 +1,6 @@
 """Perception on arrival: a worker thread prepares each frame as it arrives, requests take the result (no rclpy).
 
-    worker = LatestFrameWorker(prepare, max_age_s=0.2)   # prepare(frame, checkpoint) -> result; ValueError: bad
+    worker = LatestFrameWorker(prepare, max_age_s=0.3)   # prepare(frame, checkpoint) -> result; ValueError: bad
     worker.submit(frame)                     # from the subscription callback, every synchronised frame
     done = worker.latest()                   # in a request: a PreparedFrame (None: no frame yet)
     with worker.priority():                  # the request's own work; the worker waits at its checkpoints
@@ -15,10 +15,10 @@ Rules (docs/perception.md, "Latency"):
   the newest prepared one, nor older than max_age_s while a newer frame exists.
 - A frame whose preparation raised ValueError is a prepared frame too: requests get its error.
 - While a request holds `priority()` the worker waits at its next checkpoint (the prepare function calls
-  `checkpoint()` between its stages), so the request's work does not share the interpreter with it; a frame
-  that a request prepared itself makes the worker drop the older frame it was on at its next checkpoint.
-  A frame that became older than max_age_s while the worker waited is dropped when a newer frame waits
-  (no request could use it any more).
+  `checkpoint()` between its stages) and starts no new frame, so the request's work does not share the
+  interpreter with it. A frame that a request prepared itself makes the worker drop the older frame it was
+  on at its next checkpoint; a frame that became older than max_age_s while the worker waited is dropped
+  when a newer frame waits (no request could use it any more).
 """
 from __future__ import annotations
 
