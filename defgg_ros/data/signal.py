@@ -243,6 +243,11 @@ def _key(e: float) -> str:
     return f"{e:.0e}".replace("e+0", "e")
 
 
+def _points(x: float) -> str:
+    """Points to one decimal, without the '-0.0' of a float error below zero."""
+    return f"{round(x, 1) + 0.0:.1f}"
+
+
 def _pct(x) -> str:
     return "n/a" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{100 * x:.1f} %"
 
@@ -265,7 +270,7 @@ def what_labels_carry(report: dict) -> list[str]:
         carries = gap >= CARRY_GAP_POINTS and within is not None and within >= CARRY_WITHIN_SHARE
         verdict = "Can" if carries else "Cannot"
         lines.append(f"- {verdict} carry \"stiffness changes which grasp is good\": a perfect stiffness-aware choice "
-                     f"of grasps beats a perfect stiffness-blind one by at most {gap:.1f} points (best grasp or "
+                     f"of grasps beats a perfect stiffness-blind one by at most {_points(gap)} points (best grasp or "
                      f"best {TOP_K}; the bar is {CARRY_GAP_POINTS:g} points with a within-scene share of "
                      f"{100 * CARRY_WITHIN_SHARE:.0f} %, here {_pct(within)}). "
                      + ("" if carries else "A stiffness input can then add little over depth alone on these labels."))
@@ -298,7 +303,7 @@ def render_markdown(report: dict, title: str = "Signal report") -> str:
     if o.get("objects"):
         for name, label in (("best", "best grasp"), (f"top{TOP_K}", f"best {TOP_K} grasps")):
             lines.append(f"- Oracle, {label}: stiffness-aware {_pct(o[name]['aware'])}, stiffness-blind "
-                         f"{_pct(o[name]['blind'])}: **gap {o[name]['gap_points']:.1f} points** "
+                         f"{_pct(o[name]['blind'])}: **gap {_points(o[name]['gap_points'])} points** "
                          f"({o['objects']} objects).")
     near = report.get("near_threshold")
     if near:
