@@ -77,6 +77,10 @@ def _add_run(sub):
     p.add_argument("--protocol", choices=("defgraspsim", "legacy"), default=None,
                    help="trial protocol (docs/dataset.md, 'Trial protocols'): defgraspsim (default for a new folder) "
                         "or legacy (results up to sim_v4); a folder being resumed keeps its own")
+    p.add_argument("--protocol-from", metavar="DATASET", default=None,
+                   help="the trial protocol setting of this dataset's labels (protocol, friction, Poisson's ratio, "
+                        "finger hold, grip force rule), so success is the label's own criterion; wins over "
+                        "--protocol")
     p.add_argument("--plan-only", action="store_true",
                    help="only render and plan every view's grasps into OUT/plans.json (no simulation; cheap), "
                         "for the diagnostics of the report")
@@ -153,6 +157,10 @@ def _add_others(sub):
     p.add_argument("--protocol", choices=("defgraspsim", "legacy"), default=None,
                    help="trial protocol (docs/dataset.md, 'Trial protocols'): defgraspsim (default for a new folder) "
                         "or legacy (results up to sim_v4); a folder being resumed keeps its own")
+    p.add_argument("--protocol-from", metavar="DATASET", default=None,
+                   help="the trial protocol setting of this dataset's labels (protocol, friction, Poisson's ratio, "
+                        "finger hold, grip force rule), so success is the label's own criterion; wins over "
+                        "--protocol")
     p.add_argument("--summary-only", action="store_true", help="only rewrite OUT/ceiling.md")
 
     p = sub.add_parser("card", help="(re)write models/<name>.md from its provenance, weights and evaluation")
@@ -242,20 +250,28 @@ def write_manifest(out_dir, args, model_paths, predictors, objects, argv, settin
     write_json_atomic(Path(out_dir) / report_mod.MANIFEST_FILE, merge_manifest(out_dir, manifest))
 
 
-def resolve_protocol(out_dir, requested: str | None, records_file: str | None = None) -> str:
-    """The trial protocol of a run: as requested; else the folder's own when it holds trials (those made
-    before the setting existed are legacy); else the default (TrialSettings.protocol, defgraspsim)."""
+def resolve_protocol(out_dir, requested: str | None, records_file: str | None = None,
+                     from_dataset: str | None = None) -> dict:
+    """The trial protocol setting of a run (sim.trial.protocol_setting): the dataset's (`from_dataset`: the
+    labels' own protocol, material and grip force); else the requested protocol; else the folder's own when it
+    holds trials (those made before the setting existed are legacy); else the default (defgraspsim)."""
     from defgg_ros.atomic import read_jsonl
+    from defgg_ros.data.format import check_header
     from defgg_ros.evaluation.store import results_path
-    from defgg_ros.sim.trial import TrialSettings
+    from defgg_ros.sim.trial import TrialSettings, protocol_setting
 
+    if from_dataset is not None:
+        recorded = check_header(from_dataset).get("generator", {}).get("trial_settings")
+        if not recorded:
+            raise ValueError(f"{from_dataset} records no trial settings (made before 2026-11-24): pass --protocol")
+        return protocol_setting(recorded)
     if requested is not None:
-        return requested
+        return protocol_setting({"protocol": requested})
     path = Path(out_dir) / records_file if records_file else results_path(out_dir)
     if path.is_file():
         for record in read_jsonl(path):
-            return (record.get("trial_settings") or {}).get("protocol", "legacy")
-    return TrialSettings.protocol
+            return protocol_setting(record.get("trial_settings") or {})
+    return protocol_setting({"protocol": TrialSettings.protocol})
 
 
 def check_same_protocol(out_dir, settings, tasks) -> None:
@@ -312,7 +328,7 @@ def cmd_run(args, argv) -> int:
     model_paths = parse_models(args.model or DEFAULT_MODELS)
     predictors = load_predictors(model_paths)
     objects = eval_objects(args)
-    protocol = resolve_protocol(args.out, args.protocol)
+    protocol = resolve_protocol(args.out, args.protocol, from_dataset=args.protocol_from)
     settings = runner.quick_trial_settings(protocol) if args.quick else runner.eval_trial_settings(protocol)
     check_same_protocol(args.out, settings, args.tasks)
     write_manifest(args.out, args, model_paths, predictors, objects, argv, settings)
@@ -450,7 +466,7 @@ def cmd_ceiling(args, argv) -> int:
         trials = ceiling.plan_trials(shapes, args.moduli, args.candidates, args.task, args.seed,
                                      args.sim_max_tet_nodes, args.grasp_height)
         ceiling.record_command(args.out, "defgg-eval " + " ".join(shlex.quote(a) for a in argv))
-        protocol = resolve_protocol(args.out, args.protocol, ceiling.RESULTS_FILE)
+        protocol = resolve_protocol(args.out, args.protocol, ceiling.RESULTS_FILE, args.protocol_from)
         ceiling.run(args.out, trials, args.task, eval_trial_settings(protocol), args.max_trials,
                     progress=lambda n, total, key: print(f"[{n}/{total}] {key}", flush=True),
                     grasp_height=args.grasp_height)

@@ -43,11 +43,15 @@ STATUS_NO_GRASP = "no_grasp"   # the model proposed fewer grasps than asked: a f
 EVAL_TWIST_OSCILLATION_RADPS = 40.0
 
 
-def eval_trial_settings(protocol: str | None = None) -> TrialSettings:
+def eval_trial_settings(protocol: str | dict | None = None) -> TrialSettings:
     """The tasks' protocol: the generator's trial (same close, lift and ramp rates) with the shake ramped
     only to the task's 25 m/s^2 (0.25 s at the generator's 100 m/s^3), the twist oscillating
     (EVAL_TWIST_OSCILLATION_RADPS), and each task stopped at the first direction/axis that is not held (the
-    grasp has failed; the rest is recorded as unmeasured). `protocol`: sim.trial.PROTOCOLS (None: the default)."""
+    grasp has failed; the rest is recorded as unmeasured). `protocol`: a name of sim.trial.PROTOCOLS (None:
+    the default) or a protocol setting (sim.trial.protocol_setting: the name with its material overrides)."""
+    if isinstance(protocol, dict):
+        setting = dict(protocol)
+        return replace(eval_trial_settings(setting.pop("protocol")), **setting)
     protocol = protocol or TrialSettings.protocol
     if protocol == "defgraspsim":
         # the label's own criterion: every direction ramped to 50 m/s^2 until lost (the mean and the
@@ -65,7 +69,7 @@ def eval_trial_settings(protocol: str | None = None) -> TrialSettings:
                          twist_fail_below_radps2=TWIST_ACCEL_LIMIT_RADPS2)
 
 
-def quick_trial_settings(protocol: str | None = None) -> TrialSettings:
+def quick_trial_settings(protocol: str | dict | None = None) -> TrialSettings:
     """Smoke-test protocol: the same tasks with 5x faster ramps and a shorter lift. Never for reported numbers."""
     return replace(eval_trial_settings(protocol), lift_time_s=0.2, hold_time_s=0.05, shake_ramp_time_s=0.05,
                    twist_ramp_time_s=0.1)

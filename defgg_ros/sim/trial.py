@@ -461,6 +461,17 @@ def comparable_protocol(recorded: dict) -> dict:
     return full
 
 
+# The fields that make a trial protocol setting (a pilot's or a dataset's): the protocol and its material and
+# grip force overrides. The evaluation takes them from the training data (defgg-eval run --protocol-from).
+PROTOCOL_SETTING_FIELDS = ("protocol", "object_friction", "poisson_ratio", "finger_hold", "grip_force_friction")
+
+
+def protocol_setting(recorded: dict) -> dict:
+    """The PROTOCOL_SETTING_FIELDS of a recorded TrialSettings dict (fields it predates: their old value)."""
+    full = {**LEGACY_PROTOCOL_SETTINGS, **recorded}
+    return {k: full[k] for k in PROTOCOL_SETTING_FIELDS}
+
+
 def task_protocol(recorded: dict, task: str) -> dict:
     """comparable_protocol of the settings `task` reads: the other task's own settings (shake_* for the
     twist, twist_* for the shake) drop out, so a new twist ramp does not make a folder's shake trials

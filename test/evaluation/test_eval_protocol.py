@@ -79,3 +79,29 @@ def test_the_twist_limit_bench_reruns_a_recorded_trial(tmp_path):
     assert done.returncode == 0, done.stderr[-3000:]
     assert "first axis reproduces the record in 1/1" in done.stdout, done.stdout
     assert "osc_40: grip 4.5 N/finger, 1/1 lifted, held all axes 1/1" in done.stdout, done.stdout
+
+
+def test_the_evaluation_takes_the_datasets_protocol_setting_with_its_material_and_force_rule():
+    """defgg-eval run --protocol-from DATASET: success is judged under the labels' own setting."""
+    from pathlib import Path
+
+    pilot_a = Path(__file__).resolve().parents[2] / "bench" / "pilots" / "a_defgraspsim"
+    setting = cli.resolve_protocol("unused", None, from_dataset=str(pilot_a))
+    assert setting == {"protocol": "defgraspsim", "object_friction": None, "poisson_ratio": None,
+                       "finger_hold": "force", "grip_force_friction": None}
+    settings = eval_trial_settings({**setting, "object_friction": 0.4, "grip_force_friction": 0.7})
+    assert settings.material()["effective_friction"] == 0.4 and settings.grip_force_friction == 0.7
+    assert dataclasses.replace(settings, object_friction=None, grip_force_friction=None) == eval_trial_settings()
+    assert cli.resolve_protocol("unused", "legacy")["protocol"] == "legacy"
+
+
+def test_protocol_from_a_dataset_without_recorded_trial_settings_is_refused(tmp_path):
+    """Headers before 2026-11-24 do not say how their labels were made: the run must name the protocol."""
+    from pathlib import Path
+
+    source = Path(__file__).resolve().parents[2] / "bench" / "pilots" / "a_defgraspsim" / "dataset.json"
+    header = json.loads(source.read_text(encoding="utf-8"))
+    del header["generator"]["trial_settings"]
+    (tmp_path / "dataset.json").write_text(json.dumps(header), encoding="utf-8")
+    with pytest.raises(ValueError, match="records no trial settings"):
+        cli.resolve_protocol("unused", None, from_dataset=str(tmp_path))
