@@ -138,6 +138,16 @@ class PerceivedFrame:
     searches: _Searches = dataclasses.field(default_factory=_Searches, compare=False)
 
 
+@dataclasses.dataclass(frozen=True)
+class _Perceived:
+    """A frame through perception (the first stage of perception on arrival), before the network."""
+
+    frame: Frame
+    base_T_camera: np.ndarray
+    objects: object                 # planning.tabletop_planner.PerceivedObjects
+    seconds: float                  # wall time so far
+
+
 class GraspInferenceNode(Node):
     def __init__(self, **kwargs):
         super().__init__("grasp_inference_node", **kwargs)
@@ -185,7 +195,11 @@ class GraspInferenceNode(Node):
         self.create_service(PlanGrasp, p["plan_grasp_service"], self._on_plan_grasp)
         # Perception on arrival (tabletop planner): a worker thread prepares each synchronised frame.
         if self._tabletop is not None and p["perceive_on_arrival"]:
-            self._worker = LatestFrameWorker(self._perceive_on_arrival, float(p["max_frame_age_s"]),
+            stages = (self._perceive_stage, self._network_stage)
+            if int(p["perception_stages"]) == 1:
+                stages = (lambda matched, checkpoint: self._network_stage(self._perceive_stage(matched, checkpoint),
+                                                                          checkpoint),)
+            self._worker = LatestFrameWorker(stages, float(p["max_frame_age_s"]),
                                              self._publish_perceived if p["publish_on_sync"] else None,
                                              on_error=self._on_worker_error)
         self.get_logger().info(f"loaded {model_path} (runtime {self.predictor.runtime}, "
@@ -272,27 +286,37 @@ class GraspInferenceNode(Node):
     def _perceive(self, frame: Frame, checkpoint) -> PerceivedFrame:
         """The preparation of a synchronised frame (TabletopPlanner.prepare); raises ValueError for a frame
         without table, objects or moduli on them (requests then answer with that reason)."""
+        return self._network_stage(self._perceive_stage(frame, checkpoint), checkpoint, search=False)
+
+    def _perceive_stage(self, frame, checkpoint) -> _Perceived:
+        """Perception on arrival's first stage (and the synchronous path's first half): conversion of a
+        synchronised frame (a dict of messages; a frame that cannot be converted is a perceived frame with
+        that error: requests answer with it), the camera pose, perception and the objects' moduli."""
+        if isinstance(frame, dict):
+            frame = self._convert_matched(frame)
+        start = time.perf_counter()
         base_T_camera = self.base_T_camera_for(frame.header)
         with self._state_lock:
             joints = self._joint_positions
-        start = time.perf_counter()
-        prepared = self._tabletop.prepare(frame.depth_m, frame.camera_k, base_T_camera, frame.youngs_modulus_pa,
+        objects = self._tabletop.perceive(frame.depth_m, frame.camera_k, base_T_camera, frame.youngs_modulus_pa,
                                           frame.entries, joints, checkpoint)
-        return PerceivedFrame(frame, base_T_camera, prepared, time.perf_counter() - start)
+        return _Perceived(frame, base_T_camera, objects, time.perf_counter() - start)
 
-    def _perceive_on_arrival(self, matched: dict, checkpoint) -> PerceivedFrame:
-        """The worker's preparation of a synchronised frame: conversion (a frame that cannot be converted is a
-        perceived frame with that error: requests answer with it), perception; with publish_on_sync also
-        its top_k 1 search (which it publishes), before requests see the frame, so a top_k 1 request finds
-        it made."""
-        perceived = self._perceive(self._convert_matched(matched), checkpoint)
-        if self._p["publish_on_sync"]:
+    def _network_stage(self, perceived: _Perceived, checkpoint, search: bool = True) -> PerceivedFrame:
+        """The second stage: the network on the height map and the free space (TabletopPlanner.network); on
+        arrival with publish_on_sync also the frame's top_k 1 search (which it publishes), before requests
+        see the frame, so a top_k 1 request finds it made."""
+        start = time.perf_counter()
+        prepared = self._tabletop.network(perceived.objects, checkpoint)
+        out = PerceivedFrame(perceived.frame, perceived.base_T_camera, prepared,
+                             perceived.seconds + time.perf_counter() - start)
+        if search and self._p["publish_on_sync"]:
             checkpoint()
             try:
-                self._search(perceived, 1)
+                self._search(out, 1)
             except ValueError:      # no feasible grasp: kept for the requests, warned when publishing
                 pass
-        return perceived
+        return out
 
     def _publish_perceived(self, done, checkpoint):
         """publish_on_sync with perception on arrival: the best grasp of each frame the worker perceived."""

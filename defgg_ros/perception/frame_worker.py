@@ -1,28 +1,37 @@
-"""Perception on arrival: a worker thread prepares each frame as it arrives, requests take the result (no rclpy).
+"""Perception on arrival: worker threads prepare each frame as it arrives, requests take the result (no rclpy).
 
     worker = LatestFrameWorker(prepare, max_age_s=0.3)   # prepare(frame, checkpoint) -> result; ValueError: bad
+    worker = LatestFrameWorker((perceive, plan), 0.3)    # a pipeline: plan(perceive(frame, cp), cp) -> result
     worker.submit(frame)                     # from the subscription callback, every synchronised frame
     done = worker.latest()                   # in a request: a PreparedFrame (None: no frame yet)
     with worker.priority():                  # the request's own work; the worker waits at its checkpoints
         answer(done.value())
 
+Stages: `prepare` may be a sequence of functions, each run by its own thread on the previous one's output,
+so consecutive frames are in different stages at once (two cores: one perceives frame n + 1 while the
+other runs the network on frame n; the stages must release the interpreter enough, as numpy, OpenCV and
+torch do). The result is the same as running the stages one after the other in one thread.
+
 Rules (docs/perception.md, "Latency"):
-- Only the newest unprocessed frame is kept: a frame submitted while another waits replaces it (dropped).
+- Only the newest unprocessed frame is kept at each stage's input: a frame handed on while another waits
+  there replaces it (dropped).
 - `latest()` answers from the newest prepared frame when it is the newest submitted frame or was
   submitted at most max_age_s before the call (clock: time.monotonic, when the frame was submitted, not its
-  stamp). Otherwise from the newest submitted frame: the call waits for the worker when the worker is on it,
-  else takes it from the queue and prepares it itself. So an answer never comes from a frame older than
-  the newest prepared one, nor older than max_age_s while a newer frame exists.
-- A frame whose preparation raised ValueError is a prepared frame too: requests get its error.
-- While a request holds `priority()` the worker waits at its next checkpoint (the prepare function calls
-  `checkpoint()` between its stages) and starts no new frame, so the request's work does not share the
-  interpreter with it. A frame that a request prepared itself makes the worker drop the older frame it was
-  on at its next checkpoint; a frame that became older than max_age_s while the worker waited is dropped
-  when a newer frame waits (no request could use it any more).
+  stamp). Otherwise from the newest submitted frame: the call waits for the worker when a stage is on it,
+  else takes it from the stage input it waits at and runs the remaining stages itself. So an answer never
+  comes from a frame older than the newest prepared one, nor older than max_age_s while a newer frame exists.
+- A frame whose preparation raised ValueError (in any stage) is a prepared frame too: requests get its error.
+- While a request holds `priority()` the stage threads wait at their next checkpoint (the stage functions
+  call `checkpoint()` between their steps) and start no new frame, so the request's work does not share the
+  interpreter with them. A frame that a request prepared itself makes the stages drop the older frames they
+  are on at their next checkpoint; a frame that became older than max_age_s while a stage waited is dropped
+  when a newer frame was submitted (no request could use it any more).
 """
 from __future__ import annotations
 
 import contextlib
+import dataclasses
+import functools
 import threading
 import time
 from dataclasses import dataclass
@@ -51,6 +60,16 @@ class PreparedFrame:
         return self.result
 
 
+@dataclass(frozen=True)
+class _Item:
+    """A frame between stages: the last stage's output (the frame itself before the first), or its error."""
+    seq: int
+    frame: object
+    submitted_s: float
+    value: object
+    error: Exception | None = None
+
+
 def _no_checkpoint() -> None:
     pass
 
@@ -58,29 +77,38 @@ def _no_checkpoint() -> None:
 class LatestFrameWorker:
     def __init__(self, prepare, max_age_s: float, on_prepared=None, name: str = "perception_on_arrival",
                  clock=time.monotonic, on_error=None):
-        """prepare(frame, checkpoint) -> result. max_age_s: the freshness rule's age (module docstring).
-        on_prepared(prepared, checkpoint): called in the worker thread
-        after each frame it prepared is stored (e.g. publish its grasps). on_error(frame, exception): an
-        unexpected (non-ValueError) exception of prepare; the frame's requests get it as their error."""
-        self._prepare = prepare
+        """prepare(frame, checkpoint) -> result, or a sequence of such stage functions (module docstring).
+        max_age_s: the freshness rule's age. on_prepared(prepared, checkpoint): called in the last stage's
+        thread after each frame it prepared is stored (e.g. publish its grasps). on_error(frame, exception):
+        an unexpected (non-ValueError) exception of a stage; the frame's requests get it as their error."""
+        self._stages = tuple(prepare) if isinstance(prepare, (tuple, list)) else (prepare,)
+        if not self._stages:
+            raise ValueError("at least one stage")
         self.max_age_s = float(max_age_s)
         self._on_prepared = on_prepared
         self._on_error = on_error
         self._clock = clock
         self._cond = threading.Condition()
-        self._pending = None          # (seq, frame, submitted_s) not started yet
-        self._in_flight = 0           # seq the worker is preparing, 0: none
-        self._in_flight_submitted_s = 0.0
+        n = len(self._stages)
+        self._inbox = [None] * n      # per stage: the _Item waiting for it, not started yet
+        self._in_flight = [None] * n  # per stage: the _Item its thread is on
         self._done = None             # the newest PreparedFrame
-        self._claimed = 0             # the newest seq a request took from the queue
+        self._claimed = 0             # the newest seq a request took from a stage input
         self._priority = 0            # requests holding priority()
         self._closed = False
         self.submitted = 0            # frames submitted
         self.prepared = 0             # frames prepared (by the worker or by requests)
-        self.dropped = 0              # frames replaced in the queue before anyone started them
-        self.superseded = 0           # frames the worker stopped because a newer one was prepared
-        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
-        self._thread.start()
+        self.dropped = 0              # frames replaced at a stage input before that stage started them
+        self.superseded = 0           # frames a stage stopped because a newer one was prepared
+        self._threads = [threading.Thread(target=self._run, args=(index,), daemon=True,
+                                          name=name if n == 1 else f"{name}_{index + 1}") for index in range(n)]
+        self._thread = self._threads[-1]    # the last stage's: on_prepared runs there
+        for thread in self._threads:
+            thread.start()
+
+    @property
+    def stages(self) -> int:
+        return len(self._stages)
 
     # --- producer --------------------------------------------------------------------------------
     def submit(self, frame) -> int:
@@ -89,11 +117,15 @@ class LatestFrameWorker:
             if self._closed:
                 raise WorkerClosed("the perception worker is closed")
             self.submitted += 1
-            if self._pending is not None:
-                self.dropped += 1
-            self._pending = (self.submitted, frame, self._clock())
-            self._cond.notify_all()
+            self._put(0, _Item(self.submitted, frame, self._clock(), frame))
             return self.submitted
+
+    def _put(self, index: int, item: _Item) -> None:
+        """Under the lock: item waits for stage `index`, replacing an older unstarted one."""
+        if self._inbox[index] is not None:
+            self.dropped += 1
+        self._inbox[index] = item
+        self._cond.notify_all()
 
     # --- consumer --------------------------------------------------------------------------------
     def latest(self, timeout_s: float = 30.0) -> PreparedFrame | None:
@@ -107,10 +139,12 @@ class LatestFrameWorker:
             done = self._done
             if done is not None and (done.seq == newest or now - done.submitted_s <= self.max_age_s):
                 return done
-            if self._pending is not None and self._pending[0] == newest:
-                claimed, self._pending = self._pending, None
-                self._claimed = claimed[0]
-            else:       # the worker (or another request) is on it
+            waiting = [index for index, item in enumerate(self._inbox) if item is not None and item.seq == newest]
+            if waiting:
+                first = waiting[0]
+                claimed, self._inbox[first] = self._inbox[first], None
+                self._claimed = claimed.seq
+            else:       # a stage (or another request) is on it
                 if not self._cond.wait_for(lambda: self._closed or (self._done is not None
                                                                     and self._done.seq >= newest), timeout_s):
                     raise TimeoutError(f"the latest frame was not perceived within {timeout_s:.0f} s")
@@ -118,11 +152,11 @@ class LatestFrameWorker:
                     raise WorkerClosed("the perception worker is closed")
                 return self._done
         with self.priority():
-            return self._prepare_and_store(claimed, _no_checkpoint)
+            return self._prepare_from(first, claimed, _no_checkpoint)
 
     @contextlib.contextmanager
     def priority(self):
-        """While held, the worker waits at its checkpoints."""
+        """While held, the stage threads wait at their checkpoints."""
         with self._cond:
             self._priority += 1
         try:
@@ -136,8 +170,9 @@ class LatestFrameWorker:
         with self._cond:
             self._closed = True
             self._cond.notify_all()
-        if threading.current_thread() is not self._thread:
-            self._thread.join(timeout_s)
+        for thread in self._threads:
+            if threading.current_thread() is not thread:
+                thread.join(timeout_s)
 
     @property
     def done(self) -> PreparedFrame | None:
@@ -145,50 +180,65 @@ class LatestFrameWorker:
         with self._cond:
             return self._done
 
-    # --- worker ----------------------------------------------------------------------------------
-    def _checkpoint(self) -> None:
+    # --- stages ----------------------------------------------------------------------------------
+    def _checkpoint(self, index: int) -> None:
         with self._cond:
             paused = self._priority > 0
             self._cond.wait_for(lambda: self._closed or self._priority == 0)
             if self._closed:
                 raise WorkerClosed("the perception worker is closed")
-            if max(self._claimed, self._done.seq if self._done is not None else 0) > self._in_flight:
+            item = self._in_flight[index]
+            if max(self._claimed, self._done.seq if self._done is not None else 0) > item.seq:
                 raise _Superseded
-            if paused and self._pending is not None \
-                    and self._clock() - self._in_flight_submitted_s > self.max_age_s:
+            if paused and self.submitted > item.seq and self._clock() - item.submitted_s > self.max_age_s:
                 raise _Superseded
 
-    def _prepare_and_store(self, item, checkpoint) -> PreparedFrame:
-        seq, frame, submitted_s = item
+    def _stage(self, index: int, item: _Item, checkpoint) -> _Item:
+        """Stage `index` on item (an error passes through untouched)."""
+        if item.error is not None:
+            return item
         try:
-            prepared = PreparedFrame(seq, frame, submitted_s, self._prepare(frame, checkpoint))
+            return dataclasses.replace(item, value=self._stages[index](item.value, checkpoint))
         except (_Superseded, WorkerClosed):
             raise
         except ValueError as exc:
-            prepared = PreparedFrame(seq, frame, submitted_s, error=exc)
+            return dataclasses.replace(item, value=None, error=exc)
         except Exception as exc:  # noqa: BLE001 - the worker and the requests must go on
             if self._on_error is not None:
-                self._on_error(frame, exc)
-            prepared = PreparedFrame(seq, frame, submitted_s, error=RuntimeError(f"internal error: {exc!r}"))
+                self._on_error(item.frame, exc)
+            return dataclasses.replace(item, value=None, error=RuntimeError(f"internal error: {exc!r}"))
+
+    def _prepare_from(self, first: int, item: _Item, checkpoint) -> PreparedFrame:
+        """Stages first.. on item, then stored as the newest prepared frame (unless a newer one is)."""
+        for index in range(first, len(self._stages)):
+            item = self._stage(index, item, checkpoint)
+        prepared = PreparedFrame(item.seq, item.frame, item.submitted_s, item.value, item.error)
         with self._cond:
             self.prepared += 1
-            if self._done is None or seq > self._done.seq:
+            if self._done is None or item.seq > self._done.seq:
                 self._done = prepared
             self._cond.notify_all()
         return prepared
 
-    def _run(self) -> None:
+    def _run(self, index: int) -> None:
+        last = index == len(self._stages) - 1
+        checkpoint = functools.partial(self._checkpoint, index)
         while True:
             with self._cond:
-                self._cond.wait_for(lambda: self._closed or (self._pending is not None and self._priority == 0))
+                self._cond.wait_for(lambda: self._closed or (self._inbox[index] is not None and self._priority == 0))
                 if self._closed:
                     return
-                item, self._pending = self._pending, None
-                self._in_flight, self._in_flight_submitted_s = item[0], item[2]
+                item, self._inbox[index] = self._inbox[index], None
+                self._in_flight[index] = item
             try:
-                prepared = self._prepare_and_store(item, self._checkpoint)
-                if self._on_prepared is not None:
-                    self._on_prepared(prepared, self._checkpoint)
+                if last:
+                    prepared = self._prepare_from(index, item, checkpoint)
+                    if self._on_prepared is not None:
+                        self._on_prepared(prepared, checkpoint)
+                else:
+                    item = self._stage(index, item, checkpoint)
+                    with self._cond:
+                        self._put(index + 1, item)
             except _Superseded:
                 with self._cond:
                     self.superseded += 1
@@ -196,8 +246,8 @@ class LatestFrameWorker:
                 return
             except Exception as exc:  # noqa: BLE001 - on_prepared failed: keep perceiving
                 if self._on_error is not None:
-                    self._on_error(item[1], exc)
+                    self._on_error(item.frame, exc)
             finally:
                 with self._cond:
-                    self._in_flight = 0
+                    self._in_flight[index] = None
                     self._cond.notify_all()

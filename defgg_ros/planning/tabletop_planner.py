@@ -15,7 +15,8 @@ import numpy as np
 
 from defgg_ros.perception.self_filter import RobotSelfFilter
 from defgg_ros.perception.stiffness_assignment import assign_stiffness
-from defgg_ros.perception.tabletop import TabletopConfig, TabletopView, perceive
+from defgg_ros.perception.tabletop import TabletopConfig, TabletopView
+from defgg_ros.perception.tabletop import perceive as perceive_view
 from defgg_ros.planning.tabletop_grasps import TabletopNetworkView, TabletopPlan, prepare_tabletop, search_tabletop
 
 
@@ -60,6 +61,15 @@ def objects_with_moduli(view: TabletopView, youngs_modulus_pa) -> set:
 
 
 @dataclass(frozen=True)
+class PerceivedObjects:
+    """TabletopPlanner.perceive's result: the view and the moduli of one frame, before the network."""
+    view: TabletopView
+    targets: set | None              # object labels to grasp (None = all)
+    youngs_modulus_pa: np.ndarray    # HxW, what the planner uses (0 = background)
+    robot_mask: np.ndarray | None    # HxW bool, the self-filter's pixels (None: not applied)
+
+
+@dataclass(frozen=True)
 class PreparedFrame:
     """TabletopPlanner.prepare's result: one frame perceived and through the network, not yet searched."""
     network: TabletopNetworkView
@@ -87,11 +97,18 @@ class TabletopPlanner:
                 joint_positions: dict | None = None, checkpoint=None) -> PreparedFrame:
         """Everything of plan() that depends on the frame only, not on top_k: the self-filter, perception,
         the moduli, the network on the height map, the free space. Raises what plan() raises for a frame
-        without table or objects. checkpoint: called between stages (perception/frame_worker.py)."""
+        without table or objects. checkpoint: called between stages (perception/frame_worker.py).
+        The same as network(perceive(...)): perception on arrival runs the two in separate threads."""
+        return self.network(self.perceive(depth_m, camera_k, base_T_camera, youngs_modulus_pa, entries,
+                                          joint_positions, checkpoint), checkpoint)
+
+    def perceive(self, depth_m, camera_k, base_T_camera, youngs_modulus_pa=None, entries=(),
+                 joint_positions: dict | None = None, checkpoint=None) -> PerceivedObjects:
+        """prepare's first part: the self-filter, perception, the objects' moduli."""
         robot = None
         if self.self_filter is not None and joint_positions:
             robot = self.self_filter.mask(joint_positions, base_T_camera, camera_k, depth_m)
-        view = perceive(depth_m, camera_k, base_T_camera, self.config, robot, checkpoint)
+        view = perceive_view(depth_m, camera_k, base_T_camera, self.config, robot, checkpoint)
         if not view.object_ids:
             raise NoFeasibleGrasp("no object found above the table in the workspace box (blobs smaller than "
                                   f"{self.config.min_object_area_m2 * 1e4:.1f} cm^2 are ignored)")
@@ -104,11 +121,16 @@ class TabletopPlanner:
             if not targets:
                 raise NoFeasibleGrasp(f"the stiffness image has no object pixel on any of the "
                                       f"{len(view.object_ids)} object(s) found in the depth (all background)")
+        return PerceivedObjects(view, targets, youngs_modulus_pa, robot)
+
+    def network(self, objects: PerceivedObjects, checkpoint=None) -> PreparedFrame:
+        """prepare's second part: the network on the height map, the free space."""
         if checkpoint is not None:
             checkpoint()
-        network = prepare_tabletop(view, self.predictor, youngs_modulus_pa, self.default_youngs_modulus_pa,
-                                   checkpoint)
-        return PreparedFrame(network, targets, np.asarray(youngs_modulus_pa, np.float32), robot)
+        network = prepare_tabletop(objects.view, self.predictor, objects.youngs_modulus_pa,
+                                   self.default_youngs_modulus_pa, checkpoint)
+        return PreparedFrame(network, objects.targets, np.asarray(objects.youngs_modulus_pa, np.float32),
+                             objects.robot_mask)
 
     def search(self, prepared: PreparedFrame, top_k: int = 1) -> TabletopResult:
         """The grasps of a prepared frame (any number of searches may share one PreparedFrame)."""

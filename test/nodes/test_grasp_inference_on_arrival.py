@@ -51,16 +51,19 @@ def camera_messages(frame, stamp_sec: int, depth_m=None):
             "info": make_camera_info(k, w, h, header)}
 
 
-@pytest.fixture
-def cell(executor, frames, inference_service):
-    """(node perceiving on arrival, its client, node planning synchronously, its client, probe node)."""
+@pytest.fixture(params=[2, 1], ids=["two_stages", "one_stage"])
+def cell(request, executor, frames, inference_service):
+    """(node perceiving on arrival, its client, node planning synchronously, its client, probe node); the
+    on-arrival node's perception pipeline in two threads (the default) or in one (perception_stages)."""
     xyz, quat = transform_to_xyz_quaternion(frames[0][3])
     pose = [*xyz.tolist(), *quat.tolist()]
 
     def parameters(**extra):
         return {"model_path": str(MODEL_PATH), "base_T_camera": pose, **extra}
 
-    arrival, probe, arrival_client = inference_service("on_arrival_probe", **parameters(max_frame_age_s=0.0))
+    arrival, probe, arrival_client = inference_service("on_arrival_probe", **parameters(max_frame_age_s=0.0,
+                                                                                     perception_stages=request.param))
+    assert arrival._worker.stages == request.param
     # The same node in another namespace, on the same camera topics.
     inputs = {"depth_topic": topics.DEPTH_IMAGE, "stiffness_topic": topics.STIFFNESS_IMAGE,
               "camera_info_topic": topics.DEPTH_CAMERA_INFO}

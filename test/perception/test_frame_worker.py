@@ -225,3 +225,55 @@ def test_close_ends_waiting_requests_and_refuses_new_frames(make):
     prepare.release["b"].set()
     with pytest.raises(WorkerClosed):
         worker.submit("c")
+
+
+class Network(Prepare):
+    """A second stage: prepare's result -> 'planned <result>'; holds and errors keyed by the frame's name."""
+
+    def __call__(self, value, checkpoint):
+        frame = value.removeprefix("result of ")
+        return "planned " + super().__call__(frame, checkpoint)
+
+
+def test_two_stages_work_on_consecutive_frames_at_once_and_give_the_stages_in_sequence(make):
+    perceive, network = Prepare(), Network(hold=("a",))
+    worker = make((perceive, network), max_age_s=0.0)
+    worker.submit("a")
+    wait(network.event(network.started, "a"), "a in the second stage")
+    worker.submit("b")
+    with worker._cond:      # b through the first stage while a is held in the second: the stages overlap
+        assert worker._cond.wait_for(lambda: worker._inbox[1] is not None and worker._inbox[1].seq == 2, GUARD_S)
+    assert not worker.done
+    network.release["a"].set()
+    prepared_frames(worker, 2)
+    assert [worker.latest().value(), worker.prepared, worker.dropped] == ["planned result of b", 2, 0]
+    assert perceive.threads["a"] is perceive.threads["b"] is not network.threads["a"]
+    assert network.threads["b"] is worker._thread and worker.stages == 2
+
+
+def test_an_error_of_the_first_stage_skips_the_second(make):
+    perceive, network = Prepare(), Network()
+    worker = make((perceive, network), max_age_s=0.0)
+    worker.submit("bad")
+    prepared_frames(worker, 1)
+    with pytest.raises(ValueError, match="no table"):
+        worker.latest().value()
+    assert network.calls == []
+
+
+def test_a_request_runs_the_second_stage_of_a_latest_frame_waiting_for_it(make):
+    """The second stage is busy with an older frame: the request takes the newest frame from its input."""
+    perceive, network = Prepare(), Network(hold=("a",))
+    worker = make((perceive, network), max_age_s=0.0)
+    worker.submit("a")
+    wait(network.event(network.started, "a"), "a in the second stage")
+    worker.submit("b")
+    with worker._cond:
+        assert worker._cond.wait_for(lambda: worker._inbox[1] is not None, GUARD_S)
+    done = worker.latest()
+    assert done.value() == "planned result of b" and network.threads["b"] is threading.current_thread()
+    assert perceive.threads["b"] is not threading.current_thread()      # its first stage ran in the worker
+    network.release["a"].set()
+    with worker._cond:
+        assert worker._cond.wait_for(lambda: worker.superseded == 1, GUARD_S)
+    assert not network.event(network.passed_checkpoint, "a").is_set() and worker.latest() is done
