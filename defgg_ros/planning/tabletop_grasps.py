@@ -294,8 +294,12 @@ class FreeSpace:
             v = np.rint(self.k[1, 1] * y / z + self.k[1, 2]).astype(np.int64)
         h, w = depth.shape
         seen = (z > 0) & (u >= 0) & (u < w) & (v >= 0) & (v < h)
-        observed = np.zeros(z.shape)
-        observed[seen] = depth[v[seen], u[seen]]
+        # Every point reads a pixel (clipped into the image: no boolean gathers); unseen ones are masked.
+        np.clip(u, 0, w - 1, out=u)
+        np.clip(v, 0, h - 1, out=v)
+        v *= w
+        v += u
+        observed = depth.reshape(-1).take(v)
         tolerance = CARVING_TOLERANCE_M + 3 * z * z * SUBPIXEL_RMS_PX / (self.sensor_fx * STEREO_BASELINE_M)
         return seen & (observed > z + tolerance)
 

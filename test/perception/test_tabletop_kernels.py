@@ -150,3 +150,45 @@ def test_pads_of_several_grasps_in_one_pass_are_those_of_each_alone():
                   for t in np.linspace(0.0, PANDA_FINGER_THICKNESS_M, tg.PAD_SAMPLES)]
         free = space.free(tg._points(view, np.array(points), 0.01), strict=True)
         assert together[k] == bool(free.all())
+
+
+def _free_by_point(space, points, strict):
+    """FreeSpace.free's rule, one point at a time: projected into the image, seen in front of the camera,
+    and the surface read there lies behind the point by more than the carving tolerance."""
+    depth = space.strict_depth if strict else space.depth
+    h, w = depth.shape
+    out = []
+    for p in points:
+        r = space.rotation
+        x, y, z = (float(r[i, 0] * p[0] + r[i, 1] * p[1] + r[i, 2] * p[2] + space.translation[i]) for i in range(3))
+        if not z > 0:
+            out.append(False)
+            continue
+        u, v = round(space.k[0, 0] * x / z + space.k[0, 2]), round(space.k[1, 1] * y / z + space.k[1, 2])
+        if not (0 <= u < w and 0 <= v < h):
+            out.append(False)
+            continue
+        tolerance = tg.CARVING_TOLERANCE_M + 3 * z * z * ts.SUBPIXEL_RMS_PX / (space.sensor_fx * ts.STEREO_BASELINE_M)
+        out.append(bool(float(depth[v, u]) > z + tolerance))
+    return np.array(out)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_free_space_follows_its_rule_point_by_point(seed):
+    rng = np.random.default_rng(seed)
+    space = tg.FreeSpace.__new__(tg.FreeSpace)
+    space.depth = (0.3 + 0.4 * rng.random((24, 32))).astype(np.float32)
+    space.strict_depth = space.depth - np.float32(0.01)
+    space.k = np.array([[30.0, 0, 15.5], [0, 30.0, 11.5], [0, 0, 1]])
+    space.sensor_fx = 600.0
+    angle = rng.uniform(0, 0.5)
+    c, s = math.cos(angle), math.sin(angle)
+    space.rotation = np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
+    space.translation = np.array([0.01, -0.02, 0.0])
+    # Points in front of and behind the camera, off the image on every side, and at z = 0 exactly.
+    points = np.stack([rng.uniform(-0.5, 0.5, 400), rng.uniform(-0.4, 0.4, 400), rng.uniform(-0.2, 0.8, 400)], axis=1)
+    points[:5] = np.linalg.solve(space.rotation, (np.array([[0.1, 0.1, 0.0]]) - space.translation).T).T
+    for strict in (False, True):
+        got = space.free(points, strict=strict)
+        assert got.dtype == bool and np.array_equal(got, _free_by_point(space, points, strict))
+    assert 0 < np.count_nonzero(got) < len(points)
