@@ -57,6 +57,13 @@ def parse_args(argv=None):
                         help="the node's publish_on_sync parameter (the cell's: true, the best grasp of every frame "
                              "perceived is published; a top_k 1 request then reuses that frame's search)")
     parser.add_argument("--max-frame-age", type=float, default=None, help="the node's max_frame_age_s (its default)")
+    parser.add_argument("--perception-stages", type=int, default=None,
+                        help="the node's perception_stages (its default: 2 threads)")
+    parser.add_argument("--only-latest", action="store_true",
+                        help="only latest-frame requests, one per --request-period (no bare planner or image "
+                             "requests in this process: the node and the camera have the machine to themselves)")
+    parser.add_argument("--request-period", type=float, default=0.05,
+                        help="with --only-latest: seconds from one request's start to the next")
     return parser.parse_args(argv)
 
 
@@ -72,7 +79,8 @@ def scene(width_px: int, height_px: int, seed: int | None = None):
 
 
 def start_node(model: str, threads: int, base_T_camera, planner: str, perceive_on_arrival: str = "true",
-               publish_on_sync: str = "true", max_frame_age_s: float | None = None) -> NodeProcess:
+               publish_on_sync: str = "true", max_frame_age_s: float | None = None,
+               perception_stages: int | None = None) -> NodeProcess:
     """grasp_inference_node in its own process, with the cell's parameters unless told otherwise."""
     from defgg_ros.perception.geometry import transform_to_xyz_quaternion
 
@@ -84,6 +92,8 @@ def start_node(model: str, threads: int, base_T_camera, planner: str, perceive_o
            "-p", f"perceive_on_arrival:={perceive_on_arrival}", "--log-level", "warn"]
     if max_frame_age_s is not None:
         cmd[-2:-2] = ["-p", f"max_frame_age_s:={max_frame_age_s}"]
+    if perception_stages is not None:
+        cmd[-2:-2] = ["-p", f"perception_stages:={perception_stages}"]
     return NodeProcess("grasp_inference_node", cmd, cwd=ROOT)
 
 
@@ -253,7 +263,7 @@ def main(argv=None):
     predictor = GraspPredictor.from_checkpoint(args.model)
     planner = TabletopPlanner(predictor)
     proc = start_node(args.model, args.threads, base_T_camera, args.planner, args.perceive_on_arrival,
-                      args.publish_on_sync, args.max_frame_age)
+                      args.publish_on_sync, args.max_frame_age, args.perception_stages)
     context = Context()
     rclpy.init(context=context)
     camera = None
@@ -279,12 +289,16 @@ def main(argv=None):
                 "PlanGrasp (latest frame)": lambda: _ok(cell.call(PlanGrasp.Request(top_k=args.top_k))),
                 "PlanGrasp (images in request)": lambda r=image_request: _ok(cell.call(r)),
             }
+            if args.only_latest:
+                fns = {name: fn for name, fn in fns.items() if name == "PlanGrasp (latest frame)"}
             times = {name: [] for name in fns}
             in_node = {name: [] for name in fns}  # the node's own planning time (response.inference_time_s)
             cpu = []   # the bare call's CPU time in this process: less sensitive to other jobs than wall time
             stream = Stream(camera)
             for i in tqdm(range(args.warmup + args.calls), desc=f"{mode[0]}x{mode[1]}", unit="round",
                           mininterval=5):
+                if args.only_latest:
+                    round_start = time.perf_counter()
                 for name, fn in fns.items():
                     start, start_cpu, start_ns = time.perf_counter(), time.process_time(), time.time_ns()
                     result = fn()
@@ -296,6 +310,8 @@ def main(argv=None):
                             in_node[name].append(result.inference_time_s)
                         if name == "PlanGrasp (latest frame)":
                             stream.answer(result, start_ns)
+                if args.only_latest:
+                    time.sleep(max(0.0, round_start + args.request_period - time.perf_counter()))
             report(mode, times, in_node, args, predictor.runtime, cpu)
             stream.report()
             if camera is not None:
@@ -365,14 +381,17 @@ def report(mode, times, in_node, args, runtime, cpu):
           f"Fast DDS profile {Path(os.environ.get(FASTDDS_PROFILE_VARIABLE, 'built-in')).name}, camera "
           f"{args.camera_hz:g} Hz, perceive_on_arrival {args.perceive_on_arrival}, publish_on_sync "
           f"{args.publish_on_sync}, max_frame_age_s {'default' if args.max_frame_age is None else args.max_frame_age}, "
+          f"perception_stages {args.perception_stages or 'default'}"
+          f"{f', only latest-frame requests every {args.request_period:g} s' if args.only_latest else ''}, "
           f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
     print(f"{'mode':32s} {'median ms':>10s} {'p99 ms':>8s} {'max ms':>8s}")
     for name, seconds in times.items():
         median, p99, worst = stats_ms(seconds)
         print(f"{name:32s} {median:10.2f} {p99:8.2f} {worst:8.2f}")
-    cpu_median, cpu_p99, _ = stats_ms(cpu)
-    print(f"bare planner CPU time (process_time): median {cpu_median:.2f} ms, p99 {cpu_p99:.2f} ms")
-    for name in list(times)[1:]:
+    if cpu:
+        cpu_median, cpu_p99, _ = stats_ms(cpu)
+        print(f"bare planner CPU time (process_time): median {cpu_median:.2f} ms, p99 {cpu_p99:.2f} ms")
+    for name in [name for name in times if name.startswith("PlanGrasp")]:
         node_median, node_p99, _ = stats_ms(in_node[name])
         _, p99, _ = stats_ms(times[name])
         verdict = "" if target is None else f"; p99 target {target:.0f} ms {'met' if p99 <= target else 'NOT met'}"

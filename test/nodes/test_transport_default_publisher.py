@@ -137,3 +137,24 @@ def test_a_silent_stream_is_reported_and_its_return_too(executor, spin):
 
     spin(executor, delivered, 5.0, "a message after the silence")
     assert not watch._warned
+
+
+def test_the_cells_fastdds_profile_loads_without_errors_and_sets_a_short_heartbeat():
+    """Fast DDS ignores a profile it cannot parse (only logging it): then the cell would run on the default
+    transports and 3 s heartbeats again."""
+    import xml.etree.ElementTree as ET
+
+    from defgg_ros.ros.transport import FASTDDS_PROFILE, FASTDDS_PROFILE_VARIABLE
+
+    ns = {"f": "http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles"}
+    period = ET.parse(FASTDDS_PROFILE).getroot().find("f:data_writer[@is_default_profile='true']/f:times/"
+                                                      "f:heartbeatPeriod", ns)
+    assert period is not None and int(period.find("f:sec", ns).text) == 0
+    assert 0 < int(period.find("f:nanosec", ns).text) <= 200_000_000
+    code = ("import rclpy; from rclpy.node import Node; from std_msgs.msg import String; rclpy.init(); "
+            "n = Node('profile_check'); n.create_publisher(String, 'profile_check', 10); n.destroy_node(); "
+            "rclpy.shutdown()")
+    env = {**os.environ, FASTDDS_PROFILE_VARIABLE: str(FASTDDS_PROFILE), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    done = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert "XMLPARSER" not in done.stderr and "Error" not in done.stderr, done.stderr
