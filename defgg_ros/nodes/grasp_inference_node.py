@@ -66,6 +66,7 @@ from defgg_ros.perception.sync import StampSynchronizer
 from defgg_ros.perception.tabletop import TabletopConfig, WorkspaceBox
 from defgg_ros.planning.tabletop_grasps import base_T_grasp, image_projection
 from defgg_ros.planning.tabletop_planner import TabletopPlanner
+from defgg_ros.ros.memory import keep_freed_memory
 from defgg_ros.ros.parameters import declare_parameters, load_schema
 from defgg_ros.ros.share import share_path
 from defgg_ros.ros.tf import CameraPose, TfBroadcaster, transform_msg
@@ -152,6 +153,7 @@ class GraspInferenceNode(Node):
     def __init__(self, **kwargs):
         super().__init__("grasp_inference_node", **kwargs)
         declare_parameters(self)  # a value outside its schema raises ParameterError here
+        keep_freed_memory()       # frame-sized temporaries in worker threads: no page faults per frame
         p = {name: self.get_parameter(name).value for name in PARAMETERS}
         self._p = p
         self._base_T_camera = transform_from_list(p["base_T_camera"])
