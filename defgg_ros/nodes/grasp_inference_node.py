@@ -12,8 +12,10 @@ Thin adapter over defgg_ros.model.inference.GraspPredictor:
   segmentation node does). Every bad request gets success=false + reason.
 - tabletop planner with `perceive_on_arrival`: each synchronised frame is
   perceived as it arrives (conversion, perception, moduli, network, and with
-  `publish_on_sync` its top_k 1 search; a worker thread,
-  perception/frame_worker.py: only the newest waiting frame is kept), and an
+  `publish_on_sync` its top_k 1 search; two worker threads by default,
+  `perception_stages`: one converts and perceives the next frame while the
+  other runs the network on the frame before, perception/frame_worker.py:
+  only the newest waiting frame is kept at each stage), and an
   empty PlanGrasp only searches a perceived frame for grasps (top_k 1 with
   publish_on_sync: reads the search made): the newest perceived one when no
   newer frame arrived or it arrived at most `max_frame_age_s` before the
