@@ -14,6 +14,7 @@ import math
 import os
 import subprocess
 import sys
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -251,5 +252,11 @@ def _run_driver_process():
 if __name__ == "__main__":
     import signal
 
-    signal.signal(signal.SIGTERM, lambda *_: rclpy.try_shutdown())
+    def _terminate(*_):
+        # Shutting rclpy down ends the spin; under load it once did not (an orphan kept running after two
+        # SIGTERMs), so the process also leaves on its own 3 s later.
+        threading.Timer(3.0, os._exit, (0,)).start()
+        rclpy.try_shutdown()
+
+    signal.signal(signal.SIGTERM, _terminate)
     _run_driver_process()
