@@ -255,7 +255,9 @@ if __name__ == "__main__":
     def _terminate(*_):
         # Shutting rclpy down ends the spin; under load it once did not (an orphan kept running after two
         # SIGTERMs), so the process also leaves on its own 3 s later.
-        threading.Timer(3.0, os._exit, (0,)).start()
+        fallback = threading.Timer(3.0, os._exit, (0,))
+        fallback.daemon = True      # a spin that ends in time exits at once
+        fallback.start()
         rclpy.try_shutdown()
 
     signal.signal(signal.SIGTERM, _terminate)
