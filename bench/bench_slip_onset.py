@@ -34,8 +34,12 @@ def pick_records(folder: Path, per_object: int, moduli) -> list:
     return chosen
 
 
+SLIDES_MM = (5.0, 10.0, 20.0)   # also logged: the acceleration at which the object had slid this far
+
+
 def ramp_log(record: dict, directions, slip_m: float) -> list:
-    """[(direction, friction limit, onset accel, loss accel, displacement at loss mm)] of one record."""
+    """[(direction, friction limit, onset accel, loss accel, displacement at loss mm, {slide mm: accel})] of
+    one record (accelerations None when not reached before the loss or the ramp's end)."""
     from defgg_ros.sim import objects, trial, world
     from defgg_ros.sim.trial import TrialSettings, WorldGrasp, shake_directions
 
@@ -53,7 +57,7 @@ def ramp_log(record: dict, directions, slip_m: float) -> list:
             d = shake_directions(settings.shake_directions)[k]
             run.restore()
             start = run.object_in_hand()
-            onset, lost_at, moved_mm = None, None, None
+            onset, lost_at, moved_mm, slid = None, None, None, {}
             n = run.seconds(settings.shake_ramp_time_s)
             for step in range(0, n, run.check_steps):
                 a = settings.shake_limit_mps2 * min(1.0, (step + run.check_steps) / n)
@@ -62,10 +66,13 @@ def ramp_log(record: dict, directions, slip_m: float) -> list:
                 moved = float(np.linalg.norm(run.object_in_hand() - start))
                 if onset is None and moved > slip_m:
                     onset = a
+                for mm in SLIDES_MM:
+                    if mm not in slid and moved > mm * 1e-3:
+                        slid[mm] = a
                 if not run.held():
                     lost_at, moved_mm = a, moved * 1e3
                     break
-            rows.append((k, mu_f_over_m, onset, lost_at, moved_mm))
+            rows.append((k, mu_f_over_m, onset, lost_at, moved_mm, slid))
         return rows
     finally:
         import pybullet as p
@@ -88,12 +95,14 @@ def main(argv=None) -> None:
     if not records:
         raise SystemExit(f"{args.folder}: no held trial at {args.moduli}")
     print(f"{args.folder}: accelerations in m/s^2 (ramp to the limit), slip onset = moved > {args.slip_mm} mm")
-    print("| trial | dir | friction limit 2 mu F / m | slip onset | lost at (held) | moved at loss (mm) |")
-    print("|---|---|---|---|---|---|")
+    slides = " | ".join(f"slid {mm:g} mm" for mm in SLIDES_MM)
+    print(f"| trial | dir | friction limit 2 mu F / m | slip onset | {slides} | lost at (held) | moved at loss (mm) |")
+    print("|---|---|---|---|" + "---|" * len(SLIDES_MM) + "---|---|")
     gaps = []
     for r in records:
-        for k, limit, onset, lost, moved in ramp_log(r, DIRECTIONS, args.slip_mm * 1e-3):
-            print(f"| {r['trial_id']} | {k} | {limit:.1f} | {_fmt(onset)} | {_fmt(lost)} | {_fmt(moved)} |")
+        for k, limit, onset, lost, moved, slid in ramp_log(r, DIRECTIONS, args.slip_mm * 1e-3):
+            at = " | ".join(_fmt(slid.get(mm)) for mm in SLIDES_MM)
+            print(f"| {r['trial_id']} | {k} | {limit:.1f} | {_fmt(onset)} | {at} | {_fmt(lost)} | {_fmt(moved)} |")
             if onset is not None and lost is not None:
                 gaps.append(lost - onset)
     if gaps:
