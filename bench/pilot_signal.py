@@ -74,10 +74,8 @@ def seed_candidates(folder: Path) -> None:
                           {"key": key, "candidates": src["candidates"][:CANDIDATES]})
 
 
-def run_try(name: str, workers: int, progress: bool) -> dict:
-    from defgg_ros.atomic import write_json_atomic, write_text_atomic
+def run_try(name: str, workers: int, progress: bool) -> None:
     from defgg_ros.data.datagen import DatagenConfig, generate
-    from defgg_ros.data.signal import read_trial_records, render_markdown, signal_report
 
     what, settings, extras = TRIES[name]
     folder = PILOTS / name
@@ -87,17 +85,33 @@ def run_try(name: str, workers: int, progress: bool) -> dict:
                         workers=workers, settings=dict(settings), grasp_height="executor",
                         **extras)
     counts = generate(cfg, progress_bar=progress)
+    write_report(name)
+    partial = [folder / "signal_partial.json", folder / "signal_partial.md"]
+    for path in partial:       # the finished report supersedes the one committed on the way
+        path.unlink(missing_ok=True)
+    print(json.dumps(counts))
+
+
+def write_report(name: str, partial: bool = False) -> dict:
+    """signal.{json,md} of a try from its trial records (partial: signal_partial.*, for a try still running)."""
+    from defgg_ros.atomic import write_json_atomic, write_text_atomic
+    from defgg_ros.data.signal import read_trial_records, render_markdown, signal_report
+
+    what, settings, extras = TRIES[name]
+    folder = PILOTS / name
     records = read_trial_records(folder)
     if name in SHAKE_FROM:
         records = with_shake_from(records, read_trial_records(PILOTS / SHAKE_FROM[name]))
     report = signal_report(records, LABEL_RULE.get(name, "shake"))
-    report["try"] = {"name": name, "what": what, "settings": cfg.settings, "extras": extras,
+    report["try"] = {"name": name, "what": what, "settings": settings, "extras": extras,
                      "cpu_h": cpu_hours(folder)}
     if name in SHAKE_FROM:
         report["try"]["shake_from"] = SHAKE_FROM[name]
-    write_json_atomic(folder / "signal.json", report)
-    write_text_atomic(folder / "signal.md", render_markdown(report, f"Pilot {name}: {what}"))
-    print(json.dumps(counts))
+    stem = "signal_partial" if partial else "signal"
+    title = f"Pilot {name}{' (partial)' if partial else ''}: {what}"
+    write_json_atomic(folder / f"{stem}.json", report)
+    write_text_atomic(folder / f"{stem}.md", render_markdown(report, title))
+    return report
     print((folder / "signal.md").read_text(encoding="utf-8"))
     return report
 
@@ -179,7 +193,16 @@ def main(argv=None) -> int:
     ap.add_argument("--list", action="store_true", help="list the tries")
     ap.add_argument("--summary", action="store_true", help="print the table of finished tries")
     ap.add_argument("--no-progress", action="store_true")
+    ap.add_argument("--partial", metavar="TRY", help="write TRY's signal_partial.{json,md} from its records so far "
+                                                      "(no simulation; for committing a try that is still running)")
     args = ap.parse_args(argv)
+    if args.partial:
+        if args.partial not in TRIES:
+            print(f"pilot_signal: unknown try {args.partial}; known: {', '.join(TRIES)}", file=sys.stderr)
+            return 2
+        report = write_report(args.partial, partial=True)
+        print(f"{report['labelled']} labelled of {report['trials']}: {PILOTS / args.partial}/signal_partial.md")
+        return 0
     if args.list:
         for name, (what, settings, extras) in TRIES.items():
             print(f"{name}: {what} {settings} {extras}")
