@@ -74,6 +74,15 @@ def _add_run(sub):
     p.add_argument("--quick", action="store_true",
                    help="smoke test only: 5x faster acceleration ramps, shorter lift (recorded in run.json and every "
                         "trial; not the paper's protocol, never for reported numbers)")
+    _add_protocol_args(p)
+    p.add_argument("--plan-only", action="store_true",
+                   help="only render and plan every view's grasps into OUT/plans.json (no simulation; cheap), "
+                        "for the diagnostics of the report")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+
+
+def _add_protocol_args(p):
+    """--protocol and --protocol-from (run and ceiling: resolve_protocol reads both)."""
     p.add_argument("--protocol", choices=("defgraspsim", "legacy"), default=None,
                    help="trial protocol (docs/dataset.md, 'Trial protocols'): defgraspsim (default for a new folder) "
                         "or legacy (results up to sim_v4); a folder being resumed keeps its own")
@@ -81,10 +90,6 @@ def _add_run(sub):
                    help="the trial protocol setting of this dataset's labels (protocol, friction, Poisson's ratio, "
                         "finger hold, grip force rule), so success is the label's own criterion; wins over "
                         "--protocol")
-    p.add_argument("--plan-only", action="store_true",
-                   help="only render and plan every view's grasps into OUT/plans.json (no simulation; cheap), "
-                        "for the diagnostics of the report")
-    p.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
 def _add_others(sub):
@@ -154,13 +159,7 @@ def _add_others(sub):
                         "the height the evaluation executes a model's grasp at (comparable to the models; use a "
                         "new --out folder)")
     p.add_argument("--max-trials", type=int, default=None, help="stop after simulating this many trials")
-    p.add_argument("--protocol", choices=("defgraspsim", "legacy"), default=None,
-                   help="trial protocol (docs/dataset.md, 'Trial protocols'): defgraspsim (default for a new folder) "
-                        "or legacy (results up to sim_v4); a folder being resumed keeps its own")
-    p.add_argument("--protocol-from", metavar="DATASET", default=None,
-                   help="the trial protocol setting of this dataset's labels (protocol, friction, Poisson's ratio, "
-                        "finger hold, grip force rule), so success is the label's own criterion; wins over "
-                        "--protocol")
+    _add_protocol_args(p)
     p.add_argument("--summary-only", action="store_true", help="only rewrite OUT/ceiling.md")
 
     p = sub.add_parser("card", help="(re)write models/<name>.md from its provenance, weights and evaluation")

@@ -3,7 +3,7 @@
     worker = LatestFrameWorker(prepare, max_age_s=0.3)   # prepare(frame, checkpoint) -> result; ValueError: bad
     worker = LatestFrameWorker((perceive, plan), 0.3)    # a pipeline: plan(perceive(frame, cp), cp) -> result
     worker.submit(frame)                     # from the subscription callback, every synchronised frame
-    done = worker.latest()                   # in a request: a PreparedFrame (None: no frame yet)
+    done = worker.latest()                   # in a request: a WorkerResult (None: no frame yet)
     with worker.priority():                  # the request's own work; the worker waits at its checkpoints
         answer(done.value())
 
@@ -46,7 +46,7 @@ class _Superseded(Exception):
 
 
 @dataclass(frozen=True)
-class PreparedFrame:
+class WorkerResult:
     seq: int                      # 1, 2, ... in submission order
     frame: object                 # what was submitted
     submitted_s: float            # time.monotonic() at submit()
@@ -92,7 +92,7 @@ class LatestFrameWorker:
         n = len(self._stages)
         self._inbox = [None] * n      # per stage: the _Item waiting for it, not started yet
         self._in_flight = [None] * n  # per stage: the _Item its thread is on
-        self._done = None             # the newest PreparedFrame
+        self._done = None             # the newest WorkerResult
         self._claimed = 0             # the newest seq a request took from a stage input
         self._priority = 0            # requests holding priority()
         self._closed = False
@@ -128,7 +128,7 @@ class LatestFrameWorker:
         self._cond.notify_all()
 
     # --- consumer --------------------------------------------------------------------------------
-    def latest(self, timeout_s: float = 30.0) -> PreparedFrame | None:
+    def latest(self, timeout_s: float = 30.0) -> WorkerResult | None:
         """The prepared frame to answer a request from (module docstring); None when nothing was submitted.
         Raises TimeoutError when the worker does not finish the frame within timeout_s, WorkerClosed."""
         now = self._clock()
@@ -175,7 +175,7 @@ class LatestFrameWorker:
                 thread.join(timeout_s)
 
     @property
-    def done(self) -> PreparedFrame | None:
+    def done(self) -> WorkerResult | None:
         """The newest prepared frame (no waiting, no freshness rule)."""
         with self._cond:
             return self._done
@@ -208,11 +208,11 @@ class LatestFrameWorker:
                 self._on_error(item.frame, exc)
             return dataclasses.replace(item, value=None, error=RuntimeError(f"internal error: {exc!r}"))
 
-    def _prepare_from(self, first: int, item: _Item, checkpoint) -> PreparedFrame:
+    def _prepare_from(self, first: int, item: _Item, checkpoint) -> WorkerResult:
         """Stages first.. on item, then stored as the newest prepared frame (unless a newer one is)."""
         for index in range(first, len(self._stages)):
             item = self._stage(index, item, checkpoint)
-        prepared = PreparedFrame(item.seq, item.frame, item.submitted_s, item.value, item.error)
+        prepared = WorkerResult(item.seq, item.frame, item.submitted_s, item.value, item.error)
         with self._cond:
             self.prepared += 1
             if self._done is None or item.seq > self._done.seq:

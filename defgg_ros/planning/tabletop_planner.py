@@ -9,7 +9,7 @@ The camera pose is an argument (`base_T_camera`, 4x4): the node passes what TF s
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -72,10 +72,8 @@ class PerceivedObjects:
 @dataclass(frozen=True)
 class PreparedFrame:
     """TabletopPlanner.prepare's result: one frame perceived and through the network, not yet searched."""
+    objects: PerceivedObjects        # its moduli as float32, as the result reports them
     network: TabletopNetworkView
-    targets: set | None              # object labels to grasp (None = all)
-    youngs_modulus_pa: np.ndarray    # HxW, what the planner used (0 = background)
-    robot_mask: np.ndarray | None    # HxW bool, the self-filter's pixels (None: not applied)
 
 
 class TabletopPlanner:
@@ -129,16 +127,17 @@ class TabletopPlanner:
             checkpoint()
         network = prepare_tabletop(objects.view, self.predictor, objects.youngs_modulus_pa,
                                    self.default_youngs_modulus_pa, checkpoint)
-        return PreparedFrame(network, objects.targets, np.asarray(objects.youngs_modulus_pa, np.float32),
-                             objects.robot_mask)
+        moduli = np.asarray(objects.youngs_modulus_pa, np.float32)
+        return PreparedFrame(replace(objects, youngs_modulus_pa=moduli), network)
 
     def search(self, prepared: PreparedFrame, top_k: int = 1) -> TabletopResult:
         """The grasps of a prepared frame (any number of searches may share one PreparedFrame)."""
-        plan = search_tabletop(prepared.network, top_k, prepared.targets)
+        objects = prepared.objects
+        plan = search_tabletop(prepared.network, top_k, objects.targets)
         view = prepared.network.view
         if not plan.grasps:
             raise NoFeasibleGrasp(
                 f"no feasible grasp on the {len(view.object_ids)} object(s) in the workspace: each is wider than "
                 "the gripper's opening minus clearance along every closing direction, or a finger would land on "
                 "a neighbour or on space the camera cannot see")
-        return TabletopResult(view, plan, prepared.youngs_modulus_pa, prepared.robot_mask)
+        return TabletopResult(view, plan, objects.youngs_modulus_pa, objects.robot_mask)
