@@ -81,15 +81,18 @@ def test_the_twist_limit_bench_reruns_a_recorded_trial(tmp_path):
     assert "osc_40: grip 4.5 N/finger, 1/1 lifted, held all axes 1/1" in done.stdout, done.stdout
 
 
-def test_the_evaluation_takes_the_datasets_protocol_setting_with_its_material_and_force_rule():
-    """defgg-eval run --protocol-from DATASET: success is judged under the labels' own setting."""
+def test_the_evaluation_takes_the_datasets_protocol_setting_with_its_material_and_force_rule(tmp_path):
+    """defgg-eval run --protocol-from DATASET: success is judged under the labels' own setting (pilot b's here)."""
     from pathlib import Path
 
-    pilot_a = Path(__file__).resolve().parents[2] / "bench" / "pilots" / "a_defgraspsim"
-    setting = cli.resolve_protocol("unused", None, from_dataset=str(pilot_a))
-    assert setting == {"protocol": "defgraspsim", "object_friction": None, "poisson_ratio": None,
-                       "finger_hold": "force", "grip_force_friction": None}
-    settings = eval_trial_settings({**setting, "object_friction": 0.4, "grip_force_friction": 0.7})
+    source = Path(__file__).resolve().parents[2] / "bench" / "pilots" / "a_defgraspsim" / "dataset.json"
+    header = json.loads(source.read_text(encoding="utf-8"))
+    header["generator"]["trial_settings"].update(object_friction=0.4, grip_force_friction=0.7)
+    (tmp_path / "dataset.json").write_text(json.dumps(header), encoding="utf-8")
+    setting = cli.resolve_protocol("unused", "legacy", from_dataset=str(tmp_path))   # the dataset's wins
+    assert setting == {"protocol": "defgraspsim", "object_friction": 0.4, "poisson_ratio": None,
+                       "finger_hold": "force", "grip_force_friction": 0.7}
+    settings = eval_trial_settings(setting)
     assert settings.material()["effective_friction"] == 0.4 and settings.grip_force_friction == 0.7
     assert dataclasses.replace(settings, object_friction=None, grip_force_friction=None) == eval_trial_settings()
     assert cli.resolve_protocol("unused", "legacy")["protocol"] == "legacy"
