@@ -53,7 +53,7 @@ from defgg_ros.nodes.conversions import (
     transform_from_pose,
 )
 from defgg_ros.nodes.node_main import run_node
-from defgg_ros.perception.frame_worker import LatestFrameWorker, WorkerClosed
+from defgg_ros.perception.frame_worker import LatestFrameWorker, RecentValues, WorkerClosed
 from defgg_ros.perception.grasp_planning import (
     PlanningError,
     check_top_k,
@@ -109,6 +109,12 @@ class _Searches:
     def __init__(self):
         self._lock = threading.Lock()
         self._entries = {}          # top_k -> [done Event, (result, grasps), error]
+
+    def made(self, top_k: int) -> bool:
+        """Whether the search for top_k is finished (made by the worker or an earlier request)."""
+        with self._lock:
+            entry = self._entries.get(top_k)
+        return entry is not None and entry[0].is_set()
 
     def get(self, top_k: int, search):
         with self._lock:
@@ -181,6 +187,8 @@ class GraspInferenceNode(Node):
         self.synced_frames = 0          # frames matched by stamp
         self.skipped_frames = 0         # synchronised, but not convertible (wrong sizes, encodings)
         self._worker = None
+        # The top_k values empty requests asked for lately: perception on arrival makes those searches too.
+        self._requested_top_k = RecentValues(float(p["prepare_requested_top_k_s"]))
         self._grasp_pub = self.create_publisher(Grasp, p["best_grasp_topic"], qos.STATE)
         self._quality_pub = self.create_publisher(Image, p["quality_topic"], qos.SENSOR_DATA)
         self._marker_pub = self.create_publisher(MarkerArray, p["markers_topic"], qos.STATE)
@@ -311,18 +319,20 @@ class GraspInferenceNode(Node):
 
     def _network_stage(self, perceived: _Perceived, checkpoint, search: bool = True) -> PerceivedFrame:
         """The second stage: the network on the height map and the free space (TabletopPlanner.network); on
-        arrival with publish_on_sync also the frame's top_k 1 search (which it publishes), before requests
-        see the frame, so a top_k 1 request finds it made."""
+        arrival also the frame's searches requests will want, before they see the frame: top_k 1 with
+        publish_on_sync (which it publishes) and every top_k asked for lately (prepare_requested_top_k_s)."""
         start = time.perf_counter()
         prepared = self._tabletop.network(perceived.objects, checkpoint)
         out = PerceivedFrame(perceived.frame, perceived.base_T_camera, prepared,
                              perceived.seconds + time.perf_counter() - start)
-        if search and self._p["publish_on_sync"]:
-            checkpoint()
-            try:
-                self._search(out, 1)
-            except ValueError:      # no feasible grasp: kept for the requests, warned when publishing
-                pass
+        if search:
+            wanted = self._requested_top_k.recent() | ({1} if self._p["publish_on_sync"] else set())
+            for top_k in sorted(wanted):
+                checkpoint()
+                try:
+                    self._search(out, top_k)
+                except ValueError:  # no feasible grasp: kept for the requests, warned when publishing
+                    pass
         return out
 
     def _publish_perceived(self, done, checkpoint):
@@ -350,6 +360,7 @@ class GraspInferenceNode(Node):
     def _plan_latest_perceived(self, top_k: int):
         """An empty request with perception on arrival: (grasps, seconds, summary) from a perceived frame."""
         start = time.perf_counter()
+        self._requested_top_k.note(top_k)
         try:
             done = self._worker.latest(PERCEPTION_WAIT_S)
         except (TimeoutError, WorkerClosed) as exc:
@@ -358,12 +369,14 @@ class GraspInferenceNode(Node):
             raise PlanningError(NO_FRAME_YET)
         waited = time.perf_counter() - start
         perceived = done.value()
+        on_arrival = perceived.searches.made(top_k)
         with self._worker.priority():
             _, grasps = self._search(perceived, top_k)
         seconds = time.perf_counter() - start
         worker = self._worker
+        searched = "search made before the request" if on_arrival else f"searched {(seconds - waited) * 1e3:.1f} ms"
         note = (f"; frame perceived on arrival ({perceived.seconds * 1e3:.1f} ms; waited {waited * 1e3:.1f} ms, "
-                f"searched {(seconds - waited) * 1e3:.1f} ms; {worker.prepared} of {worker.submitted} "
+                f"{searched}; {worker.prepared} of {worker.submitted} "
                 f"synchronised frames perceived)")
         return grasps, seconds, note
 

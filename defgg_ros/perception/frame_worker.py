@@ -251,3 +251,28 @@ class LatestFrameWorker:
                 with self._cond:
                     self._in_flight[index] = None
                     self._cond.notify_all()
+
+
+class RecentValues:
+    """The values noted within the last window_s seconds (e.g. the top_k values requests asked for, so the
+    worker can make those searches on arrival). Thread-safe; window_s 0 remembers nothing."""
+
+    def __init__(self, window_s: float, clock=time.monotonic):
+        if window_s < 0:
+            raise ValueError(f"window_s must be >= 0, got {window_s}")
+        self.window_s = float(window_s)
+        self._clock = clock
+        self._lock = threading.Lock()
+        self._last_s = {}            # value -> when it was last noted
+
+    def note(self, value) -> None:
+        if self.window_s > 0:
+            with self._lock:
+                self._last_s[value] = self._clock()
+
+    def recent(self) -> set:
+        now = self._clock()
+        with self._lock:
+            for value in [v for v, t in self._last_s.items() if now - t > self.window_s]:
+                del self._last_s[value]
+            return set(self._last_s)

@@ -235,12 +235,13 @@ def _object_grasps(view, label, box, maps, moduli, space, min_distance_px, thres
     faces = object_face_angles(view, label, box)
     cells = [(r + box[0].start, c + box[1].start) for r, c in peaks]
     at = [maps.at_pixel(row, col) for row, col in cells]
-    # Every peak's centre lines in one free-space pass: a wide object's peaks all end there.
+    # Every peak's centre lines in one free-space pass, every peak's feasibility in one more: a wide
+    # object's peaks all end there, and the per-call overhead, not the arithmetic, is what costs.
     probes = _centre_lines(view, space, cells, [angle for angle, _ in at], faces)
+    grasps = _feasible_at_peaks(view, label, cells, probes, [width_px * CELL_M for _, width_px in at],
+                                [float(maps.q[row, col]) for row, col in cells], moduli, space)
     found = []
-    for (row, col), (_, width_px), probe in zip(cells, at, probes):
-        grasp = _feasible_from_centre_lines(view, label, row, col, probe, width_px * CELL_M, float(maps.q[row, col]),
-                                            moduli, space)
+    for grasp in grasps:
         if grasp is not None and all(_distinct(grasp, other) for other in found):
             found.append(grasp)
             if len(found) >= top_k:
@@ -343,8 +344,8 @@ def feasible_grasp(view: TabletopView, label: int, row: int, col: int, angle_rad
                    quality: float, moduli: np.ndarray, space: FreeSpace, face_angles=()) -> TabletopGrasp | None:
     """The grasp at cell (row, col) with the first feasible closing direction of candidate_angles
     (map angles: from columns towards rows), or None when no direction is feasible."""
-    probe = _centre_lines(view, space, [(row, col)], [angle_rad], face_angles)[0]
-    return _feasible_from_centre_lines(view, label, row, col, probe, network_width_m, quality, moduli, space)
+    probes = _centre_lines(view, space, [(row, col)], [angle_rad], face_angles)
+    return _feasible_at_peaks(view, label, [(row, col)], probes, [network_width_m], [quality], moduli, space)[0]
 
 
 # Samples along a closing line, in cells from the centre: a run longer than the widest fitting extent
@@ -367,54 +368,60 @@ def _centre_lines(view: TabletopView, space: FreeSpace, cells, angles, face_angl
     return [(level, d, f) for level, d, f in zip(levels, directions, free)]
 
 
-def _feasible_from_centre_lines(view, label, row, col, probe, network_width_m, quality, moduli,
-                                space) -> TabletopGrasp | None:
-    """feasible_grasp from the peak's _centre_lines."""
-    level, directions, free_centre = probe
-    order = range(len(directions))
+def _feasible_at_peaks(view, label, cells, probes, network_widths_m, qualities, moduli, space) -> list:
+    """feasible_grasp at each peak (cells: (row, col) each, probes: their _centre_lines), all peaks in
+    one pass: per peak its grasp or None."""
+    levels = np.array([probe[0] for probe in probes])
+    directions = np.stack([probe[1] for probe in probes])                # P x A x 2
+    n_peaks, n_dirs = directions.shape[:2]
     steps = _STEPS
-    across = np.stack([-directions[:, 1], directions[:, 0]], axis=1)
+    centres = np.asarray(cells, float)                                   # P x 2
     # Three lines across the band the pads sweep (centre and both pad edges): what lies between the
     # fingers anywhere in that band must fit, so a box's corner is not taken for a narrow object. The
     # centre line first for every direction; the edge lines only where the centre line's run fits.
-    offsets = np.array([0.0, -0.5, 0.5]) * FINGER_PAD_WIDTH_M / CELL_M
-    centre = np.array([row, col], float)
-    ok0, low0, high0 = band_extents(~free_centre[:, None, :])
+    free_centre = np.stack([probe[2] for probe in probes]).reshape(n_peaks * n_dirs, 1, steps.size)
+    ok0, low0, high0 = band_extents(~free_centre)
     fits0 = ok0 & ((high0 - low0 + 1) * LINE_STEP_CELLS * CELL_M + 2 * CLEARANCE_M <= GRIPPER_MAX_WIDTH_M)
+    result = [None] * n_peaks
     if not fits0.any():      # no centre line fits: nothing below can (ok &= fits0)
-        return None
-    free = np.ones((len(order), 3, steps.size), bool)
-    free[:, 0] = free_centre
+        return result
+    flat_dirs = directions.reshape(-1, 2)
+    across = np.stack([-flat_dirs[:, 1], flat_dirs[:, 0]], axis=1)
+    offsets = np.array([-0.5, 0.5]) * FINGER_PAD_WIDTH_M / CELL_M
+    peak_of = np.repeat(np.arange(n_peaks), n_dirs)                    # P*A: each direction's peak
+    free = np.ones((n_peaks * n_dirs, 3, steps.size), bool)
+    free[:, 0] = free_centre[:, 0]
     idx = np.flatnonzero(fits0)
-    edges = (centre + offsets[None, 1:, None, None] * across[idx, None, None, :]
-             + steps[None, None, :, None] * directions[idx, None, None, :])       # a x 2 x S x 2
-    free[idx, 1:] = space.free(_points(view, edges.reshape(-1, 2), level)).reshape(idx.size, 2, steps.size)
+    edges = (centres[peak_of[idx], None, None, :] + offsets[None, :, None, None] * across[idx, None, None, :]
+             + steps[None, None, :, None] * flat_dirs[idx, None, None, :])        # a x 2 x S x 2
+    heights = np.repeat(levels[peak_of[idx]], 2 * steps.size)
+    free[idx, 1:] = space.free(_points(view, edges.reshape(-1, 2), heights)).reshape(idx.size, 2, steps.size)
     ok, lows, highs = band_extents(~free)
-    ok &= fits0
     extents = (highs - lows + 1) * LINE_STEP_CELLS * CELL_M
-    fitting = [(round(extents[i] / OPENING_TIE_M), i, int(lows[i]), int(highs[i]), float(extents[i]))
-               for i in order if ok[i] and extents[i] + 2 * CLEARANCE_M <= GRIPPER_MAX_WIDTH_M]
-    # The narrowest fitting direction first (the most room in the hand, and the same choice at every
-    # resolution); among near-equal ones, the candidate order (faces, then the network's angle). The
+    ok &= fits0 & (extents + 2 * CLEARANCE_M <= GRIPPER_MAX_WIDTH_M)
+    # Per peak: the narrowest fitting direction first (the most room in the hand, and the same choice at
+    # every resolution); among near-equal ones, the candidate order (faces, then the network's angle). The
     # first whose middle is on the object and whose pads are free wins (all checked in one pass).
-    if not fitting:
-        return None
-    _, index, lows, highs, extents_m = (np.array(column) for column in zip(*sorted(fitting)))
-    widths = extents_m + 2 * CLEARANCE_M           # geometric: the same object, the same opening
-    centres = np.array([row, col], float) + ((lows + highs) / 2.0 * LINE_STEP_CELLS)[:, None] * directions[index]
-    rc = np.rint(centres).astype(np.int64)
+    cand = np.flatnonzero(ok)
+    if cand.size == 0:
+        return result
+    direction_index = cand % n_dirs
+    cand = cand[np.lexsort((direction_index, np.rint(extents[cand] / OPENING_TIE_M), peak_of[cand]))]
+    widths = extents[cand] + 2 * CLEARANCE_M           # geometric: the same object, the same opening
+    mid = centres[peak_of[cand]] + ((lows[cand] + highs[cand]) / 2.0 * LINE_STEP_CELLS)[:, None] * flat_dirs[cand]
+    rc = np.rint(mid).astype(np.int64)
     rows_n, cols_n = view.grid_labels.shape
     on = (rc[:, 0] >= 0) & (rc[:, 0] < rows_n) & (rc[:, 1] >= 0) & (rc[:, 1] < cols_n)
     on[on] = view.grid_labels[rc[on, 0], rc[on, 1]] == label
-    if not on.any():
-        return None
-    on[on] = _pads_free(view, space, level, centres[on], directions[index[on]], widths[on])
-    if not on.any():
-        return None
-    k = int(np.argmax(on))
-    r, c, i = int(rc[k, 0]), int(rc[k, 1]), int(index[k])
-    return _grasp(view, label, quality, r, c, directions[i], float(widths[k]), float(extents_m[k]), network_width_m,
-                  float(moduli[r, c]))
+    if on.any():
+        on[on] = _pads_free(view, space, levels[peak_of[cand[on]]], mid[on], flat_dirs[cand[on]], widths[on])
+    for k in np.flatnonzero(on):
+        p = int(peak_of[cand[k]])
+        if result[p] is None:
+            r, c = int(rc[k, 0]), int(rc[k, 1])
+            result[p] = _grasp(view, label, qualities[p], r, c, flat_dirs[cand[k]], float(widths[k]),
+                               float(extents[cand[k]]), network_widths_m[p], float(moduli[r, c]))
+    return result
 
 
 def _points(view: TabletopView, cells_rc: np.ndarray, height_m) -> np.ndarray:
@@ -452,10 +459,11 @@ def _extent_cells(occupied: np.ndarray):
     return (int(low[0]), int(high[0])) if ok[0] else (None, None)
 
 
-def _pads_free(view, space: FreeSpace, level_m: float, centres, directions, widths_m) -> np.ndarray:
+def _pads_free(view, space: FreeSpace, level_m, centres, directions, widths_m) -> np.ndarray:
     """Per grasp (n centres in cells, unit closing directions, openings in m): both pads (thickness
     along the closing line just outside the opening, pad width across it) over free space at the
-    fingertips' level (PAD_BLOCKED_FRACTION of a pad's samples may fail)."""
+    fingertips' level (level_m: one for all, or one per grasp; PAD_BLOCKED_FRACTION of a pad's samples
+    may fail)."""
     centres, directions = np.asarray(centres, float), np.asarray(directions, float)
     across = np.stack([-directions[:, 1], directions[:, 0]], axis=1)
     thickness = np.linspace(0.0, PANDA_FINGER_THICKNESS_M, PAD_SAMPLES)
@@ -466,6 +474,8 @@ def _pads_free(view, space: FreeSpace, level_m: float, centres, directions, widt
     b = np.repeat(s_across, PAD_SAMPLES)[None, :, None]
     pads = [centres[:, None, :] + side * a * directions[:, None, :] + b * across[:, None, :] for side in (-1.0, 1.0)]
     points = np.stack(pads, axis=1).reshape(-1, 2)                            # n x 2 pads x samples
+    if np.ndim(level_m):
+        level_m = np.repeat(np.asarray(level_m, float), len(points) // len(centres))
     free = space.free(_points(view, points, level_m), strict=True).reshape(len(centres), 2, -1)
     return np.all(np.mean(~free, axis=2) <= PAD_BLOCKED_FRACTION, axis=1)
 

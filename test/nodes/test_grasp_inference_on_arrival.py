@@ -163,3 +163,22 @@ def test_unusable_frames_give_their_reason_and_the_node_keeps_serving(cell, fram
     camera.stream_until(camera_messages(frames[1], 6), latest_is(arrival, 6), "a good frame again")
     response = ask(executor, call, arrival_client)
     assert response.success and {stamp_to_ns(g.header.stamp) for g in response.grasps} == {6 * 10**9}
+
+
+def test_a_top_k_asked_for_is_searched_on_arrival_for_the_next_frames(cell, frames, executor, spin, call):
+    arrival, arrival_client, synchronous, sync_client, probe = cell
+    camera = Camera(probe, executor, spin)
+    worker = arrival._worker
+
+    def prepared(stamp_sec):
+        return lambda: (latest_is(arrival, stamp_sec)() and latest_is(synchronous, stamp_sec)()
+                        and worker.done is not None and worker.done.seq == worker.submitted)
+
+    camera.stream_until(camera_messages(frames[0], 7), prepared(7), "frame 7 perceived")
+    first = ask(executor, call, arrival_client, top_k=4)
+    assert first.success and "searched " in first.message, first.message     # nobody asked for 4 before
+    camera.stream_until(camera_messages(frames[1], 8), prepared(8), "frame 8 perceived")
+    again = ask(executor, call, arrival_client, top_k=4)
+    assert "search made before the request" in again.message, again.message
+    assert {stamp_to_ns(g.header.stamp) for g in again.grasps} == {8 * 10**9}
+    assert_same_grasps(again, ask(executor, call, sync_client, top_k=4), "top_k 4 searched on arrival")

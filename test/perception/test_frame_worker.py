@@ -6,7 +6,7 @@ import threading
 
 import pytest
 
-from defgg_ros.perception.frame_worker import LatestFrameWorker, WorkerClosed
+from defgg_ros.perception.frame_worker import LatestFrameWorker, RecentValues, WorkerClosed
 
 GUARD_S = 20.0
 
@@ -277,3 +277,21 @@ def test_a_request_runs_the_second_stage_of_a_latest_frame_waiting_for_it(make):
     with worker._cond:
         assert worker._cond.wait_for(lambda: worker.superseded == 1, GUARD_S)
     assert not network.event(network.passed_checkpoint, "a").is_set() and worker.latest() is done
+
+
+def test_recent_values_forget_after_their_window():
+    now = [100.0]
+    recent = RecentValues(5.0, clock=lambda: now[0])
+    recent.note(3)
+    now[0] += 4.0
+    recent.note(5)
+    assert recent.recent() == {3, 5}
+    now[0] += 1.5                      # 3 was noted 5.5 s ago, 5 1.5 s ago
+    assert recent.recent() == {5}
+    recent.note(3)
+    assert recent.recent() == {3, 5}
+    off = RecentValues(0.0, clock=lambda: now[0])
+    off.note(3)
+    assert off.recent() == set()
+    with pytest.raises(ValueError, match="window_s"):
+        RecentValues(-1.0)

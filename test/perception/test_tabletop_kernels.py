@@ -192,3 +192,28 @@ def test_free_space_follows_its_rule_point_by_point(seed):
         got = space.free(points, strict=strict)
         assert got.dtype == bool and np.array_equal(got, _free_by_point(space, points, strict))
     assert 0 < np.count_nonzero(got) < len(points)
+
+
+@pytest.mark.parametrize("seed", [1, 4])
+def test_feasibility_of_all_peaks_in_one_pass_is_that_of_each_alone(seed):
+    """_feasible_at_peaks batches every peak of an object (their own tip levels, their own directions):
+    each peak's grasp must be the one feasible_grasp gives for it alone; random peaks on every object."""
+    frame = ts.render(ts.cluttered_table(), seed=seed)
+    view = tt.perceive(frame.depth_m, frame.camera_k, frame.base_T_camera)
+    space = tg.FreeSpace(view)
+    moduli = np.where(view.grid_labels > 0, 2e5, 0.0).astype(np.float32)
+    rng = np.random.default_rng(seed)
+    found = 0
+    for label, box in tg.label_boxes(view.grid_labels).items():
+        rows, cols = np.nonzero(view.grid_labels[box] == label)
+        pick = rng.choice(rows.size, min(6, rows.size), replace=False)
+        cells = [(int(r) + box[0].start, int(c) + box[1].start) for r, c in zip(rows[pick], cols[pick])]
+        angles = rng.random(len(cells)) * math.pi
+        faces = tg.object_face_angles(view, label, box)
+        probes = tg._centre_lines(view, space, cells, list(angles), faces)
+        widths, qualities = [0.03] * len(cells), list(rng.random(len(cells)))
+        together = tg._feasible_at_peaks(view, label, cells, probes, widths, qualities, moduli, space)
+        for (row, col), angle, q, grasp in zip(cells, angles, qualities, together):
+            assert grasp == tg.feasible_grasp(view, label, row, col, angle, 0.03, q, moduli, space, faces)
+            found += grasp is not None
+    assert found >= 5
