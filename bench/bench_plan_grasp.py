@@ -123,18 +123,30 @@ class Cell:
     def __init__(self, context, name="bench_plan_grasp_client", executor="events"):
         from defgg_interfaces.srv import PlanGrasp
         from rclpy.node import Node
-        from sensor_msgs.msg import CameraInfo, Image
 
-        from defgg_ros.nodes import qos
         from defgg_ros.ros import topics
 
         self.node = Node(name, context=context)
         self.executor = make_executor(executor, context)
         self.executor.add_node(self.node)
         self.client = self.node.create_client(PlanGrasp, topics.PLAN_GRASP_SERVICE)
-        self.pubs = [self.node.create_publisher(Image, topics.DEPTH_IMAGE, qos.SENSOR_DATA),
-                     self.node.create_publisher(Image, topics.STIFFNESS_IMAGE, qos.SENSOR_DATA),
-                     self.node.create_publisher(CameraInfo, topics.DEPTH_CAMERA_INFO, qos.SENSOR_DATA)]
+        self._pubs = None
+
+    @property
+    def pubs(self):
+        """Camera publishers of this process, made when first used (--camera-hz 0 only): while they exist,
+        the node's camera readers see a best-effort publisher beside the camera process's reliable one and
+        subscribe best effort (nodes/qos.py), which no real cell does."""
+        from sensor_msgs.msg import CameraInfo, Image
+
+        from defgg_ros.nodes import qos
+        from defgg_ros.ros import topics
+
+        if self._pubs is None:
+            self._pubs = [self.node.create_publisher(Image, topics.DEPTH_IMAGE, qos.SENSOR_DATA),
+                          self.node.create_publisher(Image, topics.STIFFNESS_IMAGE, qos.SENSOR_DATA),
+                          self.node.create_publisher(CameraInfo, topics.DEPTH_CAMERA_INFO, qos.SENSOR_DATA)]
+        return self._pubs
 
     def call(self, request, timeout_s=30.0):
         future = self.client.call_async(request)

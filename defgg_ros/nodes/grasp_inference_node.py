@@ -374,10 +374,9 @@ class GraspInferenceNode(Node):
             _, grasps = self._search(perceived, top_k)
         seconds = time.perf_counter() - start
         worker = self._worker
-        searched = "search made before the request" if on_arrival else f"searched {(seconds - waited) * 1e3:.1f} ms"
         note = (f"; frame perceived on arrival ({perceived.seconds * 1e3:.1f} ms; waited {waited * 1e3:.1f} ms, "
-                f"{searched}; {worker.prepared} of {worker.submitted} "
-                f"synchronised frames perceived)")
+                f"searched {(seconds - waited) * 1e3:.1f} ms; {worker.prepared} of {worker.submitted} "
+                f"synchronised frames perceived{'; top_k searched on arrival' if on_arrival else ''})")
         return grasps, seconds, note
 
     # --- PlanGrasp ----------------------------------------------------------
