@@ -65,11 +65,12 @@ from defgg_ros.perception.self_filter import RobotSelfFilter
 from defgg_ros.perception.stiffness_assignment import check_entries_fit_image, make_entry
 from defgg_ros.perception.stiffness_segmenter import SegmenterConfig, run_segmenter
 from defgg_ros.perception.sync import StampSynchronizer
+from defgg_ros.perception.table_pose import TABLE_FRAME_ID, PoseFromTable
 from defgg_ros.perception.tabletop import TabletopConfig, WorkspaceBox
 from defgg_ros.planning.tabletop_grasps import base_T_grasp, image_projection
 from defgg_ros.planning.tabletop_planner import TabletopPlanner
 from defgg_ros.ros.memory import keep_freed_memory
-from defgg_ros.ros.parameters import declare_parameters, load_schema
+from defgg_ros.ros.parameters import at_default, declare_parameters, load_schema
 from defgg_ros.ros.share import share_path
 from defgg_ros.ros.tf import CameraPose, TfBroadcaster, transform_msg
 
@@ -144,6 +145,7 @@ class PerceivedFrame:
     base_T_camera: np.ndarray
     prepared: object                # planning.tabletop_planner.PreparedFrame
     seconds: float                  # wall time of the preparation
+    pose_frame_id: str              # the frame of base_T_camera and of the grasps: base_frame, or TABLE_FRAME_ID
     searches: _Searches = dataclasses.field(default_factory=_Searches, compare=False)
 
 
@@ -155,6 +157,7 @@ class _Perceived:
     base_T_camera: np.ndarray
     objects: object                 # planning.tabletop_planner.PerceivedObjects
     seconds: float                  # wall time so far
+    pose_frame_id: str              # base_frame, or TABLE_FRAME_ID when the pose is a table frame
 
 
 class GraspInferenceNode(Node):
@@ -193,7 +196,11 @@ class GraspInferenceNode(Node):
         self._quality_pub = self.create_publisher(Image, p["quality_topic"], qos.SENSOR_DATA)
         self._marker_pub = self.create_publisher(MarkerArray, p["markers_topic"], qos.STATE)
         self._tf_broadcaster = TfBroadcaster(self)  # the planned grasp as TF frame grasp_frame
-        self._camera_pose = CameraPose(self, self._base_T_camera)   # TF, the parameter as fallback
+        # TF, the parameter as fallback, and a table frame when the parameter is still the schema's placeholder
+        # and finds no table (tabletop planner; a configured pose is never second-guessed).
+        table_poses = PoseFromTable(self._tabletop.config) if self._tabletop is not None and \
+            p["camera_pose_from_table"] and at_default(PARAMETERS, "base_T_camera", list(p["base_T_camera"])) else None
+        self._camera_pose = CameraPose(self, self._base_T_camera, table_poses)
         # Reliability follows the publishers', and silence is logged (qos.SensorSubscription, issue 26).
         self._stream_subs = [
             qos.SensorSubscription(self, Image, p["depth_topic"], lambda m: self._on_stream("depth", m),
@@ -310,12 +317,15 @@ class GraspInferenceNode(Node):
         if isinstance(frame, dict):
             frame = self._convert_matched(frame)
         start = time.perf_counter()
-        base_T_camera = self.base_T_camera_for(frame.header)
+        base_T_camera, source = self._camera_pose.resolve(self._p["base_frame"], frame.header.frame_id,
+                                                          frame.depth_m, frame.camera_k)
         with self._state_lock:
-            joints = self._joint_positions
+            # In a table frame the robot's links cannot be placed in the image: no self-filter.
+            joints = None if source == "table" else self._joint_positions
         objects = self._tabletop.perceive(frame.depth_m, frame.camera_k, base_T_camera, frame.youngs_modulus_pa,
                                           frame.entries, joints, checkpoint)
-        return _Perceived(frame, base_T_camera, objects, time.perf_counter() - start)
+        pose_frame_id = TABLE_FRAME_ID if source == "table" else self._p["base_frame"]
+        return _Perceived(frame, base_T_camera, objects, time.perf_counter() - start, pose_frame_id)
 
     def _network_stage(self, perceived: _Perceived, checkpoint, search: bool = True) -> PerceivedFrame:
         """The second stage: the network on the height map and the free space (TabletopPlanner.network); on
@@ -324,7 +334,7 @@ class GraspInferenceNode(Node):
         start = time.perf_counter()
         prepared = self._tabletop.network(perceived.objects, checkpoint)
         out = PerceivedFrame(perceived.frame, perceived.base_T_camera, prepared,
-                             perceived.seconds + time.perf_counter() - start)
+                             perceived.seconds + time.perf_counter() - start, perceived.pose_frame_id)
         if search:
             wanted = self._requested_top_k.recent() | ({1} if self._p["publish_on_sync"] else set())
             for top_k in sorted(wanted):
@@ -353,8 +363,8 @@ class GraspInferenceNode(Node):
         """(TabletopResult, Grasp messages) of a perceived frame, searched once per top_k (_Searches)."""
         def search():
             result = self._tabletop.search(perceived.prepared, top_k)
-            return result, [self._tabletop_grasp_msg(g, perceived.frame, perceived.base_T_camera)
-                            for g in result.grasps]
+            return result, [self._tabletop_grasp_msg(g, perceived.frame, perceived.base_T_camera,
+                                                     perceived.pose_frame_id) for g in result.grasps]
         return perceived.searches.get(top_k, search)
 
     def _plan_latest_perceived(self, top_k: int):
@@ -494,13 +504,14 @@ class GraspInferenceNode(Node):
         result, grasps = self._search(perceived, top_k)
         return result, grasps, time.perf_counter() - start
 
-    def _tabletop_grasp_msg(self, grasp, frame: Frame, base_T_camera) -> Grasp:
+    def _tabletop_grasp_msg(self, grasp, frame: Frame, base_T_camera, pose_frame_id: str) -> Grasp:
+        """pose_base is in pose_frame_id: the base frame, or the table frame (which the executor refuses)."""
         b_T_g = base_T_grasp(grasp)
         image = image_projection(grasp, base_T_camera, frame.camera_k)
         msg = Grasp(header=frame.header)
         camera_T_grasp = np.linalg.inv(base_T_camera) @ b_T_g
         msg.pose_camera = PoseStamped(header=frame.header, pose=pose_from_transform(camera_T_grasp))
-        msg.pose_base = PoseStamped(header=Header(stamp=frame.header.stamp, frame_id=self._p["base_frame"]),
+        msg.pose_base = PoseStamped(header=Header(stamp=frame.header.stamp, frame_id=pose_frame_id),
                                     pose=pose_from_transform(b_T_g))
         msg.width_m = float(grasp.width_m)
         msg.quality = float(grasp.quality)

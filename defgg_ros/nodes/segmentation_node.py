@@ -40,8 +40,9 @@ from defgg_ros.perception.stiffness_segmenter import (
     entries_to_dicts,
     run_segmenter,
 )
+from defgg_ros.perception.table_pose import PoseFromTable
 from defgg_ros.perception.tabletop import TabletopConfig, WorkspaceBox
-from defgg_ros.ros.parameters import declare_parameters, load_schema
+from defgg_ros.ros.parameters import at_default, declare_parameters, load_schema
 from defgg_ros.ros.tf import CameraPose
 
 WARN_THROTTLE_S = 2.0
@@ -81,7 +82,11 @@ class SegmentationNode(Node):
             self.create_subscription(JointState, p["joint_states_topic"], self._on_joint_states, qos.SENSOR_DATA)
         self.create_service(SetStiffness, p["set_stiffness_service"], self._on_set_stiffness)
         self.create_service(Trigger, p["capture_background_service"], self._on_capture_background)
-        self._camera_pose = CameraPose(self, self._base_T_camera)   # TF, the parameter as fallback
+        # TF, the parameter as fallback, and a table frame when the parameter is still the schema's placeholder
+        # and finds no table (tabletop; a configured pose is never second-guessed).
+        unset = at_default(PARAMETERS, "base_T_camera", list(p["base_T_camera"]))
+        self._camera_pose = CameraPose(self, self._base_T_camera,
+                                       PoseFromTable() if p["camera_pose_from_table"] and unset else None)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._publish_assignments()
 
@@ -148,8 +153,14 @@ class SegmentationNode(Node):
             self._last_depth_m = depth_m
             with self._lock:
                 config = self._config
-            base_T_camera = self.base_T_camera_for(msg.header)
-            robot = self._robot_mask(depth_m, camera_k, base_T_camera) if config.tabletop is not None else None
+            if config.tabletop is not None:
+                base_T_camera, source = self._camera_pose.resolve(self.get_parameter("base_frame").value,
+                                                                  msg.header.frame_id, depth_m, camera_k,
+                                                                  config.tabletop)
+                # In a table frame the robot's links cannot be placed in the image: no self-filter.
+                robot = None if source == "table" else self._robot_mask(depth_m, camera_k, base_T_camera)
+            else:
+                base_T_camera, robot = self.base_T_camera_for(msg.header), None
             out = run_segmenter(config, depth_m, camera_k, robot, base_T_camera)
         except ValueError as exc:
             self.frames_rejected += 1

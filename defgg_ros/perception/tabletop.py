@@ -153,7 +153,8 @@ class TabletopView:
         return -(d + n[0] * x_m + n[1] * y_m) / n[2]
 
 
-def _pixel_rays(camera_k, shape):
+def pixel_rays(camera_k, shape):
+    """Normalised image coordinates (x / z per column, y / z per row) of a frame's pixels."""
     k = check_camera_matrix(camera_k)
     h, w = shape
     xn = ((np.arange(w) - k[0, 2]) / k[0, 0]).astype(np.float32)
@@ -206,9 +207,9 @@ def fit_table(depth, xn, yn, base_T_camera, config: TabletopConfig, rng_seed: in
     if not upright.any():
         raise TabletopError("no table plane within 15 degrees of the base's horizontal")
     normals, offsets = normals[upright], offsets[upright]
-    counts = np.count_nonzero(np.abs(_plane_distances(points, normals, offsets)) < PLANE_INLIER_M, axis=0)
+    counts = np.count_nonzero(np.abs(plane_distances(points, normals, offsets)) < PLANE_INLIER_M, axis=0)
     best = int(np.argmax(counts))
-    inliers = points[np.abs(_plane_distances(points, normals[best:best + 1], offsets[best:best + 1])[:, 0])
+    inliers = points[np.abs(plane_distances(points, normals[best:best + 1], offsets[best:best + 1])[:, 0])
                      < PLANE_INLIER_M]
     centroid = inliers.mean(axis=0)
     centred = inliers - centroid
@@ -219,7 +220,7 @@ def fit_table(depth, xn, yn, base_T_camera, config: TabletopConfig, rng_seed: in
     return normal, -float(normal @ centroid)
 
 
-def _plane_distances(points, normals, offsets) -> np.ndarray:
+def plane_distances(points, normals, offsets) -> np.ndarray:
     """N x M signed distances of N points to M planes, written out per coordinate: a matmul with an
     inner dimension of 3 goes to multi-threaded BLAS, whose threads cost 5-8 ms a call when the
     cores are busy (measured with the cell's other jobs running), the broadcast ~1 ms."""
@@ -254,7 +255,7 @@ def perceive(depth_m, camera_k, base_T_camera, config: TabletopConfig | None = N
     depth = fill_holes(full[::stride, ::stride])
     k = k_full.copy()
     k[:2] /= stride
-    xn, yn = _pixel_rays(k, depth.shape)
+    xn, yn = pixel_rays(k, depth.shape)
     normal, offset = fit_table(depth, xn, yn, pose, config)
     checkpoint()
     # Height above the table of every pixel: n . (R p_cam + t) + d, separable in u and v.

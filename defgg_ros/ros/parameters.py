@@ -92,6 +92,14 @@ def defaults(node_name: str) -> dict:
     return {name: spec.default for name, spec in load_schema(node_name).items()}
 
 
+def at_default(specs: dict, name: str, value) -> bool:
+    """Whether a parameter's value is its schema default (specs: load_schema's result); arrays element-wise."""
+    default = specs[name].default
+    if isinstance(default, (list, tuple)):
+        return isinstance(value, (list, tuple)) and list(value) == list(default)
+    return value == default
+
+
 def _spec_from_entry(path: Path, name: str, entry) -> ParameterSpec:
     if not isinstance(entry, dict) or not {"type", "default_value", "description"} <= set(entry):
         raise SchemaError(f"{path}: {name} needs type, default_value and description")

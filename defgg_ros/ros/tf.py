@@ -206,18 +206,40 @@ class TfBroadcaster:
 
 class CameraPose:
     """A node's camera pose per frame: TF's base_frame -> the frame's camera frame (latest transform), else
-    a fallback (the base_T_camera parameter); each change of source is logged once."""
+    a fallback (the base_T_camera parameter), else, when the parameter puts no table under the camera in the
+    frame and `table_poses` is given, a table frame estimated from the depth (perception/table_pose.py);
+    each change of source is logged once (the table frame as a warning: its grasps are not in the robot's
+    frame)."""
 
-    def __init__(self, node, fallback: np.ndarray):
+    def __init__(self, node, fallback: np.ndarray, table_poses=None):
         self._listener = TfListener(node)
         self._fallback = np.asarray(fallback, dtype=float)
+        self._table_poses = table_poses
         self._logger = node.get_logger()
         self._source = None
 
     def lookup(self, base_frame: str, camera_frame: str) -> np.ndarray:
+        """TF, else the parameter (no look at the frame)."""
+        return self.resolve(base_frame, camera_frame)[0]
+
+    def resolve(self, base_frame: str, camera_frame: str, depth_m=None, camera_k=None, table_config=None) -> tuple:
+        """(base_T_camera, source: 'tf', 'parameter' or 'table'). With the frame's depth (m) and K, the parameter
+        is checked against the frame's table (table_config: the tabletop perception's current TabletopConfig).
+        Raises TabletopError when a table frame is needed and the depth shows no table."""
         pose, source = base_T_camera(self._listener, base_frame, camera_frame, self._fallback)
+        if source == "parameter" and self._table_poses is not None and depth_m is not None:
+            pose, estimated = self._table_poses.pose_for(depth_m, camera_k, pose, table_config)
+            source = "table" if estimated else source
         if source != self._source:
             self._source = source
-            self._logger.info(f"camera pose {base_frame} -> {camera_frame or '(no frame id)'} from "
-                              f"{'TF' if source == 'tf' else 'the base_T_camera parameter'}")
-        return pose
+            names = f"{base_frame} -> {camera_frame or '(no frame id)'}"
+            if source == "table":
+                self._logger.warning(
+                    f"camera pose {names}: TF has none and the base_T_camera parameter puts no table under the "
+                    "camera in this frame, so a table frame estimated from the depth is used (the table at "
+                    "table_z_m, the view's centre at the workspace box's centre): grasps are NOT in the robot's "
+                    f"frame and the self-filter is off. Publish {names} on TF or set base_T_camera.")
+            else:
+                self._logger.info(f"camera pose {names} from "
+                                  f"{'TF' if source == 'tf' else 'the base_T_camera parameter'}")
+        return pose, source
