@@ -451,3 +451,29 @@ def cluttered_table(width_px: int = 640, height_px: int = 480, fx_px: float | No
 def overhead_single(obj, width_px: int = 640, height_px: int = 480, height_m: float = 0.55) -> TabletopScene:
     """One object under a camera looking straight down from height_m above (0.5, 0)."""
     return TabletopScene((obj,), look_at((0.5, 0.0, height_m), (0.5, 0.0, 0.0)), width_px, height_px)
+
+
+def hand_fingers_in_view(base_T_camera, camera_k, height_px: int, distance_m: float = 0.17,
+                         gap_m: float = 0.05) -> tuple:
+    """The Franka hand's two fingers as a wrist camera sees them: boxes (18 x 20 x 55 mm, like the Panda's
+    finger) hanging at the image's bottom edge, their nearest face distance_m along the bottom rows' central
+    ray, gap_m apart across the image; drawn as robot parts (the camera is on the hand above them)."""
+    k = np.asarray(camera_k, float)
+    ray = np.array([0.0, (height_px - 1 - k[1, 2]) / k[1, 1], 1.0])          # bottom row, centre column
+    point = base_T_camera[:3, :3] @ (ray * distance_m) + base_T_camera[:3, 3]
+    across = base_T_camera[:3, 0]                                             # image x in the base frame
+    fingers = []
+    for side in (-1.0, 1.0):
+        centre = point + side * (gap_m / 2 + 0.009) * across
+        fingers.append(Box((float(centre[0]), float(centre[1])), (0.018, 0.02, 0.055),
+                           z_bottom_m=float(point[2] - 0.055), name=f"finger {'left' if side < 0 else 'right'}"))
+    return tuple(fingers)
+
+
+def overhead_with_fingers(obj, width_px: int = 640, height_px: int = 480, height_m: float = 0.40,
+                          finger_distance_m: float = 0.17) -> TabletopScene:
+    """overhead_single from a wrist camera: the hand's fingers hang into view at the image's bottom edge."""
+    scene = overhead_single(obj, width_px, height_px, height_m)
+    fingers = hand_fingers_in_view(scene.base_T_camera, scene.camera_k, height_px, finger_distance_m)
+    return TabletopScene(scene.objects, scene.base_T_camera, width_px, height_px,
+                         robot_parts=scene.robot_parts + fingers)

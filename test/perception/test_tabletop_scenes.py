@@ -177,6 +177,24 @@ def test_overhead_single_objects_best_grasp_on_the_object_and_the_same_opening_a
         assert spread <= 0.003, f"{obj.name}: openings {np.round(widths, 4)} m (+-3 mm around their mean)"
 
 
+def test_wrist_camera_with_the_fingers_in_view_best_grasp_on_the_object():
+    """The hand's fingers hang into a wrist camera's view at the image's bottom edge (0.17-0.24 m from the lens,
+    within the workspace's height range): every top-5 grasp must be on the object, none on a finger."""
+    for index, obj in enumerate(SINGLES):
+        for w, h in ts.MODES:
+            distance = (0.17, 0.24)[index % 2]
+            scene = ts.overhead_with_fingers(obj, w, h, height_m=0.38, finger_distance_m=distance)
+            frame = ts.render(scene, seed=w + index)
+            assert np.count_nonzero(frame.labels == ts.ROBOT_LABEL) > 0.01 * w * h      # the fingers are in view
+            view = perceive(frame.depth_m, frame.camera_k, frame.base_T_camera)
+            grasps = plan_tabletop_grasps(view, MODEL, None, top_k=5)
+            assert grasps, f"{obj.name} at {w}x{h}: no grasp"
+            for grasp in grasps:
+                uv = image_projection(grasp, frame.base_T_camera, frame.camera_k)
+                u, v = min(w - 1, int(round(uv["u_px"]))), min(h - 1, int(round(uv["v_px"])))
+                assert frame.labels[v, u] == 1, f"{obj.name} at {w}x{h}: a grasp at ({u}, {v}) is not on it"
+
+
 def test_the_height_map_has_the_networks_training_scale_at_every_resolution():
     assert CELL_M == pytest.approx(0.40 / 385.0)
     extents = []
