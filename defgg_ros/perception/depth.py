@@ -42,7 +42,7 @@ def _from_millimetres(array: np.ndarray) -> np.ndarray:
     valid = array > 0
     if not np.any(valid):
         raise DepthError("depth image has no valid pixel (all zero)")
-    _check_plausible(array, "16UC1", float(np.median(array[valid])) / MILLIMETRES_PER_METRE)
+    _check_plausible(array, "16UC1", _valid_median(array, valid) / MILLIMETRES_PER_METRE)
     depth_m = array.astype(np.float32) / np.float32(MILLIMETRES_PER_METRE)
     depth_m[~valid] = np.nan
     return depth_m
@@ -55,9 +55,24 @@ def _from_metres(array: np.ndarray) -> np.ndarray:
     valid = np.isfinite(depth_m) & (depth_m > 0)
     if not np.any(valid):
         raise DepthError("depth image has no valid pixel (all NaN, Inf or <= 0)")
-    _check_plausible(array, "32FC1", float(np.median(depth_m[valid])))
+    _check_plausible(array, "32FC1", _valid_median(depth_m, valid))
     depth_m[~valid] = np.nan
     return depth_m
+
+
+# The plausibility median is read from every n-th pixel of a larger frame: it looks for gross errors (units,
+# byte order), and the full median of a 1280x720 frame costs ~2 ms per frame (the node's profile at 30 Hz).
+MEDIAN_SAMPLE_STRIDE = 4
+MEDIAN_FULL_BELOW_PX = 200_000
+
+
+def _valid_median(values: np.ndarray, valid: np.ndarray) -> float:
+    if values.size >= MEDIAN_FULL_BELOW_PX and values.ndim == 2:
+        sample, sample_valid = values[::MEDIAN_SAMPLE_STRIDE, ::MEDIAN_SAMPLE_STRIDE], \
+            valid[::MEDIAN_SAMPLE_STRIDE, ::MEDIAN_SAMPLE_STRIDE]
+        if np.count_nonzero(sample_valid) >= 1000:
+            return float(np.median(sample[sample_valid]))
+    return float(np.median(values[valid]))
 
 
 def _check_plausible(array: np.ndarray, encoding: str, median_m: float) -> None:
