@@ -73,8 +73,8 @@ def dominant_plane(points: np.ndarray, rng_seed: int = 0):
     offsets = -np.einsum("ij,ij->i", normals, triples[:, 0])
     flip = offsets < 0                       # the camera (the origin) on the normal's side: d > 0
     normals[flip], offsets[flip] = -normals[flip], -offsets[flip]
-    # Facing the camera: the ray to the plane's foot point (-d n) meets it within MAX_VIEW_ANGLE_DEG of its
-    # normal; rays to the inliers' centroid are checked after the fit.
+    # Planes in the order of their inlier counts; the first whose fit the camera looks onto (the ray to its
+    # inliers' centroid within MAX_VIEW_ANGLE_DEG of its normal) wins.
     distances = np.abs(plane_distances(points, normals, offsets))   # N x H
     counts = np.count_nonzero(distances < INLIER_M, axis=0)
     for best in np.argsort(-counts):
@@ -93,7 +93,7 @@ def dominant_plane(points: np.ndarray, rng_seed: int = 0):
 def _refine(inliers: np.ndarray, normal_hint: np.ndarray):
     centroid = inliers.mean(axis=0)
     centred = inliers - centroid
-    _, vectors = np.linalg.eigh(centred.T @ centred)
+    _, vectors = np.linalg.eigh(np.einsum("ni,nj->ij", centred, centred))   # no BLAS threads (tabletop.py)
     normal = vectors[:, 0] * np.sign(vectors[:, 0] @ normal_hint + 1e-12)
     offset = -float(normal @ centroid)
     if offset < 0:
