@@ -30,7 +30,7 @@ the image or without a return are not):
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
@@ -180,6 +180,9 @@ class TabletopNetworkView:
     space: FreeSpace | None
     min_distance_px: int
     q_threshold: float
+    # (label, (row, col)) -> the peak's grasp or None: a peak's feasibility does not depend on the search
+    # (top_k, targets), so a frame's searches share it (the worker's top_k 1 and a client's top_k 5).
+    peak_grasps: dict = field(default_factory=dict, compare=False, repr=False)
 
 
 def prepare_tabletop(view: TabletopView, predictor, youngs_modulus_pa=None, default_pa: float = 2e6,
@@ -218,8 +221,7 @@ def search_tabletop(prepared: TabletopNetworkView, top_k: int = 1, targets=None)
         firsts = sorted((g[0].quality for g in per_object.values()), reverse=True)
         if len(firsts) >= top_k and firsts[top_k - 1] >= best_q[label]:
             break
-        found = _object_grasps(view, label, boxes[label], maps, prepared.moduli, prepared.space,
-                               prepared.min_distance_px, prepared.q_threshold, top_k)
+        found = _object_grasps(prepared, label, top_k)
         if found:
             per_object[label] = found
     firsts = sorted((g[0] for g in per_object.values()), key=lambda g: -g.quality)
@@ -227,21 +229,27 @@ def search_tabletop(prepared: TabletopNetworkView, top_k: int = 1, targets=None)
     return TabletopPlan((firsts + rest)[:top_k], maps.q)
 
 
-def _object_grasps(view, label, box, maps, moduli, space, min_distance_px, threshold, top_k) -> list:
+def _object_grasps(prepared: TabletopNetworkView, label: int, top_k: int) -> list:
     """An object's feasible grasps, best first: its quality peaks in order, the first feasible one,
-    then (for top_k > 1) distinct alternatives. box: the object's bounding box in the height map."""
-    peaks = find_peaks(maps.q[box], min_distance_px, threshold, view.grid_labels[box] == label,
+    then (for top_k > 1) distinct alternatives."""
+    view, maps, box = prepared.view, prepared.maps, prepared.boxes[label]
+    peaks = find_peaks(maps.q[box], prepared.min_distance_px, prepared.q_threshold, view.grid_labels[box] == label,
                        top_k=max(PEAKS_PER_OBJECT, top_k), fill=True)
-    faces = object_face_angles(view, label, box)
     cells = [(r + box[0].start, c + box[1].start) for r, c in peaks]
-    at = [maps.at_pixel(row, col) for row, col in cells]
-    # Every peak's centre lines in one free-space pass, every peak's feasibility in one more: a wide
-    # object's peaks all end there, and the per-call overhead, not the arithmetic, is what costs.
-    probes = _centre_lines(view, space, cells, [angle for angle, _ in at], faces)
-    grasps = _feasible_at_peaks(view, label, cells, probes, [width_px * CELL_M for _, width_px in at],
-                                [float(maps.q[row, col]) for row, col in cells], moduli, space)
+    memo = prepared.peak_grasps
+    todo = [cell for cell in cells if (label, cell) not in memo]
+    if todo:
+        # Every new peak's centre lines in one free-space pass, their feasibility in one more: a wide
+        # object's peaks all end there, and the per-call overhead, not the arithmetic, is what costs.
+        at = [maps.at_pixel(row, col) for row, col in todo]
+        probes = _centre_lines(view, prepared.space, todo, [angle for angle, _ in at],
+                               object_face_angles(view, label, box))
+        grasps = _feasible_at_peaks(view, label, todo, probes, [width_px * CELL_M for _, width_px in at],
+                                    [float(maps.q[row, col]) for row, col in todo], prepared.moduli, prepared.space)
+        memo.update(((label, cell), grasp) for cell, grasp in zip(todo, grasps))
     found = []
-    for grasp in grasps:
+    for cell in cells:
+        grasp = memo[(label, cell)]
         if grasp is not None and all(_distinct(grasp, other) for other in found):
             found.append(grasp)
             if len(found) >= top_k:

@@ -204,3 +204,18 @@ def test_the_height_map_has_the_networks_training_scale_at_every_resolution():
         view = perceive(frame.depth_m, frame.camera_k, frame.base_T_camera)
         extents.append(view.areas_m2[view.object_ids[0]])
     assert max(extents) / min(extents) < 1.15     # the same footprint in square metres
+
+
+def test_searches_sharing_a_frame_give_the_grasps_of_searches_on_their_own():
+    """A frame's searches share each peak's feasibility (TabletopNetworkView.peak_grasps): in any order, every
+    top_k gives the grasps a search on a freshly prepared frame gives."""
+    from defgg_ros.planning.tabletop_grasps import prepare_tabletop, search_tabletop
+
+    frame = ts.render(ts.cluttered_table(848, 480), seed=5)
+    view = perceive(frame.depth_m, frame.camera_k, frame.base_T_camera)
+    shared = prepare_tabletop(view, MODEL)
+    for top_k in (5, 1, 3, 10, 2):
+        alone = search_tabletop(prepare_tabletop(view, MODEL), top_k).grasps
+        assert search_tabletop(shared, top_k).grasps == alone, f"top_k {top_k}"
+        assert alone
+    assert len(shared.peak_grasps) >= 10
