@@ -198,9 +198,11 @@ class GraspInferenceNode(Node):
         self._tf_broadcaster = TfBroadcaster(self)  # the planned grasp as TF frame grasp_frame
         # TF, the parameter as fallback, and a table frame when the parameter is still the schema's placeholder
         # and finds no table (tabletop planner; a configured pose is never second-guessed).
+        placeholder = at_default(PARAMETERS, "base_T_camera", list(p["base_T_camera"]))
         table_poses = PoseFromTable(self._tabletop.config) if self._tabletop is not None and \
-            p["camera_pose_from_table"] and at_default(PARAMETERS, "base_T_camera", list(p["base_T_camera"])) else None
-        self._camera_pose = CameraPose(self, self._base_T_camera, table_poses)
+            p["camera_pose_from_table"] and placeholder else None
+        self._camera_pose = CameraPose(self, self._base_T_camera, table_poses, bool(p["publish_camera_pose"]),
+                                       fallback_is_placeholder=placeholder)
         # Reliability follows the publishers', and silence is logged (qos.SensorSubscription, issue 26).
         self._stream_subs = [
             qos.SensorSubscription(self, Image, p["depth_topic"], lambda m: self._on_stream("depth", m),

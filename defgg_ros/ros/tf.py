@@ -17,9 +17,13 @@ Not supported (say so rather than guess): a camera moving relative to the base (
 needs transforms at the image's stamp; this tree keeps only the latest transform of each frame.
 """
 import threading
+import time
 
 import numpy as np
 
+from defgg_ros.perception.table_pose import TABLE_FRAME_ID
+
+FALLBACK_PUBLISH_DELAY_S = 2.0
 TF_TOPIC = "/tf"            # absolute, as tf2_ros uses them; remap for a namespaced robot
 TF_STATIC_TOPIC = "/tf_static"
 
@@ -68,6 +72,11 @@ class TransformTree:
             raise LookupError(f"no TF path from '{source_frame}' to '{target_frame}' "
                               f"(their trees end at '{root_s}' and '{root_t}'; frames known: {known})")
         return np.linalg.inv(root_T_target) @ root_T_source
+
+    def root_of(self, frame: str):
+        """(root frame of frame's tree, root_T_frame 4x4); (frame, identity) for a frame TF does not know."""
+        with self._lock:
+            return self._to_root(frame.lstrip("/"))
 
     def _to_root(self, frame: str):
         """(root frame, root_T_frame) following parents (lock held)."""
@@ -209,14 +218,29 @@ class CameraPose:
     a fallback (the base_T_camera parameter), else, when the parameter puts no table under the camera in the
     frame and `table_poses` is given, a table frame estimated from the depth (perception/table_pose.py);
     each change of source is logged once (the table frame as a warning: its grasps are not in the robot's
-    frame)."""
+    frame).
 
-    def __init__(self, node, fallback: np.ndarray, table_poses=None):
+    publish: the pose in use goes on /tf_static, so RViz and other nodes see what the cell uses. A parameter
+    pose as base_frame -> the root of the camera's TF tree (base -> camera_link when realsense2_camera
+    publishes camera_link -> ... -> the optical frame; a frame has one parent, so never base -> optical frame
+    then); a table frame as the camera frame's child `TABLE_FRAME_ID` (the grasps' frame then). A fallback
+    that is only a placeholder (fallback_is_placeholder: the parameter left at its default) is not published
+    as if it were a calibration. Once published, the node's own lookups find the pose on TF (logged as such)."""
+
+    def __init__(self, node, fallback: np.ndarray, table_poses=None, publish: bool = False,
+                 fallback_is_placeholder: bool = False):
         self._listener = TfListener(node)
         self._fallback = np.asarray(fallback, dtype=float)
         self._table_poses = table_poses
         self._logger = node.get_logger()
         self._source = None
+        self._static = TfBroadcaster(node, static=True) if publish else None
+        self._publish_fallback = not fallback_is_placeholder
+        # A latched calibration (or the fake driver's pose) may reach the node a moment after the first frame:
+        # the parameter is published only once TF had that long to say otherwise.
+        self._publish_fallback_after = time.monotonic() + FALLBACK_PUBLISH_DELAY_S
+        self._sent = {}                 # (parent, child) -> the parent_T_child last published
+        self._sent_lock = threading.Lock()
 
     def lookup(self, base_frame: str, camera_frame: str) -> np.ndarray:
         """TF, else the parameter (no look at the frame)."""
@@ -228,7 +252,7 @@ class CameraPose:
         Raises TabletopError when a table frame is needed and the depth shows no table."""
         pose, source = base_T_camera(self._listener, base_frame, camera_frame, self._fallback)
         if source == "parameter" and self._table_poses is not None and depth_m is not None:
-            pose, estimated = self._table_poses.pose_for(depth_m, camera_k, pose, table_config)
+            pose, estimated = self._table_poses.pose_for(depth_m, camera_k, pose)
             source = "table" if estimated else source
         if source != self._source:
             self._source = source
@@ -242,4 +266,23 @@ class CameraPose:
             else:
                 self._logger.info(f"camera pose {names} from "
                                   f"{'TF' if source == 'tf' else 'the base_T_camera parameter'}")
+        if self._static is not None and camera_frame:
+            self._publish(base_frame, camera_frame.lstrip("/"), pose, source)
         return pose, source
+
+    def _publish(self, base_frame: str, camera_frame: str, pose: np.ndarray, source: str) -> None:
+        if source == "parameter" and self._publish_fallback and time.monotonic() >= self._publish_fallback_after:
+            root, root_T_camera = self._listener.tree.root_of(camera_frame)
+            parent, child, matrix = base_frame, root, pose @ np.linalg.inv(root_T_camera)
+        elif source == "table":
+            parent, child, matrix = camera_frame, TABLE_FRAME_ID, np.linalg.inv(pose)
+        else:
+            return
+        with self._sent_lock:
+            last = self._sent.get((parent, child))
+            if last is not None and np.allclose(last, matrix, atol=1e-9):
+                return
+            self._sent[(parent, child)] = matrix
+            transforms = [transform_msg(p, c, m) for (p, c), m in self._sent.items()]
+        # /tf_static is latched per publisher: every transform this node publishes goes in each message.
+        self._static.send(*transforms)

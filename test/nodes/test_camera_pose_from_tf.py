@@ -1,4 +1,6 @@
 """Perception takes the camera pose from TF (base -> the depth frame's frame_id), the parameter as fallback."""
+import time
+
 import numpy as np
 import pytest
 from rclpy.node import Node
@@ -26,3 +28,74 @@ def test_segmentation_node_uses_the_calibrated_camera_pose_on_tf(executor, spin)
     np.testing.assert_allclose(node.base_T_camera_for(header), tilted, atol=1e-9)
     # a frame id TF does not know falls back to the parameter
     np.testing.assert_allclose(node.base_T_camera_for(Header(frame_id="other_camera")), parameter_pose)
+
+
+def _frame_request():
+    """A tilted cluttered-table frame as a PlanGrasp request, and its true base_T_camera."""
+    from defgg_interfaces.srv import PlanGrasp
+
+    from defgg_ros.nodes.conversions import depth_metres_to_msg, make_camera_info
+    from defgg_ros.perception import tabletop_scenes as ts
+
+    frame = ts.render(ts.cluttered_table(640, 480), seed=7)
+    header = Header(frame_id="camera_depth_optical_frame")
+    request = PlanGrasp.Request(depth=depth_metres_to_msg(frame.depth_m, "16UC1", header),
+                                camera_info=make_camera_info(frame.camera_k, 640, 480, header), top_k=1)
+    return request, frame.base_T_camera
+
+
+def _tf_probe(executor):
+    from defgg_ros.ros.tf import TfListener
+
+    probe = Node("tf_probe", context=executor.context)
+    executor.add_node(probe)
+    return TfListener(probe)
+
+
+def test_the_configured_camera_pose_is_published_under_the_cameras_own_tree(inference_service, executor, spin,
+                                                                            call):
+    """base_T_camera set, no calibration on TF, realsense2_camera's own camera_link -> optical frame on
+    /tf_static: the node publishes base -> camera_link so that base -> optical frame is its parameter."""
+    from defgg_ros.perception.geometry import transform_to_xyz_quaternion
+    from defgg_ros.ros.tf import TfBroadcaster, transform_msg
+
+    request, base_T_camera = _frame_request()
+    driver = Node("realsense_like", context=executor.context)
+    executor.add_node(driver)
+    link_T_optical = np.eye(4)
+    link_T_optical[:3, :3] = [[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]]
+    link_T_optical[:3, 3] = [0.0, 0.015, 0.0]
+    TfBroadcaster(driver, static=True).send(transform_msg("camera_link", "camera_depth_optical_frame",
+                                                          link_T_optical))
+    listener = _tf_probe(executor)
+    xyz, quaternion = transform_to_xyz_quaternion(base_T_camera)
+    node, _, client = inference_service("pose_publisher_probe", base_T_camera=[*xyz.tolist(), *quaternion.tolist()],
+                                        base_frame="fr3_link0")
+    spin(executor, lambda: "camera_link" in node._camera_pose._listener.tree.frames(), 10.0,
+         "the node knows realsense's tree")
+    def connected():
+        try:
+            listener.lookup("fr3_link0", "camera_depth_optical_frame")
+        except LookupError:
+            return False
+        return True
+
+    # The parameter goes on TF once TF had FALLBACK_PUBLISH_DELAY_S to give a calibration instead.
+    deadline = time.monotonic() + 20.0
+    while not connected() and time.monotonic() < deadline:
+        assert call(executor, client, request, 60.0, "plan_grasp").success
+        executor.spin_once(timeout_sec=0.5)
+    assert connected(), "base -> camera never appeared on /tf_static"
+    np.testing.assert_allclose(listener.lookup("fr3_link0", "camera_depth_optical_frame"), base_T_camera, atol=1e-6)
+    assert listener.tree.root_of("camera_link")[0] == "fr3_link0"       # base -> camera_link, not -> optical
+
+
+def test_a_placeholder_pose_is_not_published_but_a_table_frame_is(inference_service, executor, spin, call):
+    request, _ = _frame_request()
+    listener = _tf_probe(executor)
+    _, _, client = inference_service("pose_publisher_probe")       # base_T_camera left at its default
+    response = call(executor, client, request, 60.0, "plan_grasp")
+    assert response.success and response.grasps[0].pose_base.header.frame_id == "defgg_table_estimate"
+    spin(executor, lambda: "defgg_table_estimate" in listener.tree.frames(), 10.0, "the table frame on TF")
+    assert listener.tree.root_of("defgg_table_estimate")[0] == "camera_depth_optical_frame"
+    assert "panda_link0" not in listener.tree.frames()
