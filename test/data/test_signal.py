@@ -120,3 +120,14 @@ def test_card_has_no_signal_report_for_trials_without_a_shake(tmp_path):
     assert "ran no shake" in "\n".join(signal_section(tmp_path))
     (tmp_path / "dataset.json").write_text(header({}))
     assert "Signal report" in "\n".join(signal_section(tmp_path))
+
+
+def test_the_threshold_moves_the_labels_not_the_measurements():
+    """signal_report(threshold_mps2=...): the same records, another threshold (bench/analyze_threshold_gap.py)."""
+    records = [rec("cube", c, e, held) for c, (e, held) in enumerate([(2e4, 21.0), (2e4, 27.0), (2e9, 21.0),
+                                                                     (2e9, 27.0)])]
+    at_25 = signal_report(records)
+    at_20 = signal_report(records, threshold_mps2=20.0)
+    assert at_25["threshold_mps2"] == 25.0 and at_20["threshold_mps2"] == 20.0
+    assert at_25["positive_rate"]["2e4"]["rate"] == 0.5 and at_20["positive_rate"]["2e4"]["rate"] == 1.0
+    assert at_25["within_scene_share"] == at_20["within_scene_share"]
