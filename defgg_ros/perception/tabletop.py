@@ -356,7 +356,8 @@ def fill_holes(depth_m: np.ndarray) -> np.ndarray:
     whose nearest valid pixel on the right is nearer than the one on the left by more than
     SHADOW_JUMP_M takes the left (background) depth. Any other hole (speckle, a dark object's missing
     returns) takes the nearer of its two neighbours, so it is never emptier than what surrounds it.
-    Rows without any return stay NaN.
+    Rows without any return stay NaN, and so do holes at a row's left end: that is the D4xx's left invalid
+    band (what the right imager cannot see, fB/z pixels wide), unseen space, not a surface to extend.
 
     Worked per run of invalid pixels (a run has one left and one right neighbour), not per pixel:
     a frame has ~1e4 runs and ~5e4 invalid pixels among its 3e5."""
@@ -381,6 +382,7 @@ def fill_holes(depth_m: np.ndarray) -> np.ndarray:
     with np.errstate(invalid="ignore"):
         shadow = right_depth < left_depth - SHADOW_JUMP_M
     fill = np.where(shadow, left_depth, np.fmin(left_depth, right_depth))
+    fill[left_col < 0] = nan                            # the left invalid band (docstring)
     out = depth.copy()
     out[~valid] = np.repeat(fill, ends - starts)
     return out

@@ -10,7 +10,8 @@ TinyRenderer from the Panda's meshes (render_arm_depth), so the self-filter that
 
 The noise model (parameters and sources: docs/perception.md):
 - stereo occlusion shadow: pixels the right imager cannot see (left of foreground edges; the
-  left imager is the depth reference) are invalid (0);
+  left imager is the depth reference) are invalid (0), and so is the left invalid band (fB/z pixels
+  at the image's left edge, outside the right imager's view);
 - depth RMS error sigma_z = z^2 * subpixel / (fx * baseline) (Intel's D400 formula), i.i.d. plus
   a spatially correlated part;
 - flying pixels: next to depth jumps, pixels with a mix of the foreground and background depth;
@@ -344,6 +345,9 @@ def add_realsense_noise(depth_m: np.ndarray, labels: np.ndarray, normals_base: n
     hidden = np.zeros_like(invalid)
     hidden[:, :-1] = x_right[:, :-1] > suffix_min[:, 1:] + 0.5
     invalid |= hidden
+    # The left invalid band: what lies left of the right imager's field of view (fB/z pixels wide, ~40-65 px
+    # at 0.5 m) has no match at all.
+    invalid |= x_right < 0
     # Speckle dropouts.
     seeds = (rng.random((h, w)) < SPECKLE_SEED_FRACTION).astype(np.uint8)
     invalid |= cv2.dilate(seeds, np.ones((3, 3), np.uint8)) > 0

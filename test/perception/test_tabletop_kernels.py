@@ -39,7 +39,9 @@ def _fill_holes_by_pixel(depth: np.ndarray) -> np.ndarray:
                 continue
             left = next((depth[v, i] for i in range(u - 1, -1, -1) if valid[v, i]), np.float32(np.nan))
             right = next((depth[v, i] for i in range(u + 1, w) if valid[v, i]), np.float32(np.nan))
-            if right < left - np.float32(tt.SHADOW_JUMP_M):
+            if np.isnan(left):
+                out[v, u] = np.nan              # the row's left end: the stereo camera's left invalid band
+            elif right < left - np.float32(tt.SHADOW_JUMP_M):
                 out[v, u] = left                # a stereo shadow: the background on the left
             else:
                 out[v, u] = np.fmin(left, right)
