@@ -118,6 +118,7 @@ class SensorSubscription:
         self.subscription = None
         self.reliability = None
         self.messages_received = 0
+        self.mixed_publishers = False   # reliable and best-effort publishers at once (warned)
         self._update()
         self._timer = node.create_timer(RECHECK_PERIOD_S, self._on_timer, callback_group=callback_group)
 
@@ -129,9 +130,17 @@ class SensorSubscription:
         return [info.qos_profile.reliability for info in infos]
 
     def _update(self) -> None:
-        wanted = reliability_for(self._publisher_reliabilities())
+        offered = self._publisher_reliabilities()
+        wanted = reliability_for(offered)
         if wanted == self.reliability:
             return
+        self.mixed_publishers = ReliabilityPolicy.RELIABLE in offered and wanted == ReliabilityPolicy.BEST_EFFORT
+        if self.mixed_publishers:
+            # A best-effort reader never gets a lost fragment again: 5.5 MB camera frames then stalled for
+            # seconds in the PlanGrasp bench (docs/perception.md, "Latency").
+            self._node.get_logger().warning(
+                f"{self._resolved}: a best-effort publisher beside reliable ones makes this reader best effort; "
+                "large frames may be lost or stall for seconds. Keep every publisher of a camera topic reliable.")
         # The new reader first, then the old one goes: the new one needs a moment to match the
         # publishers, and a frame the old one still receives meanwhile is not lost.
         old = self.subscription

@@ -139,6 +139,23 @@ def test_a_silent_stream_is_reported_and_its_return_too(executor, spin):
     assert not watch._warned
 
 
+def test_a_best_effort_publisher_beside_a_reliable_one_is_warned_about(executor, spin):
+    from rclpy.node import Node
+    from sensor_msgs.msg import Image
+
+    from defgg_ros.nodes import qos
+
+    node = Node("mixed_watch", context=executor.context)
+    executor.add_node(node)
+    watch = qos.SensorSubscription(node, Image, "mixed_camera/depth", lambda m: None, warn_after_s=0.0)
+    node.create_publisher(Image, "mixed_camera/depth", qos.IMAGE_PUBLISH)
+    spin(executor, lambda: watch.reliability.name == "RELIABLE", 5.0, "a reliable reader for the camera")
+    assert not watch.mixed_publishers
+    node.create_publisher(Image, "mixed_camera/depth", qos.SENSOR_DATA)      # someone's best-effort publisher
+    spin(executor, lambda: watch.reliability.name == "BEST_EFFORT", 5.0, "the switch to best effort")
+    assert watch.mixed_publishers
+
+
 def test_the_cells_fastdds_profile_loads_without_errors_and_sets_a_short_heartbeat():
     """Fast DDS ignores a profile it cannot parse (only logging it): then the cell would run on the default
     transports and 3 s heartbeats again."""
