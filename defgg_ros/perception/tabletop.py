@@ -315,6 +315,25 @@ def perceive(depth_m, camera_k, base_T_camera, config: TabletopConfig | None = N
                         grid_labels, owner, tuple(sorted(areas)), areas, full, depth, k)
 
 
+def partly_seen_objects(view: TabletopView) -> set:
+    """The labels of objects the camera sees only in part: with a pixel on the image's border, or next to
+    the start of a row's returns (the stereo camera's left invalid band: fill_holes leaves it empty).
+    Their extent beyond the cut is unknown (a plate under the robot, a hand hanging into view, an object
+    half out of the frame), so planning ranks their grasps after those on objects seen whole."""
+    labels = view.processed_labels
+    if not view.object_ids:
+        return set()
+    edge = np.zeros(labels.shape, bool)
+    edge[[0, -1], :] = True
+    edge[:, [0, -1]] = True
+    if view.filled_depth_m is not None:
+        valid = np.isfinite(view.filled_depth_m)
+        first = np.where(valid.any(axis=1), np.argmax(valid, axis=1), 0)
+        cols = np.arange(labels.shape[1])[None, :]
+        edge |= (cols >= first[:, None]) & (cols <= first[:, None] + 1)
+    return {int(v) for v in np.unique(labels[edge]) if v}
+
+
 def _no_checkpoint() -> None:
     pass
 

@@ -45,7 +45,7 @@ from defgg_ros.constants import (
 from defgg_ros.grasping.geometry import tcp_height_m
 from defgg_ros.grasping.postprocess import find_peaks, maps_from_network
 from defgg_ros.model.preprocess import network_input
-from defgg_ros.perception.tabletop import CELL_M, TabletopView, fill_holes
+from defgg_ros.perception.tabletop import CELL_M, TabletopView, fill_holes, partly_seen_objects
 from defgg_ros.perception.tabletop_scenes import STEREO_BASELINE_M, SUBPIXEL_RMS_PX
 
 # Free space the fingers need between the object and each pad while closing.
@@ -180,6 +180,7 @@ class TabletopNetworkView:
     space: FreeSpace | None
     min_distance_px: int
     q_threshold: float
+    partly_seen: frozenset = frozenset()   # objects cut by the image border or the left band (perception)
     # (label, (row, col)) -> the peak's grasp or None: a peak's feasibility does not depend on the search
     # (top_k, targets), so a frame's searches share it (the worker's top_k 1 and a client's top_k 5).
     peak_grasps: dict = field(default_factory=dict, compare=False, repr=False)
@@ -203,20 +204,35 @@ def prepare_tabletop(view: TabletopView, predictor, youngs_modulus_pa=None, defa
     maps = maps_from_network(raw, predictor.postprocess)
     best_q = {label: float(maps.q[boxes[label]][view.grid_labels[boxes[label]] == label].max())
               for label in view.object_ids if label in boxes}
-    return TabletopNetworkView(view, maps, moduli, boxes, best_q, FreeSpace(view), d, threshold)
+    return TabletopNetworkView(view, maps, moduli, boxes, best_q, FreeSpace(view), d, threshold,
+                               frozenset(partly_seen_objects(view)))
 
 
 def search_tabletop(prepared: TabletopNetworkView, top_k: int = 1, targets=None) -> TabletopPlan:
-    """The request's part of plan_tabletop: each object's feasible grasps, objects in quality order."""
+    """The request's part of plan_tabletop: each object's feasible grasps, objects in quality order, those
+    seen whole before those cut by the image's edge (prepared.partly_seen)."""
     view, maps = prepared.view, prepared.maps
     if maps is None:
         return TabletopPlan([], np.zeros(view.grid_height_m.shape, np.float32))
-    boxes, best_q = prepared.boxes, prepared.best_q
     labels = view.object_ids if targets is None else [t for t in view.object_ids if t in targets]
+    labels = [label for label in labels if label in prepared.boxes]
+    whole = _grasps_by_object(prepared, [lab for lab in labels if lab not in prepared.partly_seen], top_k)
+    cut = _grasps_by_object(prepared, [lab for lab in labels if lab in prepared.partly_seen], top_k - len(whole)) \
+        if len(whole) < top_k else {}
+    ranked = []
+    for group in (whole, cut):
+        ranked += sorted((g[0] for g in group.values()), key=lambda g: -g.quality)
+    for group in (whole, cut):
+        ranked += sorted((g for gs in group.values() for g in gs[1:]), key=lambda g: -g.quality)
+    return TabletopPlan(ranked[:top_k], maps.q)
+
+
+def _grasps_by_object(prepared: TabletopNetworkView, labels, top_k: int) -> dict:
+    """label -> its feasible grasps (best first) for the objects a search for top_k grasps needs."""
+    best_q = prepared.best_q
+    per_object = {}
     # Objects in the order of their best quality: a grasp on an object never scores above its best
     # peak, so once top_k objects have a grasp better than the next object's best peak, stop.
-    labels = [label for label in labels if label in boxes]
-    per_object = {}
     for label in sorted(labels, key=lambda lab: -best_q[lab]):
         firsts = sorted((g[0].quality for g in per_object.values()), reverse=True)
         if len(firsts) >= top_k and firsts[top_k - 1] >= best_q[label]:
@@ -224,9 +240,7 @@ def search_tabletop(prepared: TabletopNetworkView, top_k: int = 1, targets=None)
         found = _object_grasps(prepared, label, top_k)
         if found:
             per_object[label] = found
-    firsts = sorted((g[0] for g in per_object.values()), key=lambda g: -g.quality)
-    rest = sorted((g for gs in per_object.values() for g in gs[1:]), key=lambda g: -g.quality)
-    return TabletopPlan((firsts + rest)[:top_k], maps.q)
+    return per_object
 
 
 def _object_grasps(prepared: TabletopNetworkView, label: int, top_k: int) -> list:

@@ -219,3 +219,42 @@ def test_searches_sharing_a_frame_give_the_grasps_of_searches_on_their_own():
         assert search_tabletop(shared, top_k).grasps == alone, f"top_k {top_k}"
         assert alone
     assert len(shared.peak_grasps) >= 10
+
+
+def test_objects_cut_by_the_image_edge_are_known_and_ranked_after_those_seen_whole():
+    """partly_seen_objects: an object half out of the frame (bottom edge) and one cut by the left invalid band
+    are partly seen, one in the middle is not; the planner ranks grasps on objects seen whole first."""
+    import dataclasses
+
+    from defgg_ros.perception.tabletop import partly_seen_objects
+    from defgg_ros.planning.tabletop_grasps import prepare_tabletop, search_tabletop
+
+    base = ts.overhead_single(SINGLES[0], height_m=0.40)      # the whole view inside the workspace box
+    k, pose = base.camera_k, base.base_T_camera
+
+    def on_table_at(u, v):        # the table point seen at pixel (u, v)
+        ray = pose[:3, :3] @ np.array([(u - k[0, 2]) / k[0, 0], (v - k[1, 2]) / k[1, 1], 1.0])
+        point = pose[:3, 3] + ray * (-pose[2, 3] / ray[2])
+        return float(point[0]), float(point[1])
+
+    objects = (ts.Box(on_table_at(320, 240), (0.05, 0.04, 0.04), name="middle"),
+               ts.Box(on_table_at(320, 440), (0.05, 0.04, 0.04), name="bottom edge"),   # ~1 cm out
+               ts.Box(on_table_at(90, 240), (0.05, 0.04, 0.04), name="left band"))   # the band: ~53 px
+    frame = ts.render(ts.TabletopScene(objects, pose), seed=4)
+    view = perceive(frame.depth_m, frame.camera_k, frame.base_T_camera)
+    label_of = {}
+    for index, obj in enumerate(objects, start=1):
+        found = view.labels[frame.labels == index]
+        found = found[found > 0]
+        assert found.size, f"{obj.name} not perceived"
+        label_of[obj.name] = int(np.bincount(found).argmax())
+    assert partly_seen_objects(view) == {label_of["bottom edge"], label_of["left band"]}
+    # Ranking: mark the best object of the cluttered table as partly seen; it must come after the others.
+    frame = ts.render(ts.cluttered_table(640, 480), seed=6)
+    prepared = prepare_tabletop(perceive(frame.depth_m, frame.camera_k, frame.base_T_camera), MODEL)
+    plain = search_tabletop(prepared, 5).grasps
+    best = plain[0].object_id
+    demoted = search_tabletop(dataclasses.replace(prepared, partly_seen=frozenset({best}), peak_grasps={}), 5).grasps
+    objects_in_order = list(dict.fromkeys(g.object_id for g in demoted))
+    assert objects_in_order[-1] == best and demoted[0].object_id != best, objects_in_order
+    assert {g.object_id for g in demoted} == {g.object_id for g in plain}
