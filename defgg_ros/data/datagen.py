@@ -354,6 +354,11 @@ def generate(cfg: DatagenConfig, progress_bar=True) -> dict:
         bar.update(1)
         if counts["done"] % cfg.card_every == 0:
             write_card(cfg.out, cfg)
+            if not progress_bar:   # a log (nohup, CI) still shows how far the run is, a line per card
+                left_h = (len(jobs) - counts["done"]) / max(per_hour, 1e-9)
+                print(f"defgg-datagen: {counts['done']} of {len(jobs)} pending trials done "
+                      f"({100 * counts['done'] / len(jobs):.1f} %), {per_hour:.0f} trials/h, ~{left_h:.1f} h left; "
+                      f"card: {cfg.out / 'card.md'}", flush=True)
 
     try:
         execute(jobs, cfg, on_result)

@@ -196,3 +196,11 @@ def test_card_names_objects_without_candidates_and_counts_labels_per_scene():
     assert "no trials: cone." in lines[1]
     assert lines[2] == "- Labelled grasps per scene with candidates: min 4, median 5, max 6."
     assert _coverage_lines(rows, {"box": 6, "cone": 2})[0] == "- Objects with trials: 2 of 2."
+
+
+def test_without_a_progress_bar_the_log_gets_a_line_per_card(tmp_path, capsys):
+    cfg = datagen.DatagenConfig(out=tmp_path / "log", objects=("cube",), moduli_pa=(2e9,), grasps_per_scene=2,
+                                pass_size=1, settings=QUICK, card_every=1)
+    assert datagen.generate(cfg, progress_bar=False)["done"] == 2
+    lines = [line for line in capsys.readouterr().out.splitlines() if line.startswith("defgg-datagen: ")]
+    assert lines and "pending trials done" in lines[-1] and "100.0 %" in lines[-1], lines
