@@ -11,13 +11,14 @@ Thin adapter over defgg_ros.model.inference.GraspPredictor:
   image or its `objects` (then the depth is segmented here exactly like the
   segmentation node does). Every bad request gets success=false + reason.
 - tabletop planner with `perceive_on_arrival`: each synchronised frame is
-  perceived as it arrives (conversion, perception, moduli, network, and with
-  `publish_on_sync` its top_k 1 search; two worker threads by default,
+  perceived as it arrives (conversion, perception, moduli, network, the top_k
+  1 search with `publish_on_sync` and the searches for every top_k asked for
+  in the last `prepare_requested_top_k_s`; two worker threads by default,
   `perception_stages`: one converts and perceives the next frame while the
   other runs the network on the frame before, perception/frame_worker.py:
   only the newest waiting frame is kept at each stage), and an
-  empty PlanGrasp only searches a perceived frame for grasps (top_k 1 with
-  publish_on_sync: reads the search made): the newest perceived one when no
+  empty PlanGrasp only searches a perceived frame for grasps (or reads the
+  search made on arrival): the newest perceived one when no
   newer frame arrived or it arrived at most `max_frame_age_s` before the
   request, else the latest frame (waiting for its perception, or perceiving
   it here when the worker has not started it). The grasps are those the
