@@ -117,10 +117,12 @@ def fit_table_plane(points_m: np.ndarray, rng_seed: int = RANSAC_SEED) -> Plane:
     if len(inliers) < PLANE_MIN_INLIER_FRACTION * len(points_m):
         raise SegmentationError(
             f"no dominant table plane: only {len(inliers)} of {len(points_m)} valid points lie on the best plane")
-    return _refine_plane(inliers)
+    return refine_plane(inliers)
 
 
-def _refine_plane(inliers: np.ndarray) -> Plane:
+def refine_plane(inliers: np.ndarray) -> Plane:
+    """The least-squares plane through Nx3 inlier points (camera frame), oriented so the camera (the origin)
+    lies on its positive side."""
     centroid = inliers.mean(axis=0)
     # The normal is the direction of least variance of the inliers.
     centred = inliers - centroid

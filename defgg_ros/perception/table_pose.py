@@ -22,7 +22,7 @@ import time
 import numpy as np
 
 from defgg_ros.constants import CAMERA_FAR_M, CAMERA_NEAR_M
-from defgg_ros.perception.geometry import check_camera_matrix
+from defgg_ros.perception.segmentation import back_project, refine_plane
 from defgg_ros.perception.tabletop import (
     TABLE_MAX_TILT_DEG,
     TabletopConfig,
@@ -48,15 +48,10 @@ MIN_INLIER_SHARE = 0.15
 def camera_points(depth_m, camera_k) -> np.ndarray:
     """Up to ~SAMPLE_PIXELS valid pixels as camera-frame points (N x 3)."""
     depth = np.asarray(depth_m, np.float32)
-    k = check_camera_matrix(camera_k)
     h, w = depth.shape
-    stride = max(1, int(math.sqrt(h * w / SAMPLE_PIXELS)))
-    v, u = np.mgrid[0:h:stride, 0:w:stride]
-    z = depth[::stride, ::stride]
+    points = back_project(depth, camera_k, max(1, int(math.sqrt(h * w / SAMPLE_PIXELS)))).reshape(-1, 3)
     with np.errstate(invalid="ignore"):
-        ok = (z > CAMERA_NEAR_M) & (z < CAMERA_FAR_M)
-    z, u, v = z[ok].astype(np.float64), u[ok], v[ok]
-    return np.stack([(u - k[0, 2]) / k[0, 0] * z, (v - k[1, 2]) / k[1, 1] * z, z], axis=1)
+        return points[(points[:, 2] > CAMERA_NEAR_M) & (points[:, 2] < CAMERA_FAR_M)]
 
 
 def dominant_plane(points: np.ndarray, rng_seed: int = 0):
@@ -81,24 +76,14 @@ def dominant_plane(points: np.ndarray, rng_seed: int = 0):
         inliers = points[distances[:, best] < INLIER_M]
         if len(inliers) < MIN_INLIER_SHARE * len(points):
             break
-        normal, offset = _refine(inliers, normals[best])
+        plane = refine_plane(inliers)
+        normal, offset = plane.normal, plane.offset_m
         centroid = inliers.mean(axis=0)
         cos_view = float(-normal @ centroid / np.linalg.norm(centroid))
         if cos_view >= math.cos(math.radians(MAX_VIEW_ANGLE_DEG)):
             return normal, offset, len(inliers) / len(points)
     raise TabletopError("no plane the camera looks onto covers at least "
                         f"{MIN_INLIER_SHARE:.0%} of the depth returns: no table in view")
-
-
-def _refine(inliers: np.ndarray, normal_hint: np.ndarray):
-    centroid = inliers.mean(axis=0)
-    centred = inliers - centroid
-    _, vectors = np.linalg.eigh(np.einsum("ni,nj->ij", centred, centred))   # no BLAS threads (tabletop.py)
-    normal = vectors[:, 0] * np.sign(vectors[:, 0] @ normal_hint + 1e-12)
-    offset = -float(normal @ centroid)
-    if offset < 0:
-        normal, offset = -normal, -offset
-    return normal, offset
 
 
 def table_frame_pose(depth_m, camera_k, config: TabletopConfig | None = None) -> np.ndarray:
@@ -159,11 +144,10 @@ class PoseFromTable:
         """(base_T_camera, estimated: bool). config: replaces the one given at construction (a node whose
         workspace parameters changed). Raises TabletopError when the frame shows no plane to use."""
         configured = np.asarray(configured, float)
+        key, now = configured.tobytes(), self._clock()
         with self._lock:
             if config is not None and config != self.config:
                 self.config, self.estimate, self._decision = config, None, None
-        key, now = configured.tobytes(), self._clock()
-        with self._lock:
             if self._decision is not None and self._decision[0] == key and now - self._decision[1] < self.recheck_s:
                 return self._decision[2]
         normal, offset, _ = dominant_plane(camera_points(depth_m, camera_k))

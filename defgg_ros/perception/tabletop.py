@@ -153,8 +153,7 @@ class TabletopView:
         return -(d + n[0] * x_m + n[1] * y_m) / n[2]
 
 
-def pixel_rays(camera_k, shape):
-    """Normalised image coordinates (x / z per column, y / z per row) of a frame's pixels."""
+def _pixel_rays(camera_k, shape):
     k = check_camera_matrix(camera_k)
     h, w = shape
     xn = ((np.arange(w) - k[0, 2]) / k[0, 0]).astype(np.float32)
@@ -255,7 +254,7 @@ def perceive(depth_m, camera_k, base_T_camera, config: TabletopConfig | None = N
     depth = fill_holes(full[::stride, ::stride])
     k = k_full.copy()
     k[:2] /= stride
-    xn, yn = pixel_rays(k, depth.shape)
+    xn, yn = _pixel_rays(k, depth.shape)
     normal, offset = fit_table(depth, xn, yn, pose, config)
     checkpoint()
     # Height above the table of every pixel: n . (R p_cam + t) + d, separable in u and v.
