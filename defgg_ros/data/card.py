@@ -91,7 +91,7 @@ def render_card(root, grasps_per_scene: int | None = None) -> str:
     lines += ["", "## How the labels were made", "",
               f"- Shake test: 16 directions, acceleration ramped to 50 m/s^2; positive when the mean held "
               f"acceleration is >= {SHAKE_POSITIVE_THRESHOLD_MPS2} m/s^2; a failed lift is a negative.",
-              "- Grasp force per finger: 2 N at E = 2e4 Pa plus 0.5 N per decade of E (defgg_ros/sim/trial.py).",
+              f"- {_force_line(gen)}",
               f"- {RIGID_NOTE}",
               f"- {MESH_NOTE}",
               f"- {_protocol_line(gen)}",
@@ -124,12 +124,31 @@ def _coverage_lines(rows, planned) -> list[str]:
     return lines
 
 
-def _protocol_line(gen: dict) -> str:
-    from defgg_ros.data.header import effective_trial_settings, recorded_grasp_height
+def _recorded_settings(gen: dict) -> dict:
+    from defgg_ros.data.header import effective_trial_settings
     from defgg_ros.sim.trial import comparable_protocol
 
     recorded = gen.get("trial_settings")
-    settings = comparable_protocol(recorded or effective_trial_settings(gen.get("settings", {}), legacy=True))
+    return comparable_protocol(recorded or effective_trial_settings(gen.get("settings", {}), legacy=True))
+
+
+def _force_line(gen: dict) -> str:
+    """How hard the fingers squeezed: the rule of the dataset's recorded protocol (defgg_ros/grip_force.py)."""
+    from defgg_ros.constants import GRIPPER_MAX_FORCE_N
+    from defgg_ros.sim.trial import PROTOCOL_DEFGRASPSIM
+
+    if _recorded_settings(gen)["protocol"] == PROTOCOL_DEFGRASPSIM:
+        return ("Grasp force: FOS * m * g / mu in total with FOS = 1 + log10(E) / 10, half on each finger, capped at "
+                f"{GRIPPER_MAX_FORCE_N:g} N a finger; m the object's mass, mu the rule's friction "
+                "(defgg_ros/grip_force.py).")
+    return "Grasp force per finger: 2 N at E = 2e4 Pa plus 0.5 N per decade of E (defgg_ros/grip_force.py)."
+
+
+def _protocol_line(gen: dict) -> str:
+    from defgg_ros.data.header import recorded_grasp_height
+
+    recorded = gen.get("trial_settings")
+    settings = _recorded_settings(gen)
     stop = (f"shake stopped early once the mean is {settings['confident_margin_mps2']:g}/sqrt(k) m/s^2 from the "
             f"threshold after k >= {settings['confident_min_directions']} directions"
             if settings["confident_stop"] else "no early stop on the measured mean")

@@ -9,12 +9,17 @@ from dataclasses import asdict, replace
 
 def effective_trial_settings(overrides: dict, legacy: bool = False) -> dict:
     """Every TrialSettings field of the generator's protocol with these overrides (legacy: the
-    pre-2026-11-24 lift and the pre-2026-11-25 confident stop)."""
-    from defgg_ros.sim.trial import LEGACY_CONFIDENT_SETTINGS, LEGACY_LIFT_SETTINGS, TrialSettings
+    pre-2026-11-24 lift, the pre-2026-11-25 confident stop and the pre-2026-11-26 protocol)."""
+    from defgg_ros.sim.trial import (
+        LEGACY_CONFIDENT_SETTINGS,
+        LEGACY_LIFT_SETTINGS,
+        LEGACY_PROTOCOL_SETTINGS,
+        TrialSettings,
+    )
 
     base = TrialSettings.fast()
     if legacy:
-        base = replace(base, **LEGACY_LIFT_SETTINGS, **LEGACY_CONFIDENT_SETTINGS)
+        base = replace(base, **LEGACY_LIFT_SETTINGS, **LEGACY_CONFIDENT_SETTINGS, **LEGACY_PROTOCOL_SETTINGS)
     return asdict(replace(base, **overrides))
 
 

@@ -156,8 +156,10 @@ def test_resume_keeps_the_trial_protocol_of_the_dataset(tmp_path):
     with pytest.raises(DatasetError, match='"lift_time_s": 0.3') as err:
         datagen.check_resumable(cfg)
     assert '"hold_time_s": 0.1' in str(err.value) and '"confident_margin_mps2": 40.0' in str(err.value)
+    assert '"protocol": "legacy"' in str(err.value)
     datagen.check_resumable(datagen.DatagenConfig(out=out, objects=("cube",), moduli_pa=(2e9,), settings={
-        "lift_time_s": 0.3, "hold_time_s": 0.1, "confident_min_directions": 4, "confident_margin_mps2": 40.0}))
+        "lift_time_s": 0.3, "hold_time_s": 0.1, "confident_min_directions": 4, "confident_margin_mps2": 40.0,
+        "protocol": "legacy"}))
     # recorded after the lift fix, before the confident-stop knobs existed (datasets/fem_v2)
     before_knobs = tmp_path / "before_knobs"
     header = datagen.DatagenConfig(out=before_knobs).header()
@@ -184,6 +186,15 @@ def test_card_states_the_shake_early_stop_the_dataset_was_made_with():
     assert "40/sqrt(k) m/s^2 from the threshold after k >= 4 directions" in _protocol_line(legacy)
     header["trial_settings"]["confident_stop"] = False
     assert "no early stop on the measured mean" in _protocol_line(header)
+
+
+def test_card_states_the_grip_force_rule_of_the_recorded_protocol():
+    from defgg_ros.data.card import _force_line
+
+    header = datagen.DatagenConfig(out=None).header()        # the default protocol: defgraspsim
+    assert "FOS * m * g / mu" in _force_line(header)
+    legacy = {**{k: v for k, v in header.items() if k != "trial_settings"}, "settings": {}}   # as fem_v1-v4
+    assert "0.5 N per decade" in _force_line(legacy)
 
 
 def test_card_names_objects_without_candidates_and_counts_labels_per_scene():
