@@ -145,7 +145,7 @@ def _force_line(gen: dict) -> str:
 
 
 def _protocol_line(gen: dict) -> str:
-    from defgg_ros.data.header import recorded_grasp_height
+    from defgg_ros.data.header import protocol_summary, recorded_grasp_height
 
     recorded = gen.get("trial_settings")
     settings = _recorded_settings(gen)
@@ -154,7 +154,7 @@ def _protocol_line(gen: dict) -> str:
             if settings["confident_stop"] else "no early stop on the measured mean")
     mesh = gen.get("sim_max_tet_nodes")
     return (f"Trial protocol{'' if recorded else ' (not recorded in the header: the generator of the time)'}: "
-            f"{_protocol_summary(settings)}; close settle {settings['close_settle_s']} s, "
+            f"{protocol_summary(settings)}; close settle {settings['close_settle_s']} s, "
             f"lift {settings['lift_height_m'] * 100:.0f} cm in "
             f"{settings['lift_time_s']} s, hold {settings['hold_time_s']} s; {stop}; FEM mesh: "
             + (f"at most {mesh} nodes (soft bodies)" if mesh else "the shipped mesh")
@@ -164,26 +164,6 @@ def _protocol_line(gen: dict) -> str:
                "few mm of its height label the grasp it performs (results/notes_height.md)")
             + ("" if settings["lift_time_s"] >= 0.6 else ". This lift dropped soft grasps that a 0.6 s lift holds "
                "(bench/README.md): some soft lift failures here are artifacts of it"))
-
-
-def _protocol_summary(settings: dict) -> str:
-    from defgg_ros.sim.trial import PROTOCOL_DEFGRASPSIM, TrialSettings
-
-    known = {k: v for k, v in settings.items() if k in TrialSettings.__dataclass_fields__}
-    material = TrialSettings(**known).material()
-    nu = material["poisson_ratio"]
-    nu_text = f"nu {nu}" if nu is not None else "nu of the object (0.4)"
-    if settings["protocol"] == PROTOCOL_DEFGRASPSIM:
-        hold = ("locked after it (soft bodies; the rigid stand-in held with F/2)"
-                if settings.get("finger_hold") == "lock" else "held with F/2 each after it")
-        mu = settings.get("grip_force_friction")
-        force_mu = f" with mu {mu} (not the contact's)" if mu else ""
-        rule = (f"**defgraspsim** (zero gravity after settling, grip force FOS*m*g/mu{force_mu} split over the "
-                f"fingers, table moved away for the pickup, fingers {hold}, lost when either finger has no contact)")
-    else:
-        rule = ("**legacy** (gravity on, 2 N + 0.5 N per decade a finger, fingers force-held, lost when both fingers "
-                "let go or the centroid moved 20 mm)")
-    return f"{rule}, effective friction {material['effective_friction']:.2f}, Neo-Hookean FEM, {nu_text}"
 
 
 def signal_section(root) -> list[str]:

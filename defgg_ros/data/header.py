@@ -32,3 +32,24 @@ def recorded_grasp_height(generator: dict) -> str:
 def recorded_protocol(generator: dict) -> str:
     """The trial protocol a dataset header records (headers before 2026-11-26 lack it: legacy)."""
     return (generator.get("trial_settings") or {}).get("protocol", "legacy")
+
+
+def protocol_summary(settings: dict) -> str:
+    """One line naming a recorded protocol's rules, friction and material (dataset cards, evaluation reports)."""
+    from defgg_ros.sim.trial import PROTOCOL_DEFGRASPSIM, TrialSettings
+
+    known = {k: v for k, v in settings.items() if k in TrialSettings.__dataclass_fields__}
+    material = TrialSettings(**known).material()
+    nu = material["poisson_ratio"]
+    nu_text = f"nu {nu}" if nu is not None else "nu of the object (0.4)"
+    if settings["protocol"] == PROTOCOL_DEFGRASPSIM:
+        hold = ("locked after it (soft bodies; the rigid stand-in held with F/2)"
+                if settings.get("finger_hold") == "lock" else "held with F/2 each after it")
+        mu = settings.get("grip_force_friction")
+        force_mu = f" with mu {mu} (not the contact's)" if mu else ""
+        rule = (f"**defgraspsim** (zero gravity after settling, grip force FOS*m*g/mu{force_mu} split over the "
+                f"fingers, table moved away for the pickup, fingers {hold}, lost when either finger has no contact)")
+    else:
+        rule = ("**legacy** (gravity on, 2 N + 0.5 N per decade a finger, fingers force-held, lost when both fingers "
+                "let go or the centroid moved 20 mm)")
+    return f"{rule}, effective friction {material['effective_friction']:.2f}, Neo-Hookean FEM, {nu_text}"

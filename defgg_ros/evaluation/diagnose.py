@@ -86,8 +86,19 @@ def label_stats(data_root) -> dict:
         "locality": locality,
         "grasp_choice": choice,
         "positive_rate_by_height_offset_mm": by_height,
+        "signal": _signal(data_root),
         "data_root": str(data_root),
     }
+
+
+def _signal(data_root) -> dict | None:
+    """The dataset's signal report (data.signal): can its labels carry a stiffness-aware margin at all?"""
+    from defgg_ros.data.signal import SignalError, read_trial_records, signal_report
+
+    try:
+        return signal_report(read_trial_records(data_root))
+    except SignalError:
+        return None
 
 
 NEAR_PX, NEAR_DEG, FAR_PX = 10.0, 20.0, 30.0
@@ -315,6 +326,7 @@ def diagnostics_markdown(labels: dict | None, shifts: dict | None, replicates: d
         lines += _locality_markdown(labels.get("locality"))
         lines += _height_offset_markdown(labels.get("positive_rate_by_height_offset_mm"))
         lines += _grasp_choice_markdown(labels.get("grasp_choice"))
+        lines += signal_lines(labels.get("signal"), labels.get("data_root"))
     if shifts:
         lines += ["**How far the best grasp moves with the modulus** (rank-0 grasp vs the one at the stiffest "
                   "modulus, same object)", "", "| model | E (Pa) | objects | mean shift (mm) | moved > 5 mm | "
@@ -341,6 +353,22 @@ def diagnostics_markdown(labels: dict | None, shifts: dict | None, replicates: d
         lines.append("")
     lines += _twist_axes_markdown(twist_axes)
     return "\n".join(lines)
+
+
+def signal_lines(signal: dict | None, data_root: str | None) -> list:
+    """The training labels' oracle gap and what it lets a ranking learn (data.signal's own statements)."""
+    if not signal or not signal["oracle"].get("objects"):
+        return []
+    from defgg_ros.data.signal import TOP_K, what_labels_carry
+
+    o = signal["oracle"]
+    gaps = ", ".join(f"{label} {round(o[key]['gap_points'], 1) + 0.0:+.1f} points (aware "
+                     f"{100 * o[key]['aware']:.1f} %, blind {100 * o[key]['blind']:.1f} %)"
+                     for key, label in (("best", "best grasp"), (f"top{TOP_K}", f"best {TOP_K}")))
+    return [f"**Could the training labels carry a stiffness-aware margin?** (`defgg-datagen signal {data_root}`, "
+            f"{signal['labelled']} labelled trials, protocol {', '.join(signal['protocols'])}) A perfect "
+            f"stiffness-aware choice among the labelled candidates vs a perfect stiffness-blind one: {gaps}.", "",
+            *what_labels_carry(signal), ""]
 
 
 def _locality_markdown(locality: dict | None) -> list:

@@ -45,6 +45,34 @@ def _targets_md(targets: list) -> list:
     return lines
 
 
+def _protocol_md(manifest: dict) -> str:
+    """The trial protocol the run's trials were made with (run.json records its settings)."""
+    from defgg_ros.data.header import protocol_summary
+    from defgg_ros.evaluation.tasks import shake_success_rule
+    from defgg_ros.sim.trial import comparable_protocol
+
+    recorded = manifest.get("trial_settings")
+    if not recorded:
+        return "Trial protocol: not recorded in run.json (a run of before 2026-11-24)."
+    settings = comparable_protocol(recorded)
+    rule = ("held through the pickup and a mean held acceleration >= 25 m/s^2 over the 16 directions (the "
+            "label's own criterion; the every-direction rate is the second table)"
+            if shake_success_rule(settings["protocol"]) == "mean" else "held at 25 m/s^2 in every direction")
+    return f"Trial protocol: {protocol_summary(settings)}. Shake success: {rule}."
+
+
+def _carry_lines(out_dir: Path) -> list:
+    """Whether the training labels could have carried the targets' margins (diagnostics.json, written by
+    `defgg-eval report --data DATASET`)."""
+    from defgg_ros.evaluation.diagnose import signal_lines
+
+    diag = _read(out_dir / "diagnostics.json")
+    labels = json.loads(diag).get("labels") if diag else None
+    lines = signal_lines((labels or {}).get("signal"), (labels or {}).get("data_root"))
+    return lines or ["Whether the training labels could carry these margins: run `defgg-eval report --data "
+                     "DATASET` for their signal report.", ""]
+
+
 def distinct_commands(commands) -> list:
     """The evaluation commands that ran trials, without their --workers (speed, never a result), each once."""
     return list(dict.fromkeys(re.sub(r"\s--workers[ =]\d+", "", c) for c in commands if "--plan-only" not in c))
@@ -70,7 +98,8 @@ def results_markdown(out_dir, doc_path, notes_path=None) -> str:
         "`models/ggcnn_depth_only.md` (commands, data fingerprint, trials used).", "",
         f"Evaluation code commit: `{manifest['commit']}`; object pose seed {manifest['seed']}; "
         f"{manifest['grasps_per_object']} best grasps per object and modulus; tasks {', '.join(manifest['tasks'])}.",
-        "", "## Models", "", "| name | input | weights sha (16) | training data fingerprint |", "|---|---|---|---|"]
+        "", _protocol_md(manifest), "",
+        "## Models", "", "| name | input | weights sha (16) | training data fingerprint |", "|---|---|---|---|"]
     for name, m in manifest["models"].items():
         lines.append(f"| `{name}` | {'depth + stiffness' if m['uses_stiffness'] else 'depth only'} | `{m['sha']}` | "
                      f"`{m.get('data_fingerprint')}` |")
@@ -90,6 +119,7 @@ def results_markdown(out_dir, doc_path, notes_path=None) -> str:
         if by_rank:
             lines += [by_rank, ""]
     lines += ["## Targets of the issue (shake task, all stiffnesses)", ""] + _targets_md(summary["targets"]) + [""]
+    lines += _carry_lines(out_dir)
     pairs_md = _read(tdir / "paired.md")
     if pairs_md:
         lines += ["## Are the two models separable on these trials?", "", pairs_md, ""]

@@ -18,6 +18,19 @@ def test_label_stats_count_every_trial(tmp_path):
     assert "Training labels by modulus" in diagnose.diagnostics_markdown(stats, None)
 
 
+def test_label_stats_carry_the_datasets_signal_report_and_its_verdict(tmp_path):
+    """The synthetic labels depend on where a box is grasped and on its stiffness: the oracle gap is large."""
+    write_synthetic_dataset(tmp_path, n_objects=3, trials_per_scene=5)
+    signal = diagnose.label_stats(tmp_path)["signal"]
+    assert signal["labelled"] == 60 and signal["oracle"]["objects"] == 3
+    best = signal["oracle"]["best"]
+    assert best["gap_points"] == pytest.approx(100 * (best["aware"] - best["blind"])) and best["gap_points"] > 5
+    md = diagnose.diagnostics_markdown(diagnose.label_stats(tmp_path), None)
+    assert f"best grasp +{best['gap_points']:.1f} points" in md
+    assert '- Can carry "stiffness changes which grasp is good"' in md
+    assert diagnose.signal_lines(None, None) == []
+
+
 def test_label_locality_finds_the_spatial_order_of_rule_based_labels(tmp_path):
     """The synthetic labels are a rule of the grasp's place on the box: near candidates share a label
     far more often than distant ones."""

@@ -107,3 +107,23 @@ def test_wrong_stiffness_input_pairs_with_the_correct_input_of_the_same_view_and
     assert summary["sensitivity"]["stiff|paired"]["-60"]["pairs"] == 3
     doc = results_markdown(tmp_path, tmp_path / "results.md")
     assert "**Does a wrong stiffness input cost grasps?**" in doc and "| -60 | 3 | 1 | 1 | 1 | 0 | +0.0 |" in doc
+
+
+def test_results_doc_names_the_trial_protocol_and_whether_the_labels_could_carry_the_margin(tmp_path):
+    from defgg_ros.data.synthetic import write_synthetic_dataset
+    from defgg_ros.evaluation.diagnose import label_stats
+    from defgg_ros.sim.trial import TrialSettings
+
+    _two_model_run(tmp_path)
+    report.write_outputs(tmp_path)
+    doc = results_markdown(tmp_path, tmp_path / "results.md")
+    assert "Trial protocol: not recorded" in doc and "run `defgg-eval report --data DATASET`" in doc
+    manifest = json.loads((tmp_path / "run.json").read_text())
+    settings = TrialSettings.fast().__dict__ | {"protocol": "defgraspsim"}
+    write_json_atomic(tmp_path / "run.json", {**manifest, "trial_settings": settings})
+    data = tmp_path / "data"
+    write_synthetic_dataset(data, n_objects=3, trials_per_scene=5)
+    write_json_atomic(tmp_path / "diagnostics.json", {"labels": label_stats(data)})
+    doc = results_markdown(tmp_path, tmp_path / "results.md")
+    assert "Trial protocol: **defgraspsim**" in doc and "the label's own criterion" in doc
+    assert f"`defgg-datagen signal {data}`" in doc and "A perfect stiffness-aware choice" in doc
