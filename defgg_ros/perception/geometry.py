@@ -123,3 +123,13 @@ def check_camera_matrix(camera_k) -> np.ndarray:
     if k[0, 0] <= 0 or k[1, 1] <= 0:
         raise TransformError(f"camera focal lengths must be > 0, got fx={k[0, 0]}, fy={k[1, 1]}")
     return k
+
+
+def plane_hypotheses(triples: np.ndarray, min_cross_norm: float) -> tuple[np.ndarray, np.ndarray]:
+    """RANSAC's plane hypotheses, one per point triple (K x 3 x 3): unit normals (M x 3) and offsets d (M) with
+    n.p + d = 0, for the M triples whose cross product is longer than min_cross_norm (not collinear)."""
+    normals = np.cross(triples[:, 1] - triples[:, 0], triples[:, 2] - triples[:, 0])
+    norms = np.linalg.norm(normals, axis=1)
+    usable = norms > min_cross_norm
+    normals = normals[usable] / norms[usable, None]
+    return normals, -np.einsum("ij,ij->i", normals, triples[usable, 0])

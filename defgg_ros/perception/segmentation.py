@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from defgg_ros.perception.geometry import check_camera_matrix
+from defgg_ros.perception.geometry import check_camera_matrix, plane_hypotheses
 
 # Points farther than this from the plane are not table (depth noise of a
 # D435 at 0.4 m is ~1-2 mm, so 4 mm keeps the table and rejects objects).
@@ -103,13 +103,9 @@ def fit_table_plane(points_m: np.ndarray, rng_seed: int = RANSAC_SEED) -> Plane:
         sample = points_m[rng.integers(0, len(points_m), PLANE_RANSAC_SAMPLE_POINTS)]
     # All hypotheses at once: one plane per random point triple.
     triples = sample[rng.integers(0, len(sample), size=(PLANE_RANSAC_ITERATIONS, 3))]
-    normals = np.cross(triples[:, 1] - triples[:, 0], triples[:, 2] - triples[:, 0])
-    norms = np.linalg.norm(normals, axis=1)
-    usable = norms > 1e-12
-    if not np.any(usable):
+    normals, offsets = plane_hypotheses(triples, min_cross_norm=1e-12)
+    if not len(normals):
         raise SegmentationError("table plane fit failed: the valid depth points are degenerate (collinear)")
-    normals = normals[usable] / norms[usable, None]
-    offsets = -np.einsum("ij,ij->i", normals, triples[usable, 0])
     counts = np.count_nonzero(np.abs(sample @ normals.T + offsets) < PLANE_INLIER_DISTANCE_M, axis=0)
     best = int(np.argmax(counts))
     best = (normals[best], offsets[best])

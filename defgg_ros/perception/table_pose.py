@@ -22,6 +22,7 @@ import time
 import numpy as np
 
 from defgg_ros.constants import CAMERA_FAR_M, CAMERA_NEAR_M
+from defgg_ros.perception.geometry import plane_hypotheses
 from defgg_ros.perception.segmentation import back_project, refine_plane
 from defgg_ros.perception.tabletop import (
     TABLE_MAX_TILT_DEG,
@@ -61,11 +62,7 @@ def dominant_plane(points: np.ndarray, rng_seed: int = 0):
         raise TabletopError(f"too few depth returns to find a table ({len(points)} sampled)")
     rng = np.random.default_rng(rng_seed)
     triples = points[rng.integers(0, len(points), size=(HYPOTHESES, 3))]
-    normals = np.cross(triples[:, 1] - triples[:, 0], triples[:, 2] - triples[:, 0])
-    norms = np.linalg.norm(normals, axis=1)
-    good = norms > 1e-12
-    normals, triples = normals[good] / norms[good, None], triples[good]
-    offsets = -np.einsum("ij,ij->i", normals, triples[:, 0])
+    normals, offsets = plane_hypotheses(triples, min_cross_norm=1e-12)
     flip = offsets < 0                       # the camera (the origin) on the normal's side: d > 0
     normals[flip], offsets[flip] = -normals[flip], -offsets[flip]
     # Planes in the order of their inlier counts; the first whose fit the camera looks onto (the ray to its

@@ -32,7 +32,7 @@ import cv2
 import numpy as np
 
 from defgg_ros.constants import CAMERA_FX_PX, CAMERA_HEIGHT_ABOVE_TABLE_M
-from defgg_ros.perception.geometry import check_camera_matrix
+from defgg_ros.perception.geometry import check_camera_matrix, plane_hypotheses
 
 # The network was trained on top-down images from 0.40 m with fx = 385 px: 1.039 mm per pixel at
 # the table. The height map uses that cell size, so objects have their training size in pixels.
@@ -196,12 +196,10 @@ def fit_table(depth, xn, yn, base_T_camera, config: TabletopConfig, rng_seed: in
                             "(check base_T_camera and the workspace box)")
     rng = np.random.default_rng(rng_seed)
     triples = points[rng.integers(0, len(points), size=(PLANE_ITERATIONS, 3))]
-    normals = np.cross(triples[:, 1] - triples[:, 0], triples[:, 2] - triples[:, 0])
-    norms = np.linalg.norm(normals, axis=1)
-    good = norms > 1e-9
-    normals = normals[good] / norms[good, None]
-    normals *= np.sign(normals[:, 2:3] + 1e-12)
-    offsets = -np.einsum("ij,ij->i", normals, triples[good, 0])
+    normals, offsets = plane_hypotheses(triples, min_cross_norm=1e-9)
+    up = np.sign(normals[:, 2] + 1e-12)      # normals point up (an exact sign flip of normal and offset)
+    normals *= up[:, None]
+    offsets *= up
     upright = normals[:, 2] > math.cos(math.radians(TABLE_MAX_TILT_DEG))
     if not upright.any():
         raise TabletopError("no table plane within 15 degrees of the base's horizontal")
