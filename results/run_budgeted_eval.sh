@@ -4,6 +4,10 @@
 # background (setsid: stop it with kill -TERM -- -<its process group>, which reaches the workers too):
 #   WORKERS=2 NOTES=results/notes_v4.md setsid nohup results/run_budgeted_eval.sh results/sim_v4 \
 #       > results/sim_v4.log 2>&1 &
+# The pair trained on datasets/fem_v5 (issue 25) is evaluated under that dataset's own trial protocol,
+# and its report carries the dataset's signal report (DATA):
+#   WORKERS=2 PROTOCOL_FROM=datasets/fem_v5 DATA=datasets/fem_v5 NOTES=results/notes_v5.md \
+#       setsid nohup results/run_budgeted_eval.sh results/sim_v5 > results/sim_v5.log 2>&1 &
 # Every step is resumable: rerunning this script skips every finished trial. The order puts the
 # cheapest informative trials first: every common object's best grasp (shake), the multi-material
 # object, the best grasps' twist, then the stiffness-error sensitivity of that best grasp, then the
@@ -13,10 +17,10 @@ set -uo pipefail
 cd "$(dirname "$0")/.."
 OUT=${1:-results/sim_v2}
 EVAL=".venv/bin/python -m defgg_ros.evaluation.cli"
-RUN="$EVAL run --out $OUT --workers ${WORKERS:-1} --grasps 5 --no-progress"
+RUN="$EVAL run --out $OUT --workers ${WORKERS:-1} --grasps 5 --no-progress${PROTOCOL_FROM:+ --protocol-from $PROTOCOL_FROM}"
 
 refresh() {
-  $EVAL report --out $OUT --docs docs/results.md --notes "${NOTES:-results/notes.md}" || return 0
+  $EVAL report --out $OUT --docs docs/results.md --notes "${NOTES:-results/notes.md}" ${DATA:+--data $DATA} || return 0
   for _ in 1 2 3 4 5; do
     git add $OUT docs/results.md 2>/dev/null && \
       git commit -q -m "$OUT: $1" -- $OUT docs/results.md && return 0
@@ -24,7 +28,7 @@ refresh() {
   done
 }
 
-$EVAL run --out $OUT --sets common --experiments main --plan-only --no-progress
+$EVAL run --out $OUT --sets common --experiments main --plan-only --no-progress${PROTOCOL_FROM:+ --protocol-from $PROTOCOL_FROM}
 $RUN --sets common --experiments main --tasks shake --ranks 1
 refresh "common set, best grasp, shake"
 $RUN --sets common --only mallet_mm --experiments multimaterial --multimaterial-moduli 2e4 --tasks shake --ranks 2
