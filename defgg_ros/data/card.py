@@ -166,17 +166,27 @@ def _protocol_line(gen: dict) -> str:
                "(bench/README.md): some soft lift failures here are artifacts of it"))
 
 
-def signal_section(root) -> list[str]:
-    """The signal report of the dataset's trials, as card lines (empty when there is nothing to report)."""
+SIGNAL_FIGURE = "signal.png"   # beside card.md
+
+
+def write_signal_section(root) -> list[str]:
+    """The signal report of the dataset's trials as card lines (empty when there is nothing to report); its
+    figure is written beside the card."""
     from defgg_ros.data.signal import SignalError, read_trial_records, render_markdown, signal_report
 
     if "shake" not in check_header(root)["generator"].get("tests", ["shake"]):
         return ["", "No signal report: these trials ran no shake (a twist-only pilot takes its shake from "
                     "another folder, bench/pilot_signal.py)."]
     try:
-        return ["", render_markdown(signal_report(read_trial_records(root)), "Signal report (defgg-datagen signal)")]
+        records = read_trial_records(root)
+        report = signal_report(records)
     except SignalError:
         return []
+    from defgg_ros.data.signal_figure import signal_figure
+
+    signal_figure(report, records, Path(root) / SIGNAL_FIGURE, f"Signal report: {Path(root).name}")
+    return ["", render_markdown(report, "Signal report (defgg-datagen signal)"), f"![signal report]({SIGNAL_FIGURE})",
+            ""]
 
 
 def _share(rows) -> str:
@@ -188,5 +198,5 @@ def _share(rows) -> str:
 def write_card(root, cfg=None) -> Path:
     path = Path(root) / "card.md"
     text = render_card(root, getattr(cfg, "grasps_per_scene", None))
-    write_text_atomic(path, text + "\n".join(signal_section(root)))
+    write_text_atomic(path, text + "\n".join(write_signal_section(root)))
     return path

@@ -28,7 +28,7 @@ grip force FOS*m*g/mu, fingers locked after pickup, lost when either finger lets
 (fem_v1-v4). A resumed dataset keeps its own. docs/dataset.md, "Trial protocols".
 
 Signal report (do the labels carry "stiffness changes which grasp is good"?):
-  defgg-datagen signal datasets/fem_v4 [--json out.json] [--md out.md]
+  defgg-datagen signal datasets/fem_v4 [--json out.json] [--md out.md] [--png out.png]
 Seal a finished dataset (compress its trial files; the fingerprint stays):
   defgg-datagen seal datasets/fem_v4
 """
@@ -85,6 +85,9 @@ def build_signal_parser() -> argparse.ArgumentParser:
     ap.add_argument("folder", type=Path, help="a folder with trials/*.jsonl (a dataset or a pilot)")
     ap.add_argument("--json", type=Path, default=None, help="also write the figures as JSON here")
     ap.add_argument("--md", type=Path, default=None, help="also write the Markdown report here")
+    ap.add_argument("--png", type=Path, default=None,
+                    help="also draw the report here: held accelerations against the threshold per modulus, the "
+                         "within-scene share and the oracle (PNG)")
     ap.add_argument("--title", default=None, help="heading of the Markdown report (default: the folder name)")
     ap.add_argument("--label", choices=("shake", "shake_and_twist"), default="shake",
                     help="label rule: the dataset's (shake mean >= 25 m/s^2, default) or that and a mean twist "
@@ -121,11 +124,17 @@ def signal_main(argv) -> int:
 
     args = build_signal_parser().parse_args(argv)
     try:
-        report = signal_report(read_trial_records(args.folder), args.label)
+        records = read_trial_records(args.folder)
+        report = signal_report(records, args.label)
     except (SignalError, OSError, ValueError, KeyError) as exc:
         print(f"defgg-datagen signal: error: {exc}", file=sys.stderr)
         return 2
-    text = render_markdown(report, args.title or f"Signal report: {args.folder.name}")
+    title = args.title or f"Signal report: {args.folder.name}"
+    text = render_markdown(report, title)
+    if args.png:
+        from defgg_ros.data.signal_figure import signal_figure
+
+        signal_figure(report, records, args.png, title)
     if args.json:
         write_json_atomic(args.json, report)
     if args.md:

@@ -125,7 +125,7 @@ def _positive_rates(rows, moduli, label) -> dict:
     out = {}
     for e in moduli:
         labels = [label(r) for r in rows if float(r["youngs_modulus_pa"]) == e]
-        out[_key(e)] = {"n": len(labels), "positive": sum(labels), "rate": sum(labels) / len(labels)}
+        out[modulus_key(e)] = {"n": len(labels), "positive": sum(labels), "rate": sum(labels) / len(labels)}
     return out
 
 
@@ -137,13 +137,13 @@ def _near_threshold_shares(rows, moduli) -> dict:
 
     out = {"band_mps2": NEAR_THRESHOLD_BAND_MPS2, "all": share([held_mps2(r) for r in rows])}
     for e in moduli:
-        out[_key(e)] = share([held_mps2(r) for r in rows if float(r["youngs_modulus_pa"]) == e])
+        out[modulus_key(e)] = share([held_mps2(r) for r in rows if float(r["youngs_modulus_pa"]) == e])
     return out
 
 
 def _within_scene_shares(rows, moduli) -> dict:
     soft = [e for e in moduli if e <= MAX_SOFT_BODY_YOUNGS_MODULUS_PA]
-    groups = {"soft": soft, **{_key(e): [e] for e in moduli}}
+    groups = {"soft": soft, **{modulus_key(e): [e] for e in moduli}}
     return {name: _within_share([r for r in rows if float(r["youngs_modulus_pa"]) in es])
             for name, es in groups.items()}
 
@@ -245,7 +245,8 @@ def _ranks(v: np.ndarray) -> np.ndarray:
     return ranks
 
 
-def _key(e: float) -> str:
+def modulus_key(e: float) -> str:
+    """The report's key of a modulus: 2e4, 2e9 (its JSON and the tables)."""
     return f"{e:.0e}".replace("e+0", "e")
 
 
@@ -266,7 +267,7 @@ CARRY_GAP_POINTS, CARRY_WITHIN_SHARE, NOISY_NEAR_SHARE = 5.0, 0.30, 0.40
 def what_labels_carry(report: dict) -> list[str]:
     """Plain statements, from the report's figures alone, of what a network trained on these labels can and
     cannot learn from them (the dataset card prints them under the report)."""
-    rates = {e: report["positive_rate"][_key(e)]["rate"] for e in report["moduli_pa"]}
+    rates = {e: report["positive_rate"][modulus_key(e)]["rate"] for e in report["moduli_pa"]}
     rate_text = " / ".join(f"{100 * r:.0f}" for r in rates.values())
     lines = [f"- Can carry: how often a grasp of an object holds at each modulus ({rate_text} % positive at "
              f"{' / '.join(f'{e:.0e}' for e in rates)} Pa) and which objects are hard to hold."]
@@ -296,8 +297,8 @@ def render_markdown(report: dict, title: str = "Signal report") -> str:
              "| E (Pa) | labelled | positive | within-scene share of held-acceleration variance |",
              "|---|---|---|---|"]
     for e in report["moduli_pa"]:
-        pr = report["positive_rate"][_key(e)]
-        lines.append(f"| {e:.0e} | {pr['n']} | {_pct(pr['rate'])} | {_pct(report['within_scene_share'][_key(e)])} |")
+        pr, within = report["positive_rate"][modulus_key(e)], report["within_scene_share"][modulus_key(e)]
+        lines.append(f"| {e:.0e} | {pr['n']} | {_pct(pr['rate'])} | {_pct(within)} |")
     c, o = report["candidates"], report["oracle"]
     lines += ["", f"- Within-scene share, soft moduli pooled: **{_pct(report['within_scene_share']['soft'])}**."]
     if c.get("n") and "monotone" in c:
@@ -313,7 +314,7 @@ def render_markdown(report: dict, title: str = "Signal report") -> str:
                          f"({o['objects']} objects).")
     near = report.get("near_threshold")
     if near:
-        per_e = ", ".join(f"{e:.0e}: {_pct(near[_key(e)])}" for e in report["moduli_pa"])
+        per_e = ", ".join(f"{e:.0e}: {_pct(near[modulus_key(e)])}" for e in report["moduli_pa"])
         lines.append(f"- Held within {near['band_mps2']:g} m/s^2 of the 25 m/s^2 threshold (labels a 10 % change "
                      f"flips): **{_pct(near['all'])}** ({per_e}).")
     rho = report["friction_limit_spearman"]

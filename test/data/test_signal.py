@@ -82,8 +82,9 @@ def test_cli_reads_plain_and_gzip_trials_and_writes_json_and_markdown(tmp_path, 
         fh.write("".join(json.dumps(r) + "\n" for r in records[4:]))
     assert len(read_trial_records(tmp_path / "pilot")) == 8
     rc = datagen_cli.main(["signal", str(tmp_path / "pilot"), "--json", str(tmp_path / "s.json"),
-                           "--md", str(tmp_path / "s.md")])
+                           "--md", str(tmp_path / "s.md"), "--png", str(tmp_path / "s.png")])
     assert rc == 0
+    assert (tmp_path / "s.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert json.loads((tmp_path / "s.json").read_text())["oracle"]["best"]["gap_points"] == pytest.approx(25.0)
     assert "gap 25.0 points" in (tmp_path / "s.md").read_text() and "gap 25.0 points" in capsys.readouterr().out
 
@@ -108,7 +109,7 @@ def test_shake_and_twist_rule_needs_both_and_refuses_records_without_a_twist():
 
 
 def test_card_has_no_signal_report_for_trials_without_a_shake(tmp_path):
-    from defgg_ros.data.card import signal_section
+    from defgg_ros.data.card import SIGNAL_FIGURE, write_signal_section
     from defgg_ros.data.format import FORMAT_NAME, FORMAT_VERSION
 
     def header(generator):
@@ -117,9 +118,12 @@ def test_card_has_no_signal_report_for_trials_without_a_shake(tmp_path):
     (tmp_path / "trials").mkdir()
     (tmp_path / "trials" / "A__2e+04.jsonl").write_text(json.dumps(rec("A", 0, 2e4, 30.0)) + "\n")
     (tmp_path / "dataset.json").write_text(header({"tests": ["twist"]}))
-    assert "ran no shake" in "\n".join(signal_section(tmp_path))
+    assert "ran no shake" in "\n".join(write_signal_section(tmp_path))
+    assert not (tmp_path / SIGNAL_FIGURE).exists()
     (tmp_path / "dataset.json").write_text(header({}))
-    assert "Signal report" in "\n".join(signal_section(tmp_path))
+    lines = "\n".join(write_signal_section(tmp_path))
+    assert "Signal report" in lines and f"![signal report]({SIGNAL_FIGURE})" in lines
+    assert (tmp_path / SIGNAL_FIGURE).stat().st_size > 1000
 
 
 def test_the_threshold_moves_the_labels_not_the_measurements():
