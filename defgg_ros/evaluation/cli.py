@@ -77,7 +77,8 @@ def _add_run(sub):
     _add_protocol_args(p)
     p.add_argument("--plan-only", action="store_true",
                    help="only render and plan every view's grasps into OUT/plans.json (no simulation; cheap), "
-                        "for the diagnostics of the report")
+                        "for the diagnostics of the report; prints how many simulations a run would still need "
+                        "per task and modulus, and their CPU-hours where OUT holds finished ones to cost them")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
@@ -334,8 +335,9 @@ def cmd_run(args, argv) -> int:
     plan = runner.EvalPlan(objects, predictors, build_views(args, predictors, objects), args.grasps,
                            tuple(args.tasks), args.seed, settings, args.ranks)
     if args.plan_only:
-        path = runner.write_plans(plan, args.out, not args.no_progress)
+        path, budget = runner.write_plans(plan, args.out, not args.no_progress)
         print(path)
+        print("\n".join(runner.budget_lines(budget)))
         return 0
     counts = runner.run_evaluation(plan, args.out, args.workers, not args.no_progress, args.max_trials,
                                    on_progress=_reporter(args.out, args.report_every))

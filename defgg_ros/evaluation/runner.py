@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import multiprocessing as mp
 import time
+from collections import defaultdict
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
@@ -116,11 +117,28 @@ def plan_views(plan: EvalPlan, views, client: int, show_progress: bool = True) -
     return out
 
 
+def budget_lines(budget: dict) -> list[str]:
+    """pending_budget as lines for the terminal."""
+    lines = [f"{budget['trials']} trials pending: {budget['simulations']} simulations to run (trials with the same "
+             f"grasp share one); {budget['settled_without_simulation']} settled without one (a finished identical "
+             "simulation reused, or no grasp proposed)"]
+    for c in budget["cells"]:
+        cost = (f"~{c['cpu_h']:.1f} CPU-h (mean of {c['finished_simulations']} finished here)"
+                if c["cpu_h"] is not None else "no finished simulation here to estimate from")
+        lines.append(f"  {c['task']:5s} E = {c['youngs_modulus_pa']:.0e} Pa: {c['simulations']:5d}  {cost}")
+    if budget["cpu_h_estimated"] is not None:
+        missing = budget["cells_without_cost"]
+        lines.append(f"estimated: ~{budget['cpu_h_estimated']:.1f} CPU-h"
+                     + (f" plus {missing} cell(s) without a cost" if missing else ""))
+    return lines
+
+
 PLANS_FILE = "plans.json"
 
 
-def write_plans(plan: EvalPlan, out_dir, show_progress: bool = True):
-    """Render and plan every view (no simulation) into out_dir/plans.json; return its path."""
+def write_plans(plan: EvalPlan, out_dir, show_progress: bool = True) -> tuple:
+    """Render and plan every view (no simulation) into out_dir/plans.json; return its path and the budget of
+    what a run would still simulate (pending_budget)."""
     from pathlib import Path
 
     import pybullet as p
@@ -128,9 +146,11 @@ def write_plans(plan: EvalPlan, out_dir, show_progress: bool = True):
     from defgg_ros.atomic import write_json_atomic
     from defgg_ros.sim import world
 
+    store = ResultStore(out_dir)
     client = world.connect()
     try:
         grasps = plan_views(plan, plan.views, client, show_progress)
+        ready, to_run = pending_work(plan, store, client, show_progress, grasps)
     finally:
         p.disconnect(client)
     shas = plan.model_shas()
@@ -138,7 +158,32 @@ def write_plans(plan: EvalPlan, out_dir, show_progress: bool = True):
                for v, gs in grasps.items()]
     path = Path(out_dir) / PLANS_FILE
     write_json_atomic(path, entries)
-    return path
+    return path, pending_budget(ready, to_run, store.records())
+
+
+def pending_budget(ready: list, to_run: dict, finished: list) -> dict:
+    """What a run would do: trials settled without a simulation (reused or no grasp), and the simulations
+    still to run per task and modulus, with CPU-hours where the folder's own finished simulations of that task
+    and modulus give a mean cost (none for a fresh folder: bench/bench_eval.py gives costs)."""
+    cost = defaultdict(list)
+    for rec in finished:
+        if rec.get("reused_from") is None and rec.get("cpu_s") is not None:
+            cost[(rec["task"], float(rec["youngs_modulus_pa"]))].append(rec["cpu_s"])
+    per_cell = defaultdict(int)
+    for recs in to_run.values():
+        rec = recs[0][0]
+        per_cell[(rec["task"], float(rec["youngs_modulus_pa"]))] += 1
+    cells = []
+    for (task, e), n in sorted(per_cell.items()):
+        mean = sum(cost[(task, e)]) / len(cost[(task, e)]) if cost[(task, e)] else None
+        cells.append({"task": task, "youngs_modulus_pa": e, "simulations": n, "finished_simulations":
+                      len(cost[(task, e)]), "cpu_h": None if mean is None else n * mean / 3600.0})
+    known = [c["cpu_h"] for c in cells if c["cpu_h"] is not None]
+    trials = len(ready) + sum(len(recs) for recs in to_run.values())
+    return {"trials": trials, "settled_without_simulation": len(ready), "simulations": sum(per_cell.values()),
+            "cells": cells,
+            "cpu_h_estimated": sum(known) if known else None,
+            "cells_without_cost": sum(c["cpu_h"] is None for c in cells)}
 
 
 def _base_record(job, plan: EvalPlan, obj, grasp) -> dict:
@@ -204,11 +249,14 @@ def run_trial_payload_guarded(payload: dict) -> dict:
         return {"error": f"{type(exc).__name__}: {exc}"}
 
 
-def pending_work(plan: EvalPlan, store: ResultStore, client: int, show_progress: bool = True):
-    """(records ready to append now, {sim_key: [base records]} to simulate) for unfinished trials."""
+def pending_work(plan: EvalPlan, store: ResultStore, client: int, show_progress: bool = True,
+                 grasps: dict | None = None):
+    """(records ready to append now, {sim_key: [base records]} to simulate) for unfinished trials.
+    grasps: the views' planned grasps when already known (plan_views), else they are planned here."""
     todo = [j for j in plan.jobs() if j.key not in store]
     views = list(dict.fromkeys(j.view for j in todo))
-    grasps = plan_views(plan, views, client, show_progress) if views else {}
+    if grasps is None:
+        grasps = plan_views(plan, views, client, show_progress) if views else {}
     objects = {(o.set_name, o.name): o for o in plan.objects}
     ready, to_run, done_sims = [], {}, store.by_sim_key()
     settings = asdict(plan.settings)

@@ -127,3 +127,19 @@ def test_results_doc_names_the_trial_protocol_and_whether_the_labels_could_carry
     doc = results_markdown(tmp_path, tmp_path / "results.md")
     assert "Trial protocol: **defgraspsim**" in doc and "the label's own criterion" in doc
     assert f"`defgg-datagen signal {data}`" in doc and "A perfect stiffness-aware choice" in doc
+
+
+def test_pending_budget_costs_each_task_and_modulus_from_the_folders_own_simulations():
+    from defgg_ros.evaluation.runner import budget_lines, pending_budget
+
+    finished = [{"task": "shake", "youngs_modulus_pa": 2e4, "cpu_s": 30.0, "reused_from": None},
+                {"task": "shake", "youngs_modulus_pa": 2e4, "cpu_s": 90.0, "reused_from": None},
+                {"task": "shake", "youngs_modulus_pa": 2e4, "cpu_s": 0.0, "reused_from": "k0"}]   # reused: free
+    to_run = {f"s{i}": [({"task": "shake", "youngs_modulus_pa": 2e4}, None)] for i in range(6)}
+    to_run["t"] = [({"task": "twist", "youngs_modulus_pa": 2e4}, None)] * 2     # two trials, one simulation
+    budget = pending_budget([{"status": "no_grasp"}], to_run, finished)
+    assert budget["simulations"] == 7 and budget["settled_without_simulation"] == 1 and budget["trials"] == 9
+    shake = next(c for c in budget["cells"] if c["task"] == "shake")
+    assert shake["simulations"] == 6 and shake["cpu_h"] == pytest.approx(6 * 60.0 / 3600)
+    assert budget["cpu_h_estimated"] == pytest.approx(0.1) and budget["cells_without_cost"] == 1
+    assert budget_lines(budget)[-1] == "estimated: ~0.1 CPU-h plus 1 cell(s) without a cost"

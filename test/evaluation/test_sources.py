@@ -55,7 +55,7 @@ def test_mesh_folder_errors(tmp_path):
         sources.check_moduli([1e12])
 
 
-def test_cli_plans_grasps_on_a_mesh_folder(tmp_path):
+def test_cli_plans_grasps_on_a_mesh_folder(tmp_path, capsys):
     """`defgg-eval run --objects DIR --plan-only`: a user's mesh, moduli from the YAML, real render + both models."""
     import json
     from pathlib import Path
@@ -81,3 +81,9 @@ def test_cli_plans_grasps_on_a_mesh_folder(tmp_path):
         assert abs(g["position_m"][0]) < 0.05 and abs(g["position_m"][1]) < 0.05 and 0 < g["width_m"] <= 0.08
     manifest = json.loads((out / "run.json").read_text())
     assert manifest["objects"]["user"][0]["moduli_pa"] == [2e5, 2e9]
+    # the budget: one simulation per distinct grasp and task, none finished here to cost it
+    distinct = {(p["view"]["youngs_modulus_pa"], tuple(round(c, 5) for c in g["position_m"]), round(g["yaw_rad"], 5),
+                 round(g["width_m"], 5)) for p in plans for g in p["grasps"]}
+    printed = capsys.readouterr().out
+    assert "16 trials pending" in printed       # 2 models x 2 moduli x 2 grasps x 2 tasks
+    assert f"{2 * len(distinct)} simulations to run" in printed and "no finished simulation here" in printed
