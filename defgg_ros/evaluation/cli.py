@@ -486,6 +486,7 @@ def cmd_card(args) -> int:
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     args = build_parser().parse_args(argv)
+    from defgg_ros.data.format import DatasetError
     from defgg_ros.evaluation.cards import CardError
     from defgg_ros.evaluation.report import ReportError
     from defgg_ros.evaluation.snapshot import SnapshotError
@@ -500,8 +501,8 @@ def main(argv=None) -> int:
         commands = {"report": cmd_report, "strategy": cmd_strategy, "ship": cmd_ship, "card": cmd_card,
                     "snapshot": cmd_snapshot, "freeze": cmd_freeze}
         return commands[args.command](args)
-    except (sources.SourceError, ReportError, ResultsError, CardError, CheckpointError, SnapshotError, OSError,
-            ValueError) as exc:
+    except (sources.SourceError, ReportError, ResultsError, CardError, CheckpointError, SnapshotError, DatasetError,
+            OSError, ValueError) as exc:
         print(f"defgg-eval: error: {exc}", file=sys.stderr)
         return 2
 

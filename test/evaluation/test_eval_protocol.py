@@ -108,3 +108,10 @@ def test_protocol_from_a_dataset_without_recorded_trial_settings_is_refused(tmp_
     (tmp_path / "dataset.json").write_text(json.dumps(header), encoding="utf-8")
     with pytest.raises(ValueError, match="records no trial settings"):
         cli.resolve_protocol("unused", None, from_dataset=str(tmp_path))
+
+
+def test_protocol_from_a_folder_that_is_no_dataset_is_one_clear_line(tmp_path, capsys):
+    assert cli.main(["run", "--out", str(tmp_path / "out"), "--protocol-from", str(tmp_path / "nothing"),
+                     "--plan-only", "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("defgg-eval: error:") and "not a defgg dataset" in err and "Traceback" not in err
