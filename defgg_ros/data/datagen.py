@@ -24,7 +24,7 @@ import numpy as np
 from defgg_ros.atomic import append_jsonl, write_json_atomic
 from defgg_ros.constants import GRASP_CANDIDATES_PER_OBJECT, TRAINING_YOUNGS_MODULI_PA
 from defgg_ros.data.format import TRIAL_ERRORS_FILE as ERRORS_FILE
-from defgg_ros.data.format import DatasetWriter, GraspRect, Scene, TrialRecord, scene_id_for
+from defgg_ros.data.format import DatasetError, DatasetWriter, GraspRect, Scene, TrialRecord, scene_id_for
 from defgg_ros.data.header import effective_trial_settings, recorded_grasp_height, recorded_protocol  # noqa: F401
 
 CANDIDATE_FILE_VERSION = 1
@@ -146,14 +146,22 @@ def render_scene(shape, youngs_modulus_pa: float, seed: int) -> Scene:
     return Scene(scene_id_for(shape.name, youngs_modulus_pa), meta=meta, **images)
 
 
-def plan(cfg: DatagenConfig, writer: DatasetWriter, progress=None) -> list:
-    """Render missing scenes, sample candidates, and return pending TrialJobs in pass order."""
+def selected_shapes(cfg: DatagenConfig) -> list:
+    """The object set's shapes the config names (all of them when it names none); DatasetError for a name
+    the set does not have."""
     from defgg_ros.sim.objects import object_set
 
     shapes = [s for s in object_set(cfg.object_set) if not cfg.objects or s.name in cfg.objects]
     missing = set(cfg.objects) - {s.name for s in shapes}
     if missing:
-        raise ValueError(f"objects not in set {cfg.object_set!r}: {sorted(missing)}")
+        raise DatasetError(f"objects not in set {cfg.object_set!r}: {sorted(missing)}; its objects: "
+                           f"{', '.join(s.name for s in object_set(cfg.object_set))}")
+    return shapes
+
+
+def plan(cfg: DatagenConfig, writer: DatasetWriter, progress=None) -> list:
+    """Render missing scenes, sample candidates, and return pending TrialJobs in pass order."""
+    shapes = selected_shapes(cfg)
     per_scene = {}
     for shape in shapes:
         cands = load_or_sample_candidates(writer.root, shape, cfg)
@@ -300,7 +308,7 @@ def resolve_protocol(out, requested: str | None) -> str:
 
 def check_resumable(cfg: DatagenConfig) -> None:
     """A resumed dataset keeps its FEM mesh and trial protocol (labels depend on both)."""
-    from defgg_ros.data.format import DatasetError, check_header
+    from defgg_ros.data.format import check_header
 
     stored = check_header(cfg.out).get("generator", {})
     mesh = stored.get("sim_max_tet_nodes")
@@ -330,6 +338,7 @@ def generate(cfg: DatagenConfig, progress_bar=True) -> dict:
 
     from defgg_ros.data.card import write_card
 
+    selected_shapes(cfg)           # a bad object name is refused before anything is written
     writer = DatasetWriter(cfg.out, cfg.header())
     check_resumable(cfg)
     t_plan = tqdm(desc="planning (objects)", unit="obj", disable=not progress_bar)

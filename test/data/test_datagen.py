@@ -215,3 +215,13 @@ def test_without_a_progress_bar_the_log_gets_a_line_per_card(tmp_path, capsys):
     assert datagen.generate(cfg, progress_bar=False)["done"] == 2
     lines = [line for line in capsys.readouterr().out.splitlines() if line.startswith("defgg-datagen: ")]
     assert lines and "pending trials done" in lines[-1] and "100.0 %" in lines[-1], lines
+
+
+def test_an_unknown_object_is_one_clear_line_and_writes_nothing(tmp_path, capsys):
+    from defgg_ros.data import datagen_cli
+
+    out = tmp_path / "new"
+    assert datagen_cli.main(["--out", str(out), "--objects", "cube", "no_such_object", "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "objects not in set 'train': ['no_such_object']" in err and "Traceback" not in err
+    assert not out.exists()
