@@ -332,6 +332,22 @@ def run_demo(args, out_dir: Path, log) -> int:
     return code
 
 
+def _check_inputs(args) -> str | None:
+    """What is wrong with the scene, model or --objects, found before the cell starts (else None)."""
+    from defgg_ros.sim.scene_spec import SceneError, load_scene
+
+    if not Path(args.model).is_file():
+        return f"model file {args.model} does not exist"
+    try:
+        names = [o.name for o in load_scene(args.scene).objects]
+    except SceneError as exc:
+        return f"scene: {exc}"
+    unknown = sorted(set(args.objects.split(",")) - set(names)) if args.objects else []
+    if unknown:
+        return f"--objects {unknown} not in the scene (it has {', '.join(names)})"
+    return None
+
+
 def _explain_dead_node(bringup) -> None:
     """A call that timed out is often a node that died: name it and show its last lines (else every node's)."""
     dead = bringup.failed_node()
@@ -366,10 +382,10 @@ def main(argv=None) -> int:
     except ValueError as exc:
         print(f"defgg-demo: --ros-domain: {exc}", file=sys.stderr)
         return 2
-    for path, what in ((args.scene, "scene"), (args.model, "model")):
-        if not Path(path).is_file():
-            print(f"defgg-demo: {what} file {path} does not exist", file=sys.stderr)
-            return 2
+    problem = _check_inputs(args)
+    if problem:
+        print(f"defgg-demo: {problem}", file=sys.stderr)
+        return 2
     out_dir = _out_dir(args)
     out_dir.mkdir(parents=True, exist_ok=True)
     with open(out_dir / "cell.log", "w", encoding="utf-8") as log:

@@ -103,3 +103,14 @@ def test_demo_refuses_missing_files(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "defgg_ros.demo", "--scene", str(tmp_path / "none.yaml"),
                            "--out", str(tmp_path / "o")], capture_output=True, text=True, timeout=60, cwd=ROOT)
     assert proc.returncode == 2 and "does not exist" in proc.stderr
+
+
+def test_demo_refuses_unknown_objects_and_bad_scenes_before_the_cell_starts(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("objects: [{name: a}, {name: a}]\n")
+    for extra, says in ((["--objects", "sponge,nosuch"], "--objects ['nosuch'] not in the scene (it has sponge"),
+                        (["--scene", str(bad)], "scene: ")):
+        proc = subprocess.run([sys.executable, "-m", "defgg_ros.demo", "--out", str(tmp_path / "o"), *extra],
+                              capture_output=True, text=True, timeout=60, cwd=ROOT)
+        assert proc.returncode == 2 and says in proc.stderr, proc.stderr
+        assert not (tmp_path / "o").exists()          # nothing started, nothing written
