@@ -34,10 +34,22 @@ class TrainConfig:
     # the sampler's candidates span the object's height, the executed grasp does not.
     max_height_offset_m: float | None = None
 
-    def __post_init__(self):
-        check_label_rule(self.label_rule)   # fail before any data is read
+    def __post_init__(self):   # fail before any data is read
+        check_label_rule(self.label_rule)
         if self.max_height_offset_m is not None and not self.max_height_offset_m >= 0:
             raise ValueError(f"max_height_offset_m must be >= 0 or None, got {self.max_height_offset_m}")
+        counts = {"epochs": self.epochs, "batch_size": self.batch_size, "samples_per_scene": self.samples_per_scene}
+        if self.max_steps is not None:
+            counts["max_steps"] = self.max_steps
+        for name, value in counts.items():
+            if not value >= 1:
+                raise ValueError(f"{name} must be >= 1, got {value}")
+        for name, value in (("learning_rate", self.learning_rate), ("positive_weight", self.positive_weight)):
+            if not value > 0:
+                raise ValueError(f"{name} must be > 0, got {value}")
+        if not (0 <= self.val_fraction and 0 <= self.test_fraction and self.val_fraction + self.test_fraction < 1):
+            raise ValueError(f"val_fraction and test_fraction must be >= 0 with a sum below 1 (the rest trains), "
+                             f"got {self.val_fraction} and {self.test_fraction}")
 
     def network_config(self) -> GGCNNConfig:
         return GGCNNConfig(input_channels=2 if self.uses_stiffness else 1, architecture=self.architecture)

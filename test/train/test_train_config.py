@@ -16,3 +16,21 @@ def test_height_filter_option_is_in_metres_and_round_trips():
 def test_negative_height_filter_is_refused():
     with pytest.raises(ValueError, match="max_height_offset_m"):
         TrainConfig(max_height_offset_m=-0.001)
+
+
+@pytest.mark.parametrize("field, value, says", [
+    ("epochs", 0, "epochs must be >= 1"), ("batch_size", 0, "batch_size must be >= 1"),
+    ("samples_per_scene", 0, "samples_per_scene must be >= 1"), ("max_steps", 0, "max_steps must be >= 1"),
+    ("learning_rate", 0.0, "learning_rate must be > 0"), ("positive_weight", -1.0, "positive_weight must be > 0"),
+    ("val_fraction", 0.6, "sum below 1"), ("test_fraction", -0.1, "must be >= 0")])
+def test_hyper_parameters_out_of_range_are_refused_before_any_data_is_read(field, value, says):
+    with pytest.raises(ValueError, match=says):
+        TrainConfig(**{field: value, **({"test_fraction": 0.4} if field == "val_fraction" else {})})
+
+
+def test_the_cli_says_what_is_wrong_in_one_line(tmp_path, capsys):
+    from defgg_ros.train.cli import main
+
+    assert main(["--data", str(tmp_path), "--out", str(tmp_path / "run"), "--epochs", "0"]) == 2
+    assert capsys.readouterr().err.strip() == "defgg-train: error: epochs must be >= 1, got 0"
+    assert not (tmp_path / "run").exists()
