@@ -322,9 +322,19 @@ def merge_manifest(out_dir, manifest: dict) -> dict:
             "commands": list(dict.fromkeys(old.get("commands", [old["command"]]) + [manifest["command"]]))}
 
 
+def check_run_counts(args) -> None:
+    """ValueError naming the first count option out of range (before any model is loaded)."""
+    for flag, value, least in (("--grasps", args.grasps, 1), ("--workers", args.workers, 1),
+                               ("--ranks", args.ranks, 1), ("--max-trials", args.max_trials, 0),
+                               ("--report-every", args.report_every, 1)):
+        if value is not None and value < least:
+            raise ValueError(f"{flag} must be >= {least}, got {value}")
+
+
 def cmd_run(args, argv) -> int:
     from defgg_ros.evaluation import runner
 
+    check_run_counts(args)
     model_paths = parse_models(args.model or DEFAULT_MODELS)
     predictors = load_predictors(model_paths)
     objects = eval_objects(args)

@@ -115,3 +115,11 @@ def test_protocol_from_a_folder_that_is_no_dataset_is_one_clear_line(tmp_path, c
                      "--plan-only", "--no-progress"]) == 2
     err = capsys.readouterr().err
     assert err.startswith("defgg-eval: error:") and "not a defgg dataset" in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize("option, value", [("--grasps", "0"), ("--workers", "0"), ("--ranks", "0"),
+                                           ("--max-trials", "-1"), ("--report-every", "0")])
+def test_count_options_out_of_range_are_refused_before_anything_runs(tmp_path, capsys, option, value):
+    assert cli.main(["run", "--out", str(tmp_path / "out"), option, value, "--plan-only", "--no-progress"]) == 2
+    assert f"defgg-eval: error: {option} must be >= " in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
