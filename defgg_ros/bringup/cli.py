@@ -64,6 +64,44 @@ def parse_overrides(args) -> dict:
     return overrides
 
 
+def checked_overrides(node_set, overrides: dict) -> dict:
+    """The overrides with values in their schema's type (`:=0` for a double is 0.0: rclpy refuses an integer
+    for a double parameter). NodeSetError for an override of a node the set does not start, of a parameter its
+    schema does not declare, or with a value its schema refuses; and for a scene file that is not a valid scene.
+    Checked before any process starts: a typo would otherwise leave the parameter at its default (or kill a node
+    mid start-up)."""
+    from defgg_ros.ros.parameters import _coerce, check_value, load_schema, schema_path
+
+    names = [entry.name for entry in node_set.nodes]
+    out = {}
+    for node, params in overrides.items():
+        if node not in names:
+            raise NodeSetError(f"--param/--scene/--gui: node {node!r} is not in node set {node_set.name!r} "
+                               f"(it starts {', '.join(names)})")
+        if not schema_path(node).is_file():
+            out[node] = dict(params)
+            continue
+        specs = load_schema(node)
+        out[node] = {}
+        for name, value in params.items():
+            if name not in specs:
+                raise NodeSetError(f"--param {node}:{name}: {node} has no parameter {name!r} "
+                                   f"(see defgg_ros/ros/params/{node}.yaml)")
+            out[node][name] = _coerce(specs[name], value)
+            problem = check_value(specs[name], out[node][name])
+            if problem:
+                raise NodeSetError(f"--param {node}:{problem}")
+    scene = out.get(DRIVER, {}).get("scene_file")
+    if scene:
+        from defgg_ros.sim.scene_spec import SceneError, load_scene
+
+        try:
+            load_scene(scene)
+        except SceneError as exc:
+            raise NodeSetError(f"--scene: {exc}") from None
+    return out
+
+
 def _yaml_scalar(text):
     import yaml
 
@@ -128,7 +166,7 @@ def main(argv=None) -> int:
         # First, before any rclpy context or child process exists: they read the domain at start-up.
         print(f"defgg-bringup: {apply_domain_choice(domain_choice(args, node_set))}", flush=True)
         extra = record_hook(args.record, args.scene) if args.record else {}
-        bringup = Bringup(node_set, parse_overrides(args), extra)
+        bringup = Bringup(node_set, checked_overrides(node_set, parse_overrides(args)), extra)
     except (NodeSetError, BringupError, ValueError) as exc:
         print(f"defgg-bringup: {exc}", file=sys.stderr)
         return 2

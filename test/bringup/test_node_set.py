@@ -43,3 +43,20 @@ def test_bad_sets_are_explained(tmp_path, body, words):
 def test_unknown_set_name():
     with pytest.raises(NodeSetError, match="does not exist"):
         load_node_set("no_such_set")
+
+
+def test_overrides_are_checked_against_the_node_schemas_and_typed_before_any_process_starts(tmp_path):
+    from defgg_ros.bringup.cli import checked_overrides, parse_args, parse_overrides
+
+    sim = load_node_set("sim_cell")
+    out = checked_overrides(sim, parse_overrides(parse_args(["-p", "fake_panda_driver:max_real_time_factor:=0"])))
+    value = out["fake_panda_driver"]["max_real_time_factor"]
+    assert value == 0.0 and isinstance(value, float)        # rclpy refuses an int for a double parameter
+    for argv, says in ((["-p", "grasp_inference_node:nosuch:=3"], "grasp_inference_node has no parameter 'nosuch'"),
+                       (["-p", "fake_panda_driver:max_real_time_factor:=-1"], "max_real_time_factor = -1.0 must be"),
+                       (["-p", "nobody:x:=1"], "node 'nobody' is not in node set 'sim_cell'"),
+                       (["--scene", str(tmp_path / "none.yaml")], "--scene: scene file")):
+        with pytest.raises(NodeSetError, match=says.replace("(", r"\(").replace(")", r"\)")):
+            checked_overrides(sim, parse_overrides(parse_args(argv)))
+    with pytest.raises(NodeSetError, match="not in node set 'real_cell'"):
+        checked_overrides(load_node_set("real_cell"), parse_overrides(parse_args(["--gui"])))
