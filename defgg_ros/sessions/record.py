@@ -238,14 +238,37 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def check_args(args) -> None:
+    """ValueError naming the first option out of range (before anything connects or writes)."""
+    import math
+
+    least = {"--duration-s": (args.duration_s, 0.0), "--plan": (args.plan, 0), "--top-k": (args.top_k, 1),
+             "--frames-between": (args.frames_between, 0), "--depth-period-s": (args.depth_period_s, 0.0),
+             "--joint-state-period-s": (args.joint_state_period_s, 0.0)}
+    positive = {"--position-tol-mm": args.position_tol_mm, "--angle-tol-deg": args.angle_tol_deg,
+                "--width-tol-mm": args.width_tol_mm, "--wait-s": args.wait_s, "--param-timeout-s":
+                args.param_timeout_s}
+    for flag, (value, bound) in least.items():
+        if not (math.isfinite(value) and value >= bound):
+            raise ValueError(f"{flag} must be >= {bound:g}, got {value:g}")
+    for flag, value in positive.items():
+        if not (math.isfinite(value) and value > 0):
+            raise ValueError(f"{flag} must be > 0, got {value:g}")
+    if args.stiffness_from_scene and not args.scene:
+        raise ValueError("--stiffness-from-scene needs --scene")
+
+
 def _interrupt(*_):
     raise KeyboardInterrupt
 
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
-    if args.stiffness_from_scene and not args.scene:
-        raise SystemExit("defgg-record: --stiffness-from-scene needs --scene")
+    try:
+        check_args(args)
+    except ValueError as exc:
+        print(f"defgg-record: error: {exc}", file=sys.stderr)
+        return 2
     use_large_message_transport()
     # SIGTERM (e.g. from the bringup) ends the recording cleanly, like Ctrl-C.
     previous = signal.signal(signal.SIGTERM, _interrupt)

@@ -98,3 +98,15 @@ def test_a_fresh_recording_replays_clean(live_cell, tmp_path):
     code, text = run_replay(out)
     assert code == 0, text
     assert re.search(r"fresh: all \d+ item\(s\) match", text), text
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["--duration-s", "-5"], "--duration-s must be >= 0, got -5"), (["--top-k", "0"], "--top-k must be >= 1"),
+    (["--plan", "-1"], "--plan must be >= 0"), (["--width-tol-mm", "0"], "--width-tol-mm must be > 0"),
+    (["--depth-period-s", "nan"], "--depth-period-s must be >= 0"),
+    (["--stiffness-from-scene"], "--stiffness-from-scene needs --scene")])
+def test_options_out_of_range_are_refused_before_anything_connects(tmp_path, capsys, argv, says):
+    assert record.main([str(tmp_path / "bag"), *argv]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"defgg-record: error: {says}"), err
+    assert not (tmp_path / "bag").exists()
