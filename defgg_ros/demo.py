@@ -336,6 +336,11 @@ def _check_inputs(args) -> str | None:
     """What is wrong with the scene, model or --objects, found before the cell starts (else None)."""
     from defgg_ros.sim.scene_spec import SceneError, load_scene
 
+    if not args.max_rtf >= 0:
+        return f"--max-rtf must be >= 0 (0: as fast as possible), got {args.max_rtf:g}"
+    for flag, value in (("--ready-timeout", args.ready_timeout), ("--pick-timeout", args.pick_timeout)):
+        if not value > 0:
+            return f"{flag} must be > 0 s, got {value:g}"
     if not Path(args.model).is_file():
         return f"model file {args.model} does not exist"
     try:

@@ -109,7 +109,8 @@ def test_demo_refuses_unknown_objects_and_bad_scenes_before_the_cell_starts(tmp_
     bad = tmp_path / "bad.yaml"
     bad.write_text("objects: [{name: a}, {name: a}]\n")
     for extra, says in ((["--objects", "sponge,nosuch"], "--objects ['nosuch'] not in the scene (it has sponge"),
-                        (["--scene", str(bad)], "scene: ")):
+                        (["--scene", str(bad)], "scene: "), (["--max-rtf", "-1"], "--max-rtf must be >= 0"),
+                        (["--pick-timeout", "0"], "--pick-timeout must be > 0 s")):
         proc = subprocess.run([sys.executable, "-m", "defgg_ros.demo", "--out", str(tmp_path / "o"), *extra],
                               capture_output=True, text=True, timeout=60, cwd=ROOT)
         assert proc.returncode == 2 and says in proc.stderr, proc.stderr

@@ -153,6 +153,7 @@ def main(argv=None) -> int:
     from defgg_ros.data.datagen import DatagenConfig, generate, resolve_grasp_height, resolve_protocol
     from defgg_ros.data.format import DatasetError
     from defgg_ros.sim.trial import TrialSettings
+    from defgg_ros.stiffness import InvalidYoungsModulus, check_youngs_modulus
 
     try:
         settings = json.loads(args.settings)
@@ -167,8 +168,15 @@ def main(argv=None) -> int:
         print("defgg-datagen: --sim-max-tet-nodes must be 0 (shipped mesh) or >= 4 (a tetrahedron)",
               file=sys.stderr)
         return 2
-    if args.grasps_per_scene < 1 or args.pass_size < 1 or args.workers < 1:
-        print("defgg-datagen: --grasps-per-scene, --pass-size and --workers must be >= 1", file=sys.stderr)
+    if args.grasps_per_scene < 1 or args.pass_size < 1 or args.workers < 1 or args.candidates < 1:
+        print("defgg-datagen: --grasps-per-scene, --pass-size, --workers and --candidates must be >= 1",
+              file=sys.stderr)
+        return 2
+    try:
+        for e in args.moduli:
+            check_youngs_modulus(e)
+    except InvalidYoungsModulus as exc:
+        print(f"defgg-datagen: --moduli: {exc}", file=sys.stderr)
         return 2
     try:
         cfg = DatagenConfig(out=args.out, object_set=args.object_set, objects=tuple(args.objects),

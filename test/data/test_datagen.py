@@ -225,3 +225,13 @@ def test_an_unknown_object_is_one_clear_line_and_writes_nothing(tmp_path, capsys
     err = capsys.readouterr().err
     assert "objects not in set 'train': ['no_such_object']" in err and "Traceback" not in err
     assert not out.exists()
+
+
+@pytest.mark.parametrize("argv, says", [(["--moduli", "2e4", "-1"], "--moduli: Young's modulus must be finite"),
+                                        (["--candidates", "0"], "--candidates must be >= 1")])
+def test_bad_numbers_are_one_clear_line_and_write_nothing(tmp_path, capsys, argv, says):
+    from defgg_ros.data import datagen_cli
+
+    out = tmp_path / "new"
+    assert datagen_cli.main(["--out", str(out), "--objects", "cube", "--no-progress", *argv]) == 2
+    assert says in capsys.readouterr().err and not out.exists()
