@@ -224,8 +224,32 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def check_args(args) -> None:
+    """ValueError naming the first option out of range (before any node starts)."""
+    import math
+
+    from defgg_ros.ros.domain import SAFE_DOMAIN_RANGE
+
+    for flag, value in (("--position-tol-mm", args.position_tol_mm), ("--angle-tol-deg", args.angle_tol_deg),
+                        ("--width-tol-mm", args.width_tol_mm)):
+        if value is not None and not (math.isfinite(value) and value >= 0):
+            raise ValueError(f"{flag} must be >= 0 (0: exact), got {value:g}")
+    for flag, value in (("--timeout-s", args.timeout_s), ("--pick-timeout-s", args.pick_timeout_s)):
+        if not (math.isfinite(value) and value > 0):
+            raise ValueError(f"{flag} must be > 0, got {value:g}")
+    low, high = SAFE_DOMAIN_RANGE
+    if args.domain_id is not None and not low <= args.domain_id <= high:
+        raise ValueError(f"--domain-id must be in {low}..{high} (higher ids map to ports in Linux's ephemeral "
+                         f"range), got {args.domain_id}")
+
+
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
+    try:
+        check_args(args)
+    except ValueError as exc:
+        print(f"defgg-replay: error: {exc}", file=sys.stderr)
+        return EXIT_ERROR
     use_large_message_transport()
     try:
         paths = find_sessions(args.sessions)

@@ -122,3 +122,14 @@ def test_a_pick_that_no_longer_succeeds_is_a_regression(tmp_path):
     assert code == 1, text
     report = text.split("REGRESSION in session rigid_objects")[1]
     assert "pick 0: pick failed but the recording succeeded" in report
+
+
+@pytest.mark.parametrize("argv, says", [(["--timeout-s", "-1"], "--timeout-s must be > 0"),
+                                        (["--width-tol-mm", "-0.5"], "--width-tol-mm must be >= 0 (0: exact)"),
+                                        (["--domain-id", "999"], "--domain-id must be in 0..101")])
+def test_options_out_of_range_are_an_error_not_a_regression(tmp_path, capsys, argv, says):
+    """A negative timeout made every frame 'time out': reported as a REGRESSION with advice to re-record."""
+    from defgg_ros.sessions import replay
+
+    assert replay.main([str(tmp_path), *argv]) == replay.EXIT_ERROR
+    assert capsys.readouterr().err.startswith(f"defgg-replay: error: {says}")
