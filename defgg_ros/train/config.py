@@ -47,8 +47,8 @@ class TrainConfig:
         for name, value in (("learning_rate", self.learning_rate), ("positive_weight", self.positive_weight)):
             if not value > 0:
                 raise ValueError(f"{name} must be > 0, got {value}")
-        if not (0 <= self.val_fraction and 0 <= self.test_fraction and self.val_fraction + self.test_fraction < 1):
-            raise ValueError(f"val_fraction and test_fraction must be >= 0 with a sum below 1 (the rest trains), "
+        if not (0 < self.val_fraction and 0 < self.test_fraction and self.val_fraction + self.test_fraction < 1):
+            raise ValueError(f"val_fraction and test_fraction must be > 0 with a sum below 1 (the rest trains), "
                              f"got {self.val_fraction} and {self.test_fraction}")
 
     def network_config(self) -> GGCNNConfig:

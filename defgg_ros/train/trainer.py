@@ -40,6 +40,15 @@ METRICS_FILE, CURVES_FILE, RESPONSE_FILE = "metrics.json", "curves.png", "stiffn
 RESUMABLE_OVERRIDES = ("epochs", "max_steps")
 
 
+
+def labelled_scene_objects(data_root: Path, manifest: dict) -> dict:
+    """{scene id: object name} of the scenes whose object has a trial in the manifest. An object without any
+    (the sampler found no candidate for it) has no label anywhere: were it split, a validation or test slot
+    would hold an object with nothing to score (fem_v5: 5 of 30 objects)."""
+    objects = {sid: read_scene(data_root / "scenes" / f"{sid}.npz").object_name for sid in manifest}
+    labelled = {name for sid, name in objects.items() if manifest[sid] > 0}
+    return {sid: name for sid, name in objects.items() if name in labelled}
+
 class TrainingError(RuntimeError):
     """Training cannot start or resume (bad data, mismatched state)."""
 
@@ -103,7 +112,7 @@ class Trainer:
             if not self.manifest:
                 raise TrainingError(f"{self.data_root}: no scenes yet")
             self.fingerprint = manifest_fingerprint(self.data_root, self.manifest)
-        scene_objects = {sid: read_scene(self.data_root / "scenes" / f"{sid}.npz").object_name for sid in self.manifest}
+        scene_objects = labelled_scene_objects(self.data_root, self.manifest)
         if not state:
             self.object_split = split_objects(scene_objects.values(), self.config.val_fraction,
                                               self.config.test_fraction, self.config.seed)

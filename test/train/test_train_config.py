@@ -22,7 +22,7 @@ def test_negative_height_filter_is_refused():
     ("epochs", 0, "epochs must be >= 1"), ("batch_size", 0, "batch_size must be >= 1"),
     ("samples_per_scene", 0, "samples_per_scene must be >= 1"), ("max_steps", 0, "max_steps must be >= 1"),
     ("learning_rate", 0.0, "learning_rate must be > 0"), ("positive_weight", -1.0, "positive_weight must be > 0"),
-    ("val_fraction", 0.6, "sum below 1"), ("test_fraction", -0.1, "must be >= 0")])
+    ("val_fraction", 0.6, "sum below 1"), ("test_fraction", 0.0, "must be > 0")])
 def test_hyper_parameters_out_of_range_are_refused_before_any_data_is_read(field, value, says):
     with pytest.raises(ValueError, match=says):
         TrainConfig(**{field: value, **({"test_fraction": 0.4} if field == "val_fraction" else {})})
@@ -34,3 +34,19 @@ def test_the_cli_says_what_is_wrong_in_one_line(tmp_path, capsys):
     assert main(["--data", str(tmp_path), "--out", str(tmp_path / "run"), "--epochs", "0"]) == 2
     assert capsys.readouterr().err.strip() == "defgg-train: error: epochs must be >= 1, got 0"
     assert not (tmp_path / "run").exists()
+
+
+def test_objects_without_any_trial_take_no_validation_or_test_slot(tmp_path):
+    from defgg_ros.data.dataset import build_manifest
+    from defgg_ros.data.synthetic import write_synthetic_dataset
+    from defgg_ros.train.trainer import labelled_scene_objects
+
+    write_synthetic_dataset(tmp_path, n_objects=4, trials_per_scene=2)
+    manifest = build_manifest(tmp_path)
+    objects = labelled_scene_objects(tmp_path, manifest)
+    assert len(objects) == len(manifest) and len(set(objects.values())) == 4
+    unlabelled = sorted(set(objects.values()))[0]
+    for path in (tmp_path / "trials").glob(f"{unlabelled}__*"):
+        path.unlink()                              # as for an object the sampler found no candidate for
+    objects = labelled_scene_objects(tmp_path, build_manifest(tmp_path))
+    assert unlabelled not in objects.values() and len(set(objects.values())) == 3
