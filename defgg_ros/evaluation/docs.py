@@ -115,6 +115,9 @@ def results_markdown(out_dir, doc_path, notes_path=None) -> str:
         lines += ["**WARNING: this run used --quick (0.1 s ramps): a smoke test, not the paper's protocol.**", ""]
     for task in manifest["tasks"]:
         lines += [f"## {task.capitalize()} task", "", _read(tdir / f"{task}.md") or "(no table yet)", ""]
+        every = _read(tdir / f"{task}_every_direction.md")   # the second column under the label's own rule
+        if every:
+            lines += [every, ""]
         by_rank = _read(tdir / f"{task}_by_rank.md")
         if by_rank:
             lines += [by_rank, ""]
