@@ -3,7 +3,9 @@
 For each object and modulus, the generator's antipodal sampler proposes
 collision-free candidates (the same sampler and seeds as the training data,
 object at the origin, yaw 0) and each runs under the evaluation's task
-protocol. Two figures per modulus bound a model's success:
+protocol, success judged by that protocol's rule (tasks.outcome_fields: under
+defgraspsim the shake's mean, the every-direction result beside it). Two
+figures per modulus bound a model's success:
 
 - *random candidate*: the mean per-object fraction of candidates that
   succeed, i.e. what picking a candidate at random scores (no skill);
@@ -28,7 +30,7 @@ from collections import defaultdict
 from pathlib import Path
 
 from defgg_ros.atomic import append_jsonl, read_jsonl, write_text_atomic
-from defgg_ros.evaluation.tasks import check_task, task_success
+from defgg_ros.evaluation.tasks import check_task, outcome_fields
 
 RESULTS_FILE = "ceiling.jsonl"
 TABLE_FILE = "ceiling.md"
@@ -131,7 +133,7 @@ def _run_one(path, client, trial, task: str, settings, grasp_height: str) -> Non
     accels = out.shake_accels_mps2 if task == "shake" else out.twist_accels_radps2
     append_jsonl(path, {"key": key, "object": shape.name, "object_set": shape.set_name, "youngs_modulus_pa": e,
                         "candidate": i, "task": task, "status": out.status, "accels": accels,
-                        "success": task_success(task, out.status, accels), "cpu_s": out.cpu_s,
+                        **outcome_fields(task, out.status, accels, settings.protocol), "cpu_s": out.cpu_s,
                         "tet_nodes": [len(t.nodes_m) for t in shape.tet_parts],
                         "grasp_force_n": out.grasp_force_n, "trial_settings": asdict(settings),
                         "grasp_height": grasp_height})

@@ -27,7 +27,7 @@ from defgg_ros.evaluation import scene as scene_mod
 from defgg_ros.evaluation.planning import plan_world_grasp
 from defgg_ros.evaluation.sources import make_spec, shape_from_ref
 from defgg_ros.evaluation.store import ResultStore
-from defgg_ros.evaluation.tasks import shake_success_rule, task_success
+from defgg_ros.evaluation.tasks import outcome_fields
 from defgg_ros.sim.trial import TrialSettings, WorldGrasp, run_grasp_trial
 
 STATUS_NO_GRASP = "no_grasp"   # the model proposed fewer grasps than asked: a failed grasp
@@ -226,11 +226,10 @@ def run_trial_payload(payload: dict) -> dict:
     out = run_grasp_trial(spec, grasp, tests=(task,), settings=TrialSettings.from_record(payload["settings"]),
                           client=_WORKER_CLIENT, object_yaw_rad=payload["yaw"])
     accels = out.shake_accels_mps2 if task == "shake" else out.twist_accels_radps2
-    rule = shake_success_rule(payload["settings"].get("protocol", "legacy")) if task == "shake" else "every"
-    extra = {"success_every_direction": task_success(task, out.status, accels)} if rule != "every" else {}
     return {"status": out.status, "accels": accels,
             "measured": out.shake_measured if task == "shake" else out.twist_measured,
-            "success": task_success(task, out.status, accels, rule), **extra, "grasp_force_n": out.grasp_force_n,
+            **outcome_fields(task, out.status, accels, payload["settings"].get("protocol", "legacy")),
+            "grasp_force_n": out.grasp_force_n,
             "cpu_s": out.cpu_s, "wall_s": time.monotonic() - wall0, "sim_steps": out.sim_steps,
             "time_step_s": out.sim.get("time_step_s"), "soft": out.sim.get("soft"), "note": out.note}
 

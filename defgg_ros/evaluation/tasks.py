@@ -73,3 +73,13 @@ def shake_success_rule(protocol: str) -> str:
     """The shake's success rule of an evaluation under a trial protocol (legacy: every direction)."""
     return "mean" if protocol == "defgraspsim" else "every"
 
+
+
+def outcome_fields(task: str, status: str, accels: list | None, protocol: str) -> dict:
+    """A trial record's success fields under a protocol: "success" by the protocol's rule and, where that rule
+    is not already every direction (the defgraspsim shake: the mean), "success_every_direction" beside it."""
+    rule = shake_success_rule(protocol) if task == "shake" else "every"
+    fields = {"success": task_success(task, status, accels, rule)}
+    if rule != "every":
+        fields["success_every_direction"] = task_success(task, status, accels)
+    return fields

@@ -24,3 +24,12 @@ def test_defgraspsim_evaluation_measures_every_direction_to_the_label_limit():
     assert s.stop_direction_when_lost and not s.stop_when_label_decided and not s.confident_stop
     legacy = eval_trial_settings("legacy")
     assert legacy.shake_limit_mps2 == 25.0 and shake_success_rule(legacy.protocol) == "every"
+
+
+def test_outcome_fields_follow_the_protocol():
+    from defgg_ros.evaluation.tasks import outcome_fields
+
+    accels = [50.0] * 8 + [10.0] * 8
+    assert outcome_fields("shake", "ok", accels, "defgraspsim") == {"success": True, "success_every_direction": False}
+    assert outcome_fields("shake", "ok", accels, "legacy") == {"success": False}
+    assert outcome_fields("twist", "ok", [500.0] * 6, "defgraspsim") == {"success": True}
