@@ -37,6 +37,10 @@ def _targets_md(targets: list) -> list:
         if "required_success_pct" in t:
             req += f", success ≥ {t['required_success_pct']:g} %"
             verdict = "met" if t["margin_met"] and t["success_met"] else "NOT met"
+        if "sign_test_met" in t:
+            p = "no pairs" if t["p_sign_test"] is None else f"p = {t['p_sign_test']:.3g}"
+            req += f", paired sign test p < {report_mod.TARGET_SIGN_TEST_P:g} over the five best grasps ({p})"
+            verdict = "met" if t["margin_met"] and t["sign_test_met"] else "NOT met"
         if not t["complete"]:
             verdict += " (partial data: not the full experiment)"
         lines.append(f"| {t['set']} | {t['with_stiffness_pct']:.1f} % | {t['no_stiffness_pct']:.1f} % | "

@@ -22,6 +22,7 @@ TABLES_DIR = "tables"
 # Issue targets (shake task, all stiffnesses).
 TARGET_MARGIN_COMMON_PTS = 15.0
 TARGET_COMMON_SUCCESS_PCT = 75.0
+TARGET_SIGN_TEST_P = 0.05      # adversarial set: ahead with a paired sign test p below this
 
 
 class ReportError(RuntimeError):
@@ -172,5 +173,11 @@ def targets(summary: dict, manifest: dict) -> list:
         if s == "common":
             item["required_success_pct"] = TARGET_COMMON_SUCCESS_PCT
             item["success_met"] = a["success_pct"] >= TARGET_COMMON_SUCCESS_PCT
+        else:   # ahead, and separable from chance: paired sign test over the five best grasps
+            p = next((r for r in summary.get("paired", []) if r["task"] == "shake" and r["set"] == s
+                      and r["grasps"] == paired.ALL_RANKS), None)
+            item["p_sign_test"] = None if p is None else p["p_sign_test"]
+            item["sign_test_met"] = p is not None and p["p_sign_test"] is not None and \
+                p["a_only"] > p["b_only"] and p["p_sign_test"] < TARGET_SIGN_TEST_P
         out.append(item)
     return out

@@ -143,3 +143,22 @@ def test_pending_budget_costs_each_task_and_modulus_from_the_folders_own_simulat
     assert shake["simulations"] == 6 and shake["cpu_h"] == pytest.approx(6 * 60.0 / 3600)
     assert budget["cpu_h_estimated"] == pytest.approx(0.1) and budget["cells_without_cost"] == 1
     assert budget_lines(budget)[-1] == "estimated: ~0.1 CPU-h plus 1 cell(s) without a cost"
+
+
+def test_the_adversarial_target_needs_the_paired_sign_test_over_the_five_best_grasps(tmp_path):
+    write_json_atomic(tmp_path / "run.json", {
+        "command": "defgg-eval run", "commit": "c", "seed": 0, "grasps_per_object": 3, "tasks": ["shake"],
+        "experiments": ["main"], "models": {"stiff": {"sha": "S", "uses_stiffness": True, "path": "p"},
+                                            "base": {"sha": "B", "uses_stiffness": False, "path": "q"}},
+        "objects": {"adversarial": [{"name": n, "moduli_pa": [2e4]} for n in ("a", "b")]}})
+    store, i = ResultStore(tmp_path), 0
+    for obj in ("a", "b"):
+        for rank in range(3):          # the stiffness-aware grasp holds, the baseline's does not: 6 of 6
+            store.append(_trial(i, "stiff", "S", obj, 2e4, rank, True, object_set="adversarial"))
+            store.append(_trial(i + 1, "base", "B", obj, 2e4, rank, False, object_set="adversarial"))
+            i += 2
+    (target,) = report.write_outputs(tmp_path)["targets"]
+    assert target["set"] == "adversarial" and target["p_sign_test"] == pytest.approx(2 / 2**6)
+    assert target["sign_test_met"] and target["margin_met"]
+    doc = results_markdown(tmp_path, tmp_path / "results.md")
+    assert "paired sign test p < 0.05 over the five best grasps (p = 0.0312) | met" in doc
