@@ -58,3 +58,6 @@ for name in defgg_cnn ggcnn_depth_only; do
     --data-source "$DATA" --data-archive "$ARCHIVE" --models-dir "$MODELS"
 done
 $EVAL card --name defgg_cnn ggcnn_depth_only --models-dir "$MODELS"
+echo "retrain_pair: shipped defgg_cnn and ggcnn_depth_only ($TAG) into $MODELS. Next, on purpose (docs/sessions.md):"
+echo "  .venv/bin/defgg-replay --update sim_bringup/sessions   # the recorded sessions name the shipped weights"
+echo "  make demo && make test"
