@@ -24,7 +24,16 @@ import numpy as np
 from defgg_ros.atomic import append_jsonl, write_json_atomic
 from defgg_ros.constants import GRASP_CANDIDATES_PER_OBJECT, TRAINING_YOUNGS_MODULI_PA
 from defgg_ros.data.format import TRIAL_ERRORS_FILE as ERRORS_FILE
-from defgg_ros.data.format import DatasetError, DatasetWriter, GraspRect, Scene, TrialRecord, scene_id_for
+from defgg_ros.data.format import (
+    DatasetError,
+    DatasetWriter,
+    GraspRect,
+    Scene,
+    TrialRecord,
+    list_scene_ids,
+    read_trials,
+    scene_id_for,
+)
 from defgg_ros.data.header import effective_trial_settings, recorded_grasp_height, recorded_protocol  # noqa: F401
 
 CANDIDATE_FILE_VERSION = 1
@@ -345,6 +354,7 @@ def generate(cfg: DatagenConfig, progress_bar=True) -> dict:
     jobs = plan(cfg, writer, progress=lambda name: t_plan.update(1))
     t_plan.close()
     counts = {"planned_pending": len(jobs), "done": 0, "labelled": 0, "failed": 0, "errors": 0}
+    finished_before = sum(len(read_trials(cfg.out, sid)) for sid in list_scene_ids(cfg.out))
     bar = tqdm(total=len(jobs), desc="trials", unit="trial", disable=not progress_bar, smoothing=0.05)
     t0 = time.monotonic()
 
@@ -365,9 +375,10 @@ def generate(cfg: DatagenConfig, progress_bar=True) -> dict:
             write_card(cfg.out, cfg)
             if not progress_bar:   # a log (nohup, CI) still shows how far the run is, a line per card
                 left_h = (len(jobs) - counts["done"]) / max(per_hour, 1e-9)
-                print(f"defgg-datagen: {counts['done']} of {len(jobs)} pending trials done "
-                      f"({100 * counts['done'] / len(jobs):.1f} %), {per_hour:.0f} trials/h, ~{left_h:.1f} h left; "
-                      f"card: {cfg.out / 'card.md'}", flush=True)
+                in_dataset, planned = finished_before + counts["done"], finished_before + len(jobs)
+                print(f"defgg-datagen: dataset {in_dataset} of {planned} trials ({100 * in_dataset / planned:.1f} %); "
+                      f"this run {counts['done']} of {len(jobs)} pending trials done, {per_hour:.0f} trials/h, "
+                      f"~{left_h:.1f} h left; card: {cfg.out / 'card.md'}", flush=True)
 
     try:
         execute(jobs, cfg, on_result)

@@ -214,7 +214,12 @@ def test_without_a_progress_bar_the_log_gets_a_line_per_card(tmp_path, capsys):
                                 pass_size=1, settings=QUICK, card_every=1)
     assert datagen.generate(cfg, progress_bar=False)["done"] == 2
     lines = [line for line in capsys.readouterr().out.splitlines() if line.startswith("defgg-datagen: ")]
-    assert lines and "pending trials done" in lines[-1] and "100.0 %" in lines[-1], lines
+    assert lines and lines[-1].startswith("defgg-datagen: dataset 2 of 2 trials (100.0 %); this run 2 of 2"), lines
+    # a resumed run counts what the dataset already holds
+    more = replace(cfg, grasps_per_scene=3)
+    assert datagen.generate(more, progress_bar=False)["done"] == 1
+    lines = [line for line in capsys.readouterr().out.splitlines() if line.startswith("defgg-datagen: ")]
+    assert lines[-1].startswith("defgg-datagen: dataset 3 of 3 trials (100.0 %); this run 1 of 1"), lines
 
 
 def test_an_unknown_object_is_one_clear_line_and_writes_nothing(tmp_path, capsys):
