@@ -24,6 +24,9 @@ MAX_SOFT_BODY_YOUNGS_MODULUS_PA = 1e7
 SHAKE_DIRECTIONS = 16
 SHAKE_ACCEL_LIMIT_MPS2 = 50.0
 SHAKE_POSITIVE_THRESHOLD_MPS2 = 25.0
+# The ramp records the last value it checked before a loss; a value within this fraction of a limit counts as
+# "held at the limit" (ramp granularity; the evaluation's success rules and the trial's stops share it).
+HELD_LIMIT_TOLERANCE = 1e-6
 TWIST_ACCEL_LIMIT_RADPS2 = 500.0
 # The twist part of the pilots' shake_and_twist label (data/signal.py): mean held angular acceleration
 # over the six axes >= half the paper's 500 rad/s^2 limit.

@@ -55,10 +55,10 @@ def eval_trial_settings(protocol: str | dict | None = None) -> TrialSettings:
         return replace(eval_trial_settings(setting.pop("protocol")), **setting)
     protocol = protocol or TrialSettings.protocol
     if protocol == "defgraspsim":
-        # the label's own criterion: every direction ramped to 50 m/s^2 until lost (the mean and the
-        # every-direction rate both need every direction measured), the twist as before
+        # the label's own criterion: every direction ramped to 50 m/s^2 until lost, until the mean and the
+        # every-direction outcome are both certain (shake_stop_when_decided: exact for both), the twist as before
         return TrialSettings(protocol=protocol, stop_direction_when_lost=True, stop_when_label_decided=False,
-                             twist_oscillation_radps=EVAL_TWIST_OSCILLATION_RADPS,
+                             shake_stop_when_decided=True, twist_oscillation_radps=EVAL_TWIST_OSCILLATION_RADPS,
                              twist_fail_below_radps2=TWIST_ACCEL_LIMIT_RADPS2)
     rate_mps3 = SHAKE_ACCEL_LIMIT_MPS2 / TrialSettings().shake_ramp_time_s
     return TrialSettings(protocol=protocol, stop_direction_when_lost=True,

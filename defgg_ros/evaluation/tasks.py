@@ -26,15 +26,13 @@ are not grasp outcomes: ``success`` is None and tables count them apart.
 """
 from __future__ import annotations
 
-from defgg_ros.constants import SHAKE_POSITIVE_THRESHOLD_MPS2, TWIST_ACCEL_LIMIT_RADPS2
+from defgg_ros.constants import HELD_LIMIT_TOLERANCE, SHAKE_POSITIVE_THRESHOLD_MPS2, TWIST_ACCEL_LIMIT_RADPS2
 from defgg_ros.data.format import STATUS_LIFT_FAILED, STATUS_OK
 
 TASKS = ("shake", "twist")
 # "every": held at the limit in every direction/axis; "mean": the shake label's rule (mean held >= 25 m/s^2).
 SUCCESS_RULES = ("every", "mean")
-# The ramp records the last value it checked before the loss; a value within
-# this fraction of the limit counts as "held at the limit" (ramp granularity).
-LIMIT_TOLERANCE = 1e-6
+LIMIT_TOLERANCE = HELD_LIMIT_TOLERANCE
 
 
 class TaskError(ValueError):

@@ -33,6 +33,7 @@ import numpy as np
 
 from defgg_ros.constants import (
     GRIPPER_MAX_WIDTH_M,
+    HELD_LIMIT_TOLERANCE,
     SHAKE_ACCEL_LIMIT_MPS2,
     SHAKE_DIRECTIONS,
     SHAKE_POSITIVE_THRESHOLD_MPS2,
@@ -71,6 +72,7 @@ CONFIDENT_MIN_DIRECTIONS = 3
 CONFIDENT_MARGIN_MPS2 = 20.0
 LEGACY_CONFIDENT_SETTINGS = {"confident_min_directions": 4, "confident_margin_mps2": 40.0}
 LEGACY_TWIST_SETTINGS = {"twist_oscillation_radps": None}   # before 2026-11-25: the one-way twist
+LEGACY_EVAL_STOP_SETTINGS = {"shake_stop_when_decided": False}   # before 2026-11-27: every direction measured
 # Before 2026-11-26 every trial ran the legacy protocol on its own material.
 LEGACY_PROTOCOL_SETTINGS = {"protocol": "legacy", "object_friction": None, "poisson_ratio": None,
                             "finger_hold": "force", "grip_force_friction": None}
@@ -139,6 +141,10 @@ class TrialSettings:
     # failed). Skipped ones are stored as 0 and flagged unmeasured. None = off (generator).
     shake_limit_mps2: float = SHAKE_ACCEL_LIMIT_MPS2
     shake_fail_below_mps2: float | None = None
+    # The evaluation under the label's rule reports two outcomes, the mean held >= the threshold and "held in
+    # every direction": stop the shake once both are certain (the mean as in stop_when_label_decided, and a
+    # measured direction below the threshold), filling the rest as that stop does. Exact: neither changes.
+    shake_stop_when_decided: bool = False
     twist_fail_below_radps2: float | None = None
     time_step_s: float | None = None   # None: world.time_step_for(E), the probe's stable steps
     shake_directions: int = SHAKE_DIRECTIONS   # fewer only in tests
@@ -399,13 +405,19 @@ class _Trial:
                 measured += [False] * left
                 break
             fill = label_decided_fill(values, len(dirs), SHAKE_POSITIVE_THRESHOLD_MPS2, SHAKE_ACCEL_LIMIT_MPS2) \
-                if self.settings.stop_when_label_decided else None
+                if self.settings.stop_when_label_decided or self._both_outcomes_may_stop(values) else None
             if fill is not None:
                 values += [fill] * left
                 measured += [False] * left
                 break
         self.world.set_gravity(g)
         return values, measured
+
+    def _both_outcomes_may_stop(self, values) -> bool:
+        """shake_stop_when_decided: the every-direction outcome is certain (a measured direction was not held
+        at the threshold), so the shake may stop as soon as the mean's is too."""
+        every_failed = min(values) < SHAKE_POSITIVE_THRESHOLD_MPS2 * (1 - HELD_LIMIT_TOLERANCE)
+        return self.settings.shake_stop_when_decided and every_failed
 
     def twist(self):
         values, fill = [], 0.0     # axes skipped after a failure hold 0
@@ -452,9 +464,10 @@ class _Trial:
 def comparable_protocol(recorded: dict) -> dict:
     """A recorded TrialSettings dict in the form two protocols are compared in (resuming a dataset or an
     evaluation folder): fields added after it was recorded get the value they implicitly had then
-    (LEGACY_CONFIDENT_SETTINGS, LEGACY_TWIST_SETTINGS, LEGACY_PROTOCOL_SETTINGS), and the surrogate's knobs
-    drop out when the surrogate is off."""
-    full = {**LEGACY_CONFIDENT_SETTINGS, **LEGACY_TWIST_SETTINGS, **LEGACY_PROTOCOL_SETTINGS, **recorded}
+    (LEGACY_CONFIDENT_SETTINGS, LEGACY_TWIST_SETTINGS, LEGACY_PROTOCOL_SETTINGS, LEGACY_EVAL_STOP_SETTINGS),
+    and the surrogate's knobs drop out when the surrogate is off."""
+    full = {**LEGACY_CONFIDENT_SETTINGS, **LEGACY_TWIST_SETTINGS, **LEGACY_PROTOCOL_SETTINGS,
+            **LEGACY_EVAL_STOP_SETTINGS, **recorded}
     if not full.get("confident_stop"):
         for key in LEGACY_CONFIDENT_SETTINGS:
             full.pop(key)

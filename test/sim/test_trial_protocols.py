@@ -144,3 +144,23 @@ def test_twist_stop_fills_the_remaining_axes_only_once_the_label_is_certain():
     assert twist_label_decided([0.0, 0.0, 0.0, 490.0]) == 500.0             # 490 + 1000 < 1500: negative
     assert twist_label_decided([0.0, 0.0, 0.0, 500.0]) is None              # 500 + 1000 = 1500: could still pass
     assert twist_label_decided([100.0] * 6) is None                         # nothing left to fill
+
+
+def test_the_evaluations_shake_stops_once_both_outcomes_are_certain_and_neither_changes(client):
+    """shake_stop_when_decided: a weak grip (force rule's mu 2.0 on a 0.7 contact) on the rigid box fails
+    directions early; once the mean cannot reach 25 m/s^2 and a direction has failed, the rest is skipped."""
+    from defgg_ros.evaluation.tasks import outcome_fields
+
+    weak = dataclasses.replace(QUICK, protocol="defgraspsim", shake_directions=16, stop_when_label_decided=False,
+                               grip_force_friction=2.0)
+    full = run_grasp_trial(box(2e9), CENTRED, ("shake",), weak, client=client)
+    early = run_grasp_trial(box(2e9), CENTRED, ("shake",), dataclasses.replace(weak, shake_stop_when_decided=True),
+                            client=client)
+    assert full.status == early.status == STATUS_OK, (full.note, early.note)
+    assert all(full.shake_measured) and not all(early.shake_measured)       # the stop did happen
+    assert early.sim_steps < full.sim_steps
+    measured = sum(early.shake_measured)
+    assert early.shake_accels_mps2[:measured] == full.shake_accels_mps2[:measured]   # the same trial up to it
+    assert outcome_fields("shake", early.status, early.shake_accels_mps2, "defgraspsim") == \
+        outcome_fields("shake", full.status, full.shake_accels_mps2, "defgraspsim") == \
+        {"success": False, "success_every_direction": False}
