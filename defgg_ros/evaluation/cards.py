@@ -152,6 +152,11 @@ def _data_section(prov) -> list:
         lines += [f"Trial protocol of the labels: **{recorded_protocol(header)}** (docs/dataset.md, 'Trial "
                   "protocols').", "",
                   f"Generator settings (`dataset.json`, written by `defgg-datagen`): `{json.dumps(header)}`", ""]
+        if recorded_protocol(header) == "defgraspsim":
+            lines += ["Grip force of these labels: FOS·m·g/μ, from the object's mass (defgg_ros/grip_force.py). The "
+                      "executor grasps with the legacy rule (2 N + 0.5 N per decade of E a finger; "
+                      "control/gripper_rule.py): it knows no mass. For objects of ~100 g it squeezes harder than "
+                      "the labels did, so a real grasp is not the one these labels rated (docs/real_cell.md).", ""]
         if "n_candidates" in header and recorded_grasp_height(header) == "contacts":   # defgg-datagen's
             lines += ["Known limitation of these labels: the candidates sit at their contacts' height, anywhere up "
                       "the object's side, while the evaluation executes a grasp at half the height seen at its "

@@ -86,3 +86,7 @@ def test_card_reads_the_generator_header_from_the_archive_and_states_the_height_
     executor = "\n".join(_data_section({**prov, "data_archive": str(
         archive({"n_candidates": 200, "grasp_height": "executor"}))}))
     assert '"grasp_height": "executor"' in executor and "Known limitation" not in executor
+    assert "Grip force of these labels" not in executor          # legacy labels: the executor's own force rule
+    weight_rule = "\n".join(_data_section({**prov, "data_archive": str(archive({
+        "n_candidates": 200, "grasp_height": "executor", "trial_settings": {"protocol": "defgraspsim"}}))}))
+    assert "Grip force of these labels: FOS·m·g/μ" in weight_rule and "executor grasps with the legacy" in weight_rule
