@@ -37,7 +37,10 @@ def _add_run(sub):
         help="plan the models' grasps and run them in the FEM simulator (resumable)",
         description="For each object and Young's modulus, render the scene with the training camera, take each "
                     "model's N best grasps and run them in the PyBullet FEM simulator under the shake task (16 "
-                    "directions, success if held at 25 m/s^2 in all) and the twist task (angular acceleration "
+                    "directions; under the defgraspsim protocol, the default, success is the label's own rule: "
+                    "the mean held acceleration >= 25 m/s^2 with each direction ramped to 50, and 'held at 25 "
+                    "in every direction' is the second table; under legacy, held at 25 m/s^2 in all) and the "
+                    "twist task (angular acceleration "
                     "oscillating at 40 rad/s, amplitude ramped to 500 rad/s^2; success if held at 500 rad/s^2 "
                     "about all 6 axes). Both models see the same objects, poses and seeds. Each finished "
                     "trial is one fsync'd line of OUT/trials.jsonl: rerunning the same command skips finished "
