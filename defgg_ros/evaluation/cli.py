@@ -348,9 +348,11 @@ def cmd_run(args, argv) -> int:
     plan = runner.EvalPlan(objects, predictors, build_views(args, predictors, objects), args.grasps,
                            tuple(args.tasks), args.seed, settings, args.ranks)
     if args.plan_only:
+        from defgg_ros.evaluation.budget import budget_lines
+
         path, budget = runner.write_plans(plan, args.out, not args.no_progress)
         print(path)
-        print("\n".join(runner.budget_lines(budget)))
+        print("\n".join(budget_lines(budget)))
         return 0
     counts = runner.run_evaluation(plan, args.out, args.workers, not args.no_progress, args.max_trials,
                                    on_progress=_reporter(args.out, args.report_every))

@@ -130,7 +130,7 @@ def test_results_doc_names_the_trial_protocol_and_whether_the_labels_could_carry
 
 
 def test_pending_budget_costs_each_task_and_modulus_from_the_folders_own_simulations():
-    from defgg_ros.evaluation.runner import budget_lines, pending_budget
+    from defgg_ros.evaluation.budget import budget_lines, pending_budget
 
     finished = [{"task": "shake", "youngs_modulus_pa": 2e4, "cpu_s": 30.0, "reused_from": None},
                 {"task": "shake", "youngs_modulus_pa": 2e4, "cpu_s": 90.0, "reused_from": None},
