@@ -44,6 +44,8 @@ train() {   # name, extra flags: one resumable run; its command and wall seconds
   echo $((SECONDS - start)) >> "$run.wall_s"
   echo "$cmd" > "$run.command"
 }
+echo "retrain_pair: training both models at once ($EPOCHS epochs each); follow $RUNS/defgg_cnn_${TAG}.log and" \
+  "$RUNS/ggcnn_depth_only_${TAG}.log (a line per epoch); a kill loses at most 25 steps, rerun to resume"
 train defgg_cnn &
 with_stiffness=$!
 train ggcnn_depth_only --no-stiffness &

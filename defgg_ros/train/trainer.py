@@ -225,6 +225,11 @@ class Trainer:
                 "val_accuracy": val["accuracy"],
                 "val_per_modulus": val["per_modulus"]})
             self._write_epoch_outputs()
+            if not self.show_progress:   # a log (nohup, models/retrain_pair.sh) still shows how far the run is
+                h = self.history[-1]
+                print(f"defgg-train: epoch {h['epoch']}/{self.config.epochs}: train loss {h['train_loss']:.4f}, "
+                      f"val loss {h['val_loss']:.4f}, val accuracy {h['val_accuracy']:.2f}, "
+                      f"{h['train_images_per_s']:.1f} images/s", flush=True)
         self._save_state()
         if self.world > 1:
             dist.barrier()
