@@ -325,8 +325,7 @@ def diagnostics_markdown(labels: dict | None, shifts: dict | None, replicates: d
         lines.append("")
         lines += _locality_markdown(labels.get("locality"))
         lines += _height_offset_markdown(labels.get("positive_rate_by_height_offset_mm"))
-        lines += _grasp_choice_markdown(labels.get("grasp_choice"))
-        lines += signal_lines(labels.get("signal"), labels.get("data_root"))
+        lines += _grasp_choice_markdown(labels.get("grasp_choice"))   # its signal report: under the targets
     if shifts:
         lines += ["**How far the best grasp moves with the modulus** (rank-0 grasp vs the one at the stiffest "
                   "modulus, same object)", "", "| model | E (Pa) | objects | mean shift (mm) | moved > 5 mm | "

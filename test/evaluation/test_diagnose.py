@@ -25,7 +25,7 @@ def test_label_stats_carry_the_datasets_signal_report_and_its_verdict(tmp_path):
     assert signal["labelled"] == 60 and signal["oracle"]["objects"] == 3
     best = signal["oracle"]["best"]
     assert best["gap_points"] == pytest.approx(100 * (best["aware"] - best["blind"])) and best["gap_points"] > 5
-    md = diagnose.diagnostics_markdown(diagnose.label_stats(tmp_path), None)
+    md = "\n".join(diagnose.signal_lines(signal, str(tmp_path)))
     assert f"best grasp +{best['gap_points']:.1f} points" in md
     assert '- Can carry "stiffness changes which grasp is good"' in md
     assert diagnose.signal_lines(None, None) == []

@@ -111,7 +111,7 @@ def test_wrong_stiffness_input_pairs_with_the_correct_input_of_the_same_view_and
 
 def test_results_doc_names_the_trial_protocol_and_whether_the_labels_could_carry_the_margin(tmp_path):
     from defgg_ros.data.synthetic import write_synthetic_dataset
-    from defgg_ros.evaluation.diagnose import label_stats
+    from defgg_ros.evaluation.diagnose import diagnostics_markdown, label_stats
     from defgg_ros.sim.trial import TrialSettings
 
     _two_model_run(tmp_path)
@@ -123,10 +123,12 @@ def test_results_doc_names_the_trial_protocol_and_whether_the_labels_could_carry
     write_json_atomic(tmp_path / "run.json", {**manifest, "trial_settings": settings})
     data = tmp_path / "data"
     write_synthetic_dataset(data, n_objects=3, trials_per_scene=5)
-    write_json_atomic(tmp_path / "diagnostics.json", {"labels": label_stats(data)})
+    labels = label_stats(data)
+    write_json_atomic(tmp_path / "diagnostics.json", {"labels": labels})
+    (tmp_path / "diagnostics.md").write_text(diagnostics_markdown(labels, None))   # as `report --data` writes
     doc = results_markdown(tmp_path, tmp_path / "results.md")
     assert "Trial protocol: **defgraspsim**" in doc and "the label's own criterion" in doc
-    assert f"`defgg-datagen signal {data}`" in doc and "A perfect stiffness-aware choice" in doc
+    assert f"`defgg-datagen signal {data}`" in doc and doc.count("A perfect stiffness-aware choice") == 1
 
 
 def test_pending_budget_costs_each_task_and_modulus_from_the_folders_own_simulations():
