@@ -129,6 +129,7 @@ def test_results_doc_names_the_trial_protocol_and_whether_the_labels_could_carry
     doc = results_markdown(tmp_path, tmp_path / "results.md")
     assert "Trial protocol: **defgraspsim**" in doc and "the label's own criterion" in doc
     assert f"`defgg-datagen signal {data}`" in doc and doc.count("A perfect stiffness-aware choice") == 1
+    assert f"`defgg-eval report --out {tmp_path} --docs {tmp_path / 'results.md'} --data {data}`" in doc
 
 
 def test_pending_budget_costs_each_task_and_modulus_from_the_folders_own_simulations():
