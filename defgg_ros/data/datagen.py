@@ -30,8 +30,6 @@ from defgg_ros.data.format import (
     GraspRect,
     Scene,
     TrialRecord,
-    list_scene_ids,
-    read_trials,
     scene_id_for,
 )
 from defgg_ros.data.header import effective_trial_settings, recorded_grasp_height, recorded_protocol  # noqa: F401
@@ -170,9 +168,13 @@ def selected_shapes(cfg: DatagenConfig) -> list:
 
 def plan(cfg: DatagenConfig, writer: DatasetWriter, progress=None) -> list:
     """Render missing scenes, sample candidates, and return pending TrialJobs in pass order."""
-    shapes = selected_shapes(cfg)
+    return pass_order(cfg, plan_scenes(cfg, writer, progress))
+
+
+def plan_scenes(cfg: DatagenConfig, writer: DatasetWriter, progress=None) -> dict:
+    """Render missing scenes and sample candidates: {(object, E): (scene id, candidates, finished trial ids)}."""
     per_scene = {}
-    for shape in shapes:
+    for shape in selected_shapes(cfg):
         cands = load_or_sample_candidates(writer.root, shape, cfg)
         for e in cfg.moduli_pa:
             sid = scene_id_for(shape.name, e)
@@ -182,6 +184,11 @@ def plan(cfg: DatagenConfig, writer: DatasetWriter, progress=None) -> list:
             per_scene[(shape.name, e)] = (sid, cands, done)
         if progress:
             progress(shape.name)
+    return per_scene
+
+
+def pass_order(cfg: DatagenConfig, per_scene: dict) -> list:
+    """The scenes' pending TrialJobs in pass order (pass_size candidates of every scene per pass)."""
     jobs = []
     n_passes = math.ceil(cfg.grasps_per_scene / cfg.pass_size)
     for k in range(n_passes):
@@ -351,10 +358,11 @@ def generate(cfg: DatagenConfig, progress_bar=True) -> dict:
     writer = DatasetWriter(cfg.out, cfg.header())
     check_resumable(cfg)
     t_plan = tqdm(desc="planning (objects)", unit="obj", disable=not progress_bar)
-    jobs = plan(cfg, writer, progress=lambda name: t_plan.update(1))
+    per_scene = plan_scenes(cfg, writer, progress=lambda name: t_plan.update(1))
+    jobs = pass_order(cfg, per_scene)
     t_plan.close()
     counts = {"planned_pending": len(jobs), "done": 0, "labelled": 0, "failed": 0, "errors": 0}
-    finished_before = sum(len(read_trials(cfg.out, sid)) for sid in list_scene_ids(cfg.out))
+    finished_before = sum(len(done) for _, _, done in per_scene.values())
     bar = tqdm(total=len(jobs), desc="trials", unit="trial", disable=not progress_bar, smoothing=0.05)
     t0 = time.monotonic()
 
