@@ -72,7 +72,6 @@ def shake_success_rule(protocol: str) -> str:
     return "mean" if protocol == "defgraspsim" else "every"
 
 
-
 def outcome_fields(task: str, status: str, accels: list | None, protocol: str) -> dict:
     """A trial record's success fields under a protocol: "success" by the protocol's rule and, where that rule
     is not already every direction (the defgraspsim shake: the mean), "success_every_direction" beside it."""

@@ -40,7 +40,6 @@ METRICS_FILE, CURVES_FILE, RESPONSE_FILE = "metrics.json", "curves.png", "stiffn
 RESUMABLE_OVERRIDES = ("epochs", "max_steps")
 
 
-
 def labelled_scene_objects(data_root: Path, manifest: dict) -> dict:
     """{scene id: object name} of the scenes whose object has a trial in the manifest. An object without any
     (the sampler found no candidate for it) has no label anywhere: were it split, a validation or test slot
@@ -48,6 +47,7 @@ def labelled_scene_objects(data_root: Path, manifest: dict) -> dict:
     objects = {sid: read_scene(data_root / "scenes" / f"{sid}.npz").object_name for sid in manifest}
     labelled = {name for sid, name in objects.items() if manifest[sid] > 0}
     return {sid: name for sid, name in objects.items() if name in labelled}
+
 
 class TrainingError(RuntimeError):
     """Training cannot start or resume (bad data, mismatched state)."""
