@@ -6,6 +6,7 @@ from dataclasses import asdict, dataclass, field
 from defgg_ros.data.augment import AugmentConfig
 from defgg_ros.data.labels import check_label_rule
 from defgg_ros.model.network import GGCNNConfig
+from defgg_ros.train.split import check_split_fractions
 
 
 @dataclass
@@ -47,9 +48,7 @@ class TrainConfig:
         for name, value in (("learning_rate", self.learning_rate), ("positive_weight", self.positive_weight)):
             if not value > 0:
                 raise ValueError(f"{name} must be > 0, got {value}")
-        if not (0 < self.val_fraction and 0 < self.test_fraction and self.val_fraction + self.test_fraction < 1):
-            raise ValueError(f"val_fraction and test_fraction must be > 0 with a sum below 1 (the rest trains), "
-                             f"got {self.val_fraction} and {self.test_fraction}")
+        check_split_fractions(self.val_fraction, self.test_fraction)
 
     def network_config(self) -> GGCNNConfig:
         return GGCNNConfig(input_channels=2 if self.uses_stiffness else 1, architecture=self.architecture)

@@ -8,14 +8,20 @@ import numpy as np
 SPLITS = ("train", "val", "test")
 
 
+def check_split_fractions(val_fraction: float, test_fraction: float) -> None:
+    """ValueError unless both fractions are > 0 and leave objects to train on (sum below 1)."""
+    if not (0 < val_fraction and 0 < test_fraction and val_fraction + test_fraction < 1):
+        raise ValueError(f"val_fraction and test_fraction must be > 0 with a sum below 1 (the rest trains), "
+                         f"got {val_fraction} and {test_fraction}")
+
+
 def split_objects(object_names, val_fraction: float, test_fraction: float, seed: int) -> dict:
     """{split: sorted object names}; val/test get at least one object each
     when there are at least three objects."""
     names = sorted(set(object_names))
     if len(names) < 3:
         raise ValueError(f"need at least 3 distinct objects to split train/val/test, got {len(names)}")
-    if not (0 < val_fraction < 1 and 0 < test_fraction < 1 and val_fraction + test_fraction < 1):
-        raise ValueError("val_fraction and test_fraction must be in (0, 1) and sum below 1")
+    check_split_fractions(val_fraction, test_fraction)
     order = np.random.default_rng(seed).permutation(len(names))
     n_val = max(1, round(val_fraction * len(names)))
     n_test = max(1, round(test_fraction * len(names)))
