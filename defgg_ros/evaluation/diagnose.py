@@ -48,8 +48,10 @@ def label_stats(data_root) -> dict:
     shake_means = defaultdict(list)
     labelled_by_scene = []                    # each scene's labelled trials, for the locality check
     with_offsets = []                         # and their height offsets from the executor's grasp height
+    records = []                              # every trial as its record, for the signal report
     for sid in list_scene_ids(data_root):
         trials = read_trials(data_root, sid)
+        records += [t.to_json() for t in trials]
         labelled = [t for t in trials if t.label is not None]
         labelled_by_scene.append(labelled)
         if labelled:
@@ -86,17 +88,18 @@ def label_stats(data_root) -> dict:
         "locality": locality,
         "grasp_choice": choice,
         "positive_rate_by_height_offset_mm": by_height,
-        "signal": _signal(data_root),
+        "signal": _signal(records),
         "data_root": str(data_root),
     }
 
 
-def _signal(data_root) -> dict | None:
-    """The dataset's signal report (data.signal): can its labels carry a stiffness-aware margin at all?"""
-    from defgg_ros.data.signal import SignalError, read_trial_records, signal_report
+def _signal(records: list) -> dict | None:
+    """The dataset's signal report (data.signal) from its trial records: can its labels carry a
+    stiffness-aware margin at all?"""
+    from defgg_ros.data.signal import SignalError, signal_report
 
     try:
-        return signal_report(read_trial_records(data_root))
+        return signal_report(records)
     except SignalError:
         return None
 
