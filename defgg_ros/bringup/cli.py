@@ -70,7 +70,7 @@ def checked_overrides(node_set, overrides: dict) -> dict:
     schema does not declare, or with a value its schema refuses; and for a scene file that is not a valid scene.
     Checked before any process starts: a typo would otherwise leave the parameter at its default (or kill a node
     mid start-up)."""
-    from defgg_ros.ros.parameters import _coerce, check_value, load_schema, schema_path
+    from defgg_ros.ros.parameters import check_value, coerce_value, load_schema, schema_path
 
     names = [entry.name for entry in node_set.nodes]
     out = {}
@@ -87,7 +87,7 @@ def checked_overrides(node_set, overrides: dict) -> dict:
             if name not in specs:
                 raise NodeSetError(f"--param {node}:{name}: {node} has no parameter {name!r} "
                                    f"(see defgg_ros/ros/params/{node}.yaml)")
-            out[node][name] = _coerce(specs[name], value)
+            out[node][name] = coerce_value(specs[name], value)
             problem = check_value(specs[name], out[node][name])
             if problem:
                 raise NodeSetError(f"--param {node}:{problem}")

@@ -112,11 +112,11 @@ def _spec_from_entry(path: Path, name: str, entry) -> ParameterSpec:
         raise SchemaError(f"{path}: {name} uses validators this loader does not know: {sorted(unknown)}")
     spec = ParameterSpec(name, kind, None, str(entry["description"]), bool(entry.get("read_only", False)),
                          validation)
-    return ParameterSpec(name, kind, _coerce(spec, entry["default_value"]), spec.description, spec.read_only,
+    return ParameterSpec(name, kind, coerce_value(spec, entry["default_value"]), spec.description, spec.read_only,
                          validation)
 
 
-def _coerce(spec: ParameterSpec, value):
+def coerce_value(spec: ParameterSpec, value):
     """YAML and ROS write 1 for 1.0; a double parameter holds a float (rclpy types parameters by value)."""
     if spec.element_type is float:
         if spec.is_array:
