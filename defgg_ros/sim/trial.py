@@ -21,7 +21,9 @@ can no longer reach, or can no longer miss, the threshold); skipped directions
 are stored as the bound that decided the label (50 / 0). Surrogate (on in
 TrialSettings.fast(), the generator's): after >= 4 directions stop when the
 measured mean is far from the threshold; skipped directions hold the measured
-mean. Skipped directions are flagged False in `shake_measured`.
+mean. Skipped directions are flagged False in `shake_measured`. The evaluation's
+exact stop (shake_stop_when_decided) also ends a direction's ramp once held at
+the value that decides both its outcomes (shake_outcome_cap).
 """
 from __future__ import annotations
 
@@ -143,7 +145,9 @@ class TrialSettings:
     shake_fail_below_mps2: float | None = None
     # The evaluation under the label's rule reports two outcomes, the mean held >= the threshold and "held in
     # every direction": stop the shake once both are certain (the mean as in stop_when_label_decided, and a
-    # measured direction below the threshold), filling the rest as that stop does. Exact: neither changes.
+    # measured direction below the threshold), filling the rest as that stop does, and end a direction's ramp
+    # once held at the value that decides both (shake_outcome_cap; stored as that lower bound, flagged
+    # unmeasured). Exact: neither outcome changes.
     shake_stop_when_decided: bool = False
     twist_fail_below_radps2: float | None = None
     time_step_s: float | None = None   # None: world.time_step_for(E), the probe's stable steps
@@ -367,8 +371,9 @@ class _Trial:
         self.hand.move_to(self.lifted_tcp)
         self.world.set_gravity(self.gravity)
 
-    def ramp(self, limit, ramp_time_s, apply) -> float:
-        """Ramp 0..limit over ramp_time_s calling apply(value); return the last held value."""
+    def ramp(self, limit, ramp_time_s, apply, stop_at=None) -> float:
+        """Ramp 0..limit over ramp_time_s calling apply(value); return the last held value. stop_at: end the
+        ramp once held at that value (the full ramp would return at least the value reached)."""
         n = self.seconds(ramp_time_s)
         held_value, lost = limit, False
         for k in range(0, n, self.check_steps):
@@ -378,6 +383,8 @@ class _Trial:
                 lost, held_value = True, max(0.0, value - limit * self.check_steps / n)
                 if self.settings.stop_direction_when_lost:
                     break
+            if not lost and stop_at is not None and value >= stop_at:
+                return value
         return held_value
 
     def shake(self):
@@ -391,8 +398,9 @@ class _Trial:
                 self.world.set_gravity(g - a * d)
                 self.step(n)
 
-            values.append(self.ramp(self.settings.shake_limit_mps2, self.settings.shake_ramp_time_s, apply))
-            measured.append(True)
+            cap = self._shake_outcome_cap(values, len(dirs))
+            values.append(self.ramp(self.settings.shake_limit_mps2, self.settings.shake_ramp_time_s, apply, cap))
+            measured.append(cap is None or values[-1] < cap)    # a capped direction holds a lower bound
             left = len(dirs) - len(values)
             if self.settings.confident_stop and left and _confidently_decided(
                     values, self.settings.confident_min_directions, self.settings.confident_margin_mps2):
@@ -412,6 +420,11 @@ class _Trial:
                 break
         self.world.set_gravity(g)
         return values, measured
+
+    def _shake_outcome_cap(self, values, total: int) -> float | None:
+        if not self.settings.shake_stop_when_decided:
+            return None
+        return shake_outcome_cap(values, total, self.settings.shake_limit_mps2)
 
     def _both_outcomes_may_stop(self, values) -> bool:
         """shake_stop_when_decided: the every-direction outcome is certain (a measured direction was not held
@@ -520,6 +533,17 @@ def label_decided_fill(values, total: int, threshold: float, limit: float) -> fl
     if sum(values) + limit * left < need:
         return limit
     return None
+
+
+def shake_outcome_cap(values, total: int, limit: float) -> float | None:
+    """shake_stop_when_decided: the held acceleration beyond which the next direction changes neither of the
+    evaluation's outcomes, None when any value up to `limit` can. The mean is certain once the held sum reaches
+    threshold * total (held values are >= 0); "held in every direction" needs the threshold until a direction
+    has failed. Exact: the full ramp would hold at least the value the capped one reached."""
+    mean_needs = SHAKE_POSITIVE_THRESHOLD_MPS2 * total - sum(values)
+    every_failed = bool(values) and min(values) < SHAKE_POSITIVE_THRESHOLD_MPS2 * (1 - HELD_LIMIT_TOLERANCE)
+    cap = max(mean_needs, 0.0 if every_failed else SHAKE_POSITIVE_THRESHOLD_MPS2)
+    return cap if cap < limit else None
 
 
 def rms_speed_mps(before: list | None, after: list, dt_s: float) -> float:

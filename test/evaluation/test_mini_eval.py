@@ -42,12 +42,14 @@ def test_every_trial_ran_in_the_simulator(mini_run):
         assert r["trial_settings"]["protocol"] == "defgraspsim"          # a new folder's default
         if r["status"] == "ok" and r["task"] == "shake":
             # the label's own criterion: directions ramped to 50 m/s^2, success = the mean held >= 25 m/s^2,
-            # the every-direction column beside it; directions are skipped only once both are certain
+            # the every-direction column beside it; directions are skipped only once both are certain (a
+            # measured one failed) or capped at a held value >= 25 m/s^2 that decides both
             assert len(r["accels"]) == 16 and max(r["accels"]) <= 50.0
             assert r["success"] == (sum(r["accels"]) / 16 >= 25.0)
             assert r["success_every_direction"] == (min(r["accels"]) >= 25.0)
             measured = [a for a, m in zip(r["accels"], r["measured"]) if m]
-            assert all(r["measured"]) or min(measured) < 25.0
+            unmeasured = [a for a, m in zip(r["accels"], r["measured"]) if not m]
+            assert not unmeasured or min(measured) < 25.0 or min(unmeasured) >= 25.0
         elif r["status"] == "ok":
             assert len(r["accels"]) == 6
             assert r["success"] == (min(r["accels"]) >= 500.0)

@@ -164,3 +164,23 @@ def test_the_evaluations_shake_stops_once_both_outcomes_are_certain_and_neither_
     assert outcome_fields("shake", early.status, early.shake_accels_mps2, "defgraspsim") == \
         outcome_fields("shake", full.status, full.shake_accels_mps2, "defgraspsim") == \
         {"success": False, "success_every_direction": False}
+
+
+def test_the_evaluations_shake_caps_a_direction_once_its_outcomes_are_certain_and_neither_changes(client):
+    """shake_stop_when_decided on a grasp that holds: once the held sum reaches 25 m/s^2 * 16 the mean is
+    certain, so later directions ramp only until held at 25 m/s^2 (the every-direction outcome); each capped
+    value is a lower bound of the full trial's."""
+    from defgg_ros.evaluation.tasks import outcome_fields
+
+    firm = dataclasses.replace(QUICK, protocol="defgraspsim", shake_directions=16, stop_when_label_decided=False)
+    full = run_grasp_trial(box(2e9), CENTRED, ("shake",), firm, client=client)
+    capped = run_grasp_trial(box(2e9), CENTRED, ("shake",), dataclasses.replace(firm, shake_stop_when_decided=True),
+                             client=client)
+    assert full.status == capped.status == STATUS_OK, (full.note, capped.note)
+    assert min(full.shake_accels_mps2) >= 25.0, full.shake_accels_mps2    # the grasp holds: nothing fails early
+    assert capped.sim_steps < full.sim_steps and not all(capped.shake_measured)
+    for f, c, m in zip(full.shake_accels_mps2, capped.shake_accels_mps2, capped.shake_measured):
+        assert c == f if m else 25.0 <= c <= f
+    assert outcome_fields("shake", capped.status, capped.shake_accels_mps2, "defgraspsim") == \
+        outcome_fields("shake", full.status, full.shake_accels_mps2, "defgraspsim") == \
+        {"success": True, "success_every_direction": True}
