@@ -19,6 +19,9 @@ STIFFNESS_OBJECT_MIN = 0.1
 # PyBullet's FEM was unstable for E >= 2e7 Pa on these machines (see
 # docs/dataset.md); stiffer materials are simulated as rigid bodies.
 MAX_SOFT_BODY_YOUNGS_MODULUS_PA = 1e7
+# One density for every object of the trials (water-like, as the FEM probe's 96 g box; DefGraspSim's is
+# 1000 too): the defgraspsim labels' grip force used m = volume x this, so the cell estimates m the same way.
+OBJECT_DENSITY_KG_M3 = 1000.0
 
 # --- Grasp quality labels (paper: shake test) ------------------------------
 SHAKE_DIRECTIONS = 16

@@ -1,11 +1,13 @@
 """Grip force rules of the trial protocols (pure arithmetic; docs/dataset.md, "Trial protocols").
 
-Below the cores: the trials (sim.trial) label with these forces and the executor (control.gripper_rule)
-grasps with the legacy one, so neither has to import the other.
+Below the cores: the trials (sim.trial) label with these forces; a model's weights record which rule made
+their labels (LabelGripRule) and the cell grasps with that rule (the inference node computes the force,
+control.gripper_rule applies it), so none of them has to import another.
 """
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 from defgg_ros.constants import GRAVITY_MPS2, GRIPPER_MAX_FORCE_N
 
@@ -31,3 +33,60 @@ def defgraspsim_finger_force_n(youngs_modulus_pa: float, mass_kg: float, frictio
     """Force per finger (N) of the defgraspsim protocol: half of FOS * m * g / mu, capped at the hand's."""
     total = factor_of_safety(youngs_modulus_pa) * mass_kg * GRAVITY_MPS2 / friction
     return float(min(total / 2.0, GRIPPER_MAX_FORCE_N))
+
+
+class GripRuleError(ValueError):
+    """A label grip rule, mass or modulus the rule cannot work with."""
+
+
+LABEL_GRIP_PROTOCOLS = ("legacy", "defgraspsim")
+
+
+@dataclass(frozen=True)
+class LabelGripRule:
+    """How hard the fingers squeezed in a model's training labels (the weights' meta "label_grip_rule").
+
+    A grasp quality is the probability that the grasp holds when closed with the labels' force, so the
+    executor should close with it. legacy: grasp_force_n(E), nothing else needed. defgraspsim: half of
+    FOS * m * g / friction, so the object's mass must be known (the cell estimates it: perception).
+    Weights trained before the rule was recorded are legacy (from_meta).
+    """
+
+    protocol: str = "legacy"
+    friction: float | None = None      # defgraspsim: the mu of FOS*m*g/mu
+
+    def __post_init__(self):
+        if self.protocol not in LABEL_GRIP_PROTOCOLS:
+            raise GripRuleError(f"unknown label grip protocol {self.protocol!r}; known: "
+                                f"{', '.join(LABEL_GRIP_PROTOCOLS)}")
+        if self.protocol == "defgraspsim" and not (
+                isinstance(self.friction, (int, float)) and math.isfinite(self.friction) and self.friction > 0):
+            raise GripRuleError(f"the defgraspsim grip rule needs a friction > 0, got {self.friction!r}")
+
+    @property
+    def needs_mass(self) -> bool:
+        return self.protocol == "defgraspsim"
+
+    def finger_force_n(self, youngs_modulus_pa: float, mass_kg: float | None = None) -> float:
+        """The labels' force per finger (N) for an object of modulus E (its softest part) and mass."""
+        e = float(youngs_modulus_pa)
+        if not (math.isfinite(e) and e > 0):
+            raise GripRuleError(f"Young's modulus must be a positive number of Pa, got {youngs_modulus_pa!r}")
+        if not self.needs_mass:
+            return grasp_force_n(e)
+        if mass_kg is None or not (math.isfinite(mass_kg) and mass_kg > 0):
+            raise GripRuleError(f"the defgraspsim grip rule needs the object's mass, got {mass_kg!r}")
+        return defgraspsim_finger_force_n(e, float(mass_kg), float(self.friction))
+
+    def to_meta(self) -> dict:
+        return {"protocol": self.protocol, "friction": self.friction}
+
+    @classmethod
+    def from_meta(cls, meta: dict | None) -> LabelGripRule:
+        """The rule a checkpoint's meta records ("label_grip_rule"); legacy when it records none."""
+        rule = (meta or {}).get("label_grip_rule")
+        if rule is None:
+            return cls()
+        if not isinstance(rule, dict):
+            raise GripRuleError(f"label_grip_rule must be a mapping, got {type(rule).__name__}")
+        return cls(rule.get("protocol", "legacy"), rule.get("friction"))

@@ -1,4 +1,4 @@
-"""How hard and how far to close the Franka Hand, chosen from Young's modulus.
+"""How hard and how far to close the Franka Hand, chosen from Young's modulus (or the grasp's own force).
 
 Why a rule at all: the same grasp force cannot serve a foam cube and a
 wooden block -- a force that holds a rigid object by friction squashes a
@@ -9,7 +9,10 @@ function* (`defgg_ros.sim.trial.grasp_force_n`, the force of the training
 labels), because Def-GG-CNN's quality is the probability that a grasp holds
 when closed with that force: executing with another force would execute a
 different grasp than the one the network rated. The force is clipped to the
-hand's continuous rating. Soft objects are also closed more slowly, so the
+hand's continuous rating. A grasp planned by a model whose labels used another
+rule (defgraspsim: FOS * m * g / mu, from the object's mass) carries that force
+(Grasp.finger_force_n, computed by the inference node: planning/grip_estimate.py)
+and is closed with it instead. Soft objects are also closed more slowly, so the
 fingers stop on the object instead of driving through its first millimetres.
 
 The closing width follows franka_gripper's grasp semantics: the command
@@ -83,15 +86,25 @@ def pre_grasp_opening_m() -> float:
     return GRIPPER_MAX_WIDTH_M
 
 
-def grasp_command(youngs_modulus_pa: float, grasp_width_m: float) -> GraspCommand:
-    """The full gripper plan for a grasp of predicted opening `grasp_width_m` on a material E."""
+def commanded_force_n(youngs_modulus_pa: float, finger_force_n: float = 0.0) -> float:
+    """The grasp's own force (its model's label rule) when it carries one (> 0), else the legacy rule of E;
+    within the hand's rating either way."""
+    f = float(finger_force_n)
+    if not math.isfinite(f) or f < 0.0:
+        raise GripperRuleError(f"grasp force must be a finite number of N >= 0 (0: the modulus rule), got {f}")
+    return min(f, GRIPPER_MAX_FORCE_N) if f > 0.0 else grasp_force_n(youngs_modulus_pa)
+
+
+def grasp_command(youngs_modulus_pa: float, grasp_width_m: float, finger_force_n: float = 0.0) -> GraspCommand:
+    """The full gripper plan for a grasp of predicted opening `grasp_width_m` on a material E; finger_force_n:
+    the force the grasp carries (0: the modulus rule's)."""
     w = float(grasp_width_m)
     if not math.isfinite(w) or w <= 0.0:
         raise GripperRuleError(f"grasp width must be a positive number of metres, got {w}")
     if w > GRIPPER_MAX_WIDTH_M:
         raise GripperRuleError(f"grasp width {w * 1000:.1f} mm exceeds the hand's maximum opening "
                                f"{GRIPPER_MAX_WIDTH_M * 1000:.0f} mm")
-    force = grasp_force_n(youngs_modulus_pa)
+    force = commanded_force_n(youngs_modulus_pa, finger_force_n)
     soft = youngs_modulus_pa <= MAX_SOFT_BODY_YOUNGS_MODULUS_PA
     pre_open = pre_grasp_opening_m()
     width = min(w, pre_open)

@@ -229,7 +229,7 @@ class PickPlaceSequence:
             self._kin.ik(place_M, approach.q_rad)
         except KinematicsError as error:
             raise SequenceFailure(f"place pose unreachable: {error}") from error
-        gripper = grasp_command(self._grasp.youngs_modulus_pa, self._grasp.width_m)
+        gripper = grasp_command(self._grasp.youngs_modulus_pa, self._grasp.width_m, self._grasp.finger_force_n)
         return _Plan(pregrasp.q_rad, grasp_M, approach.q_rad, place_M, gripper)
 
     # --- motions ------------------------------------------------------------

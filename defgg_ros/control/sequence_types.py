@@ -100,6 +100,7 @@ class GraspTarget:
     yaw_rad: float             # finger closing direction about the vertical
     width_m: float
     youngs_modulus_pa: float
+    finger_force_n: float = 0.0   # the force the grasp carries (its model's label rule); 0: the modulus rule's
 
 
 @dataclass(frozen=True)

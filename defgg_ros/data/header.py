@@ -53,3 +53,18 @@ def protocol_summary(settings: dict) -> str:
         rule = ("**legacy** (gravity on, 2 N + 0.5 N per decade a finger, fingers force-held, lost when both fingers "
                 "let go or the centroid moved 20 mm)")
     return f"{rule}, effective friction {material['effective_friction']:.2f}, Neo-Hookean FEM, {nu_text}"
+
+
+def label_grip_rule(generator: dict) -> dict:
+    """The grip force rule of a dataset's labels (grip_force.LabelGripRule's meta form): legacy, or
+    defgraspsim with the friction its force used (the rule's own, else the contact's, as sim.trial does)."""
+    from defgg_ros.sim.trial import PROTOCOL_DEFGRASPSIM, TrialSettings
+
+    generator = generator if isinstance(generator, dict) else {}     # synthetic datasets name a string
+    settings = generator.get("trial_settings") or {}
+    if recorded_protocol(generator) != PROTOCOL_DEFGRASPSIM:
+        return {"protocol": "legacy", "friction": None}
+    known = {k: v for k, v in settings.items() if k in TrialSettings.__dataclass_fields__}
+    trial = TrialSettings(**known)
+    return {"protocol": PROTOCOL_DEFGRASPSIM,
+            "friction": float(trial.grip_force_friction or trial.material()["effective_friction"])}

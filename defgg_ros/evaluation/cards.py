@@ -153,10 +153,11 @@ def _data_section(prov) -> list:
                   "protocols').", "",
                   f"Generator settings (`dataset.json`, written by `defgg-datagen`): `{json.dumps(header)}`", ""]
         if recorded_protocol(header) == "defgraspsim":
-            lines += ["Grip force of these labels: FOS·m·g/μ, from the object's mass (defgg_ros/grip_force.py). The "
-                      "executor grasps with the legacy rule (2 N + 0.5 N per decade of E a finger; "
-                      "control/gripper_rule.py): it knows no mass. For objects of ~100 g it squeezes harder than "
-                      "the labels did, so a real grasp is not the one these labels rated (docs/real_cell.md).", ""]
+            lines += ["Grip force of these labels: FOS·m·g/μ, from the object's mass (defgg_ros/grip_force.py). "
+                      "Weights trained since 2026-11-27 record the rule (`label_grip_rule`); with the tabletop "
+                      "planner the cell then closes each grasp with it, the mass estimated from the height map "
+                      "(volume × 1000 kg/m³; Grasp.finger_force_n, docs/real_cell.md). Weights without the record "
+                      "are closed with the legacy rule (2 N + 0.5 N per decade of E a finger).", ""]
         if "n_candidates" in header and recorded_grasp_height(header) == "contacts":   # defgg-datagen's
             lines += ["Known limitation of these labels: the candidates sit at their contacts' height, anywhere up "
                       "the object's side, while the evaluation executes a grasp at half the height seen at its "

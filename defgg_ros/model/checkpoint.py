@@ -114,8 +114,8 @@ def network_from_checkpoint(payload: dict, path="<checkpoint>") -> GGCNN:
 
 
 def make_random_checkpoint(path, uses_stiffness: bool = True, seed: int = 0,
-                           architecture: str = GGCNNConfig.architecture) -> Path:
-    """A freshly initialised (untrained) network saved as a checkpoint.
+                           architecture: str = GGCNNConfig.architecture, meta: dict | None = None) -> Path:
+    """A freshly initialised (untrained) network saved as a checkpoint; meta: more training metadata.
 
     For tests of the code that consumes checkpoints; its grasps are arbitrary.
     """
@@ -126,4 +126,4 @@ def make_random_checkpoint(path, uses_stiffness: bool = True, seed: int = 0,
     finally:
         torch.random.set_rng_state(generator_state)
     return save_checkpoint(path, network, data_fingerprint="untrained",
-                           meta={"note": "random initialisation, not trained", "seed": seed})
+                           meta={"note": "random initialisation, not trained", "seed": seed, **(meta or {})})

@@ -102,7 +102,10 @@ def grasp_target(grasp, base_frame: str, default_modulus_pa: float) -> GraspTarg
     except (ConversionError, PoseError) as error:
         raise GoalError(f"bad grasp pose: {error}") from error
     modulus = grasp.youngs_modulus_pa if grasp.youngs_modulus_pa > 0 else default_modulus_pa
-    return GraspTarget(tuple(base_M_tcp[:3, 3]), yaw, float(grasp.width_m), float(modulus))
+    force = float(grasp.finger_force_n)
+    if not math.isfinite(force) or force < 0.0:
+        raise GoalError(f"grasp finger_force_n must be >= 0 N (0: the modulus rule), got {force}")
+    return GraspTarget(tuple(base_M_tcp[:3, 3]), yaw, float(grasp.width_m), float(modulus), force)
 
 
 def place_target(pose_stamped, base_frame: str, default_position, default_yaw: float | None) -> PlaceTarget:

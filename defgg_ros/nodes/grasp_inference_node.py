@@ -39,6 +39,7 @@ from std_msgs.msg import Header
 from visualization_msgs.msg import Marker, MarkerArray
 
 from defgg_ros.constants import GRIPPER_MAX_WIDTH_M
+from defgg_ros.grip_force import GripRuleError, LabelGripRule
 from defgg_ros.model.inference import CheckpointError, GraspPredictor
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import (
@@ -68,6 +69,7 @@ from defgg_ros.perception.stiffness_segmenter import SegmenterConfig, run_segmen
 from defgg_ros.perception.sync import StampSynchronizer
 from defgg_ros.perception.table_pose import TABLE_FRAME_ID, PoseFromTable
 from defgg_ros.perception.tabletop import TabletopConfig, WorkspaceBox
+from defgg_ros.planning.grip_estimate import grip_estimate
 from defgg_ros.planning.tabletop_grasps import base_T_grasp, image_projection
 from defgg_ros.planning.tabletop_planner import TabletopPlanner
 from defgg_ros.ros.memory import keep_freed_memory
@@ -177,6 +179,7 @@ class GraspInferenceNode(Node):
         if self.predictor.uses_stiffness != bool(p["use_stiffness"]):
             raise ValueError(f"{model_path} is a {'depth+stiffness' if self.predictor.uses_stiffness else 'depth-only'}"
                              f" network but use_stiffness is {p['use_stiffness']}")
+        self._grip_rule = self._label_grip_rule(model_path, p["planner"])
         self._segmenter = SegmenterConfig(float(p["default_youngs_modulus_pa"]), (),
                                           float(p["min_object_height_m"]), int(p["min_object_area_px"]),
                                           max_height_m=float(p["max_object_height_m"]))
@@ -367,7 +370,8 @@ class GraspInferenceNode(Node):
         def search():
             result = self._tabletop.search(perceived.prepared, top_k)
             return result, [self._tabletop_grasp_msg(g, perceived.frame, perceived.base_T_camera,
-                                                     perceived.pose_frame_id) for g in result.grasps]
+                                                     perceived.pose_frame_id, perceived.prepared.network)
+                            for g in result.grasps]
         return perceived.searches.get(top_k, search)
 
     def _plan_latest_perceived(self, top_k: int):
@@ -507,7 +511,28 @@ class GraspInferenceNode(Node):
         result, grasps = self._search(perceived, top_k)
         return result, grasps, time.perf_counter() - start
 
-    def _tabletop_grasp_msg(self, grasp, frame: Frame, base_T_camera, pose_frame_id: str) -> Grasp:
+    def _label_grip_rule(self, model_path, planner: str) -> LabelGripRule:
+        """The grip force rule of the model's labels (its weights record it; legacy when they do not)."""
+        try:
+            rule = LabelGripRule.from_meta(self.predictor.checkpoint_meta.get("meta"))
+        except GripRuleError as exc:
+            raise CheckpointError(f"{model_path}: {exc}") from exc
+        if rule.needs_mass and planner != "tabletop":
+            self.get_logger().warning(
+                f"{model_path}'s labels squeezed with F = FOS*m*g/mu ({rule.protocol}); only the tabletop planner "
+                "estimates the mass, so the executor will close these grasps with its legacy force")
+        return rule
+
+    def _grip_fields(self, msg: Grasp, grasp, network) -> None:
+        """Grasp.estimated_mass_kg and finger_force_n (planning/grip_estimate.py)."""
+        grip = grip_estimate(network, grasp.object_id, self._grip_rule, float(self._p["object_density_kg_m3"]))
+        msg.estimated_mass_kg = grip.mass_kg
+        msg.finger_force_n = grip.finger_force_n
+        if self._grip_rule.needs_mass and grip.finger_force_n <= 0.0:
+            self._warn(f"object {grasp.object_id}: no volume seen, so no mass for the labels' grip force; the "
+                       "executor will close with its legacy force")
+
+    def _tabletop_grasp_msg(self, grasp, frame: Frame, base_T_camera, pose_frame_id: str, network) -> Grasp:
         """pose_base is in pose_frame_id: the base frame, or the table frame (which the executor refuses)."""
         b_T_g = base_T_grasp(grasp)
         image = image_projection(grasp, base_T_camera, frame.camera_k)
@@ -523,6 +548,7 @@ class GraspInferenceNode(Node):
         msg.width_px = image["width_px"]
         msg.youngs_modulus_pa = float(grasp.youngs_modulus_pa)
         msg.object_id = int(grasp.object_id)
+        self._grip_fields(msg, grasp, network)
         return msg
 
     # --- visualisation ------------------------------------------------------

@@ -23,12 +23,16 @@ import numpy as np
 import pybullet as p
 import trimesh
 
-from defgg_ros.constants import MAX_SOFT_BODY_YOUNGS_MODULUS_PA, POISSON_RATIO, TRAINING_YOUNGS_MODULI_PA
+from defgg_ros.constants import (
+    MAX_SOFT_BODY_YOUNGS_MODULUS_PA,
+    OBJECT_DENSITY_KG_M3,
+    POISSON_RATIO,
+    TRAINING_YOUNGS_MODULI_PA,
+)
 from defgg_ros.sim import library, meshes, physics
 from defgg_ros.stiffness import check_youngs_modulus
 
-# One density for every object: water-like, as the FEM probe's 96 g box.
-DEFAULT_DENSITY_KG_M3 = 1000.0
+DEFAULT_DENSITY_KG_M3 = OBJECT_DENSITY_KG_M3
 # Soft nodes closer than this to a rigid part are anchored to it (multi-material).
 ANCHOR_DISTANCE_M = 0.003
 OBJECT_FRICTION = physics.DEFAULT_FRICTION

@@ -25,7 +25,8 @@ from tqdm import tqdm
 from defgg_ros.atomic import atomic_path, write_json_atomic
 from defgg_ros.constants import TRAINING_YOUNGS_MODULI_PA
 from defgg_ros.data.dataset import GraspDataset, build_manifest, manifest_fingerprint
-from defgg_ros.data.format import DatasetError, read_scene
+from defgg_ros.data.format import DatasetError, check_header, read_scene
+from defgg_ros.data.header import label_grip_rule
 from defgg_ros.model.checkpoint import save_checkpoint
 from defgg_ros.model.network import GGCNN
 from defgg_ros.train.config import TrainConfig
@@ -112,6 +113,8 @@ class Trainer:
             if not self.manifest:
                 raise TrainingError(f"{self.data_root}: no scenes yet")
             self.fingerprint = manifest_fingerprint(self.data_root, self.manifest)
+        # recorded in every checkpoint: the cell grasps with the force the labels were made with
+        self.label_grip_rule = label_grip_rule(check_header(self.data_root).get("generator") or {})
         scene_objects = labelled_scene_objects(self.data_root, self.manifest)
         if not state:
             self.object_split = split_objects(scene_objects.values(), self.config.val_fraction,
@@ -238,7 +241,7 @@ class Trainer:
         return {"epoch": record["epoch"], "val_accuracy": record["val_accuracy"], "val_loss": record["val_loss"],
                 "val_per_modulus": record["val_per_modulus"], "train_config": self.config.to_dict(),
                 "object_split": self.object_split, "data_root": str(self.data_root),
-                "n_trials": int(sum(self.manifest.values()))}
+                "n_trials": int(sum(self.manifest.values())), "label_grip_rule": self.label_grip_rule}
 
     def _write_epoch_outputs(self) -> None:
         record = self.history[-1]

@@ -43,3 +43,15 @@ def test_command_window_accepts_anything_but_empty_fingers():
 def test_bad_inputs_raise(modulus, width, message):
     with pytest.raises(GripperRuleError, match=message):
         grasp_command(modulus, width)
+
+
+def test_a_grasp_that_carries_its_labels_force_is_closed_with_it():
+    """Grasp.finger_force_n > 0 (a defgraspsim model's FOS*m*g/mu): that force, within the hand's rating;
+    0: the modulus rule; anything else refused."""
+    assert grasp_command(2e9, 0.04, finger_force_n=0.65).force_n == pytest.approx(0.65)
+    assert grasp_command(2e9, 0.04, finger_force_n=0.0).force_n == grasp_force_n(2e9)
+    assert grasp_command(2e9, 0.04, finger_force_n=500.0).force_n == GRIPPER_MAX_FORCE_N
+    assert grasp_command(2e4, 0.04, finger_force_n=0.65).speed_mps < grasp_command(2e9, 0.04, 0.65).speed_mps
+    for bad in (-1.0, float("nan"), float("inf")):
+        with pytest.raises(GripperRuleError, match="grasp force"):
+            grasp_command(2e5, 0.04, finger_force_n=bad)

@@ -68,12 +68,19 @@ def test_grasp_target_from_a_grasp_message():
     assert target.youngs_modulus_pa == 2e5
     # A grasp computed without stiffness input carries 0 Pa: the default applies.
     assert grasp_target(grasp(modulus=0.0), BASE, default_modulus_pa=2e6).youngs_modulus_pa == 2e6
+    # The force its model's labels used travels with the grasp (0: the executor's modulus rule).
+    assert target.finger_force_n == 0.0
+    msg = grasp()
+    msg.finger_force_n = 0.8
+    assert grasp_target(msg, BASE, 2e6).finger_force_n == 0.8
 
 
 @pytest.mark.parametrize("mutate, message", [
     (lambda g: setattr(g.pose_base.header, "frame_id", "camera_depth_optical_frame"), "expected 'panda_link0'"),
     (lambda g: setattr(g.pose_base.pose.orientation, "w", 7.0), "bad grasp pose"),
     (lambda g: setattr(g.pose_base.pose.position, "z", float("inf")), "bad grasp pose"),
+    (lambda g: setattr(g, "finger_force_n", -2.0), "finger_force_n"),
+    (lambda g: setattr(g, "finger_force_n", float("nan")), "finger_force_n"),
 ])
 def test_bad_grasp_messages(mutate, message):
     msg = grasp()
