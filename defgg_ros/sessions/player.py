@@ -15,13 +15,13 @@ from defgg_interfaces.msg import Grasp, StiffnessAssignment
 from defgg_interfaces.srv import PlanGrasp
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import CameraInfo, Image, JointState
 
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import ns_to_stamp
 from defgg_ros.ros.cell_client import CellCallError
 from defgg_ros.sessions.compare import GraspSummary, PickOutcome, Tolerances, grasp_problems, pick_problems
+from defgg_ros.sessions.live_message import live_message
 from defgg_ros.sessions.report import Row, diff_text
 from defgg_ros.sessions.selector import restamp
 from defgg_ros.sessions.session import Frame, Session, stamp_ns
@@ -135,7 +135,7 @@ class Replay:
         return self.rows
 
     def _assignment(self, message):
-        assignment = deserialize_message(message.raw, StiffnessAssignment)
+        assignment = live_message(message, StiffnessAssignment)
         self.client.set_stiffness(assignment.objects, assignment.default_youngs_modulus_pa)
         if self.recorder is not None:
             self.recorder.write_raw(message.topic, message.raw)
@@ -172,7 +172,7 @@ class Replay:
                              grasp_problems(expected, actual, self.options.tolerances)))
 
     def _plan(self, call):
-        request = deserialize_message(call.request.raw, PlanGrasp.Request)
+        request = live_message(call.request, PlanGrasp.Request)
         recorded = call.response.decode() if call.response is not None else None
         if recorded is not None and recorded.grasps and request.depth.width == 0:
             self._ensure_fed(stamp_ns(recorded.grasps[0].header.stamp))  # the call planned on the latest frame
@@ -197,7 +197,7 @@ class Replay:
         if not self.options.pick:
             self.rows.append(Row(f"pick {pick.index}", recorded.brief() if recorded else "none", "skipped"))
             return
-        goal = deserialize_message(pick.goal.raw, PickAndPlace.Goal)
+        goal = live_message(pick.goal, PickAndPlace.Goal)
         self._prepare_goal(goal, pick)
         self._wait_for_joint_states()
         self.log(f"  pick {pick.index}: executing in the simulated cell ...")

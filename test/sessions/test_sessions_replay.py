@@ -72,7 +72,7 @@ def shift_principal_point(source: Path, target: Path, shift_px: float) -> Path:
             info.k[2] += shift_px
             info.p[2] += shift_px
             raw = bytes(store.serialize_cdr(info, m.msgtype))
-        writer.write(m.topic, raw, m.log_time_ns, m.msgtype)
+        writer.write(m.topic, raw, m.log_time_ns, m.msgtype, m.msgdef)   # as recorded
     return writer.close()
 
 
