@@ -65,6 +65,19 @@ def test_happy_path_reaches_every_phase_and_places(kin):
     assert out.duration_s > 0
 
 
+def test_a_grasp_that_carries_its_labels_force_is_closed_with_it_and_the_outcome_says_so(kin):
+    """A defgraspsim model's grasp carries FOS*m*g/mu per finger (Grasp.finger_force_n): the hand closes with
+    that, not with the modulus rule's 4.5 N for 2e9 Pa."""
+    from dataclasses import replace
+
+    sequence = make(kin, grasp=replace(GRASP, finger_force_n=1.3))
+    robot = FakeRobot(kin, World(object_width_m=0.045))
+    run(sequence, robot, until=lambda r, s: False)
+    (close,) = [c for c in robot.sent if isinstance(c, GraspGripper)]
+    assert close.command.force_n == 1.3 and sequence.outcome.gripper_force_n == 1.3
+    assert sequence.outcome.success, sequence.outcome.failure_reason
+
+
 def test_pre_grasp_is_25_mm_above_the_grasp_point_with_fingers_closing_along_the_grasp_axis(kin):
     sequence, robot = make(kin), FakeRobot(kin, World())
     run(sequence, robot, until=lambda r, s: s.phase == "descend")
