@@ -12,6 +12,9 @@ from dataclasses import dataclass
 DEFAULT_POSITION_TOL_MM = 3.0
 DEFAULT_ANGLE_TOL_DEG = 5.0
 DEFAULT_WIDTH_TOL_MM = 3.0
+# The grip a grasp carries (estimated mass, the labels' finger force): a grasp within the tolerances above
+# sees nearly the same cells, so its object's volume moves by a few per cent at most.
+GRIP_TOL_REL = 0.1
 
 
 @dataclass(frozen=True)
@@ -34,12 +37,16 @@ class GraspSummary:
     width_m: float
     quality: float
     center_px: tuple
+    # (estimated_mass_kg, finger_force_n); None for a grasp recorded before the Grasp had them
+    grip: tuple | None = None
 
     @classmethod
     def of(cls, grasp) -> "GraspSummary":
         p = grasp.pose_base.pose.position
+        grip = (float(grasp.estimated_mass_kg), float(grasp.finger_force_n)) \
+            if hasattr(grasp, "estimated_mass_kg") else None
         return cls((p.x, p.y, p.z), float(grasp.angle_rad), float(grasp.width_m), float(grasp.quality),
-                   (float(grasp.center_u_px), float(grasp.center_v_px)))
+                   (float(grasp.center_u_px), float(grasp.center_v_px)), grip)
 
     def brief(self) -> str:
         x, y, z = (1000 * v for v in self.position_base_m)
@@ -82,6 +89,19 @@ def grasp_problems(expected: GraspSummary | None, actual: GraspSummary | None, t
         problems.append(f"angle changed {d.angle_deg:.1f} deg (> {tol.angle_deg:g} deg)")
     if d.width_mm > tol.width_mm:
         problems.append(f"width changed {d.width_mm:.1f} mm (> {tol.width_mm:g} mm)")
+    return problems + grip_problems(expected.grip, actual.grip)
+
+
+def grip_problems(expected: tuple | None, actual: tuple | None) -> list[str]:
+    """Estimated mass and finger force beyond GRIP_TOL_REL of the recording (nothing to compare when the
+    recording predates them)."""
+    if expected is None or actual is None:
+        return []
+    problems = []
+    for name, unit, scale, e, a in zip(("estimated mass", "finger force"), ("g", "N"), (1000.0, 1.0),
+                                       expected, actual):
+        if abs(a - e) > GRIP_TOL_REL * max(abs(e), abs(a)):
+            problems.append(f"{name} changed {scale * e:.3g} -> {scale * a:.3g} {unit} (> {100 * GRIP_TOL_REL:g} %)")
     return problems
 
 
