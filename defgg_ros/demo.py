@@ -15,6 +15,7 @@ lab network; `--ros-domain inherit` (or DEFGG_ROS_DOMAIN=inherit) uses the
 shell's ROS_DOMAIN_ID and discovery instead.
 """
 import argparse
+import math
 import sys
 import time
 from datetime import UTC, datetime
@@ -224,6 +225,7 @@ class DemoRun:
             return None
         grasp = response.grasps[0]
         row.grasp_width_m, row.quality = grasp.width_m, grasp.quality
+        row.estimated_mass_kg = grasp.estimated_mass_kg
         panel.grasp_uv_px = (grasp.center_u_px, grasp.center_v_px)
         panel.grasp_angle_rad, panel.grasp_width_px = grasp.angle_rad, grasp.width_px
         return grasp
@@ -246,6 +248,7 @@ class DemoRun:
         if not result.success and not result.phase_reached:
             row.failure_reason = "the executor returned an empty result (its error is in cell.log)"
         row.sim_duration_s = result.duration_s
+        row.gripper_force_n = result.gripper_force_n or math.nan
 
     def _place_pose(self, grasp_pose):
         """Each object into its own quadrant of the bin, released just above the bin's floor

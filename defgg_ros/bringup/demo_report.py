@@ -22,6 +22,8 @@ class PickRow:
     failure_reason: str = ""
     sim_duration_s: float = math.nan
     wall_duration_s: float = math.nan
+    estimated_mass_kg: float = math.nan   # the inference node's, from the height map (0: not estimated)
+    gripper_force_n: float = math.nan     # what the executor closed with (per finger); NaN: it never closed
 
 
 @dataclass
@@ -41,16 +43,21 @@ def _yes(flag: bool) -> str:
     return "yes" if flag else "no"
 
 
+def _number(value: float, spec: str) -> str:
+    return "-" if math.isnan(value) else format(value, spec)
+
+
 def format_table(rows: list) -> str:
-    header = f"{'object':<14} {'E (Pa)':>8} {'sim':>5} {'width (mm)':>10} {'quality':>7} {'phase reached':>14} " \
-             f"{'held':>5} {'in bin':>6}  note"
+    header = f"{'object':<14} {'E (Pa)':>8} {'sim':>5} {'width (mm)':>10} {'quality':>7} {'mass (g)':>8} " \
+             f"{'force (N)':>9} {'phase reached':>14} {'held':>5} {'in bin':>6}  note"
     lines = [header, "-" * len(header)]
     for r in rows:
-        width = "-" if math.isnan(r.grasp_width_m) else f"{r.grasp_width_m * 1000:.1f}"
-        quality = "-" if math.isnan(r.quality) else f"{r.quality:.3f}"
+        width = _number(r.grasp_width_m * 1000, ".1f")
+        quality = _number(r.quality, ".3f")
+        mass, force = _number(r.estimated_mass_kg * 1000, ".0f"), _number(r.gripper_force_n, ".2f")
         lines.append(f"{r.name:<14} {r.youngs_modulus_pa:>8.0e} {r.simulated_as:>5} {width:>10} {quality:>7} "
-                     f"{r.phase_reached:>14} {_yes(r.held_after_transfer):>5} {_yes(r.in_bin):>6}  "
-                     f"{r.failure_reason}")
+                     f"{mass:>8} {force:>9} {r.phase_reached:>14} {_yes(r.held_after_transfer):>5} "
+                     f"{_yes(r.in_bin):>6}  {r.failure_reason}")
     return "\n".join(lines)
 
 

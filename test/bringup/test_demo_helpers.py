@@ -61,10 +61,12 @@ def test_grasp_on_object_and_bin():
 
 
 def test_table_summary_and_figure(tmp_path):
-    rows = [PickRow("sponge", 2e4, "soft", 0.031, 0.8, "done", True, True, True),
+    rows = [PickRow("sponge", 2e4, "soft", 0.031, 0.8, "done", True, True, True, estimated_mass_kg=0.0631,
+                    gripper_force_n=0.678),
             PickRow("can", 2e9, "rigid", failure_reason="PlanGrasp: no object")]
     table = format_table(rows)
     assert "sponge" in table and "31.0" in table and "2e+09" in table and "PlanGrasp: no object" in table
+    assert " 63 " in table and "0.68" in table          # estimated mass (g) and the force it closed with (N)
     summary = write_summary(tmp_path / "summary.json", rows, {"scene": "x"})
     loaded = json.loads((tmp_path / "summary.json").read_text())
     assert loaded == json.loads(json.dumps(summary))
