@@ -7,13 +7,13 @@
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 HERE=sim_bringup/sessions
-export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-211} ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
+export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-97} ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 export FASTRTPS_DEFAULT_PROFILES_FILE=${FASTRTPS_DEFAULT_PROFILES_FILE:-$PWD/defgg_ros/ros/fastdds_profile.xml}
 
 record() {  # name, then defgg-record options
   local name=$1; shift
   local scene=$HERE/scenes/$name.yaml
-  .venv/bin/defgg-bringup --scene "$scene" > "/tmp/defgg_record_$name.bringup.log" 2>&1 &
+  .venv/bin/defgg-bringup --scene "$scene" --ros-domain "$ROS_DOMAIN_ID" > "/tmp/defgg_record_$name.bringup.log" 2>&1 &
   local bringup=$!
   rm -rf "${HERE:?}/$name"  # git keeps the previous recording
   .venv/bin/defgg-record "$HERE/$name" --scene "$scene" --stiffness-from-scene \
