@@ -21,6 +21,7 @@ import torch
 from defgg_ros.atomic import atomic_path, write_json_atomic, write_text_atomic
 from defgg_ros.data.format import read_trials
 from defgg_ros.data.header import recorded_grasp_height, recorded_protocol
+from defgg_ros.grip_force import LabelGripRule
 from defgg_ros.model.checkpoint import load_checkpoint
 
 PROVENANCE_SUFFIX = ".train.json"
@@ -100,6 +101,17 @@ def ship_model(run_dir, name: str, models_dir, provenance: dict, checkpoint: str
     return dst
 
 
+def _grip_rule_text(meta: dict) -> str:
+    """The label grip rule the weights record (grip_force.LabelGripRule), as the card states it."""
+    rule = LabelGripRule.from_meta(meta)
+    recorded = "recorded in the weights" if "label_grip_rule" in meta else "none recorded (weights before " \
+        "2026-11-27): legacy"
+    if rule.needs_mass:
+        return (f"{rule.protocol}, FOS·m·g/μ with μ {rule.friction:.2f}, the mass estimated from the height map "
+                f"({recorded}; docs/real_cell.md)")
+    return f"legacy, 2 N + 0.5 N per decade of E a finger ({recorded})"
+
+
 def _pct(x) -> str:
     return "–" if x is None else f"{100 * x:.1f} %"
 
@@ -127,6 +139,7 @@ def render_card(name: str, models_dir, eval_summary: dict | None = None, eval_di
              f"best validation epoch {prov['best_epoch']} (torch threads: 1)",
              f"- **Shipped checkpoint**: {prov.get('shipped_checkpoint', 'best')} (epoch "
              f"{prov.get('shipped_epoch', prov['best_epoch'])})" + (f". {prov['note']}" if prov.get("note") else ""),
+             f"- **Grip force the cell closes these grasps with**: {_grip_rule_text(payload['meta'])}",
              f"- **Training data**: `{prov['data_root']}` (growing dataset; this run froze "
              f"{prov['n_trials']} trials), data fingerprint `{prov['data_fingerprint']}`; scenes per split "
              f"{prov['scenes']}", ""]

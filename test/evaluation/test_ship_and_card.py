@@ -48,6 +48,16 @@ def test_ship_snapshot_and_card(trained):
     card = (models / "m.md").read_text()
     for needle in (prov["data_fingerprint"], "abc123", command, "Validation", "Not evaluated yet", "frozen.tar.gz"):
         assert needle in card
+    # a synthetic dataset names no protocol: legacy labels, and the weights say so
+    assert "closes these grasps with**: legacy, 2 N + 0.5 N per decade of E a finger (recorded in the weights)" in card
+
+
+def test_card_states_the_grip_rule_its_weights_record():
+    from defgg_ros.evaluation.cards import _grip_rule_text
+
+    assert _grip_rule_text({"label_grip_rule": {"protocol": "defgraspsim", "friction": 0.7}}).startswith(
+        "defgraspsim, FOS·m·g/μ with μ 0.70")
+    assert "none recorded" in _grip_rule_text({}) and _grip_rule_text({}).startswith("legacy")
 
 
 def test_card_refuses_weights_that_changed_after_shipping(trained, tmp_path):
@@ -89,4 +99,5 @@ def test_card_reads_the_generator_header_from_the_archive_and_states_the_height_
     assert "Grip force of these labels" not in executor          # legacy labels: the executor's own force rule
     weight_rule = "\n".join(_data_section({**prov, "data_archive": str(archive({
         "n_candidates": 200, "grasp_height": "executor", "trial_settings": {"protocol": "defgraspsim"}}))}))
-    assert "Grip force of these labels: FOS·m·g/μ" in weight_rule and "executor grasps with the legacy" in weight_rule
+    assert "Grip force of these labels: FOS·m·g/μ" in weight_rule
+    assert "record the rule (`label_grip_rule`)" in weight_rule
