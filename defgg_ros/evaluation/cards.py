@@ -104,8 +104,8 @@ def ship_model(run_dir, name: str, models_dir, provenance: dict, checkpoint: str
 def _grip_rule_text(meta: dict) -> str:
     """The label grip rule the weights record (grip_force.LabelGripRule), as the card states it."""
     rule = LabelGripRule.from_meta(meta)
-    recorded = "recorded in the weights" if "label_grip_rule" in meta else "none recorded (weights before " \
-        "2026-11-27): legacy"
+    recorded = "recorded in the weights" if "label_grip_rule" in meta else \
+        "the weights record no rule: trained before 2026-11-27"
     if rule.needs_mass:
         return (f"{rule.protocol}, FOS·m·g/μ with μ {rule.friction:.2f}, the mass estimated from the height map "
                 f"({recorded}; docs/real_cell.md)")

@@ -57,7 +57,7 @@ def test_card_states_the_grip_rule_its_weights_record():
 
     assert _grip_rule_text({"label_grip_rule": {"protocol": "defgraspsim", "friction": 0.7}}).startswith(
         "defgraspsim, FOS·m·g/μ with μ 0.70")
-    assert "none recorded" in _grip_rule_text({}) and _grip_rule_text({}).startswith("legacy")
+    assert "record no rule" in _grip_rule_text({}) and _grip_rule_text({}).startswith("legacy")
 
 
 def test_card_refuses_weights_that_changed_after_shipping(trained, tmp_path):
