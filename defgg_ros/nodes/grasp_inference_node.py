@@ -525,7 +525,12 @@ class GraspInferenceNode(Node):
 
     def _grip_fields(self, msg: Grasp, grasp, network) -> None:
         """Grasp.estimated_mass_kg and finger_force_n (planning/grip_estimate.py)."""
-        grip = grip_estimate(network, grasp.object_id, self._grip_rule, float(self._p["object_density_kg_m3"]))
+        try:
+            grip = grip_estimate(network, grasp.object_id, self._grip_rule, float(self._p["object_density_kg_m3"]))
+        except ValueError as exc:     # a grasp is always on an object's cells; never lose the grasp over this
+            self._warn(f"no grip estimate for object {grasp.object_id} ({exc}); Grasp.finger_force_n 0: the "
+                       "executor's legacy force")
+            return
         msg.estimated_mass_kg = grip.mass_kg
         msg.finger_force_n = grip.finger_force_n
         if self._grip_rule.needs_mass and grip.finger_force_n <= 0.0:
