@@ -20,9 +20,10 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 from support.executor_goals import send_goal, stop_driver_processes
 
-from defgg_ros.constants import PANDA_READY_Q_RAD
+from defgg_ros.constants import OBJECT_DENSITY_KG_M3, PANDA_READY_Q_RAD
 from defgg_ros.control.kinematics import PandaKinematics
 from defgg_ros.control.poses import matrix_to_quaternion, top_down_pose
+from defgg_ros.grip_force import LabelGripRule
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.executor_node import ExecutorNode
 from defgg_ros.ros import topics
@@ -122,13 +123,23 @@ def fresh_state(ex, spin, executor_node):
          TIMEOUT_S, "joint states from the driver")
 
 
-def test_pick_of_a_rigid_box_into_the_bin(cell, spin):
+# The box (125 g) as a defgraspsim model's grasp carries it: FOS(2e9) * m * g / 0.7 / 2 a finger.
+LABEL_FINGER_FORCE_N = LabelGripRule("defgraspsim", 0.7).finger_force_n(2e9, BOX_SIZE_M ** 3 * OBJECT_DENSITY_KG_M3)
+
+
+@pytest.mark.parametrize("finger_force_n", [0.0, LABEL_FINGER_FORCE_N], ids=["modulus_rule", "labels_force"])
+def test_pick_of_a_rigid_box_into_the_bin(cell, spin, finger_force_n):
+    """With the executor's modulus rule (4.5 N a finger at 2e9 Pa) and with the force a defgraspsim model's grasp
+    carries (1.69 N): gravity on, the transfer's accelerations, the box still ends in the bin."""
     ex, executor_node, client, seen, _, _ = cell
     fresh_state(ex, spin, executor_node)
-    handle = send(ex, spin, client, PickAndPlace.Goal(grasp=box_grasp()))
+    grasp = box_grasp()
+    grasp.finger_force_n = finger_force_n
+    handle = send(ex, spin, client, PickAndPlace.Goal(grasp=grasp))
     assert handle.accepted
     result = spin(ex, handle.get_result_async(), TIMEOUT_S, "pick-and-place result").result
     assert result.success, result.failure_reason
+    assert result.gripper_force_n == pytest.approx(finger_force_n or 4.5)
     assert result.phase_reached == "done"
     assert result.held_after_lift and result.held_after_transfer
     # The fingers stopped on the 5 cm box (a little less: contact penetration).

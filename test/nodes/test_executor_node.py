@@ -103,6 +103,7 @@ def test_bad_goals_are_aborted_with_a_reason_and_the_node_keeps_serving(executor
         (PickAndPlace.Goal(grasp=nan_grasp), "bad grasp pose"),
         (PickAndPlace.Goal(grasp=grasp_msg(xyz=(1.3, 0.0, 0.05))), "grasp outside the workspace"),
         (PickAndPlace.Goal(grasp=grasp_msg(width_m=0.2)), "maximum opening"),
+        (PickAndPlace.Goal(grasp=grasp_msg(finger_force_n=-1.0)), "finger_force_n"),
         (PickAndPlace.Goal(plan_grasp=True), "grasp service"),
     ]
     place = PickAndPlace.Goal(grasp=grasp_msg())

@@ -168,14 +168,14 @@ class InTestDriver(Node):
         return GripperGrasp.Result(success=ok, error="" if ok else "fingers stopped outside epsilon")
 
 
-def grasp_msg(xyz=GRASP_XYZ, yaw=0.3, width_m=0.05, modulus_pa=2e9):
+def grasp_msg(xyz=GRASP_XYZ, yaw=0.3, width_m=0.05, modulus_pa=2e9, finger_force_n=0.0):
     msg = Grasp()
     msg.pose_base.header.frame_id = topics.BASE_FRAME
     pose = msg.pose_base.pose
     pose.position.x, pose.position.y, pose.position.z = (float(v) for v in xyz)
     qx, qy, qz, qw = matrix_to_quaternion(top_down_pose(xyz, yaw)[:3, :3])
     pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w = qx, qy, qz, qw
-    msg.width_m, msg.youngs_modulus_pa = width_m, modulus_pa
+    msg.width_m, msg.youngs_modulus_pa, msg.finger_force_n = width_m, modulus_pa, finger_force_n
     return msg
 
 
