@@ -63,3 +63,17 @@ def test_a_message_of_the_installed_layout_round_trips():
     for msgdef in ("", current):         # no definition recorded: the installed one
         back = live_message(BagMessage("/defgg/session/pick_goal", GOAL, 0, raw, msgdef), PickAndPlace.Goal)
         assert back == goal
+
+
+def test_a_request_with_images_and_fixed_arrays_copies_every_byte():
+    from defgg_interfaces.srv import PlanGrasp
+    from sensor_msgs.msg import Image
+
+    from defgg_ros.sessions.interfaces import session_typestore
+    from defgg_ros.sessions.live_message import copy_fields
+
+    request = PlanGrasp.Request(top_k=2)
+    request.depth = Image(height=2, width=3, encoding="32FC1", step=12, data=bytes(range(24)))
+    request.camera_info.k = [500.0, 0.0, 320.0, 0.0, 500.0, 240.0, 0.0, 0.0, 1.0]
+    decoded = session_typestore().deserialize_cdr(serialize_message(request), "defgg_interfaces/srv/PlanGrasp_Request")
+    assert copy_fields(decoded, PlanGrasp.Request()) == request
