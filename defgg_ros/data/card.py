@@ -10,7 +10,7 @@ import numpy as np
 
 from defgg_ros.atomic import write_text_atomic
 from defgg_ros.constants import MAX_SOFT_BODY_YOUNGS_MODULUS_PA, SHAKE_POSITIVE_THRESHOLD_MPS2
-from defgg_ros.data.format import STATUS_LIFT_FAILED, check_header, list_scene_ids, read_scene, read_trials
+from defgg_ros.data.format import STATUS_LIFT_FAILED, check_header, list_scene_ids, read_scene_meta, read_trials
 from defgg_ros.data.labels import slips_in_a_direction
 
 RIGID_NOTE = (
@@ -24,7 +24,7 @@ def _stats(root):
     rows = defaultdict(lambda: {"n": 0, "pos": 0, "neg": 0, "fail": 0, "cpu": [], "means": [], "pos_slip": 0,
                                 "lift_failed": 0})
     for sid in list_scene_ids(root):
-        meta = read_scene(Path(root) / "scenes" / f"{sid}.npz").meta
+        meta = read_scene_meta(Path(root) / "scenes" / f"{sid}.npz")
         row = rows[(meta["object_name"], meta["youngs_modulus_pa"])]
         row["soft"] = any(meta.get("soft", []))
         row["nodes"] = meta.get("tet_nodes")

@@ -228,6 +228,20 @@ def read_scene(path) -> Scene:
     return Scene(scene_id=path.stem, meta=meta, **arrays)
 
 
+def read_scene_meta(path) -> dict:
+    """One scene shard's metadata alone (the card's per-scene facts; the images stay on disk)."""
+    path = Path(path)
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            if "meta" not in z.files:
+                raise DatasetError(f"{path}: missing arrays ['meta']")
+            return json.loads(str(z["meta"]))
+    except DatasetError:
+        raise
+    except Exception as exc:  # zipfile/zlib/ValueError on truncated or tampered files
+        raise DatasetError(f"{path}: cannot read scene ({type(exc).__name__}: {exc})") from None
+
+
 def read_trials(root, scene_id: str) -> list:
     path = trials_path(root, scene_id)
     try:

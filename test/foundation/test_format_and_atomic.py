@@ -32,6 +32,7 @@ def test_scene_and_trials_round_trip(tmp_path):
     assert fmt.list_scene_ids(tmp_path) == ["box__E2e+04"]
     scene = fmt.read_scene(tmp_path / "scenes" / "box__E2e+04.npz")
     assert scene.object_name == "box" and scene.depth_m.dtype == np.float32
+    assert fmt.read_scene_meta(tmp_path / "scenes" / "box__E2e+04.npz") == scene.meta     # the card's read
     np.testing.assert_array_equal(scene.youngs_modulus_pa, _scene().youngs_modulus_pa)
     trials = fmt.read_trials(tmp_path, "box__E2e+04")
     assert [t.label for t in trials] == [True, False]
@@ -57,6 +58,8 @@ def test_truncated_scene_gives_dataset_error(tmp_path):
     path.write_bytes(data[: len(data) // 2])
     with pytest.raises(fmt.DatasetError, match="cannot read scene"):
         fmt.read_scene(path)
+    with pytest.raises(fmt.DatasetError, match="cannot read scene"):
+        fmt.read_scene_meta(path)
 
 
 def test_foreign_header_is_rejected(tmp_path):
