@@ -34,12 +34,18 @@ def recorded_protocol(generator: dict) -> str:
     return (generator.get("trial_settings") or {}).get("protocol", "legacy")
 
 
+def _trial_settings(settings: dict):
+    """sim.trial.TrialSettings of recorded settings (fields it does not know are dropped)."""
+    from defgg_ros.sim.trial import TrialSettings
+
+    return TrialSettings(**{k: v for k, v in settings.items() if k in TrialSettings.__dataclass_fields__})
+
+
 def protocol_summary(settings: dict) -> str:
     """One line naming a recorded protocol's rules, friction and material (dataset cards, evaluation reports)."""
-    from defgg_ros.sim.trial import PROTOCOL_DEFGRASPSIM, TrialSettings
+    from defgg_ros.sim.trial import PROTOCOL_DEFGRASPSIM
 
-    known = {k: v for k, v in settings.items() if k in TrialSettings.__dataclass_fields__}
-    material = TrialSettings(**known).material()
+    material = _trial_settings(settings).material()
     nu = material["poisson_ratio"]
     nu_text = f"nu {nu}" if nu is not None else "nu of the object (0.4)"
     if settings["protocol"] == PROTOCOL_DEFGRASPSIM:
@@ -57,14 +63,12 @@ def protocol_summary(settings: dict) -> str:
 
 def label_grip_rule(generator: dict) -> dict:
     """The grip force rule of a dataset's labels (grip_force.LabelGripRule's meta form): legacy, or
-    defgraspsim with the friction its force used (the rule's own, else the contact's, as sim.trial does)."""
-    from defgg_ros.sim.trial import PROTOCOL_DEFGRASPSIM, TrialSettings
+    defgraspsim with the friction its force used (TrialSettings.grip_force_mu, as the trials did)."""
+    from defgg_ros.grip_force import LabelGripRule
+    from defgg_ros.sim.trial import PROTOCOL_DEFGRASPSIM
 
     generator = generator if isinstance(generator, dict) else {}     # synthetic datasets name a string
-    settings = generator.get("trial_settings") or {}
     if recorded_protocol(generator) != PROTOCOL_DEFGRASPSIM:
-        return {"protocol": "legacy", "friction": None}
-    known = {k: v for k, v in settings.items() if k in TrialSettings.__dataclass_fields__}
-    trial = TrialSettings(**known)
-    return {"protocol": PROTOCOL_DEFGRASPSIM,
-            "friction": float(trial.grip_force_friction or trial.material()["effective_friction"])}
+        return LabelGripRule().to_meta()
+    mu = _trial_settings(generator.get("trial_settings") or {}).grip_force_mu()
+    return LabelGripRule(PROTOCOL_DEFGRASPSIM, float(mu)).to_meta()

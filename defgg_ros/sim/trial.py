@@ -191,6 +191,10 @@ class TrialSettings:
             material = replace(material, poisson_ratio=self.poisson_ratio)
         return {**asdict(material), "effective_friction": material.effective_friction}
 
+    def grip_force_mu(self) -> float:
+        """The mu of the defgraspsim force rule FOS*m*g/mu: the rule's own friction, else the contact's."""
+        return self.grip_force_friction or self.material()["effective_friction"]
+
     @classmethod
     def naive(cls) -> TrialSettings:
         """The probe's protocol: close 0.4 s, lift 0.8 s, every direction ramps to the end, all 16 run."""
@@ -256,8 +260,7 @@ class _Trial:
                                        friction=self.material["object_friction"])
         softest = min(spec.part_moduli_pa())
         if self.defgraspsim:
-            rule_friction = settings.grip_force_friction or self.material["effective_friction"]
-            self.force_n = defgraspsim_finger_force_n(softest, self.obj.mass_kg, rule_friction)
+            self.force_n = defgraspsim_finger_force_n(softest, self.obj.mass_kg, settings.grip_force_mu())
             self.gravity = np.zeros(3)      # during the squeeze, the pickup and the tests
         else:
             self.force_n = grasp_force_n(softest)
