@@ -32,8 +32,11 @@ class GripEstimate:
 def object_volume_m3(grid_height_m, grid_labels, label: int, box=None) -> float:
     """Volume under an object's cells of a top-down height map (m^3); box: its (row, col) slices, if known."""
     box = box or (slice(None), slice(None))
-    heights = np.asarray(grid_height_m)[box][np.asarray(grid_labels)[box] == label]
-    return float(np.nansum(np.clip(heights, 0.0, None))) * CELL_M * CELL_M
+    return _column_volume_m3(np.asarray(grid_height_m)[box][np.asarray(grid_labels)[box] == label])
+
+
+def _column_volume_m3(cell_heights_m) -> float:
+    return float(np.nansum(np.clip(cell_heights_m, 0.0, None))) * CELL_M * CELL_M
 
 
 def grip_estimate(network, label: int, rule: LabelGripRule,
@@ -43,7 +46,7 @@ def grip_estimate(network, label: int, rule: LabelGripRule,
     mine = np.asarray(view.grid_labels)[box] == label if box else np.zeros((0,), bool)
     if not np.any(mine):
         raise ValueError(f"object {label} has no cell in the height map")
-    mass = object_volume_m3(view.grid_height_m, view.grid_labels, label, box) * float(density_kg_m3)
+    mass = _column_volume_m3(np.asarray(view.grid_height_m)[box][mine]) * float(density_kg_m3)
     softest = float(np.min(np.asarray(network.moduli)[box][mine]))
     force = rule.finger_force_n(softest, mass) if rule.needs_mass and mass > 0 else 0.0
     return GripEstimate(mass, softest, force)
