@@ -8,9 +8,17 @@ from pathlib import Path
 
 import numpy as np
 
-from defgg_ros.atomic import write_text_atomic
+from defgg_ros.atomic import read_jsonl, write_text_atomic
 from defgg_ros.constants import MAX_SOFT_BODY_YOUNGS_MODULUS_PA, SHAKE_POSITIVE_THRESHOLD_MPS2
-from defgg_ros.data.format import STATUS_LIFT_FAILED, check_header, list_scene_ids, read_scene_meta, read_trials
+from defgg_ros.data.format import (
+    STATUS_LIFT_FAILED,
+    DatasetError,
+    TrialRecord,
+    check_header,
+    list_scene_ids,
+    read_scene_meta,
+    trials_path,
+)
 from defgg_ros.data.labels import slips_in_a_direction
 
 RIGID_NOTE = (
@@ -20,15 +28,20 @@ RIGID_NOTE = (
     "a rigid body is physically fair.")
 
 
-def _stats(root):
+def _read_records(root) -> dict[str, list[dict]]:
+    """Every scene's trial records as dicts, read once for both the tables and the signal report."""
+    return {sid: read_jsonl(trials_path(root, sid)) for sid in list_scene_ids(root)}
+
+
+def _stats(root, records_by_scene):
     rows = defaultdict(lambda: {"n": 0, "pos": 0, "neg": 0, "fail": 0, "cpu": [], "means": [], "pos_slip": 0,
                                 "lift_failed": 0})
-    for sid in list_scene_ids(root):
+    for sid, records in records_by_scene.items():
         meta = read_scene_meta(Path(root) / "scenes" / f"{sid}.npz")
         row = rows[(meta["object_name"], meta["youngs_modulus_pa"])]
         row["soft"] = any(meta.get("soft", []))
         row["nodes"] = meta.get("tet_nodes")
-        for t in read_trials(root, sid):
+        for t in _as_trials(root, sid, records):
             row["n"] += 1
             row["cpu"].append(t.cpu_s)
             label = t.label
@@ -40,6 +53,13 @@ def _stats(root):
     return rows
 
 
+def _as_trials(root, scene_id, records) -> list:
+    try:
+        return [TrialRecord.from_json(r) for r in records]
+    except (ValueError, TypeError, KeyError) as exc:
+        raise DatasetError(f"{trials_path(root, scene_id)}: {exc}") from None
+
+
 def _planned(root, grasps_per_scene):
     out = {}
     for path in sorted((Path(root) / "candidates").glob("*.json")):
@@ -47,11 +67,11 @@ def _planned(root, grasps_per_scene):
     return out
 
 
-def render_card(root, grasps_per_scene: int | None = None) -> str:
+def render_card(root, grasps_per_scene: int | None = None, records_by_scene: dict | None = None) -> str:
     header = check_header(root)
     gen = header.get("generator", {})
     grasps_per_scene = grasps_per_scene or gen.get("grasps_per_scene", 40)
-    rows = _stats(root)
+    rows = _stats(root, _read_records(root) if records_by_scene is None else records_by_scene)
     planned = _planned(root, grasps_per_scene)
     moduli = sorted({e for _, e in rows})
     total = {k: sum(r[k] for r in rows.values()) for k in ("n", "pos", "neg", "fail")}
@@ -169,16 +189,16 @@ def _protocol_line(gen: dict) -> str:
 SIGNAL_FIGURE = "signal.png"   # beside card.md
 
 
-def write_signal_section(root) -> list[str]:
-    """The signal report of the dataset's trials as card lines (empty when there is nothing to report); its
-    figure is written beside the card."""
+def write_signal_section(root, records: list[dict] | None = None) -> list[str]:
+    """The signal report of the dataset's trials (records: already read, else read from <root>/trials) as
+    card lines (empty when there is nothing to report); its figure is written beside the card."""
     from defgg_ros.data.signal import SignalError, read_trial_records, render_markdown, signal_report
 
     if "shake" not in check_header(root)["generator"].get("tests", ["shake"]):
         return ["", "No signal report: these trials ran no shake (a twist-only pilot takes its shake from "
                     "another folder, bench/pilot_signal.py)."]
     try:
-        records = read_trial_records(root)
+        records = read_trial_records(root) if records is None else records
         report = signal_report(records)
     except SignalError:
         return []
@@ -197,6 +217,8 @@ def _share(rows) -> str:
 
 def write_card(root, cfg=None) -> Path:
     path = Path(root) / "card.md"
-    text = render_card(root, getattr(cfg, "grasps_per_scene", None))
-    write_text_atomic(path, text + "\n".join(write_signal_section(root)))
+    records_by_scene = _read_records(root)
+    text = render_card(root, getattr(cfg, "grasps_per_scene", None), records_by_scene)
+    flat = [r for records in records_by_scene.values() for r in records]
+    write_text_atomic(path, text + "\n".join(write_signal_section(root, flat or None)))
     return path
