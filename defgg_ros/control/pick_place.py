@@ -32,7 +32,7 @@ import numpy as np
 
 from defgg_ros.control.gripper_rule import MISSED_WIDTH_M, OPENING_SPEED_MPS, grasp_command
 from defgg_ros.control.kinematics import KinematicsError, PandaKinematics, WorkspaceError, check_workspace
-from defgg_ros.control.poses import top_down_pose
+from defgg_ros.control.poses import finite_array, top_down_pose
 from defgg_ros.control.sequence_types import (
     RECOVER_PHASE,
     ArmState,
@@ -81,10 +81,7 @@ class SequenceFailure(Exception):
 
 
 def _finite(name: str, values) -> np.ndarray:
-    array = np.asarray(values, dtype=float)
-    if not np.all(np.isfinite(array)):
-        raise SequenceFailure(f"{name} has non-finite values: {array.tolist()}")
-    return array
+    return finite_array(name, values, SequenceFailure)
 
 
 class PickPlaceSequence:

@@ -21,16 +21,17 @@ class PoseError(ValueError):
     """A pose that cannot be used: non-finite, bad quaternion, not top-down."""
 
 
-def _finite(name: str, values) -> np.ndarray:
+def finite_array(name: str, values, error: type[Exception] = PoseError) -> np.ndarray:
+    """values as a float array, or error naming them if any is NaN or infinite."""
     array = np.asarray(values, dtype=float)
     if not np.all(np.isfinite(array)):
-        raise PoseError(f"{name} has non-finite values: {array.tolist()}")
+        raise error(f"{name} has non-finite values: {array.tolist()}")
     return array
 
 
 def quaternion_to_matrix(quat_xyzw) -> np.ndarray:
     """3x3 rotation of a quaternion (x, y, z, w); rejects non-unit ones."""
-    q = _finite("quaternion", quat_xyzw)
+    q = finite_array("quaternion", quat_xyzw)
     if q.shape != (4,):
         raise PoseError(f"quaternion must have 4 values (x, y, z, w), got shape {q.shape}")
     norm = float(np.linalg.norm(q))
@@ -67,7 +68,7 @@ def matrix_to_quaternion(rotation) -> np.ndarray:
 
 def pose_matrix(position_m, quat_xyzw) -> np.ndarray:
     """4x4 homogeneous transform from a position and a quaternion (x, y, z, w)."""
-    p = _finite("position", position_m)
+    p = finite_array("position", position_m)
     if p.shape != (3,):
         raise PoseError(f"position must have 3 values, got shape {p.shape}")
     m = np.eye(4)
@@ -78,8 +79,8 @@ def pose_matrix(position_m, quat_xyzw) -> np.ndarray:
 
 def top_down_pose(position_m, yaw_rad: float) -> np.ndarray:
     """base_M_tcp of a top-down grasp: z down, fingers closing along (cos yaw, sin yaw, 0)."""
-    p = _finite("position", position_m)
-    yaw = float(_finite("yaw", yaw_rad))
+    p = finite_array("position", position_m)
+    yaw = float(finite_array("yaw", yaw_rad))
     c, s = math.cos(yaw), math.sin(yaw)
     m = np.eye(4)
     # Columns are the TCP axes in the base frame: x = closing, z = down, y = z cross x.
@@ -90,7 +91,7 @@ def top_down_pose(position_m, yaw_rad: float) -> np.ndarray:
 
 def top_down_yaw(base_M_tcp) -> float:
     """Yaw of a top-down pose; PoseError when its z axis is not (nearly) straight down."""
-    m = _finite("pose", base_M_tcp)
+    m = finite_array("pose", base_M_tcp)
     z_axis = m[:3, 2]
     tilt = math.acos(max(-1.0, min(1.0, -float(z_axis[2]))))
     if tilt > TOP_DOWN_TILT_ATOL_RAD:
