@@ -18,10 +18,6 @@ PACKAGE_DIR = Path(__file__).resolve().parents[2] / "defgg_ros"
 CORES = ("model", "grasping", "perception", "control", "sim", "data", "planning")
 ABOVE_CORES = ("ros", "nodes", "bringup", "sessions", "demo", "train", "evaluation")
 ROS_MODULES = ("rclpy", "rosidl_runtime_py", "rosbag2_py")
-# Cycles that remain, each as the set of packages it joins, with who owns the fix. Each is an xfail
-# of its own (strict: it fails once the cycle is gone, so the entry is removed with the fix).
-KNOWN_PACKAGE_CYCLES = {}
-KNOWN_MODULE_CYCLES = {}
 
 
 def _module_name(path: Path) -> str:
@@ -134,20 +130,11 @@ def test_cores_import_neither_rclpy_nor_a_layer_above_them():
     assert not bad, "\n".join(bad)
 
 
-def test_no_package_cycles_besides_the_known_ones():
-    new = [sorted(c) for c in _cycles(_package_graph()) if c not in KNOWN_PACKAGE_CYCLES]
-    assert not new, f"import cycles between packages: {new}"
+def test_no_package_cycles():
+    cycles = [sorted(c) for c in _cycles(_package_graph())]
+    assert not cycles, f"import cycles between packages: {cycles}"
 
 
-def test_no_module_cycles_besides_the_known_ones():
-    new = [sorted(c) for c in _cycles(_internal_graph()) if c not in KNOWN_MODULE_CYCLES]
-    assert not new, f"import cycles between modules: {new}"
-
-
-@pytest.mark.parametrize("cycle", [pytest.param(c, id="-".join(sorted(c)), marks=pytest.mark.xfail(
-    strict=True, reason=f"known package cycle {sorted(c)}: {why}")) for c, why in KNOWN_PACKAGE_CYCLES.items()]
-    + [pytest.param(c, id="-".join(m.rsplit(".", 1)[1] for m in sorted(c)), marks=pytest.mark.xfail(
-        strict=True, reason=f"known module cycle {sorted(c)}: {why}")) for c, why in KNOWN_MODULE_CYCLES.items()])
-def test_known_cycle_is_gone(cycle):
-    graph = _package_graph() if all("." not in m for m in cycle) else _internal_graph()
-    assert cycle not in _cycles(graph), f"still a cycle: {sorted(cycle)}"
+def test_no_module_cycles():
+    cycles = [sorted(c) for c in _cycles(_internal_graph())]
+    assert not cycles, f"import cycles between modules: {cycles}"
