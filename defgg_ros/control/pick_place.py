@@ -127,6 +127,15 @@ class PickPlaceSequence:
     def phase(self) -> str:
         return self._phase
 
+    def plan_failure(self, q_now) -> str:
+        """Why this pick would be refused before the arm moves from q_now ("" if it would not): the checks
+        start() makes (workspace, IK, the straight descent and lift, the place pose), run alone."""
+        try:
+            self._make_plan(np.asarray(q_now, dtype=float))
+        except (SequenceFailure, KinematicsError, ValueError) as error:
+            return str(error)
+        return ""
+
     def feedback(self, sim_s: float) -> Feedback:
         state = self._obs.state
         return Feedback(self._phase, self._progress(sim_s), state.gripper_width_m if state else float("nan"),

@@ -241,10 +241,11 @@ class ExecutorNode(Node):
                     return self._finish(goal_handle, moved, result)
             result.grasp_used = grasp = self._resolve_grasp(goal_handle.request)
             p = self._params()
-            sequence = PickPlaceSequence(
-                self._kin, self._config, grasp_target(grasp, p["base_frame"], p["default_youngs_modulus_pa"]),
-                place_target(goal_handle.request.place_pose, p["base_frame"], p["place_position_m"],
-                             None if p["place_keep_grasp_yaw"] else p["place_yaw_rad"]))
+            place = place_target(goal_handle.request.place_pose, p["base_frame"], p["place_position_m"],
+                                 None if p["place_keep_grasp_yaw"] else p["place_yaw_rad"])
+            sequence = self._sequence_for(grasp, place, p)
+            if goal_handle.request.plan_grasp and p["plan_grasp_alternatives"] > 1:
+                result.grasp_used, sequence = self._reachable_alternative(grasp, sequence, place, p)
             self._wait_for_servers(p["server_wait_s"])
             return self._run(goal_handle, sequence, result)
         except (GoalError, ValueError) as error:
@@ -271,9 +272,40 @@ class ExecutorNode(Node):
         goal_handle.abort()
         return result
 
+    def _sequence_for(self, grasp, place, p: dict) -> PickPlaceSequence:
+        return PickPlaceSequence(self._kin, self._config,
+                                 grasp_target(grasp, p["base_frame"], p["default_youngs_modulus_pa"]), place)
+
+    def _reachable_alternative(self, grasp, sequence: PickPlaceSequence, place, p: dict):
+        """(grasp, sequence) to run: the planned best grasp, unless the sequence would refuse it before the arm
+        moves (near the base its straight lift can run out of reach); then the first of the service's
+        plan_grasp_alternatives ranked grasps that can be made. If none can, the best one (its refusal is the
+        goal's result, as without alternatives)."""
+        with self._lock:
+            q_now = self._last_state[0].q_rad if self._last_state is not None else None
+        reason = "" if q_now is None else sequence.plan_failure(q_now)
+        if not reason:
+            return grasp, sequence
+        count = int(p["plan_grasp_alternatives"])
+        self.get_logger().info(f"best grasp would be refused ({reason}); asking for {count} ranked grasps")
+        for rank, candidate in enumerate(self._planned_grasps(count), start=1):
+            try:
+                other = self._sequence_for(candidate, place, p)
+            except (GoalError, ValueError):
+                continue
+            if not other.plan_failure(q_now):
+                self.get_logger().info(f"picking ranked grasp {rank} of {count} instead")
+                return candidate, other
+        return grasp, sequence
+
     def _resolve_grasp(self, request):
         if not request.plan_grasp:
             return request.grasp
+        return self._planned_grasps(1)[0]
+
+    def _planned_grasps(self, top_k: int) -> list:
+        """The grasp service's top_k grasps (best first, at least one) on a frame taken while the arm rested at
+        the observation pose."""
         p = self._params()
         if not self._plan_client.wait_for_service(timeout_sec=p["server_wait_s"]):
             raise GoalError(f"grasp service {p['plan_grasp_service']} is not available")
@@ -282,7 +314,7 @@ class ExecutorNode(Node):
         deadline = time.monotonic() + float(p["fresh_frame_timeout_s"])
         while True:
             try:  # planning on the latest frame is idempotent: re-sent while unanswered (ros_service.py)
-                response = call_idempotent(self._plan_client, PlanGrasp.Request(top_k=1),
+                response = call_idempotent(self._plan_client, PlanGrasp.Request(top_k=top_k),
                                            p["plan_grasp_timeout_s"], "grasp service")
             except (ServiceTimeout, RuntimeError) as error:
                 raise GoalError(str(error)) from None
@@ -292,7 +324,7 @@ class ExecutorNode(Node):
                 clear = frame_s is not None and self._watch.frame_is_clear(frame_s)
                 arrived_s = self._watch.since_s
             if clear:
-                return grasp
+                return list(response.grasps)
             if arrived_s is None:
                 raise GoalError("not planning: the arm left the observation pose, so it may be in the camera's view")
             if time.monotonic() >= deadline:

@@ -278,3 +278,10 @@ def test_half_height_rule_grasps_where_the_simulated_evaluation_does(kin, table_
 def test_unknown_grasp_height_rule_is_refused():
     with pytest.raises(ValueError, match="grasp_height_rule"):
         SequenceConfig(grasp_height_rule="middle").validate()
+
+
+def test_plan_failure_says_why_start_would_refuse_without_moving_the_arm(kin):
+    assert make(kin).plan_failure(kin.q_ready_rad) == ""
+    near_base = make(kin, grasp=GraspTarget((0.277, -0.048, 0.036), -1.49, 0.04, 2e9))
+    assert "its straight lift cannot be made" in near_base.plan_failure(kin.q_ready_rad)
+    assert near_base.phase == "idle" and not near_base.finished

@@ -140,3 +140,47 @@ def test_invalid_parameters_refuse_to_start(rclpy_context):
         ExecutorNode(context=rclpy_context, parameter_overrides=[Parameter("limits_scale", value=1.5)])
     with pytest.raises(ValueError, match="grasp_height_rule"):
         ExecutorNode(context=rclpy_context, parameter_overrides=[Parameter("grasp_height_rule", value="middle")])
+
+
+NEAR_BASE_XYZ, NEAR_BASE_YAW = (0.277, -0.048, 0.036), -1.49   # its straight lift runs out of reach
+
+
+def _ranked_grasp_service(ex, context):
+    """A real PlanGrasp server node: the best grasp is one the sequence refuses (near the base), the second
+    the reachable GRASP_XYZ; it answers top_k grasps, stamped now (a frame taken at the observation pose)."""
+    from defgg_interfaces.srv import PlanGrasp
+    from rclpy.node import Node
+
+    server = Node("ranked_grasp_service", context=context)
+    asked = []
+
+    def plan(request, response):
+        asked.append(request.top_k)
+        ranked = [grasp_msg(xyz=NEAR_BASE_XYZ, yaw=NEAR_BASE_YAW), grasp_msg()][:max(1, request.top_k)]
+        for grasp in ranked:
+            grasp.header.stamp = server.get_clock().now().to_msg()
+        response.success, response.grasps = True, ranked
+        return response
+
+    server.create_service(PlanGrasp, topics.PLAN_GRASP_SERVICE, plan)
+    ex.add_node(server)
+    return asked
+
+
+@pytest.mark.parametrize("alternatives", [5, 1])
+def test_a_planned_grasp_the_arm_cannot_make_gives_way_to_the_next_ranked_one(executor_cell, spin, alternatives):
+    ex, node, client, start_driver = executor_cell
+    start_driver(object_width_m=0.04)
+    wait_driver_ready(ex, spin, node)
+    node.set_parameters([Parameter("plan_grasp_alternatives", value=alternatives)])
+    asked = _ranked_grasp_service(ex, node.context)
+    handle = send(ex, client, spin, PickAndPlace.Goal(plan_grasp=True))
+    assert handle.accepted
+    result = result_of(ex, spin, handle, timeout_s=60.0).result
+    if alternatives == 1:   # as before alternatives: the best grasp's refusal, before the arm moved
+        assert asked == [1] and not result.success and result.phase_reached == "pre_grasp"
+        assert "its straight lift cannot be made" in result.failure_reason
+        return
+    assert asked == [1, 5]
+    assert result.success, result.failure_reason
+    assert result.grasp_used.pose_base.pose.position.x == pytest.approx(GRASP_XYZ[0])
