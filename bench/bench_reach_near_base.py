@@ -4,7 +4,9 @@ Random grasps (seeded) between the workspace's near edge and 0.45 m, 1-5 cm abov
 each, what the executor plans before it moves (control/pick_place.py, _check_straight_lines): the pre-grasp
 by IK from the ready pose, the straight descent at the configured descent speed, then the straight 15 cm
 lift at the line speed, each checked against every joint limit and the table. Prints how many plan, and
-why the others are refused, per band of distance from the base.
+why the others are refused, per band of distance from the base; and for each refused grasp whether the same
+point grasped at another yaw (8 evenly spaced) plans, which is what the executor's ranked alternatives
+(plan_grasp_alternatives) can find when the network's next grasps on the object differ in angle.
 
     .venv/bin/python bench/bench_reach_near_base.py [--grasps 200] [--seed 1]
 """
@@ -21,9 +23,13 @@ from defgg_ros.control.trajectories import check_trajectory, panda_limits, plan_
 from defgg_ros.perception.tabletop import WorkspaceBox
 
 BANDS_M = ((0.22, 0.30), (0.30, 0.38), (0.38, 0.45))
+OTHER_YAWS = 8
 
 
-def outcome(kin, limits, cfg, grasp) -> str:
+def outcome(limits, cfg, grasp) -> str:
+    # A fresh solver each time: IK's random restarts draw from the solver's generator, so a shared one would
+    # make a grasp's outcome depend on the grasps tried before it.
+    kin = PandaKinematics()
     x, y, z, yaw = grasp
     try:
         pregrasp, _ = kin.top_down_ik([x, y, z + PREGRASP_HEIGHT_M], yaw, kin.q_ready_rad)
@@ -48,7 +54,7 @@ def main():
     parser.add_argument("--grasps", type=int, default=200)
     parser.add_argument("--seed", type=int, default=1)
     args = parser.parse_args()
-    kin, limits, cfg = PandaKinematics(), panda_limits(), SequenceConfig()
+    limits, cfg = panda_limits(), SequenceConfig()
     near_x_m = WorkspaceBox().x_m[0]
     rng = np.random.default_rng(args.seed)
     counts = collections.defaultdict(collections.Counter)
@@ -57,15 +63,22 @@ def main():
         grasp = (rng.uniform(near_x_m, BANDS_M[-1][1]), rng.uniform(-0.25, 0.25), rng.uniform(0.01, 0.05),
                  rng.uniform(-np.pi, np.pi))
         band = next(b for b in BANDS_M if grasp[0] < b[1])
-        counts[band][outcome(kin, limits, cfg, grasp)] += 1
+        result = outcome(limits, cfg, grasp)
+        counts[band][result] += 1
+        if result != "plans":
+            yaws = grasp[3] + np.arange(1, OTHER_YAWS) * np.pi / OTHER_YAWS   # a half turn is the same grasp
+            another = any(outcome(limits, cfg, (*grasp[:3], yaw)) == "plans" for yaw in yaws)
+            counts[band]["refused, another yaw plans"] += another
     cpu_s = time.process_time() - start
     print(f"{args.grasps} grasps (seed {args.seed}), x from {near_x_m:.2f} m, 1-5 cm high; {cpu_s:.1f} CPU s")
-    print("| x (m) | grasps | plans | refused: why |")
-    print("|---|---|---|---|")
+    print("| x (m) | grasps | plans | refused: why | of the refused: another yaw plans |")
+    print("|---|---|---|---|---|")
     for band in BANDS_M:
         c = counts[band]
-        why = ", ".join(f"{k} {n}" for k, n in sorted(c.items()) if k != "plans") or "-"
-        print(f"| {band[0]:.2f}-{band[1]:.2f} | {sum(c.values())} | {c['plans']} | {why} |")
+        refused = {k: n for k, n in c.items() if k not in ("plans", "refused, another yaw plans")}
+        why = ", ".join(f"{k} {n}" for k, n in sorted(refused.items())) or "-"
+        print(f"| {band[0]:.2f}-{band[1]:.2f} | {c['plans'] + sum(refused.values())} | {c['plans']} | {why} | "
+              f"{c['refused, another yaw plans']} of {sum(refused.values())} |")
 
 
 if __name__ == "__main__":
