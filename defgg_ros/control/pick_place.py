@@ -242,7 +242,8 @@ class PickPlaceSequence:
     def _check_straight_lines(self, pregrasp_q: np.ndarray, grasp_p: np.ndarray) -> None:
         """Refuse, before the arm moves, a grasp whose descent or lift cannot be a straight line: close to the
         base, a 15 cm vertical lift can run a joint into its limit, and finding that out after the fingers
-        closed costs the pick (4 of 60 random grasps at x 0.25-0.45 m, 1-5 cm high, docs/reliability.md)."""
+        closed costs the pick (19 of 200 random grasps at x 0.22-0.45 m, 1-5 cm high:
+        bench/bench_reach_near_base.py)."""
         line = "descent"
         try:
             descent = plan_line(self._kin, pregrasp_q, grasp_p - self._kin.fk(pregrasp_q)[:3, 3], self._limits,

@@ -321,7 +321,7 @@ def plan_line(kin: PandaKinematics, q_start, displacement_m, limits: JointLimits
         # The path limits come from the grid's finite differences, which can miss how fast the joints turn
         # between grid points near a singularity (a grasp 0.33 m from the base overshot the acceleration
         # limit 2x): then the same line, slowed by the factor that brings every ratio within its limit.
-        slower = max(_slowdown_factor(line, limits), 1.0)
+        slower = _slowdown_factor(line, limits)
         if slower <= 1.0 + LIMIT_RTOL:
             return line
         slower *= LINE_RETIMING_MARGIN

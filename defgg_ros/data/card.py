@@ -12,11 +12,10 @@ from defgg_ros.atomic import read_jsonl, write_text_atomic
 from defgg_ros.constants import MAX_SOFT_BODY_YOUNGS_MODULUS_PA, SHAKE_POSITIVE_THRESHOLD_MPS2
 from defgg_ros.data.format import (
     STATUS_LIFT_FAILED,
-    DatasetError,
-    TrialRecord,
     check_header,
     list_scene_ids,
     read_scene_meta,
+    trials_of,
     trials_path,
 )
 from defgg_ros.data.labels import slips_in_a_direction
@@ -41,7 +40,7 @@ def _stats(root, records_by_scene):
         row = rows[(meta["object_name"], meta["youngs_modulus_pa"])]
         row["soft"] = any(meta.get("soft", []))
         row["nodes"] = meta.get("tet_nodes")
-        for t in _as_trials(root, sid, records):
+        for t in trials_of(trials_path(root, sid), records):
             row["n"] += 1
             row["cpu"].append(t.cpu_s)
             label = t.label
@@ -51,13 +50,6 @@ def _stats(root, records_by_scene):
                 row["means"].append(t.shake_mean_mps2)
             row["pos_slip"] += label is True and slips_in_a_direction(t)
     return rows
-
-
-def _as_trials(root, scene_id, records) -> list:
-    try:
-        return [TrialRecord.from_json(r) for r in records]
-    except (ValueError, TypeError, KeyError) as exc:
-        raise DatasetError(f"{trials_path(root, scene_id)}: {exc}") from None
 
 
 def _planned(root, grasps_per_scene):

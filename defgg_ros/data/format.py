@@ -244,8 +244,13 @@ def read_scene_meta(path) -> dict:
 
 def read_trials(root, scene_id: str) -> list:
     path = trials_path(root, scene_id)
+    return trials_of(path, read_jsonl(path))
+
+
+def trials_of(path, records) -> list:
+    """TrialRecords of a trial file's records (dicts, already read from path); DatasetError naming the file."""
     try:
-        return [TrialRecord.from_json(r) for r in read_jsonl(path)]
+        return [TrialRecord.from_json(r) for r in records]
     except (ValueError, TypeError, KeyError) as exc:
         raise DatasetError(f"{path}: {exc}") from None
 
