@@ -26,10 +26,7 @@ BANDS_M = ((0.22, 0.30), (0.30, 0.38), (0.38, 0.45))
 OTHER_YAWS = 8
 
 
-def outcome(limits, cfg, grasp) -> str:
-    # A fresh solver each time: IK's random restarts draw from the solver's generator, so a shared one would
-    # make a grasp's outcome depend on the grasps tried before it.
-    kin = PandaKinematics()
+def outcome(kin, limits, cfg, grasp) -> str:
     x, y, z, yaw = grasp
     try:
         pregrasp, _ = kin.top_down_ik([x, y, z + PREGRASP_HEIGHT_M], yaw, kin.q_ready_rad)
@@ -54,7 +51,7 @@ def main():
     parser.add_argument("--grasps", type=int, default=200)
     parser.add_argument("--seed", type=int, default=1)
     args = parser.parse_args()
-    limits, cfg = panda_limits(), SequenceConfig()
+    limits, cfg, kin = panda_limits(), SequenceConfig(), PandaKinematics()
     near_x_m = WorkspaceBox().x_m[0]
     rng = np.random.default_rng(args.seed)
     counts = collections.defaultdict(collections.Counter)
@@ -63,11 +60,11 @@ def main():
         grasp = (rng.uniform(near_x_m, BANDS_M[-1][1]), rng.uniform(-0.25, 0.25), rng.uniform(0.01, 0.05),
                  rng.uniform(-np.pi, np.pi))
         band = next(b for b in BANDS_M if grasp[0] < b[1])
-        result = outcome(limits, cfg, grasp)
+        result = outcome(kin, limits, cfg, grasp)
         counts[band][result] += 1
         if result != "plans":
             yaws = grasp[3] + np.arange(1, OTHER_YAWS) * np.pi / OTHER_YAWS   # a half turn is the same grasp
-            another = any(outcome(limits, cfg, (*grasp[:3], yaw)) == "plans" for yaw in yaws)
+            another = any(outcome(kin, limits, cfg, (*grasp[:3], yaw)) == "plans" for yaw in yaws)
             counts[band]["refused, another yaw plans"] += another
     cpu_s = time.process_time() - start
     print(f"{args.grasps} grasps (seed {args.seed}), x from {near_x_m:.2f} m, 1-5 cm high; {cpu_s:.1f} CPU s")

@@ -102,7 +102,7 @@ class PandaKinematics:
         self.q_min_rad = np.array(PANDA_Q_MIN_RAD)
         self.q_max_rad = np.array(PANDA_Q_MAX_RAD)
         self.q_ready_rad = np.array(PANDA_READY_Q_RAD)
-        self._rng = np.random.default_rng(seed)
+        self.restart_seed = seed
         self._link_ids: dict = {}
 
     # --- forward kinematics -------------------------------------------------
@@ -161,15 +161,19 @@ class PandaKinematics:
 
         Tries the seed first (solutions near it keep motions short), then
         `restarts` random seeds. Raises IKError with the best residual.
+        The random seeds come from a generator started afresh on every call, so
+        the answer depends only on the arguments and `restart_seed`, never on
+        what was solved before (an executor's plan for a goal does not depend
+        on the goals before it).
         """
         target = np.asarray(base_M_tcp, dtype=float)
         if target.shape != (4, 4) or not np.all(np.isfinite(target)):
             raise KinematicsError("IK target must be a finite 4x4 transform")
         oMdes = pin.SE3(target[:3, :3], target[:3, 3])
         seed = self.q_ready_rad if q_seed_rad is None else self._check_q(q_seed_rad)
-        best = None
+        best, rng = None, np.random.default_rng(self.restart_seed)
         for attempt in range(restarts + 1):
-            q0 = seed if attempt == 0 else self._rng.uniform(self.q_min_rad, self.q_max_rad)
+            q0 = seed if attempt == 0 else rng.uniform(self.q_min_rad, self.q_max_rad)
             result = self._solve_from(oMdes, q0, pos_atol_m, rot_atol_rad)
             if result.residual_m < pos_atol_m and result.residual_rad < rot_atol_rad:
                 return result

@@ -122,3 +122,22 @@ def test_top_down_yaw_round_trip_and_tilt_rejection():
     tilted = pose_matrix([0.4, 0, 0.1], [1.0, 0.0, 0.0, 0.0]) @ pose_matrix([0, 0, 0], [0.0, 0.2588, 0.0, 0.9659])
     with pytest.raises(PoseError, match="tilted"):
         top_down_yaw(tilted)
+
+
+def test_ik_answer_does_not_depend_on_earlier_solves():
+    # Poses the ready-pose seed does not reach, so the random restarts decide the solution: a solver that has
+    # solved other poses before must give the same joints as a fresh one (an executor's plan for a goal must
+    # not depend on the goals before it).
+    fresh, used = PandaKinematics(), PandaKinematics()
+    targets = [fresh.fk(q) for q in random_configurations(fresh, 40, seed=5)]
+    needing_restarts = []
+    for target in targets:
+        try:
+            fresh.ik(target, restarts=0)
+        except IKError:
+            needing_restarts.append(target)
+    assert len(needing_restarts) >= 3
+    expected = [PandaKinematics().ik(t).q_rad for t in needing_restarts]
+    for _ in range(2):   # history: every pose once more, in reverse order
+        for target, q in reversed(list(zip(needing_restarts, expected))):
+            assert used.ik(target).q_rad == pytest.approx(q, abs=1e-12)
