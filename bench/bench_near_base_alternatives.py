@@ -2,8 +2,9 @@
 
 bench_reach_near_base.py measures the kinematics alone (any yaw at a point). Here the grasps are the shipped
 Def-GG-CNN's: one random object (box, upright or lying cylinder; 2-10 cm; a modulus of the paper's four) per
-scene, at x 0.22-0.30 m (where straight lifts run out of reach) or, as a control, 0.30-0.45 m, seen by the sim
-cell's overhead camera (0.40 m above (0.5, 0)); the tabletop planner ranks 5 grasps (what the executor asks
+scene, at x 0.22-0.30 m (where straight lifts run out of reach) or, as a control, 0.30-0.45 m, seen from the sim
+cell's camera pose (0.40 m above (0.5, 0)) through the synthetic D435 model (noise, shadows, the left invalid
+band; perception/tabletop_scenes.py); the tabletop planner ranks 5 grasps (what the executor asks
 for with plan_grasp_alternatives 5), and each is put to PickPlaceSequence.plan_failure from the observation
 pose with the executor's default parameters, as the executor does before it moves. Prints, per band: scenes,
 with a grasp, best grasp plans, best refused but a lower rank plans (which ranks), nothing plans; and the
