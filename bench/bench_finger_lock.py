@@ -13,6 +13,7 @@ PyBullet's soft contact forces are unreliable, so the squeeze is read from the f
 """
 from __future__ import annotations
 
+import argparse
 import math
 import sys
 
@@ -62,6 +63,7 @@ def _weak_lock(hand):
 
 
 def main() -> int:
+    argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter).parse_args()
     client = world.connect()
     print(f"| object | E (Pa) | hold | F/2 (N) | squeeze after pickup (share of F/2) | after {HOLD_S} s |")
     print("|---|---|---|---|---|---|")
