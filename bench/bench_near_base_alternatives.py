@@ -72,6 +72,13 @@ def ranked_outcomes(planner, kin, cfg, place, q_obs, scene, modulus_pa, seed, no
     return "", out
 
 
+def returned_share(scene, seed: int) -> float:
+    """Share of the object's pixels that have a depth return in the noisy frame."""
+    frame = ts.render(scene, seed=seed)
+    on_object = frame.labels == 1
+    return float(np.isfinite(frame.depth_m[on_object]).mean()) if on_object.any() else 0.0
+
+
 def refusal_kind(message: str) -> str:
     """A refusal message without its numbers, e.g. 'straight lift: leaves the reachable workspace'."""
     line = "lift" if "straight lift" in message else "descent" if "straight descent" in message else "other"
@@ -97,7 +104,7 @@ def main():
           f"model {Path(args.model).name}")
     print("| x (m) | scenes | with a grasp | best plans | best refused, a lower rank plans (ranks) | none plans |")
     print("|---|---|---|---|---|---|")
-    reasons, no_grasp_reasons = collections.Counter(), collections.Counter()
+    reasons, no_grasp_reasons, sensor_misses = collections.Counter(), collections.Counter(), []
     for band in BANDS_M:
         counts, rescue_ranks = collections.Counter(), collections.Counter()
         for i in range(args.scenes):
@@ -110,6 +117,8 @@ def main():
                 why = no_grasp.split(":")[0].split("(")[0].strip()
                 no_grasp_reasons[f"x {band[0]:.2f}-{band[1]:.2f}: {why}; "
                                  f"without sensor noise: {'the same' if clean else 'a grasp'}"] += 1
+                if not clean:
+                    sensor_misses.append(returned_share(scene, seed=i))
                 continue
             counts["with a grasp"] += 1
             if not outcomes[0]:
@@ -126,6 +135,9 @@ def main():
     print("Why the planner found no grasp:")
     for reason, n in no_grasp_reasons.most_common():
         print(f"  {n} x {reason}")
+    if sensor_misses:
+        print(f"Objects only the sensor model hides: {len(sensor_misses)}; share of the object's pixels with a depth "
+              f"return: median {np.median(sensor_misses):.0%}, range {min(sensor_misses):.0%}-{max(sensor_misses):.0%}")
     print("Why the best grasps were refused:")
     for reason, n in reasons.most_common():
         print(f"  {n} x {reason}")
