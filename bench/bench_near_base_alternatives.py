@@ -8,9 +8,10 @@ band; perception/tabletop_scenes.py); the tabletop planner ranks 5 grasps (what 
 for with plan_grasp_alternatives 5), and each is put to PickPlaceSequence.plan_failure from the observation
 pose with the executor's default parameters, as the executor does before it moves. Prints, per band: scenes,
 with a grasp, best grasp plans, best refused but a lower rank plans (which ranks), nothing plans; and the
-refusal reasons of the best grasps.
+refusal reasons of the best grasps, why the planner found none, and how much of each object the sensor model
+hides has depth.
 
-    .venv/bin/python bench/bench_near_base_alternatives.py [--scenes 60] [--seed 3]
+    .venv/bin/python bench/bench_near_base_alternatives.py [--scenes 100] [--seed 3]
 """
 import argparse
 import collections
@@ -89,7 +90,7 @@ def refusal_kind(message: str) -> str:
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--scenes", type=int, default=60, help="scenes per band")
+    parser.add_argument("--scenes", type=int, default=100, help="scenes per band")
     parser.add_argument("--seed", type=int, default=3)
     parser.add_argument("--model", default=str(ROOT / "models" / "defgg_cnn.pt"))
     args = parser.parse_args()
