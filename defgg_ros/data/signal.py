@@ -14,7 +14,8 @@ be recomputed by anyone. Figures, per the issue that asked for them (docs/datase
   = negative at a soft modulus and positive at the stiffest;
 - the oracle gap: success of a stiffness-aware oracle (the best candidates per object x E) minus a
   stiffness-blind one (the same candidates for every E of an object, best on average over the moduli),
-  for the best grasp and the best five; both choose among the candidates labelled at every modulus;
+  for the best grasp and the best five; both choose among the candidates labelled at every modulus; also
+  per object, to show where a gap comes from;
 - near the threshold: the share of labelled trials held within 2.5 m/s^2 (10 %) of 25 m/s^2, whose labels
   a small change in the measurement flips (bench/bench_label_repeatability.py measures how often it does);
 - the friction limit: Spearman correlation, over the softest modulus's scenes, between 2 mu F / m (the
@@ -195,17 +196,20 @@ def _oracle_figures(rows, moduli, label) -> dict:
         by_object[obj][cand] = labels
     if not by_object:
         return {"objects": 0}
-    out = {"objects": len(by_object)}
+    out = {"objects": len(by_object), "per_object": {}}
     for k in (1, TOP_K):
         aware, blind = [], []
-        for cands in by_object.values():
+        name = "best" if k == 1 else f"top{k}"
+        for obj, cands in sorted(by_object.items()):
             kk = min(k, len(cands))
-            for e in moduli:   # aware: the kk best for this E (labels are 0/1, so: positives first)
-                aware.append(min(kk, sum(labels[e] for labels in cands.values())) / kk)
+            # aware: the kk best for this E (labels are 0/1, so: positives first)
+            obj_aware = [min(kk, sum(labels[e] for labels in cands.values())) / kk for e in moduli]
             mean_over_e = sorted((np.mean([labels[e] for e in moduli]) for labels in cands.values()),
                                  reverse=True)
+            aware += obj_aware
             blind += [float(np.mean(mean_over_e[:kk]))] * len(moduli)
-        name = "best" if k == 1 else f"top{k}"
+            out["per_object"].setdefault(obj, {"candidates": len(cands)})[f"{name}_gap_points"] = \
+                100 * (float(np.mean(obj_aware)) - float(np.mean(mean_over_e[:kk])))
         out[name] = {"aware": float(np.mean(aware)), "blind": float(np.mean(blind)),
                      "gap_points": 100 * (float(np.mean(aware)) - float(np.mean(blind)))}
     return out
@@ -312,6 +316,13 @@ def render_markdown(report: dict, title: str = "Signal report") -> str:
             lines.append(f"- Oracle, {label}: stiffness-aware {_pct(o[name]['aware'])}, stiffness-blind "
                          f"{_pct(o[name]['blind'])}: **gap {_points(o[name]['gap_points'])} points** "
                          f"({o['objects']} objects).")
+        ahead = sorted(((obj, f) for obj, f in o.get("per_object", {}).items()
+                        if max(f["best_gap_points"], f[f"top{TOP_K}_gap_points"]) >= 0.05),   # shows as 0.1
+                       key=lambda item: -item[1]["best_gap_points"] - item[1][f"top{TOP_K}_gap_points"])
+        listed = ", ".join(f"{obj} {_points(f['best_gap_points'])} / {_points(f[f'top{TOP_K}_gap_points'])}"
+                           for obj, f in ahead)
+        lines.append(f"- Where the stiffness-aware oracle is ahead (points, best / best {TOP_K}): "
+                     f"{listed or 'no object'}; level on the other {o['objects'] - len(ahead)} object(s).")
     near = report.get("near_threshold")
     if near:
         per_e = ", ".join(f"{e:.0e}: {_pct(near[modulus_key(e)])}" for e in report["moduli_pa"])

@@ -5,7 +5,14 @@ import json
 import pytest
 
 from defgg_ros.data import datagen_cli
-from defgg_ros.data.signal import SignalError, read_trial_records, signal_report, spearman, what_labels_carry
+from defgg_ros.data.signal import (
+    SignalError,
+    read_trial_records,
+    render_markdown,
+    signal_report,
+    spearman,
+    what_labels_carry,
+)
 
 pytestmark = pytest.mark.unit
 
@@ -38,6 +45,12 @@ def test_oracle_gap_and_reversals_of_a_pinch_versus_cage_object():
     assert c["softest_pos_rigid_neg_count"] == 1 and c["soft_neg_rigid_pos"] == 0.25
     assert c["monotone"] == 0.75
     assert r["positive_rate"]["2e4"]["rate"] == 0.5 and r["positive_rate"]["2e9"]["rate"] == 0.5
+    # Where the gap lives: all of it on A (aware 2 of 2, blind 1 of 2: 50 points), none on B.
+    per_object = r["oracle"]["per_object"]
+    assert per_object["A"]["best_gap_points"] == pytest.approx(50.0)
+    assert per_object["B"]["best_gap_points"] == 0.0 and per_object["B"]["candidates"] == 2
+    assert "ahead (points, best / best 5): A 50.0 / " in render_markdown(r)
+    assert "level on the other 1 object(s)" in render_markdown(r)
 
 
 def test_what_labels_carry_follows_the_gap_the_within_share_and_the_near_threshold_share():
