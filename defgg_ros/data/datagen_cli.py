@@ -18,10 +18,12 @@ Resumable: rerunning with the same --out skips finished trials; a killed run
 loses only the trials in flight. Trials run in passes of --pass-size per scene
 over ALL scenes, so coverage grows evenly.
 
-Example (background, one worker):
-  nohup defgg-datagen --out datasets/fem_v2 --workers 1 > datasets/fem_v2.log 2>&1 &
-Resume the dataset of the shipped models (made with the lift of its time):
-  defgg-datagen --out datasets/fem_v1 --settings '{"lift_time_s": 0.3, "hold_time_s": 0.1}'
+Example (background, both cores; a new dataset gets the defgraspsim protocol):
+  nohup defgg-datagen --out datasets/mine --workers 2 > datasets/mine.log 2>&1 &
+Resume fem_v5 (issue 25's dataset) as it was started:
+  defgg-datagen --out datasets/fem_v5 --workers 2 --pass-size 1 --grasps-per-scene 36
+A resumed dataset keeps its trial settings: if they differ, the error names the --settings to pass
+(fem_v1, made with the lift of its time: --settings '{"lift_time_s": 0.3, "hold_time_s": 0.1}').
 
 Trial protocol (--protocol): defgraspsim (default for a new dataset; the paper's labels: zero gravity,
 grip force FOS*m*g/mu, fingers locked after pickup, lost when either finger lets go) or legacy
