@@ -3,15 +3,20 @@
 Examples::
 
     # both models, held-out common + adversarial sets, 5 best grasps, shake + twist, 2 workers
-    defgg-eval run --out results/sim_v1 --workers 2
+    defgg-eval run --out results/my_eval --workers 2
+    # the same under a dataset's own trial protocol (success = its labels' rule)
+    defgg-eval run --out results/my_eval_v5 --workers 2 --protocol-from datasets/fem_v5
     # a folder of meshes, moduli from DIR/moduli.yaml (or --moduli)
     defgg-eval run --objects my_meshes/ --moduli 2e5 2e9 --out results/my_meshes
-    defgg-eval report --out results/sim_v1 --docs docs/results.md    # tables, plots, report
-    defgg-eval strategy --object common_toy_bone --out results/sim_v1
-    defgg-eval ship --run runs/defgg --name defgg_cnn --command "defgg-train ..." --wall-s 540
-    defgg-eval freeze --data datasets/fem_v1 --archive models/train_data_fem_v1.tar.gz --extract-to runs/frozen
-    defgg-eval snapshot --name defgg_cnn --out models/train_data_fem_v1.tar.gz
-    defgg-eval card --name defgg_cnn --eval results/sim_v1
+    defgg-eval report --out results/my_eval        # tables, plots, summary.json (--docs FILE: the Markdown report)
+    defgg-eval strategy --object common_toy_bone --out results/my_eval
+    # a retrained pair: models/retrain_pair.sh runs freeze, training, ship and card in order
+    defgg-eval freeze --data datasets/mine --archive runs/train_data_mine.tar.gz --extract-to runs/frozen_mine
+    defgg-eval ship --run runs/defgg --name defgg_cnn --command "defgg-train ..." --wall-s 540 --models-dir runs/ship
+    defgg-eval snapshot --name defgg_cnn --out runs/defgg_cnn_train_data.tar.gz
+    defgg-eval card --name defgg_cnn --eval results/my_eval --models-dir runs/ship
+
+The shipped reports are results/sim_vN (docs/results.md is rebuilt from the newest by results/run_budgeted_eval.sh).
 """
 from __future__ import annotations
 
