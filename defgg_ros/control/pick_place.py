@@ -74,6 +74,9 @@ GRASP_BELOW_TABLE_TOLERANCE_M = 0.02
 NOT_CLOSED_TOLERANCE_M = 0.003
 # A held object's fingers may creep (a soft object relaxing); opening further than this means it is gone.
 OPENED_WIDTH_TOLERANCE_M = 0.010
+# plan_failure's plan is reused by start() when the arm is still where it was checked (an arm at rest reads
+# within this of itself): the plan depends only on the start configuration (IK seeds from it).
+CHECKED_PLAN_REUSE_TOLERANCE_RAD = 1e-3
 
 
 class SequenceFailure(Exception):
@@ -96,6 +99,7 @@ class PickPlaceSequence:
         self._pending = _Pending()
         self._motion: _Motion | None = None
         self._plan: _Plan | None = None
+        self._checked: tuple[np.ndarray, _Plan] | None = None   # (q it was planned from, plan_failure's plan)
         self._phase = "idle"
         self._placed_open_sent = False
         self._stopping = False
@@ -130,8 +134,9 @@ class PickPlaceSequence:
     def plan_failure(self, q_now) -> str:
         """Why this pick would be refused before the arm moves from q_now ("" if it would not): the checks
         start() makes (workspace, IK, the straight descent and lift, the place pose), run alone."""
+        q_now = np.asarray(q_now, dtype=float)
         try:
-            self._make_plan(np.asarray(q_now, dtype=float))
+            self._checked = (q_now.copy(), self._make_plan(q_now))
         except (SequenceFailure, KinematicsError, ValueError) as error:
             return str(error)
         return ""
@@ -189,7 +194,7 @@ class PickPlaceSequence:
     # --- planning before the arm moves --------------------------------------
     def _start(self, sim_s: float) -> list:
         self._phase = "pre_grasp"
-        self._plan = self._make_plan(self._obs.state.q_rad)
+        self._plan = self._checked_plan(self._obs.state.q_rad) or self._make_plan(self._obs.state.q_rad)
         commands = [MoveGripper(self._plan.gripper.pre_open_width_m, OPENING_SPEED_MPS)]
         self._pending.gripper, self._pending.gripper_sent_s = True, sim_s
         motion = plan_joint_motion(self._obs.state.q_rad, self._plan.pregrasp_q, self._limits,
@@ -212,6 +217,14 @@ class PickPlaceSequence:
         pregrasp = surface.copy()
         pregrasp[2] = max(surface[2], floor) + self._cfg.pregrasp_height_m
         return pregrasp, grasp
+
+    def _checked_plan(self, q_now) -> _Plan | None:
+        """plan_failure's plan if the arm has not moved since (saves planning the pick twice per goal)."""
+        if self._checked is None:
+            return None
+        q_checked, plan = self._checked
+        moved_rad = np.max(np.abs(np.asarray(q_now, dtype=float) - q_checked))
+        return plan if moved_rad <= CHECKED_PLAN_REUSE_TOLERANCE_RAD else None
 
     def _make_plan(self, q_now: np.ndarray) -> _Plan:
         pregrasp_p, grasp_p = self._grasp_positions()

@@ -285,3 +285,29 @@ def test_plan_failure_says_why_start_would_refuse_without_moving_the_arm(kin):
     near_base = make(kin, grasp=GraspTarget((0.277, -0.048, 0.036), -1.49, 0.04, 2e9))
     assert "its straight lift cannot be made" in near_base.plan_failure(kin.q_ready_rad)
     assert near_base.phase == "idle" and not near_base.finished
+
+
+class _CountingKinematics:
+    """The real kinematics, counting top-down IK solves (one per pre-grasp and one per place approach)."""
+
+    def __init__(self, kin):
+        self._kin, self.top_down_solves = kin, 0
+
+    def top_down_ik(self, *args, **kwargs):
+        self.top_down_solves += 1
+        return self._kin.top_down_ik(*args, **kwargs)
+
+    def __getattr__(self, name):
+        return getattr(self._kin, name)
+
+
+@pytest.mark.parametrize("moved_rad, solves_at_start", [(0.0, 0), (0.05, 2)])
+def test_start_reuses_the_checked_plan_only_while_the_arm_rests_where_it_was_checked(kin, moved_rad, solves_at_start):
+    counting = _CountingKinematics(kin)
+    sequence = make(counting)
+    assert sequence.plan_failure(kin.q_ready_rad) == ""
+    checked = counting.top_down_solves
+    q_start = np.array(kin.q_ready_rad) + [moved_rad, 0, 0, 0, 0, 0, 0]
+    robot = FakeRobot(kin, World(), q0=q_start)
+    run(sequence, robot, until=lambda r, s: s.phase == "descend")
+    assert counting.top_down_solves - checked == solves_at_start
