@@ -56,26 +56,28 @@ def random_object(rng, x_range_m):
     return ts.LyingCylinder(xy, rng.uniform(0.015, 0.035), rng.uniform(0.08, 0.18), yaw_rad=yaw)
 
 
-def ranked_outcomes(planner, kin, cfg, place, q_obs, scene, modulus_pa, seed, noise=True) -> tuple[str, list]:
-    """(why the planner found no grasp, or ""; plan_failure of each ranked grasp ("" = it plans), best first)."""
+def ranked_outcomes(planner, kin, cfg, place, q_obs, scene, modulus_pa, seed,
+                    noise=True) -> tuple[str, list, float]:
+    """(why the planner found no grasp, or ""; plan_failure of each ranked grasp ("" = it plans), best first;
+    the share of the object's pixels with a depth return in the frame)."""
     frame = ts.render(scene, seed=seed, noise=noise)
+    share = returned_share(frame)
     moduli = np.where(frame.labels == 1, modulus_pa, 0.0).astype(np.float32)
     try:
         grasps = planner.plan(frame.depth_m, frame.camera_k, frame.base_T_camera, top_k=ALTERNATIVES,
                               youngs_modulus_pa=moduli).grasps
     except ValueError as error:
-        return str(error), []
+        return str(error), [], share
     out = []
     for grasp in grasps:
         target = GraspTarget(tuple(grasp.position_base_m), top_down_yaw(base_T_grasp(grasp)), grasp.width_m,
                              grasp.youngs_modulus_pa)
         out.append(PickPlaceSequence(kin, cfg, target, place).plan_failure(q_obs))
-    return "", out
+    return "", out, share
 
 
-def returned_share(scene, seed: int) -> float:
-    """Share of the object's pixels that have a depth return in the noisy frame."""
-    frame = ts.render(scene, seed=seed)
+def returned_share(frame) -> float:
+    """Share of the object's pixels that have a depth return in the frame."""
     on_object = frame.labels == 1
     return float(np.isfinite(frame.depth_m[on_object]).mean()) if on_object.any() else 0.0
 
@@ -110,16 +112,17 @@ def main():
         counts, rescue_ranks = collections.Counter(), collections.Counter()
         for i in range(args.scenes):
             scene = ts.TabletopScene((random_object(rng, band),), camera)
-            no_grasp, outcomes = ranked_outcomes(planner, kin, cfg, place, q_obs, scene, MODULI_PA[i % 4], seed=i)
+            modulus_pa = MODULI_PA[i % 4]
+            no_grasp, outcomes, share = ranked_outcomes(planner, kin, cfg, place, q_obs, scene, modulus_pa, seed=i)
             counts["scenes"] += 1
             if no_grasp:
                 # Does the sensor model decide (the D4xx's left invalid band cuts objects near the base)?
-                clean, _ = ranked_outcomes(planner, kin, cfg, place, q_obs, scene, MODULI_PA[i % 4], i, False)
+                clean, _, _ = ranked_outcomes(planner, kin, cfg, place, q_obs, scene, modulus_pa, i, False)
                 why = no_grasp.split(":")[0].split("(")[0].strip()
                 no_grasp_reasons[f"x {band[0]:.2f}-{band[1]:.2f}: {why}; "
                                  f"without sensor noise: {'the same' if clean else 'a grasp'}"] += 1
                 if not clean:
-                    sensor_misses.append(returned_share(scene, seed=i))
+                    sensor_misses.append(share)
                 continue
             counts["with a grasp"] += 1
             if not outcomes[0]:
