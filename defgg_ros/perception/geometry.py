@@ -64,13 +64,18 @@ def matrix_to_quaternion_xyzw(rotation) -> np.ndarray:
 
 def transform_from_xyz_quaternion(xyz_m, quaternion_xyzw) -> np.ndarray:
     """4x4 transform from a translation (m) and a unit quaternion (x, y, z, w)."""
-    t = np.asarray(xyz_m, dtype=np.float64).reshape(-1)
-    if t.shape != (3,) or not np.all(np.isfinite(t)):
-        raise TransformError(f"translation must be 3 finite numbers (m), got {xyz_m!r}")
+    t = _finite_xyz_m("translation", xyz_m)
     out = np.eye(4)
     out[:3, :3] = quaternion_xyzw_to_matrix(quaternion_xyzw)
     out[:3, 3] = t
     return out
+
+
+def _finite_xyz_m(what: str, values) -> np.ndarray:
+    v = np.asarray(values, dtype=np.float64).reshape(-1)
+    if v.shape != (3,) or not np.all(np.isfinite(v)):
+        raise TransformError(f"{what} must be 3 finite numbers (m), got {values!r}")
+    return v
 
 
 def transform_from_list(values) -> np.ndarray:
@@ -102,9 +107,7 @@ def top_down_grasp_in_camera(position_camera_m, angle_rad: float) -> np.ndarray:
     which is the image direction at `angle_rad` from u towards v. Because the
     optical frame has x = u and y = v, this is a pure rotation about z.
     """
-    p = np.asarray(position_camera_m, dtype=np.float64).reshape(-1)
-    if p.shape != (3,) or not np.all(np.isfinite(p)):
-        raise TransformError(f"grasp position must be 3 finite numbers (m), got {position_camera_m!r}")
+    p = _finite_xyz_m("grasp position", position_camera_m)
     if not math.isfinite(angle_rad):
         raise TransformError(f"grasp angle must be finite, got {angle_rad!r}")
     out = np.eye(4)
