@@ -9,9 +9,8 @@ import math
 
 import numpy as np
 
-# A quaternion further than this from unit norm is a corrupted message, not
-# rounding error; below it we normalise.
-QUATERNION_NORM_ATOL = 1e-3
+from defgg_ros import rotations
+
 # How far the approach axis may tilt from straight down and still count as a
 # top-down grasp (the 4-DoF grasp representation has no tilt).
 TOP_DOWN_TILT_ATOL_RAD = math.radians(5.0)
@@ -30,40 +29,13 @@ def finite_array(name: str, values, error: type[Exception] = PoseError) -> np.nd
 
 
 def quaternion_to_matrix(quat_xyzw) -> np.ndarray:
-    """3x3 rotation of a quaternion (x, y, z, w); rejects non-unit ones."""
-    q = finite_array("quaternion", quat_xyzw)
-    if q.shape != (4,):
-        raise PoseError(f"quaternion must have 4 values (x, y, z, w), got shape {q.shape}")
-    norm = float(np.linalg.norm(q))
-    if abs(norm - 1.0) > QUATERNION_NORM_ATOL:
-        raise PoseError(f"quaternion is not unit length (norm {norm:.6f})")
-    x, y, z, w = q / norm
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])
+    """3x3 rotation of a quaternion (x, y, z, w); PoseError for a non-unit one."""
+    return rotations.quaternion_xyzw_to_matrix(quat_xyzw, PoseError)
 
 
 def matrix_to_quaternion(rotation) -> np.ndarray:
     """Quaternion (x, y, z, w) with w >= 0 of a 3x3 rotation matrix."""
-    r = np.asarray(rotation, dtype=float)
-    # Shepperd's method: pick the largest diagonal term for numerical stability.
-    trace = np.trace(r)
-    if trace > 0:
-        s = 2.0 * math.sqrt(trace + 1.0)
-        q = [(r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s, 0.25 * s]
-    elif r[0, 0] > r[1, 1] and r[0, 0] > r[2, 2]:
-        s = 2.0 * math.sqrt(1.0 + r[0, 0] - r[1, 1] - r[2, 2])
-        q = [0.25 * s, (r[0, 1] + r[1, 0]) / s, (r[0, 2] + r[2, 0]) / s, (r[2, 1] - r[1, 2]) / s]
-    elif r[1, 1] > r[2, 2]:
-        s = 2.0 * math.sqrt(1.0 + r[1, 1] - r[0, 0] - r[2, 2])
-        q = [(r[0, 1] + r[1, 0]) / s, 0.25 * s, (r[1, 2] + r[2, 1]) / s, (r[0, 2] - r[2, 0]) / s]
-    else:
-        s = 2.0 * math.sqrt(1.0 + r[2, 2] - r[0, 0] - r[1, 1])
-        q = [(r[0, 2] + r[2, 0]) / s, (r[1, 2] + r[2, 1]) / s, 0.25 * s, (r[1, 0] - r[0, 1]) / s]
-    q = np.array(q)
-    return q if q[3] >= 0 else -q
+    return rotations.matrix_to_quaternion_xyzw(rotation)
 
 
 def pose_matrix(position_m, quat_xyzw) -> np.ndarray:

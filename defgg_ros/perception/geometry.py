@@ -7,9 +7,7 @@ import math
 
 import numpy as np
 
-# A quaternion whose norm is this far from 1 is a typo or a wrong order, not
-# rounding; reject it instead of silently normalising.
-QUATERNION_NORM_TOLERANCE = 1e-3
+from defgg_ros import rotations
 
 
 class TransformError(ValueError):
@@ -18,48 +16,23 @@ class TransformError(ValueError):
 
 def check_quaternion_xyzw(quaternion_xyzw) -> np.ndarray:
     """Return a unit quaternion (x, y, z, w) or raise TransformError."""
-    q = np.asarray(quaternion_xyzw, dtype=np.float64).reshape(-1)
-    if q.shape != (4,) or not np.all(np.isfinite(q)):
-        raise TransformError(f"quaternion must be 4 finite numbers (x, y, z, w), got {quaternion_xyzw!r}")
-    norm = float(np.linalg.norm(q))
-    if abs(norm - 1.0) > QUATERNION_NORM_TOLERANCE:
-        raise TransformError(f"quaternion must have unit norm, got norm {norm:.6f} for {q.tolist()}")
-    return q / norm
+    return rotations.unit_quaternion_xyzw(quaternion_xyzw, TransformError)
 
 
 def quaternion_xyzw_to_matrix(quaternion_xyzw) -> np.ndarray:
-    """3x3 rotation matrix of a unit quaternion (x, y, z, w)."""
-    x, y, z, w = check_quaternion_xyzw(quaternion_xyzw)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])
+    """3x3 rotation matrix of a unit quaternion (x, y, z, w); TransformError for any other."""
+    return rotations.quaternion_xyzw_to_matrix(quaternion_xyzw, TransformError)
 
 
 def matrix_to_quaternion_xyzw(rotation) -> np.ndarray:
-    """Unit quaternion (x, y, z, w, with w >= 0) of a 3x3 rotation matrix."""
+    """Unit quaternion (x, y, z, w, with w >= 0) of a 3x3 rotation matrix; TransformError for a matrix
+    that is not a proper rotation."""
     r = np.asarray(rotation, dtype=np.float64)
     if r.shape != (3, 3) or not np.all(np.isfinite(r)):
         raise TransformError(f"rotation must be a finite 3x3 matrix, got shape {r.shape}")
     if not np.allclose(r @ r.T, np.eye(3), atol=1e-6) or np.linalg.det(r) < 0:
         raise TransformError("matrix is not a proper rotation (orthonormal, det +1)")
-    # Shepperd's method: pick the largest diagonal term for numerical stability.
-    trace = np.trace(r)
-    if trace > 0:
-        s = 2.0 * math.sqrt(trace + 1.0)
-        q = [(r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s, 0.25 * s]
-    else:
-        i = int(np.argmax(np.diag(r)))
-        j, k = (i + 1) % 3, (i + 2) % 3
-        s = 2.0 * math.sqrt(1.0 + r[i, i] - r[j, j] - r[k, k])
-        q = [0.0, 0.0, 0.0, (r[k, j] - r[j, k]) / s]
-        q[i] = 0.25 * s
-        q[j] = (r[j, i] + r[i, j]) / s
-        q[k] = (r[k, i] + r[i, k]) / s
-    q = np.asarray(q)
-    q /= np.linalg.norm(q)
-    return -q if q[3] < 0 else q
+    return rotations.matrix_to_quaternion_xyzw(r)
 
 
 def transform_from_xyz_quaternion(xyz_m, quaternion_xyzw) -> np.ndarray:

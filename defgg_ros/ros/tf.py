@@ -22,6 +22,7 @@ import time
 import numpy as np
 
 from defgg_ros.perception.table_pose import TABLE_FRAME_ID
+from defgg_ros.rotations import matrix_to_quaternion_xyzw, quaternion_xyzw_to_matrix
 
 FALLBACK_PUBLISH_DELAY_S = 2.0
 TF_TOPIC = "/tf"            # absolute, as tf2_ros uses them; remap for a namespaced robot
@@ -107,35 +108,16 @@ def matrix_from_transform(transform) -> np.ndarray:
     norm = float(np.linalg.norm(quat))
     if not (np.all(np.isfinite(xyz)) and np.all(np.isfinite(quat))) or norm < 1e-6:
         raise ValueError(f"transform has non-finite values or a zero quaternion: {xyz.tolist()}, {quat.tolist()}")
-    x, y, z, w = quat / norm
     matrix = np.eye(4)
-    matrix[:3, :3] = [[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                      [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                      [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]]
+    # tf2 accepts any non-zero quaternion and normalises it; so does this
+    matrix[:3, :3] = quaternion_xyzw_to_matrix(quat / norm)
     matrix[:3, 3] = xyz
     return matrix
 
 
 def quaternion_from_matrix(rotation: np.ndarray) -> tuple[float, float, float, float]:
-    """(x, y, z, w) of a 3x3 rotation matrix (Shepperd's method, w >= 0)."""
-    m = np.asarray(rotation, dtype=float)
-    trace = np.trace(m)
-    if trace > 0:
-        s = 2.0 * np.sqrt(trace + 1.0)
-        q = (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s, 0.25 * s
-    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
-        s = 2.0 * np.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
-        q = 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s, (m[2, 1] - m[1, 2]) / s
-    elif m[1, 1] > m[2, 2]:
-        s = 2.0 * np.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2])
-        q = (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s, (m[0, 2] - m[2, 0]) / s
-    else:
-        s = 2.0 * np.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1])
-        q = (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s, (m[1, 0] - m[0, 1]) / s
-    q = np.array(q) / np.linalg.norm(q)
-    if q[3] < 0:
-        q = -q
-    return tuple(float(v) for v in q)
+    """(x, y, z, w) of a 3x3 rotation matrix, w >= 0."""
+    return tuple(float(v) for v in matrix_to_quaternion_xyzw(rotation))
 
 
 def transform_msg(parent_frame: str, child_frame: str, parent_T_child: np.ndarray, stamp=None):

@@ -111,7 +111,7 @@ def test_quaternion_round_trip_and_rejects():
         q /= np.linalg.norm(q)
         back = matrix_to_quaternion(quaternion_to_matrix(q))
         assert abs(back @ q) == pytest.approx(1.0, abs=1e-9)
-    with pytest.raises(PoseError, match="unit length"):
+    with pytest.raises(PoseError, match="unit norm"):
         quaternion_to_matrix([0, 0, 0, 2.0])
     with pytest.raises(PoseError, match="non-finite"):
         pose_matrix([0, float("inf"), 0], [0, 0, 0, 1])
