@@ -5,7 +5,7 @@ importing rclpy or a layer above the cores (the ROS plumbing, nodes, bringup, se
 Cores: model, grasping, perception, control, sim, data, planning (the tabletop planner that combines
 grasping, control, perception and model). Above them: train, evaluation (offline),
 ros (rclpy helpers), nodes (thin adapters), bringup, sessions, demo. Below them: the root modules
-(constants, errors, stiffness, atomic).
+(constants, errors, stiffness, grip_force, rotations, atomic).
 """
 import ast
 from pathlib import Path
