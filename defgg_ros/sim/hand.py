@@ -148,8 +148,10 @@ class Hand:
 
 
 def _quat(pose):
+    # rotation matrix -> quaternion (x, y, z, w), robust branch on the trace. Not defgg_ros.rotations on
+    # purpose: that one normalises and turns w >= 0, and the trials' numbers depend on these last bits
+    # (4 fem_v5 trials re-run with it: 3 of 64 shake directions moved by 0.5 m/s²).
     m = pose[:3, :3]
-    # rotation matrix -> quaternion (x, y, z, w), robust branch on the trace
     tr = np.trace(m)
     if tr > 0:
         s = math.sqrt(tr + 1.0) * 2
