@@ -58,13 +58,10 @@ def test_finger_boxes_stand_at_the_opening_and_reach_back():
     assert max(p[0, 3] for p, _ in too_wide) == pytest.approx(GRIPPER_MAX_WIDTH_M / 2 + FINGER_THICKNESS_M / 2)
 
 
-def test_quaternion_round_trip_and_rejections():
-    rng = np.random.default_rng(0)
-    for _ in range(50):
-        q = rng.normal(size=4)
-        q /= np.linalg.norm(q)
-        back = matrix_to_quaternion_xyzw(quaternion_xyzw_to_matrix(q))
-        assert np.allclose(back, q) or np.allclose(back, -q)
+def test_quaternion_rejections_in_the_perception_error_type():
+    # the conversion itself: test/foundation/test_rotations.py
+    q = np.array([0.0, 0.0, np.sin(0.3), np.cos(0.3)])
+    assert matrix_to_quaternion_xyzw(quaternion_xyzw_to_matrix(q)) == pytest.approx(q)
     with pytest.raises(TransformError, match="unit norm"):
         quaternion_xyzw_to_matrix([0, 0, 0, 2])
     with pytest.raises(TransformError, match="7 numbers"):
