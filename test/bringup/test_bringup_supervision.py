@@ -112,7 +112,10 @@ def test_sigterm_stops_every_node_cleanly(bringup):
     bringup.popen.send_signal(signal.SIGTERM)
     assert bringup.finish() == 0
     assert all(_gone(pid) for pid in pids.values())
-    assert any("stopped segmentation_node (0), fake_panda_driver (0)" in line for line in bringup.log), bringup.log
+    stopped = [line for line in bringup.log if line.startswith("defgg-bringup: stopped ")]
+    # a string message, so pytest prints all of it: the exit codes and what the nodes said last
+    assert stopped == ["defgg-bringup: stopped segmentation_node (0), fake_panda_driver (0)"], \
+        "stopped lines: " + repr(stopped) + "\nlog tail:\n" + "\n".join(bringup.log[-20:])
 
 
 def test_a_node_that_cannot_start_is_reported(tmp_path):
