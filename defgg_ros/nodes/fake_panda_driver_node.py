@@ -20,14 +20,12 @@ import json
 import threading
 import time
 
-import rclpy
 from control_msgs.action import FollowJointTrajectory
 from franka_msgs.action import Grasp, Homing, Move
 from geometry_msgs.msg import Pose, PoseArray, TransformStamped, WrenchStamped
 from rclpy._rclpy_pybind11 import RCLError
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, Image, JointState
@@ -39,12 +37,11 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from defgg_ros.constants import CAMERA_HEIGHT_PX, CAMERA_WIDTH_PX, GRIPPER_MAX_WIDTH_M
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import depth_metres_to_msg, make_camera_info, numpy_to_image
+from defgg_ros.nodes.node_main import run_node
 from defgg_ros.ros import topics
 from defgg_ros.ros.action import destroy_actions
-from defgg_ros.ros.executor import ThreadedExecutor
 from defgg_ros.ros.parameters import declare_parameters, load_schema
 from defgg_ros.ros.share import share_path
-from defgg_ros.ros.transport import use_large_message_transport
 from defgg_ros.sim.cell import CellSettings, SimCell
 from defgg_ros.sim.cell_camera import DepthNoise
 from defgg_ros.sim.cell_gripper import GripperCommandError
@@ -409,29 +406,13 @@ class FakePandaDriver(Node):
             self.cell.close()
 
     def destroy_node(self):
+        self.shutdown()  # the simulation thread first: it publishes through this node
         destroy_actions(self)  # the gripper actions must vanish with the driver (see destroy_actions)
         return super().destroy_node()
 
 
 def main(args=None):
-    use_large_message_transport()  # before the DDS participant starts (see node_main.run_node)
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = FakePandaDriver()
-        executor = ThreadedExecutor(num_threads=4)
-        executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (SceneError, ValueError) as exc:
-        print(f"fake_panda_driver: {exc}", flush=True)
-        raise SystemExit(2) from None
-    finally:
-        if node is not None:
-            node.shutdown()
-            node.destroy_node()
-        rclpy.try_shutdown()
+    run_node("fake_panda_driver", FakePandaDriver, startup_errors=(SceneError, ValueError), threads=4, args=args)
 
 
 if __name__ == "__main__":

@@ -48,8 +48,12 @@ def run_node(name: str, make_node, startup_errors=(ValueError, OSError), threads
             rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except startup_errors as exc:
-        if node is not None:
+    except Exception as exc:
+        if not rclpy.ok():
+            # SIGINT/SIGTERM while the node was being built: rclpy's handler shut the context down under
+            # the constructor, which then fails ("context is not valid"). A requested stop, not a bug.
+            return
+        if node is not None or not isinstance(exc, startup_errors):
             raise
         print(f"{name}: {exc}", file=sys.stderr, flush=True)
         raise SystemExit(2) from None

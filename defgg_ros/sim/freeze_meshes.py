@@ -13,9 +13,8 @@ from __future__ import annotations
 
 import argparse
 
-import trimesh
-
 from defgg_ros.sim import library, meshes, objects
+from defgg_ros.sim.trimesh_import import trimesh
 
 
 def surfaces_to_mesh(shape: objects.ObjectShape) -> list:

@@ -24,9 +24,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import trimesh
 
 from defgg_ros.atomic import atomic_path
+from defgg_ros.sim.trimesh_import import trimesh
 
 TARGET_MAX_NODES = 220
 # (edge length factor, envelope epsilon) tried in order until the mesh has

@@ -21,7 +21,6 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pybullet as p
-import trimesh
 
 from defgg_ros.constants import (
     MAX_SOFT_BODY_YOUNGS_MODULUS_PA,
@@ -30,6 +29,7 @@ from defgg_ros.constants import (
     TRAINING_YOUNGS_MODULI_PA,
 )
 from defgg_ros.sim import library, meshes, physics
+from defgg_ros.sim.trimesh_import import trimesh
 from defgg_ros.stiffness import check_youngs_modulus
 
 DEFAULT_DENSITY_KG_M3 = OBJECT_DENSITY_KG_M3

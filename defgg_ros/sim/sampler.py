@@ -16,7 +16,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import pybullet as p
-import trimesh
 
 from defgg_ros.constants import (
     FINGER_DEPTH_M,
@@ -33,6 +32,7 @@ from defgg_ros.grasping.rectangles import GraspRect
 from defgg_ros.sim import hand as hand_mod
 from defgg_ros.sim.camera import TopDownCamera
 from defgg_ros.sim.trial import OPENING_CLEARANCE_M, WorldGrasp
+from defgg_ros.sim.trimesh_import import trimesh
 
 # Bump when the sampling or the grasp height rule changes (invalidates cached candidates).
 SAMPLER_VERSION = 3

@@ -14,8 +14,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import trimesh
 import trimesh.creation as tc
+
+from defgg_ros.sim.trimesh_import import trimesh
 
 
 def outward(m: trimesh.Trimesh) -> trimesh.Trimesh:

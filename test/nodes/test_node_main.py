@@ -1,0 +1,52 @@
+"""defgg_ros/nodes/node_main.run_node: a stop requested while the node is being built is a clean exit.
+
+A SIGINT after rclpy.init shuts the context down; if its KeyboardInterrupt is lost on the way (a library's
+`except BaseException`), the constructor's next rclpy call fails ("context is not valid") and the launcher's
+stop saw exit 1 and a traceback (the fake driver did, SIGINT 0.5 s after its start). Real processes, real
+signals, real rclpy; the node is built after the signal has been handled, so the race is certain.
+"""
+import os
+import subprocess
+import sys
+
+import pytest
+
+pytestmark = pytest.mark.ros
+
+CHILD = """
+import os, signal, sys, time
+import rclpy
+from rclpy.node import Node
+from defgg_ros.nodes.node_main import run_node
+
+def make_node():
+    if sys.argv[1] == "stop":
+        try:
+            os.kill(os.getpid(), signal.SIGINT)  # the launcher's stop, while the node is being built
+            deadline = time.monotonic() + 5.0
+            while rclpy.ok() and time.monotonic() < deadline:
+                time.sleep(0.01)                  # rclpy's handler shuts the context down
+        except KeyboardInterrupt:
+            pass                                  # lost in a library's `except BaseException` (trimesh has them)
+    node = Node("built_late")
+    raise ValueError("a bad parameter")          # if the node could be built: a start-up error
+
+run_node("probe_node", make_node)
+"""
+
+
+def _run(mode):
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    return subprocess.run([sys.executable, "-c", CHILD, mode], capture_output=True, text=True, timeout=60, env=env)
+
+
+def test_a_stop_while_the_node_is_built_exits_0_without_a_traceback():
+    done = _run("stop")
+    assert done.returncode == 0, done.stderr
+    assert "Traceback" not in done.stderr
+
+
+def test_a_start_up_error_without_a_stop_is_still_exit_2_with_one_line():
+    done = _run("run")
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.strip() == "probe_node: a bad parameter"
