@@ -14,9 +14,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import trimesh.creation as tc
 
 from defgg_ros.sim.trimesh_import import trimesh
+
+tc = trimesh.creation  # through trimesh_import, so its import is guarded too
 
 
 def outward(m: trimesh.Trimesh) -> trimesh.Trimesh:

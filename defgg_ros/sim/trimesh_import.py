@@ -13,11 +13,13 @@ def swallowed_interrupt(modules=None) -> bool:
     """Whether a trimesh module keeps a KeyboardInterrupt in place of an optional dependency."""
     # looked up, not imported: importing any part of trimesh runs its package's optional imports
     wrapper = getattr(sys.modules.get("trimesh.exceptions"), "ExceptionWrapper", None)
+    if wrapper is None:
+        return False
     if modules is None:
         modules = [m for name, m in list(sys.modules.items()) if name.split(".")[0] == "trimesh"]
     for module in modules:
         for value in list(vars(module).values()):
-            if wrapper is not None and type(value) is wrapper:  # isinstance would ask the wrapper: it raises
+            if type(value) is wrapper:  # isinstance would ask the wrapper, which raises
                 exc_type, _ = object.__getattribute__(value, "exception")
                 if issubclass(exc_type, KeyboardInterrupt):
                     return True
