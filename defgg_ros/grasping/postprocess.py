@@ -23,13 +23,19 @@ class GraspMaps:
     """Per-pixel grasp maps of one image (all H x W float32): q in [0, 1], angle_rad in
     [-pi/2, pi/2] from image u towards v, width_px in [0, width_scale_px].
 
+    q_unclipped is the filtered quality before the clip to [0, 1]: the peak search ranks on it.
+    The network's quality output is linear, and where it overshoots 1 over a whole object the
+    clipped map is one plateau of ties that the search resolved in raster order, i.e. at the
+    plateau's top-left edge (the fem_v5 pair: 58-66 % of the evaluation's grasps, 2026-11-28,
+    docs/model.md). Clipping is monotone, so ranking on q_unclipped never reverses an order of q.
     q is filtered at once (the peak search reads all of it); the angle and width maps only when
     read, because ranking needs them at a few peaks (at_pixel): ~0.7 ms of a PlanGrasp call.
     """
 
     def __init__(self, raw: np.ndarray, config: PostProcessConfig):
         self._raw, self._config = raw, config
-        self.q = np.clip(_blur(raw[0], config.q_sigma_px), 0.0, 1.0)
+        self.q_unclipped = _blur(raw[0], config.q_sigma_px).astype(np.float32, copy=False)
+        self.q = np.clip(self.q_unclipped, 0.0, 1.0)
 
     @functools.cached_property
     def angle_rad(self) -> np.ndarray:
@@ -185,5 +191,5 @@ def apart(g, others, min_distance_px: int) -> bool:
 def grasps_from_maps(maps: GraspMaps, config: PostProcessConfig = DEFAULT_POSTPROCESS,
                      allowed=None, top_k: int = 1, fill: bool = False) -> list:
     """Ranked Grasp2D list from filtered maps (fill: see find_peaks)."""
-    peaks = find_peaks(maps.q, config.peak_min_distance_px, config.q_threshold, allowed, top_k, fill)
+    peaks = find_peaks(maps.q_unclipped, config.peak_min_distance_px, config.q_threshold, allowed, top_k, fill)
     return [Grasp2D(u, v, *maps.at_pixel(v, u), quality=float(maps.q[v, u])) for v, u in peaks]

@@ -176,7 +176,7 @@ class TabletopNetworkView:
     maps: object                 # grasping.postprocess.GraspMaps over the height map
     moduli: np.ndarray           # R x C Young's modulus per cell (grid_moduli)
     boxes: dict                  # label -> (row slice, column slice) in the height map
-    best_q: dict                 # label -> the object's best quality on its own cells
+    best_q: dict                 # label -> the object's best unclipped quality on its own cells (orders the objects)
     space: FreeSpace | None
     min_distance_px: int
     q_threshold: float
@@ -202,7 +202,7 @@ def prepare_tabletop(view: TabletopView, predictor, youngs_modulus_pa=None, defa
     if checkpoint is not None:
         checkpoint()
     maps = maps_from_network(raw, predictor.postprocess)
-    best_q = {label: float(maps.q[boxes[label]][view.grid_labels[boxes[label]] == label].max())
+    best_q = {label: float(maps.q_unclipped[boxes[label]][view.grid_labels[boxes[label]] == label].max())
               for label in view.object_ids if label in boxes}
     return TabletopNetworkView(view, maps, moduli, boxes, best_q, FreeSpace(view), d, threshold,
                                frozenset(partly_seen_objects(view)))
@@ -247,7 +247,7 @@ def _object_grasps(prepared: TabletopNetworkView, label: int, top_k: int) -> lis
     """An object's feasible grasps, best first: its quality peaks in order, the first feasible one,
     then (for top_k > 1) distinct alternatives."""
     view, maps, box = prepared.view, prepared.maps, prepared.boxes[label]
-    peaks = find_peaks(maps.q[box], prepared.min_distance_px, prepared.q_threshold, view.grid_labels[box] == label,
+    peaks = find_peaks(maps.q_unclipped[box], prepared.min_distance_px, prepared.q_threshold, view.grid_labels[box] == label,
                        top_k=max(PEAKS_PER_OBJECT, top_k), fill=True)
     cells = [(r + box[0].start, c + box[1].start) for r, c in peaks]
     memo = prepared.peak_grasps

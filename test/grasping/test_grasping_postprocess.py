@@ -47,6 +47,20 @@ def test_outputs_are_clipped_to_their_ranges():
     assert maps.q.min() == 0.0 and maps.width_px.min() == 0.0
 
 
+def test_a_quality_overshoot_is_ranked_at_its_top_not_at_the_clipped_plateau_edge():
+    # A linear quality output above 1 over a whole object (the fem_v5 pair's maps): clipped to 1 it is
+    # one plateau of ties, which the search once resolved in raster order, at the object's top-left edge.
+    v, u = np.mgrid[0:300, 0:300]
+    on_object = (np.abs(u - 150) <= 30) & (np.abs(v - 120) <= 30)
+    q = np.where(on_object, 1.6 - 0.01 * np.hypot(u - 152, v - 118), 0.0).astype(np.float32)
+    maps = maps_from_network(_raw(0.2, 50.0, q))
+    assert np.sum(maps.q[on_object] == 1.0) > 1000     # the plateau the clip makes
+    grasps = grasps_from_maps(maps, allowed=on_object, top_k=5, fill=True)
+    assert (grasps[0].center_u_px, grasps[0].center_v_px) == (152, 118)
+    assert grasps[0].quality == 1.0                    # reported in [0, 1]
+    assert len({(g.center_u_px, g.center_v_px) for g in grasps}) == 5
+
+
 def test_planted_peak_is_found_with_its_parameters():
     v, u = np.mgrid[0:300, 0:300]
     q = 0.8 * np.exp(-((u - 210) ** 2 + (v - 95) ** 2) / (2 * 6.0**2)).astype(np.float32)
