@@ -247,8 +247,8 @@ def _object_grasps(prepared: TabletopNetworkView, label: int, top_k: int) -> lis
     """An object's feasible grasps, best first: its quality peaks in order, the first feasible one,
     then (for top_k > 1) distinct alternatives."""
     view, maps, box = prepared.view, prepared.maps, prepared.boxes[label]
-    peaks = find_peaks(maps.q_unclipped[box], prepared.min_distance_px, prepared.q_threshold, view.grid_labels[box] == label,
-                       top_k=max(PEAKS_PER_OBJECT, top_k), fill=True)
+    peaks = find_peaks(maps.q_unclipped[box], prepared.min_distance_px, prepared.q_threshold,
+                       view.grid_labels[box] == label, top_k=max(PEAKS_PER_OBJECT, top_k), fill=True)
     cells = [(r + box[0].start, c + box[1].start) for r, c in peaks]
     memo = prepared.peak_grasps
     todo = [cell for cell in cells if (label, cell) not in memo]
