@@ -514,7 +514,10 @@ class PickPlaceSequence:
             self._finish(sim_s, "unknown")
             return []
         m = self._motion
-        stop_ends_s = m.start_s + m.trajectory.duration_s if m is not None else self._stop_began_s
+        # A motion that ended long before the stop (a grasp that failed seconds after the descent) must
+        # not eat the rest timeout: it counts from whichever is later.
+        stop_ends_s = self._stop_began_s if m is None else max(m.start_s + m.trajectory.duration_s,
+                                                               self._stop_began_s)
         if sim_s >= stop_ends_s and self._at_rest(sim_s):
             self._stopping = False
             if self._needs_recovery():

@@ -81,6 +81,19 @@ def test_missed_grasp_opens_the_hand_before_leaving(kin):
     assert opened[-1].width_m > 0.05 and robot.width_m == pytest.approx(opened[-1].width_m)
 
 
+def test_a_grasp_that_fails_long_after_the_descent_still_recovers(kin):
+    # The stop's rest timeout counts from the stop, not from the end of the last motion: a soft
+    # object's slow squeeze (the simulated hand's 5 s grasp timeout) once ended such picks with
+    # "the arm did not come to rest ... 0.000 rad/s" and no recovery (demo, 2026-11-28).
+    delay_s = CONFIG.stop_timeout_s + 1.0
+    sequence = PickPlaceSequence(kin, CONFIG, GRASP, PLACE)
+    robot = FakeRobot(kin, World(object_width_m=None, gripper_report_delay_s=delay_s))
+    run(sequence, robot, max_s=120.0)
+    out = sequence.outcome
+    assert out.failure_reason.startswith("missed"), out.failure_reason
+    assert out.arm_state == "observation_pose" and at_observation(robot)
+
+
 def test_an_object_held_at_a_cancel_is_placed_before_the_arm_leaves(kin):
     sequence, robot = PickPlaceSequence(kin, CONFIG, GRASP, PLACE), FakeRobot(kin, World(object_width_m=0.045))
     run(sequence, robot, until=lambda r, s: s.phase == "transfer" and s.feedback(r.sim_s).phase_progress > 0.3)

@@ -23,6 +23,7 @@ class World:
     contact_height_m: float = -1.0           # TCP z below which the hand touches something
     silent: bool = False                     # driver stops publishing joint states
     slip_at_phase: str | None = None         # object falls out when this phase starts
+    gripper_report_delay_s: float = 0.0      # fingers report this long after they stopped (a slow squeeze)
 
 
 class FakeRobot:
@@ -33,7 +34,8 @@ class FakeRobot:
         self.width_m = width_m
         self.sim_s = 0.0
         self.trajectory, self.trajectory_start_s = None, 0.0
-        self.gripper = None   # (kind, target_width, speed, sent_s)
+        self.gripper = None   # (kind, target_width, speed)
+        self.gripper_stopped_s = None
         self.sent = []        # every command, in order
 
     def apply(self, commands, sequence: PickPlaceSequence):
@@ -48,6 +50,8 @@ class FakeRobot:
                 self.gripper = ("grasp", target, command.command.speed_mps)
             elif isinstance(command, CancelGripper):
                 self.gripper = None
+            if isinstance(command, (MoveGripper, GraspGripper, CancelGripper)):
+                self.gripper_stopped_s = None
 
     def _step_gripper(self, sequence: PickPlaceSequence):
         if self.gripper is None:
@@ -56,8 +60,12 @@ class FakeRobot:
         step = speed * TICK_S
         remaining = target - self.width_m
         self.width_m = target if abs(remaining) <= step else self.width_m + np.sign(remaining) * step
-        if self.width_m == target:
-            self.gripper = None
+        if self.width_m != target:
+            return
+        if self.gripper_stopped_s is None:
+            self.gripper_stopped_s = self.sim_s
+        if self.sim_s - self.gripper_stopped_s >= self.world.gripper_report_delay_s - 1e-9:
+            self.gripper, self.gripper_stopped_s = None, None
             sequence.on_gripper_result(True, self.width_m, "")
 
     def step(self, sequence: PickPlaceSequence):
