@@ -4,13 +4,16 @@ The network's quality output is linear; where it overshoots 1 over an object, th
 [0, 1] is a plateau of ties. Ranking on the clipped map resolved them in raster order (the plateau's
 top-left edge); since 2026-11-28 the ranking reads the quality before the clip (grasping/postprocess.py).
 This prints, per model and split, the top-1 rectangle accuracy (the training's validation metric) under
-both rankings, and how often the clipped ranking's top-1 grasp was a tie at quality 1.0.
+both rankings, and how often the clipped ranking's top-1 grasp was a tie at quality 1.0; with --eval,
+also the share of an evaluation's graded grasps at reported quality 1.0 (possibly such a tie).
 
     .venv/bin/python bench/bench_rank_clip.py     # the shipped pair on models/train_data_fem_v5.tar.gz
+    .venv/bin/python bench/bench_rank_clip.py --eval results/sim_v4/trials.jsonl.gz
 """
 from __future__ import annotations
 
 import argparse
+import collections
 import sys
 import tarfile
 import tempfile
@@ -20,6 +23,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from defgg_ros.atomic import read_jsonl  # noqa: E402
 from defgg_ros.grasping.postprocess import maps_from_network  # noqa: E402
 from defgg_ros.grasping.rectangles import rectangle_match  # noqa: E402
 from defgg_ros.model.inference import GraspPredictor  # noqa: E402
@@ -35,9 +39,11 @@ def parse_args(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--archive", type=Path, default=ROOT / "models/train_data_fem_v5.tar.gz",
                    help="frozen training data (defgg-eval freeze); its train_data/ is read")
-    p.add_argument("--models", nargs="+", type=Path,
+    p.add_argument("--models", nargs="*", type=Path,
                    default=[ROOT / "models/defgg_cnn.pt", ROOT / "models/ggcnn_depth_only.pt"])
     p.add_argument("--seed", type=int, default=0, help="the training's split seed (the model cards: 0)")
+    p.add_argument("--eval", nargs="*", type=Path, default=[],
+                   help="evaluation trial files (trials.jsonl[.gz]): share of graded grasps at quality 1.0")
     return p.parse_args(argv)
 
 
@@ -61,8 +67,23 @@ def score(predictor: GraspPredictor, samples) -> dict:
     return {"n": len(samples), "ties": ties, **{k: float(np.mean(v)) for k, v in hits.items()}}
 
 
+def print_eval_ties(path: Path) -> None:
+    """Per model: graded trials whose grasp's reported (clipped) quality is 1.0."""
+    at_one, graded = collections.Counter(), collections.Counter()
+    for r in read_jsonl(path):
+        quality = (r.get("grasp") or {}).get("quality")
+        if quality is not None and r.get("success") is not None:
+            graded[r["model"]] += 1
+            at_one[r["model"]] += quality >= 1.0
+    for model in sorted(graded):
+        print(f"{path}: {model}: {at_one[model]} of {graded[model]} graded grasps at quality 1.0 "
+              f"({100 * at_one[model] / graded[model]:.0f} %)")
+
+
 def main(argv=None) -> int:
     args = parse_args(argv)
+    for path in args.eval:
+        print_eval_ties(path)
     with tempfile.TemporaryDirectory() as tmp:
         with tarfile.open(args.archive) as tar:
             tar.extractall(tmp, filter="data")
