@@ -140,7 +140,7 @@ def render_card(name: str, models_dir, eval_summary: dict | None = None, eval_di
              f"- **Shipped checkpoint**: {prov.get('shipped_checkpoint', 'best')} (epoch "
              f"{prov.get('shipped_epoch', prov['best_epoch'])})" + (f". {prov['note']}" if prov.get("note") else ""),
              f"- **Grip force the cell closes these grasps with**: {_grip_rule_text(payload['meta'])}",
-             f"- **Training data**: `{prov['data_root']}` (growing dataset; this run froze "
+             f"- **Training data**: `{prov['data_root']}` (frozen for this run at "
              f"{prov['n_trials']} trials), data fingerprint `{prov['data_fingerprint']}`; scenes per split "
              f"{prov['scenes']}", ""]
     lines += _data_section(prov)
