@@ -96,6 +96,7 @@ class FakePandaDriver(Node):
         names = topics.arm_names(self.cfg["arm_id"])  # ValueError on a malformed arm_id
         self._arm_joints, self._finger_joints = names["joints"], names["fingers"]
         self._capture_requested = False
+        self._reported_off_table = set()   # object names already reported as off the table
         self._running = True
         self._create_interfaces()
         self._thread = threading.Thread(target=self._sim_loop, name="sim", daemon=True)
@@ -331,6 +332,7 @@ class FakePandaDriver(Node):
                     self._publish_frame(now_s, *frame)
                 if poses is not None:
                     self._publish_poses(now_s, poses)
+                    self._report_objects_off_the_table(poses)
             except RCLError:
                 if self.context.ok():
                     raise
@@ -357,6 +359,16 @@ class FakePandaDriver(Node):
         self.get_logger().info(f"sim time {now_s:.1f} s, real-time factor {rtf:.2f} "
                                f"(simulation capacity {self.cell.real_time_factor():.2f})"
                                f"{', FEM active: ' + ', '.join(active) if active else ''}")
+
+    def _report_objects_off_the_table(self, poses):
+        """Once per object: one that left the table will not come back (the demo's 2026-11-28 rubber block
+        ended 12 km under it), and whoever watches the cell should hear it when it happens."""
+        for name, xyz in self.cell.objects_off_the_table(poses):
+            if name not in self._reported_off_table:
+                self._reported_off_table.add(name)
+                self.get_logger().error(f"object {name} left the table: at ({xyz[0]:.2f}, {xyz[1]:.2f}, "
+                                        f"{xyz[2]:.2f}) m, under its top (fallen off an edge, or its simulation "
+                                        f"failed); it stays in the scene")
 
     def _finish_gripper(self, outcomes):
         for token, outcome in outcomes:

@@ -45,6 +45,8 @@ TCP_LINK_NAME = "panda_grasptarget"
 SETTLE_TIME_S = 0.3
 # How often (sim time) soft objects are woken up / put to sleep.
 SOFT_ACTIVITY_PERIOD_S = 0.05
+# An object this far below the table top has left the table (its height on the table is >= 0).
+OFF_TABLE_BELOW_M = 0.05
 
 
 @dataclass
@@ -288,6 +290,12 @@ class SimCell:
                 nodes = cell_objects.soft_nodes_m(self.client, obj.body) if obj.active else obj.nodes_m
                 poses.append((nodes.mean(axis=0), np.array([0.0, 0.0, 0.0, 1.0])))
         return poses
+
+    def objects_off_the_table(self, poses: list, below_m: float = OFF_TABLE_BELOW_M) -> list:
+        """[(name, xyz)] of the objects (poses: object_poses()) more than below_m under the table top
+        (z = 0): fallen off an edge, or through the top when an FEM body's simulation failed. Nothing in
+        the cell brings them back."""
+        return [(spec.name, xyz) for spec, (xyz, _) in zip(self.scene.objects, poses) if xyz[2] < -below_m]
 
     def render_depth(self, with_color: bool = False):
         """(depth_m HxW float32 NaN = invalid, object index mask int32 (-1 none), rgb or None).

@@ -4,6 +4,7 @@ from pathlib import Path
 import numpy as np
 import pybullet as p
 import pytest
+from support.cell_faults import put_beyond_the_table_edge
 
 from defgg_ros.constants import CAMERA_HEIGHT_ABOVE_TABLE_M, PANDA_READY_Q_RAD
 from defgg_ros.sim.cell import CellSettings, SimCell
@@ -171,3 +172,14 @@ def test_noise_drops_pixels_only_when_asked():
         assert np.nanstd(depth_m[200:280, 500:600]) > 1e-4
     finally:
         cell.close()
+
+
+
+def test_an_object_that_falls_off_the_table_is_found_under_it(rigid_cell):
+    assert rigid_cell.objects_off_the_table(rigid_cell.object_poses()) == []
+    put_beyond_the_table_edge(rigid_cell)
+    rigid_cell.advance(0.05)
+    assert rigid_cell.objects_off_the_table(rigid_cell.object_poses()) == []     # still falling past the top
+    rigid_cell.advance(0.5)
+    ((name, xyz),) = rigid_cell.objects_off_the_table(rigid_cell.object_poses())
+    assert name == "wooden_block" and xyz[2] < -0.5

@@ -5,6 +5,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from rclpy.parameter import Parameter
+from support.cell_faults import put_beyond_the_table_edge
 
 from defgg_ros.constants import CAMERA_HEIGHT_PX, CAMERA_WIDTH_PX, PANDA_READY_Q_RAD
 from defgg_ros.ros import topics
@@ -262,3 +263,28 @@ def test_malformed_trajectory_is_rejected_and_the_driver_keeps_serving(driver, c
         JointTrajectoryPoint(positions=goal.tolist(), time_from_start=Duration(sec=0, nanosec=500_000_000))]))
     spin(executor, lambda: np.abs(np.array(joints[-1].position[:7]) - goal).max() < 0.01, TIMEOUT_S,
          "the valid trajectory after the bad ones")
+
+
+def test_an_object_that_leaves_the_table_is_reported_once_on_rosout(driver, client, executor, spin):
+    from rcl_interfaces.msg import Log
+    from rosgraph_msgs.msg import Clock
+
+    from defgg_ros.nodes import qos
+
+    logs = []
+    client.create_subscription(Log, "/rosout", logs.append, 100)
+    clocks = _latest(client, Clock, "/clock", qos.STATE)
+    spin(executor, lambda: clocks, TIMEOUT_S, "the clock")
+    with driver._lock:
+        put_beyond_the_table_edge(driver.cell)
+
+    def reports():
+        return [m for m in logs if m.name == "fake_panda_driver" and "left the table" in m.msg]
+
+    spin(executor, reports, TIMEOUT_S, "an error on /rosout")
+    reported_s = clocks[-1].clock.sec + clocks[-1].clock.nanosec * 1e-9
+    spin(executor, lambda: clocks[-1].clock.sec + clocks[-1].clock.nanosec * 1e-9 > reported_s + 1.0, TIMEOUT_S,
+         "1 s of sim time after the report")
+    (report,) = reports()                   # once, though it is still under the table at every check since
+    assert report.level == Log.ERROR
+    assert "wooden_block" in report.msg
