@@ -113,3 +113,7 @@ STATUS_OK = "ok"
 STATUS_LIFT_FAILED = "lift_failed"
 STATUS_EXPLODED = "exploded"
 STATUS_TIMEOUT = "timeout"
+
+# An object more than this under the table top (z = 0) has left the table: fallen off an edge, or through
+# the top when its FEM simulation failed (the fake driver reports it, the demo's table says so).
+OFF_TABLE_DEPTH_M = 0.05

@@ -5,6 +5,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from defgg_ros.atomic import atomic_path, write_json_atomic
+from defgg_ros.constants import OFF_TABLE_DEPTH_M
 
 
 @dataclass
@@ -57,8 +58,18 @@ def format_table(rows: list) -> str:
         mass, force = _number(r.estimated_mass_kg * 1000, ".0f"), _number(r.gripper_force_n, ".2f")
         lines.append(f"{r.name:<14} {r.youngs_modulus_pa:>8.0e} {r.simulated_as:>5} {width:>10} {quality:>7} "
                      f"{mass:>8} {force:>9} {r.phase_reached:>14} {_yes(r.held_after_transfer):>5} "
-                     f"{_yes(r.in_bin):>6}  {r.failure_reason}")
+                     f"{_yes(r.in_bin):>6}  {_note(r)}")
     return "\n".join(lines)
+
+
+def _note(r: PickRow) -> str:
+    """The failure, or for a pick that succeeded but did not end in the bin, where the object ended."""
+    if r.failure_reason or r.in_bin or r.final_position_m is None:
+        return r.failure_reason
+    x, y, z = r.final_position_m
+    if z < -OFF_TABLE_DEPTH_M:
+        return f"left the table after the pick: ended at ({x:.2f}, {y:.2f}, {z:.2f}) m"
+    return f"ended outside the bin at ({x:.2f}, {y:.2f}, {z:.2f}) m"
 
 
 def write_summary(path, rows: list, meta: dict) -> dict:

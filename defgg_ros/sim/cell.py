@@ -19,6 +19,7 @@ import pybullet_data
 
 from defgg_ros.constants import (
     GRIPPER_MAX_WIDTH_M,
+    OFF_TABLE_DEPTH_M,
     PANDA_FINGER_JOINT_NAMES,
     PANDA_JOINT_NAMES,
     PANDA_READY_Q_RAD,
@@ -45,8 +46,6 @@ TCP_LINK_NAME = "panda_grasptarget"
 SETTLE_TIME_S = 0.3
 # How often (sim time) soft objects are woken up / put to sleep.
 SOFT_ACTIVITY_PERIOD_S = 0.05
-# An object this far below the table top has left the table (its height on the table is >= 0).
-OFF_TABLE_BELOW_M = 0.05
 
 
 @dataclass
@@ -291,7 +290,7 @@ class SimCell:
                 poses.append((nodes.mean(axis=0), np.array([0.0, 0.0, 0.0, 1.0])))
         return poses
 
-    def objects_off_the_table(self, poses: list, below_m: float = OFF_TABLE_BELOW_M) -> list:
+    def objects_off_the_table(self, poses: list, below_m: float = OFF_TABLE_DEPTH_M) -> list:
         """[(name, xyz)] of the objects (poses: object_poses()) more than below_m under the table top
         (z = 0): fallen off an edge, or through the top when an FEM body's simulation failed. Nothing in
         the cell brings them back."""

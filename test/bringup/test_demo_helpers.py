@@ -67,6 +67,12 @@ def test_table_summary_and_figure(tmp_path):
     table = format_table(rows)
     assert "sponge" in table and "31.0" in table and "2e+09" in table and "PlanGrasp: no object" in table
     assert " 63 " in table and "0.68" in table          # estimated mass (g) and the force it closed with (N)
+    placed_but_gone = PickRow("block", 2e6, "soft", 0.064, 1.0, "done", True, True, False,
+                              final_position_m=(0.734, -0.0816, -12306.607))
+    assert "left the table after the pick: ended at (0.73, -0.08, -12306.61) m" in format_table([placed_but_gone])
+    placed_beside = PickRow("block", 2e6, "soft", 0.064, 1.0, "done", True, True, False,
+                            final_position_m=(0.2, -0.3, 0.02))
+    assert "ended outside the bin at (0.20, -0.30, 0.02) m" in format_table([placed_beside])
     summary = write_summary(tmp_path / "summary.json", rows, {"scene": "x"})
     loaded = json.loads((tmp_path / "summary.json").read_text())
     assert loaded == json.loads(json.dumps(summary))
