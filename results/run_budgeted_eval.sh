@@ -32,6 +32,7 @@ refresh() {
 
 $EVAL run --out $OUT --sets common --experiments main --plan-only --no-progress${PROTOCOL_FROM:+ --protocol-from $PROTOCOL_FROM}
 $RUN --sets common --experiments main --tasks shake --ranks 1
+$EVAL strategy --out $OUT > /dev/null     # the strategy figure: predictions only, no simulation
 refresh "common set, best grasp, shake"
 $RUN --sets common --experiments main --tasks shake
 refresh "common set, 5 grasps, shake"
