@@ -270,6 +270,7 @@ def test_an_object_that_leaves_the_table_is_reported_once_on_rosout(driver, clie
     from rosgraph_msgs.msg import Clock
 
     from defgg_ros.nodes import qos
+    from defgg_ros.nodes.conversions import stamp_to_ns
 
     logs = []
     client.create_subscription(Log, "/rosout", logs.append, 100)
@@ -282,8 +283,8 @@ def test_an_object_that_leaves_the_table_is_reported_once_on_rosout(driver, clie
         return [m for m in logs if m.name == "fake_panda_driver" and "left the table" in m.msg]
 
     spin(executor, reports, TIMEOUT_S, "an error on /rosout")
-    reported_s = clocks[-1].clock.sec + clocks[-1].clock.nanosec * 1e-9
-    spin(executor, lambda: clocks[-1].clock.sec + clocks[-1].clock.nanosec * 1e-9 > reported_s + 1.0, TIMEOUT_S,
+    reported_ns = stamp_to_ns(clocks[-1].clock)
+    spin(executor, lambda: stamp_to_ns(clocks[-1].clock) > reported_ns + 1_000_000_000, TIMEOUT_S,
          "1 s of sim time after the report")
     (report,) = reports()                   # once, though it is still under the table at every check since
     assert report.level == Log.ERROR
