@@ -5,15 +5,19 @@ The network's quality output is linear; where it overshoots 1 over an object, th
 top-left edge); since 2026-11-28 the ranking reads the quality before the clip (grasping/postprocess.py).
 This prints, per model and split, the top-1 rectangle accuracy (the training's validation metric) under
 both rankings, and how often the clipped ranking's top-1 grasp was a tie at quality 1.0; with --eval,
-also the share of an evaluation's graded grasps at reported quality 1.0 (possibly such a tie).
+also the share of an evaluation's graded (trials.jsonl) or planned (plans.json) grasps at reported quality 1.0
+(possibly such a tie).
 
     .venv/bin/python bench/bench_rank_clip.py     # the shipped pair on models/train_data_fem_v5.tar.gz
-    .venv/bin/python bench/bench_rank_clip.py --eval results/sim_v4/trials.jsonl.gz
+    .venv/bin/python bench/bench_rank_clip.py --eval results/sim_v4/trials.jsonl.gz --models
+    git show acb5d4f:results/sim_v5/plans.json > /tmp/clipped_plans.json     # sim_v5's discarded first start
+    .venv/bin/python bench/bench_rank_clip.py --eval /tmp/clipped_plans.json --models
 """
 from __future__ import annotations
 
 import argparse
 import collections
+import json
 import sys
 import tarfile
 import tempfile
@@ -43,7 +47,7 @@ def parse_args(argv=None):
                    default=[ROOT / "models/defgg_cnn.pt", ROOT / "models/ggcnn_depth_only.pt"])
     p.add_argument("--seed", type=int, default=0, help="the training's split seed (the model cards: 0)")
     p.add_argument("--eval", nargs="*", type=Path, default=[],
-                   help="evaluation trial files (trials.jsonl[.gz]): share of graded grasps at quality 1.0")
+                   help="evaluation files (trials.jsonl[.gz] or plans.json): share of grasps at quality 1.0")
     return p.parse_args(argv)
 
 
@@ -67,17 +71,29 @@ def score(predictor: GraspPredictor, samples) -> dict:
     return {"n": len(samples), "ties": ties, **{k: float(np.mean(v)) for k, v in hits.items()}}
 
 
-def print_eval_ties(path: Path) -> None:
-    """Per model: graded trials whose grasp's reported (clipped) quality is 1.0."""
-    at_one, graded = collections.Counter(), collections.Counter()
+def _qualities(path: Path):
+    """(model, reported quality) of each graded trial (trials.jsonl[.gz]) or planned grasp (plans.json)."""
+    if path.name.endswith("plans.json"):
+        for plan in json.loads(path.read_text(encoding="utf-8")):
+            for grasp in plan["grasps"]:
+                yield plan["view"]["model"], grasp["quality"]
+        return
     for r in read_jsonl(path):
         quality = (r.get("grasp") or {}).get("quality")
         if quality is not None and r.get("success") is not None:
-            graded[r["model"]] += 1
-            at_one[r["model"]] += quality >= 1.0
-    for model in sorted(graded):
-        print(f"{path}: {model}: {at_one[model]} of {graded[model]} graded grasps at quality 1.0 "
-              f"({100 * at_one[model] / graded[model]:.0f} %)")
+            yield r["model"], quality
+
+
+def print_eval_ties(path: Path) -> None:
+    """Per model: graded trials (or planned grasps) whose reported (clipped) quality is 1.0."""
+    at_one, counted = collections.Counter(), collections.Counter()
+    for model, quality in _qualities(path):
+        counted[model] += 1
+        at_one[model] += quality >= 1.0
+    what = "planned" if path.name.endswith("plans.json") else "graded"
+    for model in sorted(counted):
+        print(f"{path}: {model}: {at_one[model]} of {counted[model]} {what} grasps at quality 1.0 "
+              f"({100 * at_one[model] / counted[model]:.0f} %)")
 
 
 def main(argv=None) -> int:
