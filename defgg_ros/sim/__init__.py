@@ -9,7 +9,8 @@ Layers (imports point down only):
 - geometry and meshes: ``shapes``, ``library``, ``meshes`` (no PyBullet state).
 - the grasp trials (data generator, evaluation): ``world``, ``objects``, ``hand``, ``camera``,
   ``sampler``, ``trial`` (the trial protocols, docs/dataset.md "Trial protocols").
-- the simulated cell (fake Panda + RealSense driver): ``scene_spec``, ``cell`` and its ``cell_*`` parts.
+- the simulated cell (fake Panda + RealSense driver): ``scene_spec``, ``cell`` and its ``cell_*`` parts;
+  ``cell_sequence`` runs a pick-and-place sequence against a cell in one process (tests, benches).
 
 API overview (stable):
 

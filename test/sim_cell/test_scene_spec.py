@@ -7,6 +7,7 @@ from defgg_ros.constants import MAX_SOFT_BODY_YOUNGS_MODULUS_PA
 from defgg_ros.sim.scene_spec import SceneError, load_scene, parse_scene
 
 SCENES = Path(__file__).resolve().parents[2] / "sim_bringup" / "scenes"
+SESSION_SCENES = SCENES.parent / "sessions" / "scenes"
 
 
 def _scene(**obj):
@@ -16,7 +17,8 @@ def _scene(**obj):
     return {"objects": [base]}
 
 
-@pytest.mark.parametrize("path", sorted(SCENES.glob("*.yaml")), ids=lambda p: p.name)
+@pytest.mark.parametrize("path", sorted([*SCENES.glob("*.yaml"), *SESSION_SCENES.glob("*.yaml")]),
+                         ids=lambda p: f"{p.parent.name}/{p.name}")
 def test_shipped_scenes_parse(path):
     scene = load_scene(path)
     assert scene.objects
@@ -68,3 +70,21 @@ def test_missing_file_and_bad_yaml(tmp_path):
     bad.write_text("objects: [\n")
     with pytest.raises(SceneError, match="YAML"):
         load_scene(bad)
+
+
+def test_an_object_off_the_table_is_rejected():
+    with pytest.raises(SceneError, match="object a: position_xy_m .* is off the table's top"):
+        parse_scene(_scene(position_xy_m=[0.5, 0.6]))     # the default table reaches y 0.5 m
+
+
+@pytest.mark.parametrize("center_y_m, accepted", [(-0.45, False), (-0.37, True)])
+def test_a_bin_over_the_table_edge_is_rejected(center_y_m, accepted):
+    # The default table reaches y -0.5 m; a 0.22 m bin with 1 cm walls reaches 0.12 m from its centre.
+    raw = _scene()
+    raw["bin"] = {"center_xy_m": [0.35, center_y_m], "inner_size_m": [0.22, 0.22, 0.06]}
+    if accepted:
+        assert parse_scene(raw).bin.center_xy_m == (0.35, center_y_m)
+    else:
+        with pytest.raises(SceneError, match=r"bin's walls \(x 0.230 ... 0.470 m, y -0.570 ... -0.330 m\) reach "
+                                             r"beyond the table's top"):
+            parse_scene(raw)
