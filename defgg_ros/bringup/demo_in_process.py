@@ -32,18 +32,25 @@ def bin_dict(scene: SceneSpec) -> dict:
     return {"center_xy_m": list(scene.bin.center_xy_m), "inner_size_m": list(scene.bin.inner_size_m)}
 
 
+def closing_width_m(spec) -> float:
+    """The object's extent along the fingers' closing direction at its own yaw (the grasp's yaw is the closing
+    direction): a box's x side, a cylinder's diameter."""
+    return float(spec.size_m[0])
+
+
 def pick_into_bin(scene: SceneSpec, name: str, sequence_config, slot: int, offset_xy_m=(0.0, 0.0),
                   yaw_offset_rad: float = 0.0, finger_force_n: float = 0.0, release_max_z_m: float = 0.12,
                   settle_s: float = 4.0) -> PlacedObject:
-    """Grasp the object at its top centre (moved by offset_xy_m, turned by yaw_offset_rad from its yaw, the
-    width of its second side), place it as the demo does in the bin's slot-th quadrant, then settle_s more."""
+    """Grasp the object at its top centre (moved by offset_xy_m, turned by yaw_offset_rad from its yaw,
+    closing across its x side), place it as the demo does in the bin's slot-th quadrant, then settle_s more."""
     index = [o.name for o in scene.objects].index(name)
     spec = scene.objects[index]
     cell = SimCell(scene)
     try:
         start, _ = cell.object_poses()[index]
         grasp = GraspTarget((start[0] + offset_xy_m[0], start[1] + offset_xy_m[1], spec.height_m),
-                            spec.yaw_rad + yaw_offset_rad, spec.size_m[1], spec.youngs_modulus_pa, finger_force_n)
+                            spec.yaw_rad + yaw_offset_rad, closing_width_m(spec), spec.youngs_modulus_pa,
+                            finger_force_n)
         bins = bin_dict(scene)
         x, y = bin_place_xy(bins, slot)
         place = PlaceTarget((x, y, release_tcp_z(spec.height_m, bins, release_max_z_m)), None)
