@@ -80,6 +80,9 @@ class TabletopGrasp:
     network_width_m: float       # the network's width at the peak (training pixels x CELL_M), for reference
     youngs_modulus_pa: float
     cell_rc: tuple               # (row, col) in the height map
+    # The smoothed quality at the peak before its clip to [0, 1]: what grasps are ranked on (the clipped
+    # quality ties at 1.0 wherever the network overshoots; docs/model.md "Post-processing").
+    rank_quality: float = float("nan")
 
 
 def virtual_depth(view: TabletopView) -> np.ndarray:
@@ -221,9 +224,9 @@ def search_tabletop(prepared: TabletopNetworkView, top_k: int = 1, targets=None)
         if len(whole) < top_k else {}
     ranked = []
     for group in (whole, cut):
-        ranked += sorted((g[0] for g in group.values()), key=lambda g: -g.quality)
+        ranked += sorted((g[0] for g in group.values()), key=lambda g: -g.rank_quality)
     for group in (whole, cut):
-        ranked += sorted((g for gs in group.values() for g in gs[1:]), key=lambda g: -g.quality)
+        ranked += sorted((g for gs in group.values() for g in gs[1:]), key=lambda g: -g.rank_quality)
     return TabletopPlan(ranked[:top_k], maps.q)
 
 
@@ -232,9 +235,10 @@ def _grasps_by_object(prepared: TabletopNetworkView, labels, top_k: int) -> dict
     best_q = prepared.best_q
     per_object = {}
     # Objects in the order of their best quality: a grasp on an object never scores above its best
-    # peak, so once top_k objects have a grasp better than the next object's best peak, stop.
+    # peak, so once top_k objects have a grasp better than the next object's best peak, stop (both on the
+    # quality before its clip: on the clipped one a grasp at 1.0 never beat a best peak above 1).
     for label in sorted(labels, key=lambda lab: -best_q[lab]):
-        firsts = sorted((g[0].quality for g in per_object.values()), reverse=True)
+        firsts = sorted((g[0].rank_quality for g in per_object.values()), reverse=True)
         if len(firsts) >= top_k and firsts[top_k - 1] >= best_q[label]:
             break
         found = _object_grasps(prepared, label, top_k)
@@ -259,7 +263,8 @@ def _object_grasps(prepared: TabletopNetworkView, label: int, top_k: int) -> lis
         probes = _centre_lines(view, prepared.space, todo, [angle for angle, _ in at],
                                object_face_angles(view, label, box))
         grasps = _feasible_at_peaks(view, label, todo, probes, [width_px * CELL_M for _, width_px in at],
-                                    [float(maps.q[row, col]) for row, col in todo], prepared.moduli, prepared.space)
+                                    [(float(maps.q[row, col]), float(maps.q_unclipped[row, col])) for row, col in todo],
+                                    prepared.moduli, prepared.space)
         memo.update(((label, cell), grasp) for cell, grasp in zip(todo, grasps))
     found = []
     for cell in cells:
@@ -268,7 +273,7 @@ def _object_grasps(prepared: TabletopNetworkView, label: int, top_k: int) -> lis
             found.append(grasp)
             if len(found) >= top_k:
                 break
-    return sorted(found, key=lambda g: -g.quality)
+    return sorted(found, key=lambda g: -g.rank_quality)
 
 
 def _distinct(a: TabletopGrasp, b: TabletopGrasp) -> bool:
@@ -363,11 +368,14 @@ def candidate_angles(angle_rad: float, face_angles=()) -> np.ndarray:
 
 
 def feasible_grasp(view: TabletopView, label: int, row: int, col: int, angle_rad: float, network_width_m: float,
-                   quality: float, moduli: np.ndarray, space: FreeSpace, face_angles=()) -> TabletopGrasp | None:
+                   quality: float, moduli: np.ndarray, space: FreeSpace, face_angles=(),
+                   rank_quality: float | None = None) -> TabletopGrasp | None:
     """The grasp at cell (row, col) with the first feasible closing direction of candidate_angles
-    (map angles: from columns towards rows), or None when no direction is feasible."""
+    (map angles: from columns towards rows), or None when no direction is feasible. rank_quality: the
+    quality before its clip (default: quality)."""
     probes = _centre_lines(view, space, [(row, col)], [angle_rad], face_angles)
-    return _feasible_at_peaks(view, label, [(row, col)], probes, [network_width_m], [quality], moduli, space)[0]
+    qualities = [(quality, quality if rank_quality is None else rank_quality)]
+    return _feasible_at_peaks(view, label, [(row, col)], probes, [network_width_m], qualities, moduli, space)[0]
 
 
 # Samples along a closing line, in cells from the centre: a run longer than the widest fitting extent
@@ -391,8 +399,8 @@ def _centre_lines(view: TabletopView, space: FreeSpace, cells, angles, face_angl
 
 
 def _feasible_at_peaks(view, label, cells, probes, network_widths_m, qualities, moduli, space) -> list:
-    """feasible_grasp at each peak (cells: (row, col) each, probes: their _centre_lines), all peaks in
-    one pass: per peak its grasp or None."""
+    """feasible_grasp at each peak (cells: (row, col) each, probes: their _centre_lines, qualities: (clipped,
+    before the clip) each), all peaks in one pass: per peak its grasp or None."""
     levels = np.array([probe[0] for probe in probes])
     directions = np.stack([probe[1] for probe in probes])                # P x A x 2
     n_peaks, n_dirs = directions.shape[:2]
@@ -502,18 +510,21 @@ def _pads_free(view, space: FreeSpace, level_m, centres, directions, widths_m) -
     return np.all(np.mean(~free, axis=2) <= PAD_BLOCKED_FRACTION, axis=1)
 
 
-def _grasp(view, label, quality, r, c, direction, width, extent_m, network_width_m, modulus) -> TabletopGrasp:
+def _grasp(view, label, qualities, r, c, direction, width, extent_m, network_width_m, modulus) -> TabletopGrasp:
+    """qualities: (the clipped quality it reports, the quality before the clip it is ranked on)."""
     x, y = view.cell_xy_m(r, c)
     z = float(view.table_z_at(x, y)) + float(view.grid_height_m[r, c])
     normal = np.asarray(view.table_normal, float)
     closing = np.array([direction[0], direction[1], 0.0])      # rows = +x, columns = +y
     closing -= normal * (closing @ normal)
     closing /= np.linalg.norm(closing)
+    quality, rank_quality = qualities
     return TabletopGrasp(object_id=int(label), quality=float(quality), position_base_m=(float(x), float(y), z),
                          closing_direction_base=tuple(closing.tolist()),
                          approach_direction_base=tuple((-normal).tolist()), width_m=float(width),
                          extent_m=float(extent_m), network_width_m=float(network_width_m),
-                         youngs_modulus_pa=float(modulus), cell_rc=(int(r), int(c)))
+                         youngs_modulus_pa=float(modulus), cell_rc=(int(r), int(c)),
+                         rank_quality=float(rank_quality))
 
 
 def base_T_grasp(grasp: TabletopGrasp) -> np.ndarray:
