@@ -213,9 +213,9 @@ def test_feasibility_of_all_peaks_in_one_pass_is_that_of_each_alone(seed):
         angles = rng.random(len(cells)) * math.pi
         faces = tg.object_face_angles(view, label, box)
         probes = tg._centre_lines(view, space, cells, list(angles), faces)
-        widths, qualities = [0.03] * len(cells), list(rng.random(len(cells)))
+        widths, qualities = [0.03] * len(cells), [(q, q + 0.5) for q in rng.random(len(cells))]  # (clipped, not)
         together = tg._feasible_at_peaks(view, label, cells, probes, widths, qualities, moduli, space)
-        for (row, col), angle, q, grasp in zip(cells, angles, qualities, together):
-            assert grasp == tg.feasible_grasp(view, label, row, col, angle, 0.03, q, moduli, space, faces)
+        for (row, col), angle, (q, q_rank), grasp in zip(cells, angles, qualities, together):
+            assert grasp == tg.feasible_grasp(view, label, row, col, angle, 0.03, q, moduli, space, faces, q_rank)
             found += grasp is not None
     assert found >= 5
