@@ -40,8 +40,7 @@ def parse_args(argv=None):
     parser.add_argument("--scene", type=Path, default=SCENE, help="scene YAML (default: the demo's)")
     parser.add_argument("--table-before-2026-11-28", dest="old_table", action="store_true",
                         help="the demo table as it was (1.2 x 1.0 m about (0.45, 0)): the bin's walls hung 7 cm "
-                             "over its edge (scene files are now refused when they do, so the table is swapped in "
-                             "here)")
+                             "over its edge (the scene files no longer do; the table is swapped in here)")
     parser.add_argument("--trials", type=int, default=20, help="picks, each in a fresh cell (~21 CPU s each)")
     parser.add_argument("--seed", type=int, default=1, help="seed of the grasp offsets and turns")
     parser.add_argument("--object", default="rubber_block", help="scene object to pick (default rubber_block)")

@@ -46,7 +46,7 @@ from defgg_ros.sim.cell import CellSettings, SimCell
 from defgg_ros.sim.cell_camera import DepthNoise
 from defgg_ros.sim.cell_gripper import GripperCommandError
 from defgg_ros.sim.cell_trajectory import TrajectoryError
-from defgg_ros.sim.scene_spec import SceneError, load_scene
+from defgg_ros.sim.scene_spec import SceneError, load_scene, scene_warnings
 
 SCENE_TOPIC = topics.FAKE_SCENE
 OBJECT_POSES_TOPIC = topics.FAKE_OBJECT_POSES
@@ -89,6 +89,8 @@ class FakePandaDriver(Node):
             f"({sum(o.is_soft for o in self.cell.scene.objects)} soft), "
             f"{'deformable' if self.cell.scene.has_soft_objects else 'rigid'} world, "
             f"step {self.cell.time_step_s * 1e3:.2f} ms, {'GUI' if settings.gui else 'headless'}")
+        for warning in scene_warnings(self.cell.scene):
+            self.get_logger().warning(f"scene {scene_path}: {warning}")
         self._lock = threading.Lock()
         self._waiters = {}           # gripper token -> [threading.Event, GripperOutcome | None]
         self._advanced = threading.Condition()  # notified after every control period of the sim thread

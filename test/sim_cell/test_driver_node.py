@@ -289,3 +289,30 @@ def test_an_object_that_leaves_the_table_is_reported_once_on_rosout(driver, clie
     (report,) = reports()                   # once, though it is still under the table at every check since
     assert report.level == Log.ERROR
     assert "wooden_block" in report.msg
+
+
+def test_a_bin_over_the_table_edge_is_warned_about_at_start_up(executor, rclpy_context, client, spin, tmp_path):
+    """A warning, not a refusal: a recorded session replays the scene it was recorded with (docs/sessions.md)."""
+    from rcl_interfaces.msg import Log
+    from rclpy.qos import DurabilityPolicy, QoSProfile
+
+    from defgg_ros.nodes.fake_panda_driver_node import FakePandaDriver
+
+    scene = tmp_path / "bin_over_the_edge.yaml"
+    scene.write_text((SCENES / "rigid_box.yaml").read_text().replace(
+        "table: {size_m: [1.2, 1.2, 0.05], center_xy_m: [0.45, -0.1]}", "table: {size_m: [1.2, 1.0, 0.05]}"))
+    logs = []
+    client.create_subscription(Log, "/rosout", logs.append,
+                               QoSProfile(depth=1000, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    node = FakePandaDriver(context=rclpy_context, parameter_overrides=[
+        Parameter("scene_file", value=str(scene)), Parameter("max_real_time_factor", value=0.0)])
+    executor.add_node(node)
+    try:
+        def warnings():
+            return [m for m in logs if m.name == "fake_panda_driver" and "bin's walls" in m.msg]
+
+        spin(executor, warnings, TIMEOUT_S, "the start-up warning on /rosout")
+        (warning,) = warnings()
+        assert warning.level == Log.WARN and "y -0.560 ... -0.340 m) reach beyond the table's top" in warning.msg
+    finally:
+        node.shutdown()
