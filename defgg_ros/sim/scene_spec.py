@@ -213,8 +213,9 @@ def scene_warnings(scene: SceneSpec) -> list:
     """What a scene allows but a cell would not be built like, one sentence each (the driver logs them).
 
     The bin's walls beyond the table: the table is the bin's floor, so an object placed over the edge rests
-    on the FEM contact at the edge. The shipped scenes' bin did (its walls by 7 cm) and the demo's rubber
-    block fell off in 1 of 12 runs, 2 of 24 in-process placements (bench/bench_release_in_bin.py). A warning,
+    on the FEM contact at the edge. Until 2026-11-28 the shipped scenes' bin reached 7 cm beyond the table and
+    the demo's rubber block fell off in 1 of 12 runs, 2 of 24 in-process placements
+    (bench/bench_release_in_bin.py). A warning,
     not an error: a recorded session replays the scene it was recorded with (docs/sessions.md).
     """
     if scene.bin is None:
