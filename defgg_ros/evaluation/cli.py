@@ -404,16 +404,16 @@ def write_diagnostics(out_dir, data_root) -> None:
     results = results_path(out_dir)
     records = read_results(results) if results.is_file() else []
     replicates, ranking = diagnose.replicate_flips(records), diagnose.quality_ranking(records)
-    twist_axes = diagnose.twist_by_axis(records)
-    if labels is None and shifts is None and replicates is None and ranking is None and twist_axes is None:
+    twist_axes, model_pairs = diagnose.twist_by_axis(records), diagnose.model_grasp_pairs(records)
+    if all(v is None for v in (labels, shifts, replicates, ranking, twist_axes, model_pairs)):
         return
     write_json_atomic(path, {"labels": labels, "data_root": str(data_root or old.get("data_root")),
                              "plan_shifts": shifts, "replicates": replicates, "quality_ranking": ranking,
-                             "twist_by_axis": twist_axes})
+                             "twist_by_axis": twist_axes, "model_grasp_pairs": model_pairs})
     from defgg_ros.atomic import write_text_atomic
 
     write_text_atomic(out_dir / "diagnostics.md", diagnose.diagnostics_markdown(labels, shifts, replicates, ranking,
-                                                                                    twist_axes))
+                                                                                    twist_axes, model_pairs))
 
 
 def cmd_strategy(args) -> int:

@@ -263,6 +263,62 @@ def quality_ranking(records) -> dict | None:
     return {k: {**v, "rate": v["concordant"] / v["pairs"]} for k, v in sorted(out.items())} or None
 
 
+NEAR_GRASP_MM, NEAR_GRASP_DEG = 5.0, 15.0     # two grasps this close are "the same grasp" for the pairing
+
+
+def model_grasp_pairs(records) -> dict | None:
+    """Per "task|object set", over the graded main-experiment trials (correct input) that two models ran on
+    one view and rank: how many were the identical simulation (the same grasp, so the same outcome by
+    construction), how many near (centres <= NEAR_GRASP_MM, closing directions <= NEAR_GRASP_DEG apart) and
+    how many apart, and in each how often the outcomes differ. Near pairs that differ measure how much of the
+    paired comparison is the simulator's sensitivity to a small change of grasp, not a different choice.
+    None without two models on a view."""
+    by_view = defaultdict(dict)
+    for r in records:
+        if is_main_correct_input(r) and r.get("grasp") and r.get("success") is not None:
+            by_view[(r["task"], r["object_set"], r["object"], r["youngs_modulus_pa"], r["rank"])][r["model"]] = r
+    out = defaultdict(lambda: {"pairs": 0, "identical": 0, "near": 0, "near_differ": 0, "apart": 0,
+                               "apart_differ": 0, "distances_mm": []})
+    for (task, object_set, *_), models in by_view.items():
+        if len(models) != 2:
+            continue
+        a, b = models.values()
+        cell = out[f"{task}|{object_set}"]
+        cell["pairs"] += 1
+        if a.get("sim_key") and a.get("sim_key") == b.get("sim_key"):
+            cell["identical"] += 1
+            continue
+        ga, gb = a["grasp"], b["grasp"]
+        d_mm = 1000 * math.dist(ga["position_m"][:2], gb["position_m"][:2])
+        cell["distances_mm"].append(d_mm)
+        kind = "near" if d_mm <= NEAR_GRASP_MM and _grasp_turn_deg(ga["yaw_rad"], gb["yaw_rad"]) <= NEAR_GRASP_DEG \
+            else "apart"
+        cell[kind] += 1
+        cell[f"{kind}_differ"] += int(bool(a["success"]) != bool(b["success"]))
+    return {k: {**{n: v for n, v in c.items() if n != "distances_mm"},
+                "median_distance_mm": float(np.median(c["distances_mm"])) if c["distances_mm"] else None}
+            for k, c in sorted(out.items())} or None
+
+
+def _model_pairs_markdown(pairs: dict | None) -> list:
+    if not pairs:
+        return []
+    lines = ["**Do the two models choose different grasps?** (main experiment, correct input: the two models' "
+             f"graded trials on one view and rank; near = centres <= {NEAR_GRASP_MM:.0f} mm and closing directions "
+             f"<= {NEAR_GRASP_DEG:.0f} deg apart; an identical simulation has the same outcome by construction)", "",
+             "| task | object set | pairs | identical simulation | near: outcomes differ | apart: outcomes differ | "
+             "median distance (mm) |", "|---|---|---|---|---|---|---|"]
+
+    def share(k, n):
+        return f"{k} of {n} ({100 * k / n:.1f} %)" if n else "–"
+    for key, v in pairs.items():
+        task, object_set = key.split("|")
+        median = "–" if v["median_distance_mm"] is None else f"{v['median_distance_mm']:.1f}"
+        lines.append(f"| {task} | {object_set} | {v['pairs']} | {v['identical']} | "
+                     f"{share(v['near_differ'], v['near'])} | {share(v['apart_differ'], v['apart'])} | {median} |")
+    return lines + [""]
+
+
 TWIST_AXIS_NAMES = ("x", "y", "z")    # sim.trial.TWIST_AXES in pairs: +x, -x, +y, -y, +z, -z
 
 
@@ -309,7 +365,8 @@ def _twist_axes_markdown(axes: dict | None) -> list:
 
 
 def diagnostics_markdown(labels: dict | None, shifts: dict | None, replicates: dict | None = None,
-                         ranking: dict | None = None, twist_axes: dict | None = None) -> str:
+                         ranking: dict | None = None, twist_axes: dict | None = None,
+                         model_pairs: dict | None = None) -> str:
     lines = []
     if labels:
         lines += [f"**Training labels by modulus** (`{labels.get('data_root', 'the dataset')}`)", "",
@@ -353,6 +410,7 @@ def diagnostics_markdown(labels: dict | None, shifts: dict | None, replicates: d
             task, object_set, model = key.split("|")
             lines.append(f"| {task} | {object_set} | {model} | {v['pairs']} | {100 * v['rate']:.1f} % |")
         lines.append("")
+    lines += _model_pairs_markdown(model_pairs)
     lines += _twist_axes_markdown(twist_axes)
     return "\n".join(lines)
 

@@ -178,3 +178,28 @@ def test_twist_by_axis_counts_an_axis_only_where_the_trial_reached_it():
     md = "\n".join(diagnose._twist_axes_markdown(axes))
     assert "| 2e+04 | 4 | 1 | 3 | 100.0 % of 3 | 66.7 % of 3 | 50.0 % of 2 |" in md
     assert diagnose.twist_by_axis([_twist(2e4, "ok", [full] * 6, task="shake")]) is None
+
+
+def test_model_grasp_pairs_split_the_two_models_grasps_into_identical_near_and_apart():
+    import math
+
+    def trial(model, success, xy, yaw=0.0, obj="a", rank=0, sim_key=None, experiment="main"):
+        r = _trial(experiment, success, yaw=yaw, rank=rank, input_error_pct=0.0,
+                   sim_key=sim_key or f"{model}{obj}{rank}")
+        r["model"], r["object"], r["grasp"]["position_m"] = model, obj, [*xy, 0.02]
+        return r
+
+    records = [trial("stiff", True, (0.0, 0.0)), trial("depth", False, (0.003, 0.0), yaw=math.pi - 0.1),  # near
+               trial("stiff", True, (0.0, 0.0), rank=1), trial("depth", True, (0.0, 0.004), yaw=0.5, rank=1),  # turned
+               trial("stiff", True, (0.0, 0.0), obj="b"), trial("depth", False, (0.02, 0.0), obj="b"),         # apart
+               trial("stiff", True, (0.0, 0.0), obj="c", sim_key="k"),
+               trial("depth", True, (0.0, 0.0), obj="c", sim_key="k"),                             # identical
+               trial("stiff", None, (0.0, 0.0), obj="d"), trial("depth", True, (0.0, 0.0), obj="d"),  # not graded
+               trial("stiff", True, (0.0, 0.0), obj="e"),                                           # one model
+               trial("depth", False, (0.0, 0.0), obj="e", experiment="sensitivity")]
+    pairs = diagnose.model_grasp_pairs(records)
+    assert pairs == {"shake|common": {"pairs": 4, "identical": 1, "near": 1, "near_differ": 1, "apart": 2,
+                                      "apart_differ": 1, "median_distance_mm": 4.0}}
+    md = diagnose.diagnostics_markdown(None, None, model_pairs=pairs)
+    assert "| shake | common | 4 | 1 | 1 of 1 (100.0 %) | 1 of 2 (50.0 %) | 4.0 |" in md
+    assert diagnose.model_grasp_pairs([trial("stiff", True, (0.0, 0.0))]) is None
