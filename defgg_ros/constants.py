@@ -61,6 +61,21 @@ PANDA_Q_MAX_RAD = (2.8973, 1.7628, 2.8973, -0.0698, 2.8973, 3.7525, 2.8973)
 PANDA_QD_MAX_RADPS = (2.1750, 2.1750, 2.1750, 2.1750, 2.6100, 2.6100, 2.6100)
 PANDA_QDD_MAX_RADPS2 = (15.0, 7.5, 10.0, 12.5, 15.0, 20.0, 20.0)
 PANDA_QDDD_MAX_RADPS3 = (7500.0, 3750.0, 5000.0, 6250.0, 7500.0, 10000.0, 10000.0)
+# --- Franka Research 3 (FR3) arm limits (Franka's FR3 datasheet, "Limits for Franka Research 3") ------
+# The same kinematic structure as the Panda, other ranges: joint 6 stays above 0.5445 rad, joint 4 below
+# -0.1518 rad. The velocity bound is the constant one; the FR3's controller also lowers it near the ends of
+# a joint's range (from the joint position), which is not modelled here (docs/real_cell.md).
+FR3_Q_MIN_RAD = (-2.7437, -1.7837, -2.9007, -3.0421, -2.8065, 0.5445, -3.0159)
+FR3_Q_MAX_RAD = (2.7437, 1.7837, 2.9007, -0.1518, 2.8065, 4.5169, 3.0159)
+FR3_QD_MAX_RADPS = (2.62, 2.62, 2.62, 2.62, 5.26, 4.18, 5.26)
+FR3_QDD_MAX_RADPS2 = (10.0, 10.0, 10.0, 10.0, 10.0, 10.0, 10.0)
+FR3_QDDD_MAX_RADPS3 = (5000.0, 5000.0, 5000.0, 5000.0, 5000.0, 5000.0, 5000.0)
+# Per arm model (the executor's joint_limits): position min, max, velocity, acceleration, jerk.
+ARM_JOINT_LIMITS = {
+    "panda": (PANDA_Q_MIN_RAD, PANDA_Q_MAX_RAD, PANDA_QD_MAX_RADPS, PANDA_QDD_MAX_RADPS2, PANDA_QDDD_MAX_RADPS3),
+    "fr3": (FR3_Q_MIN_RAD, FR3_Q_MAX_RAD, FR3_QD_MAX_RADPS, FR3_QDD_MAX_RADPS2, FR3_QDDD_MAX_RADPS3),
+}
+ARM_MODELS = tuple(ARM_JOINT_LIMITS)
 # A comfortable "ready" configuration above the table.
 PANDA_READY_Q_RAD = (0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785)
 

@@ -6,7 +6,8 @@ same geometry). The two finger joints are locked: only the 7 arm joints move.
 A `panda_tcp` frame is added at the fingertip centre (franka_ros default TCP), with its x
 axis along the fingers' closing direction (the hand's y axis; see PANDA_TCP_YAW_RAD).
 Joint limits are Franka's datasheet values from `defgg_ros.constants`, which
-are tighter than the URDF's.
+are tighter than the URDF's: the Panda's, or the FR3's (`arm="fr3"`: the same
+kinematic structure, other joint ranges).
 """
 import math
 from dataclasses import dataclass
@@ -17,10 +18,10 @@ import pinocchio as pin
 import pybullet_data
 
 from defgg_ros.constants import (
+    ARM_JOINT_LIMITS,
+    ARM_MODELS,
     PANDA_JOINT_NAMES,
     PANDA_MAX_REACH_M,
-    PANDA_Q_MAX_RAD,
-    PANDA_Q_MIN_RAD,
     PANDA_READY_Q_RAD,
     PANDA_SHOULDER_HEIGHT_M,
     PANDA_TCP_OFFSET_M,
@@ -93,14 +94,18 @@ def _arm_model(urdf_path: Path) -> pin.Model:
 
 
 class PandaKinematics:
-    """Forward and inverse kinematics of the Panda's TCP (7 arm joints)."""
+    """Forward and inverse kinematics of the Panda's TCP (7 arm joints), within the joint limits of the arm
+    model `arm` (panda or fr3)."""
 
-    def __init__(self, urdf_path: Path | None = None, seed: int = 0):
+    def __init__(self, urdf_path: Path | None = None, seed: int = 0, arm: str = "panda"):
+        if arm not in ARM_JOINT_LIMITS:
+            raise KinematicsError(f"unknown arm model {arm!r}; known: {', '.join(ARM_MODELS)}")
+        self.arm = arm
         self.model = _arm_model(Path(urdf_path) if urdf_path else panda_urdf_path())
         self.data = self.model.createData()
         self.tcp_id = self.model.getFrameId(TCP_FRAME)
-        self.q_min_rad = np.array(PANDA_Q_MIN_RAD)
-        self.q_max_rad = np.array(PANDA_Q_MAX_RAD)
+        self.q_min_rad = np.array(ARM_JOINT_LIMITS[arm][0])
+        self.q_max_rad = np.array(ARM_JOINT_LIMITS[arm][1])
         self.q_ready_rad = np.array(PANDA_READY_Q_RAD)
         self.restart_seed = seed
         self._link_ids: dict = {}

@@ -51,9 +51,9 @@ from defgg_ros.control.sequence_types import (
     _Plan,
 )
 from defgg_ros.control.trajectories import (
+    arm_limits,
     check_trajectory,
     matched_state,
-    panda_limits,
     plan_joint_motion,
     plan_joint_via,
     plan_line,
@@ -94,7 +94,7 @@ class PickPlaceSequence:
                  place: PlaceTarget | None):
         config.validate()
         self._kin, self._cfg, self._grasp, self._place = kin, config, grasp, place
-        self._limits = panda_limits(config.limits_scale)
+        self._limits = arm_limits(kin.arm, config.limits_scale)   # the kinematics' arm model
         self._obs = _Observed()
         self._pending = _Pending()
         self._motion: _Motion | None = None

@@ -17,11 +17,8 @@ import numpy as np
 from ruckig import ControlInterface, InputParameter, Result, Ruckig, Trajectory
 
 from defgg_ros.constants import (
-    PANDA_Q_MAX_RAD,
-    PANDA_Q_MIN_RAD,
-    PANDA_QD_MAX_RADPS,
-    PANDA_QDD_MAX_RADPS2,
-    PANDA_QDDD_MAX_RADPS3,
+    ARM_JOINT_LIMITS,
+    ARM_MODELS,
 )
 from defgg_ros.control.kinematics import MIN_TCP_HEIGHT_ABOVE_TABLE_M, KinematicsError, PandaKinematics
 
@@ -73,13 +70,19 @@ class JointLimits:
     qddd_max_radps3: np.ndarray
 
 
-def panda_limits(scale: float = LIMITS_SAFETY_SCALE) -> JointLimits:
-    """Franka's limits with velocity/acceleration/jerk scaled by `scale` in (0, 1]."""
+def arm_limits(arm: str = "panda", scale: float = LIMITS_SAFETY_SCALE) -> JointLimits:
+    """The arm model's limits (panda or fr3) with velocity/acceleration/jerk scaled by `scale` in (0, 1]."""
+    if arm not in ARM_JOINT_LIMITS:
+        raise ValueError(f"unknown arm model {arm!r}; known: {', '.join(ARM_MODELS)}")
     if not 0.0 < scale <= 1.0:
         raise ValueError(f"limits scale must be in (0, 1], got {scale}")
-    return JointLimits(np.array(PANDA_Q_MIN_RAD), np.array(PANDA_Q_MAX_RAD),
-                       scale * np.array(PANDA_QD_MAX_RADPS), scale * np.array(PANDA_QDD_MAX_RADPS2),
-                       scale * np.array(PANDA_QDDD_MAX_RADPS3))
+    q_min, q_max, qd, qdd, qddd = (np.array(v) for v in ARM_JOINT_LIMITS[arm])
+    return JointLimits(q_min, q_max, scale * qd, scale * qdd, scale * qddd)
+
+
+def panda_limits(scale: float = LIMITS_SAFETY_SCALE) -> JointLimits:
+    """The Panda's limits with velocity/acceleration/jerk scaled by `scale` in (0, 1]."""
+    return arm_limits("panda", scale)
 
 
 @dataclass(frozen=True)

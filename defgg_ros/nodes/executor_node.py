@@ -139,7 +139,7 @@ class ExecutorNode(Node):
         self._config = self._sequence_config(p)  # invalid start-up parameters raise here
         # Since when the arm rests at the observation pose: plan_grasp goals plan only on later frames.
         self._watch = ObservationWatch(p["observation_q_rad"], p["observation_tolerance_rad"])
-        self._kin = PandaKinematics()
+        self._kin = PandaKinematics(arm=p["joint_limits"])   # plans within that arm's joint ranges
         self._group = ReentrantCallbackGroup()
         self._lock = threading.Lock()
         self._shutdown = threading.Event()

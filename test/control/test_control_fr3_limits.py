@@ -1,0 +1,59 @@
+"""The executor plans within the FR3's limits when its joint_limits parameter says fr3.
+
+Why: the FR3 has the Panda's kinematic structure but other ranges (joint 6 >= 0.5445 rad, joint 4 <= -0.1518 rad)
+and lower accelerations (10 rad/s^2) and jerks (5000 rad/s^3) on several joints; a motion planned within the
+Panda's limits can leave the FR3's, which its controller refuses or stops with a reflex.
+"""
+import numpy as np
+import pytest
+from support.control_fake_robot import FakeRobot, World, run
+
+from defgg_ros.constants import FR3_Q_MAX_RAD, FR3_Q_MIN_RAD, FR3_QDD_MAX_RADPS2, FR3_QDDD_MAX_RADPS3
+from defgg_ros.control.kinematics import KinematicsError, PandaKinematics
+from defgg_ros.control.pick_place import PickPlaceSequence
+from defgg_ros.control.sequence_types import GraspTarget, PlaceTarget, SendTrajectory, SequenceConfig
+from defgg_ros.control.trajectories import TrajectoryError, arm_limits, plan_joint_motion
+
+
+def test_fr3_kinematics_refuse_the_panda_only_joint_ranges():
+    panda, fr3 = PandaKinematics(), PandaKinematics(arm="fr3")
+    q = np.array(panda.q_ready_rad)
+    q[5] = 0.3                       # joint 6: inside the Panda's range, below the FR3's 0.5445 rad
+    assert panda.within_limits(q) and not fr3.within_limits(q)
+    assert np.array_equal(fr3.q_min_rad, FR3_Q_MIN_RAD) and np.array_equal(fr3.q_max_rad, FR3_Q_MAX_RAD)
+    with pytest.raises(KinematicsError, match="unknown arm model 'ur5'; known: panda, fr3"):
+        PandaKinematics(arm="ur5")
+
+
+def test_a_joint_motion_keeps_to_the_fr3s_acceleration_jerk_and_ranges():
+    panda, fr3 = arm_limits("panda", 1.0), arm_limits("fr3", 1.0)
+    start = np.array(PandaKinematics().q_ready_rad)
+    goal = start.copy()
+    goal[6] -= 2.5                   # joint 7 alone: the Panda allows 20 rad/s^2 there, the FR3 10
+    # (and 5.26 rad/s to the Panda's 2.61: the FR3's motion may be the shorter one)
+    on_panda, on_fr3 = plan_joint_motion(start, goal, panda), plan_joint_motion(start, goal, fr3)
+    assert np.abs(on_panda.qdd_radps2[:, 6]).max() > FR3_QDD_MAX_RADPS2[6] * 1.2
+    assert np.abs(on_fr3.qdd_radps2).max() <= FR3_QDD_MAX_RADPS2[6] * (1 + 1e-6)
+    jerk = np.diff(on_fr3.qdd_radps2, axis=0) / np.diff(on_fr3.times_s)[:, None]
+    assert np.abs(jerk).max() <= FR3_QDDD_MAX_RADPS3[6] * (1 + 1e-6)
+    low = start.copy()
+    low[5] = 0.3
+    with pytest.raises(TrajectoryError):
+        plan_joint_motion(start, low, fr3)
+
+
+@pytest.mark.parametrize("arm", ["panda", "fr3"])
+def test_a_whole_pick_sends_only_motions_within_its_arms_limits(arm):
+    kin = PandaKinematics(arm=arm)
+    config = SequenceConfig(limits_scale=0.4, watchdog_timeout_s=0.5)
+    sequence = PickPlaceSequence(kin, config, GraspTarget((0.5, 0.05, 0.03), 0.4, 0.04, 2e5),
+                                 PlaceTarget((0.35, -0.45, 0.12)))
+    robot = FakeRobot(kin, World(object_width_m=0.04))
+    run(sequence, robot)
+    assert sequence.outcome.success, sequence.outcome.failure_reason
+    limits = arm_limits(arm, config.limits_scale)
+    trajectories = [c.trajectory for c in robot.sent if isinstance(c, SendTrajectory)]
+    assert len(trajectories) >= 5
+    for t in trajectories:
+        assert np.all(t.q_rad >= limits.q_min_rad - 1e-9) and np.all(t.q_rad <= limits.q_max_rad + 1e-9)
+        assert np.all(np.abs(t.qdd_radps2) <= limits.qdd_max_radps2 * (1 + 1e-6))
