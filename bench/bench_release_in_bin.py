@@ -27,12 +27,12 @@ sys.path.insert(0, str(ROOT))
 
 from defgg_ros.bringup.demo_in_process import pick_into_bin  # noqa: E402
 from defgg_ros.bringup.node_set import load_node_set  # noqa: E402
+from defgg_ros.constants import OFF_TABLE_DEPTH_M  # noqa: E402
 from defgg_ros.demo import executor_params  # noqa: E402
 from defgg_ros.nodes.executor_node import ExecutorNode  # noqa: E402
 from defgg_ros.sim.scene_spec import load_scene  # noqa: E402
 
 SCENE = ROOT / "sim_bringup" / "scenes" / "demo.yaml"
-UNDER_TABLE_M = -0.05
 
 
 def parse_args(argv=None):
@@ -77,7 +77,7 @@ def main(argv=None) -> int:
         t0 = time.process_time()
         r, offset, yaw_offset = one_trial(args, config, release_max_z_m, rng)
         where = ("pick failed" if not r.success else "in the bin" if r.in_bin else
-                 "under the table" if r.final_m[2] < UNDER_TABLE_M else "elsewhere")
+                 "under the table" if r.final_m[2] < -OFF_TABLE_DEPTH_M else "elsewhere")
         counts[where] += 1
         f = r.final_m
         print(f"{i:3d} offset ({offset[0] * 1e3:+5.1f}, {offset[1] * 1e3:+5.1f}) mm yaw {np.degrees(yaw_offset):+5.1f} "

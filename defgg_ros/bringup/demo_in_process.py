@@ -2,7 +2,7 @@
 the simulated cell (defgg_ros.sim.cell_sequence). Deterministic, so a pick that misbehaved can be replayed
 (bench/bench_release_in_bin.py) and pinned by a test.
 """
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 
 import numpy as np
 
@@ -27,11 +27,6 @@ class PlacedObject:
     fastest_after_release_mps: float
 
 
-def bin_dict(scene: SceneSpec) -> dict:
-    """The scene's bin as the demo reads it from the /fake_panda/scene topic."""
-    return {"center_xy_m": list(scene.bin.center_xy_m), "inner_size_m": list(scene.bin.inner_size_m)}
-
-
 def closing_width_m(spec) -> float:
     """The object's extent along the fingers' closing direction at its own yaw (the grasp's yaw is the closing
     direction): a box's x side, a cylinder's diameter."""
@@ -51,7 +46,7 @@ def pick_into_bin(scene: SceneSpec, name: str, sequence_config, slot: int, offse
         grasp = GraspTarget((start[0] + offset_xy_m[0], start[1] + offset_xy_m[1], spec.height_m),
                             spec.yaw_rad + yaw_offset_rad, closing_width_m(spec), spec.youngs_modulus_pa,
                             finger_force_n)
-        bins = bin_dict(scene)
+        bins = asdict(scene.bin)       # as the demo reads it from the /fake_panda/scene topic (to_json_dict)
         x, y = bin_place_xy(bins, slot)
         place = PlaceTarget((x, y, release_tcp_z(spec.height_m, bins, release_max_z_m)), None)
         sequence = PickPlaceSequence(PandaKinematics(), sequence_config, grasp, place)

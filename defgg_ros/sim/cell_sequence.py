@@ -16,7 +16,6 @@ class CellSequenceDriver:
 
     def __init__(self, cell: SimCell, sequence: PickPlaceSequence, period_s: float = PERIOD_S):
         self.cell, self.sequence, self.period_s = cell, sequence, period_s
-        self.widths_m = []            # gripper width after every period
 
     def apply(self, commands) -> None:
         for command in commands:
@@ -48,7 +47,6 @@ class CellSequenceDriver:
         while not self.sequence.finished and self.cell.time_s < max_sim_s:
             outcomes = self.cell.advance(self.period_s)
             self.feed(outcomes)
-            self.widths_m.append(self.cell.gripper_width_m())
             if on_period is not None:
                 on_period(self.cell)
             self.apply(self.sequence.tick(self.cell.time_s, self.cell.time_s))

@@ -215,8 +215,8 @@ def scene_warnings(scene: SceneSpec) -> list:
     The bin's walls beyond the table: the table is the bin's floor, so an object placed over the edge rests
     on the FEM contact at the edge. Until 2026-11-28 the shipped scenes' bin reached 7 cm beyond the table and
     the demo's rubber block fell off in 1 of 12 runs, 2 of 24 in-process placements
-    (bench/bench_release_in_bin.py). A warning,
-    not an error: a recorded session replays the scene it was recorded with (docs/sessions.md).
+    (bench/bench_release_in_bin.py). A warning, not an error: a recorded session replays the scene it was
+    recorded with (docs/sessions.md).
     """
     if scene.bin is None:
         return []
