@@ -38,6 +38,21 @@ def test_real_cell_sets_load_and_override_known_parameters_within_bounds(set_nam
     assert executor["arm_trajectory_action"] == names["trajectory_action"]
 
 
+@pytest.mark.unit
+@pytest.mark.parametrize("set_name", sorted(ROBOTS))
+def test_every_node_with_a_base_frame_gets_the_robots_base_frame(set_name):
+    """A node left at the schema's panda_link0 on an FR3 finds no camera pose on TF."""
+    arm_id, robot_file = ROBOTS[set_name]
+    overrides = yaml.safe_load(robot_file.read_text())
+    for entry in load_node_set(set_name).nodes:
+        schema = load_schema(entry.name)
+        if "base_frame" not in schema:
+            continue
+        section = (overrides.get(entry.name) or {}).get("ros__parameters") or {}
+        effective = section.get("base_frame", schema["base_frame"].default)
+        assert effective == topics.arm_names(arm_id)["base_frame"], entry.name
+
+
 @pytest.mark.ros
 def test_executor_with_the_fr3_file_drives_a_driver_speaking_fr3_names(executor, spin):
     from rclpy.parameter import Parameter
