@@ -37,6 +37,7 @@ from defgg_ros.bringup.demo_geometry import (
 from defgg_ros.bringup.demo_report import FramePanels, PickRow, format_table, save_figure, write_summary
 from defgg_ros.bringup.node_set import NodeSetError, load_node_set
 from defgg_ros.bringup.supervisor import Bringup, BringupError
+from defgg_ros.cli_help import HelpFormatter
 from defgg_ros.ros.domain import ISOLATION_ENV, apply_domain_choice, default_domain_choice
 from defgg_ros.ros.share import share_path
 
@@ -52,7 +53,7 @@ OBSERVE_MOVE_S = (2.0, 5.0)
 
 def parse_args(argv=None):
     parser = argparse.ArgumentParser(prog="defgg-demo", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+                                     formatter_class=HelpFormatter)
     parser.add_argument("--scene", default=str(DEFAULT_SCENE), help="scene YAML (default: the demo scene)")
     parser.add_argument("--model", default=str(DEFAULT_MODEL), help="Def-GG-CNN checkpoint for the inference node")
     parser.add_argument("--out", help="output folder (default: runs/demo/<UTC timestamp>)")

@@ -24,6 +24,7 @@ import time
 
 from defgg_ros.bringup.node_set import NodeSetError, load_node_set
 from defgg_ros.bringup.supervisor import DEFAULT_READY_TIMEOUT_S, Bringup, BringupError
+from defgg_ros.cli_help import HelpFormatter
 from defgg_ros.ros.domain import ISOLATION_ENV, apply_domain_choice, parse_domain_choice
 
 DRIVER = "fake_panda_driver"
@@ -31,9 +32,10 @@ DRIVER = "fake_panda_driver"
 
 def parse_args(argv=None):
     parser = argparse.ArgumentParser(prog="defgg-bringup", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+                                     formatter_class=HelpFormatter)
     parser.add_argument("--set", default="sim_cell",
-                        help="node set: a name in sim_bringup/config (sim_cell, real_cell) or a YAML path")
+                        help="node set: a name in sim_bringup/config (sim_cell; real_cell: FR3; "
+                             "real_cell_panda: Panda) or a YAML path")
     parser.add_argument("--scene", help="scene YAML for the simulated driver (default: its parameter file's)")
     parser.add_argument("--gui", action="store_true", help="open PyBullet's GUI (the driver is headless by default)")
     parser.add_argument("-p", "--param", action="append", default=[], metavar="NODE:NAME:=VALUE",

@@ -6,6 +6,7 @@ import json
 import sys
 from pathlib import Path
 
+from defgg_ros.cli_help import HelpFormatter
 from defgg_ros.constants import GRASP_CANDIDATES_PER_OBJECT, GRASP_HEIGHT_RULES, TRAINING_YOUNGS_MODULI_PA
 
 DESCRIPTION = """\
@@ -39,8 +40,11 @@ Seal a finished dataset (compress its trial files; the fingerprint stays):
 def build_parser() -> argparse.ArgumentParser:
     from defgg_ros.data.datagen import COARSE_SIM_MAX_TET_NODES
 
-    ap = argparse.ArgumentParser(prog="defgg-datagen", description=DESCRIPTION,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(prog="defgg-datagen", description=DESCRIPTION, formatter_class=HelpFormatter,
+                                 usage="%(prog)s --out DIR [options]   (generate or resume a dataset)\n"
+                                       "       %(prog)s signal FOLDER [--json F] [--md F] [--png F]   "
+                                       "(its signal report; signal --help)\n"
+                                       "       %(prog)s seal FOLDER   (compress a finished dataset)")
     ap.add_argument("--out", type=Path, required=True, help="dataset folder (created or resumed)")
     ap.add_argument("--object-set", default="train", choices=("train", "common", "adversarial"),
                     help="object library set (default: train; the others are held out for evaluation)")
@@ -80,7 +84,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def build_signal_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
-        prog="defgg-datagen signal",
+        prog="defgg-datagen signal", formatter_class=HelpFormatter,
         description="Signal report of a dataset or pilot folder, from its trial records alone: positive rate per "
                     "modulus, within-scene share of the held-acceleration variance, reversal rates and the "
                     "stiffness-aware minus stiffness-blind oracle gap (docs/dataset.md, 'Signal report').")
@@ -100,7 +104,7 @@ def build_signal_parser() -> argparse.ArgumentParser:
 def seal_main(argv) -> int:
     from defgg_ros.data.format import DatasetError, dataset_fingerprint, seal_trials
 
-    ap = argparse.ArgumentParser(prog="defgg-datagen seal",
+    ap = argparse.ArgumentParser(prog="defgg-datagen seal", formatter_class=HelpFormatter,
                                  description="Compress a finished dataset's trial files (trials/*.jsonl -> .jsonl.gz). "
                                              "Records and fingerprint stay the same; a sealed dataset is never "
                                              "resumed.")

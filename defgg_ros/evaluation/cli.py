@@ -27,6 +27,7 @@ import sys
 from pathlib import Path
 
 from defgg_ros.atomic import write_json_atomic
+from defgg_ros.cli_help import HelpFormatter, use_for
 from defgg_ros.constants import EVAL_GRASPS_PER_OBJECT, GRASP_HEIGHT_RULES, TRAINING_YOUNGS_MODULI_PA
 from defgg_ros.evaluation import jobs as jobs_mod
 from defgg_ros.evaluation import report as report_mod
@@ -38,7 +39,7 @@ DEFAULT_MODELS = ("defgg_cnn=models/defgg_cnn.pt", "ggcnn_depth_only=models/ggcn
 
 def _add_run(sub):
     p = sub.add_parser(
-        "run", formatter_class=argparse.RawDescriptionHelpFormatter,
+        "run", formatter_class=HelpFormatter,
         help="plan the models' grasps and run them in the FEM simulator (resumable)",
         description="For each object and Young's modulus, render the scene with the training camera, take each "
                     "model's N best grasps and run them in the PyBullet FEM simulator under the shake task (16 "
@@ -178,12 +179,12 @@ def _add_others(sub):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="defgg-eval", formatter_class=argparse.RawDescriptionHelpFormatter,
+    parser = argparse.ArgumentParser(prog="defgg-eval", formatter_class=HelpFormatter,
                                      description=__doc__.split("\n\n")[0], epilog=__doc__.split("\n\n", 1)[1])
     sub = parser.add_subparsers(dest="command", required=True)
     _add_run(sub)
     _add_others(sub)
-    return parser
+    return use_for(parser)
 
 
 def parse_models(specs) -> dict:

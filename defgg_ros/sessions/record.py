@@ -30,6 +30,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo
 from tqdm import tqdm
 
+from defgg_ros.cli_help import HelpFormatter
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import camera_info_to_k
 from defgg_ros.ros.cell_client import CellCallError, CellClient
@@ -206,7 +207,7 @@ def wait_passive(context, duration_s: float, periodic=lambda: None) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="defgg-record", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+                                     formatter_class=HelpFormatter)
     parser.add_argument("out", help="bag folder to create (must not exist)")
     parser.add_argument("--scene", help="scene YAML the cell runs (sim): embedded so picks can be replayed")
     parser.add_argument("--source", choices=("sim", "real"), help="where it was recorded (default: sim with --scene)")
@@ -215,7 +216,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--duration-s", type=float, default=0.0, help="passive mode: stop after this long (0: Ctrl-C)")
     parser.add_argument("--plan", type=int, default=0,
                         help="driving mode: PlanGrasp calls to make, one per fresh frame")
-    parser.add_argument("--pick", help="driving mode: comma-separated plan indices to pick with (PickAndPlace)")
+    parser.add_argument("--pick", help="driving mode: comma-separated plan indices to pick with "
+                                       "(PickAndPlace; 0 = the first PlanGrasp call's grasp)")
     parser.add_argument("--stiffness-from-scene", action="store_true",
                         help="driving mode: first enter the --scene objects' moduli (and parts) via SetStiffness")
     parser.add_argument("--top-k", type=int, default=3, help="grasps per PlanGrasp call")

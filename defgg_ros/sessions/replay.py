@@ -21,6 +21,7 @@ from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from tqdm import tqdm
 
+from defgg_ros.cli_help import HelpFormatter
 from defgg_ros.ros.cell_client import CellCallError, CellClient
 from defgg_ros.ros.domain import SAFE_DOMAIN_RANGE, pick_private_domain
 from defgg_ros.ros.executor import ThreadedExecutor
@@ -201,7 +202,7 @@ def _tolerances(args, recorded: Tolerances) -> Tolerances:
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="defgg-replay", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+        prog="defgg-replay", description=__doc__, formatter_class=HelpFormatter)
     parser.add_argument("sessions", nargs="+", help="session bag folders, or folders of them "
                                                     "(e.g. sim_bringup/sessions)")
     parser.add_argument("--update", action="store_true",

@@ -15,6 +15,7 @@ import sys
 
 import torch
 
+from defgg_ros.cli_help import HelpFormatter
 from defgg_ros.data.augment import AugmentConfig
 from defgg_ros.data.format import DatasetError
 from defgg_ros.data.labels import LABEL_RULES
@@ -36,7 +37,7 @@ DEFAULTS = TrainConfig()
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
-        prog="defgg-train", formatter_class=argparse.RawDescriptionHelpFormatter,
+        prog="defgg-train", formatter_class=HelpFormatter,
         description="Train the Def-GG-CNN (depth + stiffness) or, with --no-stiffness, the depth-only GG-CNN "
                     "baseline on the same data and schedule. Scenes are split by object (validation/test objects "
                     "are never seen in training). The dataset may still be growing: the run freezes the trials it "
