@@ -77,6 +77,11 @@ def test_report_writes_the_paired_table_and_the_results_doc_shows_it(tmp_path):
     assert csv_text.splitlines()[1].startswith("shake,common,best grasp,stiff,base,4,1,3,0,0,75.00")
     doc = results_markdown(tmp_path, tmp_path / "results.md")
     assert "## Are the two models separable on these trials?" in doc and "| shake | common | best grasp | 4 |" in doc
+    notes = tmp_path / "notes.md"
+    notes.write_text("The analysis.\n")
+    with_notes = results_markdown(tmp_path, tmp_path / "results.md", notes)
+    step2 = next(line for line in with_notes.splitlines() if line.startswith("2. Tables, plots"))
+    assert f"--notes {notes}" in step2 and "The analysis." in with_notes   # following step 2 keeps the notes
 
 
 def test_wrong_stiffness_input_pairs_with_the_correct_input_of_the_same_view_and_rank(tmp_path):
