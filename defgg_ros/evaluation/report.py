@@ -13,6 +13,7 @@ from pathlib import Path
 
 from defgg_ros.atomic import write_json_atomic, write_text_atomic
 from defgg_ros.constants import TRAINING_YOUNGS_MODULI_PA
+from defgg_ros.data.format import STATUS_OK
 from defgg_ros.evaluation import figures, paired, ranks, tables
 from defgg_ros.evaluation.store import read_results, results_path
 
@@ -58,6 +59,14 @@ def _expected_main(manifest) -> dict:
     return out
 
 
+def _has_second_column(records, task: str) -> bool:
+    """Whether the task's success has an every-direction column: only where a graded trial carries a
+    verdict for it (the defgraspsim shake). A twist record reused from another view copies the field as
+    None, and a no-grasp record sets it for any task: neither makes a second column."""
+    return any(r.get("task") == task and r.get("status") == STATUS_OK and r.get("success_every_direction") is not None
+               for r in records)
+
+
 def write_outputs(out_dir) -> dict:
     """(Re)write tables, plots and summary.json of `out_dir`; returns the summary."""
     out_dir = Path(out_dir)
@@ -75,13 +84,16 @@ def write_outputs(out_dir) -> dict:
         cells = tables.main_table(records, task, sets, models, moduli, expected)
         write_text_atomic(tdir / f"{task}.md", tables.main_table_markdown(cells, task, sets, models, moduli, labels))
         write_text_atomic(tdir / f"{task}.csv", tables.main_table_csv(cells, task, sets, models, moduli))
-        if any("success_every_direction" in r for r in records if r.get("task") == task):
+        every_path = tdir / f"{task}_every_direction.md"
+        if _has_second_column(records, task):
             every = tables.main_table(records, task, sets, models, moduli, expected, field="success_every_direction")
-            write_text_atomic(tdir / f"{task}_every_direction.md", tables.main_table_markdown(
+            write_text_atomic(every_path, tables.main_table_markdown(
                 every, task, sets, models, moduli, labels, title=f"**{task.capitalize()} task, held in every "
                 "direction** (the second column): success rate in % (successes/graded trials)"))
             summary["tasks"][f"{task}_every_direction"] = {
                 f"{s}|{m}": _cell_json(every[(tables.ALL_STIFFNESSES, s, m)]) for s in sets for m in models}
+        else:
+            every_path.unlink(missing_ok=True)    # a table an earlier report wrote from misread records
         summary["tasks"][task] = {f"{s}|{m}": _cell_json(cells[(tables.ALL_STIFFNESSES, s, m)])
                                   for s in sets for m in models}
         summary["tasks"][task].update({f"{s}|{m}|{e:g}": _cell_json(cells[(e, s, m)])

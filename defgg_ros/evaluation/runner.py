@@ -243,7 +243,7 @@ _OUTCOME_FIELDS = ("status", "accels", "measured", "success", "success_every_dir
 
 
 def _reused(rec: dict, original: dict) -> dict:
-    return {**rec, **{k: original.get(k) for k in _OUTCOME_FIELDS}, "reused_from": original["key"]}
+    return {**rec, **{k: original[k] for k in _OUTCOME_FIELDS if k in original}, "reused_from": original["key"]}
 
 
 def run_evaluation(plan: EvalPlan, out_dir, workers: int = 1, show_progress: bool = True,

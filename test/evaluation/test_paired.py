@@ -170,3 +170,31 @@ def test_the_adversarial_target_needs_the_paired_sign_test_over_the_five_best_gr
     assert target["sign_test_met"] and target["margin_met"]
     doc = results_markdown(tmp_path, tmp_path / "results.md")
     assert "paired sign test p < 0.05 over the five best grasps (p = 0.0312) | met" in doc
+
+
+def test_every_direction_column_only_where_graded_trials_carry_it(tmp_path):
+    _two_model_run(tmp_path)
+    manifest = json.loads((tmp_path / "run.json").read_text())
+    write_json_atomic(tmp_path / "run.json", {**manifest, "tasks": ["shake", "twist"]})
+    store = ResultStore(tmp_path)
+    for i, model, sha in ((0, "stiff", "S"), (1, "base", "B")):
+        store.append(_trial(i, model, sha, "a", 2e4, 0, True, status="ok", success_every_direction=i == 0))
+        # a twist outcome copied from another view carries the field as None (runner._reused before 2026-11-28)
+        store.append(_trial(2 + i, model, sha, "a", 2e4, 0, False, status="ok", task="twist",
+                            success_every_direction=None))
+    (tmp_path / "tables").mkdir(exist_ok=True)
+    (tmp_path / "tables" / "twist_every_direction.md").write_text("stale\n")
+    summary = report.write_outputs(tmp_path)
+    assert (tmp_path / "tables" / "shake_every_direction.md").exists()
+    assert summary["tasks"]["shake_every_direction"]["common|stiff"]["successes"] == 1
+    assert not (tmp_path / "tables" / "twist_every_direction.md").exists()
+    assert "twist_every_direction" not in summary["tasks"]
+
+
+def test_a_reused_outcome_copies_only_the_fields_the_original_has():
+    from defgg_ros.evaluation.runner import _reused
+
+    original = {"key": "main|x|twist", "status": "ok", "accels": [500.0], "success": True}
+    rec = _reused({"key": "multimaterial|x|twist", "task": "twist"}, original)
+    assert rec["success"] is True and rec["reused_from"] == "main|x|twist"
+    assert "success_every_direction" not in rec
