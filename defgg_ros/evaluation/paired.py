@@ -141,6 +141,11 @@ def _fmt(x, spec="+.1f") -> str:
     return "–" if x is None else format(x, spec)
 
 
+def _fmt_p(p) -> str:
+    """Two decimals, three near the 0.05 bar (0.0507 must not read as 0.05)."""
+    return _fmt(p, ".3f" if p is not None and 0.01 <= p < 0.1 else ".2f")
+
+
 def paired_markdown(rows, label_a: str, label_b: str) -> str:
     lines = [f"**Paired comparison**: A = {label_a}, B = {label_b}; trials paired by object, modulus and rank; "
              "margin = A − B in points (Wald 95 % interval); p = exact two-sided sign test on the discordant "
@@ -152,7 +157,7 @@ def paired_markdown(rows, label_a: str, label_b: str) -> str:
         ci = p.margin_ci_pts()
         interval = f"{ci[0]:+.1f} … {ci[1]:+.1f}" if ci else "–"
         lines.append(f"| {task} | {s} | {scope} | {p.pairs} | {p.both} | {p.a_only} | {p.b_only} | {p.neither} | "
-                     f"{_fmt(p.margin_pts)} | {interval} | {_fmt(p.p_value, '.2f')} | "
+                     f"{_fmt(p.margin_pts)} | {interval} | {_fmt_p(p.p_value)} | "
                      f"{'none' if p.margin_needed_pts is None else format(p.margin_needed_pts, '.1f')} |")
     return "\n".join(lines) + "\n"
 
@@ -166,7 +171,7 @@ def sensitivity_paired_markdown(rows, model_label: str, object_set: str) -> str:
     for e, p in rows:
         ci = p.margin_ci_pts()
         lines.append(f"| {e:+g} | {p.pairs} | {p.both} | {p.a_only} | {p.b_only} | {p.neither} | "
-                     f"{_fmt(p.margin_pts)} | {ci[0]:+.1f} … {ci[1]:+.1f} | {_fmt(p.p_value, '.2f')} |")
+                     f"{_fmt(p.margin_pts)} | {ci[0]:+.1f} … {ci[1]:+.1f} | {_fmt_p(p.p_value)} |")
     if len(rows) > 1:   # many rows, many chances: chance alone puts one of ten rows under p = 0.05 four times in ten
         lines += ["", f"{len(rows)} error levels are tested, so a single row is significant at a family-wise "
                       f"{ALPHA:g} only with p < {ALPHA / len(rows):.3g} (Bonferroni)."]

@@ -198,3 +198,9 @@ def test_a_reused_outcome_copies_only_the_fields_the_original_has():
     rec = _reused({"key": "multimaterial|x|twist", "task": "twist"}, original)
     assert rec["success"] is True and rec["reused_from"] == "main|x|twist"
     assert "success_every_direction" not in rec
+
+
+def test_a_p_value_near_the_bar_is_not_rounded_onto_it():
+    rows = [("shake", "adversarial", paired.ALL_RANKS, paired.Paired(both=322, a_only=69, b_only=47, neither=41))]
+    table = paired.paired_markdown(rows, "A", "B")
+    assert "| 0.051 |" in table and "| 0.05 |" not in table     # sim_v5's adversarial five best: p = 0.0507
