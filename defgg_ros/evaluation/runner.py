@@ -27,11 +27,8 @@ from defgg_ros.evaluation import scene as scene_mod
 from defgg_ros.evaluation.planning import plan_world_grasp
 from defgg_ros.evaluation.sources import make_spec, shape_from_ref
 from defgg_ros.evaluation.store import ResultStore
-from defgg_ros.evaluation.tasks import outcome_fields
+from defgg_ros.evaluation.tasks import STATUS_NO_GRASP, outcome_fields
 from defgg_ros.sim.trial import TrialSettings, WorldGrasp, run_grasp_trial
-
-STATUS_NO_GRASP = "no_grasp"   # the model proposed fewer grasps than asked: a failed grasp
-
 
 # The twist's angular acceleration oscillates at this angular frequency (6.4 Hz) under an amplitude
 # ramped to 500 rad/s^2 in 0.5 s, so the hand turns back and forth (at most ~0.3 rad) and spins at most
@@ -224,7 +221,8 @@ def pending_work(plan: EvalPlan, store: ResultStore, client: int, show_progress:
         grasp = planned[job.rank] if job.rank < len(planned) else None
         rec = _base_record(job, plan, obj, grasp)
         if grasp is None:
-            ready.append({**rec, "status": STATUS_NO_GRASP, "success": False, "success_every_direction": False,
+            protocol = settings.get("protocol", "legacy")
+            ready.append({**rec, "status": STATUS_NO_GRASP, **outcome_fields(job.task, STATUS_NO_GRASP, None, protocol),
                           "accels": None, "sim_key": None,
                           "reused_from": None, "note": f"model proposed only {len(planned)} grasps"})
             continue

@@ -32,6 +32,7 @@ from defgg_ros.data.format import STATUS_LIFT_FAILED, STATUS_OK
 TASKS = ("shake", "twist")
 # "every": held at the limit in every direction/axis; "mean": the shake label's rule (mean held >= 25 m/s^2).
 SUCCESS_RULES = ("every", "mean")
+STATUS_NO_GRASP = "no_grasp"   # the model proposed fewer grasps than asked: a failed grasp, never simulated
 LIMIT_TOLERANCE = HELD_LIMIT_TOLERANCE
 
 
@@ -55,7 +56,7 @@ def task_success(task: str, status: str, accels: list | None, rule: str = "every
     check_task(task)
     if rule not in SUCCESS_RULES or (rule == "mean" and task != "shake"):
         raise TaskError(f"success rule {rule!r} does not apply to the {task} task")
-    if status == STATUS_LIFT_FAILED:
+    if status in (STATUS_LIFT_FAILED, STATUS_NO_GRASP):
         return False
     if status != STATUS_OK:
         return None

@@ -34,3 +34,14 @@ def test_outcome_fields_follow_the_protocol():
     assert outcome_fields("shake", "ok", accels, "defgraspsim") == {"success": True, "success_every_direction": False}
     assert outcome_fields("shake", "ok", accels, "legacy") == {"success": False}
     assert outcome_fields("twist", "ok", [500.0] * 6, "defgraspsim") == {"success": True}
+
+
+def test_a_missing_grasp_is_a_failure_with_the_fields_of_its_task():
+    # the runner's record for a grasp the model did not propose: failed, and the every-direction verdict only
+    # where the task's graded trials carry one (the defgraspsim shake), not for the twist
+    from defgg_ros.evaluation.tasks import STATUS_NO_GRASP, outcome_fields
+
+    assert outcome_fields("shake", STATUS_NO_GRASP, None, "defgraspsim") == {
+        "success": False, "success_every_direction": False}
+    assert outcome_fields("twist", STATUS_NO_GRASP, None, "defgraspsim") == {"success": False}
+    assert outcome_fields("shake", STATUS_NO_GRASP, None, "legacy") == {"success": False}
