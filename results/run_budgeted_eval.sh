@@ -14,17 +14,26 @@
 # best and five best (the paired sign test); then the twist's best grasps, the multi-material object,
 # the stiffness-error sensitivity of the best grasp, and the rest. (Until 2026-11-28 the order was
 # common best grasp, multi-material, twist, sensitivity, five ranks, adversarial: sim_v1-v4.)
-# After each step the tables and the report are refreshed, and results/ is committed (if git is free;
-# with COMMIT_EVERY_TRIALS=N only once N records more than the last commit holds have run: the
-# issue's one commit per 10 % of progress, e.g. 391 for sim_v5's 3,906 planned trials).
+# After each step the tables and docs/results.md are rewritten (with NOTES: default results/notes_vN.md
+# for results/sim_vN) and OUT + docs/results.md are COMMITTED to git (if git is free; with
+# COMMIT_EVERY_TRIALS=N only once N records more than the last commit holds have run: the issue's one
+# commit per 10 % of progress, e.g. 391 for sim_v5's 3,906 planned trials). A rerun keeps the folder's
+# trial protocol (read from its records; other trial settings are refused).
 set -uo pipefail
 cd "$(dirname "$0")/.."
-OUT=${1:-results/sim_v2}
+if [ $# -ne 1 ] || [ "$1" = "-h" ] || [ "$1" = "--help" ]; then
+  sed -n '2,/^set -uo/p' "$0" | sed '$d' | sed 's/^# \{0,1\}//'
+  echo "usage: [WORKERS=N] [PROTOCOL_FROM=DATASET] [DATA=DATASET] [NOTES=FILE] [COMMIT_EVERY_TRIALS=N] $0 OUT"
+  exit 2
+fi
+OUT=$1
+NOTES=${NOTES:-results/notes_${OUT##*sim_}.md}
+[ -f "$NOTES" ] || { echo "no notes file $NOTES (set NOTES=FILE)" >&2; exit 2; }
 EVAL=".venv/bin/python -m defgg_ros.evaluation.cli"
 RUN="$EVAL run --out $OUT --workers ${WORKERS:-1} --grasps 5 --no-progress${PROTOCOL_FROM:+ --protocol-from $PROTOCOL_FROM}"
 
 refresh() {
-  $EVAL report --out $OUT --docs docs/results.md --notes "${NOTES:-results/notes.md}" ${DATA:+--data $DATA} || return 0
+  $EVAL report --out $OUT --docs docs/results.md --notes "$NOTES" ${DATA:+--data $DATA} || return 0
   # COMMIT_EVERY_TRIALS=N: commit only once N more trial records than the last commit holds have run
   # (about 10 % of the plan; the tables and the report are rewritten after every step all the same).
   local committed now

@@ -23,12 +23,12 @@ Example (background, both cores; a new dataset gets the defgraspsim protocol):
   nohup defgg-datagen --out datasets/mine --workers 2 > datasets/mine.log 2>&1 &
 Resume fem_v5 (issue 25's dataset) as it was started:
   defgg-datagen --out datasets/fem_v5 --workers 2 --pass-size 1 --grasps-per-scene 36
-A resumed dataset keeps its trial settings: if they differ, the error names the --settings to pass
-(fem_v1, made with the lift of its time: --settings '{"lift_time_s": 0.3, "hold_time_s": 0.1}').
+A resumed dataset keeps its trial settings: if they differ, the error names the --settings to pass.
+A sealed dataset (trials/*.jsonl.gz: fem_v1-v4) is finished and never resumed: write a new one.
 
 Trial protocol (--protocol): defgraspsim (default for a new dataset; the paper's labels: zero gravity,
-grip force FOS*m*g/mu, fingers locked after pickup, lost when either finger lets go) or legacy
-(fem_v1-v4). A resumed dataset keeps its own. docs/dataset.md, "Trial protocols".
+grip force FOS*m*g/mu, fingers held with F/2 each after the pickup, lost when either finger lets go) or
+legacy (fem_v1-v4). A resumed dataset keeps its own. docs/dataset.md, "Trial protocols".
 
 Signal report (do the labels carry "stiffness changes which grasp is good"?):
   defgg-datagen signal datasets/fem_v4 [--json out.json] [--md out.md] [--png out.png]
@@ -88,7 +88,8 @@ def build_signal_parser() -> argparse.ArgumentParser:
         description="Signal report of a dataset or pilot folder, from its trial records alone: positive rate per "
                     "modulus, within-scene share of the held-acceleration variance, reversal rates and the "
                     "stiffness-aware minus stiffness-blind oracle gap (docs/dataset.md, 'Signal report').")
-    ap.add_argument("folder", type=Path, help="a folder with trials/*.jsonl (a dataset or a pilot)")
+    ap.add_argument("folder", type=Path,
+                    help="a folder with trials/*.jsonl or sealed *.jsonl.gz (a dataset or a pilot)")
     ap.add_argument("--json", type=Path, default=None, help="also write the figures as JSON here")
     ap.add_argument("--md", type=Path, default=None, help="also write the Markdown report here")
     ap.add_argument("--png", type=Path, default=None,

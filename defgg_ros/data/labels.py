@@ -2,10 +2,10 @@
 
 "mean" (the paper's, the default): the mean held acceleration over the 16 shake directions is
 >= SHAKE_POSITIVE_THRESHOLD_MPS2 (TrialRecord.label). "every_direction": that, and no measured
-direction held less, which is the evaluation's shake-task criterion (every direction must hold the
-threshold). Directions the generator skipped once the label was decided are not known, so the
-strict rule only removes positives that were seen to slip; it is an experiment
-(results/notes_v2.md), not the paper's protocol.
+direction held less, which is the evaluation's shake-task criterion under the legacy protocol (every
+direction must hold the threshold; under defgraspsim the evaluation's second table). Directions the
+generator skipped once the label was decided are not known, so the strict rule only removes positives
+that were seen to slip; it is an experiment (results/notes_v2.md), not the paper's protocol.
 """
 from __future__ import annotations
 

@@ -69,7 +69,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--label-rule", choices=LABEL_RULES, default=DEFAULTS.label_rule,
                    help="positives: 'mean' = mean held acceleration over the 16 shake directions >= 25 m/s^2 "
                         "(the paper's, default); 'every_direction' = that and no measured direction below it "
-                        "(the evaluation's shake criterion; an experiment)")
+                        "(the evaluation's shake criterion under legacy, its second table under defgraspsim; "
+                        "an experiment)")
     p.add_argument("--max-height-offset-mm", type=float, default=None, metavar="MM",
                    help="positives only from trials whose TCP was within MM of the height the executor grasps "
                         "at on their pixel (an experiment; default: every trial, as in the paper)")
