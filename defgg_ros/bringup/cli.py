@@ -104,6 +104,17 @@ def checked_overrides(node_set, overrides: dict) -> dict:
     return out
 
 
+def check_cell_parameters_agree(node_set, overrides: dict) -> None:
+    """NodeSetError when the nodes would start with different values for one cell's geometry or arm
+    (bringup/shared_parameters.py): each would act on its own idea of the table, frame or camera."""
+    from defgg_ros.bringup.shared_parameters import disagreements
+
+    lines = disagreements(node_set, overrides)
+    if lines:
+        raise NodeSetError("the nodes disagree on the cell (set one value for every node, e.g. in "
+                           "sim_bringup/config/real_cell/<robot>.yaml, or -p for each):\n  " + "\n  ".join(lines))
+
+
 def _yaml_scalar(text):
     import yaml
 
@@ -168,7 +179,9 @@ def main(argv=None) -> int:
         # First, before any rclpy context or child process exists: they read the domain at start-up.
         print(f"defgg-bringup: {apply_domain_choice(domain_choice(args, node_set))}", flush=True)
         extra = record_hook(args.record, args.scene) if args.record else {}
-        bringup = Bringup(node_set, checked_overrides(node_set, parse_overrides(args)), extra)
+        overrides = checked_overrides(node_set, parse_overrides(args))
+        check_cell_parameters_agree(node_set, overrides)
+        bringup = Bringup(node_set, overrides, extra)
     except (NodeSetError, BringupError, ValueError) as exc:
         print(f"defgg-bringup: {exc}", file=sys.stderr)
         return 2

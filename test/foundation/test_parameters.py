@@ -7,7 +7,7 @@ import pytest
 import yaml
 
 from defgg_ros.ros import topics
-from defgg_ros.ros.parameters import ParameterError, ParameterSpec, check_value, defaults, load_schema
+from defgg_ros.ros.parameters import ParameterError, ParameterSpec, at_default, check_value, defaults, load_schema
 
 ROOT = Path(__file__).resolve().parents[2]
 NODES = ("executor_node", "grasp_inference_node", "segmentation_node", "fake_panda_driver")
@@ -39,6 +39,31 @@ def test_shipped_configs_hold_only_valid_overrides(node):
     for name, value in overrides.items():
         assert value != specs[name].default, f"{name}: repeats the schema default"
         assert check_value(specs[name], value) is None
+
+
+@pytest.mark.unit
+@pytest.mark.parametrize("path", sorted((ROOT / "sim_bringup" / "config" / "real_cell").glob("*.yaml")),
+                         ids=lambda p: p.name)
+def test_robot_files_hold_only_valid_overrides(path):
+    for node, section in yaml.safe_load(path.read_text()).items():
+        specs = load_schema(node)
+        for name, value in ((section or {}).get("ros__parameters") or {}).items():
+            assert name in specs, f"{path.name}: {node} has no parameter {name}"
+            assert not at_default(specs, name, value), f"{path.name}: {node}.{name} repeats the schema default"
+            assert check_value(specs[name], value) is None
+
+
+@pytest.mark.unit
+def test_node_set_overrides_are_overrides():
+    from defgg_ros.bringup.node_set import load_node_set
+
+    for path in sorted((ROOT / "sim_bringup" / "config").glob("*.yaml")):
+        if "nodes" not in (yaml.safe_load(path.read_text()) or {}):
+            continue
+        for entry in load_node_set(str(path)).nodes:
+            specs = load_schema(entry.name)
+            for name, value in entry.overrides.items():
+                assert name in specs and not at_default(specs, name, value), f"{path.name}: {entry.name}.{name}"
 
 
 @pytest.mark.unit

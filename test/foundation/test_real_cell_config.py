@@ -7,6 +7,7 @@ import pytest
 import yaml
 
 from defgg_ros.bringup.node_set import load_node_set
+from defgg_ros.bringup.shared_parameters import effective_parameters
 from defgg_ros.ros import topics
 from defgg_ros.ros.parameters import check_value, load_schema
 
@@ -30,11 +31,12 @@ def test_real_cell_sets_load_and_override_known_parameters_within_bounds(set_nam
         for name, value in (section["ros__parameters"] or {}).items():
             assert name in schema, f"{robot_file.name}: {node} has no parameter {name}"
             assert check_value(schema[name], value) is None, check_value(schema[name], value)
+    # what the nodes start with (schema defaults, then the node's file, then the robot file)
+    effective = {entry.name: effective_parameters(entry) for entry in node_set.nodes}
     names = topics.arm_names(arm_id)
-    executor = overrides["executor_node"]["ros__parameters"]
-    assert executor["arm_id"] == arm_id
-    assert executor["base_frame"] == names["base_frame"] == overrides["grasp_inference_node"]["ros__parameters"][
-        "base_frame"]
+    executor = effective["executor_node"]
+    assert executor["arm_id"] == arm_id and executor["joint_limits"] == arm_id
+    assert executor["base_frame"] == names["base_frame"] == effective["grasp_inference_node"]["base_frame"]
     assert executor["arm_trajectory_action"] == names["trajectory_action"]
 
 

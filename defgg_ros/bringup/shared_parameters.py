@@ -1,0 +1,64 @@
+"""Parameters that describe one physical cell and so must agree between the nodes that declare them.
+
+The table height, the workspace box, the base frame, the camera's pose and the arm are each declared by
+two to four nodes (their own schemas), and a deployment sets them per node. A cell where the executor
+believes the table is at z = 0.02 m and the perception at 0.0 m plans grasps 2 cm into the table or
+above the object, without any node noticing. So the bringup resolves each node's effective value
+(schema default, then its parameter files in order, then the set's overrides, then -p) and refuses to
+start when they differ. Pure: no rclpy.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import yaml
+
+# One cell, one value: names declared by more than one node that describe the same physical thing.
+# (Topic and action names are left out: a deployment may remap one node's on purpose.)
+CELL_PARAMETERS = ("arm_id", "base_frame", "table_z_m", "workspace_box_m", "base_T_camera",
+                   "camera_pose_from_table", "min_object_height_m", "max_object_height_m")
+
+
+def _file_section(path: str, node: str) -> dict:
+    raw = yaml.safe_load(Path(path).read_text(encoding="utf-8")) or {}
+    params = {}
+    for key in ("/**", node, f"/{node}"):   # ROS 2 parameter files: wildcard first, then the node's own
+        section = raw.get(key) or {}
+        params.update(section.get("ros__parameters") or {})
+    return params
+
+
+def effective_parameters(entry, extra: dict | None = None) -> dict:
+    """A node entry's parameter values as the node will see them at start-up (only those its schema declares;
+    {} for a node without a schema)."""
+    from defgg_ros.ros.parameters import defaults, schema_path
+
+    if not schema_path(entry.name).is_file():
+        return {}
+    declared = defaults(entry.name)
+    values = dict(declared)
+    for path in entry.params_files:
+        values.update(_file_section(path, entry.name))
+    values.update(entry.overrides)
+    values.update(extra or {})
+    return {name: value for name, value in values.items() if name in declared}
+
+
+def _comparable(value):
+    # 0 and 0.0 are one table height; a YAML list and a tuple one box
+    if isinstance(value, (list, tuple)):
+        return tuple(_comparable(v) for v in value)
+    return float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) else value
+
+
+def disagreements(node_set, overrides_by_node: dict | None = None) -> list[str]:
+    """One line per cell parameter whose effective value differs between the set's nodes."""
+    overrides_by_node = overrides_by_node or {}
+    values = {entry.name: effective_parameters(entry, overrides_by_node.get(entry.name))
+              for entry in node_set.nodes}
+    lines = []
+    for name in CELL_PARAMETERS:
+        seen = {node: params[name] for node, params in values.items() if name in params}
+        if len({_comparable(v) for v in seen.values()}) > 1:
+            lines.append(f"{name}: " + ", ".join(f"{node}={value!r}" for node, value in seen.items()))
+    return lines
