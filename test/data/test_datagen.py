@@ -75,8 +75,10 @@ def test_killed_and_restarted_run_has_every_trial_once(tmp_path):
     # growing the dataset adds trials pass by pass over all scenes
     cfg = datagen.DatagenConfig(out=out, objects=OBJECTS, moduli_pa=(2e9,), grasps_per_scene=8, pass_size=2,
                                 settings=QUICK)
-    jobs = datagen.plan(cfg, DatasetWriter(out, cfg.header()))
-    assert [j.candidate_index for j in jobs] == [4, 5, 4, 5, 6, 7, 6, 7][: len(jobs)]
+    per_scene = datagen.plan_scenes(cfg, DatasetWriter(out, cfg.header()))
+    assert all(len(cands) >= 8 for _, cands, _ in per_scene.values())     # both objects have 8 to run
+    jobs = datagen.pass_order(cfg, per_scene)
+    assert [j.candidate_index for j in jobs] == [4, 5, 4, 5, 6, 7, 6, 7]
 
 
 def test_ray_path_gives_the_local_results(tmp_path):

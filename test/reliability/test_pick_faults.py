@@ -9,7 +9,6 @@
   is checked independently of the planner's own check: joint position, velocity, acceleration and jerk limits, TCP above
   the table, and the cancel's stop ends at rest.
 """
-import time
 
 import numpy as np
 import pytest
@@ -124,12 +123,10 @@ def test_driver_alive_but_silent_is_aborted_within_the_watchdog_time(executor_ce
     spin(ex, lambda: np.max(np.abs(driver.qd)) > 0.2, 10.0, "the arm moving")
     for timer in list(driver.timers):  # the node, its actions and its subscription stay up
         timer.cancel()
-    silent_since = time.monotonic()
+    # result_of's timeout bounds the wait (a hang fails); the watchdog's own bound is checked on a fake clock
+    # (control/test_control_pick_place.py), not timed here
     response = result_of(ex, spin, handle, timeout_s=FAST["watchdog_timeout_s"] + 5.0)
-    waited_s = time.monotonic() - silent_since
     assert response.status == ABORTED and "driver silent" in response.result.failure_reason
-    # Bounded: the watchdog time plus scheduling on a shared 2-core machine (not a timing benchmark).
-    assert waited_s < FAST["watchdog_timeout_s"] + 3.0
     assert driver.context.ok() and driver.handle is not None
 
 

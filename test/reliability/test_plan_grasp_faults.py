@@ -106,3 +106,7 @@ def test_a_node_with_bad_start_up_files_or_parameters_exits_2_with_one_clear_lin
     output = done.stdout + done.stderr
     assert done.returncode == 2, output[-2000:]
     assert words in output and "Traceback" not in output, output[-2000:]
+    # one line, named after the node (PyBullet prints its build banner on import: not the node's)
+    lines = [line for line in output.splitlines() if line.strip() and not line.startswith("pybullet build time")]
+    node = module.rsplit(".", 1)[1].removesuffix("_node")     # fake_panda_driver_node runs fake_panda_driver
+    assert len(lines) == 1 and lines[0].startswith(node) and words in lines[0], output[-2000:]

@@ -81,12 +81,18 @@ def test_trajectory_is_executed_in_sim_time(driver, client, executor, spin):
     msg = JointTrajectory(joint_names=[PANDA_JOINT_NAMES[i] for i in order])
     msg.points.append(JointTrajectoryPoint(positions=[float(goal[i]) for i in order],
                                            time_from_start=Duration(sec=1, nanosec=0)))
+    sent_at = len(joints)
     pub.publish(msg)
 
     def arrived():
         return joints and np.abs(np.array(joints[-1].position[:7]) - goal).max() < 0.01
 
     spin(executor, arrived, TIMEOUT_S, "the arm to reach the trajectory's goal")
+    # on the sim clock the move takes the trajectory's 1 s (within 0.01 rad a little before its end), not at once
+    def stamp(m):
+        return m.header.stamp.sec + m.header.stamp.nanosec * 1e-9
+    took_s = stamp(joints[-1]) - stamp(joints[sent_at - 1])
+    assert 0.7 <= took_s <= 1.5, took_s
 
 
 def test_gripper_actions(driver, client, executor, spin):

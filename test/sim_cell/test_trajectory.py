@@ -37,6 +37,15 @@ def test_quintic_is_smooth_and_hits_the_midpoint_of_a_symmetric_move():
     tracker.replace(make_waypoints([(0.0, Q0, z, z), (2.0, Q1, z, z)], 7), 0.0, Q0)
     q, _ = tracker.sample(1.0)
     np.testing.assert_allclose(q, Q1 / 2, atol=1e-9)
+    # smooth: the velocity is the position's derivative, starts and ends at rest with no jump in
+    # acceleration (after 1 ms it has barely moved: a linear ramp would be at 0.7 rad/s at once)
+    ts = np.linspace(0.0, 2.0, 2001)
+    samples = [tracker.sample(t) for t in ts]
+    qs, qds = np.array([s[0] for s in samples]), np.array([s[1] for s in samples])
+    np.testing.assert_allclose(qds, np.gradient(qs, ts, axis=0), atol=2e-3)
+    np.testing.assert_allclose(qds[[0, -1]], 0.0, atol=1e-9)
+    assert np.abs(qds[1]).max() < 1e-4 and np.abs(qds[-2]).max() < 1e-4
+    assert np.all(np.diff(qs, axis=0) >= -1e-12)        # monotone towards Q1, no overshoot
 
 
 def test_first_point_in_the_future_blends_from_the_current_state():
