@@ -117,6 +117,26 @@ def test_reliability_follows_the_publishers():
     assert reliability_for([R.RELIABLE, R.BEST_EFFORT]) == R.BEST_EFFORT
 
 
+def _rosout_of(node, name):
+    """The /rosout lines (level, text) that node `name` logs from now on, as the cell's operator sees them."""
+    from rcl_interfaces.msg import Log
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+    lines = []
+    qos_profile = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    node.create_subscription(Log, "/rosout", lambda m: lines.append((m.level, m.msg)) if m.name == name else None,
+                             qos_profile)
+    return lines
+
+
+def _logged(lines, level, words):
+    return any(lv == level and words in text for lv, text in lines)
+
+
+WARN, INFO = 30, 20   # rcl_interfaces/msg/Log levels
+
+
 def test_a_silent_stream_is_reported_and_its_return_too(executor, spin):
     from rclpy.node import Node
     from sensor_msgs.msg import Image
@@ -125,9 +145,11 @@ def test_a_silent_stream_is_reported_and_its_return_too(executor, spin):
 
     node = Node("silence_watch", context=executor.context)
     executor.add_node(node)
+    log = _rosout_of(node, "silence_watch")
     got = []
     watch = qos.SensorSubscription(node, Image, "silent_camera/depth", got.append, warn_after_s=1.0)
-    spin(executor, lambda: watch._warned, 5.0, "the silence warning")
+    spin(executor, lambda: _logged(log, WARN, "no message on /silent_camera/depth for"), 5.0, "the silence warning")
+    assert watch._warned
     pub = node.create_publisher(Image, "silent_camera/depth", qos.IMAGE_PUBLISH)
     spin(executor, lambda: watch.reliability.name == "RELIABLE", 5.0, "the switch to a reliable reader")
 
@@ -136,6 +158,7 @@ def test_a_silent_stream_is_reported_and_its_return_too(executor, spin):
         return bool(got)
 
     spin(executor, delivered, 5.0, "a message after the silence")
+    spin(executor, lambda: _logged(log, INFO, "/silent_camera/depth: messages arrive again"), 5.0, "the return")
     assert not watch._warned
 
 
@@ -147,13 +170,15 @@ def test_a_best_effort_publisher_beside_a_reliable_one_is_warned_about(executor,
 
     node = Node("mixed_watch", context=executor.context)
     executor.add_node(node)
+    log = _rosout_of(node, "mixed_watch")
     watch = qos.SensorSubscription(node, Image, "mixed_camera/depth", lambda m: None, warn_after_s=0.0)
     node.create_publisher(Image, "mixed_camera/depth", qos.IMAGE_PUBLISH)
     spin(executor, lambda: watch.reliability.name == "RELIABLE", 5.0, "a reliable reader for the camera")
-    assert not watch.mixed_publishers
+    assert not watch.mixed_publishers and not _logged(log, WARN, "beside reliable ones")
     node.create_publisher(Image, "mixed_camera/depth", qos.SENSOR_DATA)      # someone's best-effort publisher
     spin(executor, lambda: watch.reliability.name == "BEST_EFFORT", 5.0, "the switch to best effort")
     assert watch.mixed_publishers
+    spin(executor, lambda: _logged(log, WARN, "a best-effort publisher beside reliable ones"), 5.0, "the warning")
 
 
 def test_the_cells_fastdds_profile_loads_without_errors_and_sets_a_short_heartbeat():
