@@ -117,6 +117,7 @@ def test_the_slide_search_checks_every_shift_like_fingers_clear():
         angle = float(rng.uniform(-math.pi / 2, math.pi / 2))
         shifts = list(range(-60, 61, 3))
         fast = clear_after_shifts(depth, mask, u, v, angle, shifts, OPENING_M, FX)
+        assert len(fast) == len(shifts)
         for k, got in zip(shifts, fast):
             cu, cv = int(round(u + k * math.cos(angle))), int(round(v + k * math.sin(angle)))
             on_box = 0 <= cu < 320 and 0 <= cv < 240 and mask[cv, cu] == mask[v, u]

@@ -91,7 +91,7 @@ def test_sampling_is_deterministic_per_seed():
     surface = objects.get_shape("cube").surface()
     a = sampler.sample_grasps(surface, seed=7, n_candidates=30, keep=10)
     b = sampler.sample_grasps(surface, seed=7, n_candidates=30, keep=10)
-    assert [c.grasp for c in a] == [c.grasp for c in b]
+    assert a and [c.grasp for c in a] == [c.grasp for c in b]
 
 
 @pytest.mark.parametrize("yaw, angle", [(0.0, 0.0), (math.pi / 4, -math.pi / 4), (math.pi / 2, -math.pi / 2),
