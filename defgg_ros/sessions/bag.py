@@ -23,6 +23,7 @@ from rosbags.rosbag2 import Reader, Writer
 from rosbags.rosbag2.enums import CompressionFormat, CompressionMode, StoragePlugin
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
+from defgg_ros.atomic import write_text_atomic
 from defgg_ros.sessions import session_topics as st
 from defgg_ros.sessions.interfaces import PACKAGE, session_typestore
 
@@ -88,6 +89,37 @@ def serialize_string(text: str) -> bytes:
     return bytes(store.serialize_cdr(store.types["std_msgs/msg/String"](data=text), "std_msgs/msg/String"))
 
 
+def _yaml(width: int | None = None):
+    from ruamel.yaml import YAML
+
+    yaml = YAML(typ="safe", pure=True)
+    yaml.default_flow_style = False
+    if width is not None:
+        yaml.width = width
+    return yaml
+
+
+def write_custom_data(bag_dir, key: str, text: str) -> None:
+    """Put `text` into metadata.yaml's custom_data[key] so that it reads back unchanged.
+
+    rosbags writes metadata.yaml with ruamel's default line width, which folds a long double-quoted string;
+    at a fold right after an escaped backslash the text reads back with a space inserted ("\\ n"): the
+    session JSON of sim_bringup/sessions/rigid_objects came back as invalid JSON. Written here unfolded,
+    atomically, and checked by reading it back.
+    """
+    import io
+
+    path = Path(bag_dir) / "metadata.yaml"
+    document = _yaml().load(path.read_text(encoding="utf-8"))
+    document["rosbag2_bagfile_information"].setdefault("custom_data", {})[key] = text
+    stream = io.StringIO()
+    _yaml(width=2 ** 30).dump(document, stream)
+    check = _yaml().load(stream.getvalue())
+    if check["rosbag2_bagfile_information"]["custom_data"][key] != text:
+        raise SessionBagError(f"{path}: custom_data does not read back as written")
+    write_text_atomic(path, stream.getvalue())
+
+
 class SessionWriter:
     """Write a session bag into a temporary folder; `close()` renames it into place.
 
@@ -105,7 +137,8 @@ class SessionWriter:
         self._writer = Writer(self._tmp_bag, version=BAG_VERSION, storage_plugin=StoragePlugin.MCAP)
         # STORAGE mode = compressed MCAP chunks (zstd), what rosbag2's mcap plugin calls a storage preset.
         self._writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
-        self._writer.set_custom_data(CUSTOM_DATA_KEY, json.dumps(metadata, sort_keys=True))
+        self._custom_text = json.dumps(metadata, sort_keys=True)
+        self._writer.set_custom_data(CUSTOM_DATA_KEY, self._custom_text)
         self._writer.open()
         self._connections = {}
         self.counts = {}
@@ -128,11 +161,13 @@ class SessionWriter:
     def update_metadata(self, metadata: dict, log_time_ns: int) -> None:
         """Metadata learned while recording (e.g. node parameters): a newer metadata message wins."""
         text = json.dumps(metadata, sort_keys=True)
+        self._custom_text = text
         self._writer.set_custom_data(CUSTOM_DATA_KEY, text)
         self.write(st.METADATA, serialize_string(text), log_time_ns)
 
     def close(self) -> Path:
         self._writer.close()
+        write_custom_data(self._tmp_bag, CUSTOM_DATA_KEY, self._custom_text)
         if self.path.exists():  # only with overwrite: swap folders, old one removed after
             old = self._scratch / "previous"
             os.rename(self.path, old)

@@ -27,6 +27,27 @@ def test_round_trip_is_mcap_with_zstd_chunks_and_metadata_twice(tmp_path):
     assert grasp.header.stamp.sec == 3 and grasp.width_m == pytest.approx(0.03)
 
 
+def _custom_data(path):
+    return yaml.safe_load((path / "metadata.yaml").read_text())["rosbag2_bagfile_information"]["custom_data"][
+        "defgg_session"]
+
+
+def test_custom_data_reads_back_as_the_session_metadata_even_long_and_multiline(tmp_path):
+    # rosbags folds long quoted strings; a fold after an escaped backslash read back as "\\ n" (invalid JSON)
+    import json
+
+    meta = metadata()
+    meta["note"] = "\n".join(f"# line {i}: a scene file's comment, long enough to be folded by YAML" for i in range(60))
+    writer = SessionWriter(tmp_path / "long", meta, 0)
+    meta["parameters"] = {"executor_node": {f"p{i}": "x" * (i % 17) for i in range(200)}}
+    writer.update_metadata(meta, 1)
+    path = writer.close()
+    assert json.loads(_custom_data(path)) == read_bag(path)[0] == meta
+    for session in sorted(Path(__file__).resolve().parents[2].joinpath("sim_bringup", "sessions").iterdir()):
+        if (session / "metadata.yaml").is_file():   # the shipped sessions too
+            assert json.loads(_custom_data(session)) == read_bag(session)[0], session.name
+
+
 def test_session_timeline_pairs_frames_grasps_and_calls(tmp_path):
     session = load_session(write_small_session(tmp_path / "s"))
     assert [e.kind for e in session.events] == ["assignment", "frame", "frame", "frame", "plan"]
