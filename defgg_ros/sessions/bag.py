@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
 
+import yaml
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
 from rosbags.rosbag2 import Reader, Writer
 from rosbags.rosbag2.enums import CompressionFormat, CompressionMode, StoragePlugin
@@ -89,16 +90,6 @@ def serialize_string(text: str) -> bytes:
     return bytes(store.serialize_cdr(store.types["std_msgs/msg/String"](data=text), "std_msgs/msg/String"))
 
 
-def _yaml(width: int | None = None):
-    from ruamel.yaml import YAML
-
-    yaml = YAML(typ="safe", pure=True)
-    yaml.default_flow_style = False
-    if width is not None:
-        yaml.width = width
-    return yaml
-
-
 def write_custom_data(bag_dir, key: str, text: str) -> None:
     """Put `text` into metadata.yaml's custom_data[key] so that it reads back unchanged.
 
@@ -107,17 +98,13 @@ def write_custom_data(bag_dir, key: str, text: str) -> None:
     session JSON of sim_bringup/sessions/rigid_objects came back as invalid JSON. Written here unfolded,
     atomically, and checked by reading it back.
     """
-    import io
-
     path = Path(bag_dir) / "metadata.yaml"
-    document = _yaml().load(path.read_text(encoding="utf-8"))
+    document = yaml.safe_load(path.read_text(encoding="utf-8"))
     document["rosbag2_bagfile_information"].setdefault("custom_data", {})[key] = text
-    stream = io.StringIO()
-    _yaml(width=2 ** 30).dump(document, stream)
-    check = _yaml().load(stream.getvalue())
-    if check["rosbag2_bagfile_information"]["custom_data"][key] != text:
+    out = yaml.safe_dump(document, default_flow_style=False, sort_keys=False, width=2 ** 30, allow_unicode=True)
+    if yaml.safe_load(out)["rosbag2_bagfile_information"]["custom_data"][key] != text:
         raise SessionBagError(f"{path}: custom_data does not read back as written")
-    write_text_atomic(path, stream.getvalue())
+    write_text_atomic(path, out)
 
 
 class SessionWriter:
