@@ -39,10 +39,10 @@ from defgg_ros.bringup.node_set import NodeSetError, load_node_set
 from defgg_ros.bringup.supervisor import Bringup, BringupError
 from defgg_ros.cli_help import HelpFormatter
 from defgg_ros.ros.domain import ISOLATION_ENV, apply_domain_choice, default_domain_choice
-from defgg_ros.ros.share import share_path
+from defgg_ros.ros.share import demo_scene_file, share_path
 
 ROOT = Path(__file__).resolve().parents[1]  # runs/ of the working copy
-DEFAULT_SCENE = share_path("sim_bringup", "scenes", "demo.yaml")
+DEFAULT_SCENE = demo_scene_file()
 DEFAULT_MODEL = share_path("models", "defgg_cnn.pt")
 DRIVER, INFERENCE = "fake_panda_driver", "grasp_inference_node"
 # Before each camera frame the arm goes to the ready pose, which is out of the

@@ -121,11 +121,18 @@ def _yaml_scalar(text):
     return yaml.safe_load(text) if text else ""
 
 
-def record_hook(path: str, scene: str | None) -> dict:
-    """The recorder as one more supervised process (its CLI: defgg_ros/sessions/record.py)."""
-    argv = [sys.executable, "-c", "from defgg_ros.sessions.record import main; main()", path]
-    if scene:
-        argv += ["--scene", scene]
+def record_hook(path: str, node_set, overrides: dict) -> dict:
+    """The recorder as one more supervised process (its CLI: defgg_ros/sessions/record.py), its exit code
+    the recorder's own. On a set with the simulated driver the session records the scene that driver runs
+    (--scene, or its parameter files' scene_file): a simulated session, replayable with its picks."""
+    from defgg_ros.bringup.shared_parameters import effective_parameters
+    from defgg_ros.ros.share import demo_scene_file
+
+    argv = [sys.executable, "-c", "import sys; from defgg_ros.sessions.record import main; sys.exit(main())", path]
+    driver = next((entry for entry in node_set.nodes if entry.name == DRIVER), None)
+    if driver is not None:
+        scene = effective_parameters(driver, overrides.get(DRIVER)).get("scene_file") or demo_scene_file()
+        argv += ["--scene", str(scene)]
     return {"recorder": argv}
 
 
@@ -178,9 +185,9 @@ def main(argv=None) -> int:
         node_set = load_node_set(args.set)
         # First, before any rclpy context or child process exists: they read the domain at start-up.
         print(f"defgg-bringup: {apply_domain_choice(domain_choice(args, node_set))}", flush=True)
-        extra = record_hook(args.record, args.scene) if args.record else {}
         overrides = checked_overrides(node_set, parse_overrides(args))
         check_cell_parameters_agree(node_set, overrides)
+        extra = record_hook(args.record, node_set, overrides) if args.record else {}
         bringup = Bringup(node_set, overrides, extra)
     except (NodeSetError, BringupError, ValueError) as exc:
         print(f"defgg-bringup: {exc}", file=sys.stderr)

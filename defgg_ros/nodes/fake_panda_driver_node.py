@@ -41,7 +41,7 @@ from defgg_ros.nodes.node_main import run_node
 from defgg_ros.ros import topics
 from defgg_ros.ros.action import destroy_actions
 from defgg_ros.ros.parameters import declare_parameters, load_schema
-from defgg_ros.ros.share import share_path
+from defgg_ros.ros.share import demo_scene_file
 from defgg_ros.sim.cell import CellSettings, SimCell
 from defgg_ros.sim.cell_camera import DepthNoise
 from defgg_ros.sim.cell_gripper import GripperCommandError
@@ -64,7 +64,7 @@ MAX_STAMP_OFFSET_S = 1.0
 
 def default_scene_file() -> str:
     """sim_bringup/scenes/demo.yaml of the source tree, else of the installed share folder."""
-    return str(share_path("sim_bringup", "scenes", "demo.yaml"))
+    return str(demo_scene_file())
 
 
 # Names, types, defaults and bounds: defgg_ros/ros/params/fake_panda_driver.yaml.

@@ -11,8 +11,10 @@ SAFE_DOMAIN_RANGE = (0, 101)
 
 
 def pick_private_domain(exclude=(), rng=random) -> int:
-    """A random safe domain id other than this process's ROS_DOMAIN_ID and the ids in `exclude`."""
-    taken = {str(d) for d in exclude} | {os.environ.get("ROS_DOMAIN_ID", "0")}
+    """A random safe domain id other than 0, this process's ROS_DOMAIN_ID and the ids in `exclude`.
+
+    Never 0: it is ROS 2's default, where a lab's real arm controller usually listens."""
+    taken = {str(d) for d in exclude} | {os.environ.get("ROS_DOMAIN_ID", "0"), "0"}
     choices = [d for d in range(SAFE_DOMAIN_RANGE[0], SAFE_DOMAIN_RANGE[1] + 1) if str(d) not in taken]
     return rng.choice(choices)
 

@@ -28,6 +28,11 @@ def share_roots() -> list[Path]:
     return unique
 
 
+def demo_scene_file() -> Path:
+    """The simulated cell's default scene (the fake driver's scene_file '' and `defgg-demo`'s --scene)."""
+    return share_path("sim_bringup", "scenes", "demo.yaml")
+
+
 def share_path(*parts: str) -> Path:
     """The first existing <root>/<parts>; else the source tree's path, so an error names where it belongs."""
     for root in share_roots():

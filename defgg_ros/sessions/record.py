@@ -62,14 +62,17 @@ def _model_path(args, parameters: dict) -> tuple[Path, bool]:
 
 
 def _pick_indices(text: str | None, n_plans: int) -> set:
+    """ValueError unless `text` names PlanGrasp calls of this run (check_args: before anything connects)."""
     if not text:
         return set()
+    if n_plans < 1:
+        raise ValueError("--pick needs --plan N (it picks with the grasps of those PlanGrasp calls)")
     try:
         indices = {int(v) for v in text.split(",")}
     except ValueError:
-        raise SystemExit(f"defgg-record: --pick needs plan indices like 0,2; got {text!r}") from None
+        raise ValueError(f"--pick needs plan indices like 0,2; got {text!r}") from None
     if any(not 0 <= i < n_plans for i in indices):
-        raise SystemExit(f"defgg-record: --pick indices must be in 0..{n_plans - 1} (see --plan)")
+        raise ValueError(f"--pick indices must be in 0..{n_plans - 1} (see --plan)")
     return indices
 
 
@@ -258,6 +261,7 @@ def check_args(args) -> None:
             raise ValueError(f"{flag} must be > 0, got {value:g}")
     if args.stiffness_from_scene and not args.scene:
         raise ValueError("--stiffness-from-scene needs --scene")
+    _pick_indices(args.pick, args.plan)
 
 
 def _interrupt(*_):

@@ -5,8 +5,9 @@ session has picks, the fake Panda driver on the recorded scene + the
 executor), feed the recorded depth frames and stiffness assignments, replay
 the PlanGrasp calls and PickAndPlace goals, and compare grasps (position mm,
 angle deg, width mm) and pick outcomes with the recording. Prints a diff
-table per session. Exit codes: 0 all matched, 1 regression, 2 a session or
-the cell could not be replayed (bad bag, node died, timeout).
+table per session. Exit codes: 0 all matched, 1 regression (a recorded frame
+that gets no grasp within --timeout-s is one), 2 a session or the cell could
+not be replayed (bad bag, node died, a service or action call timed out).
 """
 import argparse
 import sys
@@ -190,7 +191,7 @@ class ReplayRun:
                          f"{tolerances.angle_deg:g} deg, {tolerances.width_mm:g} mm)", rows))
         if args.update:
             return EXIT_OK, f"{path.name}: expectations re-recorded into {path}"
-        message = regression_message(path.name, rows, model.change_from(meta))
+        message = regression_message(path.name, rows, model.change_from(meta), str(path))
         return (EXIT_REGRESSION, message) if message else (EXIT_OK, f"{path.name}: all {len(rows)} item(s) match")
 
 
@@ -215,7 +216,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--position-tol-mm", type=float, help="grasp position tolerance (default: as recorded)")
     parser.add_argument("--angle-tol-deg", type=float, help="grasp angle tolerance (default: as recorded)")
     parser.add_argument("--width-tol-mm", type=float, help="grasp width tolerance (default: as recorded)")
-    parser.add_argument("--timeout-s", type=float, default=30.0, help="how long to wait for a frame's grasp (s)")
+    parser.add_argument("--timeout-s", type=float, default=30.0,
+                        help="how long to wait for a frame's grasp (s); none by then: a regression")
     parser.add_argument("--pick-timeout-s", type=float, default=300.0, help="how long a pick may take (s)")
     parser.add_argument("--domain-id", type=int,
                         help="ROS_DOMAIN_ID of the replay's private graph (default: a random one in "

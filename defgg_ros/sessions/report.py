@@ -34,10 +34,12 @@ def format_table(title: str, rows: list[Row]) -> str:
     return "\n".join(out)
 
 
-def regression_message(session_name: str, rows: list[Row], cause: str = "") -> str | None:
+def regression_message(session_name: str, rows: list[Row], cause: str = "",
+                       session_path: str = "") -> str | None:
     """None when everything matched, else one line per changed item saying what changed.
 
-    `cause`: a known difference from the recording (e.g. another model) to name first.
+    `cause`: a known difference from the recording (e.g. another model) to name first. `session_path`: the
+    path the update command needs (default: the name).
     """
     bad = [r for r in rows if r.problems]
     if not bad:
@@ -46,5 +48,5 @@ def regression_message(session_name: str, rows: list[Row], cause: str = "") -> s
              + (f" ({cause})" if cause else "")]
     lines += [f"  {r.item}: " + "; ".join(r.problems) for r in bad]
     lines.append("  (if the change is intended, re-record the expectations with: defgg-replay --update "
-                 f"{session_name})")
+                 f"{session_path or session_name})")
     return "\n".join(lines)

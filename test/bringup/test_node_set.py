@@ -60,3 +60,21 @@ def test_overrides_are_checked_against_the_node_schemas_and_typed_before_any_pro
             checked_overrides(sim, parse_overrides(parse_args(argv)))
     with pytest.raises(NodeSetError, match="not in node set 'real_cell'"):
         checked_overrides(load_node_set("real_cell"), parse_overrides(parse_args(["--gui"])))
+
+
+def test_the_bringups_recorder_keeps_its_exit_code_and_records_the_scene_the_driver_runs(tmp_path):
+    import subprocess
+
+    from defgg_ros.bringup.cli import checked_overrides, parse_args, parse_overrides, record_hook
+    from defgg_ros.ros.share import demo_scene_file
+
+    sim = load_node_set("sim_cell")
+    argv = record_hook(str(tmp_path / "bag"), sim, {})["recorder"]
+    assert argv[-2:] == ["--scene", str(demo_scene_file())]     # the driver's '' scene_file is the demo scene
+    other = str(demo_scene_file().with_name("rigid_box.yaml"))
+    chosen = checked_overrides(sim, parse_overrides(parse_args(["--scene", other])))
+    assert record_hook(str(tmp_path / "bag"), sim, chosen)["recorder"][-2:] == ["--scene", other]
+    assert "--scene" not in record_hook(str(tmp_path / "bag"), load_node_set("real_cell"), {})["recorder"]
+    # the recorder's own exit code comes out of the process (a bad option: 2, before anything connects)
+    done = subprocess.run(argv + ["--top-k", "0"], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2 and "--top-k must be >= 1" in done.stderr, done.stderr

@@ -100,6 +100,9 @@ def test_regression_message_names_the_frames_and_the_difference():
     assert "1 of 2 item(s) changed" in message
     assert "frame 1 @2.000s: position moved 20.0 mm (> 3 mm)" in message
     assert "--update soft_objects" in message
+    # the replay passes the session's path: the update command then works from where it was run
+    assert "--update sim_bringup/sessions/soft_objects)" in regression_message(
+        "soft_objects", rows, session_path="sim_bringup/sessions/soft_objects")
     assert regression_message("s", rows[:1]) is None
 
 

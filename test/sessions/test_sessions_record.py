@@ -104,7 +104,9 @@ def test_a_fresh_recording_replays_clean(live_cell, tmp_path):
     (["--duration-s", "-5"], "--duration-s must be >= 0, got -5"), (["--top-k", "0"], "--top-k must be >= 1"),
     (["--plan", "-1"], "--plan must be >= 0"), (["--width-tol-mm", "0"], "--width-tol-mm must be > 0"),
     (["--depth-period-s", "nan"], "--depth-period-s must be >= 0"),
-    (["--stiffness-from-scene"], "--stiffness-from-scene needs --scene")])
+    (["--stiffness-from-scene"], "--stiffness-from-scene needs --scene"),
+    (["--pick", "0"], "--pick needs --plan N"), (["--plan", "2", "--pick", "2"], "--pick indices must be in 0..1"),
+    (["--plan", "2", "--pick", "first"], "--pick needs plan indices like 0,2")])
 def test_options_out_of_range_are_refused_before_anything_connects(tmp_path, capsys, argv, says):
     assert record.main([str(tmp_path / "bag"), *argv]) == 2
     err = capsys.readouterr().err
