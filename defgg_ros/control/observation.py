@@ -39,6 +39,12 @@ class ObservationWatch:
         elif self.since_s is None:
             self.since_s = float(stamp_s)
 
+    def retarget(self, observation_q_rad, tolerance_rad: float) -> None:
+        """A new observation pose or tolerance (a parameter change): the rest there counts afresh."""
+        q = np.asarray(observation_q_rad, dtype=float)
+        if not (np.array_equal(q, self.observation_q_rad) and float(tolerance_rad) == self.tolerance_rad):
+            self.observation_q_rad, self.tolerance_rad, self.since_s = q, float(tolerance_rad), None
+
     def at_observation(self) -> bool:
         return self.since_s is not None
 

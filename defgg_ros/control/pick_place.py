@@ -54,10 +54,10 @@ from defgg_ros.control.trajectories import (
     arm_limits,
     check_trajectory,
     matched_state,
+    plan_checked_stop,
     plan_joint_motion,
     plan_joint_via,
     plan_line,
-    plan_stop,
 )
 from defgg_ros.grasping.geometry import tcp_height_m
 
@@ -288,9 +288,13 @@ class PickPlaceSequence:
         return self._line_to(target, self._cfg.line_speed_mps, sim_s)
 
     def _stop_motion(self, sim_s: float) -> list:
-        """Jerk-limited stop from where the arm is along the commanded motion."""
+        """Jerk-limited stop from where the arm is along the commanded motion (checked: plan_checked_stop)."""
         q, qd, qdd = matched_state(self._motion.trajectory, self._obs.state.q_rad)
-        return self._send(plan_stop(q, qd, qdd, self._limits, self._cfg.sample_dt_s), sim_s, guarded_stop=True)
+        stop, breach = plan_checked_stop(q, qd, qdd, self._limits, self._kin, self._cfg.table_z_m,
+                                         self._cfg.sample_dt_s)
+        if breach:
+            self._recovery_log.append(breach)   # in Outcome.recovery: the operator must hear of it
+        return self._send(stop, sim_s, guarded_stop=True)
 
     def _arrived(self, sim_s: float) -> bool:
         m, state = self._motion, self._obs.state

@@ -14,7 +14,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from ruckig import ControlInterface, InputParameter, Result, Ruckig, Trajectory
+from ruckig import ControlInterface, InputParameter, Result, Ruckig, Synchronization, Trajectory
 
 from defgg_ros.constants import (
     ARM_JOINT_LIMITS,
@@ -228,13 +228,40 @@ def plan_joint_via(q_start, q_via, q_goal, limits: JointLimits, dt_s: float = SA
                              np.vstack([a.qdd_radps2, b.qdd_radps2[1:]]))
 
 
-def plan_stop(q_rad, qd_radps, qdd_radps2, limits: JointLimits, dt_s: float = SAMPLE_DT_S) -> SampledTrajectory:
-    """Jerk-limited stop: brings velocity and acceleration to zero as fast as the limits allow."""
+def plan_stop(q_rad, qd_radps, qdd_radps2, limits: JointLimits, dt_s: float = SAMPLE_DT_S,
+              synchronized: bool = True) -> SampledTrajectory:
+    """Jerk-limited stop: brings velocity and acceleration to zero as fast as the limits allow.
+
+    synchronized: every joint comes to rest at the same time (the TCP keeps roughly to its path); False:
+    each joint brakes as hard as it may, so each travels the least (the stop of last resort)."""
     inp = _joint_input(limits, q_rad, qd_radps, qdd_radps2)
     inp.control_interface = ControlInterface.Velocity
     inp.target_velocity = np.zeros(7).tolist()
     inp.target_acceleration = np.zeros(7).tolist()
+    if not synchronized:
+        inp.synchronization = Synchronization.No
     return _sample_ruckig(_calculate(inp, "stop"), dt_s)
+
+
+def plan_checked_stop(q_rad, qd_radps, qdd_radps2, limits: JointLimits, kin: PandaKinematics, table_z_m: float,
+                      dt_s: float = SAMPLE_DT_S) -> tuple[SampledTrajectory, str]:
+    """The stop to send and "" when it passes check_trajectory; else the stop of last resort and why it fails.
+
+    A stop is sent whatever the check says (standing still is not on offer), but it is checked like every
+    other motion: the synchronised stop first; where it would leave a joint's range or go below the table,
+    the unsynchronised one (each joint travels the least); when neither passes, the latter, with the
+    breach, for the caller to report."""
+    synced = plan_stop(q_rad, qd_radps, qdd_radps2, limits, dt_s)
+    try:
+        check_trajectory(synced, limits, kin, table_z_m)
+        return synced, ""
+    except TrajectoryError as first:
+        shortest = plan_stop(q_rad, qd_radps, qdd_radps2, limits, dt_s, synchronized=False)
+        try:
+            check_trajectory(shortest, limits, kin, table_z_m)
+            return shortest, ""
+        except TrajectoryError as error:
+            return shortest, f"the stop itself fails its check ({error}; synchronised: {first})"
 
 
 # --- straight TCP lines ------------------------------------------------------

@@ -148,6 +148,7 @@ class ExecutorNode(Node):
         self._gripper_goal = None
         self._last_state: tuple[ArmState, float] | None = None
         self._last_force = np.zeros(3)
+        self._last_force_wall_s = None   # when the last external wrench arrived (monotonic)
         names = topics.arm_names(p["arm_id"])  # ValueError on a malformed arm_id
         self._arm_joints, self._finger_joints = names["joints"], names["fingers"]
         self._arm_goal = None       # handle of the running FollowJointTrajectory goal
@@ -168,6 +169,16 @@ class ExecutorNode(Node):
 
     def _params(self) -> dict:
         return {name: self.get_parameter(name).value for name in PARAMETERS}
+
+    def _take_parameters(self) -> None:
+        """Each goal runs on the parameters as they are when it starts (`ros2 param set executor_node
+        limits_scale 0.2` slows the next pick); a combination the sequence refuses aborts that goal
+        (ValueError) and keeps the previous one."""
+        p = self._params()
+        config = self._sequence_config(p)
+        with self._lock:
+            self._config = config
+            self._watch.retarget(p["observation_q_rad"], p["observation_tolerance_rad"])
 
     @staticmethod
     def _sequence_config(p: dict) -> SequenceConfig:
@@ -218,7 +229,7 @@ class ExecutorNode(Node):
         if not np.all(np.isfinite(force)):
             return
         with self._lock:
-            self._last_force = force
+            self._last_force, self._last_force_wall_s = force, time.monotonic()
             if self._sequence is not None:
                 self._sequence.on_force(force)
 
@@ -235,6 +246,7 @@ class ExecutorNode(Node):
         started = time.monotonic()
         result = PickAndPlace.Result()
         try:
+            self._take_parameters()
             if goal_handle.request.plan_grasp:
                 moved = self._observe_before_planning(goal_handle)
                 if moved is not None and not moved.success:
@@ -247,8 +259,12 @@ class ExecutorNode(Node):
             if goal_handle.request.plan_grasp and p["plan_grasp_alternatives"] > 1:
                 result.grasp_used, sequence = self._reachable_alternative(grasp, sequence, place, p)
             self._wait_for_servers(p["server_wait_s"])
+            self._check_contact_guard(p)
             return self._run(goal_handle, sequence, result)
         except (GoalError, ValueError) as error:
+            with self._lock:   # raised while a sequence drove the arm (shutdown, a stop it could not plan):
+                if self._sequence is not None:   # its motion must not run on unwatched
+                    self._hold_arm()
             return self._abort(goal_handle, result, str(error), started)
         except Exception as error:  # noqa: BLE001 - a bug must not take the action server down
             self.get_logger().error(f"pick-and-place failed unexpectedly: {error!r}")
@@ -271,6 +287,18 @@ class ExecutorNode(Node):
         self.get_logger().warning(f"pick-and-place aborted: {reason}")
         goal_handle.abort()
         return result
+
+    def _check_contact_guard(self, p: dict) -> None:
+        """GoalError unless an external wrench arrived within watchdog_timeout_s: the descent stops on the force
+        it reads, and with a wrong topic, a QoS mismatch or a dead broadcaster it would read zeros and descend
+        blind into the object or the table."""
+        with self._lock:
+            last = self._last_force_wall_s
+        age = None if last is None else time.monotonic() - last
+        if age is None or age > float(p["watchdog_timeout_s"]):
+            heard = "none received yet" if age is None else f"the last {age:.1f} s ago"
+            raise GoalError(f"no external wrench on {self.resolve_topic_name(p['external_wrench_topic'])} ({heard}):"
+                            " the descent's contact guard would be blind; check franka_robot_state_broadcaster")
 
     def _sequence_for(self, grasp, place, p: dict) -> PickPlaceSequence:
         return PickPlaceSequence(self._kin, self._config,

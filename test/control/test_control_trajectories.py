@@ -15,6 +15,7 @@ from defgg_ros.control.trajectories import (
     hold,
     matched_state,
     panda_limits,
+    plan_checked_stop,
     plan_joint_motion,
     plan_joint_via,
     plan_line,
@@ -112,6 +113,27 @@ def test_stop_from_full_speed_is_jerk_limited():
     independent_limit_check(stop, LIMITS)
     assert stop.duration_s > 0.1
     assert np.allclose(stop.qd_radps[-1], 0.0, atol=1e-9) and np.allclose(stop.qdd_radps2[-1], 0.0, atol=1e-9)
+
+
+@pytest.mark.parametrize("gap_rad, sent, breach", [(0.03, "synchronised", False), (0.01, "shortest", False),
+                                                    (0.005, "shortest", True)])
+def test_a_stop_is_checked_and_near_a_range_end_each_joint_brakes_hardest(gap_rad, sent, breach):
+    # joint 7 fast (a long stop), joint 1 slow towards its upper end: synchronised, joint 1 brakes over the
+    # whole stop and travels 19 mm of angle; braking on its own, 8 mm
+    q = np.array(KIN.q_ready_rad, dtype=float)
+    q[0] = LIMITS.q_max_rad[0] - gap_rad
+    qd = np.zeros(7)
+    qd[0], qd[6] = 0.3, 0.95 * LIMITS.qd_max_radps[6]
+    synced = plan_stop(q, qd, np.zeros(7), LIMITS)
+    shortest = plan_stop(q, qd, np.zeros(7), LIMITS, synchronized=False)
+    assert shortest.q_rad[-1, 0] - q[0] < synced.q_rad[-1, 0] - q[0]
+    stop, why = plan_checked_stop(q, qd, np.zeros(7), LIMITS, KIN, TABLE_Z_M)
+    expected = synced if sent == "synchronised" else shortest
+    np.testing.assert_allclose(stop.q_rad, expected.q_rad)
+    assert bool(why) == breach and (not breach or "joint 1" in why)
+    if not breach:
+        check_trajectory(stop, LIMITS, KIN, TABLE_Z_M)
+    assert np.allclose(stop.qd_radps[-1], 0.0, atol=1e-9)       # a stop is sent either way, and it stops
 
 
 def test_bad_inputs():

@@ -184,3 +184,50 @@ def test_a_planned_grasp_the_arm_cannot_make_gives_way_to_the_next_ranked_one(ex
     assert asked == [1, 5]
     assert result.success, result.failure_reason
     assert result.grasp_used.pose_base.pose.position.x == pytest.approx(GRASP_XYZ[0])
+
+
+def _peak_limit_ratio(trajectory_msgs) -> float:
+    from defgg_ros.constants import PANDA_QD_MAX_RADPS, PANDA_QDD_MAX_RADPS2
+
+    ratios = [0.0]
+    for msg in trajectory_msgs:
+        for point in msg.points:
+            ratios.append(float(np.max(np.abs(point.velocities) / np.array(PANDA_QD_MAX_RADPS))))
+            ratios.append(float(np.max(np.abs(point.accelerations) / np.array(PANDA_QDD_MAX_RADPS2))))
+    return max(ratios)
+
+
+def test_a_parameter_set_at_runtime_takes_effect_from_the_next_goal(executor_cell, spin):
+    """`ros2 param set executor_node limits_scale 0.3` must slow the next pick (it was accepted and ignored)."""
+    ex, node, client, start_driver = executor_cell
+    driver = start_driver()
+    wait_driver_ready(ex, spin, node)
+    assert result_of(ex, spin, send(ex, client, spin, PickAndPlace.Goal(grasp=grasp_msg()))).result.success
+    fast = _peak_limit_ratio(driver.trajectory_msgs)
+    assert fast > 0.5, fast                       # at limits_scale 1.0 the motions reach far beyond 0.3
+    assert node.set_parameters([Parameter("limits_scale", value=0.3)])[0].successful
+    driver.trajectory_msgs.clear()
+    assert result_of(ex, spin, send(ex, client, spin, PickAndPlace.Goal(grasp=grasp_msg()))).result.success
+    assert 0.0 < _peak_limit_ratio(driver.trajectory_msgs) <= 0.3 * (1 + 1e-3)
+
+
+def test_without_an_external_wrench_the_pick_is_refused_before_the_arm_moves(executor_cell, spin):
+    """A wrong wrench topic or a dead broadcaster would leave the descent's contact guard reading zeros."""
+    import time
+
+    from geometry_msgs.msg import WrenchStamped
+
+    from defgg_ros.nodes import qos
+
+    ex, node, client, start_driver = executor_cell
+    driver = start_driver()
+    wait_driver_ready(ex, spin, node)
+    driver.destroy_publisher(driver.wrench_pub)      # the broadcaster goes quiet (or publishes elsewhere)
+    driver.wrench_pub = driver.create_publisher(WrenchStamped, "elsewhere/external_wrench", qos.STATE)
+    quiet_since = time.monotonic()
+    spin(ex, lambda: time.monotonic() - quiet_since > FAST["watchdog_timeout_s"] + 0.5, 10.0, "the wrench to age")
+    driver.trajectory_msgs.clear()
+    response = result_of(ex, spin, send(ex, client, spin, PickAndPlace.Goal(grasp=grasp_msg())), timeout_s=20.0)
+    assert response.status == 6 and "no external wrench on /" in response.result.failure_reason
+    assert "contact guard would be blind" in response.result.failure_reason
+    assert driver.trajectory_msgs == []                # refused before any motion
