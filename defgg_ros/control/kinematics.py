@@ -20,12 +20,14 @@ import pybullet_data
 from defgg_ros.constants import (
     ARM_JOINT_LIMITS,
     ARM_MODELS,
+    PANDA_FINGERTIP_BELOW_TCP_M,
     PANDA_JOINT_NAMES,
     PANDA_MAX_REACH_M,
     PANDA_READY_Q_RAD,
     PANDA_SHOULDER_HEIGHT_M,
     PANDA_TCP_OFFSET_M,
     PANDA_TCP_YAW_RAD,
+    TABLE_CLEARANCE_M,
 )
 from defgg_ros.control.poses import PoseError, top_down_pose, wrap_angle
 
@@ -45,8 +47,12 @@ WORKSPACE_MIN_RADIUS_M = 0.20
 # Keep the reach check a little inside the datasheet sphere: the IK needs
 # some slack to satisfy the orientation at full stretch.
 WORKSPACE_REACH_MARGIN_M = 0.02
-# The TCP may not go lower than this above the table (fingertips touch at 0).
-MIN_TCP_HEIGHT_ABOVE_TABLE_M = 0.003
+# The TCP may not go lower than this above the table: the fingertips end PANDA_FINGERTIP_BELOW_TCP_M below it
+# and keep TABLE_CLEARANCE_M (the floor of grasping.geometry.tcp_height_m). Until 2026-11-28 it was 3 mm, which
+# let the fingertips 4 mm into the table.
+MIN_TCP_HEIGHT_ABOVE_TABLE_M = PANDA_FINGERTIP_BELOW_TCP_M + TABLE_CLEARANCE_M
+# Every other link's frame origin keeps this much above the table.
+MIN_LINK_HEIGHT_ABOVE_TABLE_M = 0.003
 
 
 class KinematicsError(ValueError):

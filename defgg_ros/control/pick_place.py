@@ -31,7 +31,13 @@ import math
 import numpy as np
 
 from defgg_ros.control.gripper_rule import MISSED_WIDTH_M, OPENING_SPEED_MPS, grasp_command
-from defgg_ros.control.kinematics import KinematicsError, PandaKinematics, WorkspaceError, check_workspace
+from defgg_ros.control.kinematics import (
+    MIN_TCP_HEIGHT_ABOVE_TABLE_M,
+    KinematicsError,
+    PandaKinematics,
+    WorkspaceError,
+    check_workspace,
+)
 from defgg_ros.control.poses import finite_array, top_down_pose
 from defgg_ros.control.sequence_types import (
     RECOVER_PHASE,
@@ -65,8 +71,9 @@ from defgg_ros.grasping.geometry import tcp_height_m
 STILL_SPEED_RADPS = SequenceConfig.still_speed_radps
 STOP_TIMEOUT_S = SequenceConfig.stop_timeout_s
 # Grasps predicted a little below the table top (depth noise on thin
-# objects) are raised to this height; further below is a bad grasp.
-GRASP_MIN_HEIGHT_ABOVE_TABLE_M = 0.005
+# objects) are raised to this TCP height (fingertips TABLE_CLEARANCE_M above the table, as tcp_height_m's
+# floor; 5 mm until 2026-11-28, the fingertips 2 mm into the table); further below is a bad grasp.
+GRASP_MIN_HEIGHT_ABOVE_TABLE_M = MIN_TCP_HEIGHT_ABOVE_TABLE_M
 GRASP_BELOW_TABLE_TOLERANCE_M = 0.02
 # A grasp that ends this close to the opening it started from never closed:
 # a finger rests on the object (the grasp centre is off the object). Without

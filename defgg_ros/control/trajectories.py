@@ -20,7 +20,12 @@ from defgg_ros.constants import (
     ARM_JOINT_LIMITS,
     ARM_MODELS,
 )
-from defgg_ros.control.kinematics import MIN_TCP_HEIGHT_ABOVE_TABLE_M, KinematicsError, PandaKinematics
+from defgg_ros.control.kinematics import (
+    MIN_LINK_HEIGHT_ABOVE_TABLE_M,
+    MIN_TCP_HEIGHT_ABOVE_TABLE_M,
+    KinematicsError,
+    PandaKinematics,
+)
 
 # Fraction of Franka's published velocity/acceleration/jerk limits we plan
 # with: the datasheet values are the hardware's reflex limits, and the
@@ -431,6 +436,6 @@ def check_trajectory(trajectory: SampledTrajectory, limits: JointLimits, kin: Pa
         tcp_min, link_min = min(tcp_min, tcp_z), min(link_min, link_z)
     if tcp_min < table_z_m + MIN_TCP_HEIGHT_ABOVE_TABLE_M - JOINT_ATOL:
         raise TrajectoryError(f"TCP goes down to {tcp_min:.4f} m, below the table at {table_z_m:.3f} m + clearance")
-    if link_min < table_z_m + MIN_TCP_HEIGHT_ABOVE_TABLE_M:
+    if link_min < table_z_m + MIN_LINK_HEIGHT_ABOVE_TABLE_M:
         raise TrajectoryError(f"a link of the arm goes down to {link_min:.4f} m, below the table at {table_z_m:.3f} m")
     return LimitReport(ratios["velocity"], ratios["acceleration"], ratios["jerk"], tcp_min, link_min)

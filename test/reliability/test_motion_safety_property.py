@@ -4,7 +4,7 @@ For random reachable grasps, object widths, place poses, contact heights and
 cancel moments, every trajectory PickPlaceSequence sends (approach, guarded
 descent, lift, transfer, place, retreat, and the stop after a cancel) is
 checked from its samples alone: joint position, velocity, acceleration and
-jerk limits at the configured scale, and TCP above the table. A descent with
+jerk limits at the configured scale, and fingertips above the table. A descent with
 something in the way stops there (force threshold), and a canceled run ends
 with the arm at rest. Runs on the fake-clock robot of test/control (real
 Pinocchio kinematics and Ruckig trajectories).
@@ -15,6 +15,7 @@ from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 from support.control_fake_robot import CONTACT_STIFFNESS_N_PER_M, FakeRobot, World, run
 
+from defgg_ros.constants import PANDA_FINGERTIP_BELOW_TCP_M
 from defgg_ros.control.kinematics import PandaKinematics
 from defgg_ros.control.pick_place import GRASP_MIN_HEIGHT_ABOVE_TABLE_M, PickPlaceSequence
 from defgg_ros.control.sequence_types import GraspTarget, PlaceTarget, SendTrajectory, SequenceConfig
@@ -38,7 +39,8 @@ def check_samples(trajectory):
         assert np.all(np.diff(t) > 0)
         jerk = np.diff(qdd, axis=0) / np.diff(t)[:, None]
         assert np.all(np.abs(jerk) <= LIMITS.qddd_max_radps3 * (1 + REL_TOL))
-    assert min(KIN.fk(qk)[2, 3] for qk in q) >= CONFIG.table_z_m
+    # the fingertips (7 mm below the TCP) never reach the table, stops after a contact included
+    assert min(KIN.fk(qk)[2, 3] for qk in q) >= CONFIG.table_z_m + PANDA_FINGERTIP_BELOW_TCP_M
 
 
 scenarios = st.fixed_dictionaries({
