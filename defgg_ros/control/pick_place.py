@@ -110,6 +110,7 @@ class PickPlaceSequence:
         self._phase = "idle"
         self._placed_open_sent = False
         self._stopping = False
+        self._cancel_after_stop = False   # canceled while a failure's stop ran: no recovery after it
         self._stop_began_s = 0.0
         self._still_since_s: float | None = None
         self._failed_phase = ""
@@ -171,8 +172,14 @@ class PickPlaceSequence:
         return self._guarded(handlers[self._phase], sim_s, wall_s)
 
     def cancel(self, sim_s: float, wall_s: float) -> list:
-        """Stop the arm (jerk-limited) and end as canceled once it is still (then recover, unless recovering)."""
-        if self.finished or self._stopping:
+        """Stop the arm (jerk-limited) and end as canceled once it is still (then recover, unless recovering).
+        During a failure's stop the arm is already stopping: the cancel is kept, and no recovery (or no more
+        of it) follows the stop; the action forwards only one cancel, so it must not be lost."""
+        if self.finished:
+            return []
+        if self._stopping:
+            if not self.outcome.success:
+                self.outcome.canceled = self._cancel_after_stop = True
             return []
         self.outcome.canceled = True
         return self._fail(f"canceled during {self._phase}", sim_s)
@@ -512,7 +519,7 @@ class PickPlaceSequence:
 
     def _needs_recovery(self) -> bool:
         return (not self._recovering and not self.outcome.success and self._cfg.observation_q_rad is not None
-                and self._obs.state is not None and not self._at_observation())
+                and self._obs.state is not None and not self._at_observation() and not self._cancel_after_stop)
 
     def _tick_stopping(self, sim_s: float, wall_s: float) -> list:
         try:
@@ -531,9 +538,11 @@ class PickPlaceSequence:
                                                                self._stop_began_s)
         if sim_s >= stop_ends_s and self._at_rest(sim_s):
             self._stopping = False
+            if self._cancel_after_stop and (self._recovery_steps or not self._recovering):
+                self._recovery_log.append("canceled during the stop: no recovery")
             if self._needs_recovery():
                 return self._guarded(self._begin_recovery, sim_s, wall_s)
-            if self._recovering and self._recovery_steps:  # the recovery goes on after a dropped object
+            if self._recovering and self._recovery_steps and not self._cancel_after_stop:  # after a dropped object
                 return self._guarded(self._next_recovery_step, sim_s, wall_s)
             self._finish(sim_s, self._rest_state())
         elif sim_s > stop_ends_s + self._cfg.stop_timeout_s:

@@ -258,3 +258,19 @@ def test_fingers_pushed_open_while_carrying_is_a_lost_object_not_a_success(kin):
     assert not out.success and not out.held_after_transfer
     assert out.failure_reason.startswith("object lost during transfer: the fingers opened from 45.0 mm to 75.0 mm")
     assert "carried" not in out.recovery and out.arm_state == "observation_pose"
+
+
+def test_a_cancel_during_a_failures_stop_is_kept_and_no_recovery_follows(kin):
+    # The action forwards one cancel: arriving while the failure's stop runs, it used to be dropped, and
+    # the lift and move to the observation pose then ran with no way to stop them through the action.
+    sequence, robot = PickPlaceSequence(kin, CONFIG, GRASP, PLACE), FakeRobot(kin, World(object_width_m=None))
+    run(sequence, robot, until=lambda r, s: s.outcome.failure_reason != "")
+    assert "missed" in sequence.outcome.failure_reason and not sequence.finished
+    sent = len(robot.sent)
+    assert sequence.cancel(robot.sim_s, robot.sim_s) == []       # already stopping: nothing new to send
+    finish(sequence, robot)
+    out = sequence.outcome
+    assert out.canceled and not out.success and "missed" in out.failure_reason
+    assert "canceled during the stop: no recovery" in out.recovery
+    assert not any(isinstance(c, SendTrajectory) for c in robot.sent[sent:])   # no recovery motion
+    assert not at_observation(robot)
