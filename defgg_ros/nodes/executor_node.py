@@ -32,7 +32,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from defgg_ros.constants import PANDA_FINGER_JOINT_NAMES, PANDA_JOINT_NAMES
+from defgg_ros.constants import ARM_MODELS, PANDA_FINGER_JOINT_NAMES, PANDA_JOINT_NAMES
 from defgg_ros.control.kinematics import PandaKinematics
 from defgg_ros.control.observation import ObservationWatch, arm_state_of
 from defgg_ros.control.pick_place import ObservationMove, PickPlaceSequence
@@ -131,6 +131,14 @@ def place_target(pose_stamped, base_frame: str, default_position, default_yaw: f
         raise GoalError(f"bad place pose: {error}") from error
 
 
+def check_arm_limits(arm_id: str, joint_limits: str) -> None:
+    """ValueError when a known arm is planned with another arm's limits: an FR3 (arm_id fr3) planned with
+    the Panda's ranges and, above limits_scale 0.5, accelerations and jerks the FR3 does not allow."""
+    if arm_id in ARM_MODELS and joint_limits != arm_id:
+        raise ValueError(f"arm_id {arm_id} with joint_limits {joint_limits}: set joint_limits: {arm_id} "
+                         "(sim_bringup/config/real_cell/<robot>.yaml)")
+
+
 class ExecutorNode(Node):
     def __init__(self, **kwargs):
         super().__init__("executor_node", **kwargs)
@@ -139,6 +147,7 @@ class ExecutorNode(Node):
         self._config = self._sequence_config(p)  # invalid start-up parameters raise here
         # Since when the arm rests at the observation pose: plan_grasp goals plan only on later frames.
         self._watch = ObservationWatch(p["observation_q_rad"], p["observation_tolerance_rad"])
+        check_arm_limits(p["arm_id"], p["joint_limits"])
         self._kin = PandaKinematics(arm=p["joint_limits"])   # plans within that arm's joint ranges
         self._group = ReentrantCallbackGroup()
         self._lock = threading.Lock()

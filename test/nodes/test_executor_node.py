@@ -140,6 +140,9 @@ def test_invalid_parameters_refuse_to_start(rclpy_context):
         ExecutorNode(context=rclpy_context, parameter_overrides=[Parameter("limits_scale", value=1.5)])
     with pytest.raises(ValueError, match="grasp_height_rule"):
         ExecutorNode(context=rclpy_context, parameter_overrides=[Parameter("grasp_height_rule", value="middle")])
+    # an FR3 planned within the Panda's ranges and accelerations (arm_id set, joint_limits forgotten)
+    with pytest.raises(ValueError, match="arm_id fr3 with joint_limits panda: set joint_limits: fr3"):
+        ExecutorNode(context=rclpy_context, parameter_overrides=[Parameter("arm_id", value="fr3")])
 
 
 NEAR_BASE_XYZ, NEAR_BASE_YAW = (0.277, -0.048, 0.036), -1.49   # its straight lift runs out of reach
