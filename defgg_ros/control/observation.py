@@ -18,7 +18,7 @@ def arm_state_of(q_rad, qd_radps, observation_q_rad, tolerance_rad: float, still
     """One of sequence_types.ARM_STATES from a single joint state (no state: unknown)."""
     if q_rad is None:
         return "unknown"
-    if float(np.max(np.abs(np.asarray(qd_radps, dtype=float)))) >= still_speed_radps:
+    if not float(np.max(np.abs(np.asarray(qd_radps, dtype=float)))) < still_speed_radps:   # NaN: not known still
         return "moving"
     if observation_q_rad is not None and at_pose(q_rad, observation_q_rad, tolerance_rad):
         return "observation_pose"

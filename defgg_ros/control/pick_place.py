@@ -329,8 +329,10 @@ class PickPlaceSequence:
         return False
 
     def _max_speed_radps(self) -> float:
+        """The fastest joint's speed; inf when unknown (no state, or a velocity not yet estimated: NaN)."""
         state = self._obs.state
-        return float(np.max(np.abs(state.qd_radps))) if state is not None else math.inf
+        speed = float(np.max(np.abs(state.qd_radps))) if state is not None else math.inf
+        return speed if math.isfinite(speed) else math.inf
 
     def _at_rest(self, sim_s: float) -> bool:
         """Every joint slower than still_speed_radps, continuously for rest_hold_s (robot clock).

@@ -246,6 +246,7 @@ def test_observation_watch_clears_only_frames_taken_after_the_arm_arrived():
     assert arm_state_of(OBSERVE_Q, np.zeros(7), OBSERVE_Q, 0.05, 0.02) == "observation_pose"
     assert arm_state_of(away, np.zeros(7), OBSERVE_Q, 0.05, 0.02) == "at_rest"
     assert arm_state_of(away, np.full(7, 0.1), OBSERVE_Q, 0.05, 0.02) == "moving"
+    assert arm_state_of(OBSERVE_Q, np.full(7, np.nan), OBSERVE_Q, 0.05, 0.02) == "moving"   # speed unknown
     assert arm_state_of(None, None, OBSERVE_Q, 0.05, 0.02) == "unknown"
 
 

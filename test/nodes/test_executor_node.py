@@ -234,3 +234,23 @@ def test_without_an_external_wrench_the_pick_is_refused_before_the_arm_moves(exe
     assert response.status == 6 and "no external wrench on /" in response.result.failure_reason
     assert "contact guard would be blind" in response.result.failure_reason
     assert driver.trajectory_msgs == []                # refused before any motion
+
+
+def test_joint_states_without_velocities_get_them_from_the_positions(rclpy_context):
+    """A driver that publishes positions only: zeros would make a moving arm read as at rest."""
+    from sensor_msgs.msg import JointState
+
+    from defgg_ros.constants import PANDA_JOINT_NAMES, PANDA_READY_Q_RAD
+
+    node = ExecutorNode(context=rclpy_context)
+    try:
+        q = np.array(PANDA_READY_Q_RAD)
+        for k, t_ns in enumerate((1_000_000_000, 1_010_000_000)):
+            msg = JointState(name=list(PANDA_JOINT_NAMES), position=(q + 0.002 * k).tolist())
+            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t_ns, 1_000_000_000)
+            node._on_joint_state(msg)
+            if k == 0:   # one message: not known to be still
+                assert np.all(np.isnan(node._last_state[0].qd_radps))
+        np.testing.assert_allclose(node._last_state[0].qd_radps, 0.2, rtol=1e-6)   # 2 mrad in 10 ms
+    finally:
+        node.destroy_node()
