@@ -251,7 +251,8 @@ class PickPlaceSequence:
             self._kin.ik(grasp_M, pregrasp.q_rad)
         except KinematicsError as error:
             raise SequenceFailure(f"grasp outside the workspace: {error}") from error
-        self._check_straight_lines(pregrasp.q_rad, grasp_p)
+        self._check_straight_lines(pregrasp.q_rad, grasp_p, self._cfg.descent_speed_mps, self._cfg.lift_height_m,
+                                   ("descent", "lift"), "grasp outside the workspace")
         place_p = _finite("place position", self._place.position_m)
         approach_p = place_p + [0.0, 0.0, self._cfg.place_approach_height_m]
         try:
@@ -263,26 +264,31 @@ class PickPlaceSequence:
             self._kin.ik(place_M, approach.q_rad)
         except KinematicsError as error:
             raise SequenceFailure(f"place pose unreachable: {error}") from error
+        # the lowering into the bin and the retreat up are straight lines too: found out after the grasp,
+        # the pick would fail holding the object (and the recovery would try the same lowering)
+        self._check_straight_lines(approach.q_rad, place_p, self._cfg.line_speed_mps,
+                                   self._cfg.place_approach_height_m, ("lowering", "retreat"),
+                                   "place pose unreachable")
         gripper = grasp_command(self._grasp.youngs_modulus_pa, self._grasp.width_m, self._grasp.finger_force_n)
         return _Plan(pregrasp.q_rad, grasp_M, approach.q_rad, place_M, gripper)
 
-    def _check_straight_lines(self, pregrasp_q: np.ndarray, grasp_p: np.ndarray) -> None:
-        """Refuse, before the arm moves, a grasp whose descent or lift cannot be a straight line: close to the
-        base, a 15 cm vertical lift can run a joint into its limit, and finding that out after the fingers
-        closed costs the pick (19 of 200 random grasps at x 0.22-0.45 m, 1-5 cm high:
-        bench/bench_reach_near_base.py)."""
-        line = "descent"
+    def _check_straight_lines(self, above_q: np.ndarray, target_p: np.ndarray, down_speed_mps: float,
+                              up_m: float, names: tuple, failure: str) -> None:
+        """Refuse, before the arm moves, a grasp (or place) whose way down from above_q to target_p or back up by
+        up_m cannot be a straight line: close to the base, a 15 cm vertical lift can run a joint into its limit,
+        and finding that out after the fingers closed costs the pick (19 of 200 random grasps at x 0.22-0.45 m,
+        1-5 cm high: bench/bench_reach_near_base.py)."""
+        line = names[0]
         try:
-            descent = plan_line(self._kin, pregrasp_q, grasp_p - self._kin.fk(pregrasp_q)[:3, 3], self._limits,
-                                self._cfg.descent_speed_mps, self._cfg.sample_dt_s)
-            check_trajectory(descent, self._limits, self._kin, self._cfg.table_z_m)
-            line = "lift"
-            lift = plan_line(self._kin, descent.final_q_rad, [0.0, 0.0, self._cfg.lift_height_m], self._limits,
-                             self._cfg.line_speed_mps, self._cfg.sample_dt_s)
-            check_trajectory(lift, self._limits, self._kin, self._cfg.table_z_m)
+            down = plan_line(self._kin, above_q, target_p - self._kin.fk(above_q)[:3, 3], self._limits,
+                             down_speed_mps, self._cfg.sample_dt_s)
+            check_trajectory(down, self._limits, self._kin, self._cfg.table_z_m)
+            line = names[1]
+            up = plan_line(self._kin, down.final_q_rad, [0.0, 0.0, up_m], self._limits, self._cfg.line_speed_mps,
+                           self._cfg.sample_dt_s)
+            check_trajectory(up, self._limits, self._kin, self._cfg.table_z_m)
         except KinematicsError as error:
-            raise SequenceFailure(f"grasp outside the workspace: its straight {line} cannot be made: {error}") \
-                from error
+            raise SequenceFailure(f"{failure}: its straight {line} cannot be made: {error}") from error
 
     # --- motions ------------------------------------------------------------
     def _send(self, trajectory, sim_s: float, guarded_stop: bool = False) -> list:

@@ -289,6 +289,17 @@ def test_plan_failure_says_why_start_would_refuse_without_moving_the_arm(kin):
     assert near_base.phase == "idle" and not near_base.finished
 
 
+def test_a_place_whose_straight_lowering_cannot_be_made_is_refused_before_the_grasp(kin):
+    # IK reaches the place pose and the approach above it, but not the straight line between (near the base):
+    # found out after the grasp, the pick failed holding the object (10 of 150 random places near the base)
+    place = PlaceTarget(position_m=(0.278, -0.046, 0.052), yaw_rad=-0.54)
+    sequence, robot = make(kin, place=place), FakeRobot(kin, World())
+    assert "place pose unreachable: its straight lowering cannot be made" in sequence.plan_failure(kin.q_ready_rad)
+    run(sequence, robot, max_s=10.0)
+    assert sequence.finished and "straight lowering" in sequence.outcome.failure_reason
+    assert not any(isinstance(c, SendTrajectory) for c in robot.sent)   # the arm never moved
+
+
 class _CountingKinematics:
     """The real kinematics, counting top-down IK solves (one per pre-grasp and one per place approach)."""
 
