@@ -10,6 +10,8 @@ with the arm at rest. Runs on the fake-clock robot of test/control (real
 Pinocchio kinematics and Ruckig trajectories).
 """
 
+import dataclasses
+
 import numpy as np
 from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
@@ -50,6 +52,9 @@ scenarios = st.fixed_dictionaries({
     # Above the descent's end by more than the threshold's spring travel (10 N / 5 kN/m = 2 mm).
     "contact_above_grasp_m": st.one_of(st.none(), st.floats(0.005, 0.012), st.floats(0.012, 0.02)),
     "cancel": st.one_of(st.none(), st.tuples(st.sampled_from(CANCEL_PHASES), st.floats(0.1, 0.9))),
+    # after a cancel the arm recovers to the observation pose (the node's default): those motions too
+    "recover": st.booleans(),
+    "via": st.one_of(st.none(), st.tuples(st.floats(0.3, 0.5), st.floats(-0.3, 0.0), st.floats(0.2, 0.35))),
 })
 
 
@@ -60,7 +65,9 @@ def run_scenario(s) -> dict:
     tcp_grasp_z = max(tcp_height_m(z, CONFIG.table_z_m), CONFIG.table_z_m + GRASP_MIN_HEIGHT_ABOVE_TABLE_M)
     contact_z = None if s["contact_above_grasp_m"] is None else tcp_grasp_z + s["contact_above_grasp_m"]
     world = World(object_width_m=s["width_m"], contact_height_m=-1.0 if contact_z is None else contact_z)
-    sequence = PickPlaceSequence(KIN, CONFIG, grasp, PlaceTarget(s["place"]))
+    config = dataclasses.replace(CONFIG, transfer_via_position_m=s["via"],
+                                 observation_q_rad=tuple(KIN.q_ready_rad) if s["recover"] else None)
+    sequence = PickPlaceSequence(KIN, config, grasp, PlaceTarget(s["place"]))
     robot = FakeRobot(KIN, world)
     lowest_descent_z = [np.inf]
 
@@ -77,7 +84,7 @@ def run_scenario(s) -> dict:
     if not sequence.finished:  # `watch` stopped the run here: cancel, then let it finish
         canceled_at = sequence.phase
         robot.apply(sequence.cancel(robot.sim_s, robot.sim_s), sequence)
-        end_s = robot.sim_s + 30.0
+        end_s = robot.sim_s + 60.0
         while not sequence.finished and robot.sim_s < end_s:
             robot.step(sequence)
     out = sequence.outcome
@@ -97,14 +104,17 @@ def run_scenario(s) -> dict:
         # Stopped within the force threshold's spring travel plus a couple of ticks at descent speed.
         travel_m = CONFIG.contact_force_threshold_n / CONTACT_STIFFNESS_N_PER_M
         assert lowest_descent_z[0] >= contact_z - travel_m - 2 * CONFIG.descent_speed_mps * 0.01 - 1e-3
+    if canceled_at is not None and s["recover"]:
+        assert out.arm_state == "observation_pose", out.recovery
     return {"canceled": canceled_at is not None, "contact": contact_z is not None and descended,
-            "trajectories": len(trajectories)}
+            "trajectories": len(trajectories), "recovered": canceled_at is not None and s["recover"],
+            "via": s["via"] is not None}
 
 
 def test_random_pick_and_place_runs_stay_within_limits_and_above_the_table():
     seen = []
 
-    @settings(max_examples=16, deadline=None, database=None, derandomize=True,
+    @settings(max_examples=24, deadline=None, database=None, derandomize=True,
               suppress_health_check=list(HealthCheck), phases=(Phase.explicit, Phase.generate))  # no slow shrink
     @given(scenarios)
     def check(s):
@@ -113,4 +123,5 @@ def test_random_pick_and_place_runs_stay_within_limits_and_above_the_table():
     check()
     # The random runs must cover the interesting cases, not only the happy path.
     assert sum(r["canceled"] for r in seen) >= 2 and sum(r["contact"] for r in seen) >= 2
+    assert sum(r["recovered"] for r in seen) >= 2 and sum(r["via"] for r in seen) >= 2
     assert sum(r["trajectories"] for r in seen) >= 40
