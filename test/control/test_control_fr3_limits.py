@@ -56,4 +56,8 @@ def test_a_whole_pick_sends_only_motions_within_its_arms_limits(arm):
     assert len(trajectories) >= 5
     for t in trajectories:
         assert np.all(t.q_rad >= limits.q_min_rad - 1e-9) and np.all(t.q_rad <= limits.q_max_rad + 1e-9)
+        assert np.all(np.abs(t.qd_radps) <= limits.qd_max_radps * (1 + 1e-6))
         assert np.all(np.abs(t.qdd_radps2) <= limits.qdd_max_radps2 * (1 + 1e-6))
+        if len(t.times_s) > 1:
+            jerk = np.diff(t.qdd_radps2, axis=0) / np.diff(t.times_s)[:, None]
+            assert np.all(np.abs(jerk) <= limits.qddd_max_radps3 * (1 + 1e-6))
