@@ -159,6 +159,12 @@ def test_cancel_mid_transfer_stops_jerk_limited_and_leaves_the_arm_still(kin):
     stop = robot.sent[-1]
     assert isinstance(stop, SendTrajectory) and stop.trajectory.duration_s > 0
     assert np.allclose(stop.trajectory.qd_radps[-1], 0.0)
+    # jerk-limited: from the samples, within the configured scale of the arm's jerk limits
+    from defgg_ros.control.trajectories import panda_limits
+
+    t = stop.trajectory
+    jerk = np.diff(t.qdd_radps2, axis=0) / np.diff(t.times_s)[:, None]
+    assert np.all(np.abs(jerk) <= panda_limits(CONFIG.limits_scale).qddd_max_radps3 * (1 + 1e-6))
     run_until_finished(sequence, robot)
     out = sequence.outcome
     assert out.canceled and not out.success
