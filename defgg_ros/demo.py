@@ -274,18 +274,12 @@ class DemoRun:
 
 
 def executor_params(node_set) -> dict:
-    """The executor's start-up parameters: its schema's defaults, then its params files (place pose, base frame)."""
-    import yaml
-
+    """The executor's start-up parameters (place pose, base frame): as the bringup resolves them."""
+    from defgg_ros.bringup.shared_parameters import effective_parameters
     from defgg_ros.ros.parameters import defaults
 
-    params = defaults("executor_node")
-    for entry in node_set.nodes:
-        if entry.name == "executor_node":
-            for path in entry.params_files:
-                raw = yaml.safe_load(Path(path).read_text()) or {}
-                params.update(raw.get(entry.name, {}).get("ros__parameters", {}))
-    return params
+    entry = next((e for e in node_set.nodes if e.name == "executor_node"), None)
+    return effective_parameters(entry) if entry is not None else defaults("executor_node")
 
 
 def run_demo(args, out_dir: Path, log) -> int:

@@ -62,11 +62,6 @@ IMAGE_QOS = qos.IMAGE_PUBLISH
 MAX_STAMP_OFFSET_S = 1.0
 
 
-def default_scene_file() -> str:
-    """sim_bringup/scenes/demo.yaml of the source tree, else of the installed share folder."""
-    return str(demo_scene_file())
-
-
 # Names, types, defaults and bounds: defgg_ros/ros/params/fake_panda_driver.yaml.
 PARAMETERS = load_schema("fake_panda_driver")
 
@@ -77,7 +72,7 @@ class FakePandaDriver(Node):
         declare_parameters(self)  # a value outside its schema raises ParameterError here
         self.cfg = {name: self.get_parameter(name).value for name in PARAMETERS}
         self._check_parameters()
-        scene_path = self.cfg["scene_file"] or default_scene_file()
+        scene_path = self.cfg["scene_file"] or str(demo_scene_file())
         settings = CellSettings(
             depth_noise=DepthNoise(self.cfg["depth_noise_coeff_per_m"], self.cfg["depth_dropout_fraction"],
                                    self.cfg["depth_drop_edges"]),
