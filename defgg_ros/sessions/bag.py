@@ -90,8 +90,8 @@ def serialize_string(text: str) -> bytes:
     return bytes(store.serialize_cdr(store.types["std_msgs/msg/String"](data=text), "std_msgs/msg/String"))
 
 
-def write_custom_data(bag_dir, key: str, text: str) -> None:
-    """Put `text` into metadata.yaml's custom_data[key] so that it reads back unchanged.
+def write_custom_data(bag_dir, custom_data: dict) -> None:
+    """Put `custom_data` into metadata.yaml so that every value reads back unchanged.
 
     rosbags writes metadata.yaml with ruamel's default line width, which folds a long double-quoted string;
     at a fold right after an escaped backslash the text reads back with a space inserted ("\\ n"): the
@@ -100,9 +100,9 @@ def write_custom_data(bag_dir, key: str, text: str) -> None:
     """
     path = Path(bag_dir) / "metadata.yaml"
     document = yaml.safe_load(path.read_text(encoding="utf-8"))
-    document["rosbag2_bagfile_information"].setdefault("custom_data", {})[key] = text
+    document["rosbag2_bagfile_information"]["custom_data"] = dict(custom_data)
     out = yaml.safe_dump(document, default_flow_style=False, sort_keys=False, width=2 ** 30, allow_unicode=True)
-    if yaml.safe_load(out)["rosbag2_bagfile_information"]["custom_data"][key] != text:
+    if yaml.safe_load(out)["rosbag2_bagfile_information"]["custom_data"] != custom_data:
         raise SessionBagError(f"{path}: custom_data does not read back as written")
     write_text_atomic(path, out)
 
@@ -124,8 +124,7 @@ class SessionWriter:
         self._writer = Writer(self._tmp_bag, version=BAG_VERSION, storage_plugin=StoragePlugin.MCAP)
         # STORAGE mode = compressed MCAP chunks (zstd), what rosbag2's mcap plugin calls a storage preset.
         self._writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
-        self._custom_text = json.dumps(metadata, sort_keys=True)
-        self._writer.set_custom_data(CUSTOM_DATA_KEY, self._custom_text)
+        self._writer.set_custom_data(CUSTOM_DATA_KEY, json.dumps(metadata, sort_keys=True))
         self._writer.open()
         self._connections = {}
         self.counts = {}
@@ -148,13 +147,12 @@ class SessionWriter:
     def update_metadata(self, metadata: dict, log_time_ns: int) -> None:
         """Metadata learned while recording (e.g. node parameters): a newer metadata message wins."""
         text = json.dumps(metadata, sort_keys=True)
-        self._custom_text = text
         self._writer.set_custom_data(CUSTOM_DATA_KEY, text)
         self.write(st.METADATA, serialize_string(text), log_time_ns)
 
     def close(self) -> Path:
         self._writer.close()
-        write_custom_data(self._tmp_bag, CUSTOM_DATA_KEY, self._custom_text)
+        write_custom_data(self._tmp_bag, self._writer.custom_data)   # what rosbags wrote folded, unfolded
         if self.path.exists():  # only with overwrite: swap folders, old one removed after
             old = self._scratch / "previous"
             os.rename(self.path, old)
