@@ -5,7 +5,9 @@ For random top-down grasps in the camera's footprint (as bench_control.py), each
 motions from the ready pose with the executor's planners at --limits-scale: the joint motion to the pre-grasp,
 the 25 mm descent, the 15 cm lift, the joint motion to a place pose over the bin. Prints, per arm model, how
 many grasps plan, the median and 90th percentile of the summed motion time (grasps both plan), and the
-refusal reasons. Kinematics only (no physics): what the limits change, not what the gripper or object does.
+refusal reasons, and for the FR3 how much of its position-dependent velocity bound (constants.FR3_VELOCITY_ENVELOPE,
+scaled like the other bounds) the motions use at most: above 1, the executor's check refuses the motion.
+Kinematics only (no physics): what the limits change, not what the gripper or object does.
 """
 import argparse
 import collections
@@ -19,7 +21,12 @@ sys.path.insert(0, str(ROOT))
 
 from defgg_ros.constants import PREGRASP_HEIGHT_M  # noqa: E402
 from defgg_ros.control.kinematics import KinematicsError, PandaKinematics  # noqa: E402
-from defgg_ros.control.trajectories import arm_limits, plan_joint_motion, plan_line  # noqa: E402
+from defgg_ros.control.trajectories import (  # noqa: E402
+    arm_limits,
+    envelope_velocity_bounds,
+    plan_joint_motion,
+    plan_line,
+)
 
 WORKSPACE_X_M = (0.35, 0.65)     # the camera's footprint on the table (bench_control.py)
 WORKSPACE_Y_M = (-0.2, 0.2)
@@ -28,15 +35,30 @@ PLACE_XYZ_M = (0.35, -0.45, 0.12)   # the demo bin's centre, the executor's defa
 LIFT_M = 0.15
 
 
-def pick_motion_s(kin: PandaKinematics, limits, xyz, yaw) -> float:
-    """Summed duration of the pick's motions (KinematicsError when one cannot be planned)."""
+def pick_motions(kin: PandaKinematics, limits, xyz, yaw) -> list:
+    """The pick's motions (KinematicsError when one cannot be planned)."""
     pregrasp, used_yaw = kin.top_down_ik(np.add(xyz, [0.0, 0.0, PREGRASP_HEIGHT_M]), yaw, kin.q_ready_rad)
     approach = plan_joint_motion(kin.q_ready_rad, pregrasp.q_rad, limits)
     descent = plan_line(kin, pregrasp.q_rad, [0.0, 0.0, -PREGRASP_HEIGHT_M], limits)
     lift = plan_line(kin, descent.final_q_rad, [0.0, 0.0, LIFT_M], limits, max_speed_mps=0.1)
     place, _ = kin.top_down_ik(PLACE_XYZ_M, used_yaw, lift.final_q_rad)
     transfer = plan_joint_motion(lift.final_q_rad, place.q_rad, limits)
-    return sum(m.duration_s for m in (approach, descent, lift, transfer))
+    return [approach, descent, lift, transfer]
+
+
+def envelope_use(motions, limits) -> float:
+    """Largest |velocity| / position-dependent bound over the motions' samples (0 without such a bound)."""
+    if limits.velocity_envelope is None:
+        return 0.0
+    use = 0.0
+    for m in motions:
+        lower, upper = envelope_velocity_bounds(limits.velocity_envelope, m.q_rad)
+        bound = np.where(m.qd_radps >= 0, upper, -lower)
+        moving = np.abs(m.qd_radps) > 1e-9
+        if np.any(moving & (bound <= 0)):
+            return np.inf
+        use = max(use, float(np.max(np.abs(m.qd_radps)[moving] / bound[moving], initial=0.0)))
+    return use
 
 
 def main(argv=None) -> int:
@@ -48,13 +70,16 @@ def main(argv=None) -> int:
     rng = np.random.default_rng(args.seed)
     grasps = [([rng.uniform(*WORKSPACE_X_M), rng.uniform(*WORKSPACE_Y_M), rng.uniform(*WORKSPACE_Z_M)],
                rng.uniform(-np.pi, np.pi)) for _ in range(args.grasps)]
-    durations, refusals = {}, {}
+    durations, refusals, uses = {}, {}, []
     for arm in ("panda", "fr3"):
         kin, limits = PandaKinematics(seed=args.seed, arm=arm), arm_limits(arm, args.limits_scale)
         durations[arm], refusals[arm] = [], collections.Counter()
         for xyz, yaw in grasps:
             try:
-                durations[arm].append(pick_motion_s(kin, limits, xyz, yaw))
+                motions = pick_motions(kin, limits, xyz, yaw)
+                durations[arm].append(sum(m.duration_s for m in motions))
+                if arm == "fr3":
+                    uses.append(envelope_use(motions, limits))
             except (KinematicsError, ValueError) as error:
                 durations[arm].append(np.nan)
                 refusals[arm][str(error).split(":")[0][:70]] += 1
@@ -66,6 +91,9 @@ def main(argv=None) -> int:
         print(f"{arm:<6} {np.isfinite(durations[arm]).sum():>6} {np.median(d):>9.2f} {np.percentile(d, 90):>7.2f}")
     ratio = np.array(durations["fr3"])[both] / np.array(durations["panda"])[both]
     print(f"fr3 / panda per grasp: median {np.median(ratio):.3f}, min {ratio.min():.3f}, max {ratio.max():.3f}")
+    uses = np.array(uses)
+    print(f"fr3 position-dependent velocity bound, most used per grasp: median {np.median(uses):.3f}, "
+          f"max {uses.max():.3f}; over it (refused): {(uses > 1 + 1e-6).sum()} of {len(uses)}")
     for arm in ("panda", "fr3"):
         for reason, n in refusals[arm].most_common():
             print(f"refused ({arm}): {n} x {reason}")

@@ -63,13 +63,30 @@ PANDA_QDD_MAX_RADPS2 = (15.0, 7.5, 10.0, 12.5, 15.0, 20.0, 20.0)
 PANDA_QDDD_MAX_RADPS3 = (7500.0, 3750.0, 5000.0, 6250.0, 7500.0, 10000.0, 10000.0)
 # --- Franka Research 3 (FR3) arm limits (Franka's FR3 datasheet, "Limits for Franka Research 3") ------
 # The same kinematic structure as the Panda, other ranges: joint 6 stays above 0.5445 rad, joint 4 below
-# -0.1518 rad. The velocity bound is the constant one; the FR3's controller also lowers it near the ends of
-# a joint's range (from the joint position), which is not modelled here (docs/real_cell.md).
+# -0.1518 rad. Near the ends of a joint's range the FR3's controller also lowers the velocity bound:
+# FR3_VELOCITY_ENVELOPE below.
 FR3_Q_MIN_RAD = (-2.7437, -1.7837, -2.9007, -3.0421, -2.8065, 0.5445, -3.0159)
 FR3_Q_MAX_RAD = (2.7437, 1.7837, 2.9007, -0.1518, 2.8065, 4.5169, 3.0159)
 FR3_QD_MAX_RADPS = (2.62, 2.62, 2.62, 2.62, 5.26, 4.18, 5.26)
 FR3_QDD_MAX_RADPS2 = (10.0, 10.0, 10.0, 10.0, 10.0, 10.0, 10.0)
 FR3_QDDD_MAX_RADPS3 = (5000.0, 5000.0, 5000.0, 5000.0, 5000.0, 5000.0, 5000.0)
+# The FR3's velocity bound as a function of the joint position (libfranka's rate_limiting.h,
+# computeUpper/LowerLimitsJointVelocity, after Franka's "Limits for Franka Research 3"): per joint
+#   upper(q) = min(v_max, max(0, -offset + sqrt(max(0, k * (q_upper - q)))))
+#   lower(q) = max(-v_max, min(0, offset - sqrt(max(0, k * (q - q_lower)))))
+# so a joint must be slowing down at k/2 rad/s^2 before q_upper/q_lower, and be still offset^2/k before them.
+# Rows: (v_max rad/s, offset rad/s, k rad/s^2, q_upper rad, q_lower rad), joints 1..7. docs/real_cell.md.
+FR3_VELOCITY_ENVELOPE = (
+    (2.62, 0.30, 12.0, 2.75010, -2.75010),
+    (2.62, 0.20, 5.17, 1.79180, -1.79180),
+    (2.62, 0.20, 7.00, 2.90650, -2.90650),
+    (2.62, 0.30, 8.00, -0.14580, -3.04810),
+    (5.26, 0.35, 34.0, 2.81010, -2.81010),
+    (4.18, 0.35, 11.0, 4.52050, 0.54092),
+    (5.26, 0.35, 34.0, 3.01960, -3.01960),
+)
+# Arm models whose controller bounds the velocity by position (the Panda's bound is the constant one).
+ARM_VELOCITY_ENVELOPES = {"fr3": FR3_VELOCITY_ENVELOPE}
 # Per arm model (the executor's joint_limits): position min, max, velocity, acceleration, jerk.
 ARM_JOINT_LIMITS = {
     "panda": (PANDA_Q_MIN_RAD, PANDA_Q_MAX_RAD, PANDA_QD_MAX_RADPS, PANDA_QDD_MAX_RADPS2, PANDA_QDDD_MAX_RADPS3),

@@ -19,6 +19,7 @@ from ruckig import ControlInterface, InputParameter, Result, Ruckig, Synchroniza
 from defgg_ros.constants import (
     ARM_JOINT_LIMITS,
     ARM_MODELS,
+    ARM_VELOCITY_ENVELOPES,
 )
 from defgg_ros.control.kinematics import (
     MIN_LINK_HEIGHT_ABOVE_TABLE_M,
@@ -73,6 +74,17 @@ class JointLimits:
     qd_max_radps: np.ndarray
     qdd_max_radps2: np.ndarray
     qddd_max_radps3: np.ndarray
+    # The robot's position-dependent velocity bound (constants.FR3_VELOCITY_ENVELOPE rows), or None. Not scaled:
+    # it is where the controller aborts, and the plan keeps to the scaled constant bounds besides.
+    velocity_envelope: np.ndarray | None = None
+
+
+def envelope_velocity_bounds(envelope: np.ndarray, q_rad: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(lower, upper) velocity bounds (rad/s) at joint positions q_rad (shape (..., 7)) under `envelope`."""
+    v_max, offset, k, q_upper, q_lower = envelope.T
+    upper = np.minimum(v_max, np.maximum(0.0, -offset + np.sqrt(np.maximum(0.0, k * (q_upper - q_rad)))))
+    lower = np.maximum(-v_max, np.minimum(0.0, offset - np.sqrt(np.maximum(0.0, k * (q_rad - q_lower)))))
+    return lower, upper
 
 
 def arm_limits(arm: str = "panda", scale: float = LIMITS_SAFETY_SCALE) -> JointLimits:
@@ -82,7 +94,9 @@ def arm_limits(arm: str = "panda", scale: float = LIMITS_SAFETY_SCALE) -> JointL
     if not 0.0 < scale <= 1.0:
         raise ValueError(f"limits scale must be in (0, 1], got {scale}")
     q_min, q_max, qd, qdd, qddd = (np.array(v) for v in ARM_JOINT_LIMITS[arm])
-    return JointLimits(q_min, q_max, scale * qd, scale * qdd, scale * qddd)
+    envelope = ARM_VELOCITY_ENVELOPES.get(arm)
+    return JointLimits(q_min, q_max, scale * qd, scale * qdd, scale * qddd,
+                       None if envelope is None else np.array(envelope, dtype=float))
 
 
 def panda_limits(scale: float = LIMITS_SAFETY_SCALE) -> JointLimits:
@@ -404,6 +418,20 @@ def _limit_ratios(trajectory: SampledTrajectory, limits: JointLimits) -> dict:
                                         ("jerk", qddd, limits.qddd_max_radps3))}
 
 
+def _check_envelope(trajectory: SampledTrajectory, envelope: np.ndarray) -> None:
+    """TrajectoryError where a joint moves faster than the position-dependent bound allows there."""
+    q, qd = trajectory.q_rad, trajectory.qd_radps
+    lower, upper = envelope_velocity_bounds(envelope, q)
+    excess = np.maximum(qd - upper, lower - qd)
+    if np.max(excess) > JOINT_ATOL:
+        k, joint = np.unravel_index(int(np.argmax(excess)), excess.shape)
+        bound = upper[k, joint] if qd[k, joint] > 0 else lower[k, joint]
+        raise TrajectoryError(
+            f"joint {joint + 1} moves at {qd[k, joint]:.3f} rad/s at {q[k, joint]:.4f} rad "
+            f"(t={trajectory.times_s[k]:.2f} s), beyond the {bound:.3f} rad/s the arm's controller allows "
+            "that near the end of its range")
+
+
 @dataclass(frozen=True)
 class LimitReport:
     """Largest |value| / limit over the trajectory, per quantity (<= 1 is within)."""
@@ -430,6 +458,8 @@ def check_trajectory(trajectory: SampledTrajectory, limits: JointLimits, kin: Pa
     for name, ratio in ratios.items():
         if ratio > 1.0 + LIMIT_RTOL:
             raise TrajectoryError(f"{name} reaches {ratio:.3f} x its limit")
+    if limits.velocity_envelope is not None:
+        _check_envelope(trajectory, limits.velocity_envelope)
     tcp_min, link_min = math.inf, math.inf
     for qk in q:
         tcp_z, link_z = kin.lowest_heights_m(qk, TABLE_EXEMPT_FRAMES)

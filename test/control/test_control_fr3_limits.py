@@ -4,6 +4,8 @@ Why: the FR3 has the Panda's kinematic structure but other ranges (joint 6 >= 0.
 and lower accelerations (10 rad/s^2) and jerks (5000 rad/s^3) on several joints; a motion planned within the
 Panda's limits can leave the FR3's, which its controller refuses or stops with a reflex.
 """
+import dataclasses
+
 import numpy as np
 import pytest
 from support.control_fake_robot import FakeRobot, World, run
@@ -12,7 +14,13 @@ from defgg_ros.constants import FR3_Q_MAX_RAD, FR3_Q_MIN_RAD, FR3_QDD_MAX_RADPS2
 from defgg_ros.control.kinematics import KinematicsError, PandaKinematics
 from defgg_ros.control.pick_place import PickPlaceSequence
 from defgg_ros.control.sequence_types import GraspTarget, PlaceTarget, SendTrajectory, SequenceConfig
-from defgg_ros.control.trajectories import TrajectoryError, arm_limits, plan_joint_motion
+from defgg_ros.control.trajectories import (
+    TrajectoryError,
+    arm_limits,
+    check_trajectory,
+    envelope_velocity_bounds,
+    plan_joint_motion,
+)
 
 
 def test_fr3_kinematics_refuse_the_panda_only_joint_ranges():
@@ -61,3 +69,34 @@ def test_a_whole_pick_sends_only_motions_within_its_arms_limits(arm):
         if len(t.times_s) > 1:
             jerk = np.diff(t.qdd_radps2, axis=0) / np.diff(t.times_s)[:, None]
             assert np.all(np.abs(jerk) <= limits.qddd_max_radps3 * (1 + 1e-6))
+
+
+def test_the_fr3_velocity_bound_falls_near_the_ends_of_a_joints_range():
+    fr3 = arm_limits("fr3", 1.0)
+    q = np.tile(np.array(PandaKinematics().q_ready_rad), (3, 1))
+    q[:, 0] = (0.0, 2.6, 2.745)      # joint 1 towards its upper end (range end 2.7437 rad)
+    q[:, 5] = (1.571, 0.6, 0.55)     # joint 6 towards its lower end (0.5445 rad)
+    lower, upper = envelope_velocity_bounds(fr3.velocity_envelope, q)
+    # By hand from the rows, e.g. -0.30 + sqrt(12 * (2.7501 - 2.6)) and 0.35 - sqrt(11 * (0.6 - 0.54092)).
+    assert upper[:, 0] == pytest.approx([2.62, 1.0420879, 0.0], abs=1e-6)
+    assert lower[:, 0] == pytest.approx([-2.62] * 3)
+    assert lower[:, 5] == pytest.approx([-3.0161373, -0.4561514, 0.0], abs=1e-6)
+    # The robot's own bound whatever limits_scale: it is where the controller aborts (the plan keeps to the
+    # scaled constant bounds besides).
+    assert np.array_equal(arm_limits("fr3", 0.4).velocity_envelope, fr3.velocity_envelope)
+    assert arm_limits("panda", 1.0).velocity_envelope is None
+
+
+@pytest.mark.parametrize("scale", [1.0, 0.4])
+def test_a_motion_braking_late_before_a_range_end_is_refused_on_the_fr3_only(scale):
+    kin = PandaKinematics()
+    start = np.array(kin.q_ready_rad)
+    goal = start.copy()
+    start[0], goal[0] = 0.5, 2.74    # joint 1 at full speed until it brakes at 10 rad/s^2 (the bound: 6)
+    fr3 = arm_limits("fr3", scale)
+    motion = plan_joint_motion(start, goal, fr3)
+    with pytest.raises(TrajectoryError, match=r"joint 1 moves at .* near the end of its range"):
+        check_trajectory(motion, fr3, kin, table_z_m=0.0)
+    check_trajectory(motion, dataclasses.replace(fr3, velocity_envelope=None), kin, table_z_m=0.0)  # the cause
+    away = plan_joint_motion(goal, start, fr3)   # leaving the end: the bound is on the way in only
+    check_trajectory(away, fr3, kin, table_z_m=0.0)
