@@ -26,6 +26,7 @@ from defgg_ros.bringup.node_set import NodeSetError, load_node_set
 from defgg_ros.bringup.supervisor import DEFAULT_READY_TIMEOUT_S, Bringup, BringupError
 from defgg_ros.cli_help import HelpFormatter
 from defgg_ros.ros.domain import ISOLATION_ENV, apply_domain_choice, parse_domain_choice
+from defgg_ros.ros.launcher import watch_supervisor
 
 DRIVER = "fake_panda_driver"
 
@@ -181,6 +182,7 @@ def main(argv=None) -> int:
     stop_requested = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop_requested.set())
+    watch_supervisor("defgg-bringup")   # started by a process that was then killed: stop the nodes in order
     try:
         node_set = load_node_set(args.set)
         # First, before any rclpy context or child process exists: they read the domain at start-up.

@@ -6,6 +6,7 @@ import rclpy
 from rclpy.executors import ExternalShutdownException
 
 from defgg_ros.ros.executor import ThreadedExecutor
+from defgg_ros.ros.launcher import watch_supervisor
 from defgg_ros.ros.transport import use_large_message_transport
 
 
@@ -29,9 +30,13 @@ def run_node(name: str, make_node, startup_errors=(ValueError, OSError), threads
     qos.SensorSubscription picks for such a publisher gets 30 of 30). The
     profile matters for the cell's own camera-sized messages between its
     processes (docs/sessions.md).
+
+    A node started by a NodeProcess (the bringup, the replays, the tests) stops with SIGINT when the
+    process that started it dies without stopping it (defgg_ros/ros/launcher.py, watch_supervisor).
     """
     use_large_message_transport()
     rclpy.init(args=args)
+    watch_supervisor(name)   # started by a bringup that was then killed: stop, do not run on orphaned
     node = None
     try:
         node = make_node()

@@ -8,6 +8,10 @@ replay's run folder); either way the last lines are kept for error reports.
 
 One shutdown rule (`NodeProcess.stop`): SIGINT to the group (rclpy shuts down cleanly), then SIGTERM
 after SIGINT_GRACE_S, then SIGKILL after SIGTERM_GRACE_S.
+
+A parent killed before it could stop its children (SIGKILL, a crash, a test runner's SIGTERM) must not
+leave them running: each child learns its parent's pid (SUPERVISOR_PID_VARIABLE) and, through
+`watch_supervisor` in the node's main, stops itself with SIGINT once that parent is gone.
 """
 import collections
 import os
@@ -15,10 +19,13 @@ import signal
 import subprocess
 import sys
 import threading
+import time
 from pathlib import Path
 
 from defgg_ros.ros.transport import FASTDDS_PROFILE, FASTDDS_PROFILE_VARIABLE
 
+SUPERVISOR_PID_VARIABLE = "DEFGG_SUPERVISOR_PID"
+SUPERVISOR_POLL_S = 0.5
 SIGINT_GRACE_S = 10.0
 SIGTERM_GRACE_S = 5.0
 SIGKILL_WAIT_S = 5.0
@@ -50,6 +57,7 @@ class NodeProcess:
         self._out = out or sys.stdout
         self._reader = None
         env = child_env(base=env)
+        env[SUPERVISOR_PID_VARIABLE] = str(os.getpid())
         if self.log_path is not None:
             with open(self.log_path, "ab") as log:
                 self.popen = subprocess.Popen(self.argv, stdout=log, stderr=subprocess.STDOUT,
@@ -107,3 +115,43 @@ def stop_all(processes) -> dict:
     """Stop these NodeProcesses one after the other, in the order given (callers pass reverse start order);
     returns name -> exit code."""
     return {process.name: process.stop() for process in processes}
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def watch_supervisor(name: str, poll_s: float = SUPERVISOR_POLL_S) -> threading.Thread | None:
+    """In a child started by NodeProcess: SIGINT this process once the parent that started it is gone.
+
+    Returns the watching thread, or None when this process was not started by a NodeProcess (no
+    SUPERVISOR_PID_VARIABLE, or one naming a live process that is not our parent: a grandchild that
+    inherited the variable). Polls the parent pid: the kernel's parent-death signal would follow the
+    parent *thread*, and a NodeProcess may be made in a worker thread that ends before its child.
+    """
+    value = os.environ.get(SUPERVISOR_PID_VARIABLE, "")
+    if not value.isdigit():
+        return None
+    supervisor = int(value)
+    if os.getppid() != supervisor and _alive(supervisor):
+        return None
+
+    def watch():
+        while os.getppid() == supervisor:
+            time.sleep(poll_s)
+        try:
+            print(f"{name}: the process that started it (pid {supervisor}) is gone: shutting down",
+                  file=sys.stderr, flush=True)
+        except OSError:   # its output went to the dead parent's pipe
+            pass
+        os.kill(os.getpid(), signal.SIGINT)
+
+    thread = threading.Thread(target=watch, name="supervisor-watch", daemon=True)
+    thread.start()
+    return thread

@@ -1,5 +1,8 @@
 """The one process launcher (defgg_ros/ros/launcher.py) and the one share-path resolver (defgg_ros/ros/share.py)."""
 import io
+import os
+import signal
+import subprocess
 import sys
 import time
 
@@ -64,3 +67,46 @@ def test_share_paths_resolve_in_the_source_tree_first():
     assert share_path("models", "defgg_cnn.pt").is_file()
     # A missing file names the source tree's place for it.
     assert share_path("models", "no_such.pt") == SOURCE_ROOT / "models" / "no_such.pt"
+
+
+# A real rclpy node through the nodes' one main body, and a parent that starts it with NodeProcess.
+IDLE_NODE = ("from rclpy.node import Node\nfrom defgg_ros.nodes.node_main import run_node\n"
+             "run_node('idle_node', lambda: (print('ready', flush=True), Node('idle_node'))[1])\n")
+SUPERVISOR = f"""
+import sys, time
+from defgg_ros.ros.launcher import NodeProcess
+child = NodeProcess("idle", [sys.executable, "-c", {IDLE_NODE!r}], log_path=sys.argv[1])
+print(child.pid, flush=True)
+time.sleep(120)
+"""
+
+
+def _running(pid: int) -> bool:
+    """Alive and not a zombie (a container's pid 1 may never reap an orphan)."""
+    try:
+        with open(f"/proc/{pid}/stat") as stat:
+            return stat.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except FileNotFoundError:
+        return False
+
+
+def test_a_node_stops_itself_when_the_process_that_started_it_is_killed(tmp_path):
+    log = tmp_path / "idle.log"
+    parent = subprocess.Popen([sys.executable, "-c", SUPERVISOR, str(log)], stdout=subprocess.PIPE, text=True)
+    child_pid = int(parent.stdout.readline())
+    try:
+        _wait_for(lambda: log.exists() and "ready" in log.read_text(), timeout_s=30.0)
+        parent.kill()                # SIGKILL: no chance to stop its children
+        parent.wait()
+        _wait_for(lambda: not _running(child_pid), timeout_s=15.0)
+        assert f"the process that started it (pid {parent.pid}) is gone: shutting down" in log.read_text()
+    finally:
+        if _running(child_pid):
+            os.kill(child_pid, signal.SIGKILL)
+
+
+def test_the_watch_is_only_for_children_of_a_node_process(monkeypatch):
+    monkeypatch.delenv(launcher.SUPERVISOR_PID_VARIABLE, raising=False)
+    assert launcher.watch_supervisor("n") is None               # started by hand, ros2 run or a launch file
+    monkeypatch.setenv(launcher.SUPERVISOR_PID_VARIABLE, str(os.getpid()))
+    assert launcher.watch_supervisor("n") is None               # inherited from a live grandparent
