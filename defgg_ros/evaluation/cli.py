@@ -308,14 +308,15 @@ def merge_manifest(out_dir, manifest: dict) -> dict:
     the folder's manifest is their union, so the report covers everything they ran."""
     path = Path(out_dir) / report_mod.MANIFEST_FILE
     if not path.is_file():
-        return {**manifest, "commands": [manifest["command"]]}
+        return {**manifest, "commands": [manifest["command"]], "commits": [manifest["commit"]]}
     old = json.loads(path.read_text(encoding="utf-8"))
     same_models = {n: m["sha"] for n, m in old.get("models", {}).items()} == \
         {n: m["sha"] for n, m in manifest["models"].items()}
     # (a folder of another trial protocol never gets here: check_same_protocol refuses it)
     if not same_models or old.get("grasps_per_object") != manifest["grasps_per_object"] \
             or old.get("seed") != manifest["seed"]:
-        return {**manifest, "commands": [manifest["command"]]}     # a different evaluation: start the manifest anew
+        return {**manifest, "commands": [manifest["command"]],     # a different evaluation: start the manifest anew
+                "commits": [manifest["commit"]]}
     objects = {s: {o["name"]: o for o in objs} for s, objs in old["objects"].items()}
     for s, objs in manifest["objects"].items():
         for o in objs:
@@ -328,7 +329,10 @@ def merge_manifest(out_dir, manifest: dict) -> dict:
                 manifest["experiments"])],
             "multimaterial_moduli_pa": sorted(set(old.get("multimaterial_moduli_pa", [])) | set(
                 manifest["multimaterial_moduli_pa"])),
-            "commands": list(dict.fromkeys(old.get("commands", [old["command"]]) + [manifest["command"]]))}
+            "commands": list(dict.fromkeys(old.get("commands", [old["command"]]) + [manifest["command"]])),
+            # Every code commit a run into this folder started from, oldest first: a resumed evaluation's
+            # trials come from several (the last one alone would claim them all).
+            "commits": list(dict.fromkeys(old.get("commits", [old["commit"]]) + [manifest["commit"]]))}
 
 
 def check_run_counts(args) -> None:

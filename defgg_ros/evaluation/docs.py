@@ -49,6 +49,15 @@ def _targets_md(targets: list) -> list:
     return lines
 
 
+def _commits_md(manifest: dict) -> str:
+    """The code commits the runs into the folder started from (run.json's `commits`, oldest first)."""
+    commits = manifest.get("commits", [manifest["commit"]])
+    if len(commits) == 1:
+        return f"Evaluation code commit: `{commits[0]}`"
+    return (f"Evaluation code commits: {len(commits)}, one per run start that found a new one (the evaluation was "
+            f"resumed), from `{commits[0]}` to `{commits[-1]}` (all in `run.json`)")
+
+
 def _protocol_md(manifest: dict) -> str:
     """The trial protocol the run's trials were made with (run.json records its settings)."""
     from defgg_ros.data.header import protocol_summary
@@ -112,7 +121,7 @@ def results_markdown(out_dir, doc_path, notes_path=None) -> str:
         f"3. Strategy figure: `defgg-eval strategy --out {out_dir}`",
         "4. Models and their training: see the model cards `models/defgg_cnn.md` and "
         "`models/ggcnn_depth_only.md` (commands, data fingerprint, trials used).", "",
-        f"Evaluation code commit: `{manifest['commit']}`; object pose seed {manifest['seed']}; "
+        f"{_commits_md(manifest)}; object pose seed {manifest['seed']}; "
         f"{manifest['grasps_per_object']} best grasps per object and modulus; tasks {', '.join(manifest['tasks'])}.",
         "", _protocol_md(manifest), "",
         "## Models", "", "| name | input | weights sha (16) | training data fingerprint |", "|---|---|---|---|"]

@@ -124,3 +124,23 @@ def test_sensitivity_adds_like_for_like_columns_while_ranks_are_partial(tmp_path
 def test_sensitivity_curve_states_one_n_in_the_legend_only_when_every_point_shares_it():
     assert common_n_label([135, 135, 135]) == ", n = 135 per point"
     assert common_n_label([135, 124, 135]) == ""
+
+
+def test_a_resumed_evaluation_keeps_every_code_commit_it_ran_with(tmp_path):
+    """run.json's `commits`: a folder filled by runs from several commits must not name only the last one."""
+    from defgg_ros.evaluation.cli import merge_manifest
+    from defgg_ros.evaluation.docs import _commits_md
+
+    base = {"command": "defgg-eval run --out x", "models": {"m": {"sha": "s"}}, "grasps_per_object": 5, "seed": 0,
+            "objects": {"common": []}, "tasks": ["shake"], "experiments": ["main"], "multimaterial_moduli_pa": []}
+    path = tmp_path / report.MANIFEST_FILE
+    for commit in ("aaa", "bbb", "aaa", "ccc"):
+        write_json_atomic(path, merge_manifest(tmp_path, {**base, "commit": commit}))
+    manifest = json.loads(path.read_text())
+    assert manifest["commits"] == ["aaa", "bbb", "ccc"] and manifest["commit"] == "ccc"
+    assert _commits_md(manifest) == ("Evaluation code commits: 3, one per run start that found a new one (the "
+                                     "evaluation was resumed), from `aaa` to `ccc` (all in `run.json`)")
+    assert _commits_md({"commit": "aaa"}) == "Evaluation code commit: `aaa`"     # a folder from before the list
+    # Other models: a different evaluation, the list starts anew.
+    other = merge_manifest(tmp_path, {**base, "commit": "ddd", "models": {"m": {"sha": "t"}}})
+    assert other["commits"] == ["ddd"]
