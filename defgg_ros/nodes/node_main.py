@@ -31,7 +31,7 @@ def run_node(name: str, make_node, startup_errors=(ValueError, OSError), threads
     profile matters for the cell's own camera-sized messages between its
     processes (docs/sessions.md).
 
-    A node started by a NodeProcess (the bringup, the replays, the tests) stops with SIGINT when the
+    A node started by a NodeProcess (the bringup, the replays, the tests) stops with SIGTERM when the
     process that started it dies without stopping it (defgg_ros/ros/launcher.py, watch_supervisor).
     """
     use_large_message_transport()

@@ -11,7 +11,8 @@ after SIGINT_GRACE_S, then SIGKILL after SIGTERM_GRACE_S.
 
 A parent killed before it could stop its children (SIGKILL, a crash, a test runner's SIGTERM) must not
 leave them running: each child learns its parent's pid (SUPERVISOR_PID_VARIABLE) and, through
-`watch_supervisor` in the node's main, stops itself with SIGINT once that parent is gone.
+`watch_supervisor` in the node's main, stops itself with SIGTERM once that parent is gone (SIGTERM, not
+SIGINT: a shell starts background jobs with SIGINT ignored, and every entry point stops cleanly on SIGTERM).
 """
 import collections
 import os
@@ -128,7 +129,7 @@ def _alive(pid: int) -> bool:
 
 
 def watch_supervisor(name: str, poll_s: float = SUPERVISOR_POLL_S) -> threading.Thread | None:
-    """In a child started by NodeProcess: SIGINT this process once the parent that started it is gone.
+    """In a child started by NodeProcess: SIGTERM this process once the parent that started it is gone.
 
     Returns the watching thread, or None when this process was not started by a NodeProcess (no
     SUPERVISOR_PID_VARIABLE, or one naming a live process that is not our parent: a grandchild that
@@ -150,7 +151,7 @@ def watch_supervisor(name: str, poll_s: float = SUPERVISOR_POLL_S) -> threading.
                   file=sys.stderr, flush=True)
         except OSError:   # its output went to the dead parent's pipe
             pass
-        os.kill(os.getpid(), signal.SIGINT)
+        os.kill(os.getpid(), signal.SIGTERM)
 
     thread = threading.Thread(target=watch, name="supervisor-watch", daemon=True)
     thread.start()

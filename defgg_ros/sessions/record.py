@@ -35,6 +35,7 @@ from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import camera_info_to_k
 from defgg_ros.ros.cell_client import CellCallError, CellClient
 from defgg_ros.ros.executor import ThreadedExecutor
+from defgg_ros.ros.launcher import watch_supervisor
 from defgg_ros.ros.transport import use_large_message_transport
 from defgg_ros.sessions import metadata as md
 from defgg_ros.sessions.bag import SessionBagError, SessionWriter
@@ -278,6 +279,8 @@ def main(argv=None) -> int:
     use_large_message_transport()
     # SIGTERM (e.g. from the bringup) ends the recording cleanly, like Ctrl-C.
     previous = signal.signal(signal.SIGTERM, _interrupt)
+    # Started by a bringup that is then killed: end the bag cleanly instead of recording on, orphaned.
+    watch_supervisor("defgg-record")
     try:
         record(args)
     except (SessionBagError, md.MetadataError, CellCallError, SceneError, ValueError) as exc:

@@ -1,5 +1,6 @@
 """The one process launcher (defgg_ros/ros/launcher.py) and the one share-path resolver (defgg_ros/ros/share.py)."""
 import io
+import json
 import os
 import signal
 import subprocess
@@ -69,13 +70,14 @@ def test_share_paths_resolve_in_the_source_tree_first():
     assert share_path("models", "no_such.pt") == SOURCE_ROOT / "models" / "no_such.pt"
 
 
-# A real rclpy node through the nodes' one main body, and a parent that starts it with NodeProcess.
+# A real rclpy node through the nodes' one main body, and a parent that starts a child with NodeProcess.
 IDLE_NODE = ("from rclpy.node import Node\nfrom defgg_ros.nodes.node_main import run_node\n"
              "run_node('idle_node', lambda: (print('ready', flush=True), Node('idle_node'))[1])\n")
-SUPERVISOR = f"""
-import sys, time
+RECORDER = "import sys; from defgg_ros.sessions.record import main; sys.exit(main())"
+SUPERVISOR = """
+import json, sys, time
 from defgg_ros.ros.launcher import NodeProcess
-child = NodeProcess("idle", [sys.executable, "-c", {IDLE_NODE!r}], log_path=sys.argv[1])
+child = NodeProcess("child", json.loads(sys.argv[1]), log_path=sys.argv[2])
 print(child.pid, flush=True)
 time.sleep(120)
 """
@@ -90,16 +92,23 @@ def _running(pid: int) -> bool:
         return False
 
 
-def test_a_node_stops_itself_when_the_process_that_started_it_is_killed(tmp_path):
-    log = tmp_path / "idle.log"
-    parent = subprocess.Popen([sys.executable, "-c", SUPERVISOR, str(log)], stdout=subprocess.PIPE, text=True)
+@pytest.mark.parametrize("child", ["node", "recorder"])
+def test_a_child_stops_itself_when_the_process_that_started_it_is_killed(child, tmp_path):
+    """A node stops; the session recorder (`defgg-bringup --record`) ends its bag instead of recording on."""
+    log, bag = tmp_path / "child.log", tmp_path / "session"
+    argv, started = {"node": ([sys.executable, "-c", IDLE_NODE], "ready"),
+                     "recorder": ([sys.executable, "-c", RECORDER, str(bag)], "recording into")}[child]
+    parent = subprocess.Popen([sys.executable, "-c", SUPERVISOR, json.dumps(argv), str(log)],
+                              stdout=subprocess.PIPE, text=True)
     child_pid = int(parent.stdout.readline())
     try:
-        _wait_for(lambda: log.exists() and "ready" in log.read_text(), timeout_s=30.0)
-        parent.kill()                # SIGKILL: no chance to stop its children
+        _wait_for(lambda: log.exists() and started in log.read_text(), timeout_s=30.0)
+        parent.kill()                # SIGKILL: no chance to stop its child
         parent.wait()
-        _wait_for(lambda: not _running(child_pid), timeout_s=15.0)
+        _wait_for(lambda: not _running(child_pid), timeout_s=20.0)
         assert f"the process that started it (pid {parent.pid}) is gone: shutting down" in log.read_text()
+        if child == "recorder":
+            assert f"wrote {bag}" in log.read_text() and (bag / "metadata.yaml").is_file()
     finally:
         if _running(child_pid):
             os.kill(child_pid, signal.SIGKILL)
