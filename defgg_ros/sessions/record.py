@@ -277,8 +277,9 @@ def main(argv=None) -> int:
         print(f"defgg-record: error: {exc}", file=sys.stderr)
         return 2
     use_large_message_transport()
-    # SIGTERM (e.g. from the bringup) ends the recording cleanly, like Ctrl-C.
-    previous = signal.signal(signal.SIGTERM, _interrupt)
+    # SIGTERM (e.g. from the bringup) ends the recording cleanly, like Ctrl-C; and SIGINT does even when the
+    # recorder was started as a shell's background job (which starts with SIGINT ignored).
+    previous = {sig: signal.signal(sig, _interrupt) for sig in (signal.SIGINT, signal.SIGTERM)}
     # Started by a bringup that is then killed: end the bag cleanly instead of recording on, orphaned.
     watch_supervisor("defgg-record")
     try:
@@ -287,7 +288,8 @@ def main(argv=None) -> int:
         print(f"defgg-record: error: {exc}", file=sys.stderr)
         return 2
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
     return 0
 
 
