@@ -53,6 +53,9 @@ class SequenceConfig:
     # the held object sees a predefined path with real accelerations (the
     # paper's real-robot test); None: straight joint motion to the place.
     transfer_via_position_m: tuple | None = None
+    # The transfer (holding the object) is slowed down in time until its TCP accelerates at most this (m/s^2);
+    # None: as fast as the joint limits allow.
+    transfer_max_tcp_accel_mps2: float | None = 3.0
     # The arm counts as at rest when every joint is slower than still_speed_radps for rest_hold_s
     # (robot clock); a stop waits at most stop_timeout_s after its trajectory ended for that.
     still_speed_radps: float = 0.02
@@ -77,6 +80,9 @@ class SequenceConfig:
                 raise ValueError(f"{name} must be a positive number, got {value}")
         if not 0.0 < self.limits_scale <= 1.0:
             raise ValueError(f"limits_scale must be in (0, 1], got {self.limits_scale}")
+        cap = self.transfer_max_tcp_accel_mps2
+        if cap is not None and not (math.isfinite(cap) and cap > 0):
+            raise ValueError(f"transfer_max_tcp_accel_mps2 must be > 0 (or None), got {cap}")
         via = self.transfer_via_position_m
         if via is not None and (len(via) != 3 or not all(math.isfinite(v) for v in via)):
             raise ValueError(f"transfer_via_position_m must be 3 finite numbers, got {via}")

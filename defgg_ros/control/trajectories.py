@@ -10,6 +10,7 @@ anything is sent to the robot:
 - `plan_stop`: the jerk-limited stop to zero velocity from any state
   (Ruckig's velocity interface).
 """
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -416,6 +417,28 @@ def _limit_ratios(trajectory: SampledTrajectory, limits: JointLimits) -> dict:
             for name, values, limit in (("velocity", qd, limits.qd_max_radps),
                                         ("acceleration", qdd, limits.qdd_max_radps2),
                                         ("jerk", qddd, limits.qddd_max_radps3))}
+
+
+def scaled_in_time(limits: JointLimits, factor: float) -> JointLimits:
+    """Limits for the same motions `factor` (>= 1) times slower: velocity / factor, acceleration / factor^2,
+    jerk / factor^3 (a time-optimal plan within them is the original slowed down: every acceleration of
+    the arm, the TCP's included, falls by factor^2). Ranges and the velocity envelope stay."""
+    if not factor >= 1.0:
+        raise ValueError(f"time factor must be >= 1, got {factor}")
+    return dataclasses.replace(limits, qd_max_radps=limits.qd_max_radps / factor,
+                               qdd_max_radps2=limits.qdd_max_radps2 / factor ** 2,
+                               qddd_max_radps3=limits.qddd_max_radps3 / factor ** 3)
+
+
+def tcp_peak_acceleration_mps2(kin: PandaKinematics, trajectory: SampledTrajectory) -> float:
+    """Largest linear acceleration of the TCP over the trajectory (second differences of its FK positions)."""
+    if len(trajectory.times_s) < 3:
+        return 0.0
+    p = np.array([kin.fk(q)[:3, 3] for q in trajectory.q_rad])
+    dt = np.diff(trajectory.times_s)
+    v = np.diff(p, axis=0) / dt[:, None]
+    a = np.diff(v, axis=0) / (0.5 * (dt[1:] + dt[:-1]))[:, None]
+    return float(np.max(np.linalg.norm(a, axis=1)))
 
 
 def _check_envelope(trajectory: SampledTrajectory, envelope: np.ndarray) -> None:

@@ -208,6 +208,7 @@ class ExecutorNode(Node):
             settle_timeout_s=float(p["settle_timeout_s"]), gripper_timeout_s=float(p["gripper_timeout_s"]),
             slip_width_fraction=float(p["slip_width_fraction"]), sample_dt_s=float(p["trajectory_sample_dt_s"]),
             transfer_via_position_m=via, still_speed_radps=float(p["still_speed_radps"]),
+            transfer_max_tcp_accel_mps2=float(p["transfer_max_tcp_accel_mps2"]) or None,
             rest_hold_s=float(p["rest_hold_s"]), stop_timeout_s=float(p["stop_timeout_s"]),
             observation_q_rad=tuple(float(v) for v in p["observation_q_rad"]) if p["recover_after_failure"] else None,
             observation_lift_m=float(p["observation_lift_m"]),

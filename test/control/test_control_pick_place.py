@@ -1,4 +1,5 @@
 """PickPlaceSequence on a fake clock: happy path and every way it can end badly."""
+import dataclasses
 import math
 
 import numpy as np
@@ -16,6 +17,7 @@ from defgg_ros.control.sequence_types import (
     SendTrajectory,
     SequenceConfig,
 )
+from defgg_ros.control.trajectories import arm_limits, plan_joint_motion, scaled_in_time, tcp_peak_acceleration_mps2
 from defgg_ros.grasping.geometry import tcp_height_m
 
 # The network's grasp point is on the object's top surface, here a 5 cm tall object.
@@ -130,6 +132,49 @@ def test_slip_is_detected_in_the_phase_it_happens(kin, phase):
     assert f"dropped during {phase}" in out.failure_reason
     assert out.held_after_lift == (phase == "transfer")
     assert not out.held_after_transfer
+
+
+def test_a_drop_the_transfer_did_not_see_is_found_before_the_release(kin):
+    """Force-closed fingers close only at their grasp speed once the object is gone: a drop at the start of a
+    short transfer can leave the width above the slip threshold when the transfer ends (the simulated cell,
+    2026-11-28: a block flung off early in the transfer, the pick reported done, the block on the table)."""
+    # 20 mm/s (the soft closing speed): 50 -> 25 mm (the slip threshold) takes 1.25 s, the unslowed transfer 0.82 s.
+    world = World(slip_at_phase="transfer", slip_closing_mps=0.02)
+    fast = dataclasses.replace(CONFIG, transfer_max_tcp_accel_mps2=None)
+    sequence, robot = make(kin, config=fast), FakeRobot(kin, world)
+    run(sequence, robot)
+    out = sequence.outcome
+    assert out.held_after_transfer            # the transfer was too short to show it
+    assert not out.success and out.phase_reached == "place"
+    assert "dropped during place" in out.failure_reason
+
+
+@pytest.mark.parametrize("cap_mps2", [None, 3.0, 1.5])
+def test_the_transfer_is_slowed_until_the_tcp_accelerates_at_most_the_cap(kin, cap_mps2):
+    """The labels' grip force holds only (FOS - 1) g more than the weight; an unslowed transfer reaches ~7 m/s^2."""
+    config = dataclasses.replace(CONFIG, transfer_max_tcp_accel_mps2=cap_mps2)
+    sequence, robot = make(kin, config=config), FakeRobot(kin, World())
+    transfers = []
+    run(sequence, robot, until=lambda r, s: transfers.append(r.trajectory) if s.phase == "transfer" else False)
+    transfer = transfers[-1]
+    peak = tcp_peak_acceleration_mps2(kin, transfer)
+    if cap_mps2 is None:
+        assert peak > 5.0            # what the joint limits alone give this transfer
+    else:
+        assert cap_mps2 * 0.8 < peak <= cap_mps2 * 1.001
+    run_until_finished(sequence, robot)
+    assert sequence.outcome.success, sequence.outcome.failure_reason
+
+
+def test_slower_limits_in_time_slow_every_acceleration_by_the_square(kin):
+    start, goal = np.array(kin.q_ready_rad), np.array(kin.q_ready_rad) + [0.6, 0.3, -0.4, 0.3, 0.5, -0.2, 0.8]
+    limits = arm_limits("panda", 0.4)
+    fast = plan_joint_motion(start, goal, limits)
+    slow = plan_joint_motion(start, goal, scaled_in_time(limits, 2.0))
+    assert slow.duration_s == pytest.approx(2.0 * fast.duration_s, rel=0.02)
+    assert tcp_peak_acceleration_mps2(kin, slow) == pytest.approx(tcp_peak_acceleration_mps2(kin, fast) / 4, rel=0.05)
+    with pytest.raises(ValueError, match="time factor must be >= 1"):
+        scaled_in_time(limits, 0.5)
 
 
 def test_driver_silent_aborts_within_the_watchdog_time(kin):

@@ -23,6 +23,7 @@ class World:
     contact_height_m: float = -1.0           # TCP z below which the hand touches something
     silent: bool = False                     # driver stops publishing joint states
     slip_at_phase: str | None = None         # object falls out when this phase starts
+    slip_closing_mps: float = 0.0            # after the slip the fingers close at this rate (0: at once, to 0)
     gripper_report_delay_s: float = 0.0      # fingers report this long after they stopped (a slow squeeze)
 
 
@@ -75,7 +76,11 @@ class FakeRobot:
             self.q, self.qd = q, qd
         self._step_gripper(sequence)
         if self.world.slip_at_phase == sequence.phase and self.gripper is None:
-            self.width_m = 0.0
+            self.world.slip_at_phase = "slipped"    # from here on the fingers close on nothing
+        if self.world.slip_at_phase == "slipped" and self.gripper is None:
+            # Force-controlled fingers close at their grasp speed once nothing is between them.
+            rate = self.world.slip_closing_mps
+            self.width_m = 0.0 if rate <= 0 else max(0.0, self.width_m - rate * TICK_S)
         tcp_z = self.kin.fk(self.q)[2, 3]
         depth = max(0.0, self.world.contact_height_m - tcp_z)
         sequence.on_force([0.0, 0.0, CONTACT_STIFFNESS_N_PER_M * depth])
