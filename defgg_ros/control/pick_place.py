@@ -499,9 +499,6 @@ class PickPlaceSequence:
 
     def _tick_place(self, sim_s: float) -> list:
         if not self._placed_open_sent:
-            # Until the release: force-closed fingers close only at their grasp speed once the object is gone,
-            # so a drop early in a short transfer may show only while lowering (simulated cell, 2026-11-28).
-            self._check_held()
             if not self._arrived(sim_s):
                 return []
             self._placed_open_sent = True

@@ -134,19 +134,21 @@ def test_slip_is_detected_in_the_phase_it_happens(kin, phase):
     assert not out.held_after_transfer
 
 
-def test_a_drop_the_transfer_did_not_see_is_found_before_the_release(kin):
-    """Force-closed fingers close only at their grasp speed once the object is gone: a drop at the start of a
-    short transfer can leave the width above the slip threshold when the transfer ends (the simulated cell,
-    2026-11-28: a block flung off early in the transfer, the pick reported done, the block on the table)."""
-    # 20 mm/s (the soft closing speed): 50 -> 25 mm (the slip threshold) takes 1.25 s, the unslowed transfer 0.82 s.
-    world = World(slip_at_phase="transfer", slip_closing_mps=0.02)
-    fast = dataclasses.replace(CONFIG, transfer_max_tcp_accel_mps2=None)
-    sequence, robot = make(kin, config=fast), FakeRobot(kin, world)
-    run(sequence, robot)
-    out = sequence.outcome
-    assert out.held_after_transfer            # the transfer was too short to show it
-    assert not out.success and out.phase_reached == "place"
-    assert "dropped during place" in out.failure_reason
+def test_a_drop_early_in_the_slowed_transfer_is_seen_before_the_place(kin):
+    """Force-closed fingers close only at their grasp speed once the object is gone: at 25 mm/s the width
+    crosses the slip threshold (50 -> 25 mm) 1.0 s after the drop. The unslowed transfer (0.82 s here) ends
+    before that, and the drop goes unseen until the release: the simulated cell, 2026-11-28, reported a pick
+    done with the block flung onto the table. The slowed transfer (1.22 s) sees it."""
+    outcomes = {}
+    for cap in (None, 3.0):
+        world = World(slip_at_phase="transfer", slip_closing_mps=0.025)
+        sequence = make(kin, config=dataclasses.replace(CONFIG, transfer_max_tcp_accel_mps2=cap))
+        run(sequence, FakeRobot(kin, world))
+        outcomes[cap] = sequence.outcome
+    assert outcomes[None].held_after_transfer                 # unslowed: the transfer was over too soon
+    out = outcomes[3.0]
+    assert not out.success and out.phase_reached == "transfer"
+    assert "dropped during transfer" in out.failure_reason and not out.held_after_transfer
 
 
 @pytest.mark.parametrize("cap_mps2", [None, 3.0, 1.5])
