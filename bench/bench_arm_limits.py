@@ -6,7 +6,7 @@ motions from the ready pose with the executor's planners at --limits-scale: the 
 the 25 mm descent, the 15 cm lift, the joint motion to a place pose over the bin. Prints, per arm model, how
 many grasps plan, the median and 90th percentile of the summed motion time (grasps both plan), and the
 refusal reasons, and for the FR3 how much of its position-dependent velocity bound (constants.FR3_VELOCITY_ENVELOPE,
-scaled like the other bounds) the motions use at most: above 1, the executor's check refuses the motion.
+unscaled: where the controller aborts) the motions use at most: above 1, the executor's check refuses the motion.
 Kinematics only (no physics): what the limits change, not what the gripper or object does.
 """
 import argparse

@@ -74,7 +74,8 @@ FR3_QDDD_MAX_RADPS3 = (5000.0, 5000.0, 5000.0, 5000.0, 5000.0, 5000.0, 5000.0)
 # computeUpper/LowerLimitsJointVelocity, after Franka's "Limits for Franka Research 3"): per joint
 #   upper(q) = min(v_max, max(0, -offset + sqrt(max(0, k * (q_upper - q)))))
 #   lower(q) = max(-v_max, min(0, offset - sqrt(max(0, k * (q - q_lower)))))
-# so a joint must be slowing down at k/2 rad/s^2 before q_upper/q_lower, and be still offset^2/k before them.
+# so a joint must brake at no more than k/2 rad/s^2 towards q_upper/q_lower and be still offset^2/k before them
+# (for joints 1, 4 and 6 that is a few mrad inside the range ends above).
 # Rows: (v_max rad/s, offset rad/s, k rad/s^2, q_upper rad, q_lower rad), joints 1..7. docs/real_cell.md.
 FR3_VELOCITY_ENVELOPE = (
     (2.62, 0.30, 12.0, 2.75010, -2.75010),

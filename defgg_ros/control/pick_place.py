@@ -454,16 +454,17 @@ class PickPlaceSequence:
         return self._send(self._transfer_motion(self._obs.state.q_rad), sim_s)
 
     def _transfer_motion(self, q: np.ndarray):
-        """The transfer, slowed down in time until the TCP accelerates at most transfer_max_tcp_accel_mps2: the
+        """The transfer, slowed down in time (at most TRANSFER_RETIMING_TRIES times) until the TCP accelerates at
+        most transfer_max_tcp_accel_mps2: the
         grip force of the labels' rule holds the object against (FOS - 1) g more, 0.43 g at 2e4 Pa (a 126 g
         block held with 1.44 N a finger was flung off a 7.1 m/s^2 transfer in the simulated cell, 2026-11-28)."""
         motion = self._transfer_within(q, self._limits)
-        cap = self._cfg.transfer_max_tcp_accel_mps2
+        cap, factor = self._cfg.transfer_max_tcp_accel_mps2, 1.0
         for _ in range(TRANSFER_RETIMING_TRIES):
             peak = tcp_peak_acceleration_mps2(self._kin, motion)
             if cap is None or peak <= cap:
                 break
-            factor = math.sqrt(peak / cap) * TRANSFER_RETIMING_MARGIN
+            factor *= math.sqrt(peak / cap) * TRANSFER_RETIMING_MARGIN   # on top of the slow-down so far
             motion = self._transfer_within(q, scaled_in_time(self._limits, factor))
         return motion
 

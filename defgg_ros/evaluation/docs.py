@@ -55,7 +55,7 @@ def _commits_md(manifest: dict) -> str:
     if len(commits) == 1:
         return f"Evaluation code commit: `{commits[0]}`"
     return (f"Evaluation code commits: {len(commits)}, one per run start that found a new one (the evaluation was "
-            f"resumed), from `{commits[0]}` to `{commits[-1]}` (all in `run.json`)")
+            f"resumed), first `{commits[0]}`, latest run `{manifest['commit']}` (all in `run.json`)")
 
 
 def _protocol_md(manifest: dict) -> str:

@@ -119,13 +119,12 @@ def stop_all(processes) -> dict:
 
 
 def _alive(pid: int) -> bool:
+    """Running, not a zombie (a killed parent nobody has reaped yet is dead for us)."""
     try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
+        with open(f"/proc/{pid}/stat", encoding="ascii", errors="replace") as stat:
+            return stat.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except (FileNotFoundError, ProcessLookupError, IndexError):
         return False
-    except PermissionError:
-        return True
-    return True
 
 
 def watch_supervisor(name: str, poll_s: float = SUPERVISOR_POLL_S) -> threading.Thread | None:
@@ -136,7 +135,8 @@ def watch_supervisor(name: str, poll_s: float = SUPERVISOR_POLL_S) -> threading.
     inherited the variable). Polls the parent pid: the kernel's parent-death signal would follow the
     parent *thread*, and a NodeProcess may be made in a worker thread that ends before its child.
     """
-    value = os.environ.get(SUPERVISOR_PID_VARIABLE, "")
+    # Taken out of the environment: processes this one starts with plain subprocess must not inherit it.
+    value = os.environ.pop(SUPERVISOR_PID_VARIABLE, "")
     if not value.isdigit():
         return None
     supervisor = int(value)

@@ -139,7 +139,9 @@ def test_a_resumed_evaluation_keeps_every_code_commit_it_ran_with(tmp_path):
     manifest = json.loads(path.read_text())
     assert manifest["commits"] == ["aaa", "bbb", "ccc"] and manifest["commit"] == "ccc"
     assert _commits_md(manifest) == ("Evaluation code commits: 3, one per run start that found a new one (the "
-                                     "evaluation was resumed), from `aaa` to `ccc` (all in `run.json`)")
+                                     "evaluation was resumed), first `aaa`, latest run `ccc` (all in `run.json`)")
+    again = merge_manifest(tmp_path, {**base, "commit": "bbb"})    # back on an earlier commit: named as the latest
+    assert again["commits"] == ["aaa", "bbb", "ccc"] and "latest run `bbb`" in _commits_md(again)
     assert _commits_md({"commit": "aaa"}) == "Evaluation code commit: `aaa`"     # a folder from before the list
     # Other models: a different evaluation, the list starts anew.
     other = merge_manifest(tmp_path, {**base, "commit": "ddd", "models": {"m": {"sha": "t"}}})

@@ -119,3 +119,23 @@ def test_the_watch_is_only_for_children_of_a_node_process(monkeypatch):
     assert launcher.watch_supervisor("n") is None               # started by hand, ros2 run or a launch file
     monkeypatch.setenv(launcher.SUPERVISOR_PID_VARIABLE, str(os.getpid()))
     assert launcher.watch_supervisor("n") is None               # inherited from a live grandparent
+
+
+# A process whose recorded starter already died (a zombie nobody reaped) before its watch began: it must stop.
+LATE_WATCH = """
+import os, subprocess, sys, time
+from defgg_ros.ros.launcher import SUPERVISOR_PID_VARIABLE, watch_supervisor
+dead = subprocess.Popen([sys.executable, "-c", "pass"])
+time.sleep(1.0)                     # exited, not waited for: a zombie
+os.environ[SUPERVISOR_PID_VARIABLE] = str(dead.pid)
+watch_supervisor("late")
+assert SUPERVISOR_PID_VARIABLE not in os.environ   # not handed on to what this process starts
+time.sleep(30)
+"""
+
+
+def test_a_watch_that_starts_after_its_starter_died_stops_the_process_at_once():
+    started = time.monotonic()
+    proc = subprocess.run([sys.executable, "-c", LATE_WATCH], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == -signal.SIGTERM, proc.stderr
+    assert "late: the process that started it" in proc.stderr and time.monotonic() - started < 20
