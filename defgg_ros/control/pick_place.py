@@ -454,41 +454,53 @@ class PickPlaceSequence:
         return self._send(self._transfer_motion(self._obs.state.q_rad), sim_s)
 
     def _transfer_motion(self, q: np.ndarray):
-        """The transfer, slowed down in time (at most TRANSFER_RETIMING_TRIES times) until the TCP accelerates at
-        most transfer_max_tcp_accel_mps2: the
-        grip force of the labels' rule holds the object against (FOS - 1) g more, 0.43 g at 2e4 Pa (a 126 g
-        block held with 1.44 N a finger was flung off a 7.1 m/s^2 transfer in the simulated cell, 2026-11-28)."""
-        motion = self._transfer_within(q, self._limits)
+        """Holding the object, from q to above the place pose (through the via position when it passes)."""
+        target = self._place_approach_target(q)
+        q_via = None
+        if self._cfg.transfer_via_position_m is not None:
+            try:
+                via_M = self._kin.fk(q)
+                via_M[:3, 3] = self._cfg.transfer_via_position_m
+                q_via = self._kin.ik(via_M, q, restarts=0).q_rad
+            except KinematicsError:
+                pass    # a via the arm cannot reach from here must not cost the pick: go straight instead
+
+        def plan(limits):
+            direct = plan_joint_motion(q, target, limits, dt_s=self._cfg.sample_dt_s)
+            if q_via is None:
+                return direct
+            try:
+                through = plan_joint_via(q, q_via, target, limits, dt_s=self._cfg.sample_dt_s)
+                check_trajectory(through, self._limits, self._kin, self._cfg.table_z_m)
+                return through
+            except KinematicsError:   # a via motion that breaks a limit: straight instead
+                return direct
+
+        return self._held_motion(plan)
+
+    def _place_approach_target(self, q: np.ndarray) -> np.ndarray:
+        """Joints above the place pose, seeded from q for a short motion; the pre-planned solution is the fallback."""
+        approach_M = self._plan.place_M.copy()
+        approach_M[2, 3] += self._cfg.place_approach_height_m
+        try:
+            return self._kin.ik(approach_M, q, restarts=0).q_rad
+        except KinematicsError:
+            return self._plan.place_approach_q
+
+    def _held_motion(self, plan):
+        """plan(limits), slowed down in time (at most TRANSFER_RETIMING_TRIES times) until the TCP accelerates at
+        most transfer_max_tcp_accel_mps2: the grip force of the labels' rule holds the object against only
+        (FOS - 1) g more, 0.43 g at 2e4 Pa (a 126 g block held with 1.44 N a finger was flung off a 7.1 m/s^2
+        transfer in the simulated cell, 2026-11-28)."""
+        motion = plan(self._limits)
         cap, factor = self._cfg.transfer_max_tcp_accel_mps2, 1.0
         for _ in range(TRANSFER_RETIMING_TRIES):
             peak = tcp_peak_acceleration_mps2(self._kin, motion)
             if cap is None or peak <= cap:
                 break
             factor *= math.sqrt(peak / cap) * TRANSFER_RETIMING_MARGIN   # on top of the slow-down so far
-            motion = self._transfer_within(q, scaled_in_time(self._limits, factor))
+            motion = plan(scaled_in_time(self._limits, factor))
         return motion
-
-    def _transfer_within(self, q: np.ndarray, limits):
-        approach_M = self._plan.place_M.copy()
-        approach_M[2, 3] += self._cfg.place_approach_height_m
-        try:  # seeded from here for a short motion; the pre-planned solution is the fallback
-            target = self._kin.ik(approach_M, q, restarts=0).q_rad
-        except KinematicsError:
-            target = self._plan.place_approach_q
-        direct = plan_joint_motion(q, target, limits, dt_s=self._cfg.sample_dt_s)
-        if self._cfg.transfer_via_position_m is None:
-            return direct
-        try:
-            via_M = self._kin.fk(q)
-            via_M[:3, 3] = self._cfg.transfer_via_position_m
-            q_via = self._kin.ik(via_M, q, restarts=0).q_rad
-            through = plan_joint_via(q, q_via, target, limits, dt_s=self._cfg.sample_dt_s)
-            check_trajectory(through, self._limits, self._kin, self._cfg.table_z_m)
-            return through
-        except KinematicsError:
-            # A via the arm cannot pass from here (or that breaks a limit) must
-            # not cost the pick: go straight instead.
-            return direct
 
     def _tick_transfer(self, sim_s: float) -> list:
         self._check_held()
@@ -670,13 +682,9 @@ class PickPlaceSequence:
 
     def _step_carry(self, sim_s: float) -> list:
         q = self._obs.state.q_rad
-        approach_M = self._plan.place_M.copy()
-        approach_M[2, 3] += self._cfg.place_approach_height_m
-        try:  # a direct motion from wherever the stop left the arm
-            target = self._kin.ik(approach_M, q, restarts=0).q_rad
-        except KinematicsError:
-            target = self._plan.place_approach_q
-        motion = plan_joint_motion(q, target, self._limits, dt_s=self._cfg.sample_dt_s)
+        target = self._place_approach_target(q)   # a direct motion from wherever the stop left the arm
+        # Holding the object, like the transfer: slowed down the same way.
+        motion = self._held_motion(lambda limits: plan_joint_motion(q, target, limits, dt_s=self._cfg.sample_dt_s))
         return self._recovery_motion("carried the held object over the place pose", self._send(motion, sim_s), True)
 
     def _step_lower(self, sim_s: float) -> list:

@@ -53,8 +53,8 @@ class SequenceConfig:
     # the held object sees a predefined path with real accelerations (the
     # paper's real-robot test); None: straight joint motion to the place.
     transfer_via_position_m: tuple | None = None
-    # The transfer (holding the object) is slowed down in time until its TCP accelerates at most this (m/s^2);
-    # None: as fast as the joint limits allow.
+    # The transfer and a recovery's carry (both holding the object) are slowed down in time until the TCP
+    # accelerates at most this (m/s^2); None: as fast as the joint limits allow.
     transfer_max_tcp_accel_mps2: float | None = 3.0
     # The arm counts as at rest when every joint is slower than still_speed_radps for rest_hold_s
     # (robot clock); a stop waits at most stop_timeout_s after its trajectory ended for that.

@@ -19,6 +19,7 @@ from defgg_ros.control.sequence_types import (
     SendTrajectory,
     SequenceConfig,
 )
+from defgg_ros.control.trajectories import tcp_peak_acceleration_mps2
 
 pytestmark = pytest.mark.unit
 
@@ -97,6 +98,7 @@ def test_a_grasp_that_fails_long_after_the_descent_still_recovers(kin):
 def test_an_object_held_at_a_cancel_is_placed_before_the_arm_leaves(kin):
     sequence, robot = PickPlaceSequence(kin, CONFIG, GRASP, PLACE), FakeRobot(kin, World(object_width_m=0.045))
     run(sequence, robot, until=lambda r, s: s.phase == "transfer" and s.feedback(r.sim_s).phase_progress > 0.3)
+    sent_before_cancel = len(robot.sent)
     robot.apply(sequence.cancel(robot.sim_s, robot.sim_s), sequence)
     releases = []
     while not sequence.finished and robot.sim_s < 120:
@@ -108,6 +110,9 @@ def test_an_object_held_at_a_cancel_is_placed_before_the_arm_leaves(kin):
     out = sequence.outcome
     assert out.canceled and out.phase_reached == "transfer" and not out.held_after_transfer
     assert out.recovery.startswith("carried the held object"), out.recovery
+    # The carry holds the object like the transfer: slowed down to the same TCP acceleration cap.
+    stop, carry = [c.trajectory for c in robot.sent[sent_before_cancel:] if isinstance(c, SendTrajectory)][:2]
+    assert tcp_peak_acceleration_mps2(kin, carry) <= CONFIG.transfer_max_tcp_accel_mps2 * 1.001
     assert "released it there" in out.recovery
     (release_tcp,) = releases  # opened once, at the place pose
     assert release_tcp == pytest.approx(PLACE.position_m, abs=3e-3)
