@@ -490,7 +490,7 @@ class PickPlaceSequence:
     def _held_motion(self, plan):
         """plan(limits), slowed down in time (at most TRANSFER_RETIMING_TRIES times) until the TCP accelerates at
         most transfer_max_tcp_accel_mps2: the grip force of the labels' rule holds the object against only
-        (FOS - 1) g more, 0.43 g at 2e4 Pa (a 126 g block held with 1.44 N a finger was flung off a 7.1 m/s^2
+        (FOS - 1) g more, 0.43 g at 2e4 Pa (a 126 g block held with 1.44 N a finger was flung off a ~6 m/s^2
         transfer in the simulated cell, 2026-11-28)."""
         motion = plan(self._limits)
         cap, factor = self._cfg.transfer_max_tcp_accel_mps2, 1.0
