@@ -332,12 +332,20 @@ class PickPlaceSequence:
             if not still and elapsed > m.trajectory.duration_s + self._cfg.settle_timeout_s:
                 raise SequenceFailure(f"arm did not come to rest during {self._phase}")
             return still
+        # At the target *and at rest*: the next motion starts from this state with zero velocity, so a state
+        # taken while the arm still moved (a late joint state: 5-16 mrad behind in the ROS cell at RTF 3)
+        # would make the next trajectory start behind the arm, a jump that jerked a held block out of the hand.
         error = float(np.max(np.abs(state.q_rad - m.trajectory.final_q_rad)))
-        if error <= self._cfg.arrival_joint_atol_rad:
+        still = self._at_rest(sim_s)
+        if error <= self._cfg.arrival_joint_atol_rad and still:
             return True
-        if elapsed > m.trajectory.duration_s + self._cfg.settle_timeout_s:
+        moving = self._still_since_s is None       # slow now but not yet for rest_hold_s: wait for it
+        if elapsed > m.trajectory.duration_s + self._cfg.settle_timeout_s and (
+                error > self._cfg.arrival_joint_atol_rad or moving):
+            how = f"joint error {error:.3f} rad" if error > self._cfg.arrival_joint_atol_rad else (
+                f"not at rest: fastest joint {self._max_speed_radps():.3f} rad/s")
             raise SequenceFailure(f"arm did not reach the {self._phase} target {self._cfg.settle_timeout_s:.1f} s "
-                                  f"after the trajectory ended (joint error {error:.3f} rad)")
+                                  f"after the trajectory ended ({how})")
         return False
 
     def _max_speed_radps(self) -> float:
