@@ -10,7 +10,15 @@ import numpy as np
 import pytest
 from support.control_fake_robot import FakeRobot, World, run
 
-from defgg_ros.constants import FR3_Q_MAX_RAD, FR3_Q_MIN_RAD, FR3_QDD_MAX_RADPS2, FR3_QDDD_MAX_RADPS3
+from defgg_ros.constants import (
+    FR3_PLAN_Q_MAX_RAD,
+    FR3_PLAN_Q_MIN_RAD,
+    FR3_Q_MAX_RAD,
+    FR3_Q_MIN_RAD,
+    FR3_QDD_MAX_RADPS2,
+    FR3_QDDD_MAX_RADPS3,
+    FR3_VELOCITY_ENVELOPE,
+)
 from defgg_ros.control.kinematics import KinematicsError, PandaKinematics
 from defgg_ros.control.pick_place import PickPlaceSequence
 from defgg_ros.control.sequence_types import GraspTarget, PlaceTarget, SendTrajectory, SequenceConfig
@@ -28,7 +36,7 @@ def test_fr3_kinematics_refuse_the_panda_only_joint_ranges():
     q = np.array(panda.q_ready_rad)
     q[5] = 0.3                       # joint 6: inside the Panda's range, below the FR3's 0.5445 rad
     assert panda.within_limits(q) and not fr3.within_limits(q)
-    assert np.array_equal(fr3.q_min_rad, FR3_Q_MIN_RAD) and np.array_equal(fr3.q_max_rad, FR3_Q_MAX_RAD)
+    assert np.array_equal(fr3.q_min_rad, FR3_PLAN_Q_MIN_RAD) and np.array_equal(fr3.q_max_rad, FR3_PLAN_Q_MAX_RAD)
     with pytest.raises(KinematicsError, match="unknown arm model 'ur5'; known: panda, fr3"):
         PandaKinematics(arm="ur5")
 
@@ -48,6 +56,20 @@ def test_a_joint_motion_keeps_to_the_fr3s_acceleration_jerk_and_ranges():
     low[5] = 0.3
     with pytest.raises(TrajectoryError):
         plan_joint_motion(start, low, fr3)
+
+
+def test_every_fr3_position_the_ik_may_choose_can_be_approached_from_inside():
+    # The FR3's bound is 0 towards a range end from offset^2/k before it: a goal there (joints 1, 4, 6 had
+    # 1.1-7.6 mrad of datasheet range inside it) was planned and then refused for speed; the IK's range ends
+    # where the bound still lets the joint move towards the end, and within the datasheet's.
+    fr3 = PandaKinematics(arm="fr3")
+    envelope = np.array(FR3_VELOCITY_ENVELOPE)
+    inside = 1e-4
+    lower_at_min, _ = envelope_velocity_bounds(envelope, fr3.q_min_rad + inside)
+    _, upper_at_max = envelope_velocity_bounds(envelope, fr3.q_max_rad - inside)
+    assert np.all(upper_at_max > 0) and np.all(lower_at_min < 0)
+    assert np.all(fr3.q_min_rad >= FR3_Q_MIN_RAD) and np.all(fr3.q_max_rad <= FR3_Q_MAX_RAD)
+    assert np.max(fr3.q_min_rad - FR3_Q_MIN_RAD) < 0.01     # a cut of mrad, not a narrower arm
 
 
 @pytest.mark.parametrize("arm", ["panda", "fr3"])
