@@ -520,6 +520,9 @@ class PickPlaceSequence:
 
     def _tick_place(self, sim_s: float) -> list:
         if not self._placed_open_sent:
+            # Held until the fingers open: an object lost late in the transfer shows only now (force-closed
+            # fingers close on nothing at 20-50 mm/s), and one lost in the lowering may be outside the bin.
+            self._check_held()
             if not self._arrived(sim_s):
                 return []
             self._placed_open_sent = True

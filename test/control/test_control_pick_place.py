@@ -134,18 +134,31 @@ def test_slip_is_detected_in_the_phase_it_happens(kin, phase):
     assert not out.held_after_transfer
 
 
+def test_an_object_lost_in_the_place_lowering_is_reported_not_released(kin):
+    # The lowering to the release pose did not check the hold: a drop there (or late in the transfer) was
+    # reported as a pick done, wherever the object fell.
+    sequence = make(kin)
+    run(sequence, FakeRobot(kin, World(slip_at_phase="place", slip_closing_mps=0.05)))
+    out = sequence.outcome
+    assert not out.success and out.phase_reached == "place" and out.held_after_transfer
+    assert "dropped during place" in out.failure_reason, out.failure_reason
+
+
 def test_a_drop_early_in_the_slowed_transfer_is_seen_before_the_place(kin):
     """Force-closed fingers close only at their grasp speed once the object is gone: at 25 mm/s the width
     crosses the slip threshold (50 -> 25 mm) 1.0 s after the drop. The unslowed transfer (0.82 s here) ends
-    before that, and the drop goes unseen until the release: the simulated cell, 2026-11-28, reported a pick
-    done with the block flung onto the table. The slowed transfer (1.22 s) sees it."""
+    before that, and the drop went unseen until the release: the simulated cell, 2026-11-28, reported a pick
+    done with the block flung onto the table. The slowed transfer (1.22 s) sees it; the place lowering, which
+    checks the hold too, sees the unslowed one's."""
     outcomes = {}
     for cap in (None, 3.0):
         world = World(slip_at_phase="transfer", slip_closing_mps=0.025)
         sequence = make(kin, config=dataclasses.replace(CONFIG, transfer_max_tcp_accel_mps2=cap))
         run(sequence, FakeRobot(kin, world))
         outcomes[cap] = sequence.outcome
-    assert outcomes[None].held_after_transfer                 # unslowed: the transfer was over too soon
+    unslowed = outcomes[None]                  # the transfer was over too soon; the place lowering sees it
+    assert unslowed.held_after_transfer and not unslowed.success
+    assert unslowed.phase_reached == "place" and "dropped during place" in unslowed.failure_reason
     out = outcomes[3.0]
     assert not out.success and out.phase_reached == "transfer"
     assert "dropped during transfer" in out.failure_reason and not out.held_after_transfer
