@@ -88,18 +88,21 @@ FR3_VELOCITY_ENVELOPE = (
 )
 # Arm models whose controller bounds the velocity by position (the Panda's bound is the constant one).
 ARM_VELOCITY_ENVELOPES = {"fr3": FR3_VELOCITY_ENVELOPE}
-# The FR3's range to plan in: the datasheet's, cut where the bound above is already 0 towards the end
+# The FR3's range for goals (the IK's): the datasheet's, cut where the bound above is already 0 towards the end
 # (q_upper - offset^2/k, q_lower + offset^2/k): a goal there cannot be approached at any speed, so the IK must not
-# pick one. Joints 1, 4 and 6 lose 1.1, 5.3 and 7.5 mrad at each end; the others none.
-FR3_PLAN_Q_MIN_RAD = tuple(max(q, lo + off ** 2 / k)
+# pick one. Joints 1, 4 and 6 lose 1.1, 5.3 and 7.5 mrad at each end; the others none. Trajectories are checked
+# against the datasheet range (an arm at rest in the band may move out of it; moving in, the bound refuses).
+FR3_GOAL_Q_MIN_RAD = tuple(max(q, lo + off ** 2 / k)
                            for q, (_, off, k, _, lo) in zip(FR3_Q_MIN_RAD, FR3_VELOCITY_ENVELOPE))
-FR3_PLAN_Q_MAX_RAD = tuple(min(q, up - off ** 2 / k)
+FR3_GOAL_Q_MAX_RAD = tuple(min(q, up - off ** 2 / k)
                            for q, (_, off, k, up, _) in zip(FR3_Q_MAX_RAD, FR3_VELOCITY_ENVELOPE))
-# Per arm model (the executor's joint_limits): position min, max to plan in, velocity, acceleration, jerk.
+# Per arm model (the executor's joint_limits): position min, max, velocity, acceleration, jerk.
 ARM_JOINT_LIMITS = {
     "panda": (PANDA_Q_MIN_RAD, PANDA_Q_MAX_RAD, PANDA_QD_MAX_RADPS, PANDA_QDD_MAX_RADPS2, PANDA_QDDD_MAX_RADPS3),
-    "fr3": (FR3_PLAN_Q_MIN_RAD, FR3_PLAN_Q_MAX_RAD, FR3_QD_MAX_RADPS, FR3_QDD_MAX_RADPS2, FR3_QDDD_MAX_RADPS3),
+    "fr3": (FR3_Q_MIN_RAD, FR3_Q_MAX_RAD, FR3_QD_MAX_RADPS, FR3_QDD_MAX_RADPS2, FR3_QDDD_MAX_RADPS3),
 }
+# Per arm model: the range the IK chooses goals in (min, max).
+ARM_GOAL_RANGES = {"panda": (PANDA_Q_MIN_RAD, PANDA_Q_MAX_RAD), "fr3": (FR3_GOAL_Q_MIN_RAD, FR3_GOAL_Q_MAX_RAD)}
 ARM_MODELS = tuple(ARM_JOINT_LIMITS)
 # A comfortable "ready" configuration above the table.
 PANDA_READY_Q_RAD = (0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785)

@@ -5,9 +5,9 @@ pybullet_data, so nothing is downloaded and the fake driver simulates the
 same geometry). The two finger joints are locked: only the 7 arm joints move.
 A `panda_tcp` frame is added at the fingertip centre (franka_ros default TCP), with its x
 axis along the fingers' closing direction (the hand's y axis; see PANDA_TCP_YAW_RAD).
-Joint limits are Franka's datasheet values from `defgg_ros.constants`, which
+Joint ranges are Franka's datasheet values from `defgg_ros.constants`, which
 are tighter than the URDF's: the Panda's, or the FR3's (`arm="fr3"`: the same
-kinematic structure, other joint ranges).
+kinematic structure, other joint ranges, cut for goals where its velocity bound is 0).
 """
 import math
 from dataclasses import dataclass
@@ -18,6 +18,7 @@ import pinocchio as pin
 import pybullet_data
 
 from defgg_ros.constants import (
+    ARM_GOAL_RANGES,
     ARM_JOINT_LIMITS,
     ARM_MODELS,
     PANDA_FINGERTIP_BELOW_TCP_M,
@@ -110,8 +111,10 @@ class PandaKinematics:
         self.model = _arm_model(Path(urdf_path) if urdf_path else panda_urdf_path())
         self.data = self.model.createData()
         self.tcp_id = self.model.getFrameId(TCP_FRAME)
-        self.q_min_rad = np.array(ARM_JOINT_LIMITS[arm][0])
-        self.q_max_rad = np.array(ARM_JOINT_LIMITS[arm][1])
+        # The IK chooses goals in this range (the FR3's is cut where its controller's velocity bound is 0
+        # towards a range end: constants.ARM_GOAL_RANGES); trajectories are checked against ARM_JOINT_LIMITS.
+        self.q_min_rad = np.array(ARM_GOAL_RANGES[arm][0])
+        self.q_max_rad = np.array(ARM_GOAL_RANGES[arm][1])
         self.q_ready_rad = np.array(PANDA_READY_Q_RAD)
         self.restart_seed = seed
         self._link_ids: dict = {}

@@ -11,8 +11,8 @@ import pytest
 from support.control_fake_robot import FakeRobot, World, run
 
 from defgg_ros.constants import (
-    FR3_PLAN_Q_MAX_RAD,
-    FR3_PLAN_Q_MIN_RAD,
+    FR3_GOAL_Q_MAX_RAD,
+    FR3_GOAL_Q_MIN_RAD,
     FR3_Q_MAX_RAD,
     FR3_Q_MIN_RAD,
     FR3_QDD_MAX_RADPS2,
@@ -36,7 +36,7 @@ def test_fr3_kinematics_refuse_the_panda_only_joint_ranges():
     q = np.array(panda.q_ready_rad)
     q[5] = 0.3                       # joint 6: inside the Panda's range, below the FR3's 0.5445 rad
     assert panda.within_limits(q) and not fr3.within_limits(q)
-    assert np.array_equal(fr3.q_min_rad, FR3_PLAN_Q_MIN_RAD) and np.array_equal(fr3.q_max_rad, FR3_PLAN_Q_MAX_RAD)
+    assert np.array_equal(fr3.q_min_rad, FR3_GOAL_Q_MIN_RAD) and np.array_equal(fr3.q_max_rad, FR3_GOAL_Q_MAX_RAD)
     with pytest.raises(KinematicsError, match="unknown arm model 'ur5'; known: panda, fr3"):
         PandaKinematics(arm="ur5")
 
@@ -70,6 +70,19 @@ def test_every_fr3_position_the_ik_may_choose_can_be_approached_from_inside():
     assert np.all(upper_at_max > 0) and np.all(lower_at_min < 0)
     assert np.all(fr3.q_min_rad >= FR3_Q_MIN_RAD) and np.all(fr3.q_max_rad <= FR3_Q_MAX_RAD)
     assert np.max(fr3.q_min_rad - FR3_Q_MIN_RAD) < 0.01     # a cut of mrad, not a narrower arm
+
+
+def test_an_fr3_at_rest_in_the_cut_band_can_still_move_out_of_it():
+    # Only goals avoid the band: an arm standing in it (e.g. after hand guiding) moves away from the range end,
+    # which the bound allows; moving into it is refused by the bound.
+    limits = arm_limits("fr3", 0.4)
+    start = np.array(PandaKinematics().q_ready_rad)
+    start[5] = (FR3_Q_MIN_RAD[5] + FR3_GOAL_Q_MIN_RAD[5]) / 2          # joint 6 inside the band
+    away = start.copy()
+    away[5] = 1.0
+    check_trajectory(plan_joint_motion(start, away, limits), limits, PandaKinematics(arm="fr3"), 0.0)
+    with pytest.raises(TrajectoryError, match="joint 6 moves at"):
+        check_trajectory(plan_joint_motion(away, start, limits), limits, PandaKinematics(arm="fr3"), 0.0)
 
 
 @pytest.mark.parametrize("arm", ["panda", "fr3"])
