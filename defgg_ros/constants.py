@@ -90,7 +90,8 @@ FR3_VELOCITY_ENVELOPE = (
 ARM_VELOCITY_ENVELOPES = {"fr3": FR3_VELOCITY_ENVELOPE}
 # The FR3's range for goals (the IK's): the datasheet's, cut where the bound above is already 0 towards the end
 # (q_upper - offset^2/k, q_lower + offset^2/k): a goal there cannot be approached at any speed, so the IK must not
-# pick one. Joints 1, 4 and 6 lose 1.1, 5.3 and 7.5 mrad at each end; the others none. Trajectories are checked
+# pick one (goals just inside may still need gentler braking than the plan's: check_trajectory refuses those).
+# Joints 1, 4 and 6 lose 1.1, 5.3 and 7.5 mrad at each end; the others none. Trajectories are checked
 # against the datasheet range (an arm at rest in the band may move out of it; moving in, the bound refuses).
 FR3_GOAL_Q_MIN_RAD = tuple(max(q, lo + off ** 2 / k)
                            for q, (_, off, k, _, lo) in zip(FR3_Q_MIN_RAD, FR3_VELOCITY_ENVELOPE))

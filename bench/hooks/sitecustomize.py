@@ -19,7 +19,7 @@ EVERY_STEPS = 5
 def _instrument(cell_module):
     import pybullet as p
 
-    cls, out = cell_module.SimCell, open(f"{LOG}.{os.getpid()}", "w")
+    cls, out = cell_module.SimCell, open(f"{LOG}.{os.getpid()}", "w", buffering=1)   # lines survive a kill
     step, command, grasp, move = cls._step, cls.command_trajectory, cls.gripper_grasp, cls.gripper_move
 
     def logged_step(self):
@@ -31,13 +31,12 @@ def _instrument(cell_module):
         obj_xyz, obj_quat = self.object_poses()[0]
         inv = p.invertTransform(tcp_xyz, tcp_quat)
         rel = p.multiplyTransforms(inv[0], inv[1], obj_xyz, obj_quat)[0]
-        out.write("S " + " ".join(f"{v:.5f}" for v in (self.time_s, *tcp_xyz, *rel, self.gripper_width_m())) + "\n")
+        out.write("S " + " ".join(f"{v:.8f}" for v in (self.time_s, *tcp_xyz, *rel, self.gripper_width_m())) + "\n")
 
     def logged_command(self, points, start_time_s=None):
         if points:
             first = points[0][1]
             out.write("T " + " ".join(f"{v:.6f}" for v in (self.time_s, *first, *self.arm_positions())) + "\n")
-            out.flush()
         return command(self, points, start_time_s)
 
     def logged(kind, call):

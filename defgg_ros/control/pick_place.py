@@ -90,6 +90,9 @@ CHECKED_PLAN_REUSE_TOLERANCE_RAD = 1e-3
 # at most this often (Ruckig's plan within time-scaled limits is the time-scaled plan; the margin covers sampling).
 TRANSFER_RETIMING_MARGIN = 1.02
 TRANSFER_RETIMING_TRIES = 3
+# The place lowering watches the hold until the held object's bottom (assumed on the table at the grasp) comes
+# this close to the table: touching down pushes an object up between the fingers, which can read as a drop.
+TOUCHDOWN_MARGIN_M = 0.02
 
 
 class SequenceFailure(Exception):
@@ -115,6 +118,7 @@ class PickPlaceSequence:
         self._checked: tuple[np.ndarray, _Plan] | None = None   # (q it was planned from, plan_failure's plan)
         self._phase = "idle"
         self._placed_open_sent = False
+        self._grasp_tcp_z_m = math.inf     # TCP height when the fingers closed (set in _tick_close)
         self._stopping = False
         self._cancel_after_stop = False   # canceled while a failure's stop ran: no recovery after it
         self._stop_began_s = 0.0
@@ -442,6 +446,7 @@ class PickPlaceSequence:
         success, width, error = result
         self.outcome.gripper_width_closed_m = width
         self.outcome.gripper_force_n = self._plan.gripper.force_n
+        self._grasp_tcp_z_m = float(self._kin.fk(self._obs.state.q_rad)[2, 3])
         if width < MISSED_WIDTH_M:
             raise SequenceFailure(f"missed: the fingers closed to {width * 1000:.1f} mm with nothing between them")
         opened = self._plan.gripper.pre_open_width_m
@@ -518,11 +523,19 @@ class PickPlaceSequence:
         self._phase = "place"
         return self._line_to(self._plan.place_M[:3, 3], self._cfg.line_speed_mps, sim_s)
 
+    def _may_touch_down(self) -> bool:
+        """Could the held object's bottom be within TOUCHDOWN_MARGIN_M of the table (or a bin floor on it)? Its
+        bottom hangs as far below the TCP as the TCP was above the table at the grasp."""
+        hang_m = self._grasp_tcp_z_m - self._cfg.table_z_m
+        tcp_z = self._kin.fk(self._obs.state.q_rad)[2, 3]
+        return tcp_z - hang_m < self._cfg.table_z_m + TOUCHDOWN_MARGIN_M
+
     def _tick_place(self, sim_s: float) -> list:
         if not self._placed_open_sent:
-            # Held until the fingers open: an object lost late in the transfer shows only now (force-closed
-            # fingers close on nothing at 20-50 mm/s), and one lost in the lowering may be outside the bin.
-            self._check_held()
+            # Held while lowering: an object lost late in the transfer shows only now (force-closed fingers
+            # close on nothing at 20-50 mm/s), and one lost in the lowering may be outside the bin.
+            if not self._may_touch_down():
+                self._check_held()
             if not self._arrived(sim_s):
                 return []
             self._placed_open_sent = True
@@ -699,8 +712,9 @@ class PickPlaceSequence:
         return self._recovery_motion("carried the held object over the place pose", self._send(motion, sim_s), True)
 
     def _step_lower(self, sim_s: float) -> list:
-        # Not watched for a slip, like the pick's own place: an object touching down at the place
-        # pose is pushed up between the fingers, and the closing fingers would read as a drop.
+        # Not watched for a slip: this lowering follows a failure, where the object may sit anywhere in the
+        # hand, so its bottom's height is unknown; touching down pushes it up between the fingers, which
+        # would read as a drop (the pick's own place lowering is watched down to TOUCHDOWN_MARGIN_M).
         commands = self._line_to(self._plan.place_M[:3, 3], self._cfg.line_speed_mps, sim_s)
         return self._recovery_motion("lowered it to the place pose", commands)
 

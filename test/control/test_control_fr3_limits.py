@@ -58,10 +58,10 @@ def test_a_joint_motion_keeps_to_the_fr3s_acceleration_jerk_and_ranges():
         plan_joint_motion(start, low, fr3)
 
 
-def test_every_fr3_position_the_ik_may_choose_can_be_approached_from_inside():
+def test_no_fr3_goal_the_ik_may_choose_has_a_zero_velocity_bound_towards_its_range_end():
     # The FR3's bound is 0 towards a range end from offset^2/k before it: a goal there (joints 1, 4, 6 had
-    # 1.1-7.6 mrad of datasheet range inside it) was planned and then refused for speed; the IK's range ends
-    # where the bound still lets the joint move towards the end, and within the datasheet's.
+    # 1.1-7.6 mrad of datasheet range inside it) can never be approached; the IK's range ends where the bound
+    # is still above 0 (goals just inside may still need a gentler braking than the plan's: not guaranteed).
     fr3 = PandaKinematics(arm="fr3")
     envelope = np.array(FR3_VELOCITY_ENVELOPE)
     inside = 1e-4

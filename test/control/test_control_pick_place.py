@@ -144,6 +144,23 @@ def test_an_object_lost_in_the_place_lowering_is_reported_not_released(kin):
     assert "dropped during place" in out.failure_reason, out.failure_reason
 
 
+@pytest.mark.parametrize("bottom_at_slip_m, reported", [(0.05, True), (0.012, False)])
+def test_the_place_lowering_watches_the_hold_until_the_object_may_touch_down(kin, bottom_at_slip_m, reported):
+    # Placed low (its bottom ends 5 mm above the table): a width that falls while the bottom is 5 cm up is a
+    # drop; within TOUCHDOWN_MARGIN_M of the table it is the object pushed up between the fingers by touching
+    # down, which must not fail a pick that put it down (the bottom hangs GRASP_TCP_Z_M below the TCP).
+    place = PlaceTarget((0.35, -0.45, GRASP_TCP_Z_M + 0.005))
+    world = World(slip_at_phase="place", slip_closing_mps=0.2, slip_below_tcp_z_m=GRASP_TCP_Z_M + bottom_at_slip_m)
+    sequence = make(kin, place=place)
+    run(sequence, FakeRobot(kin, world))
+    out = sequence.outcome
+    assert out.held_after_transfer
+    if reported:
+        assert not out.success and "dropped during place" in out.failure_reason, out.failure_reason
+    else:
+        assert out.success, out.failure_reason
+
+
 def test_a_drop_early_in_the_slowed_transfer_is_seen_before_the_place(kin):
     """Force-closed fingers close only at their grasp speed once the object is gone: at 25 mm/s the width
     crosses the slip threshold (50 -> 25 mm) 1.0 s after the drop. The unslowed transfer (0.82 s here) ends

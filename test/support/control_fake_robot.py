@@ -25,6 +25,7 @@ class World:
     slip_at_phase: str | None = None         # object falls out when this phase starts
     slip_closing_mps: float = 0.0            # after the slip the fingers close at this rate (0: at once, to 0)
     gripper_report_delay_s: float = 0.0      # fingers report this long after they stopped (a slow squeeze)
+    slip_below_tcp_z_m: float | None = None  # with slip_at_phase: the slip waits until the TCP is below this
 
 
 class FakeRobot:
@@ -75,7 +76,8 @@ class FakeRobot:
             q, qd, _ = self.trajectory.state_at(self.sim_s - self.trajectory_start_s)
             self.q, self.qd = q, qd
         self._step_gripper(sequence)
-        if self.world.slip_at_phase == sequence.phase and self.gripper is None:
+        low_enough = self.world.slip_below_tcp_z_m is None or self.kin.fk(self.q)[2, 3] < self.world.slip_below_tcp_z_m
+        if self.world.slip_at_phase == sequence.phase and self.gripper is None and low_enough:
             self.world.slip_at_phase = "slipped"    # from here on the fingers close on nothing
         if self.world.slip_at_phase == "slipped" and self.gripper is None:
             # Force-controlled fingers close at their grasp speed once nothing is between them.
