@@ -47,6 +47,7 @@ from defgg_ros.control.sequence_types import (
     SendTrajectory,
     SequenceConfig,
 )
+from defgg_ros.control.velocity_estimate import PositionVelocityEstimator
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import ConversionError, stamp_to_ns, transform_from_pose
 from defgg_ros.nodes.node_main import run_node
@@ -156,7 +157,7 @@ class ExecutorNode(Node):
         self._sequence: PickPlaceSequence | None = None
         self._gripper_goal = None
         self._last_state: tuple[ArmState, float] | None = None
-        self._last_positions = None   # (q, stamp ns) of the last joint state, for drivers without velocities
+        self._velocity_estimate = PositionVelocityEstimator()   # for drivers without velocities
         self._last_force = np.zeros(3)
         self._last_force_wall_s = None   # when the last external wrench arrived (monotonic)
         names = topics.arm_names(p["arm_id"])  # ValueError on a malformed arm_id
@@ -231,23 +232,12 @@ class ExecutorNode(Node):
         stamp_ns = stamp_to_ns(msg.header.stamp) or self.get_clock().now().nanoseconds
         with self._lock:
             if len(msg.velocity) != len(msg.name):   # a driver without velocities: zeros would read "at rest"
-                state = self._velocity_from_positions(state, stamp_ns)
-            self._last_positions = (state.q_rad, stamp_ns)
+                qd = self._velocity_estimate.update(state.q_rad, stamp_ns * 1e-9)
+                state = dataclasses.replace(state, qd_radps=qd)
             self._last_state = (state, time.monotonic())
             self._watch.update(state.q_rad, stamp_ns * 1e-9)
             if self._sequence is not None:
                 self._sequence.on_joint_state(state, self._last_state[1])
-
-    def _velocity_from_positions(self, state: ArmState, stamp_ns: int) -> ArmState:
-        """qd from this and the previous message's positions (lock held); NaN until two messages 1 ms-0.5 s
-        apart exist, so the arm never counts as still on missing data."""
-        qd = np.full(7, np.nan)
-        if self._last_positions is not None:
-            q_before, stamp_before_ns = self._last_positions
-            dt_s = (stamp_ns - stamp_before_ns) * 1e-9
-            if 1e-3 <= dt_s <= 0.5:
-                qd = (state.q_rad - q_before) / dt_s
-        return dataclasses.replace(state, qd_radps=qd)
 
     def _on_wrench(self, msg: WrenchStamped):
         force = np.array([msg.wrench.force.x, msg.wrench.force.y, msg.wrench.force.z])

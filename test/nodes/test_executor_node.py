@@ -258,3 +258,15 @@ def test_joint_states_without_velocities_get_them_from_the_positions(rclpy_conte
         np.testing.assert_allclose(node._last_state[0].qd_radps, 0.2, rtol=1e-6)   # 2 mrad in 10 ms
     finally:
         node.destroy_node()
+
+
+def test_a_pick_against_a_driver_without_velocities_and_with_position_noise(executor_cell, spin):
+    # Every arrival waits for rest, and without velocities the executor estimates them from positions: 2e-5 rad of
+    # noise differenced over one 10 ms period would already read as ~0.003 rad/s, at 1 kHz as ~0.03 (over the
+    # 0.02 rad/s rest threshold); the estimate uses a baseline of at least 5 ms (control/velocity_estimate.py).
+    ex, node, client, start_driver = executor_cell
+    start_driver(object_width_m=0.04, publish_velocities=False, position_noise_rad=2e-5)
+    wait_driver_ready(ex, spin, node)
+    response = result_of(ex, spin, send(ex, client, spin, PickAndPlace.Goal(grasp=grasp_msg())))
+    assert response.result.success, response.result.failure_reason
+

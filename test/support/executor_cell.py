@@ -57,8 +57,11 @@ FAST = {  # quicker motions than the defaults so a full run takes a few seconds
 
 
 class InTestDriver(Node):
-    def __init__(self, context, object_width_m=0.04, contact_height_m=-1.0, q0=PANDA_READY_Q_RAD):
+    def __init__(self, context, object_width_m=0.04, contact_height_m=-1.0, q0=PANDA_READY_Q_RAD,
+                 publish_velocities=True, position_noise_rad=0.0):
         super().__init__("in_test_driver", context=context)
+        self.publish_velocities, self.position_noise_rad = publish_velocities, position_noise_rad
+        self._rng = np.random.default_rng(0)
         self.object_width_m, self.contact_height_m = object_width_m, contact_height_m
         self.kin = PandaKinematics()  # its own: one pinocchio Data is not for sharing across threads
         self.q, self.qd = np.array(q0, dtype=float), np.zeros(7)
@@ -131,8 +134,9 @@ class InTestDriver(Node):
         stamp = self.get_clock().now().to_msg()
         state = JointState(name=list(PANDA_JOINT_NAMES) + list(PANDA_FINGER_JOINT_NAMES))
         state.header.stamp = stamp
-        state.position = self.q.tolist() + [self.width_m / 2] * 2
-        state.velocity = self.qd.tolist() + [0.0, 0.0]
+        noise = self.position_noise_rad * self._rng.standard_normal(7)
+        state.position = (self.q + noise).tolist() + [self.width_m / 2] * 2
+        state.velocity = self.qd.tolist() + [0.0, 0.0] if self.publish_velocities else []
         state.effort = [0.0] * 9
         self.joint_pub.publish(state)
         wrench = WrenchStamped()
