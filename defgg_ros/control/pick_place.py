@@ -118,7 +118,6 @@ class PickPlaceSequence:
         self._checked: tuple[np.ndarray, _Plan] | None = None   # (q it was planned from, plan_failure's plan)
         self._phase = "idle"
         self._placed_open_sent = False
-        self._grasp_tcp_z_m = math.inf     # TCP height when the fingers closed (set in _tick_close)
         self._stopping = False
         self._cancel_after_stop = False   # canceled while a failure's stop ran: no recovery after it
         self._stop_began_s = 0.0
@@ -352,6 +351,10 @@ class PickPlaceSequence:
                                   f"after the trajectory ended ({how})")
         return False
 
+    def _tcp_z_m(self) -> float:
+        """The TCP's height (base frame) in the last joint state."""
+        return float(self._kin.fk(self._obs.state.q_rad)[2, 3])
+
     def _max_speed_radps(self) -> float:
         """The fastest joint's speed; inf when unknown (no state, or a velocity not yet estimated: NaN)."""
         state = self._obs.state
@@ -435,7 +438,7 @@ class PickPlaceSequence:
             return self._stop_motion(sim_s)
         if not self._arrived(sim_s):
             return []
-        self.outcome.contact_height_m = float(self._kin.fk(self._obs.state.q_rad)[2, 3])
+        self.outcome.contact_height_m = self._tcp_z_m()
         self._phase = "close"
         return self._send_gripper(GraspGripper(self._plan.gripper), sim_s)
 
@@ -446,7 +449,6 @@ class PickPlaceSequence:
         success, width, error = result
         self.outcome.gripper_width_closed_m = width
         self.outcome.gripper_force_n = self._plan.gripper.force_n
-        self._grasp_tcp_z_m = float(self._kin.fk(self._obs.state.q_rad)[2, 3])
         if width < MISSED_WIDTH_M:
             raise SequenceFailure(f"missed: the fingers closed to {width * 1000:.1f} mm with nothing between them")
         opened = self._plan.gripper.pre_open_width_m
@@ -525,10 +527,9 @@ class PickPlaceSequence:
 
     def _may_touch_down(self) -> bool:
         """Could the held object's bottom be within TOUCHDOWN_MARGIN_M of the table (or a bin floor on it)? Its
-        bottom hangs as far below the TCP as the TCP was above the table at the grasp."""
-        hang_m = self._grasp_tcp_z_m - self._cfg.table_z_m
-        tcp_z = self._kin.fk(self._obs.state.q_rad)[2, 3]
-        return tcp_z - hang_m < self._cfg.table_z_m + TOUCHDOWN_MARGIN_M
+        bottom hangs as far below the TCP as the TCP was above the table where the descent stopped."""
+        hang_m = self.outcome.contact_height_m - self._cfg.table_z_m
+        return self._tcp_z_m() - hang_m < self._cfg.table_z_m + TOUCHDOWN_MARGIN_M
 
     def _tick_place(self, sim_s: float) -> list:
         if not self._placed_open_sent:
@@ -685,7 +686,7 @@ class PickPlaceSequence:
         return self._send_gripper(MoveGripper(width, OPENING_SPEED_MPS), sim_s)
 
     def _step_lift(self, sim_s: float) -> list:
-        z_now = float(self._kin.fk(self._obs.state.q_rad)[2, 3])
+        z_now = self._tcp_z_m()
         z_observe = float(self._kin.fk(np.asarray(self._cfg.observation_q_rad))[2, 3])
         lift = min(self._cfg.observation_lift_m, max(0.0, z_observe - z_now))
         if lift < 0.005:
