@@ -9,8 +9,9 @@ With --ros-runs N: N `defgg-demo` runs on rigid_box.yaml (real nodes, real DDS),
 instrumented from outside (bench/hooks/sitecustomize.py); prints per run the largest start jump of any
 trajectory (from the driver's side), the block's largest move in the hand while held, and the TCP's peak
 acceleration while held (second differences of 5 ms samples logged to 10 nm: rounding adds < 0.01 m/s^2).
---repo runs the demo of another checkout (e.g. a `git worktree` of an
-older commit) with the same instrumentation, to measure before and after a change.
+--repo measures another checkout (e.g. a `git worktree` of an older commit) the same way, to compare before and
+after a change: its demo for the ROS runs, its code for the in-process picks (older code: lag 0 only, and no
+start jumps when its CellSequenceDriver did not record them).
 
     .venv/bin/python bench/bench_motion_start.py [--lags 0 3 6] [--ros-runs 6] [--repo /tmp/old]
 """
@@ -49,7 +50,8 @@ def in_process(lag_periods: int) -> str:
     cell = SimCell(load_scene(str(SCENE)))
     try:
         sequence = PickPlaceSequence(PandaKinematics(), config, GraspTarget(*GRASP), PlaceTarget(PLACE_XYZ_M))
-        driver, in_hand = CellSequenceDriver(cell, sequence, state_lag_periods=lag_periods), []
+        lagged = {"state_lag_periods": lag_periods} if lag_periods else {}   # older drivers had no lag
+        driver, in_hand = CellSequenceDriver(cell, sequence, **lagged), []
 
         def record(c):
             if sequence.phase in ("lift", "transfer", "place") and not sequence._placed_open_sent:
@@ -58,9 +60,11 @@ def in_process(lag_periods: int) -> str:
                 in_hand.append(p.multiplyTransforms(inv[0], inv[1], c.object_poses()[0][0], [0, 0, 0, 1])[0])
 
         outcome = driver.run(60.0, record)
+        jumps = getattr(driver, "start_jumps_rad", None)
+        jump_mrad = f"{max(jumps) * 1000:.1f}" if jumps else "(not recorded)"
         moved = np.linalg.norm(np.array(in_hand) - in_hand[0], axis=1).max() * 1000 if in_hand else float("nan")
         return (f"lag {lag_periods} periods ({lag_periods * 10} ms): success {outcome.success}, "
-                f"{outcome.duration_s:.2f} s sim, largest start jump {max(driver.start_jumps_rad) * 1000:.1f} mrad, "
+                f"{outcome.duration_s:.2f} s sim, largest start jump {jump_mrad} mrad, "
                 f"block moved in the hand {moved:.1f} mm while held")
     finally:
         cell.close()
@@ -121,8 +125,10 @@ def main(argv=None) -> int:
     parser.add_argument("--lags", type=int, nargs="*", default=[0, 3, 6],
                         help="joint-state delays to try in one process, in 10 ms control periods")
     parser.add_argument("--ros-runs", type=int, default=0, help="defgg-demo runs in the ROS cell (~25 s each)")
-    parser.add_argument("--repo", type=Path, default=ROOT, help="checkout whose demo the ROS runs use")
+    parser.add_argument("--repo", type=Path, default=ROOT, help="checkout to measure (default: this one)")
     args = parser.parse_args(argv)
+    if args.repo.resolve() != ROOT:
+        sys.path.insert(0, str(args.repo.resolve()))   # its defgg_ros for the in-process picks
     for lag in args.lags:
         print(in_process(lag), flush=True)
     with tempfile.TemporaryDirectory(prefix="bench_motion_start_") as tmp:
