@@ -33,6 +33,11 @@ GRASP = ((0.50396, 0.04357, 0.05), 0.30092, 0.0639, 2e9, 1.709)
 PLACE_XYZ_M = (0.35, -0.45, 0.12)
 
 
+def release_sent(sequence) -> bool:
+    # Checkouts older than the public property (--repo) only have the private flag.
+    return sequence.release_sent if hasattr(sequence, "release_sent") else sequence._placed_open_sent
+
+
 def in_process(lag_periods: int) -> str:
     import pybullet as p
 
@@ -54,7 +59,7 @@ def in_process(lag_periods: int) -> str:
         driver, in_hand = CellSequenceDriver(cell, sequence, **lagged), []
 
         def record(c):
-            if sequence.phase in ("lift", "transfer", "place") and not sequence._placed_open_sent:
+            if sequence.phase in ("lift", "transfer", "place") and not release_sent(sequence):
                 tcp = c.tcp_pose()
                 inv = p.invertTransform(tcp[0], tcp[1])
                 in_hand.append(p.multiplyTransforms(inv[0], inv[1], c.object_poses()[0][0], [0, 0, 0, 1])[0])

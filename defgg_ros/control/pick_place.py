@@ -122,6 +122,7 @@ class PickPlaceSequence:
         self._cancel_after_stop = False   # canceled while a failure's stop ran: no recovery after it
         self._stop_began_s = 0.0
         self._still_since_s: float | None = None
+        self._rest_confirmed_s: float | None = None   # when _arrived last found the arm at rest
         self._failed_phase = ""
         self._recovering = False
         self._recovery_steps: list = []
@@ -196,6 +197,11 @@ class PickPlaceSequence:
     @property
     def recovering(self) -> bool:
         return self._recovering
+
+    @property
+    def release_sent(self) -> bool:
+        """The hand was told to let the object go (at the place, or in a recovery): from here on it may leave."""
+        return self._placed_open_sent
 
     def _guarded(self, handler, sim_s: float, wall_s: float) -> list:
         try:
@@ -334,6 +340,8 @@ class PickPlaceSequence:
             still = self._at_rest(sim_s)
             if not still and elapsed > m.trajectory.duration_s + self._cfg.settle_timeout_s:
                 raise SequenceFailure(f"arm did not come to rest during {self._phase}")
+            if still:
+                self._rest_confirmed_s = sim_s
             return still
         # At the target *and at rest*: the next motion starts from this state with zero velocity, so a state
         # taken while the arm still moved (a late joint state: 5-16 mrad behind in the ROS cell at RTF 3)
@@ -341,6 +349,7 @@ class PickPlaceSequence:
         error = float(np.max(np.abs(state.q_rad - m.trajectory.final_q_rad)))
         still = self._at_rest(sim_s)
         if error <= self._cfg.arrival_joint_atol_rad and still:
+            self._rest_confirmed_s = sim_s
             return True
         moving = self._still_since_s is None       # slow now but not yet for rest_hold_s: wait for it
         if elapsed > m.trajectory.duration_s + self._cfg.settle_timeout_s and (
@@ -653,8 +662,11 @@ class PickPlaceSequence:
 
     def _settle(self, sim_s: float) -> list:
         """End once the arm is at rest: arriving within the joint tolerance is not standing still
-        (the driver's tracking lags; measured 0.37 rad/s at the wrist when 'arrived')."""
-        self._stopping, self._stop_began_s, self._still_since_s = True, sim_s, None
+        (the driver's tracking lags; measured 0.37 rad/s at the wrist when 'arrived'). An arrival in this very
+        tick already saw rest_hold_s of rest: that rest counts, so the run ends without waiting it again."""
+        rested = self._rest_confirmed_s == sim_s
+        self._stopping, self._stop_began_s = True, sim_s
+        self._still_since_s = self._still_since_s if rested else None
         return []
 
     def _tick_recover(self, sim_s: float) -> list:

@@ -407,3 +407,13 @@ def test_start_reuses_the_checked_plan_only_while_the_arm_rests_where_it_was_che
     robot = FakeRobot(kin, World(), q0=q_start)
     run(sequence, robot, until=lambda r, s: s.phase == "descend")
     assert counting.top_down_solves - checked == solves_at_start
+
+
+def test_the_rest_the_retreat_arrival_waited_for_is_not_waited_for_again(kin):
+    """Arrival already needs rest_hold_s of rest: the run ends on the next tick, not rest_hold_s later."""
+    sequence, robot = make(kin), FakeRobot(kin, World(object_width_m=0.045))
+    done_at = []
+    run(sequence, robot, until=lambda r, s: s.phase == "done" and not done_at and done_at.append(r.sim_s) and False)
+    assert sequence.outcome.success and sequence.outcome.arm_state == "at_rest"
+    ticks_after_done = round((robot.sim_s - done_at[0]) / 0.01)
+    assert ticks_after_done <= 1, f"ended {ticks_after_done} ticks after the arrival at rest"
