@@ -13,6 +13,11 @@ The cell runs in a private ROS domain with localhost-only discovery (the first
 line printed names it), so it never reaches a real arm's controller on the
 lab network; `--ros-domain inherit` (or DEFGG_ROS_DOMAIN=inherit) uses the
 shell's ROS_DOMAIN_ID and discovery instead.
+
+Exit codes: 0 the cell ran every pick (whether or not each object reached the
+bin: the table says), 1 the cell failed (a node died, a call timed out), 2 bad
+input (scene, model, --objects, flags), 3 with --strict: an object picked is
+not in the bin.
 """
 import argparse
 import math
@@ -49,6 +54,7 @@ DRIVER, INFERENCE = "fake_panda_driver", "grasp_inference_node"
 # camera's view: first straight up by this much, then in joint space.
 OBSERVE_LIFT_M = 0.12
 OBSERVE_MOVE_S = (2.0, 5.0)
+EXIT_CELL_FAILED, EXIT_BAD_INPUT, EXIT_NOT_ALL_IN_BIN = 1, 2, 3
 
 
 def parse_args(argv=None):
@@ -67,7 +73,20 @@ def parse_args(argv=None):
                         help="ROS domain of the cell: private (default: a random id, localhost-only discovery), "
                              "inherit (the shell's ROS_DOMAIN_ID and discovery) or an id; "
                              f"default from ${ISOLATION_ENV}")
+    parser.add_argument("--strict", action="store_true",
+                        help=f"exit {EXIT_NOT_ALL_IN_BIN} when the cell ran but an object picked did not end in the "
+                             "bin (default: exit 0, the table says which)")
     return parser.parse_args(argv)
+
+
+def exit_code(cell_ran: bool, rows, strict: bool) -> int:
+    """0: every pick ran (and with strict, every object picked is in the bin); 1: the cell failed; 3: strict and
+    an object picked is not in the bin (or nothing was picked)."""
+    if not cell_ran:
+        return EXIT_CELL_FAILED
+    if strict and (not rows or not all(r.in_bin for r in rows)):
+        return EXIT_NOT_ALL_IN_BIN
+    return 0
 
 
 def _out_dir(args) -> Path:
@@ -317,16 +336,20 @@ def run_demo(args, out_dir: Path, log) -> int:
                     remaining.discard(names[index])
         run.final_check(rows, [names.index(n) for n in wanted])
         panels = run.panels
-        code = 0
+        cell_ran = True
     except (BringupError, CellCallError, NodeSetError) as exc:
         print(f"defgg-demo: {exc}", file=sys.stderr)
         _explain_dead_node(bringup)
-        code = 1
+        cell_ran = False
     finally:
         if client is not None:
             client.close()
         bringup.stop()
     _report(out_dir, rows, panels, args, time.monotonic() - started)
+    code = exit_code(cell_ran, rows, args.strict)
+    if code == EXIT_NOT_ALL_IN_BIN:
+        print(f"defgg-demo: --strict: {sum(not r.in_bin for r in rows)} of {len(rows)} objects picked are not in "
+              "the bin", file=sys.stderr)
     return code
 
 
@@ -384,11 +407,11 @@ def main(argv=None) -> int:
         print(domain_line, flush=True)
     except ValueError as exc:
         print(f"defgg-demo: --ros-domain: {exc}", file=sys.stderr)
-        return 2
+        return EXIT_BAD_INPUT
     problem = _check_inputs(args)
     if problem:
         print(f"defgg-demo: {problem}", file=sys.stderr)
-        return 2
+        return EXIT_BAD_INPUT
     out_dir = _out_dir(args)
     out_dir.mkdir(parents=True, exist_ok=True)
     with open(out_dir / "cell.log", "w", encoding="utf-8") as log:

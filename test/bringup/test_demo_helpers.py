@@ -176,3 +176,25 @@ def test_release_height_keeps_the_drop_short_and_the_palm_over_the_walls():
     assert flat + PANDA_FINGER_LENGTH_M - PANDA_FINGERTIP_BELOW_TCP_M > 0.06              # palm above the walls
     tall_walls = dict(bin_dict, inner_size_m=[0.22, 0.22, 0.2])
     assert release_tcp_z(0.05, tall_walls, 0.3) > 0.2 - (PANDA_FINGER_LENGTH_M - PANDA_FINGERTIP_BELOW_TCP_M)
+
+
+@pytest.mark.parametrize("cell_ran,in_bin,strict,expected", [
+    (True, [True, True], False, 0), (True, [True, False], False, 0),   # default: the table says what was placed
+    (True, [True, True], True, 0), (True, [True, False], True, 3), (True, [], True, 3),
+    (False, [True], False, 1), (False, [True, False], True, 1),        # a failed cell is 1 whatever was placed
+])
+def test_demo_exit_code_says_whether_the_cell_ran_and_with_strict_whether_all_reached_the_bin(
+        cell_ran, in_bin, strict, expected):
+    from defgg_ros.demo import exit_code
+
+    rows = [PickRow(f"o{i}", 2e4, "soft", in_bin=placed) for i, placed in enumerate(in_bin)]
+    assert exit_code(cell_ran, rows, strict) == expected
+
+
+def test_demo_help_names_the_exit_codes(capsys):
+    from defgg_ros.demo import parse_args
+
+    with pytest.raises(SystemExit):
+        parse_args(["--help"])
+    out = capsys.readouterr().out
+    assert "--strict" in out and "exit 3" in out and "Exit codes" in out
