@@ -96,6 +96,10 @@ def build_signal_parser() -> argparse.ArgumentParser:
                     help="also draw the report here: held accelerations against the threshold per modulus, the "
                          "within-scene share and the oracle (PNG)")
     ap.add_argument("--title", default=None, help="heading of the Markdown report (default: the folder name)")
+    ap.add_argument("--shake-from", type=Path, default=None, metavar="FOLDER",
+                    help="the folder's trials simulated only the twist: take each trial's shake from FOLDER's record "
+                         "of the same trial id (a try with the same settings; e.g. bench/pilots/d_defgraspsim_twist "
+                         "with --shake-from bench/pilots/a_defgraspsim --label shake_and_twist)")
     ap.add_argument("--label", choices=("shake", "shake_and_twist"), default="shake",
                     help="label rule: the dataset's (shake mean >= 25 m/s^2, default) or that and a mean twist "
                          ">= 250 rad/s^2 (needs trials with the twist recorded)")
@@ -127,11 +131,13 @@ def seal_main(argv) -> int:
 
 def signal_main(argv) -> int:
     from defgg_ros.atomic import write_json_atomic, write_text_atomic
-    from defgg_ros.data.signal import SignalError, read_trial_records, render_markdown, signal_report
+    from defgg_ros.data.signal import SignalError, read_trial_records, render_markdown, signal_report, with_shake_from
 
     args = build_signal_parser().parse_args(argv)
     try:
         records = read_trial_records(args.folder)
+        if args.shake_from is not None:
+            records = with_shake_from(records, read_trial_records(args.shake_from))
         report = signal_report(records, args.label)
     except (SignalError, OSError, ValueError, KeyError) as exc:
         print(f"defgg-datagen signal: error: {exc}", file=sys.stderr)

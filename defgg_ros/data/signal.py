@@ -64,6 +64,23 @@ def read_trial_records(root) -> list[dict]:
     return [record for path in files for record in read_jsonl(path)]
 
 
+def with_shake_from(twist_records: list[dict], shake_records: list[dict]) -> list[dict]:
+    """Twist-only records (a try that simulated only the twist) completed with the shake of the same trial id
+    from another folder with the same settings: everything before the tests is identical and each test starts
+    from the state after the pickup, so this is the record one trial with both tests gives. Status: the shake's,
+    unless the twist's run failed. Twist records without a shake yet are left out."""
+    shake = {r["trial_id"]: r for r in shake_records}
+    out = []
+    for r in twist_records:
+        s = shake.get(r["trial_id"])
+        if s is None:
+            continue
+        status = s["status"] if r["status"] == STATUS_OK else r["status"]
+        out.append(dict(s, status=status, twist_accels_radps2=r.get("twist_accels_radps2"),
+                        cpu_s=s.get("cpu_s", 0.0) + r.get("cpu_s", 0.0)))
+    return out
+
+
 def held_mps2(record: dict) -> float | None:
     """Mean held acceleration of a labelled trial (0 for a lift failure), None for a sim failure."""
     if record["status"] == STATUS_LIFT_FAILED:
@@ -97,6 +114,10 @@ def signal_report(records: list[dict], label_rule: str = "shake",
     threshold (the near-threshold band stays around the paper's 25 m/s^2)."""
     if label_rule not in LABEL_RULES:
         raise SignalError(f"unknown label rule {label_rule!r}; known: {', '.join(LABEL_RULES)}")
+    unshaken = sum(r["status"] == STATUS_OK and not r.get("shake_accels_mps2") for r in records)
+    if unshaken:   # else only their lift failures would be labelled, a report of nothing
+        raise SignalError(f"{unshaken} of {len(records)} trials ran without a shake recorded (a try that simulated "
+                          "only the twist: take each trial's shake from the try with its settings, --shake-from)")
     rows = [r for r in records if held_mps2(r) is not None]
     if not rows:
         raise SignalError("no labelled trial (ok or lift_failed) among the records")

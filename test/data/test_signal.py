@@ -148,3 +148,23 @@ def test_the_threshold_moves_the_labels_not_the_measurements():
     assert at_25["threshold_mps2"] == 25.0 and at_20["threshold_mps2"] == 20.0
     assert at_25["positive_rate"]["2e4"]["rate"] == 0.5 and at_20["positive_rate"]["2e4"]["rate"] == 1.0
     assert at_25["within_scene_share"] == at_20["within_scene_share"]
+
+
+def test_cli_takes_a_twist_only_folder_s_shake_from_another_folder(tmp_path, capsys):
+    """A try that simulated only the twist (bench/pilots/d_defgraspsim_twist) is reported with the shake of the
+    same trial ids from the try it shares settings with; a twist run that failed overrides the shake's status."""
+    shakes = [dict(r, trial_id=f"t{i}") for i, r in enumerate(reversal_records())]
+    twists = [dict(r, shake_accels_mps2=None, twist_accels_radps2=[400.0 if r["candidate_index"] == 0 else 100.0] * 6,
+                   status="ok" if i != 1 else "lift_failed") for i, r in enumerate(shakes)]
+    for name, records in (("shake", shakes), ("twist", twists[:-1])):   # the last twist not run yet
+        (tmp_path / name / "trials").mkdir(parents=True)
+        (tmp_path / name / "trials" / "all.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
+    assert datagen_cli.main(["signal", str(tmp_path / "twist"), "--label", "shake_and_twist"]) == 2   # no shake
+    capsys.readouterr()
+    rc = datagen_cli.main(["signal", str(tmp_path / "twist"), "--label", "shake_and_twist", "--shake-from",
+                           str(tmp_path / "shake"), "--json", str(tmp_path / "s.json")])
+    assert rc == 0
+    report = json.loads((tmp_path / "s.json").read_text())
+    assert report["trials"] == report["labelled"] == 7   # 7 twists have a shake; lift failures are negatives
+    # A's soft grasp holds the shake and the twist at 2e4; its stiff one holds the shake at 2e9 but not the twist.
+    assert report["positive_rate"]["2e4"]["positive"] == 2 and report["positive_rate"]["2e9"]["positive"] == 1
