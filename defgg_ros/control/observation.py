@@ -6,7 +6,18 @@ The executor therefore plans only on frames taken while the arm rested at the ob
 `ObservationWatch` follows the joint states and says since when (robot clock) the arm has been
 there without a break; a frame stamped before that may show the arm. Pure: no ROS.
 """
+import math
+
 import numpy as np
+
+
+def max_joint_speed_radps(qd_radps) -> float:
+    """The fastest joint's speed; inf when unknown (no velocities, or a NaN one: not yet estimated), so
+    an unknown speed never reads as at rest."""
+    if qd_radps is None:
+        return math.inf
+    speed = float(np.max(np.abs(np.asarray(qd_radps, dtype=float))))
+    return speed if math.isfinite(speed) else math.inf
 
 
 def at_pose(q_rad, pose_q_rad, tolerance_rad: float) -> bool:
@@ -18,7 +29,7 @@ def arm_state_of(q_rad, qd_radps, observation_q_rad, tolerance_rad: float, still
     """One of sequence_types.ARM_STATES from a single joint state (no state: unknown)."""
     if q_rad is None:
         return "unknown"
-    if not float(np.max(np.abs(np.asarray(qd_radps, dtype=float)))) < still_speed_radps:   # NaN: not known still
+    if max_joint_speed_radps(qd_radps) >= still_speed_radps:
         return "moving"
     if observation_q_rad is not None and at_pose(q_rad, observation_q_rad, tolerance_rad):
         return "observation_pose"

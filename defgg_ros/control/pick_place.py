@@ -38,6 +38,7 @@ from defgg_ros.control.kinematics import (
     WorkspaceError,
     check_workspace,
 )
+from defgg_ros.control.observation import at_pose, max_joint_speed_radps
 from defgg_ros.control.poses import finite_array, top_down_pose
 from defgg_ros.control.sequence_types import (
     RECOVER_PHASE,
@@ -367,8 +368,7 @@ class PickPlaceSequence:
     def _max_speed_radps(self) -> float:
         """The fastest joint's speed; inf when unknown (no state, or a velocity not yet estimated: NaN)."""
         state = self._obs.state
-        speed = float(np.max(np.abs(state.qd_radps))) if state is not None else math.inf
-        return speed if math.isfinite(speed) else math.inf
+        return max_joint_speed_radps(state.qd_radps if state is not None else None)
 
     def _at_rest(self, sim_s: float) -> bool:
         """Every joint slower than still_speed_radps, continuously for rest_hold_s (robot clock).
@@ -386,7 +386,7 @@ class PickPlaceSequence:
         q_obs, state = self._cfg.observation_q_rad, self._obs.state
         if q_obs is None or state is None:
             return False
-        return float(np.max(np.abs(state.q_rad - np.asarray(q_obs)))) <= self._cfg.observation_tolerance_rad
+        return at_pose(state.q_rad, q_obs, self._cfg.observation_tolerance_rad)
 
     def _rest_state(self) -> str:
         return "observation_pose" if self._at_observation() else "at_rest"
