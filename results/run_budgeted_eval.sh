@@ -17,7 +17,7 @@
 # After each step the tables and docs/results.md are rewritten (with NOTES: default results/notes_vN.md
 # for results/sim_vN) and OUT + docs/results.md are COMMITTED to git (if git is free; with
 # COMMIT_EVERY_TRIALS=N only once N records more than the last commit holds have run: the issue's one
-# commit per 10 % of progress, e.g. 391 for sim_v5's 3,906 planned trials). A rerun keeps the folder's
+# commit per 10 % of progress, e.g. 391 for sim_v5's ~3,906 planned trials; it ran 3,960). A rerun keeps the folder's
 # trial protocol (read from its records; other trial settings are refused).
 set -uo pipefail
 cd "$(dirname "$0")/.."
