@@ -661,9 +661,9 @@ class PickPlaceSequence:
         return self._settle(sim_s)
 
     def _settle(self, sim_s: float) -> list:
-        """End once the arm is at rest: arriving within the joint tolerance is not standing still
-        (the driver's tracking lags; measured 0.37 rad/s at the wrist when 'arrived'). An arrival in this very
-        tick already saw rest_hold_s of rest: that rest counts, so the run ends without waiting it again."""
+        """End once the arm is at rest (a run may end without a final arrival: recovery steps that moved nothing,
+        so rest is checked here too). An arrival in this very tick already saw rest_hold_s of rest: that rest
+        counts, so the run ends without waiting it again."""
         rested = self._rest_confirmed_s == sim_s
         self._stopping, self._stop_began_s = True, sim_s
         self._still_since_s = self._still_since_s if rested else None
