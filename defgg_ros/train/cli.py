@@ -61,6 +61,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--samples-per-scene", type=int, default=DEFAULTS.samples_per_scene,
                    help="augmented copies of each training scene per epoch (default %(default)s)")
     p.add_argument("--seed", type=int, default=DEFAULTS.seed, help="seed of init, order, augmentation and split")
+    p.add_argument("--split-seed", type=int, default=None, metavar="SEED",
+                   help="seed of the object split alone (default: --seed); fix it to compare training seeds "
+                        "on the same validation objects")
     p.add_argument("--val-fraction", type=float, default=DEFAULTS.val_fraction, help="fraction of OBJECTS for val")
     p.add_argument("--test-fraction", type=float, default=DEFAULTS.test_fraction, help="fraction of OBJECTS for test")
     p.add_argument("--architecture", choices=ARCHITECTURES, default=DEFAULTS.architecture,
@@ -90,7 +93,7 @@ def config_from_args(args) -> TrainConfig:
     return TrainConfig(uses_stiffness=not args.no_stiffness, architecture=args.architecture, epochs=args.epochs,
                        batch_size=args.batch_size, learning_rate=args.lr,
                        positive_weight=args.positive_weight, samples_per_scene=args.samples_per_scene,
-                       seed=args.seed, val_fraction=args.val_fraction, test_fraction=args.test_fraction,
+                       seed=args.seed, split_seed=args.split_seed, val_fraction=args.val_fraction, test_fraction=args.test_fraction,
                        augment=augment, max_steps=args.max_steps, label_rule=args.label_rule,
                        max_height_offset_m=None if args.max_height_offset_mm is None
                        else args.max_height_offset_mm / 1000.0)

@@ -118,7 +118,7 @@ class Trainer:
         scene_objects = labelled_scene_objects(self.data_root, self.manifest)
         if not state:
             self.object_split = split_objects(scene_objects.values(), self.config.val_fraction,
-                                              self.config.test_fraction, self.config.seed)
+                                              self.config.test_fraction, self.config.object_split_seed)
         self.scene_split = split_scenes(scene_objects, self.object_split)
         c = self.config
         common = {"manifest": self.manifest, "uses_stiffness": c.uses_stiffness, "label_rule": c.label_rule,
