@@ -11,7 +11,9 @@
 # results/seeds/weights_s<seed>/<model>.pt (the best-validation checkpoints, small, tracked),
 # results/sim_v5_s<seed>/ (trial records). With COMMIT_EVERY_TRIALS=N the evaluation folders are committed
 # once N more records than the last commit holds have run (one commit per ~10 % of the plan:
-# 2 seeds x 2 models x (135 common + 480 adversarial) = 2,460 trials).
+# 2 seeds x 2 models x (135 common + 480 adversarial) = 2,460 trials). Run from a worktree pinned at a
+# commit (code that does not move under the run) with COMMIT_IN=<main checkout> and results/sim_v5_s*,
+# results/seeds linked to that checkout's: the commits then land there.
 set -uo pipefail
 cd "$(dirname "$0")/.."
 if [ "${1:-}" = "-h" ] || [ "${1:-}" = "--help" ]; then
@@ -40,11 +42,12 @@ train() {   # model seed [flags]: one resumable run, one torch thread
 
 commit() {   # folder message: at most once per COMMIT_EVERY_TRIALS new records
   local out=$1 committed now
-  committed=$(git show "HEAD:$out/trials.jsonl" 2>/dev/null | wc -l)
+  local git="git -C ${COMMIT_IN:-.}"
+  committed=$($git show "HEAD:$out/trials.jsonl" 2>/dev/null | wc -l)
   now=$(wc -l < "$out/trials.jsonl" 2>/dev/null || echo 0)
   [ "$now" -ge "$((committed + ${COMMIT_EVERY_TRIALS:-0}))" ] || return 0
   for _ in 1 2 3 4 5; do
-    git add "$out" results/seeds 2>/dev/null && git commit -q -m "$out: $2" -- "$out" results/seeds && return 0
+    $git add "$out" results/seeds 2>/dev/null && $git commit -q -m "$out: $2" -- "$out" results/seeds && return 0
     sleep 5   # another commit holds .git/index.lock
   done
 }
