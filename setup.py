@@ -7,14 +7,19 @@ from setuptools import find_packages, setup
 PACKAGE = "defgg_ros"
 
 
-def share(*patterns):
-    """Group files by folder for data_files under share/defgg_ros."""
+def share(*patterns, exclude=()):
+    """Group files by folder for data_files under share/defgg_ros (folders in `exclude` left out)."""
     groups = {}
     for pattern in patterns:
         for path in glob.glob(pattern, recursive=True):
-            if os.path.isfile(path):
+            if os.path.isfile(path) and not path.startswith(tuple(exclude)) and "__pycache__" not in path:
                 groups.setdefault(os.path.dirname(path), []).append(path)
     return [(os.path.join("share", PACKAGE, folder), files) for folder, files in sorted(groups.items())]
+
+
+# `ros2 launch defgg_ros <file>` searches the whole share folder and refuses a name found twice, so the launch
+# files are installed once, to share/defgg_ros/launch, and left out of the sim_bringup copy.
+LAUNCH_FILES = sorted(glob.glob("sim_bringup/launch/*.launch.py"))
 
 
 NODES = {
@@ -42,7 +47,8 @@ setup(
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
     ]
-    + share("sim_bringup/**/*", "models/*"),
+    + [(f"share/{PACKAGE}/launch", LAUNCH_FILES)]
+    + share("sim_bringup/**/*", "models/*", exclude=("sim_bringup/launch/",)),
     install_requires=["setuptools"],
     zip_safe=False,
     maintainer="defgg_ros maintainers",

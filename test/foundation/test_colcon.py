@@ -76,6 +76,10 @@ def test_colcon_build_installs_the_interfaces_and_a_working_package(tmp_path):
         assert (ws / "install" / "defgg_ros" / "lib" / "defgg_ros" / node).is_file(), node
     share = ws / "install" / "defgg_ros" / "share" / "defgg_ros"
     assert (share / "sim_bringup" / "config" / "real_cell.yaml").is_file() and (share / "package.xml").is_file()
+    # `ros2 launch defgg_ros real_cell.launch.py` finds each launch file once; franka.launch.py's controllers_yaml
+    assert sorted(p.relative_to(share).as_posix() for p in share.rglob("*.launch.py")) == [
+        "launch/real_cell.launch.py", "launch/sim_cell.launch.py"]
+    assert (share / "sim_bringup" / "config" / "franka" / "controllers.yaml").is_file()
     # The installed package (not this source tree) loads its parameter schemas and the built interfaces.
     probe = ("import defgg_interfaces.srv, defgg_ros.ros.parameters as p, defgg_ros.ros.transport as t; "
              "p.load_schema('executor_node'); assert t.FASTDDS_PROFILE.is_file(); print(p.SCHEMA_DIR)")
