@@ -32,6 +32,7 @@ import cv2
 import numpy as np
 
 from defgg_ros.constants import CAMERA_FX_PX, CAMERA_HEIGHT_ABOVE_TABLE_M
+from defgg_ros.perception.depth_noise import DepthNoiseModel, robust_rms_m
 from defgg_ros.perception.geometry import check_camera_matrix, plane_hypotheses
 
 # The network was trained on top-down images from 0.40 m with fx = 385 px: 1.039 mm per pixel at
@@ -89,6 +90,10 @@ class TabletopConfig:
     jump_m: float = 0.008              # a height step this large between neighbour cells cuts objects
     min_object_area_m2: float = 2.5e-4  # 16 x 16 mm: smaller blobs are speckle
     hole_close_cells: int = 5          # holes up to this many cells wide inside objects are closed
+    # The camera's depth noise (perception/depth_noise.py): the free-space test allows for it on surfaces
+    # above the table. depth_noise_from_table: measure it instead from the frame's own table residuals.
+    depth_noise: DepthNoiseModel = field(default_factory=DepthNoiseModel)
+    depth_noise_from_table: bool = False
 
 
 @dataclass
@@ -113,6 +118,11 @@ class TabletopView:
     depth_m: np.ndarray | None = None             # the full-resolution depth (NaN = no return)
     filled_depth_m: np.ndarray | None = None      # fill_holes of every stride-th pixel (what perceive read)
     filled_k: np.ndarray | None = None            # K of filled_depth_m
+    # The table plane's depth at the processed pixels perception read as table (within min_height_m of the
+    # plane), NaN elsewhere: the free-space test reads these there, without their noise.
+    processed_table_depth_m: np.ndarray | None = None
+    depth_noise: DepthNoiseModel = field(default_factory=DepthNoiseModel)   # what the free-space test allows for
+    config: TabletopConfig | None = None
 
     @functools.cached_property
     def height_m(self) -> np.ndarray:
@@ -308,8 +318,35 @@ def perceive(depth_m, camera_k, base_T_camera, config: TabletopConfig | None = N
     processed_fg.reshape(-1)[index] = not empty
     pixel_cell = np.full(depth.shape, -1, np.int32)
     pixel_cell.reshape(-1)[index] = -1 if empty else cell
+    table_depth = _table_depth(height, term, np.float32(normal @ pose[:3, 3] + offset), ws.min_height_m)
+    noise = _depth_noise(config, height, depth, k_full[0, 0])
     return TabletopView(pose, k_full, normal, offset, height, processed_fg, processed_labels, pixel_cell, origin, grid,
-                        grid_labels, owner, tuple(sorted(areas)), areas, full, depth, k)
+                        grid_labels, owner, tuple(sorted(areas)), areas, full, depth, k, table_depth, noise, config)
+
+
+def _table_depth(height, term, height_at_zero_depth, min_height_m) -> np.ndarray:
+    """The plane's depth (height 0: depth * term + c = 0) at the pixels within min_height_m of it, NaN elsewhere."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        table = np.abs(height) < min_height_m
+        return np.where(table, -height_at_zero_depth / term, np.float32(np.nan)).astype(np.float32)
+
+
+# Table pixels sampled for the measured noise (every n-th of each axis).
+NOISE_SAMPLE_STRIDE = 4
+
+
+def _depth_noise(config: TabletopConfig, height, depth, fx_px: float) -> DepthNoiseModel:
+    """config.depth_noise, or with depth_noise_from_table the same baseline with the subpixel RMS the table's
+    residuals show (robust RMS of the heights within PLANE_INLIER_M of the plane, at their median depth)."""
+    if not config.depth_noise_from_table:
+        return config.depth_noise
+    h = height[::NOISE_SAMPLE_STRIDE, ::NOISE_SAMPLE_STRIDE]
+    with np.errstate(invalid="ignore"):
+        on_table = np.abs(h) < PLANE_INLIER_M
+    if np.count_nonzero(on_table) < 50:
+        return config.depth_noise
+    z = float(np.median(depth[::NOISE_SAMPLE_STRIDE, ::NOISE_SAMPLE_STRIDE][on_table]))
+    return config.depth_noise.measured(robust_rms_m(h[on_table]), z, fx_px)
 
 
 def partly_seen_objects(view: TabletopView) -> set:

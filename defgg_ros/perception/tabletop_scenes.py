@@ -28,14 +28,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from defgg_ros.perception.depth_noise import REALSENSE_BASELINES_M, TYPICAL_SUBPIXEL_RMS_PX, DepthNoiseModel
 from defgg_ros.perception.geometry import rotation_about_z
 
 # D435 depth intrinsics per mode (fx = fy, principal point at the centre): the 1280x720 and 848x480
 # modes span the D435's 90 degree horizontal field of view (fx = (width / 2) / tan 45 deg); the
 # 640x480 mode is narrower, fx ~385 px in typical calibrations (the cell's CAMERA_FX_PX).
 REALSENSE_FX_PX = {(1280, 720): 640.0, (848, 480): 424.0, (640, 480): 385.0}
-STEREO_BASELINE_M = 0.050           # D435 (D415: 0.055)
-SUBPIXEL_RMS_PX = 0.08              # Intel's typical subpixel RMS for a well-textured surface
+STEREO_BASELINE_M = REALSENSE_BASELINES_M["d435"]   # the scenes' default camera (TabletopScene.depth_noise)
+SUBPIXEL_RMS_PX = TYPICAL_SUBPIXEL_RMS_PX          # Intel's typical subpixel RMS for a well-textured surface
 MIN_Z_M = 0.17                      # D435 MinZ at 640x480 (0.28 m at 1280x720; objects here are farther)
 MAX_Z_M = 3.0                       # beyond this the table scene has nothing; invalid
 FLYING_JUMP_M = 0.010               # a neighbour depth jump this large makes edge pixels mixed
@@ -243,6 +244,8 @@ class TabletopScene:
     table_y_range_m: tuple = (-0.8, 0.8)
     floor_z_m: float = -0.75
     robot_parts: tuple = field(default_factory=robot_base_parts)
+    depth_noise: DepthNoiseModel = field(default_factory=DepthNoiseModel)   # the camera's baseline and subpixel RMS
+    table_warp: object = None               # callable (x, y) -> the table's height above table_z_m there, or None
 
     @property
     def camera_k(self) -> np.ndarray:
@@ -293,6 +296,10 @@ def ray_cast(scene: TabletopScene):
         t_table = (scene.table_z_m - origin[2]) / rays[..., 2]
         t_floor = (scene.floor_z_m - origin[2]) / rays[..., 2]
     x, y = origin[0] + t_table * rays[..., 0], origin[1] + t_table * rays[..., 1]
+    for _ in range(4 if scene.table_warp is not None else 0):     # a warped table: a fixed-point ray cast
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t_table = (scene.table_z_m + scene.table_warp(x, y) - origin[2]) / rays[..., 2]
+        x, y = origin[0] + t_table * rays[..., 0], origin[1] + t_table * rays[..., 1]
     on_table = (t_table > 0) & (x >= scene.table_x_range_m[0]) & (x <= scene.table_x_range_m[1]) \
         & (y >= scene.table_y_range_m[0]) & (y <= scene.table_y_range_m[1])
     depth = np.where(on_table, t_table, np.where(t_floor > 0, t_floor, np.inf))
@@ -322,7 +329,8 @@ def add_realsense_noise(depth_m: np.ndarray, labels: np.ndarray, normals_base: n
     h, w = z.shape
     out = z.copy()
     # Depth RMS error, i.i.d. plus a correlated part (the stereo matcher's window correlates neighbours).
-    sigma = z * z * SUBPIXEL_RMS_PX / (fx * STEREO_BASELINE_M)
+    sigma = scene.depth_noise.sigma_m(z, fx)
+    baseline_m = scene.depth_noise.baseline_m
     low = cv2.resize(rng.standard_normal((max(h // 8, 1), max(w // 8, 1))).astype(np.float32), (w, h),
                      interpolation=cv2.INTER_LINEAR)
     out += sigma * (0.8 * rng.standard_normal((h, w)) + 0.6 * low)
@@ -340,7 +348,7 @@ def add_realsense_noise(depth_m: np.ndarray, labels: np.ndarray, normals_base: n
     # Stereo occlusion: the right imager sees pixel u at u - fB/z; hidden when a pixel to its right
     # maps at or left of it (a closer surface covers it).
     with np.errstate(divide="ignore"):
-        x_right = np.arange(w)[None, :] - np.where(z > 0, fx * STEREO_BASELINE_M / np.where(z > 0, z, 1), 0)
+        x_right = np.arange(w)[None, :] - np.where(z > 0, fx * baseline_m / np.where(z > 0, z, 1), 0)
     suffix_min = np.minimum.accumulate(x_right[:, ::-1], axis=1)[:, ::-1]
     hidden = np.zeros_like(invalid)
     hidden[:, :-1] = x_right[:, :-1] > suffix_min[:, 1:] + 0.5

@@ -42,11 +42,11 @@ from defgg_ros.constants import (
     PANDA_FINGER_THICKNESS_M,
     PANDA_FINGERTIP_BELOW_TCP_M,
 )
+from defgg_ros.control.kinematics import WorkspaceError, check_workspace
 from defgg_ros.grasping.geometry import tcp_height_m
 from defgg_ros.grasping.postprocess import find_peaks, maps_from_network
 from defgg_ros.model.preprocess import network_input
 from defgg_ros.perception.tabletop import CELL_M, TabletopView, fill_holes, partly_seen_objects
-from defgg_ros.perception.tabletop_scenes import STEREO_BASELINE_M, SUBPIXEL_RMS_PX
 
 # Free space the fingers need between the object and each pad while closing.
 CLEARANCE_M = 0.006
@@ -63,8 +63,15 @@ PAD_BLOCKED_FRACTION = 0.0
 LINE_STEP_CELLS = 0.5
 # Closing directions whose extents differ by less than this count as equally narrow.
 OPENING_TIE_M = 0.003
+# Why an object got no grasp (TabletopPlan.rejected), in the order the tests run: the object is lower than
+# the fingertips reach under the centre; wider than the hand along every direction; a pad would land on
+# something (or the grasp's middle is off the object); the grasp lies outside the workspace box; the arm
+# cannot reach it top-down. NO_PEAK: the network's quality has no peak on it.
+TOO_LOW, WIDTH, COLLISION, WORKSPACE, REACH, NO_PEAK = "too low", "width", "collision", "workspace", "reach", \
+    "no quality peak"
+REJECTIONS = (NO_PEAK, TOO_LOW, WIDTH, COLLISION, WORKSPACE, REACH)
 # A point is free when the surface seen along its ray lies this far behind it, plus three times the
-# sensor's depth noise at that distance.
+# camera's depth noise at that distance (TabletopView.depth_noise) on surfaces other than the table.
 CARVING_TOLERANCE_M = 0.002
 
 
@@ -148,6 +155,13 @@ def label_boxes(labels: np.ndarray, cells: LabelCells | None = None) -> dict:
 class TabletopPlan:
     grasps: list                 # TabletopGrasp, best first
     quality_grid: np.ndarray     # the network's quality map over the height map
+    # label -> why the search found no grasp on it (REJECTIONS: the furthest test its peaks reached), for the
+    # objects it tried without success (a search that found top_k grasps early does not try the rest).
+    rejected: dict = field(default_factory=dict)
+
+    def rejection_summary(self) -> str:
+        """'object 1: too low, object 3: width' (empty when nothing was rejected)."""
+        return ", ".join(f"object {label}: {why}" for label, why in sorted(self.rejected.items()))
 
     def quality_image(self, view: TabletopView) -> np.ndarray:
         """The quality map seen from the camera (depth-sized, 0 off the objects' cells)."""
@@ -219,19 +233,21 @@ def search_tabletop(prepared: TabletopNetworkView, top_k: int = 1, targets=None)
         return TabletopPlan([], np.zeros(view.grid_height_m.shape, np.float32))
     labels = view.object_ids if targets is None else [t for t in view.object_ids if t in targets]
     labels = [label for label in labels if label in prepared.boxes]
-    whole = _grasps_by_object(prepared, [lab for lab in labels if lab not in prepared.partly_seen], top_k)
-    cut = _grasps_by_object(prepared, [lab for lab in labels if lab in prepared.partly_seen], top_k - len(whole)) \
-        if len(whole) < top_k else {}
+    rejected = {}
+    whole = _grasps_by_object(prepared, [lab for lab in labels if lab not in prepared.partly_seen], top_k, rejected)
+    cut = _grasps_by_object(prepared, [lab for lab in labels if lab in prepared.partly_seen], top_k - len(whole),
+                            rejected) if len(whole) < top_k else {}
     ranked = []
     for group in (whole, cut):
         ranked += sorted((g[0] for g in group.values()), key=lambda g: -g.rank_quality)
     for group in (whole, cut):
         ranked += sorted((g for gs in group.values() for g in gs[1:]), key=lambda g: -g.rank_quality)
-    return TabletopPlan(ranked[:top_k], maps.q)
+    return TabletopPlan(ranked[:top_k], maps.q, rejected)
 
 
-def _grasps_by_object(prepared: TabletopNetworkView, labels, top_k: int) -> dict:
-    """label -> its feasible grasps (best first) for the objects a search for top_k grasps needs."""
+def _grasps_by_object(prepared: TabletopNetworkView, labels, top_k: int, rejected: dict) -> dict:
+    """label -> its feasible grasps (best first) for the objects a search for top_k grasps needs; rejected
+    gets label -> why for those tried without a grasp."""
     best_q = prepared.best_q
     per_object = {}
     # Objects in the order of their best quality: a grasp on an object never scores above its best
@@ -242,14 +258,16 @@ def _grasps_by_object(prepared: TabletopNetworkView, labels, top_k: int) -> dict
         if len(firsts) >= top_k and firsts[top_k - 1] >= best_q[label]:
             break
         found = _object_grasps(prepared, label, top_k)
-        if found:
+        if isinstance(found, str):
+            rejected[label] = found
+        else:
             per_object[label] = found
     return per_object
 
 
 def _object_grasps(prepared: TabletopNetworkView, label: int, top_k: int) -> list:
     """An object's feasible grasps, best first: its quality peaks in order, the first feasible one,
-    then (for top_k > 1) distinct alternatives."""
+    then (for top_k > 1) distinct alternatives; or why none is feasible (REJECTIONS)."""
     view, maps, box = prepared.view, prepared.maps, prepared.boxes[label]
     peaks = find_peaks(maps.q_unclipped[box], prepared.min_distance_px, prepared.q_threshold,
                        view.grid_labels[box] == label, top_k=max(PEAKS_PER_OBJECT, top_k), fill=True)
@@ -262,17 +280,22 @@ def _object_grasps(prepared: TabletopNetworkView, label: int, top_k: int) -> lis
         at = [maps.at_pixel(row, col) for row, col in todo]
         probes = _centre_lines(view, prepared.space, todo, [angle for angle, _ in at],
                                object_face_angles(view, label, box))
+        reasons = []
         grasps = _feasible_at_peaks(view, label, todo, probes, [width_px * CELL_M for _, width_px in at],
                                     [(float(maps.q[row, col]), float(maps.q_unclipped[row, col])) for row, col in todo],
-                                    prepared.moduli, prepared.space)
-        memo.update(((label, cell), grasp) for cell, grasp in zip(todo, grasps))
+                                    prepared.moduli, prepared.space, reasons)
+        # A peak's memo entry: its grasp, or why it has none.
+        memo.update(((label, cell), grasp if grasp is not None else why)
+                    for cell, grasp, why in zip(todo, grasps, reasons))
     found = []
     for cell in cells:
         grasp = memo[(label, cell)]
-        if grasp is not None and all(_distinct(grasp, other) for other in found):
+        if isinstance(grasp, TabletopGrasp) and all(_distinct(grasp, other) for other in found):
             found.append(grasp)
             if len(found) >= top_k:
                 break
+    if not found:
+        return max((memo[(label, cell)] for cell in cells), key=REJECTIONS.index, default=NO_PEAK)
     return sorted(found, key=lambda g: -g.rank_quality)
 
 
@@ -303,6 +326,15 @@ class FreeSpace:
         else:
             depth, self.k = fill_holes(view.depth_m), view.camera_k
         depth = np.asarray(depth, np.float32)
+        # The noise allowance baked into the depth (a point is free when its ray's surface minus three sigma of
+        # the camera's noise lies CARVING_TOLERANCE_M behind it); where perception read the table, the plane's
+        # own depth without noise: the table is never an obstacle (the descent stops above it), so its noise
+        # must not block the pads of a low object's grasp (issue 47: 6.7 mm at 0.72 m with a D435).
+        sensor_fx = float(view.camera_k[0, 0])   # the noise is the sensor's, not the read stride's
+        depth = depth - 3.0 * view.depth_noise.sigma_m(depth, sensor_fx).astype(np.float32)
+        if view.processed_table_depth_m is not None and view.processed_table_depth_m.shape == depth.shape:
+            table = np.isfinite(view.processed_table_depth_m)
+            depth[table] = view.processed_table_depth_m[table]
         finite = np.isfinite(depth)
         kernel = np.ones((3, 3), np.uint8)
         if finite.all():     # the usual case after fill_holes (only a row without any return stays NaN)
@@ -310,7 +342,6 @@ class FreeSpace:
         else:
             self.depth = np.where(finite, cv2.dilate(np.where(finite, depth, 0), kernel), 0.0)
             self.strict_depth = np.where(finite, cv2.erode(np.where(finite, depth, np.inf), kernel), 0.0)
-        self.sensor_fx = float(view.camera_k[0, 0])   # the noise is the sensor's, not the read stride's
         camera_T_base = np.linalg.inv(view.base_T_camera)
         self.rotation, self.translation = camera_T_base[:3, :3], camera_T_base[:3, 3]
 
@@ -328,8 +359,7 @@ class FreeSpace:
         v *= w
         v += u
         observed = depth.reshape(-1).take(v)
-        tolerance = CARVING_TOLERANCE_M + 3 * z * z * SUBPIXEL_RMS_PX / (self.sensor_fx * STEREO_BASELINE_M)
-        return seen & (observed > z + tolerance)
+        return seen & (observed > z + CARVING_TOLERANCE_M)
 
 
 def _rotate_row(points: np.ndarray, row: np.ndarray) -> np.ndarray:
@@ -398,9 +428,10 @@ def _centre_lines(view: TabletopView, space: FreeSpace, cells, angles, face_angl
     return [(level, d, f) for level, d, f in zip(levels, directions, free)]
 
 
-def _feasible_at_peaks(view, label, cells, probes, network_widths_m, qualities, moduli, space) -> list:
+def _feasible_at_peaks(view, label, cells, probes, network_widths_m, qualities, moduli, space, reasons=None) -> list:
     """feasible_grasp at each peak (cells: (row, col) each, probes: their _centre_lines, qualities: (clipped,
-    before the clip) each), all peaks in one pass: per peak its grasp or None."""
+    before the clip) each), all peaks in one pass: per peak its grasp or None. reasons: a list that gets, per
+    peak, the last test its best direction failed (REJECTIONS; None for a grasp)."""
     levels = np.array([probe[0] for probe in probes])
     directions = np.stack([probe[1] for probe in probes])                # P x A x 2
     n_peaks, n_dirs = directions.shape[:2]
@@ -413,6 +444,12 @@ def _feasible_at_peaks(view, label, cells, probes, network_widths_m, qualities, 
     ok0, low0, high0 = band_extents(~free_centre)
     fits0 = ok0 & ((high0 - low0 + 1) * LINE_STEP_CELLS * CELL_M + 2 * CLEARANCE_M <= GRIPPER_MAX_WIDTH_M)
     result = [None] * n_peaks
+    # Why a peak fails, from the first test on: nothing at the fingertips' level under the centre in any
+    # direction (the object is lower than the fingertips reach), then wider than the hand.
+    centre_occupied = (~free_centre[:, 0, steps.size // 2]).reshape(n_peaks, n_dirs).any(axis=1)
+    why = [TOO_LOW if not occupied else WIDTH for occupied in centre_occupied]
+    if reasons is not None:
+        reasons[:] = why
     if not fits0.any():      # no centre line fits: nothing below can (ok &= fits0)
         return result
     flat_dirs = directions.reshape(-1, 2)
@@ -435,6 +472,8 @@ def _feasible_at_peaks(view, label, cells, probes, network_widths_m, qualities, 
     cand = np.flatnonzero(ok)
     if cand.size == 0:
         return result
+    for p in np.unique(peak_of[cand]):
+        why[p] = COLLISION          # fits the hand: from here a pad on something, or the middle off the object
     direction_index = cand % n_dirs
     cand = cand[np.lexsort((direction_index, np.rint(extents[cand] / OPENING_TIE_M), peak_of[cand]))]
     widths = extents[cand] + 2 * CLEARANCE_M           # geometric: the same object, the same opening
@@ -449,9 +488,33 @@ def _feasible_at_peaks(view, label, cells, probes, network_widths_m, qualities, 
         p = int(peak_of[cand[k]])
         if result[p] is None:
             r, c = int(rc[k, 0]), int(rc[k, 1])
-            result[p] = _grasp(view, label, qualities[p], r, c, flat_dirs[cand[k]], float(widths[k]),
-                               float(extents[cand[k]]), network_widths_m[p], float(moduli[r, c]))
+            grasp = _grasp(view, label, qualities[p], r, c, flat_dirs[cand[k]], float(widths[k]),
+                           float(extents[cand[k]]), network_widths_m[p], float(moduli[r, c]))
+            outside = _out_of_workspace_or_reach(view, grasp)
+            if outside is None:
+                result[p] = grasp
+            elif REJECTIONS.index(outside) > REJECTIONS.index(why[p]):
+                why[p] = outside
+    if reasons is not None:
+        reasons[:] = [None if g is not None else w for g, w in zip(result, why)]
     return result
+
+
+def _out_of_workspace_or_reach(view: TabletopView, grasp: TabletopGrasp):
+    """WORKSPACE when the grasp's centre lies outside the view's workspace box, REACH when the arm cannot
+    take its top-down TCP pose there (control/kinematics.check_workspace), else None."""
+    x, y, z = grasp.position_base_m
+    config = view.config
+    if config is not None:
+        ws = config.workspace
+        if not (ws.x_m[0] <= x <= ws.x_m[1] and ws.y_m[0] <= y <= ws.y_m[1]):
+            return WORKSPACE
+    table_z = float(view.table_z_at(x, y))
+    try:
+        check_workspace((x, y, tcp_height_m(z, table_z)), table_z)
+    except WorkspaceError:
+        return REACH
+    return None
 
 
 def _points(view: TabletopView, cells_rc: np.ndarray, height_m) -> np.ndarray:

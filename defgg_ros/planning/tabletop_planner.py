@@ -21,7 +21,12 @@ from defgg_ros.planning.tabletop_grasps import TabletopNetworkView, TabletopPlan
 
 
 class NoFeasibleGrasp(ValueError):
-    """Objects were found, but none can be grasped (reason in the message)."""
+    """Objects were found, but none can be grasped (reason in the message; per object in `rejected`: label ->
+    which test rejected it, planning/tabletop_grasps.REJECTIONS)."""
+
+    def __init__(self, message: str, rejected: dict | None = None):
+        super().__init__(message)
+        self.rejected = dict(rejected or {})
 
 
 @dataclass(frozen=True)
@@ -143,7 +148,9 @@ class TabletopPlanner:
         view = prepared.network.view
         if not plan.grasps:
             raise NoFeasibleGrasp(
-                f"no feasible grasp on the {len(view.object_ids)} object(s) in the workspace: each is wider than "
-                "the gripper's opening minus clearance along every closing direction, or a finger would land on "
-                "a neighbour or on space the camera cannot see")
+                f"no feasible grasp on the {len(view.object_ids)} object(s) in the workspace; rejected by "
+                f"({plan.rejection_summary() or 'no object searched'}): too low = nothing at the fingertips' level "
+                "under the centre, width = wider than the gripper's opening minus clearance along every closing "
+                "direction, collision = a finger would land on a neighbour or on space the camera cannot see, "
+                "workspace = outside the workspace box, reach = beyond the arm's top-down reach", plan.rejected)
         return TabletopResult(view, plan, objects.youngs_modulus_pa, objects.robot_mask)

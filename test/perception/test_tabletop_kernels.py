@@ -156,7 +156,8 @@ def test_pads_of_several_grasps_in_one_pass_are_those_of_each_alone():
 
 def _free_by_point(space, points, strict):
     """FreeSpace.free's rule, one point at a time: projected into the image, seen in front of the camera,
-    and the surface read there lies behind the point by more than the carving tolerance."""
+    and the surface read there (its noise allowance already taken off) lies behind the point by more than the
+    carving tolerance."""
     depth = space.strict_depth if strict else space.depth
     h, w = depth.shape
     out = []
@@ -170,8 +171,7 @@ def _free_by_point(space, points, strict):
         if not (0 <= u < w and 0 <= v < h):
             out.append(False)
             continue
-        tolerance = tg.CARVING_TOLERANCE_M + 3 * z * z * ts.SUBPIXEL_RMS_PX / (space.sensor_fx * ts.STEREO_BASELINE_M)
-        out.append(bool(float(depth[v, u]) > z + tolerance))
+        out.append(bool(float(depth[v, u]) > z + tg.CARVING_TOLERANCE_M))
     return np.array(out)
 
 
@@ -182,7 +182,6 @@ def test_free_space_follows_its_rule_point_by_point(seed):
     space.depth = (0.3 + 0.4 * rng.random((24, 32))).astype(np.float32)
     space.strict_depth = space.depth - np.float32(0.01)
     space.k = np.array([[30.0, 0, 15.5], [0, 30.0, 11.5], [0, 0, 1]])
-    space.sensor_fx = 600.0
     angle = rng.uniform(0, 0.5)
     c, s = math.cos(angle), math.sin(angle)
     space.rotation = np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
