@@ -36,7 +36,7 @@ def parse_args(argv=None):
                                      formatter_class=HelpFormatter)
     parser.add_argument("--set", default="sim_cell",
                         help="node set: a name in sim_bringup/config (sim_cell; real_cell: FR3; "
-                             "real_cell_panda: Panda) or a YAML path")
+                             "real_cell_fer: Panda, franka_ros2 robot_type fer) or a YAML path")
     parser.add_argument("--scene", help="scene YAML for the simulated driver (default: its parameter file's)")
     parser.add_argument("--gui", action="store_true", help="open PyBullet's GUI (the driver is headless by default)")
     parser.add_argument("-p", "--param", action="append", default=[], metavar="NODE:NAME:=VALUE",

@@ -26,7 +26,7 @@ from std_msgs.msg import String
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from defgg_ros.constants import GRIPPER_MAX_WIDTH_M, PANDA_JOINT_NAMES
+from defgg_ros.constants import GRIPPER_MAX_WIDTH_M
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import stamp_to_ns
 from defgg_ros.nodes.fake_panda_driver_node import CAPTURE_SERVICE, IMAGE_QOS, OBJECT_POSES_TOPIC, SCENE_TOPIC
@@ -34,6 +34,9 @@ from defgg_ros.ros import topics
 from defgg_ros.ros.action import ActionClient, destroy_actions
 from defgg_ros.ros.cell_client import CellCallError, CellClient
 from defgg_ros.ros.service import ServiceTimeout, call_idempotent
+
+# The simulated cell runs the default robot type (fer: the Panda).
+ARM_JOINTS = topics.robot_names()["joints"]
 
 
 class DemoClient:
@@ -53,7 +56,7 @@ class DemoClient:
         n.create_subscription(CameraInfo, topics.DEPTH_CAMERA_INFO, self._on_info, IMAGE_QOS)
         self.capture_client = n.create_client(Trigger, CAPTURE_SERVICE)
         self._joints = None
-        n.create_subscription(JointState, topics.JOINT_STATES, self._on_joints, qos.STATE)
+        n.create_subscription(JointState, topics.JOINT_STATES, self._on_joints, qos.ROBOT_STATE_READ)
         self._trajectory_pub = n.create_publisher(JointTrajectory, topics.JOINT_TRAJECTORY, qos.COMMAND)
         self.gripper_move_client = ActionClient(n, Move, topics.GRIPPER_MOVE_ACTION)
         self._executor = SingleThreadedExecutor(context=self._context)
@@ -73,8 +76,8 @@ class DemoClient:
 
     def _on_joints(self, msg):
         by_name = dict(zip(msg.name, msg.position))
-        if all(n in by_name for n in PANDA_JOINT_NAMES):
-            self._joints = (np.array([by_name[n] for n in PANDA_JOINT_NAMES]), time.monotonic())
+        if all(n in by_name for n in ARM_JOINTS):
+            self._joints = (np.array([by_name[n] for n in ARM_JOINTS]), time.monotonic())
 
     def arm_positions(self, timeout_s=30.0) -> np.ndarray:
         asked = time.monotonic()
@@ -83,7 +86,7 @@ class DemoClient:
 
     def move_arm(self, waypoints, tolerance_rad=0.02, timeout_s=120.0) -> None:
         """Send [(time_from_start_s, q)] to the arm and wait until it is at the last q."""
-        msg = JointTrajectory(joint_names=list(PANDA_JOINT_NAMES))
+        msg = JointTrajectory(joint_names=list(ARM_JOINTS))
         for t_s, q in waypoints:
             sec, nanosec = divmod(int(round(t_s * 1e9)), 1_000_000_000)
             msg.points.append(JointTrajectoryPoint(positions=[float(v) for v in q],

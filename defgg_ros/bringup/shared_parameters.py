@@ -15,7 +15,7 @@ import yaml
 
 # One cell, one value: names declared by more than one node that describe the same physical thing.
 # (Topic and action names are left out: a deployment may remap one node's on purpose.)
-CELL_PARAMETERS = ("arm_id", "base_frame", "table_z_m", "workspace_box_m", "base_T_camera",
+CELL_PARAMETERS = ("robot_type", "base_frame", "table_z_m", "workspace_box_m", "base_T_camera",
                    "camera_pose_from_table", "min_object_height_m", "max_object_height_m")
 
 
@@ -41,7 +41,19 @@ def effective_parameters(entry, extra: dict | None = None) -> dict:
         values.update(_file_section(path, entry.name))
     values.update(entry.overrides)
     values.update(extra or {})
-    return {name: value for name, value in values.items() if name in declared}
+    return _with_robot_type_names({name: value for name, value in values.items() if name in declared})
+
+
+def _with_robot_type_names(values: dict) -> dict:
+    """A name left empty is the node's robot_type's (base_frame '' = <robot_type>_link0), as the node fills it."""
+    from defgg_ros.ros.topics import robot_names
+
+    if values.get("base_frame") == "" and "robot_type" in values:
+        try:
+            values["base_frame"] = robot_names(values["robot_type"])["base_frame"]
+        except ValueError:
+            pass   # the node refuses an unknown robot_type at start-up, naming it
+    return values
 
 
 def _comparable(value):

@@ -34,7 +34,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from defgg_ros.constants import ARM_MODELS, PANDA_FINGER_JOINT_NAMES, PANDA_JOINT_NAMES
 from defgg_ros.control.kinematics import PandaKinematics
-from defgg_ros.control.observation import ObservationWatch, arm_state_of
+from defgg_ros.control.observation import ObservationWatch, arm_state_of, max_joint_speed_radps
 from defgg_ros.control.pick_place import ObservationMove, PickPlaceSequence
 from defgg_ros.control.poses import PoseError, top_down_yaw
 from defgg_ros.control.sequence_types import (
@@ -76,6 +76,50 @@ def trajectory_to_msg(trajectory, frame_id: str, joint_names=PANDA_JOINT_NAMES) 
             positions=q.tolist(), velocities=qd.tolist(), accelerations=qdd.tolist(),
             time_from_start=Duration(sec=sec, nanosec=nanosec)))
     return msg
+
+
+# A hold trajectory reaches the measured position this long after it is received: the controller blends into it
+# from its current state, so the arm is brought to rest within this time without a step in the command (s).
+HOLD_BLEND_S = 0.1
+
+
+def hold_trajectory_msg(q_rad, frame_id: str, joint_names=PANDA_JOINT_NAMES) -> JointTrajectory:
+    """One point at q_rad, zero velocity, HOLD_BLEND_S after receipt: 'stay here' for a joint_trajectory_controller."""
+    sec, nanosec = divmod(int(round(HOLD_BLEND_S * 1e9)), 1_000_000_000)
+    msg = JointTrajectory()
+    msg.header.frame_id = frame_id
+    msg.joint_names = list(joint_names)
+    msg.points.append(JointTrajectoryPoint(positions=[float(v) for v in q_rad], velocities=[0.0] * len(q_rad),
+                                           accelerations=[0.0] * len(q_rad),
+                                           time_from_start=Duration(sec=sec, nanosec=nanosec)))
+    return msg
+
+
+class _RestWatch:
+    """Joint states newer than since_s (monotonic) showing every joint slower than still_radps for hold_s."""
+
+    def __init__(self, still_radps: float, hold_s: float, since_s: float):
+        self.still_radps, self.hold_s, self.since_s = still_radps, hold_s, since_s
+        self.still_since_s = None
+        self.last_speed_radps = None
+        self.confirmed = False
+
+    def update(self, last_state) -> None:
+        if last_state is None or last_state[1] <= self.since_s or self.confirmed:
+            return
+        state, wall_s = last_state
+        self.last_speed_radps = max_joint_speed_radps(state.qd_radps)
+        if self.last_speed_radps >= self.still_radps:
+            self.still_since_s = None
+        elif self.still_since_s is None:
+            self.still_since_s = wall_s
+        elif wall_s - self.still_since_s >= self.hold_s:
+            self.confirmed = True
+
+    def describe(self) -> str:
+        if self.last_speed_radps is None:
+            return "no joint states arrived after the stop"
+        return f"joints still at up to {self.last_speed_radps:.3f} rad/s"
 
 
 def joint_state_to_arm(msg: JointState, joint_names=PANDA_JOINT_NAMES,
@@ -219,8 +263,40 @@ class ExecutorNode(Node):
 
     def destroy_node(self):
         self._shutdown.set()  # ends a running control loop
+        with self._lock:   # torn down without stop_for_exit (an in-process owner): still command the stop
+            self._hold_arm()
         destroy_actions(self)
         return super().destroy_node()
+
+    # --- stopping on the way out ---------------------------------------------
+    def stop_for_exit(self, spin_once) -> str:
+        """Before the process tears anything down (run_node calls this on SIGINT/SIGTERM or a callback's
+        exception): end the control loop, cancel the trajectory goal and command a hold at the measured
+        position, then keep spinning (spin_once(timeout_s)) until joint states confirm the arm at rest and the
+        running goal is answered. Returns '' when the arm is confirmed at rest (or this node never moved it),
+        else why not (the process then exits 1)."""
+        p = self._params()
+        timeout_s, hold_s = float(p["exit_stop_timeout_s"]), float(p["rest_hold_s"])
+        started = time.monotonic()
+        self._shutdown.set()
+        with self._lock:
+            moved_arm = self._arm_goal_serial > 0
+            self._hold_arm()
+        if not moved_arm:
+            self.get_logger().info("stopping: this executor never commanded the arm")
+            return ""
+        rest = _RestWatch(float(p["still_speed_radps"]), hold_s, since_s=started)
+        deadline = started + timeout_s
+        while time.monotonic() < deadline and not (rest.confirmed and not self._busy):
+            spin_once(0.01)
+            with self._lock:
+                rest.update(self._last_state)
+        took = time.monotonic() - started
+        if rest.confirmed:
+            self.get_logger().info(f"stopping: the arm is at rest ({took:.2f} s after the stop was commanded)")
+            return ""
+        return (f"could not confirm that the arm stopped within {timeout_s:.1f} s: {rest.describe()}; "
+                "check the arm")
 
     # --- inputs -------------------------------------------------------------
     def _on_joint_state(self, msg: JointState):
@@ -278,17 +354,32 @@ class ExecutorNode(Node):
             return self._run(goal_handle, sequence, result)
         except (GoalError, ValueError) as error:
             with self._lock:   # raised while a sequence drove the arm (shutdown, a stop it could not plan):
-                if self._sequence is not None:   # its motion must not run on unwatched
+                driving = self._sequence is not None   # its motion must not run on unwatched
+                if driving:
                     self._hold_arm()
+            if driving:
+                self._wait_for_rest()
             return self._abort(goal_handle, result, str(error), started)
         except Exception as error:  # noqa: BLE001 - a bug must not take the action server down
             self.get_logger().error(f"pick-and-place failed unexpectedly: {error!r}")
             with self._lock:
                 self._hold_arm()
+            self._wait_for_rest()
             return self._abort(goal_handle, result, f"internal error: {error!r}", started)
         finally:
             with self._lock:
                 self._sequence, self._busy = None, False
+
+    def _wait_for_rest(self) -> None:
+        """After a hold: answer only once joint states show the arm at rest (at most stop_timeout_s, wall clock;
+        the result's arm_state then says 'moving'), so no motion follows a terminal result."""
+        config = self._config
+        rest = _RestWatch(config.still_speed_radps, config.rest_hold_s, since_s=time.monotonic())
+        deadline = time.monotonic() + config.stop_timeout_s
+        while not rest.confirmed and time.monotonic() < deadline:
+            time.sleep(0.01)
+            with self._lock:
+                rest.update(self._last_state)
 
     def _abort(self, goal_handle, result, reason: str, started: float):
         result.success, result.failure_reason = False, reason
@@ -482,6 +573,9 @@ class ExecutorNode(Node):
 
         def on_result(future):
             result = future.result().result
+            with self._lock:
+                if serial == self._arm_goal_serial:
+                    self._arm_goal = None   # ended: nothing left to cancel
             if serial == self._arm_goal_serial and result.error_code != FollowJointTrajectory.Result.SUCCESSFUL:
                 self.get_logger().error(f"arm trajectory failed (error_code {result.error_code}): "
                                         f"{result.error_string}")
@@ -501,12 +595,24 @@ class ExecutorNode(Node):
         self._arm_client.send_goal_async(goal).add_done_callback(on_goal)
 
     def _hold_arm(self) -> None:
-        """Stop the arm where it is (lock held): cancel the running goal; the controller then holds position."""
+        """Stop the arm where it is (lock held): cancel the running goal (joint_trajectory_controller then holds
+        its current state) and, as a second command that does not depend on the cancel being answered, send a
+        one-point trajectory at the measured position (an empty trajectory is refused by the controller). Only
+        when this node has a goal that may still move the arm; a failed send is logged, never raised: the
+        caller is on its way out."""
+        moving = self._arm_goal is not None or self._sequence is not None or self._held_serial < self._arm_goal_serial
         self._arm_goal_serial += 1
         self._held_serial = self._arm_goal_serial
-        if self._arm_goal is not None:
-            self._arm_goal.cancel_goal_async()
-            self._arm_goal = None
+        try:
+            if self._arm_goal is not None:
+                self._arm_goal.cancel_goal_async()
+                self._arm_goal = None
+            if moving and self._last_state is not None and self._arm_goal_serial > 1:
+                hold = hold_trajectory_msg(self._last_state[0].q_rad, self._params()["base_frame"],
+                                           self._arm_joints)
+                self._arm_client.send_goal_async(FollowJointTrajectory.Goal(trajectory=hold))
+        except Exception as error:  # noqa: BLE001 - rclpy raises RCLError/InvalidHandle once torn down
+            self.get_logger().error(f"could not command the arm to stop: {error!r}")
 
     def _gripper_width_m(self) -> float:
         """The finger width now: from the joint states, else the gripper's last feedback (franka_msgs results
@@ -541,7 +647,8 @@ class ExecutorNode(Node):
 
 
 def main(args=None):
-    run_node("executor_node", ExecutorNode, startup_errors=(ValueError, OSError), threads=4, args=args)
+    run_node("executor_node", ExecutorNode, startup_errors=(ValueError, OSError), threads=4, args=args,
+             stops_hardware=True)
 
 
 if __name__ == "__main__":

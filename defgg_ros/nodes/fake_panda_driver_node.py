@@ -1,15 +1,17 @@
 """fake_panda_driver: the simulated Panda + RealSense cell as ROS interfaces.
 
-A thin adapter over `defgg_ros.sim.cell.SimCell` (PyBullet). It speaks the
-same interfaces as the real cell (franka_ros2 + realsense2_camera, see
-defgg_ros/ros/topics.py and docs/real_cell.md): joint states, the arm's
-joint_trajectory_controller (control_msgs/action/FollowJointTrajectory and
-its JointTrajectory topic), franka_gripper's franka_msgs/action/{Grasp, Move,
-Homing}, the external wrench, depth + camera_info, and the camera's pose as
-a calibrated cell publishes it (base -> camera optical frame on /tf_static);
-plus sim time on /clock and ground truth (fake_panda/object_poses,
-fake_panda/scene). Joint names follow franka_ros2's `<arm_id>_joint1..7`
-(parameter arm_id: panda or fr3; the simulated arm is a Panda either way).
+A thin adapter over `defgg_ros.sim.cell.SimCell` (PyBullet). It serves franka_ros2 3.x's contract as
+a real cell started with franka_bringup's franka.launch.py (load_gripper:=true) and a
+JointTrajectoryController would, QoS and rates included (docs/franka_contract.md), plus
+realsense2_camera's depth + camera_info: the merged `joint_states` (joint_state_publisher, 30 Hz),
+`franka/joint_states` (joint_state_broadcaster, arm only), `franka_gripper/joint_states` (fingers only,
+depth 1) and franka_gripper's franka_msgs/action/{Grasp, Move, Homing}, franka_robot_state_broadcaster's
+convenience topics (external wrench, current pose, measured joint states; best effort, depth 1), the
+arm's `<robot_type>_arm_controller` (control_msgs/action/FollowJointTrajectory and its JointTrajectory
+topic), and the camera's pose as a calibrated cell publishes it (base -> camera optical frame on
+/tf_static); plus sim time on /clock and ground truth (fake_panda/object_poses, fake_panda/scene).
+Names follow robot_type (fer = the Panda, or fr3; the simulated arm is a Panda either way);
+joint_state_fingers reproduces the MoveIt launch's merged joint states.
 
 Threads: one sim thread owns PyBullet, advances sim time in control periods
 and publishes; ROS callbacks (trajectory, gripper goals) hand commands to it
@@ -22,7 +24,7 @@ import time
 
 from control_msgs.action import FollowJointTrajectory
 from franka_msgs.action import Grasp, Homing, Move
-from geometry_msgs.msg import Pose, PoseArray, TransformStamped, WrenchStamped
+from geometry_msgs.msg import Pose, PoseArray, PoseStamped, TransformStamped, WrenchStamped
 from rclpy._rclpy_pybind11 import RCLError
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
@@ -90,9 +92,13 @@ class FakePandaDriver(Node):
         self._waiters = {}           # gripper token -> [threading.Event, GripperOutcome | None]
         self._advanced = threading.Condition()  # notified after every control period of the sim thread
         self._arm_goal_serial = 0    # the newest FollowJointTrajectory goal; older ones are replaced
-        names = topics.arm_names(self.cfg["arm_id"])  # ValueError on a malformed arm_id
+        names = topics.robot_names(self.cfg["robot_type"])  # ValueError on an unknown robot_type
         self._arm_joints, self._finger_joints = names["joints"], names["fingers"]
+        for key, name in (("base_frame", "base_frame"), ("arm_trajectory_action", "trajectory_action"),
+                          ("joint_trajectory_topic", "trajectory_topic")):
+            self.cfg[key] = self.cfg[key] or names[name]   # '' = the robot type's name
         self._capture_requested = False
+        self._gripper_fingers_m = None     # each finger's position in the gripper's last joint state
         self._reported_off_table = set()   # object names already reported as off the table
         self._running = True
         self._create_interfaces()
@@ -100,7 +106,8 @@ class FakePandaDriver(Node):
         self._thread.start()
 
     def _check_parameters(self):
-        for name in ("joint_state_rate_hz", "depth_rate_hz", "object_pose_rate_hz"):
+        for name in ("robot_state_rate_hz", "joint_state_rate_hz", "gripper_state_rate_hz", "clock_rate_hz",
+                     "depth_rate_hz", "object_pose_rate_hz"):
             if not self.cfg[name] > 0:
                 raise ValueError(f"parameter {name} must be > 0, got {self.cfg[name]}")
         if self.cfg["max_real_time_factor"] < 0:
@@ -109,8 +116,15 @@ class FakePandaDriver(Node):
     def _create_interfaces(self):
         cfg, group = self.cfg, ReentrantCallbackGroup()
         self.pub_clock = self.create_publisher(Clock, topics.CLOCK, qos.STATE)
-        self.pub_joints = self.create_publisher(JointState, cfg["joint_states_topic"], qos.STATE)
-        self.pub_wrench = self.create_publisher(WrenchStamped, cfg["external_wrench_topic"], qos.STATE)
+        # franka_ros2's publishers with their QoS (docs/franka_contract.md).
+        self.pub_joints = self.create_publisher(JointState, cfg["joint_states_topic"], qos.JOINT_STATE_PUBLISHER)
+        self.pub_arm_joints = self.create_publisher(JointState, cfg["arm_joint_states_topic"],
+                                                    qos.FRANKA_SYSTEM_DEFAULT)
+        self.pub_gripper_joints = self.create_publisher(JointState, cfg["gripper_joint_states_topic"],
+                                                        qos.GRIPPER_STATE)
+        self.pub_wrench = self.create_publisher(WrenchStamped, cfg["external_wrench_topic"], qos.FRANKA_CONVENIENCE)
+        self.pub_pose = self.create_publisher(PoseStamped, topics.CURRENT_POSE, qos.FRANKA_CONVENIENCE)
+        self.pub_measured = self.create_publisher(JointState, topics.MEASURED_JOINT_STATES, qos.FRANKA_CONVENIENCE)
         self.pub_depth = self.create_publisher(Image, cfg["depth_topic"], IMAGE_QOS)
         self.pub_info = self.create_publisher(CameraInfo, cfg["camera_info_topic"], IMAGE_QOS)
         self.pub_color = self.create_publisher(Image, cfg["color_topic"], IMAGE_QOS)
@@ -233,7 +247,7 @@ class FakePandaDriver(Node):
         missing = [n for n in self._arm_joints if n not in names]
         if missing or unknown:
             raise TrajectoryError(f"joint_names lack {missing} / have unknown {unknown} (got {names}; "
-                                  f"this arm is {self.cfg['arm_id']}: {list(self._arm_joints)})")
+                                  f"this arm is robot_type {self.cfg['robot_type']}: {list(self._arm_joints)})")
         order = [names.index(n) for n in self._arm_joints]
 
         def pick(values):
@@ -301,7 +315,9 @@ class FakePandaDriver(Node):
 
     # ---- the sim thread ------------------------------------------------------
     def _sim_loop(self):
-        period_s = 1.0 / self.cfg["joint_state_rate_hz"]
+        period_s = 1.0 / self.cfg["robot_state_rate_hz"]
+        schedule = _Schedule({"clock": min(self.cfg["clock_rate_hz"], self.cfg["robot_state_rate_hz"]),
+                              "joints": self.cfg["joint_state_rate_hz"], "gripper": self.cfg["gripper_state_rate_hz"]})
         next_depth_s = next_pose_s = 0.0
         wall0, sim0 = time.monotonic(), self.cell.time_s
         self._log_mark = (wall0, sim0)
@@ -311,6 +327,7 @@ class FakePandaDriver(Node):
                 outcomes = self.cell.advance(period_s)
                 now_s = self.cell.time_s
                 joints, (force, torque) = self.cell.joint_state(), self.cell.external_wrench()
+                tcp = self.cell.tcp_pose()
                 periodic = now_s >= next_depth_s and (self.cfg["render_while_moving"] or not self.cell.moving(now_s))
                 render = periodic or self._capture_requested
                 frame = self.cell.render_depth(self.cfg["publish_color"]) if render else None
@@ -324,7 +341,7 @@ class FakePandaDriver(Node):
             if poses is not None:
                 next_pose_s = now_s + 1.0 / self.cfg["object_pose_rate_hz"]
             try:
-                self._publish_state(now_s, joints, force, torque)
+                self._publish_state(now_s, joints, force, torque, tcp, schedule.due(now_s))
                 if frame is not None:
                     self._publish_frame(now_s, *frame)
                 if poses is not None:
@@ -380,16 +397,45 @@ class FakePandaDriver(Node):
         header.stamp.nanosec = int(round((now_s - int(now_s)) * 1e9)) % 1_000_000_000
         return header
 
-    def _publish_state(self, now_s, joints, force, torque):
+    def _publish_state(self, now_s, joints, force, torque, tcp, due):
+        """What franka_ros2 publishes in one control period: the broadcasters every period, /clock, the merged
+        joint states and the gripper's at their own rates (`due`: the names of those whose turn it is)."""
         header = self._stamp(now_s, self.cfg["base_frame"])
-        self.pub_clock.publish(Clock(clock=header.stamp))
-        self.pub_joints.publish(JointState(header=header, name=[*self._arm_joints, *self._finger_joints],
-                                           position=joints.positions.tolist(), velocity=joints.velocities.tolist(),
-                                           effort=joints.efforts.tolist()))
+        if "clock" in due:
+            self.pub_clock.publish(Clock(clock=header.stamp))
+        arm = JointState(header=header, name=list(self._arm_joints), position=joints.positions[:7].tolist(),
+                         velocity=joints.velocities[:7].tolist(), effort=joints.efforts[:7].tolist())
+        self.pub_arm_joints.publish(arm)
+        self.pub_measured.publish(arm)
         wrench = WrenchStamped(header=header)
         wrench.wrench.force.x, wrench.wrench.force.y, wrench.wrench.force.z = (float(v) for v in force)
         wrench.wrench.torque.x, wrench.wrench.torque.y, wrench.wrench.torque.z = (float(v) for v in torque)
         self.pub_wrench.publish(wrench)
+        pose = PoseStamped(header=header)
+        pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = (float(v) for v in tcp[0])
+        o = pose.pose.orientation
+        o.x, o.y, o.z, o.w = (float(v) for v in tcp[1])
+        self.pub_pose.publish(pose)
+        if "gripper" in due:
+            # franka_gripper: each finger at half the width, velocity and effort 0 (gripper_action_server.cpp)
+            half_m = float(joints.positions[7] + joints.positions[8]) / 2.0
+            self._gripper_fingers_m = half_m
+            self.pub_gripper_joints.publish(JointState(
+                header=self._stamp(now_s, ""), name=list(self._finger_joints), position=[half_m, half_m],
+                velocity=[0.0, 0.0], effort=[0.0, 0.0]))
+        if "joints" in due:
+            self.pub_joints.publish(self._merged_joint_state(header, arm))
+
+    def _merged_joint_state(self, header, arm: JointState) -> JointState:
+        """joint_state_publisher's merge: the arm's latest state plus the fingers as joint_state_fingers says
+        (from_gripper: the gripper's last message; urdf_default: 0.0, the URDF default nobody updates)."""
+        mode = self.cfg["joint_state_fingers"]
+        if mode == "none" or (mode == "from_gripper" and self._gripper_fingers_m is None):
+            return arm
+        finger_m = self._gripper_fingers_m if mode == "from_gripper" else 0.0
+        return JointState(header=header, name=[*arm.name, *self._finger_joints],
+                          position=[*arm.position, finger_m, finger_m], velocity=[*arm.velocity, 0.0, 0.0],
+                          effort=[*arm.effort, 0.0, 0.0])
 
     def _publish_frame(self, now_s, depth_m, _object_mask, rgb):
         header = self._stamp(now_s, self.cfg["camera_frame"])
@@ -418,6 +464,21 @@ class FakePandaDriver(Node):
         self.shutdown()  # the simulation thread first: it publishes through this node
         destroy_actions(self)  # the gripper actions must vanish with the driver (see destroy_actions)
         return super().destroy_node()
+
+
+class _Schedule:
+    """Which of several rates (per second of sim time) are due in the control period ending at a time."""
+
+    def __init__(self, rates_hz: dict):
+        self._period_s = {name: 1.0 / rate for name, rate in rates_hz.items()}
+        self._next_s = dict.fromkeys(rates_hz, 0.0)
+
+    def due(self, now_s: float) -> set:
+        names = {name for name, next_s in self._next_s.items() if now_s >= next_s - 1e-9}
+        for name in names:   # from the slot, not from now: the rate holds when the period does not divide it
+            next_s = self._next_s[name] + self._period_s[name]
+            self._next_s[name] = next_s if next_s > now_s else now_s + self._period_s[name]
+        return names
 
 
 def main(args=None):

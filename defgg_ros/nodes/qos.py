@@ -42,6 +42,7 @@ from rclpy.qos import (
     QoSProfile,
     ReliabilityPolicy,
     qos_profile_sensor_data,
+    qos_profile_system_default,
 )
 
 SENSOR_DATA = qos_profile_sensor_data
@@ -73,6 +74,25 @@ COMMAND = QoSProfile(
     reliability=ReliabilityPolicy.RELIABLE,
     durability=DurabilityPolicy.VOLATILE,
 )
+
+# franka_ros2 3.x's publishers (docs/franka_contract.md has the file each is read from):
+# franka_robot_state_broadcaster's convenience topics, rclcpp::QoS(1).best_effort() since 3.3.0;
+FRANKA_CONVENIENCE = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT,
+                                durability=DurabilityPolicy.VOLATILE)
+# joint_state_broadcaster's joint_states, rclcpp::SystemDefaultsQoS() (reliable, volatile with Fast DDS);
+FRANKA_SYSTEM_DEFAULT = qos_profile_system_default
+# joint_state_publisher's merged joint_states, create_publisher(..., 10): reliable, keep last 10;
+JOINT_STATE_PUBLISHER = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                                   durability=DurabilityPolicy.VOLATILE)
+# franka_gripper's ~/joint_states, create_publisher(..., 1): reliable, keep last 1.
+GRIPPER_STATE = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                           durability=DurabilityPolicy.VOLATILE)
+# How the cell reads every franka topic: a best-effort reader matches best-effort AND reliable publishers
+# (a reliable reader gets nothing from a best-effort one: "offering incompatible QoS"); depth 1 because
+# only the newest state matters, and over shared memory / localhost nothing is lost that a newer
+# message does not replace.
+ROBOT_STATE_READ = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT,
+                              durability=DurabilityPolicy.VOLATILE)
 
 SENSOR_DEPTH = 5                 # frames kept per reader: a late frame is worthless
 RECHECK_PERIOD_S = 1.0           # how often the publishers' reliability is looked at again

@@ -16,16 +16,26 @@ DEPTH_IMAGE = "camera/camera/depth/image_rect_raw"           # 16UC1 mm or 32FC1
 DEPTH_CAMERA_INFO = "camera/camera/depth/camera_info"
 COLOR_IMAGE = "camera/camera/color/image_raw"
 
-# Robot (franka_ros2 or the fake driver). The defaults are the Panda's; an FR3 uses arm_id "fr3"
-# and the fr3_* names (see arm_names below and sim_bringup/config/real_cell.yaml).
-DEFAULT_ARM_ID = "panda"
-JOINT_STATES = "joint_states"
-ARM_TRAJECTORY_ACTION = "panda_arm_controller/follow_joint_trajectory"  # control_msgs/action/FollowJointTrajectory
-JOINT_TRAJECTORY = "panda_arm_controller/joint_trajectory"   # trajectory_msgs/JointTrajectory (same controller)
+# Robot (franka_ros2 3.x on Jazzy, or the fake driver): the names a cell started with franka_bringup's
+# franka.launch.py (load_gripper:=true) and a JointTrajectoryController serves; docs/franka_contract.md
+# has each topic's QoS and rate, read from franka_ros2's sources. Names that carry the robot type
+# (joints, base frame, controller) come from robot_names() below; the defaults are robot type "fer".
+ROBOT_TYPES = ("fer", "fr3")          # franka_ros2 Jazzy's robot_type values this cell knows; fer = the Panda
+DEFAULT_ROBOT_TYPE = "fer"            # the simulated arm is a Panda
+FROM_ROBOT_TYPE = ""                  # a name parameter left empty: robot_names(robot_type)'s name
+JOINT_STATES = "joint_states"         # joint_state_publisher: arm + fingers merged (franka.launch.py)
+ARM_JOINT_STATES = "franka/joint_states"   # joint_state_broadcaster, remapped by franka.launch.py: arm only
+GRIPPER_JOINT_STATES = "franka_gripper/joint_states"  # franka_gripper node: the two fingers only, depth 1
+ARM_TRAJECTORY_ACTION = "fer_arm_controller/follow_joint_trajectory"  # control_msgs/action/FollowJointTrajectory
+JOINT_TRAJECTORY = "fer_arm_controller/joint_trajectory"     # trajectory_msgs/JointTrajectory (same controller)
 GRIPPER_MOVE_ACTION = "franka_gripper/move"                  # franka_msgs/action/Move
 GRIPPER_GRASP_ACTION = "franka_gripper/grasp"                # franka_msgs/action/Grasp
 GRIPPER_HOMING_ACTION = "franka_gripper/homing"              # franka_msgs/action/Homing
+# franka_robot_state_broadcaster's convenience topics: best effort, depth 1 (franka_ros2 >= 3.3.0)
 EXTERNAL_WRENCH = "franka_robot_state_broadcaster/external_wrench_in_base_frame"  # geometry_msgs/WrenchStamped
+CURRENT_POSE = "franka_robot_state_broadcaster/current_pose"                       # geometry_msgs/PoseStamped
+MEASURED_JOINT_STATES = "franka_robot_state_broadcaster/measured_joint_states"     # sensor_msgs/JointState
+DESIRED_JOINT_STATES = "franka_robot_state_broadcaster/desired_joint_states"       # sensor_msgs/JointState
 
 # Segmentation node
 STIFFNESS_IMAGE = "defgg/stiffness/youngs_modulus_pa"        # 32FC1, Pa per pixel, 0 = background
@@ -54,19 +64,23 @@ TF = "/tf"                                                   # tf2_msgs/TFMessag
 TF_STATIC = "/tf_static"                                     # tf2_msgs/TFMessage, latched
 
 # Frames
-BASE_FRAME = "panda_link0"
+BASE_FRAME = "fer_link0"                                     # robot_names()["base_frame"]
 CAMERA_OPTICAL_FRAME = "camera_depth_optical_frame"
 GRASP_FRAME = "defgg_grasp"                                  # the planned grasp (TCP pose), child of the base
 
 
-def arm_names(arm_id: str = DEFAULT_ARM_ID) -> dict:
-    """franka_ros2's names for arm `arm_id` ("panda" or "fr3"): joints, fingers, base frame, controller."""
-    if not arm_id or not arm_id.replace("_", "").isalnum():
-        raise ValueError(f"arm_id must be a plain name like 'fr3' or 'panda', got {arm_id!r}")
+def robot_names(robot_type: str = DEFAULT_ROBOT_TYPE) -> dict:
+    """franka_ros2 3.x's names for robot type `robot_type` ("fer" or "fr3"): joints, fingers, base frame,
+    the JointTrajectoryController's action and topic, and the joint limits the executor plans within.
+    ValueError for any other type (Jazzy has no "panda": the Panda is "fer")."""
+    if robot_type not in ROBOT_TYPES:
+        hint = " (franka_ros2 on Jazzy names the Panda 'fer')" if robot_type == "panda" else ""
+        raise ValueError(f"robot_type must be one of {', '.join(ROBOT_TYPES)}{hint}, got {robot_type!r}")
     return {
-        "joints": tuple(f"{arm_id}_joint{i}" for i in range(1, 8)),
-        "fingers": (f"{arm_id}_finger_joint1", f"{arm_id}_finger_joint2"),
-        "base_frame": f"{arm_id}_link0",
-        "trajectory_action": f"{arm_id}_arm_controller/follow_joint_trajectory",
-        "trajectory_topic": f"{arm_id}_arm_controller/joint_trajectory",
+        "joints": tuple(f"{robot_type}_joint{i}" for i in range(1, 8)),
+        "fingers": (f"{robot_type}_finger_joint1", f"{robot_type}_finger_joint2"),
+        "base_frame": f"{robot_type}_link0",
+        "trajectory_action": f"{robot_type}_arm_controller/follow_joint_trajectory",
+        "trajectory_topic": f"{robot_type}_arm_controller/joint_trajectory",
+        "joint_limits": "panda" if robot_type == "fer" else robot_type,
     }

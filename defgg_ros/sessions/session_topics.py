@@ -20,7 +20,7 @@ def absolute(name: str) -> str:
 # namespace), so the sessions code uses these absolute forms of them.
 topics = SimpleNamespace(**{key: absolute(value) for key, value in vars(_names).items()
                             if key.isupper() and isinstance(value, str)
-                            and not key.endswith("_FRAME") and key != "DEFAULT_ARM_ID"})
+                            and not key.endswith("_FRAME") and key != "DEFAULT_ROBOT_TYPE"})
 
 SESSION_PREFIX = "/defgg/session"
 METADATA = f"{SESSION_PREFIX}/metadata"                      # std_msgs/String, JSON (also in metadata.yaml)

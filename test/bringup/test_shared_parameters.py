@@ -17,7 +17,7 @@ def _overrides(set_name, argv):
     return checked_overrides(load_node_set(set_name), parse_overrides(parse_args(argv)))
 
 
-@pytest.mark.parametrize("set_name", ["sim_cell", "real_cell", "real_cell_panda"])
+@pytest.mark.parametrize("set_name", ["sim_cell", "real_cell", "real_cell_fer"])
 def test_the_shipped_sets_agree(set_name):
     assert disagreements(load_node_set(set_name)) == []
 
@@ -36,7 +36,7 @@ def test_one_node_with_another_table_height_is_refused_naming_every_node():
 
 def _fr3_rehearsal_argv():
     text = DOCS.read_text()
-    block = re.search(r"```bash\n(defgg-bringup --ros-domain 42 -p fake_panda_driver:arm_id:=fr3.*?)```", text, re.S)
+    block = re.search(r"```bash\n(defgg-bringup --ros-domain 42 -p fake_panda_driver:robot_type:=fr3.*?)```", text, re.S)
     assert block, "the FR3 rehearsal command is no longer in docs/real_cell.md"
     return shlex.split(block.group(1).replace("\\\n", " "))[1:]
 
@@ -44,9 +44,11 @@ def _fr3_rehearsal_argv():
 def test_the_documented_fr3_rehearsal_agrees_and_without_the_drivers_arm_it_would_not():
     argv = _fr3_rehearsal_argv()
     check_cell_parameters_agree(load_node_set("sim_cell"), _overrides("sim_cell", argv))
-    i = argv.index("fake_panda_driver:arm_id:=fr3")
+    i = argv.index("fake_panda_driver:robot_type:=fr3")
     lines = disagreements(load_node_set("sim_cell"), _overrides("sim_cell", argv[:i - 1] + argv[i + 1:]))
-    assert lines == ["arm_id: fake_panda_driver='panda', executor_node='fr3'"]
+    assert lines == ["robot_type: fake_panda_driver='fer', executor_node='fr3'",
+                     "base_frame: fake_panda_driver='fer_link0', segmentation_node='fr3_link0', "
+                     "grasp_inference_node='fr3_link0', executor_node='fr3_link0'"]
 
 
 def test_parameter_files_count_with_their_wildcard_section(tmp_path):

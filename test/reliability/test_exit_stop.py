@@ -1,0 +1,132 @@
+"""Stop means stopped on the way out of the executor process (issue 48.1).
+
+The simulated arm (fake_panda_driver, PyBullet, sim time) and the executor as separate processes, started as the
+bringup starts them; a pick-and-place goal runs until a phase (descend, lift, transfer), then the executor process
+gets SIGTERM or SIGINT, or the bringup stops (executor first, then the driver). The driver keeps publishing joint
+states, so the test sees what the arm does after the signal: every joint state stamped 0.5 s (sim clock) or more
+after the signal must show every joint at most 0.01 rad/s, and the executor must exit 0 (a stop it confirmed).
+
+Before issue 48 rclpy's signal handler shut the executor's context down at once; its destroy_node then destroyed
+the action clients before the hold was sent ("action client pointer is invalid"), the arm went on to the end of
+its trajectory (0.49 rad/s 0.5-2 s after the signal) and the process exited 0.
+"""
+import signal
+import time
+
+import numpy as np
+import pytest
+import yaml
+from defgg_interfaces.action import PickAndPlace
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from support.executor_cell import grasp_msg
+
+from defgg_ros.bringup.node_set import config_dir, load_node_set
+from defgg_ros.bringup.supervisor import Bringup
+from defgg_ros.control.kinematics import PandaKinematics
+from defgg_ros.nodes import qos
+from defgg_ros.ros import topics
+from defgg_ros.ros.action import ActionClient
+
+pytestmark = [pytest.mark.e2e, pytest.mark.timeout(600)]
+
+SCENE = config_dir().parent / "scenes" / "rigid_box.yaml"
+BOX_XY_M, BOX_YAW_RAD, BOX_SIZE_M = (0.5, 0.05), 0.3, 0.05   # as in rigid_box.yaml
+REST_SPEED_RADPS = 0.01      # the issue's bound
+REST_WITHIN_S = 0.5          # after the signal, sim clock
+WATCH_AFTER_S = 1.5          # joint states watched this long after the signal (sim clock)
+KIN = PandaKinematics()
+
+
+def _cell_set(tmp_path):
+    """A node set of the simulated driver and the executor only (the pick takes a given grasp)."""
+    config = config_dir()
+    text = {"name": "driver_and_executor", "use_sim_time": True, "nodes": [
+        {"name": "fake_panda_driver", "module": "defgg_ros.nodes.fake_panda_driver_node",
+         "params": [str(config / "fake_panda_driver.yaml")], "ready": {"action": "/franka_gripper/grasp"},
+         "overrides": {"scene_file": str(SCENE), "depth_rate_hz": 0.5}},
+        {"name": "executor_node", "module": "defgg_ros.nodes.executor_node",
+         "params": [str(config / "executor_node.yaml")], "ready": {"action": "/defgg/pick_and_place"},
+         # slow enough that each phase lasts over a second on a busy machine
+         "overrides": {"descent_speed_mps": 0.01, "line_speed_mps": 0.05}}]}
+    path = tmp_path / "driver_and_executor.yaml"
+    path.write_text(yaml.safe_dump(text))
+    return load_node_set(str(path))
+
+
+def _arm(state: JointState):
+    """(q, qd) of joints 1..7, by name (any arm prefix)."""
+    index = [next(i for i, n in enumerate(state.name) if n.endswith(f"_joint{j}")) for j in range(1, 8)]
+    return (np.array([state.position[i] for i in index]), np.array([state.velocity[i] for i in index]))
+
+
+def _stamp_s(state: JointState) -> float:
+    return state.header.stamp.sec + 1e-9 * state.header.stamp.nanosec
+
+
+def _in_phase(phase: str, feedback, joints) -> bool:
+    if not feedback or not joints or feedback[-1].phase != phase:
+        return False
+    if phase == "descend":   # judged from the arm: commands reach a busy simulator late
+        tcp_z = KIN.fk(_arm(joints[-1])[0])[2, 3]
+        return tcp_z < BOX_SIZE_M + 0.025 - 0.005
+    return feedback[-1].phase_progress > 0.2
+
+
+@pytest.mark.parametrize("phase, how", [("descend", "SIGTERM"), ("lift", "SIGINT"), ("transfer", "SIGTERM"),
+                                        ("descend", "bringup_stop")])
+def test_the_arm_is_at_rest_within_half_a_second_of_stopping_the_executor(phase, how, tmp_path, executor, spin):
+    log_path = tmp_path / "cell.log"
+    joints, feedback = [], []
+    with open(log_path, "w") as log, Bringup(_cell_set(tmp_path), out=log) as bringup:
+        bringup.wait_ready(180.0)
+        probe = Node("exit_stop_probe", context=executor.context)
+        probe.create_subscription(JointState, topics.JOINT_STATES, joints.append, qos.STATE)
+        client = ActionClient(probe, PickAndPlace, topics.PICK_AND_PLACE_ACTION)
+        executor.add_node(probe)
+        spin(executor, client.server_is_ready, 60.0, "the pick-and-place action server")
+        goal = PickAndPlace.Goal(grasp=grasp_msg((*BOX_XY_M, BOX_SIZE_M), BOX_YAW_RAD, 0.07))
+        handle = spin(executor, client.send_goal_async(goal, feedback_callback=lambda f: feedback.append(f.feedback)),
+                      30.0, "the goal response")
+        assert handle.accepted
+        result = handle.get_result_async()
+        spin(executor, lambda: result.done() or _in_phase(phase, feedback, joints), 240.0, f"the {phase} phase")
+        assert not result.done(), ("the pick ended before the phase", result.result().result.failure_reason)
+        signal_s = _stamp_s(joints[-1])
+        process = bringup.processes["executor_node"]
+        if how == "bringup_stop":
+            driver = bringup.processes["fake_panda_driver"]
+            codes = {}
+            stopper = _in_thread(lambda: codes.update(bringup.stop()))
+            spin(executor, lambda: not stopper.is_alive(), 60.0, "the bringup's stop")
+            executor_code = codes["executor_node"]
+            assert driver.returncode() is not None
+        else:
+            process.popen.send_signal(getattr(signal, how))
+            spin(executor, lambda: process.returncode() is not None, 30.0, "the executor's exit")
+            executor_code = process.returncode()
+            spin(executor, lambda: _stamp_s(joints[-1]) > signal_s + WATCH_AFTER_S, 60.0, "joint states after it")
+        executor.remove_node(probe)
+    after = [(_stamp_s(j) - signal_s, float(np.max(np.abs(_arm(j)[1])))) for j in joints if _stamp_s(j) > signal_s]
+    late = [speed for t, speed in after if t >= REST_WITHIN_S]
+    if how == "bringup_stop" and not late:   # the driver stopped within 0.5 s: its last joint states count
+        late = [speed for t, speed in after if t >= after[-1][0] - 0.1]
+    moving_until = max((t for t, speed in after if speed > REST_SPEED_RADPS), default=0.0)
+    print(f"{phase}/{how}: executor exit {executor_code}; joint speed above {REST_SPEED_RADPS} rad/s until "
+          f"{moving_until:.3f} s after the signal (sim); max {max(late, default=float('nan')):.4f} rad/s from "
+          f"{REST_WITHIN_S} s on over {after[-1][0]:.2f} s of joint states")
+    tail = log_path.read_text()[-3000:]
+    assert late, ("no joint states 0.5 s after the signal", tail)
+    assert max(late) <= REST_SPEED_RADPS, (f"arm still moving {REST_WITHIN_S} s after {how}: {max(late):.3f} rad/s",
+                                          tail)
+    assert executor_code == 0, (f"the executor exited {executor_code}", tail)
+    assert "the arm is at rest" in log_path.read_text(), tail
+
+
+def _in_thread(function):
+    import threading
+
+    thread = threading.Thread(target=function, daemon=True)
+    thread.start()
+    time.sleep(0.01)
+    return thread
