@@ -16,9 +16,9 @@ import pytest
 import setuptools
 import yaml
 
-from defgg_ros.bringup.node_set import load_node_set
+from defgg_ros.bringup.node_set import NodeEntry, ReadyCheck, load_node_set
 from defgg_ros.bringup.shared_parameters import disagreements, effective_parameters
-from defgg_ros.ros.parameters import defaults, load_schema
+from defgg_ros.ros.parameters import load_schema
 
 pytestmark = pytest.mark.unit
 
@@ -103,10 +103,15 @@ def file_parameters(path: str, node: str) -> dict:
 
 
 def launch_effective(started) -> dict:
-    """What the node starts with: schema defaults, then the files and dicts in order (later wins)."""
-    values = dict(defaults(started.name))
-    for kind, item in started.parameter_order:
-        values.update(file_parameters(item, started.name) if kind == "file" else item)
+    """What the node starts with, resolved as the bringup resolves a node set's entry (schema defaults, the files
+    in order, then the dicts; names left empty follow robot_type), plus use_sim_time when given."""
+    kinds = [kind for kind, _ in started.parameter_order]
+    assert kinds == sorted(kinds, key=["file", "dict"].index), f"{started.name}: a file after a dict: {kinds}"
+    entry = NodeEntry(started.name, "", tuple(started.parameter_files), ReadyCheck("service", "/unused"),
+                      dict(started.parameter_values))
+    values = effective_parameters(entry)
+    if "use_sim_time" in started.parameter_values:
+        values["use_sim_time"] = started.parameter_values["use_sim_time"]
     return values
 
 
