@@ -28,11 +28,12 @@ from franka_msgs.msg import GraspEpsilon
 from geometry_msgs.msg import WrenchStamped
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from defgg_ros.constants import ARM_MODELS, PANDA_FINGER_JOINT_NAMES, PANDA_JOINT_NAMES
+from defgg_ros.constants import ARM_MODELS
 from defgg_ros.control.kinematics import PandaKinematics
 from defgg_ros.control.observation import ObservationWatch, arm_state_of, max_joint_speed_radps
 from defgg_ros.control.pick_place import ObservationMove, PickPlaceSequence
@@ -51,6 +52,7 @@ from defgg_ros.control.velocity_estimate import PositionVelocityEstimator
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import ConversionError, stamp_to_ns, transform_from_pose
 from defgg_ros.nodes.node_main import run_node
+from defgg_ros.nodes.topic_watch import TopicWatch
 from defgg_ros.ros import topics
 from defgg_ros.ros.action import ActionClient, destroy_actions
 from defgg_ros.ros.parameters import declare_parameters, load_schema
@@ -58,13 +60,21 @@ from defgg_ros.ros.service import ServiceTimeout, call_idempotent
 
 # Names, types, defaults and bounds: defgg_ros/ros/params/executor_node.yaml.
 PARAMETERS = load_schema("executor_node")
+# How often the input topics' silence is checked (wall clock, s).
+INPUT_CHECK_PERIOD_S = 1.0
+# A finger width source older than this gives way to the next one (s): franka_gripper publishes at 15 Hz.
+FINGER_SOURCE_FRESH_S = 1.0
 
 
 class GoalError(ValueError):
     """A goal the executor cannot work with (the message says why)."""
 
 
-def trajectory_to_msg(trajectory, frame_id: str, joint_names=PANDA_JOINT_NAMES) -> JointTrajectory:
+# The default robot type's names (the functions below are called with the node's own).
+DEFAULT_NAMES = topics.robot_names()
+
+
+def trajectory_to_msg(trajectory, frame_id: str, joint_names=DEFAULT_NAMES["joints"]) -> JointTrajectory:
     """The trajectory (arm joints 1..7 in order) for a joint_trajectory_controller; stamp 0 = start on receipt."""
     msg = JointTrajectory()
     msg.header.frame_id = frame_id
@@ -83,7 +93,7 @@ def trajectory_to_msg(trajectory, frame_id: str, joint_names=PANDA_JOINT_NAMES) 
 HOLD_BLEND_S = 0.1
 
 
-def hold_trajectory_msg(q_rad, frame_id: str, joint_names=PANDA_JOINT_NAMES) -> JointTrajectory:
+def hold_trajectory_msg(q_rad, frame_id: str, joint_names=DEFAULT_NAMES["joints"]) -> JointTrajectory:
     """One point at q_rad, zero velocity, HOLD_BLEND_S after receipt: 'stay here' for a joint_trajectory_controller."""
     sec, nanosec = divmod(int(round(HOLD_BLEND_S * 1e9)), 1_000_000_000)
     msg = JointTrajectory()
@@ -122,8 +132,8 @@ class _RestWatch:
         return f"joints still at up to {self.last_speed_radps:.3f} rad/s"
 
 
-def joint_state_to_arm(msg: JointState, joint_names=PANDA_JOINT_NAMES,
-                       finger_names=PANDA_FINGER_JOINT_NAMES) -> ArmState:
+def joint_state_to_arm(msg: JointState, joint_names=DEFAULT_NAMES["joints"],
+                       finger_names=DEFAULT_NAMES["fingers"]) -> ArmState:
     """Arm joints 1..7 (any order, other joints ignored) and the finger width (NaN without both fingers)."""
     index = {name: i for i, name in enumerate(msg.name)}
     missing = [n for n in joint_names if n not in index]
@@ -176,12 +186,17 @@ def place_target(pose_stamped, base_frame: str, default_position, default_yaw: f
         raise GoalError(f"bad place pose: {error}") from error
 
 
-def check_arm_limits(arm_id: str, joint_limits: str) -> None:
-    """ValueError when a known arm is planned with another arm's limits: an FR3 (arm_id fr3) planned with
-    the Panda's ranges and, above limits_scale 0.5, accelerations and jerks the FR3 does not allow."""
-    if arm_id in ARM_MODELS and joint_limits != arm_id:
-        raise ValueError(f"arm_id {arm_id} with joint_limits {joint_limits}: set joint_limits: {arm_id} "
-                         "(sim_bringup/config/real_cell/<robot>.yaml)")
+def check_arm_limits(robot_type: str, joint_limits: str) -> str:
+    """The joint limits to plan within: robot_type's ('' = those); ValueError when a robot is planned with
+    another arm's limits (an FR3 planned with the Panda's ranges and, above limits_scale 0.5, accelerations
+    and jerks the FR3 does not allow) or robot_type is unknown."""
+    own = topics.robot_names(robot_type)["joint_limits"]
+    if joint_limits and joint_limits != own:
+        raise ValueError(f"robot_type {robot_type} with joint_limits {joint_limits}: set joint_limits: {own} or "
+                         "leave it empty (sim_bringup/config/real_cell/<robot>.yaml)")
+    if own not in ARM_MODELS:
+        raise ValueError(f"no joint limits known for robot_type {robot_type} (known: {', '.join(ARM_MODELS)})")
+    return own
 
 
 class ExecutorNode(Node):
@@ -192,7 +207,6 @@ class ExecutorNode(Node):
         self._config = self._sequence_config(p)  # invalid start-up parameters raise here
         # Since when the arm rests at the observation pose: plan_grasp goals plan only on later frames.
         self._watch = ObservationWatch(p["observation_q_rad"], p["observation_tolerance_rad"])
-        check_arm_limits(p["arm_id"], p["joint_limits"])
         self._kin = PandaKinematics(arm=p["joint_limits"])   # plans within that arm's joint ranges
         self._group = ReentrantCallbackGroup()
         self._lock = threading.Lock()
@@ -204,18 +218,16 @@ class ExecutorNode(Node):
         self._velocity_estimate = PositionVelocityEstimator()   # for drivers without velocities
         self._last_force = np.zeros(3)
         self._last_force_wall_s = None   # when the last external wrench arrived (monotonic)
-        names = topics.arm_names(p["arm_id"])  # ValueError on a malformed arm_id
+        names = topics.robot_names(p["robot_type"])
         self._arm_joints, self._finger_joints = names["joints"], names["fingers"]
+        self._finger_widths = {}    # finger width source -> (width m, monotonic s): see _gripper_width_m
         self._arm_goal = None       # handle of the running FollowJointTrajectory goal
         self._arm_goal_serial = 0   # the newest goal sent; a result of an older one is ignored
         self._held_serial = -1      # _arm_goal_serial when the arm was last told to hold
         self._gripper_feedback_width_m = float("nan")
         self._arm_client = ActionClient(self, FollowJointTrajectory, p["arm_trajectory_action"],
                                         callback_group=self._group)
-        self.create_subscription(JointState, p["joint_states_topic"], self._on_joint_state, qos.STATE,
-                                 callback_group=self._group)
-        self.create_subscription(WrenchStamped, p["external_wrench_topic"], self._on_wrench, qos.STATE,
-                                 callback_group=self._group)
+        self._subscribe_inputs(p)
         self._move_client = ActionClient(self, Move, p["gripper_move_action"], callback_group=self._group)
         self._grasp_client = ActionClient(self, Grasp, p["gripper_grasp_action"], callback_group=self._group)
         self._plan_client = self.create_client(PlanGrasp, p["plan_grasp_service"], callback_group=self._group)
@@ -223,7 +235,14 @@ class ExecutorNode(Node):
                                     goal_callback=self._on_goal, cancel_callback=lambda _: CancelResponse.ACCEPT)
 
     def _params(self) -> dict:
-        return {name: self.get_parameter(name).value for name in PARAMETERS}
+        """The parameters, with the names left empty filled in from robot_type (ValueError: unknown type, or
+        joint limits of another arm)."""
+        p = {name: self.get_parameter(name).value for name in PARAMETERS}
+        names = topics.robot_names(p["robot_type"])
+        p["joint_limits"] = check_arm_limits(p["robot_type"], p["joint_limits"])
+        p["base_frame"] = p["base_frame"] or names["base_frame"]
+        p["arm_trajectory_action"] = p["arm_trajectory_action"] or names["trajectory_action"]
+        return p
 
     def _take_parameters(self) -> None:
         """Each goal runs on the parameters as they are when it starts (`ros2 param set executor_node
@@ -299,6 +318,55 @@ class ExecutorNode(Node):
                 "check the arm")
 
     # --- inputs -------------------------------------------------------------
+    def _subscribe_inputs(self, p: dict) -> None:
+        """Every franka topic is read best effort, depth 1 (qos.ROBOT_STATE_READ): that matches franka's
+        best-effort broadcaster topics and its reliable joint states alike (docs/franka_contract.md)."""
+        read, group = qos.ROBOT_STATE_READ, self._group
+        self._joint_watch = TopicWatch(self, p["joint_states_topic"], read)
+        self._wrench_watch = TopicWatch(self, p["external_wrench_topic"], read)
+        self._arm_topic_watch = None   # the arm's own joint states, subscribed when joint_states has no publisher
+        self.create_subscription(JointState, p["joint_states_topic"], self._on_joint_state, read, callback_group=group)
+        self.create_subscription(WrenchStamped, p["external_wrench_topic"], self._on_wrench, read, callback_group=group)
+        self.create_subscription(JointState, p["gripper_joint_states_topic"], self._on_gripper_joint_state, read,
+                                 callback_group=group)
+        self._input_warned_at_s = {}   # topic -> silence (s) at which it is reported next (doubling)
+        steady = Clock(clock_type=ClockType.STEADY_TIME)   # a stopped sim clock must not stop the check
+        self.create_timer(INPUT_CHECK_PERIOD_S, self._watch_inputs, callback_group=group, clock=steady)
+
+    def _input_watches(self) -> list:
+        return [w for w in (self._joint_watch, self._arm_topic_watch, self._wrench_watch) if w is not None]
+
+    def _watch_inputs(self) -> None:
+        """Say in the log which input topic is silent and why (TopicWatch.diagnosis); read the arm from
+        arm_joint_states_topic when joint_states_topic has no publisher and that one has."""
+        p = self._params()
+        silent_limit_s = float(p["silent_topic_s"])
+        if (self._arm_topic_watch is None and self._joint_watch.silent_s() >= silent_limit_s
+                and not self._joint_watch.publishers()):
+            candidate = TopicWatch(self, p["arm_joint_states_topic"], qos.ROBOT_STATE_READ)
+            if candidate.publishers():
+                self.get_logger().warning(
+                    f"{self._joint_watch.resolved} has no publisher: reading the arm from {candidate.resolved} "
+                    f"(the finger width from {p['gripper_joint_states_topic']} or the gripper's action feedback)")
+                self._arm_topic_watch = candidate
+                self.create_subscription(JointState, p["arm_joint_states_topic"], self._on_joint_state,
+                                         qos.ROBOT_STATE_READ, callback_group=self._group)
+        for watch in self._input_watches():
+            silent_s = watch.silent_s()
+            if silent_s < silent_limit_s:
+                self._input_warned_at_s.pop(watch.topic, None)
+                continue
+            if silent_s >= self._input_warned_at_s.get(watch.topic, silent_limit_s):
+                self.get_logger().warning(watch.diagnosis())
+                self._input_warned_at_s[watch.topic] = silent_s * 2.0
+
+    def _joint_states_diagnosis(self, timeout_s: float) -> str:
+        """'' when the arm's joint states arrived within timeout_s, else why not (TopicWatch.diagnosis)."""
+        watches = [w for w in (self._joint_watch, self._arm_topic_watch) if w is not None]
+        if any(w.silent_s() <= timeout_s for w in watches):
+            return ""
+        return "; ".join(w.diagnosis() for w in watches)
+
     def _on_joint_state(self, msg: JointState):
         try:
             state = joint_state_to_arm(msg, self._arm_joints, self._finger_joints)
@@ -307,6 +375,12 @@ class ExecutorNode(Node):
             return
         stamp_ns = stamp_to_ns(msg.header.stamp) or self.get_clock().now().nanoseconds
         with self._lock:
+            for watch in self._input_watches():
+                if watch is not self._wrench_watch:
+                    watch.heard()   # either arm topic: the fallback's subscription shares this callback
+            if math.isfinite(state.gripper_width_m):
+                self._finger_widths["joint_states"] = (state.gripper_width_m, time.monotonic())
+            state = dataclasses.replace(state, gripper_width_m=self._gripper_width_m())
             if len(msg.velocity) != len(msg.name):   # a driver without velocities: zeros would read "at rest"
                 qd = self._velocity_estimate.update(state.q_rad, stamp_ns * 1e-9)
                 state = dataclasses.replace(state, qd_radps=qd)
@@ -315,11 +389,24 @@ class ExecutorNode(Node):
             if self._sequence is not None:
                 self._sequence.on_joint_state(state, self._last_state[1])
 
+    def _on_gripper_joint_state(self, msg: JointState):
+        """franka_gripper's own joint states: the two fingers, each at half the width."""
+        index = {name: i for i, name in enumerate(msg.name)}
+        if not all(n in index and index[n] < len(msg.position) for n in self._finger_joints):
+            self.get_logger().warning(f"ignoring gripper joint state: it lacks {list(self._finger_joints)} "
+                                      f"(got {list(msg.name)})", throttle_duration_sec=5.0)
+            return
+        width_m = float(sum(msg.position[index[n]] for n in self._finger_joints))
+        if math.isfinite(width_m):
+            with self._lock:
+                self._finger_widths["gripper"] = (width_m, time.monotonic())
+
     def _on_wrench(self, msg: WrenchStamped):
         force = np.array([msg.wrench.force.x, msg.wrench.force.y, msg.wrench.force.z])
         if not np.all(np.isfinite(force)):
             return
         with self._lock:
+            self._wrench_watch.heard()
             self._last_force, self._last_force_wall_s = force, time.monotonic()
             if self._sequence is not None:
                 self._sequence.on_force(force)
@@ -350,7 +437,7 @@ class ExecutorNode(Node):
             if goal_handle.request.plan_grasp and p["plan_grasp_alternatives"] > 1:
                 result.grasp_used, sequence = self._reachable_alternative(grasp, sequence, place, p)
             self._wait_for_servers(p["server_wait_s"])
-            self._check_contact_guard(p)
+            self._check_inputs(p)
             return self._run(goal_handle, sequence, result)
         except (GoalError, ValueError) as error:
             with self._lock:   # raised while a sequence drove the arm (shutdown, a stop it could not plan):
@@ -394,17 +481,18 @@ class ExecutorNode(Node):
         goal_handle.abort()
         return result
 
-    def _check_contact_guard(self, p: dict) -> None:
-        """GoalError unless an external wrench arrived within watchdog_timeout_s: the descent stops on the force
-        it reads, and with a wrong topic, a QoS mismatch or a dead broadcaster it would read zeros and descend
-        blind into the object or the table."""
-        with self._lock:
-            last = self._last_force_wall_s
-        age = None if last is None else time.monotonic() - last
-        if age is None or age > float(p["watchdog_timeout_s"]):
-            heard = "none received yet" if age is None else f"the last {age:.1f} s ago"
-            raise GoalError(f"no external wrench on {self.resolve_topic_name(p['external_wrench_topic'])} ({heard}):"
-                            " the descent's contact guard would be blind; check franka_robot_state_broadcaster")
+    def _check_inputs(self, p: dict) -> None:
+        """GoalError unless joint states and an external wrench arrived within watchdog_timeout_s, saying which
+        topic is silent and what the graph shows (TopicWatch.diagnosis). Without the wrench the descent would
+        read zeros and descend blind into the object or the table (a wrong topic, a QoS mismatch, a dead
+        broadcaster); without joint states nothing can be planned from where the arm is."""
+        timeout_s = float(p["watchdog_timeout_s"])
+        joints = self._joint_states_diagnosis(timeout_s)
+        if joints:
+            raise GoalError(f"no joint states: {joints}")
+        if self._wrench_watch.silent_s() > timeout_s:
+            raise GoalError(f"no external wrench, the descent's contact guard would be blind: "
+                            f"{self._wrench_watch.diagnosis()}; check franka_robot_state_broadcaster")
 
     def _sequence_for(self, grasp, place, p: dict) -> PickPlaceSequence:
         return PickPlaceSequence(self._kin, self._config,
@@ -615,11 +703,15 @@ class ExecutorNode(Node):
             self.get_logger().error(f"could not command the arm to stop: {error!r}")
 
     def _gripper_width_m(self) -> float:
-        """The finger width now: from the joint states, else the gripper's last feedback (franka_msgs results
-        carry no width)."""
-        state = self._last_state[0] if self._last_state is not None else None
-        if state is not None and math.isfinite(state.gripper_width_m):
-            return state.gripper_width_m
+        """The finger width now (lock held), from the first source that has spoken within FINGER_SOURCE_FRESH_S:
+        franka_gripper's own joint states, then the fingers in the merged joint states (under franka_ros2's
+        MoveIt launch these stay at the URDF default 0.0 m, so they come second), else the gripper action's
+        last feedback (franka_msgs results carry no width). NaN when none has."""
+        now_s = time.monotonic()
+        for source in ("gripper", "joint_states"):
+            width_m, heard_s = self._finger_widths.get(source, (None, -math.inf))
+            if now_s - heard_s <= FINGER_SOURCE_FRESH_S:
+                return width_m
         return self._gripper_feedback_width_m
 
     def _send_gripper(self, sequence: PickPlaceSequence, client: ActionClient, goal):
