@@ -38,7 +38,8 @@ from defgg_ros.stiffness import InvalidYoungsModulus
 __all__ = [
     "ConversionError", "ENCODINGS", "image_to_numpy", "numpy_to_image", "depth_msg_to_metres",
     "depth_metres_to_msg", "stiffness_msg_to_pa", "mask_msg_to_labels", "camera_info_to_k",
-    "make_camera_info", "check_same_size", "pose_from_transform", "transform_from_pose",
+    "make_camera_info", "check_image_size", "MAX_IMAGE_SIZE_PX", "check_same_size", "pose_from_transform",
+    "transform_from_pose",
     "transform_from_list", "grasp_to_msg", "stamp_to_ns", "ns_to_stamp",
 ]
 
@@ -168,6 +169,21 @@ def make_camera_info(camera_k, width_px: int, height_px: int, header: Header | N
     p[:, :3] = k
     msg.p = p.reshape(-1).tolist()
     return msg
+
+
+# The largest depth image a node accepts by default: every RealSense depth mode fits (D400 series up to
+# 1280x720, D405 1280x720, L515 1024x768; docs/perception.md, "Input bounds").
+MAX_IMAGE_SIZE_PX = (1280, 800)
+
+
+def check_image_size(name: str, msg, max_size_px=MAX_IMAGE_SIZE_PX) -> None:
+    """Raise ConversionError when an Image/CameraInfo is larger than max_size_px (width, height) in either
+    direction: checked before any conversion, so a request's memory is bounded by the limit, not by the
+    sender (docs/perception.md, "Input bounds")."""
+    max_w, max_h = (int(v) for v in max_size_px)
+    if int(msg.width) > max_w or int(msg.height) > max_h:
+        raise ConversionError(f"{name} is {msg.width}x{msg.height} px, larger than the node's limit {max_w}x{max_h} px "
+                              "(parameter max_image_size_px; every RealSense depth mode fits the default)")
 
 
 def check_same_size(name_a: str, msg_a, name_b: str, msg_b) -> None:

@@ -44,6 +44,7 @@ from defgg_ros.model.inference import CheckpointError, GraspPredictor
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import (
     camera_info_to_k,
+    check_image_size,
     check_same_size,
     depth_msg_to_metres,
     grasp_to_msg,
@@ -72,6 +73,7 @@ from defgg_ros.perception.tabletop import TabletopConfig, WorkspaceBox
 from defgg_ros.planning.grip_estimate import grip_estimate
 from defgg_ros.planning.tabletop_grasps import base_T_grasp, image_projection
 from defgg_ros.planning.tabletop_planner import TabletopPlanner
+from defgg_ros.ros.diagnostics import NodeDiagnostics
 from defgg_ros.ros.memory import keep_freed_memory
 from defgg_ros.ros.parameters import at_default, declare_parameters, load_schema
 from defgg_ros.ros.share import share_path
@@ -205,7 +207,7 @@ class GraspInferenceNode(Node):
         placeholder = at_default(PARAMETERS, "base_T_camera", list(p["base_T_camera"]))
         table_poses = PoseFromTable(self._tabletop.config) if self._tabletop is not None and \
             p["camera_pose_from_table"] and placeholder else None
-        self._camera_pose = CameraPose(self, self._base_T_camera, table_poses, bool(p["publish_camera_pose"]),
+        self._camera_pose = CameraPose(self, self._base_T_camera, table_poses, bool(p["publish_camera_tf"]),
                                        fallback_is_placeholder=placeholder)
         # Reliability follows the publishers', and silence is logged (qos.SensorSubscription, issue 26).
         self._stream_subs = [
@@ -227,8 +229,15 @@ class GraspInferenceNode(Node):
             self._worker = LatestFrameWorker(stages, float(p["max_frame_age_s"]),
                                              self._publish_perceived if p["publish_on_sync"] else None,
                                              on_error=self._on_worker_error)
+        self.diagnostics = NodeDiagnostics(self, self._diagnostic_status)
         self.get_logger().info(f"loaded {model_path} (runtime {self.predictor.runtime}, "
                                f"stiffness {'on' if self.predictor.uses_stiffness else 'off'})")
+
+    def _diagnostic_status(self) -> dict:
+        counts = self.perception_counts
+        return {"frames in": self.synced_frames, "frames perceived": counts.get("perceived", self.synced_frames),
+                "frames dropped": counts.get("dropped", 0) + counts.get("superseded", 0),
+                "frames unusable": self.skipped_frames, "camera pose source": self._camera_pose.source}
 
     def _tabletop_planner(self, p) -> TabletopPlanner:
         box = [float(v) for v in p["workspace_box_m"]]
@@ -341,7 +350,8 @@ class GraspInferenceNode(Node):
         prepared = self._tabletop.network(perceived.objects, checkpoint)
         out = PerceivedFrame(perceived.frame, perceived.base_T_camera, prepared,
                              perceived.seconds + time.perf_counter() - start, perceived.pose_frame_id)
-        if search:
+        if search:      # on arrival (the worker's stages)
+            self.diagnostics.latency("perception", out.seconds)
             wanted = self._requested_top_k.recent() | ({1} if self._p["publish_on_sync"] else set())
             for top_k in sorted(wanted):
                 checkpoint()
@@ -409,6 +419,7 @@ class GraspInferenceNode(Node):
                 _, grasps, seconds = self._plan(frame, top_k)
         except ValueError as exc:  # ConversionError, PlanningError, predictor and segmentation errors
             response.success, response.message = False, str(exc) or type(exc).__name__
+            self.diagnostics.error(f"plan_grasp: {response.message}")
             return response
         except Exception as exc:  # noqa: BLE001 - a service must answer, whatever broke
             self.get_logger().error(f"plan_grasp failed unexpectedly: {exc!r}")
@@ -417,6 +428,7 @@ class GraspInferenceNode(Node):
         response.success = True
         response.grasps = grasps
         response.inference_time_s = seconds
+        self.diagnostics.latency("plan_grasp", seconds)
         best = grasps[0]
         self._publish_grasp_frame(best)
         response.message = (f"{len(grasps)} grasp(s); best q={best.quality:.3f} at ({best.center_u_px:.0f}, "
@@ -455,6 +467,7 @@ class GraspInferenceNode(Node):
         return self._frame_from_objects(request.depth, info, request.objects)
 
     def _frame_from_images(self, depth_msg, info_msg, stiffness_msg) -> Frame:
+        check_image_size("depth", depth_msg, self._p["max_image_size_px"])
         check_same_size("depth", depth_msg, "camera_info", info_msg)
         check_same_size("depth", depth_msg, "stiffness", stiffness_msg)
         camera_k = camera_info_to_k(info_msg)
@@ -465,6 +478,7 @@ class GraspInferenceNode(Node):
         return Frame(depth_msg.header, depth_m, youngs_modulus_pa, camera_k, labels_from_stiffness(youngs_modulus_pa))
 
     def _frame_from_objects(self, depth_msg, info_msg, objects) -> Frame:
+        check_image_size("depth", depth_msg, self._p["max_image_size_px"])
         check_same_size("depth", depth_msg, "camera_info", info_msg)
         camera_k = camera_info_to_k(info_msg)
         depth_m = depth_msg_to_metres(depth_msg)

@@ -11,6 +11,7 @@ change through the `set_stiffness` service or the `default_youngs_modulus_pa`
 import dataclasses
 import json
 import threading
+import time
 
 import numpy as np
 from defgg_interfaces.msg import ObjectStiffness, StiffnessAssignment
@@ -26,6 +27,7 @@ from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import (
     ConversionError,
     camera_info_to_k,
+    check_image_size,
     check_same_size,
     depth_msg_to_metres,
     numpy_to_image,
@@ -42,6 +44,7 @@ from defgg_ros.perception.stiffness_segmenter import (
 )
 from defgg_ros.perception.table_pose import PoseFromTable
 from defgg_ros.perception.tabletop import TabletopConfig, WorkspaceBox
+from defgg_ros.ros.diagnostics import NodeDiagnostics
 from defgg_ros.ros.parameters import at_default, declare_parameters, load_schema
 from defgg_ros.ros.tf import CameraPose
 
@@ -86,7 +89,10 @@ class SegmentationNode(Node):
         # and finds no table (tabletop; a configured pose is never second-guessed).
         unset = at_default(PARAMETERS, "base_T_camera", list(p["base_T_camera"]))
         self._camera_pose = CameraPose(self, self._base_T_camera,
-                                       PoseFromTable() if p["camera_pose_from_table"] and unset else None)
+                                       PoseFromTable() if p["camera_pose_from_table"] and unset else None,
+                                       bool(p["publish_camera_tf"]), fallback_is_placeholder=unset)
+        self._max_image_size_px = tuple(int(v) for v in p["max_image_size_px"])
+        self.diagnostics = NodeDiagnostics(self, self._diagnostic_status)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._publish_assignments()
 
@@ -143,8 +149,15 @@ class SegmentationNode(Node):
         except ConversionError as exc:
             self._warn(f"ignoring camera_info: {exc}")
 
+    def _diagnostic_status(self) -> dict:
+        return {"frames perceived": self.frames_processed, "frames rejected": self.frames_rejected,
+                "camera pose source": self._camera_pose.source}
+
     def _on_depth(self, msg: Image):
+        self.diagnostics.count("frames in")
+        start = time.perf_counter()
         try:
+            check_image_size("depth", msg, self._max_image_size_px)
             if self._camera_k is None:
                 raise ConversionError(f"no camera_info received yet on {self._params()['camera_info_topic']}")
             camera_k, info = self._camera_k
@@ -165,12 +178,14 @@ class SegmentationNode(Node):
         except ValueError as exc:
             self.frames_rejected += 1
             self.last_rejection = str(exc)
+            self.diagnostics.error(f"skipping depth frame: {exc}")
             self._warn(f"skipping depth frame: {exc}")
             return
         self._image_size = (msg.width, msg.height)
         self._stiffness_pub.publish(numpy_to_image(out.youngs_modulus_pa, "32FC1", msg.header))
         self._mask_pub.publish(numpy_to_image(out.labels, "mono8", msg.header))
         self.frames_processed += 1
+        self.diagnostics.latency("perception", time.perf_counter() - start)
 
     def _on_set_stiffness(self, request, response):
         try:

@@ -195,19 +195,59 @@ class TfBroadcaster:
         self._pub.publish(self._msg_type(transforms=list(transforms)))
 
 
+# A configured base_T_camera and TF's pose of the same frames may differ by this much (a calibration's own
+# noise); more means one of them is stale or wrong (issue 46: a stale node's pose on /tf_static won silently).
+POSE_AGREEMENT_M = 0.005
+POSE_AGREEMENT_DEG = 0.5
+
+
+class CameraPoseConflict(ValueError):
+    """TF and the base_T_camera parameter give the same camera frame poses that disagree (message: both)."""
+
+
+def pose_difference(a_T_b: np.ndarray, a_T_c: np.ndarray) -> tuple[float, float]:
+    """(translation distance in m, rotation angle in degrees) between two 4x4 poses."""
+    a, b = np.asarray(a_T_b, float), np.asarray(a_T_c, float)
+    cos = (np.trace(a[:3, :3].T @ b[:3, :3]) - 1.0) / 2.0
+    return float(np.linalg.norm(a[:3, 3] - b[:3, 3])), float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
+
+
+def _pose_text(pose: np.ndarray) -> str:
+    from defgg_ros.perception.geometry import transform_to_xyz_quaternion
+
+    xyz, quaternion = transform_to_xyz_quaternion(pose)
+    return "[" + ", ".join(f"{v:.4f}" for v in (*xyz, *quaternion)) + "]"
+
+
+def check_poses_agree(tf_pose: np.ndarray, parameter_pose: np.ndarray, base_frame: str, camera_frame: str) -> None:
+    """Raise CameraPoseConflict when TF's base_frame -> camera_frame and the parameter's differ by more than
+    POSE_AGREEMENT_M or POSE_AGREEMENT_DEG; the message names both sources and both poses."""
+    distance_m, angle_deg = pose_difference(tf_pose, parameter_pose)
+    if distance_m > POSE_AGREEMENT_M or angle_deg > POSE_AGREEMENT_DEG:
+        raise CameraPoseConflict(
+            f"camera pose {base_frame} -> {camera_frame}: TF (/tf, /tf_static) gives {_pose_text(tf_pose)} but the "
+            f"base_T_camera parameter gives {_pose_text(parameter_pose)} ([x, y, z, qx, qy, qz, qw]); they differ by "
+            f"{distance_m * 1e3:.1f} mm and {angle_deg:.2f} deg (allowed {POSE_AGREEMENT_M * 1e3:.0f} mm, "
+            f"{POSE_AGREEMENT_DEG} deg). Planning stops until they agree: correct the calibration on TF (or stop "
+            "the node that publishes a stale one) or the parameter, or leave base_T_camera at its default to use TF")
+
+
 class CameraPose:
     """A node's camera pose per frame: TF's base_frame -> the frame's camera frame (latest transform), else
     a fallback (the base_T_camera parameter), else, when the parameter puts no table under the camera in the
     frame and `table_poses` is given, a table frame estimated from the depth (perception/table_pose.py);
     each change of source is logged once (the table frame as a warning: its grasps are not in the robot's
-    frame).
+    frame). A configured fallback (not a placeholder) that disagrees with TF by more than POSE_AGREEMENT_M or
+    POSE_AGREEMENT_DEG raises CameraPoseConflict for every frame until they agree (logged as an error).
 
-    publish: the pose in use goes on /tf_static, so RViz and other nodes see what the cell uses. A parameter
-    pose as base_frame -> the root of the camera's TF tree (base -> camera_link when realsense2_camera
-    publishes camera_link -> ... -> the optical frame; a frame has one parent, so never base -> optical frame
-    then); a table frame as the camera frame's child `TABLE_FRAME_ID` (the grasps' frame then). A fallback
-    that is only a placeholder (fallback_is_placeholder: the parameter left at its default) is not published
-    as if it were a calibration. Once published, the node's own lookups find the pose on TF (logged as such)."""
+    publish (parameter publish_camera_tf, off unless asked for: a camera driver or calibration publishes the
+    camera on TF in a real cell): the pose in use goes on /tf_static, so RViz and other nodes see what the cell
+    uses. A parameter pose as base_frame -> the root of the camera's TF tree (base -> camera_link when
+    realsense2_camera publishes camera_link -> ... -> the optical frame; a frame has one parent, so never base
+    -> optical frame then); a table frame as the camera frame's child `TABLE_FRAME_ID` (the grasps' frame
+    then). A fallback that is only a placeholder (fallback_is_placeholder: the parameter left at its default)
+    is not published as if it were a calibration. Once published, the node's own lookups find the pose on TF
+    (logged as such)."""
 
     def __init__(self, node, fallback: np.ndarray, table_poses=None, publish: bool = False,
                  fallback_is_placeholder: bool = False):
@@ -216,13 +256,20 @@ class CameraPose:
         self._table_poses = table_poses
         self._logger = node.get_logger()
         self._source = None
+        self._conflict = None           # the last CameraPoseConflict's text (logged once per change)
         self._static = TfBroadcaster(node, static=True) if publish else None
         self._publish_fallback = not fallback_is_placeholder
+        self._check_agreement = not fallback_is_placeholder
         # A latched calibration (or the fake driver's pose) may reach the node a moment after the first frame:
         # the parameter is published only once TF had that long to say otherwise.
         self._publish_fallback_after = time.monotonic() + FALLBACK_PUBLISH_DELAY_S
         self._sent = {}                 # (parent, child) -> the parent_T_child last published
         self._sent_lock = threading.Lock()
+
+    @property
+    def source(self) -> str:
+        """Where the last frame's pose came from: 'tf', 'parameter', 'table', 'conflict' or '' (no frame yet)."""
+        return "conflict" if self._conflict else (self._source or "")
 
     def lookup(self, base_frame: str, camera_frame: str) -> np.ndarray:
         """TF, else the parameter (no look at the frame)."""
@@ -233,6 +280,8 @@ class CameraPose:
         is checked against the frame's table (table_config: the tabletop perception's current TabletopConfig).
         Raises TabletopError when a table frame is needed and the depth shows no table."""
         pose, source = base_T_camera(self._listener, base_frame, camera_frame, self._fallback)
+        if source == "tf" and self._check_agreement:
+            self._check(pose, base_frame, camera_frame)
         if source == "parameter" and self._table_poses is not None and depth_m is not None:
             pose, estimated = self._table_poses.pose_for(depth_m, camera_k, pose)
             source = "table" if estimated else source
@@ -251,6 +300,18 @@ class CameraPose:
         if self._static is not None and camera_frame:
             self._publish(base_frame, camera_frame.lstrip("/"), pose, source)
         return pose, source
+
+    def _check(self, tf_pose: np.ndarray, base_frame: str, camera_frame: str) -> None:
+        try:
+            check_poses_agree(tf_pose, self._fallback, base_frame, camera_frame or "(no frame id)")
+        except CameraPoseConflict as exc:
+            if str(exc) != self._conflict:
+                self._conflict = str(exc)
+                self._logger.error(str(exc))
+            raise
+        if self._conflict:
+            self._conflict = None
+            self._logger.info(f"camera pose {base_frame} -> {camera_frame}: TF and base_T_camera agree again")
 
     def _publish(self, base_frame: str, camera_frame: str, pose: np.ndarray, source: str) -> None:
         if source == "parameter" and self._publish_fallback and time.monotonic() >= self._publish_fallback_after:

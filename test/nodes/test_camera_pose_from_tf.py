@@ -70,7 +70,7 @@ def test_the_configured_camera_pose_is_published_under_the_cameras_own_tree(infe
     listener = _tf_probe(executor)
     xyz, quaternion = transform_to_xyz_quaternion(base_T_camera)
     node, _, client = inference_service("pose_publisher_probe", base_T_camera=[*xyz.tolist(), *quaternion.tolist()],
-                                        base_frame="fr3_link0")
+                                        base_frame="fr3_link0", publish_camera_tf=True)
     spin(executor, lambda: "camera_link" in node._camera_pose._listener.tree.frames(), 10.0,
          "the node knows realsense's tree")
     def connected():
@@ -93,7 +93,7 @@ def test_the_configured_camera_pose_is_published_under_the_cameras_own_tree(infe
 def test_a_placeholder_pose_is_not_published_but_a_table_frame_is(inference_service, executor, spin, call):
     request, _ = _frame_request()
     listener = _tf_probe(executor)
-    _, _, client = inference_service("pose_publisher_probe")       # base_T_camera left at its default
+    _, _, client = inference_service("pose_publisher_probe", publish_camera_tf=True)   # base_T_camera: default
     response = call(executor, client, request, 60.0, "plan_grasp")
     assert response.success and response.grasps[0].pose_base.header.frame_id == "defgg_table_estimate"
     spin(executor, lambda: "defgg_table_estimate" in listener.tree.frames(), 10.0, "the table frame on TF")
