@@ -135,7 +135,7 @@ class SimCell:
             p.resetJointState(self.robot, j, GRIPPER_MAX_WIDTH_M / 2, 0.0, physicsClientId=c)
         physics.couple_fingers(c, self.robot, self.finger_joints[0], self.finger_joints[1], max_force_n=200,
                                erp=0.1)
-        physics.set_friction(c, self.robot, self.finger_joints, cell_objects.FRICTION)
+        physics.set_friction(c, self.robot, self.finger_joints, cell_objects.MATERIAL.finger_friction)
         self.tracker = TrajectoryTracker(q0)
         self.gripper = GripperController(GRIPPER_MAX_WIDTH_M)
 

@@ -13,7 +13,13 @@ from defgg_ros.sim import physics
 from defgg_ros.sim.physics import SoftBodyError, reset_world, soft_nodes_m  # noqa: F401 - the cell's names
 from defgg_ros.sim.scene_spec import BinSpec, ObjectSpec, SceneSpec
 
-FRICTION = physics.DEFAULT_FRICTION
+# The trial protocol whose labels the shipped weights learned (models/defgg_cnn.train.json's data_source,
+# datasets/fem_v5: defgraspsim). The cell's objects and fingers are made of its material (object friction 0.7,
+# pads 1.0, Poisson's ratio 0.3), so a grasp in the cell meets the contact the weights' labels were made with;
+# test/sim/test_physics_core.py ties the two. The table and the bin keep the trials' table friction.
+MATERIAL_PROTOCOL = "defgraspsim"
+MATERIAL = physics.MATERIALS[MATERIAL_PROTOCOL]
+FRICTION = physics.DEFAULT_FRICTION   # the table's and the bin's own coefficient
 SOFT_COLLISION_MARGIN_M = physics.SOFT_COLLISION_MARGIN_M
 TABLE_RGBA = (0.55, 0.45, 0.35, 1.0)
 BIN_RGBA = (0.3, 0.3, 0.35, 1.0)
@@ -68,7 +74,7 @@ def add_rigid_object(client: int, spec: ObjectSpec) -> int:
     position = [spec.position_xy_m[0], spec.position_xy_m[1], spec.height_m / 2 + SPAWN_GAP_M]
     col, vis = _rigid_shapes(client, spec)
     body = p.createMultiBody(spec.mass_kg, col, vis, position, orientation, physicsClientId=client)
-    physics.set_friction(client, body, [-1], FRICTION, rollingFriction=1e-4, spinningFriction=1e-3)
+    physics.set_rigid_object_friction(client, body, [-1], MATERIAL, resting=True)
     return body
 
 
@@ -99,11 +105,17 @@ def centred_surface_mesh(spec: ObjectSpec):
 
 def load_soft_body(client: int, spec: ObjectSpec, tet, position, orientation) -> int:
     """The FEM body of a tet mesh with the physics core's settings, the same as a grasp trial's object."""
-    parameters = physics.soft_body_parameters(spec.youngs_modulus_pa, spec.poisson_ratio, spec.mass_kg, FRICTION)
+    parameters = physics.soft_body_parameters(spec.youngs_modulus_pa, poisson_ratio(spec), spec.mass_kg,
+                                              MATERIAL.object_friction)
     try:
         return physics.load_soft_body(client, tet.vtk_path, position, orientation, parameters)
     except SoftBodyError as exc:
         raise SoftBodyError(f"{spec.name!r}: {exc}") from exc
+
+
+def poisson_ratio(spec: ObjectSpec) -> float | None:
+    """The scene object's own Poisson's ratio, else the cell material's (None: the core's default)."""
+    return MATERIAL.poisson_ratio if spec.poisson_ratio is None else spec.poisson_ratio
 
 
 def _force_on_a(c):

@@ -67,7 +67,7 @@ def _make_proxy(client, obj: SoftObject, scratch_dir: Path):
                                  physicsClientId=client)
     vis = p.createVisualShape(p.GEOM_MESH, fileName=str(path), physicsClientId=client)
     obj.body = p.createMultiBody(0, col, vis, physicsClientId=client)
-    p.changeDynamics(obj.body, -1, lateralFriction=cell_objects.FRICTION, physicsClientId=client)
+    p.changeDynamics(obj.body, -1, lateralFriction=cell_objects.MATERIAL.object_friction, physicsClientId=client)
     obj.active = False
 
 

@@ -2,7 +2,8 @@
 
 Both clients go through here: the grasp trials that label the data (world.py, objects.py, hand.py,
 trial.py) and the simulated cell that the demo runs (cell.py, cell_objects.py, cell_soft.py). So the
-physics that labels the data cannot drift from the physics of the cell.
+physics that labels the data cannot drift from the physics of the cell, and the cell's objects are made of the
+material of the protocol that labelled the shipped weights (cell_objects.MATERIAL).
 
 Facts behind the numbers (docs/dataset.md, "PyBullet FEM"): the default 1/240 s step blew up with
 gripper contact at every E; 5e-4 s was stable at 2e4 and 2e5 Pa, 2.5e-4 s at 2e6 Pa; Neo-Hookean
@@ -117,6 +118,20 @@ def set_friction(client: int, body: int, links, friction: float, **extra) -> Non
     """A rigid body's own friction coefficient on these links (-1 = base)."""
     for link in links:
         p.changeDynamics(body, link, lateralFriction=friction, physicsClientId=client, **extra)
+
+
+# A rigid object of the simulated cell rests on the table for a whole session: without rolling and spinning
+# friction a cylinder rolled and a box crept about. The trials' rigid objects never had them (every dataset's
+# labels were made without), so they keep none: the one named difference between the two.
+CELL_ROLLING_FRICTION = 1e-4
+CELL_SPINNING_FRICTION = 1e-3
+
+
+def set_rigid_object_friction(client: int, body: int, links, material: Material, resting: bool = False) -> None:
+    """A rigid object's friction: the material's object coefficient on these links (-1 = base); resting (the
+    cell's objects) adds CELL_ROLLING_FRICTION and CELL_SPINNING_FRICTION."""
+    extra = {"rollingFriction": CELL_ROLLING_FRICTION, "spinningFriction": CELL_SPINNING_FRICTION} if resting else {}
+    set_friction(client, body, links, material.object_friction, **extra)
 
 
 def couple_fingers(client: int, body: int, finger_a: int, finger_b: int, max_force_n: float, erp: float) -> int:

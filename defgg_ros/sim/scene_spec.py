@@ -16,7 +16,6 @@ import yaml
 from defgg_ros.constants import (
     CAMERA_HEIGHT_ABOVE_TABLE_M,
     MAX_SOFT_BODY_YOUNGS_MODULUS_PA,
-    POISSON_RATIO,
     YOUNGS_MODULUS_MAX_PA,
     YOUNGS_MODULUS_MIN_PA,
 )
@@ -52,7 +51,7 @@ class ObjectSpec:
     yaw_rad: float
     youngs_modulus_pa: float
     mass_kg: float = DEFAULT_OBJECT_MASS_KG
-    poisson_ratio: float = POISSON_RATIO
+    poisson_ratio: float | None = None   # None: the cell material's (cell_objects.MATERIAL)
     mesh_path: str = ""
     part: PartSpec | None = None
     fem_cell_size_m: float = DEFAULT_FEM_CELL_SIZE_M
@@ -146,8 +145,9 @@ def _parse_object(raw: dict, index: int, scene_dir: Path) -> ObjectSpec:
                         float(p.get("x_from_m", 0.0)))
     mass_kg = float(raw.get("mass_kg", DEFAULT_OBJECT_MASS_KG))
     _positive((mass_kg,), f"{what}: mass_kg")
-    nu = float(raw.get("poisson_ratio", POISSON_RATIO))
-    if not 0.0 <= nu < 0.5:
+    nu = raw.get("poisson_ratio")
+    nu = None if nu is None else float(nu)
+    if nu is not None and not 0.0 <= nu < 0.5:
         raise SceneError(f"{what}: poisson_ratio must be in [0, 0.5), got {nu}")
     fem_cell_size_m = float(raw.get("fem_cell_size_m", DEFAULT_FEM_CELL_SIZE_M))
     _positive((fem_cell_size_m,), f"{what}: fem_cell_size_m")

@@ -1,27 +1,74 @@
-"""One physics core: the grasp trials' objects and the simulated cell's objects are the same FEM bodies."""
+"""One physics core: the grasp trials' objects and the simulated cell's objects are the same FEM bodies, made of
+the material of the protocol that labelled the shipped weights."""
+import json
+from dataclasses import asdict
+from pathlib import Path
+
 import pybullet as p
 import pytest
 
 from defgg_ros.sim import cell_objects, cell_soft, objects, physics, world
+from defgg_ros.sim.cell import SimCell
 from defgg_ros.sim.scene_spec import ObjectSpec as CellObjectSpec
+from defgg_ros.sim.scene_spec import load_scene
+from defgg_ros.sim.trial import TrialSettings
 
 pytestmark = pytest.mark.sim
 
+ROOT = Path(__file__).resolve().parents[2]
+SHIPPED_TRAINING_RECORD = ROOT / "models" / "defgg_cnn.train.json"
 
-def test_a_soft_body_of_the_cell_and_of_a_trial_get_identical_parameters(client, tmp_path):
-    trial_spec = objects.ObjectSpec(objects.get_shape("box_small"), 2e5)
+
+def shipped_weights_material() -> dict:
+    """The material of the trials that labelled the shipped weights: their training record names the dataset,
+    whose header records the trial settings."""
+    dataset = json.loads(SHIPPED_TRAINING_RECORD.read_text())["data_source"]
+    header = json.loads((ROOT / dataset / "dataset.json").read_text())
+    return TrialSettings.from_record(header["generator"]["trial_settings"]).material()
+
+
+def test_the_cells_material_is_the_one_that_labelled_the_shipped_weights():
+    material = shipped_weights_material()
+    assert {**asdict(cell_objects.MATERIAL), "effective_friction": cell_objects.MATERIAL.effective_friction} == material
+    assert material == {"finger_friction": 1.0, "object_friction": 0.7, "effective_friction": 0.7,
+                        "poisson_ratio": 0.3}
+
+
+def test_a_soft_body_of_the_cell_and_of_a_trial_of_the_shipped_protocol_get_identical_parameters(client, tmp_path):
+    material = shipped_weights_material()
+    trial_spec = objects.ObjectSpec(objects.get_shape("box_small"), 2e5, poisson_ratio=material["poisson_ratio"])
     world.create_world(client, trial_spec.part_moduli_pa())
-    trial_body = objects.load_object(client, trial_spec).parts[0]
+    trial_body = objects.load_object(client, trial_spec, friction=material["object_friction"]).parts[0]
     cell_spec = CellObjectSpec("box_small", "box", (0.05, 0.03, 0.04), (0.3, 0.1), 0.0, 2e5,
-                               mass_kg=trial_body.mass_kg, poisson_ratio=trial_spec.poisson_ratio)
+                               mass_kg=trial_body.mass_kg)
     cell_objects.reset_world(client, deformable=True, time_step_s=physics.time_step_for([2e5]))
     soft = cell_soft.spawn_dormant(client, cell_spec, tmp_path)
+    assert p.getDynamicsInfo(soft.body, -1, physicsClientId=client)[1] == pytest.approx(0.7)   # the static proxy
     cell_soft.activate(client, soft)
     trial_params = physics.loaded_parameters(client, trial_body.body_id)
     cell_params = physics.loaded_parameters(client, soft.body)
     assert trial_params == cell_params
     assert trial_params["NeoHookeanDamping"] == physics.NEO_HOOKEAN_DAMPING
-    assert trial_params["frictionCoeff"] == physics.DEFAULT_FRICTION
+    assert trial_params["frictionCoeff"] == 0.7
+    assert (trial_params["NeoHookeanMu"], trial_params["NeoHookeanLambda"]) == physics.neo_hookean_lame(2e5, 0.3)
+
+
+def test_rigid_objects_of_the_cell_and_of_a_trial_have_the_shipped_protocols_friction(client):
+    """The cell's resting objects add rolling and spinning friction (physics.CELL_*), the trials' have none."""
+    cell = SimCell(load_scene(ROOT / "sim_bringup" / "scenes" / "rigid_box.yaml"))
+    try:
+        info = p.getDynamicsInfo(cell.object_ids[0], -1, physicsClientId=cell.client)
+        assert (info[1], info[6], info[7]) == pytest.approx(
+            (0.7, physics.CELL_ROLLING_FRICTION, physics.CELL_SPINNING_FRICTION))   # lateral, rolling, spinning
+        for finger in cell.finger_joints:
+            assert p.getDynamicsInfo(cell.robot, finger, physicsClientId=cell.client)[1] == 1.0
+    finally:
+        cell.close()
+    world.create_world(client, [2e9])
+    spec = objects.ObjectSpec(objects.get_shape("box_small"), 2e9)
+    body = objects.load_object(client, spec, friction=shipped_weights_material()["object_friction"]).body_ids[0]
+    info = p.getDynamicsInfo(body, -1, physicsClientId=client)
+    assert (info[1], info[6], info[7]) == pytest.approx((0.7, 0.0, 0.0))
 
 
 def test_both_worlds_share_gravity_step_and_soft_step_rules(client):
