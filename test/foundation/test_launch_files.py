@@ -7,14 +7,13 @@ set's; its parameter files exist and are installed; every parameter it is given 
 nodes, their files and their effective parameters equal the bringup's node set (real_cell for robot_type fr3,
 real_cell_fer for fer, sim_cell). The launch files are installed once, to share/defgg_ros/launch.
 """
-import runpy
 import sys
 import types
 from pathlib import Path
 
 import pytest
-import setuptools
 import yaml
+from support.setup_capture import console_scripts, installed_files
 
 from defgg_ros.bringup.node_set import NodeEntry, ReadyCheck, load_node_set
 from defgg_ros.bringup.shared_parameters import disagreements, effective_parameters
@@ -62,38 +61,6 @@ def evaluate(recorder, file_name: str, arguments: dict):
     return recorder.evaluate(load_launch_file(LAUNCH_DIR / file_name), arguments, {"defgg_ros": REPO})
 
 
-@pytest.fixture(scope="module")
-def setup_kwargs():
-    """setup.py's arguments, as colcon and pip would pass them to setuptools (run from the repository)."""
-    captured = {}
-    original, cwd = setuptools.setup, Path.cwd()
-    setuptools.setup = lambda **kwargs: captured.update(kwargs)
-    try:
-        import os
-        os.chdir(REPO)
-        runpy.run_path(str(REPO / "setup.py"), run_name="__main__")
-    finally:
-        setuptools.setup = original
-        os.chdir(cwd)
-    return captured
-
-
-def console_scripts(setup_kwargs) -> dict:
-    rows = [line.split("=", 1) for line in setup_kwargs["entry_points"]["console_scripts"]]
-    return {name.strip(): target.strip().split(":")[0] for name, target in rows}
-
-
-def installed_files(setup_kwargs) -> dict:
-    """share-relative destination -> source path, for every data file."""
-    out = {}
-    for folder, files in setup_kwargs["data_files"]:
-        for source in files:
-            destination = str(Path(folder) / Path(source).name)
-            assert destination not in out, f"{destination} installed twice"
-            out[destination] = source
-    return out
-
-
 def file_parameters(path: str, node: str) -> dict:
     raw = yaml.safe_load(Path(path).read_text(encoding="utf-8")) or {}
     params = {}
@@ -116,13 +83,13 @@ def launch_effective(started) -> dict:
 
 
 @pytest.mark.parametrize("case", sorted(CASES))
-def test_the_launch_file_starts_the_bringups_node_set(recorder, setup_kwargs, case):
+def test_the_launch_file_starts_the_bringups_node_set(recorder, case):
     file_name, arguments, set_name = CASES[case]
     started = {node.name: node for node in evaluate(recorder, file_name, arguments).nodes}
     node_set = load_node_set(set_name)
     entries = {entry.name: entry for entry in node_set.nodes}
     assert sorted(started) == sorted(entries)
-    scripts = console_scripts(setup_kwargs)
+    scripts = console_scripts()
     for name, node in started.items():
         entry = entries[name]
         assert node.package == "defgg_ros" and node.namespace == ""
@@ -138,9 +105,9 @@ def test_the_launch_file_starts_the_bringups_node_set(recorder, setup_kwargs, ca
 
 
 @pytest.mark.parametrize("case", sorted(CASES))
-def test_every_file_exists_is_installed_and_sets_only_schema_parameters(recorder, setup_kwargs, case):
+def test_every_file_exists_is_installed_and_sets_only_schema_parameters(recorder, case):
     file_name, arguments, _ = CASES[case]
-    installed = installed_files(setup_kwargs)
+    installed = installed_files()
     for node in evaluate(recorder, file_name, arguments).nodes:
         schema = load_schema(node.name)
         for path in node.parameter_files:
@@ -153,8 +120,8 @@ def test_every_file_exists_is_installed_and_sets_only_schema_parameters(recorder
         assert not unknown, f"{file_name}: {node.name} has no parameter {sorted(unknown)}"
 
 
-def test_launch_files_are_installed_once_to_share_launch(setup_kwargs):
-    installed = installed_files(setup_kwargs)
+def test_launch_files_are_installed_once_to_share_launch():
+    installed = installed_files()
     for path in sorted(LAUNCH_DIR.glob("*.launch.py")):
         found = [dest for dest in installed if Path(dest).name == path.name]
         assert found == [f"share/defgg_ros/launch/{path.name}"], found   # ros2 launch refuses a name found twice

@@ -21,6 +21,7 @@ MODULE_KEYS = {
     "control_msgs": "control_msgs",
     "cv2": "python3-opencv",
     "defgg_interfaces": "defgg_interfaces",
+    "diagnostic_msgs": "diagnostic_msgs",
     "franka_msgs": "franka_msgs",
     "geometry_msgs": "geometry_msgs",
     "matplotlib": "python3-matplotlib",
