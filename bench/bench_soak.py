@@ -54,8 +54,10 @@ def next_step(index: int, max_idle_s: float, cancel_fraction: float, rng: random
 def place_goal(index: int):
     from defgg_interfaces.action import PickAndPlace
 
+    from defgg_ros.ros import topics
+
     goal = PickAndPlace.Goal(plan_grasp=True)
-    goal.place_pose.header.frame_id = "panda_link0"
+    goal.place_pose.header.frame_id = topics.BASE_FRAME
     p = goal.place_pose.pose
     p.position.x, p.position.y, p.position.z = PLACE_SPOTS_M[index % 2]
     p.orientation.w = 1.0

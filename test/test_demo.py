@@ -16,6 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from defgg_ros.ros import topics
+
 ROOT = Path(__file__).resolve().parents[1]
 SCENES = ROOT / "sim_bringup" / "scenes"
 PICK_TIMEOUT_S = 240.0
@@ -31,7 +33,7 @@ def _grasp_from_ground_truth(obj, position):
     # x: fingers close along the box's x edge; z: pointing down (approach).
     rotation = np.array([[c, s, 0.0], [s, -c, 0.0], [0.0, 0.0, -1.0]])
     grasp = Grasp()
-    grasp.pose_base.header.frame_id = "panda_link0"
+    grasp.pose_base.header.frame_id = topics.BASE_FRAME
     grasp.pose_base.pose.position.x, grasp.pose_base.pose.position.y = float(position[0]), float(position[1])
     grasp.pose_base.pose.position.z = float(obj["size_m"][2])  # the visible top surface
     q = matrix_to_quaternion_xyzw(rotation)

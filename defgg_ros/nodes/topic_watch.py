@@ -9,16 +9,19 @@ reader's QoS.
 """
 import time
 
-from rclpy.qos import ReliabilityPolicy
+from rclpy.qos import HistoryPolicy, ReliabilityPolicy
 
 
 def describe_qos(profile) -> str:
-    """'best effort, keep last 1, volatile' (history depth only for keep last)."""
-    reliability = profile.reliability.name.lower().replace("_", " ")
-    history = profile.history.name.lower().replace("_", " ")
-    if history == "keep last":
-        history = f"keep last {profile.depth}"
-    return f"{reliability}, {history}, {profile.durability.name.lower().replace('_', ' ')}"
+    """'best effort, keep last 1, volatile'. The graph does not carry a publisher's history (DDS does not
+    announce it): then only reliability and durability, 'reliable, transient local'."""
+    words = [profile.reliability.name.lower().replace("_", " ")]
+    if profile.history == HistoryPolicy.KEEP_LAST:
+        words.append(f"keep last {profile.depth}")
+    elif profile.history == HistoryPolicy.KEEP_ALL:
+        words.append("keep all")
+    words.append(profile.durability.name.lower().replace("_", " "))
+    return ", ".join(words)
 
 
 class TopicWatch:

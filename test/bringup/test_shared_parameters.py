@@ -36,7 +36,8 @@ def test_one_node_with_another_table_height_is_refused_naming_every_node():
 
 def _fr3_rehearsal_argv():
     text = DOCS.read_text()
-    block = re.search(r"```bash\n(defgg-bringup --ros-domain 42 -p fake_panda_driver:robot_type:=fr3.*?)```", text, re.S)
+    block = re.search(r"```bash\n(defgg-bringup --ros-domain 42 -p fake_panda_driver:robot_type:=fr3.*?)```", text,
+                      re.S)
     assert block, "the FR3 rehearsal command is no longer in docs/real_cell.md"
     return shlex.split(block.group(1).replace("\\\n", " "))[1:]
 

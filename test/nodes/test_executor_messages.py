@@ -7,7 +7,7 @@ from defgg_interfaces.msg import Grasp
 from geometry_msgs.msg import PoseStamped
 from sensor_msgs.msg import JointState
 
-from defgg_ros.constants import PANDA_FINGER_JOINT_NAMES, PANDA_JOINT_NAMES, PANDA_READY_Q_RAD
+from defgg_ros.constants import PANDA_READY_Q_RAD
 from defgg_ros.control.poses import matrix_to_quaternion, top_down_pose
 from defgg_ros.control.trajectories import SampledTrajectory
 from defgg_ros.nodes.executor_node import (
@@ -17,8 +17,11 @@ from defgg_ros.nodes.executor_node import (
     place_target,
     trajectory_to_msg,
 )
+from defgg_ros.ros import topics
 
-BASE = "panda_link0"
+NAMES = topics.robot_names()   # the default robot type: fer
+BASE = NAMES["base_frame"]
+ARM_JOINTS, FINGER_JOINTS = NAMES["joints"], NAMES["fingers"]
 
 
 def test_trajectory_times_survive_the_split_into_seconds_and_nanoseconds():
@@ -28,13 +31,13 @@ def test_trajectory_times_survive_the_split_into_seconds_and_nanoseconds():
     stamps = [p.time_from_start.sec + 1e-9 * p.time_from_start.nanosec for p in msg.points]
     assert stamps == pytest.approx(times, abs=1e-9)
     assert all(0 <= p.time_from_start.nanosec < 1_000_000_000 for p in msg.points)
-    assert msg.joint_names == list(PANDA_JOINT_NAMES)
+    assert msg.joint_names == list(ARM_JOINTS)
     assert (msg.header.stamp.sec, msg.header.stamp.nanosec) == (0, 0)  # start on receipt
     assert len(msg.points[0].velocities) == 7 and len(msg.points[0].accelerations) == 7
 
 
 def test_joint_state_in_any_order_with_fingers():
-    names = list(reversed(PANDA_JOINT_NAMES)) + list(PANDA_FINGER_JOINT_NAMES)
+    names = list(reversed(ARM_JOINTS)) + list(FINGER_JOINTS)
     positions = list(reversed(range(7))) + [0.01, 0.015]
     state = joint_state_to_arm(JointState(name=names, position=[float(p) for p in positions],
                                           velocity=[0.1] * 9))
@@ -45,8 +48,8 @@ def test_joint_state_in_any_order_with_fingers():
 
 def test_joint_state_without_arm_joints_or_fingers():
     with pytest.raises(GoalError, match="lacks"):
-        joint_state_to_arm(JointState(name=["panda_joint1"], position=[0.0]))
-    state = joint_state_to_arm(JointState(name=list(PANDA_JOINT_NAMES), position=[0.0] * 7))
+        joint_state_to_arm(JointState(name=["fer_joint1"], position=[0.0]))
+    state = joint_state_to_arm(JointState(name=list(ARM_JOINTS), position=[0.0] * 7))
     assert math.isnan(state.gripper_width_m) and not np.any(state.qd_radps)
 
 
@@ -76,7 +79,7 @@ def test_grasp_target_from_a_grasp_message():
 
 
 @pytest.mark.parametrize("mutate, message", [
-    (lambda g: setattr(g.pose_base.header, "frame_id", "camera_depth_optical_frame"), "expected 'panda_link0'"),
+    (lambda g: setattr(g.pose_base.header, "frame_id", "camera_depth_optical_frame"), "expected 'fer_link0'"),
     (lambda g: setattr(g.pose_base.pose.orientation, "w", 7.0), "bad grasp pose"),
     (lambda g: setattr(g.pose_base.pose.position, "z", float("inf")), "bad grasp pose"),
     (lambda g: setattr(g, "finger_force_n", -2.0), "finger_force_n"),

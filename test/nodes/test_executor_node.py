@@ -144,9 +144,13 @@ def test_invalid_parameters_refuse_to_start(rclpy_context):
         ExecutorNode(context=rclpy_context, parameter_overrides=[Parameter("limits_scale", value=1.5)])
     with pytest.raises(ValueError, match="grasp_height_rule"):
         ExecutorNode(context=rclpy_context, parameter_overrides=[Parameter("grasp_height_rule", value="middle")])
-    # an FR3 planned within the Panda's ranges and accelerations (arm_id set, joint_limits forgotten)
-    with pytest.raises(ValueError, match="arm_id fr3 with joint_limits panda: set joint_limits: fr3"):
-        ExecutorNode(context=rclpy_context, parameter_overrides=[Parameter("arm_id", value="fr3")])
+    # an FR3 planned within the Panda's ranges and accelerations
+    with pytest.raises(ValueError, match="robot_type fr3 with joint_limits panda: set joint_limits: fr3 or leave"):
+        ExecutorNode(context=rclpy_context, parameter_overrides=[Parameter("robot_type", value="fr3"),
+                                                                 Parameter("joint_limits", value="panda")])
+    # franka_ros2 on Jazzy has no "panda" robot type (the Panda is fer): refused by the schema, naming the choices
+    with pytest.raises(ValueError, match="robot_type.*fer.*fr3"):
+        ExecutorNode(context=rclpy_context, parameter_overrides=[Parameter("robot_type", value="panda")])
 
 
 NEAR_BASE_XYZ, NEAR_BASE_YAW = (0.277, -0.048, 0.036), -1.49   # its straight lift runs out of reach
@@ -244,13 +248,13 @@ def test_joint_states_without_velocities_get_them_from_the_positions(rclpy_conte
     """A driver that publishes positions only: zeros would make a moving arm read as at rest."""
     from sensor_msgs.msg import JointState
 
-    from defgg_ros.constants import PANDA_JOINT_NAMES, PANDA_READY_Q_RAD
+    from defgg_ros.constants import PANDA_READY_Q_RAD
 
     node = ExecutorNode(context=rclpy_context)
     try:
         q = np.array(PANDA_READY_Q_RAD)
         for k, t_ns in enumerate((1_000_000_000, 1_010_000_000)):
-            msg = JointState(name=list(PANDA_JOINT_NAMES), position=(q + 0.002 * k).tolist())
+            msg = JointState(name=list(topics.robot_names()["joints"]), position=(q + 0.002 * k).tolist())
             msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t_ns, 1_000_000_000)
             node._on_joint_state(msg)
             if k == 0:   # one message: not known to be still

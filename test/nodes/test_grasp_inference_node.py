@@ -87,7 +87,7 @@ def assert_valid_grasp(grasp: Grasp):
     assert 0.0 <= grasp.quality <= 1.0
     assert -math.pi / 2 <= grasp.angle_rad <= math.pi / 2
     p, o = grasp.pose_base.pose.position, grasp.pose_base.pose.orientation
-    assert grasp.pose_base.header.frame_id == "panda_link0"
+    assert grasp.pose_base.header.frame_id == topics.BASE_FRAME
     # The camera is 0.40 m above the table (z = 0): the grasp point is on an object top.
     assert p.z == pytest.approx(0.40 - DEPTH_M[v, u], abs=2e-3) and 0.035 < p.z < 0.055
     rotation = quaternion_xyzw_to_matrix([o.x, o.y, o.z, o.w])

@@ -11,6 +11,7 @@ from defgg_ros.constants import CAMERA_HEIGHT_PX, CAMERA_WIDTH_PX, PANDA_READY_Q
 from defgg_ros.ros import topics
 
 SCENES = Path(__file__).resolve().parents[2] / "sim_bringup" / "scenes"
+ARM_JOINTS = topics.robot_names()["joints"]   # the default robot type's: fer_joint1..7
 TIMEOUT_S = 30.0
 
 
@@ -50,18 +51,33 @@ def test_joint_states_clock_and_wrench_flow(driver, client, executor, spin):
 
     from defgg_ros.nodes import qos
 
-    joints = _latest(client, JointState, topics.JOINT_STATES, qos.STATE)
+    joints = _latest(client, JointState, topics.JOINT_STATES, qos.ROBOT_STATE_READ)
     clocks = _latest(client, Clock, "/clock", qos.STATE)
-    wrenches = _latest(client, WrenchStamped, topics.EXTERNAL_WRENCH, qos.STATE)
+    wrenches = _latest(client, WrenchStamped, topics.EXTERNAL_WRENCH, qos.ROBOT_STATE_READ)
     spin(executor, lambda: len(joints) >= 20 and len(clocks) >= 20 and wrenches, TIMEOUT_S, "20 joint states")
     msg = joints[-1]
-    assert list(msg.name)[:2] == ["panda_joint1", "panda_joint2"] and len(msg.position) == 9
+    assert list(msg.name)[:2] == ["fer_joint1", "fer_joint2"] and len(msg.position) == 9
     np.testing.assert_allclose(msg.position[:7], PANDA_READY_Q_RAD, atol=0.01)
     stamps = [m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for m in joints]
     assert np.all(np.diff(stamps) > 0)
-    # >= 50 Hz of sim time: consecutive stamps at most 20 ms apart.
-    assert np.median(np.diff(stamps)) <= 0.02 + 1e-6
+    # joint_state_publisher's 30 Hz of sim time (on the 1 ms control grid); the reader keeps the newest only
+    assert np.min(np.diff(stamps)) == pytest.approx(1 / 30, abs=1.1e-3)
     assert wrenches[-1].header.frame_id == topics.BASE_FRAME
+
+
+def test_a_reliable_reader_gets_no_wrench_and_a_best_effort_one_does(driver, client, executor, spin):
+    """franka_robot_state_broadcaster (>= 3.3.0) offers its wrench best effort: the QoS the executor reads with
+    before issue 46 (reliable, keep last 10) gets nothing; qos.ROBOT_STATE_READ gets it."""
+    from geometry_msgs.msg import WrenchStamped
+    from sensor_msgs.msg import JointState
+
+    from defgg_ros.nodes import qos
+
+    reliable = _latest(client, WrenchStamped, topics.EXTERNAL_WRENCH, qos.STATE)
+    best_effort = _latest(client, WrenchStamped, topics.EXTERNAL_WRENCH, qos.ROBOT_STATE_READ)
+    joints = _latest(client, JointState, topics.JOINT_STATES, qos.ROBOT_STATE_READ)
+    spin(executor, lambda: len(best_effort) >= 50 and len(joints) >= 20, TIMEOUT_S, "50 wrenches, 20 joint states")
+    assert reliable == []
 
 
 def test_trajectory_is_executed_in_sim_time(driver, client, executor, spin):
@@ -69,7 +85,6 @@ def test_trajectory_is_executed_in_sim_time(driver, client, executor, spin):
     from sensor_msgs.msg import JointState
     from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-    from defgg_ros.constants import PANDA_JOINT_NAMES
     from defgg_ros.nodes import qos
 
     joints = _latest(client, JointState, topics.JOINT_STATES, qos.STATE)
@@ -78,7 +93,7 @@ def test_trajectory_is_executed_in_sim_time(driver, client, executor, spin):
     goal = np.array(PANDA_READY_Q_RAD) + [0.2, 0.1, 0.0, 0.2, 0.0, -0.1, 0.2]
     # Joint order in the message differs from the arm's: the driver must map names.
     order = list(reversed(range(7)))
-    msg = JointTrajectory(joint_names=[PANDA_JOINT_NAMES[i] for i in order])
+    msg = JointTrajectory(joint_names=[ARM_JOINTS[i] for i in order])
     msg.points.append(JointTrajectoryPoint(positions=[float(goal[i]) for i in order],
                                            time_from_start=Duration(sec=1, nanosec=0)))
     sent_at = len(joints)
@@ -144,7 +159,6 @@ def test_follow_joint_trajectory_action(driver, client, executor, spin):
     from sensor_msgs.msg import JointState
     from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-    from defgg_ros.constants import PANDA_JOINT_NAMES
     from defgg_ros.nodes import qos
     from defgg_ros.ros.action import ActionClient
 
@@ -154,25 +168,25 @@ def test_follow_joint_trajectory_action(driver, client, executor, spin):
     goal_q = np.array(joints[-1].position[:7]) + [0.1, -0.1, 0.0, 0.1, 0.0, 0.1, -0.1]
     feedback = []
     goal = FollowJointTrajectory.Goal(trajectory=JointTrajectory(
-        joint_names=list(PANDA_JOINT_NAMES),
+        joint_names=list(ARM_JOINTS),
         points=[JointTrajectoryPoint(positions=goal_q.tolist(), time_from_start=Duration(sec=1))]))
     handle = spin(executor, arm.send_goal_async(goal, feedback_callback=feedback.append), TIMEOUT_S, "acceptance")
     assert handle.accepted
     result = spin(executor, handle.get_result_async(), TIMEOUT_S, "the trajectory's result").result
     assert result.error_code == FollowJointTrajectory.Result.SUCCESSFUL, result.error_string
-    assert feedback and list(feedback[-1].feedback.joint_names) == list(PANDA_JOINT_NAMES)
+    assert feedback and list(feedback[-1].feedback.joint_names) == list(ARM_JOINTS)
     spin(executor, lambda: np.abs(np.array(joints[-1].position[:7]) - goal_q).max() < 0.01, TIMEOUT_S,
          "the arm at the goal")
     for bad in (JointTrajectory(joint_names=[f"fr3_joint{i}" for i in range(1, 8)],     # another arm's joints
                                 points=[JointTrajectoryPoint(positions=[0.0] * 7, time_from_start=Duration(sec=1))]),
-                JointTrajectory(joint_names=list(PANDA_JOINT_NAMES))):                  # no points
+                JointTrajectory(joint_names=list(ARM_JOINTS))):                  # no points
         handle = spin(executor, arm.send_goal_async(FollowJointTrajectory.Goal(trajectory=bad)), TIMEOUT_S,
                       "the goal response")
         assert not handle.accepted
 
 
-def test_fr3_arm_id_names_the_joints_and_the_camera_pose_is_on_tf_static(executor, rclpy_context, client, spin):
-    """arm_id fr3: fr3_joint* in joint states and the FR3 controller's action name; the camera's extrinsic
+def test_fr3_robot_type_names_the_joints_and_the_camera_pose_is_on_tf_static(executor, rclpy_context, client, spin):
+    """robot_type fr3: fr3_joint* in joint states and the FR3 controller's action name; the camera's extrinsic
     (the scene's base_T_camera) comes latched on /tf_static like a calibrated cell's."""
     from builtin_interfaces.msg import Duration
     from control_msgs.action import FollowJointTrajectory
@@ -185,14 +199,13 @@ def test_fr3_arm_id_names_the_joints_and_the_camera_pose_is_on_tf_static(executo
     from defgg_ros.ros.action import ActionClient
     from defgg_ros.sim.scene_spec import load_scene
 
-    names = topics.arm_names("fr3")
+    names = topics.robot_names("fr3")
     node = FakePandaDriver(context=rclpy_context, parameter_overrides=[
         Parameter("scene_file", value=str(SCENES / "rigid_box.yaml")), Parameter("max_real_time_factor", value=0.0),
-        Parameter("arm_id", value="fr3"), Parameter("base_frame", value=names["base_frame"]),
-        Parameter("arm_trajectory_action", value=names["trajectory_action"])])
+        Parameter("robot_type", value="fr3")])
     executor.add_node(node)
     try:
-        joints = _latest(client, JointState, topics.JOINT_STATES, qos.STATE)
+        joints = _latest(client, JointState, topics.JOINT_STATES, qos.ROBOT_STATE_READ)
         static = _latest(client, TFMessage, topics.TF_STATIC, qos.LATCHED)
         arm = ActionClient(client, FollowJointTrajectory, "fr3_arm_controller/follow_joint_trajectory")
         spin(executor, lambda: joints and static and arm.server_is_ready(), TIMEOUT_S, "fr3 joint states, tf, action")
@@ -247,16 +260,15 @@ def test_malformed_trajectory_is_rejected_and_the_driver_keeps_serving(driver, c
     from sensor_msgs.msg import JointState
     from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-    from defgg_ros.constants import PANDA_JOINT_NAMES
     from defgg_ros.nodes import qos
 
     joints = _latest(client, JointState, topics.JOINT_STATES, qos.STATE)
     pub = client.create_publisher(JointTrajectory, topics.JOINT_TRAJECTORY, qos.COMMAND)
     spin(executor, lambda: joints and pub.get_subscription_count() > 0, TIMEOUT_S, "driver subscribed")
     start = np.array(joints[-1].position[:7])
-    bad = [JointTrajectory(joint_names=list(PANDA_JOINT_NAMES[:6]),            # a joint missing
+    bad = [JointTrajectory(joint_names=list(ARM_JOINTS[:6]),            # a joint missing
                            points=[JointTrajectoryPoint(positions=[0.5] * 6, time_from_start=Duration(sec=1))]),
-           JointTrajectory(joint_names=list(PANDA_JOINT_NAMES),                # NaN position
+           JointTrajectory(joint_names=list(ARM_JOINTS),                # NaN position
                            points=[JointTrajectoryPoint(positions=[float("nan")] * 7,
                                                         time_from_start=Duration(sec=1))])]
     for msg in bad:
@@ -265,7 +277,7 @@ def test_malformed_trajectory_is_rejected_and_the_driver_keeps_serving(driver, c
     spin(executor, lambda: len(joints) > count + 100, TIMEOUT_S, "1 s of joint states after the bad commands")
     np.testing.assert_allclose(joints[-1].position[:7], start, atol=0.01)
     goal = start + 0.1
-    pub.publish(JointTrajectory(joint_names=list(PANDA_JOINT_NAMES), points=[
+    pub.publish(JointTrajectory(joint_names=list(ARM_JOINTS), points=[
         JointTrajectoryPoint(positions=goal.tolist(), time_from_start=Duration(sec=0, nanosec=500_000_000))]))
     spin(executor, lambda: np.abs(np.array(joints[-1].position[:7]) - goal).max() < 0.01, TIMEOUT_S,
          "the valid trajectory after the bad ones")
@@ -322,3 +334,13 @@ def test_a_bin_over_the_table_edge_is_warned_about_at_start_up(executor, rclpy_c
         assert warning.level == Log.WARN and "y -0.560 ... -0.340 m) reach beyond the table's top" in warning.msg
     finally:
         node.shutdown()
+
+
+def test_a_robot_type_franka_ros2_does_not_have_is_refused_naming_the_choices(rclpy_context):
+    """Jazzy's franka_ros2 has no 'panda' robot type (the Panda is 'fer'): the driver refuses it at start-up."""
+    from defgg_ros.nodes.fake_panda_driver_node import FakePandaDriver
+
+    with pytest.raises(ValueError, match=r"robot_type = 'panda' must be one of \['fer', 'fr3'\]"):
+        FakePandaDriver(context=rclpy_context, parameter_overrides=[Parameter("robot_type", value="panda")])
+    with pytest.raises(ValueError, match="franka_ros2 on Jazzy names the Panda 'fer'"):
+        topics.robot_names("panda")

@@ -32,7 +32,7 @@ from rclpy.parameter import Parameter
 from rclpy.task import Future
 from sensor_msgs.msg import JointState
 
-from defgg_ros.constants import PANDA_FINGER_JOINT_NAMES, PANDA_JOINT_NAMES, PANDA_READY_Q_RAD
+from defgg_ros.constants import PANDA_READY_Q_RAD
 from defgg_ros.control.kinematics import PandaKinematics
 from defgg_ros.control.poses import matrix_to_quaternion, top_down_pose
 from defgg_ros.nodes import qos
@@ -55,6 +55,8 @@ FAST = {  # quicker motions than the defaults so a full run takes a few seconds
     "place_approach_height_m": 0.06, "watchdog_timeout_s": 1.0, "server_wait_s": 10.0,
 }
 
+NAMES = topics.robot_names()   # the default robot type's (fer)
+
 
 class InTestDriver(Node):
     def __init__(self, context, object_width_m=0.04, contact_height_m=-1.0, q0=PANDA_READY_Q_RAD,
@@ -72,7 +74,8 @@ class InTestDriver(Node):
         self.arm_goal = None       # (goal handle, Future of its outcome) of the running trajectory goal
         group = ReentrantCallbackGroup()
         self.joint_pub = self.create_publisher(JointState, topics.JOINT_STATES, qos.STATE)
-        self.wrench_pub = self.create_publisher(WrenchStamped, topics.EXTERNAL_WRENCH, qos.STATE)
+        # as franka_robot_state_broadcaster (>= 3.3.0) offers it: best effort, depth 1
+        self.wrench_pub = self.create_publisher(WrenchStamped, topics.EXTERNAL_WRENCH, qos.FRANKA_CONVENIENCE)
         ActionServer(self, FollowJointTrajectory, topics.ARM_TRAJECTORY_ACTION, self.on_follow, callback_group=group,
                      cancel_callback=lambda _goal: CancelResponse.ACCEPT)
         ActionServer(self, GripperMove, topics.GRIPPER_MOVE_ACTION, self.on_move, callback_group=group)
@@ -93,7 +96,7 @@ class InTestDriver(Node):
         msg = goal_handle.request.trajectory
         self.trajectory_msgs.append(msg)
         result = FollowJointTrajectory.Result()
-        if list(msg.joint_names) != list(PANDA_JOINT_NAMES) or not msg.points:
+        if list(msg.joint_names) != list(NAMES["joints"]) or not msg.points:
             result.error_code, result.error_string = FollowJointTrajectory.Result.INVALID_JOINTS, "bad joints"
             goal_handle.abort()
             return result
@@ -132,7 +135,7 @@ class InTestDriver(Node):
         self.step_arm()
         self.step_gripper()
         stamp = self.get_clock().now().to_msg()
-        state = JointState(name=list(PANDA_JOINT_NAMES) + list(PANDA_FINGER_JOINT_NAMES))
+        state = JointState(name=list(NAMES["joints"]) + list(NAMES["fingers"]))
         state.header.stamp = stamp
         noise = self.position_noise_rad * self._rng.standard_normal(7)
         state.position = (self.q + noise).tolist() + [self.width_m / 2] * 2
