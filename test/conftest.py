@@ -24,8 +24,11 @@ from pathlib import Path
 
 import pytest
 
-# Must happen before rclpy initialises its context.
-os.environ["ROS_DOMAIN_ID"] = str(random.Random(os.getpid()).randint(1, 100))
+from defgg_ros.ros.domain import TEST_DOMAIN_RANGE, pick_private_domain
+
+# Must happen before rclpy initialises its context. A domain of the tests' own range (disjoint from the demo's and
+# the bringup's) that no other process on this host holds, held by this process until it exits.
+os.environ["ROS_DOMAIN_ID"] = str(pick_private_domain(rng=random.Random(os.getpid()), domain_range=TEST_DOMAIN_RANGE))
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 
 TEST_ROOT = Path(__file__).resolve().parent
