@@ -45,7 +45,8 @@ def generate_launch_description():
                               description="ROS namespace of the cell's nodes: franka.launch.py's namespace"),
         DeclareLaunchArgument("camera_namespace", default_value="camera/camera",
                               description="where realsense2_camera publishes, relative to namespace: rs_launch.py's "
-                                          "<camera_namespace>/<camera_name>"),
+                                          "<camera_namespace>/<camera_name> (/camera/camera for a camera started "
+                                          "outside the namespace)"),
         DeclareLaunchArgument("config_file",
                               default_value=PathJoinSubstitution([CONFIG, "real_cell", [robot_type, ".yaml"]]),
                               description="the cell's parameter file, loaded after each node's own "
