@@ -27,13 +27,19 @@ reliable whenever the publisher is (realsense2_camera's default, the fake
 driver's); but a reliable reader does not match a best-effort publisher at
 all. Hence the subscription follows the publishers it sees, as rosbag2's
 recorder does: reliable when every publisher offers reliable, best effort
-otherwise (also before any publisher exists, since best effort matches both).
-It re-checks once a second and re-creates itself when that choice changes.
+otherwise. Before any publisher exists it reads with both a best-effort and a
+reliable reader, so the first frames of a camera started after the node reach
+it whichever QoS the camera offers (issue 46: starting best effort and
+switching after the publisher showed lost the frames of the switch); a frame
+both readers deliver is passed on once (same header stamp and frame id). It
+re-checks once a second; on a change the new reader is created first and the
+old one is kept until the new one has matched every publisher.
 
 The same subscription warns when no message arrived for `warn_after_s`
 (repeating at doubling intervals), naming the publishers it sees, so a
 silent camera or a QoS mismatch shows in the log instead of nothing.
 """
+import collections
 import time
 
 from rclpy.qos import (
@@ -122,7 +128,8 @@ class SensorSubscription:
 
     `warn_after_s` <= 0 turns the silence warning off; `depth` is the reader's keep-last history.
     The node's clock is not used for the warning: a stopped sim clock must not hide a silent camera,
-    so it runs on the wall clock.
+    so it runs on the wall clock. `reliability` is the reader's the publishers decided; while no publisher
+    is on the graph (`undecided`) a best-effort and a reliable reader both run.
     """
 
     def __init__(self, node, msg_type, topic: str, callback, warn_after_s: float = DEFAULT_WARN_AFTER_S,
@@ -135,10 +142,13 @@ class SensorSubscription:
         self._last_message = time.monotonic()
         self._next_warning_s = self._warn_after_s
         self._warned = False
-        self.subscription = None
+        self._readers = {}               # ReliabilityPolicy -> Subscription
+        self._delivered = collections.deque(maxlen=4 * self._depth)   # (stamp, frame id) passed on lately
         self.reliability = None
+        self.undecided = True            # no publisher seen yet: both readers run
         self.messages_received = 0
-        self.mixed_publishers = False   # reliable and best-effort publishers at once (warned)
+        self.duplicates_dropped = 0      # frames both readers delivered, passed on once
+        self.mixed_publishers = False    # reliable and best-effort publishers at once (warned)
         self._update()
         self._timer = node.create_timer(RECHECK_PERIOD_S, self._on_timer, callback_group=callback_group)
 
@@ -151,9 +161,33 @@ class SensorSubscription:
 
     def _update(self) -> None:
         offered = self._publisher_reliabilities()
-        wanted = reliability_for(offered)
-        if wanted == self.reliability:
+        if offered:
+            wanted = reliability_for(offered)
+            readers_wanted = {wanted}
+        else:   # nobody yet, or the camera went away: ready for whichever QoS it comes (back) with
+            wanted = self.reliability or ReliabilityPolicy.BEST_EFFORT
+            readers_wanted = {ReliabilityPolicy.BEST_EFFORT, ReliabilityPolicy.RELIABLE}
+        for reliability in readers_wanted - set(self._readers):
+            self._readers[reliability] = self._node.create_subscription(
+                self._msg_type, self.topic, self._on_message, sensor_qos(reliability, self._depth),
+                callback_group=self._group)
+        self._retire_readers(readers_wanted, len(offered))
+        if wanted != self.reliability:
+            self._report_change(offered, wanted)
+        self.reliability, self.undecided = wanted, not offered
+
+    def _retire_readers(self, readers_wanted: set, publishers: int) -> None:
+        """Destroy the readers no longer wanted once every wanted one has matched all `publishers`: a frame
+        the old reader still receives meanwhile is not lost (the duplicate is dropped in _on_message)."""
+        surplus = set(self._readers) - readers_wanted
+        if not surplus:
             return
+        if any(self._readers[r].get_publisher_count() < publishers for r in readers_wanted):
+            return   # the next check (RECHECK_PERIOD_S) tries again
+        for reliability in surplus:
+            self._node.destroy_subscription(self._readers.pop(reliability))
+
+    def _report_change(self, offered, wanted) -> None:
         self.mixed_publishers = ReliabilityPolicy.RELIABLE in offered and wanted == ReliabilityPolicy.BEST_EFFORT
         if self.mixed_publishers:
             # A best-effort reader never gets a lost fragment again: 5.5 MB camera frames then stalled for
@@ -161,19 +195,25 @@ class SensorSubscription:
             self._node.get_logger().warning(
                 f"{self._resolved}: a best-effort publisher beside reliable ones makes this reader best effort; "
                 "large frames may be lost or stall for seconds. Keep every publisher of a camera topic reliable.")
-        # The new reader first, then the old one goes: the new one needs a moment to match the
-        # publishers, and a frame the old one still receives meanwhile is not lost.
-        old = self.subscription
-        self.subscription = self._node.create_subscription(self._msg_type, self.topic, self._on_message,
-                                                           sensor_qos(wanted, self._depth), callback_group=self._group)
-        if old is not None:
-            self._node.destroy_subscription(old)
         if self.reliability is not None:
             self._node.get_logger().info(f"{self._resolved}: subscribed {wanted.name.lower()} now "
                                          "(follows the publishers' reliability)")
-        self.reliability = wanted
+
+    def _is_duplicate(self, msg) -> bool:
+        """While two readers run, the same frame can come through both: pass it on once."""
+        header = getattr(msg, "header", None)
+        if header is None or len(self._readers) < 2:
+            return False
+        key = (header.stamp.sec, header.stamp.nanosec, header.frame_id)
+        if key in self._delivered:
+            return True
+        self._delivered.append(key)
+        return False
 
     def _on_message(self, msg) -> None:
+        if self._is_duplicate(msg):
+            self.duplicates_dropped += 1
+            return
         self._last_message = time.monotonic()
         self.messages_received += 1
         if self._warned:
@@ -187,9 +227,10 @@ class SensorSubscription:
         silent_s = time.monotonic() - self._last_message
         if self._warn_after_s > 0 and silent_s >= self._next_warning_s:
             offered = [r.name.lower() for r in self._publisher_reliabilities()]
+            reading = "best effort and reliable" if self.undecided else self.reliability.name.lower()
             self._node.get_logger().warning(
                 f"no message on {self._resolved} for {silent_s:.0f} s "
                 f"({len(offered)} publisher(s){': ' + ', '.join(offered) if offered else ''}; "
-                f"subscribed {self.reliability.name.lower()})")
+                f"subscribed {reading})")
             self._warned = True
             self._next_warning_s = silent_s * 2.0
