@@ -39,7 +39,7 @@ from defgg_ros.control.kinematics import (
     check_workspace,
 )
 from defgg_ros.control.observation import at_pose, max_joint_speed_radps
-from defgg_ros.control.poses import finite_array, top_down_pose
+from defgg_ros.control.poses import finite_array, top_down_pose, top_down_yaw
 from defgg_ros.control.sequence_types import (
     RECOVER_PHASE,
     ArmState,
@@ -119,6 +119,10 @@ class PickPlaceSequence:
         self._checked: tuple[np.ndarray, _Plan] | None = None   # (q it was planned from, plan_failure's plan)
         self._phase = "idle"
         self._placed_open_sent = False
+        self.released_at_place = False          # the hand opened at the goal's place target (not in a recovery)
+        self.place_contact_z_m = float("nan")   # TCP height where a guarded lowering touched down (nan: it did not)
+        self._drop_M: np.ndarray | None = None  # a recovery's put-down pose (recovery_drop_xy_m), once planned
+        self._guarded_lowering = False           # a recovery's lowering runs: stop on contact
         self._stopping = False
         self._cancel_after_stop = False   # canceled while a failure's stop ran: no recovery after it
         self._stop_began_s = 0.0
@@ -271,6 +275,9 @@ class PickPlaceSequence:
                                    ("descent", "lift"), "grasp outside the workspace")
         place_p = _finite("place position", self._place.position_m)
         approach_p = place_p + [0.0, 0.0, self._cfg.place_approach_height_m]
+        if self._place.lower_to_contact:   # as far down as the object's bottom on the bin's floor (its lowest)
+            place_p = place_p.copy()
+            place_p[2] = min(place_p[2], grasp_p[2] + self._cfg.place_release_clearance_m)
         try:
             check_workspace(place_p, self._cfg.table_z_m)
             check_workspace(approach_p, self._cfg.table_z_m)
@@ -282,11 +289,14 @@ class PickPlaceSequence:
             raise SequenceFailure(f"place pose unreachable: {error}") from error
         # the lowering into the bin and the retreat up are straight lines too: found out after the grasp,
         # the pick would fail holding the object (and the recovery would try the same lowering)
-        self._check_straight_lines(approach.q_rad, place_p, self._cfg.line_speed_mps,
-                                   self._cfg.place_approach_height_m, ("lowering", "retreat"),
+        self._check_straight_lines(approach.q_rad, place_p, self._place_speed_mps(),
+                                   float(approach_p[2] - place_p[2]), ("lowering", "retreat"),
                                    "place pose unreachable")
         gripper = grasp_command(self._grasp.youngs_modulus_pa, self._grasp.width_m, self._grasp.finger_force_n)
-        return _Plan(pregrasp.q_rad, grasp_M, approach.q_rad, place_M, gripper)
+        return _Plan(pregrasp.q_rad, grasp_M, approach.q_rad, place_M, gripper, top_down_pose(approach_p, place_yaw))
+
+    def _place_speed_mps(self) -> float:
+        return self._cfg.place_lowering_speed_mps if self._place.lower_to_contact else self._cfg.line_speed_mps
 
     def _check_straight_lines(self, above_q: np.ndarray, target_p: np.ndarray, down_speed_mps: float,
                               up_m: float, names: tuple, failure: str) -> None:
@@ -504,8 +514,7 @@ class PickPlaceSequence:
 
     def _place_approach_target(self, q: np.ndarray) -> np.ndarray:
         """Joints above the place pose, seeded from q for a short motion; the pre-planned solution is the fallback."""
-        approach_M = self._plan.place_M.copy()
-        approach_M[2, 3] += self._cfg.place_approach_height_m
+        approach_M = self._plan.place_approach_M.copy()
         try:
             return self._kin.ik(approach_M, q, restarts=0).q_rad
         except KinematicsError:
@@ -532,7 +541,29 @@ class PickPlaceSequence:
             return []
         self.outcome.held_after_transfer = True
         self._phase = "place"
-        return self._line_to(self._plan.place_M[:3, 3], self._cfg.line_speed_mps, sim_s)
+        if not self._place.lower_to_contact:
+            return self._line_to(self._plan.place_M[:3, 3], self._cfg.line_speed_mps, sim_s)
+        self._obs.force_bias_n = self._obs.force_n.copy()   # the held object's weight is not contact
+        return self._line_to(self._release_point(self._plan.place_M[:3, 3]), self._cfg.place_lowering_speed_mps,
+                             sim_s)
+
+    def _release_point(self, lowest_p) -> np.ndarray:
+        """Where a guarded lowering ends unless it touches something first: the held object's bottom (as far
+        below the TCP as the TCP was above the table where the descent stopped) place_release_clearance_m above
+        the table; never below lowest_p."""
+        point = np.array(lowest_p, dtype=float)
+        hang_top_m = self.outcome.contact_height_m
+        if math.isfinite(hang_top_m):
+            point[2] = max(point[2], hang_top_m + self._cfg.place_release_clearance_m)
+        return point
+
+    def _touched(self) -> bool:
+        """A guarded lowering met something: the force (less its bias at the lowering's start) over the
+        threshold while the lowering itself (not yet its stop) runs."""
+        if self._motion is None or self._motion.guarded_stop:
+            return False
+        force = float(np.linalg.norm(self._obs.force_n - self._obs.force_bias_n))
+        return force > self._cfg.contact_force_threshold_n
 
     def _may_touch_down(self) -> bool:
         """Could the held object's bottom be within TOUCHDOWN_MARGIN_M of the table (or a bin floor on it)? Its
@@ -541,6 +572,9 @@ class PickPlaceSequence:
         return self._tcp_z_m() - hang_m < self._cfg.table_z_m + TOUCHDOWN_MARGIN_M
 
     def _tick_place(self, sim_s: float) -> list:
+        if not self._placed_open_sent and self._place.lower_to_contact and self._touched():
+            self.place_contact_z_m = self._tcp_z_m()   # the object stands on something: release it here
+            return self._stop_motion(sim_s)
         if not self._placed_open_sent:
             # Held while lowering: an object lost late in the transfer shows only now (force-closed fingers
             # close on nothing at 20-50 mm/s), and one lost in the lowering may be outside the bin.
@@ -548,15 +582,15 @@ class PickPlaceSequence:
                 self._check_held()
             if not self._arrived(sim_s):
                 return []
-            self._placed_open_sent = True
-            return self._send_gripper(MoveGripper(self._plan.gripper.pre_open_width_m, OPENING_SPEED_MPS), sim_s)
+            self._placed_open_sent = self.released_at_place = True
+            return self._send_gripper(MoveGripper(self._release_width_m(), OPENING_SPEED_MPS), sim_s)
         result = self._gripper_result(sim_s, "opening at the place pose")
         if result is None:
             return []
         if not result[0]:
             raise SequenceFailure(f"gripper could not release the object: {result[2] or 'no reason given'}")
         self._phase = "retreat"
-        return self._line_up(self._cfg.place_approach_height_m, sim_s)
+        return self._line_up(max(0.0, float(self._plan.place_approach_M[2, 3]) - self._tcp_z_m()), sim_s)
 
     def _tick_retreat(self, sim_s: float) -> list:
         if not self._arrived(sim_s):
@@ -677,10 +711,14 @@ class PickPlaceSequence:
             if not result[0]:
                 raise SequenceFailure(f"the hand did not open: {result[2] or 'no reason given'}")
         else:
+            if self._guarded_lowering and self._touched():
+                self._recovery_log.append(f"touched down at TCP z {self._tcp_z_m():.3f} m")
+                return self._stop_motion(sim_s)
             if self._holding_step:
                 self._check_held()
             if not self._arrived(sim_s):
                 return []
+        self._guarded_lowering = False
         self._recovery_log.append(self._step_name)
         return self._next_recovery_step(sim_s)
 
@@ -719,22 +757,60 @@ class PickPlaceSequence:
 
     def _step_carry(self, sim_s: float) -> list:
         q = self._obs.state.q_rad
-        target = self._place_approach_target(q)   # a direct motion from wherever the stop left the arm
+        # A direct motion from wherever the stop left the arm: over the drop zone (recovery_drop_xy_m), where
+        # the arm can pick the object again, else (none configured, or out of reach) over the place pose.
+        target, where = self._drop_approach_target(q), "the drop zone"
+        if target is None:
+            target, where = self._place_approach_target(q), "the place pose"
         # Holding the object, like the transfer: slowed down the same way.
         motion = self._held_motion(lambda limits: plan_joint_motion(q, target, limits, dt_s=self._cfg.sample_dt_s))
-        return self._recovery_motion("carried the held object over the place pose", self._send(motion, sim_s), True)
+        return self._recovery_motion(f"carried the held object over {where}", self._send(motion, sim_s), True)
+
+    def _drop_approach_target(self, q: np.ndarray) -> np.ndarray | None:
+        """Joints above the drop zone (and self._drop_M, the put-down pose), or None without one in reach."""
+        if self._cfg.recovery_drop_xy_m is None:
+            return None
+        x, y = (float(v) for v in self._cfg.recovery_drop_xy_m)
+        drop_p = self._release_point([x, y, self._cfg.table_z_m + MIN_TCP_HEIGHT_ABOVE_TABLE_M])
+        approach_p = drop_p + [0.0, 0.0, self._cfg.place_approach_height_m]
+        try:
+            check_workspace(drop_p, self._cfg.table_z_m)
+            approach, yaw = self._kin.top_down_ik(approach_p, top_down_yaw(self._kin.fk(q)), q)
+            self._kin.ik(top_down_pose(drop_p, yaw), approach.q_rad)
+        except (KinematicsError, ValueError) as error:
+            self._recovery_log.append(f"drop zone ({x:.2f}, {y:.2f}) out of reach ({error})")
+            return None
+        self._drop_M = top_down_pose(drop_p, yaw)
+        return approach.q_rad
 
     def _step_lower(self, sim_s: float) -> list:
         # Not watched for a slip: this lowering follows a failure, where the object may sit anywhere in the
         # hand, so its bottom's height is unknown; touching down pushes it up between the fingers, which
         # would read as a drop (the pick's own place lowering is watched down to TOUCHDOWN_MARGIN_M).
-        commands = self._line_to(self._plan.place_M[:3, 3], self._cfg.line_speed_mps, sim_s)
-        return self._recovery_motion("lowered it to the place pose", commands)
+        # Guarded instead: it stops where the object meets the table or whatever stands there.
+        if self._drop_M is not None:
+            target, where = self._drop_M[:3, 3], "the drop zone"
+        else:
+            target, where = self._release_point(self._plan.place_M[:3, 3]), "the place pose"
+        self._obs.force_bias_n = self._obs.force_n.copy()
+        self._guarded_lowering = True
+        commands = self._line_to(target, self._cfg.place_lowering_speed_mps, sim_s)
+        return self._recovery_motion(f"lowered it at {where}", commands)
 
     def _step_release(self, sim_s: float) -> list:
         self._placed_open_sent = True
         self._step_name, self._awaiting = "released it there", "gripper"
-        return self._send_gripper(MoveGripper(self._plan.gripper.pre_open_width_m, OPENING_SPEED_MPS), sim_s)
+        return self._send_gripper(MoveGripper(self._release_width_m(), OPENING_SPEED_MPS), sim_s)
+
+    def _release_width_m(self) -> float:
+        """How far the hand opens to let the object go: place_release_opening_m wider than it closed on it (at most
+        the pre-grasp opening). Opened fully, a finger reaches 4 cm from the object's centre and pushes whatever
+        stands beside it: a neighbour in the bin, or the bin's wall ('fingers blocked at 47 mm')."""
+        opened = self._plan.gripper.pre_open_width_m
+        closed = self.outcome.gripper_width_closed_m
+        if not math.isfinite(closed):
+            return opened
+        return min(opened, closed + self._cfg.place_release_opening_m)
 
     def _step_retreat(self, sim_s: float) -> list:
         return self._recovery_motion("retreated up", self._line_up(self._cfg.place_approach_height_m, sim_s))

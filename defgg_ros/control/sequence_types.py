@@ -68,12 +68,23 @@ class SequenceConfig:
     observation_lift_m: float = 0.12
     # The arm is "at the observation pose" within this joint distance (rad, every joint).
     observation_tolerance_rad: float = 0.05
+    # A place target with lower_to_contact (the bin) is lowered into at this TCP speed, guarded by
+    # contact_force_threshold_n, down to where the held object's bottom is place_release_clearance_m above the
+    # table (the bin's floor); the hand opens where the lowering stopped.
+    place_lowering_speed_mps: float = 0.05
+    place_release_clearance_m: float = 0.01
+    # The release (at the place, or a recovery's put-down) opens the hand this much wider than it closed.
+    place_release_opening_m: float = 0.01
+    # A recovery holding the object puts it down here (TCP x, y over the table, base frame) the same guarded way,
+    # where the arm can pick it again; None: at the goal's place target.
+    recovery_drop_xy_m: tuple | None = None
 
     def validate(self) -> None:
         positive = ("pregrasp_height_m", "descent_speed_mps", "line_speed_mps", "lift_height_m",
                     "place_approach_height_m", "contact_force_threshold_n", "watchdog_timeout_s",
                     "arrival_joint_atol_rad", "settle_timeout_s", "gripper_timeout_s", "sample_dt_s",
-                    "still_speed_radps", "rest_hold_s", "stop_timeout_s", "observation_tolerance_rad")
+                    "still_speed_radps", "rest_hold_s", "stop_timeout_s", "observation_tolerance_rad",
+                    "place_lowering_speed_mps", "place_release_opening_m")
         for name in positive:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
@@ -96,6 +107,11 @@ class SequenceConfig:
             raise ValueError(f"observation_q_rad must be 7 finite joint positions, got {q_obs}")
         if not (math.isfinite(self.observation_lift_m) and self.observation_lift_m >= 0):
             raise ValueError(f"observation_lift_m must be >= 0, got {self.observation_lift_m}")
+        if not (math.isfinite(self.place_release_clearance_m) and self.place_release_clearance_m >= 0):
+            raise ValueError(f"place_release_clearance_m must be >= 0, got {self.place_release_clearance_m}")
+        drop = self.recovery_drop_xy_m
+        if drop is not None and (len(drop) != 2 or not all(math.isfinite(v) for v in drop)):
+            raise ValueError(f"recovery_drop_xy_m must be 2 finite numbers, got {drop}")
         if not 0.0 <= self.slip_width_fraction < 1.0:
             raise ValueError(f"slip_width_fraction must be in [0, 1), got {self.slip_width_fraction}")
 
@@ -116,6 +132,10 @@ class PlaceTarget:
     # on the way; a turn spins an object held with a low grip force between the pads (it pried a 3 N grasp
     # of a 5 cm block open, CHANGELOG 2026-11-27).
     yaw_rad: float | None = 0.0
+    # The bin: position_m's z is only the height above which the transfer arrives (plus place_approach_height_m);
+    # the lowering goes on down, guarded by the contact force, until the object stands on what is below it
+    # (SequenceConfig.place_lowering_speed_mps). False: lowered to position_m and released there (a goal's pose).
+    lower_to_contact: bool = False
 
 
 @dataclass(frozen=True)
@@ -190,8 +210,9 @@ class _Plan:
     pregrasp_q: np.ndarray
     grasp_M: np.ndarray
     place_approach_q: np.ndarray
-    place_M: np.ndarray
+    place_M: np.ndarray          # the release pose (lower_to_contact: the lowest the lowering may go)
     gripper: GraspCommand
+    place_approach_M: np.ndarray | None = None   # above the place pose, where the transfer ends
 
 
 class SequenceFailure(Exception):

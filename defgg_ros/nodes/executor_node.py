@@ -14,6 +14,7 @@ action-client callbacks feed the sequence under one lock. One goal at a
 time: goals arriving while busy are rejected (the reason is logged).
 """
 import dataclasses
+import functools
 import math
 import threading
 import time
@@ -31,9 +32,11 @@ from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
+from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from defgg_ros.constants import ARM_MODELS
+from defgg_ros.control.bin_slots import BinArea, BinFull, BinSlots, check_drop_xy, default_drop_xy
 from defgg_ros.control.kinematics import PandaKinematics
 from defgg_ros.control.observation import ObservationWatch, arm_state_of, max_joint_speed_radps
 from defgg_ros.control.pick_place import ObservationMove, PickPlaceSequence
@@ -130,6 +133,20 @@ class _RestWatch:
         if self.last_speed_radps is None:
             return "no joint states arrived after the stop"
         return f"joints still at up to {self.last_speed_radps:.3f} rad/s"
+
+
+def recovery_drop_xy(p: dict) -> tuple:
+    """The recovery's put-down point (x, y): recovery_drop_xy_m, or at [0, 0] the point of workspace_box_m nearest
+    the observation pose's TCP, away from the base (ValueError: outside the box or inside the keep-out)."""
+    box, keep_out = p["workspace_box_m"], float(p["base_keep_out_radius_m"])
+    if any(float(v) != 0.0 for v in p["recovery_drop_xy_m"]):
+        return check_drop_xy(p["recovery_drop_xy_m"], box, keep_out)
+    return default_drop_xy(_tcp_xy_m(tuple(float(v) for v in p["observation_q_rad"])), box, keep_out)
+
+
+@functools.lru_cache(maxsize=4)
+def _tcp_xy_m(q_rad: tuple) -> tuple:
+    return tuple(float(v) for v in PandaKinematics().fk(np.asarray(q_rad))[:2, 3])
 
 
 def joint_state_to_arm(msg: JointState, joint_names=DEFAULT_NAMES["joints"],
@@ -233,6 +250,7 @@ class ExecutorNode(Node):
         self._plan_client = self.create_client(PlanGrasp, p["plan_grasp_service"], callback_group=self._group)
         self._server = ActionServer(self, PickAndPlace, p["action_name"], self._execute, callback_group=self._group,
                                     goal_callback=self._on_goal, cancel_callback=lambda _: CancelResponse.ACCEPT)
+        self._set_up_bin(p)
 
     def _params(self) -> dict:
         """The parameters, with the names left empty filled in from robot_type (ValueError: unknown type, or
@@ -276,9 +294,48 @@ class ExecutorNode(Node):
             rest_hold_s=float(p["rest_hold_s"]), stop_timeout_s=float(p["stop_timeout_s"]),
             observation_q_rad=tuple(float(v) for v in p["observation_q_rad"]) if p["recover_after_failure"] else None,
             observation_lift_m=float(p["observation_lift_m"]),
-            observation_tolerance_rad=float(p["observation_tolerance_rad"]))
+            observation_tolerance_rad=float(p["observation_tolerance_rad"]),
+            place_lowering_speed_mps=float(p["place_lowering_speed_mps"]),
+            place_release_clearance_m=float(p["place_release_clearance_m"]),
+            place_release_opening_m=float(p["place_release_opening_m"]),
+            recovery_drop_xy_m=recovery_drop_xy(p))
         config.validate()
         return config
+
+    # --- the bin ------------------------------------------------------------
+    def _set_up_bin(self, p: dict) -> None:
+        """The bin's slots (remembered across goals) and the service that frees them."""
+        self._bin = BinSlots(BinArea.from_list(p["bin_inner_m"], p["bin_slot_pitch_m"],   # ValueError: bad area
+                                               p["bin_wall_margin_m"]))
+        x, y = (float(v) for v in p["place_position_m"][:2])
+        if not self._bin.area.contains(x, y):
+            raise ValueError(f"place_position_m ({x:.3f}, {y:.3f}) is outside bin_inner_m {list(p['bin_inner_m'])}")
+        self._goal_slot = None   # the slot the running goal places into
+        self.create_service(Trigger, p["reset_bin_service"], self._on_reset_bin, callback_group=self._group)
+
+    def _on_reset_bin(self, _request, response):
+        with self._lock:
+            freed = self._bin.reset()
+        response.success, response.message = True, f"{freed} of {len(self._bin.centres)} bin slots freed"
+        self.get_logger().info(f"bin emptied: {response.message}")
+        return response
+
+    def _place_for(self, request, p: dict) -> PlaceTarget:
+        """The goal's place pose, or (empty frame_id) the bin's first free slot, lowered into until contact."""
+        place = place_target(request.place_pose, p["base_frame"], p["place_position_m"],
+                             None if p["place_keep_grasp_yaw"] else p["place_yaw_rad"])
+        self._goal_slot = None
+        if request.place_pose.header.frame_id != "":
+            return place
+        with self._lock:
+            try:
+                slot = self._bin.next_free()
+            except BinFull as full:
+                raise GoalError(f"{full}: empty it, then call {self.resolve_service_name(p['reset_bin_service'])}")\
+                    from None
+        self._goal_slot = slot
+        x, y = self._bin.centres[slot]
+        return dataclasses.replace(place, position_m=(x, y, float(p["place_position_m"][2])), lower_to_contact=True)
 
     def destroy_node(self):
         self._shutdown.set()  # ends a running control loop
@@ -431,8 +488,7 @@ class ExecutorNode(Node):
                     return self._finish(goal_handle, moved, result)
             result.grasp_used = grasp = self._resolve_grasp(goal_handle.request)
             p = self._params()
-            place = place_target(goal_handle.request.place_pose, p["base_frame"], p["place_position_m"],
-                                 None if p["place_keep_grasp_yaw"] else p["place_yaw_rad"])
+            place = self._place_for(goal_handle.request, p)
             sequence = self._sequence_for(grasp, place, p)
             if goal_handle.request.plan_grasp and p["plan_grasp_alternatives"] > 1:
                 result.grasp_used, sequence = self._reachable_alternative(grasp, sequence, place, p)
@@ -582,7 +638,12 @@ class ExecutorNode(Node):
         return self.get_clock().now().nanoseconds * 1e-9, time.monotonic()
 
     def _run(self, goal_handle, sequence: PickPlaceSequence, result):
-        self._drive(goal_handle, sequence)
+        try:
+            self._drive(goal_handle, sequence)
+        finally:   # the hand opened in the slot: an object lies there now (even if the run failed later)
+            if self._goal_slot is not None and sequence.released_at_place:
+                with self._lock:
+                    self._bin.mark_used(self._goal_slot)
         return self._finish(goal_handle, sequence.outcome, result)
 
     def _drive(self, goal_handle, sequence: PickPlaceSequence) -> None:

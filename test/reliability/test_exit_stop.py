@@ -15,13 +15,13 @@ import time
 
 import numpy as np
 import pytest
-import yaml
 from defgg_interfaces.action import PickAndPlace
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
+from support.cell_sets import driver_and_executor_set
 from support.executor_cell import grasp_msg
 
-from defgg_ros.bringup.node_set import config_dir, load_node_set
+from defgg_ros.bringup.node_set import config_dir
 from defgg_ros.bringup.supervisor import Bringup
 from defgg_ros.control.kinematics import PandaKinematics
 from defgg_ros.nodes import qos
@@ -39,19 +39,8 @@ KIN = PandaKinematics()
 
 
 def _cell_set(tmp_path):
-    """A node set of the simulated driver and the executor only (the pick takes a given grasp)."""
-    config = config_dir()
-    text = {"name": "driver_and_executor", "use_sim_time": True, "nodes": [
-        {"name": "fake_panda_driver", "module": "defgg_ros.nodes.fake_panda_driver_node",
-         "params": [str(config / "fake_panda_driver.yaml")], "ready": {"action": "/franka_gripper/grasp"},
-         "overrides": {"scene_file": str(SCENE), "depth_rate_hz": 0.5}},
-        {"name": "executor_node", "module": "defgg_ros.nodes.executor_node",
-         "params": [str(config / "executor_node.yaml")], "ready": {"action": "/defgg/pick_and_place"},
-         # slow enough that each phase lasts over a second on a busy machine
-         "overrides": {"descent_speed_mps": 0.01, "line_speed_mps": 0.05}}]}
-    path = tmp_path / "driver_and_executor.yaml"
-    path.write_text(yaml.safe_dump(text))
-    return load_node_set(str(path))
+    # slow enough that each phase lasts over a second on a busy machine
+    return driver_and_executor_set(tmp_path, SCENE, {"descent_speed_mps": 0.01, "line_speed_mps": 0.05})
 
 
 def _arm(state: JointState):

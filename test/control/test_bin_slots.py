@@ -1,0 +1,57 @@
+"""The bin's slots and the recovery's drop zone (issue 48.2, 48.3)."""
+import math
+
+import pytest
+
+from defgg_ros.control.bin_slots import BinArea, BinFull, BinSlots, check_drop_xy, default_drop_xy, slot_centres
+
+pytestmark = pytest.mark.unit
+
+SHIPPED_BIN = [0.25, 0.45, -0.55, -0.35]   # executor_node.yaml's bin_inner_m (rigid_box.yaml's 20 cm bin)
+WORKSPACE = [0.22, 0.85, -0.40, 0.40]
+
+
+def test_slots_keep_the_pitch_and_the_wall_margin():
+    for area_m, count in ((SHIPPED_BIN, 4), ([0.19, 0.51, -0.61, -0.29], 9)):
+        area = BinArea.from_list(area_m, 0.08, 0.05)
+        centres = slot_centres(area)
+        assert len(centres) == count
+        for x, y in centres:
+            assert min(x - area.x_min_m, area.x_max_m - x, y - area.y_min_m, area.y_max_m - y) >= 0.05 - 1e-9
+        gaps = [math.dist(a, b) for i, a in enumerate(centres) for b in centres[:i]]
+        assert min(gaps) == pytest.approx(0.08)
+
+
+def test_slots_are_used_once_until_the_bin_is_reset():
+    slots = BinSlots(BinArea.from_list(SHIPPED_BIN, 0.08, 0.05))
+    taken = []
+    for _ in range(4):
+        index = slots.next_free()
+        assert index == slots.next_free()   # asking again does not use it: only a release does
+        slots.mark_used(index)
+        taken.append(index)
+    assert sorted(taken) == [0, 1, 2, 3]
+    with pytest.raises(BinFull, match="4 slots"):
+        slots.next_free()
+    assert slots.reset() == 4 and slots.next_free() == 0
+
+
+@pytest.mark.parametrize("bad", [([0.25, 0.45, -0.55], 0.08, 0.05), ([0.25, 0.3, -0.55, -0.35], 0.08, 0.05),
+                                 (SHIPPED_BIN, 0.0, 0.05), (SHIPPED_BIN, 0.08, -0.01)])
+def test_a_bin_that_cannot_hold_a_slot_is_refused(bad):
+    with pytest.raises(ValueError):
+        BinArea.from_list(*bad)
+
+
+def test_the_default_drop_zone_is_nearest_the_observation_pose_and_away_from_the_base():
+    assert default_drop_xy((0.307, 0.0), WORKSPACE, 0.30) == pytest.approx((0.307, 0.0))
+    x, y = default_drop_xy((0.15, -0.05), WORKSPACE, 0.30)   # where the issue's block ended: pushed out
+    assert WORKSPACE[0] <= x <= WORKSPACE[1] and WORKSPACE[2] <= y <= WORKSPACE[3] and math.hypot(x, y) >= 0.30
+    x, y = default_drop_xy((0.9, 0.6), WORKSPACE, 0.30)       # clamped into the box
+    assert (x, y) == pytest.approx((0.85, 0.40))
+
+
+@pytest.mark.parametrize("drop", [(0.151, -0.05), (0.9, 0.0), (0.25, 0.0)])
+def test_a_drop_point_outside_the_box_or_inside_the_keep_out_is_refused(drop):
+    with pytest.raises(ValueError, match="recovery_drop_xy_m"):
+        check_drop_xy(drop, WORKSPACE, 0.30)
