@@ -50,3 +50,53 @@ def test_a_start_up_error_without_a_stop_is_still_exit_2_with_one_line():
     done = _run("run")
     assert done.returncode == 2, done.stderr
     assert done.stderr.strip() == "probe_node: a bad parameter"
+
+
+# A node that stops hardware before it exits (the executor: issue 48.1). Its timer sends the signal (or raises) once
+# the node spins; stop_for_exit must run while callbacks still run, before anything is destroyed.
+STOPPING_CHILD = """
+import os, signal, sys, time
+from rclpy.node import Node
+from defgg_ros.nodes.node_main import run_node
+
+mode = sys.argv[1]
+
+class Probe(Node):
+    def __init__(self):
+        super().__init__("stopping_probe")
+        self.ticks = 0
+        self.create_timer(0.01, self.tick)
+
+    def tick(self):
+        self.ticks += 1
+        if self.ticks == 20:
+            if mode == "raise":
+                raise RuntimeError("a bug in a callback")
+            os.kill(os.getpid(), signal.SIGINT if mode == "sigint" else signal.SIGTERM)
+
+    def stop_for_exit(self, spin_once):
+        before, deadline = self.ticks, time.monotonic() + 5.0
+        while self.ticks < before + 5 and time.monotonic() < deadline:
+            spin_once(0.05)
+        print(f"stopped while callbacks ran: {self.ticks - before >= 5}", flush=True)
+        return "could not confirm that the arm stopped" if mode == "unconfirmed" else ""
+
+    def destroy_node(self):
+        print("destroyed", flush=True)
+        super().destroy_node()
+
+run_node("stopping_probe", Probe, stops_hardware=True)
+"""
+
+
+@pytest.mark.parametrize("mode, code", [("sigterm", 0), ("sigint", 0), ("unconfirmed", 1), ("raise", 1)])
+def test_a_node_that_stops_hardware_stops_it_before_it_is_torn_down(mode, code):
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    done = subprocess.run([sys.executable, "-c", STOPPING_CHILD, mode], capture_output=True, text=True, timeout=60,
+                          env=env)
+    assert done.returncode == code, (done.stdout, done.stderr)
+    assert done.stdout.split() == ["stopped", "while", "callbacks", "ran:", "True", "destroyed"], done.stdout
+    if mode == "unconfirmed":
+        assert "stopping_probe: could not confirm that the arm stopped" in done.stderr
+    if mode == "raise":
+        assert "RuntimeError: a bug in a callback" in done.stderr
