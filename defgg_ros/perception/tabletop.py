@@ -21,6 +21,13 @@ or another resolution sees the same scene:
    Touching objects of different heights are cut at their common edge (a can against a box, a
    bottle against a block), not only separated by gaps. Image labels are read back from the cells.
    (Two flat tops at the same height that touch are one surface to any depth camera: one object.)
+5. Real shapes (issue 47): occupied cells no object reached, in a group touching no object and at least
+   LEFTOVER_MIN_WIDTH_M wide with what it encloses, are an object (a thin-walled cup, a mug seen from the
+   side: no flat core survives the cuts); such a group around one object joins it (a cup's rim and walls
+   around its inner bottom); a narrow region lower and much smaller than the one object beside it joins it
+   (a drill's chuck, a mug's handle: _merge_appendages); regions at the view's border whose outline rises
+   out of the table without a wall are the table itself, curving up, and are dropped (_drop_table_warps);
+   unlabelled pixels one object alone encloses in the image take its label (a cup's inside: fill_enclosed).
 """
 from __future__ import annotations
 
@@ -58,9 +65,28 @@ LABEL_REACH_M = 0.004
 FULL_RESOLUTION_MAX_FX_PX = 320.0
 # A hole whose right neighbour is this much nearer than its left one is a stereo shadow (fill_holes).
 SHADOW_JUMP_M = 0.005
+# A region narrower than this (twice its largest inscribed radius), lower than and under a quarter of the area
+# of the one region within APPENDAGE_GAP_M of it, is a part of that object (a drill's chuck, a mug's handle,
+# a battery pack showing beside the body above it), not an object of its own.
+APPENDAGE_MAX_WIDTH_M = 0.025
+APPENDAGE_MAX_AREA_SHARE = 0.25
+APPENDAGE_GAP_M = 0.005
+# Occupied cells no object reached become an object of their own only as a group at least this wide (a
+# mug's wall seen from the side splats into a 14 mm crescent; a battery pack's flank beside a drill's body
+# into a 6 mm sliver).
+LEFTOVER_MIN_WIDTH_M = 0.010
+# ... and only when it stays this far under the workspace box's max_height_m (what reaches it is part of
+# something taller: the robot's base seen in a table frame, a shelf).
+LEFTOVER_CEILING_M = 0.01
+# A region at the view's border whose outline against the table stands less than this above the minimum object
+# height is the table rising there, not an object (_drop_table_warps).
+WARP_OUTLINE_STEP_M = 0.004
 # Labels travel as mono8.
 MAX_LABELS = 254
 _CROSS_3X3 = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
+
+
+GRASP_HEIGHT_RULES = ("half_height", "below_surface")
 
 
 class TabletopError(ValueError):
@@ -94,6 +120,16 @@ class TabletopConfig:
     # above the table. depth_noise_from_table: measure it instead from the frame's own table residuals.
     depth_noise: DepthNoiseModel = field(default_factory=DepthNoiseModel)
     depth_noise_from_table: bool = False
+    # How low the executor takes the fingers (its grasp_height_rule and grasp_depth_below_surface_m, which the
+    # grasp search must share): half_height (half the height seen at the centre) or below_surface (this far
+    # under it: a bin's top objects, whose neighbours stand higher than half their height).
+    grasp_height_rule: str = "half_height"
+    grasp_depth_below_surface_m: float = 0.018
+
+    def __post_init__(self):
+        if self.grasp_height_rule not in GRASP_HEIGHT_RULES or not self.grasp_depth_below_surface_m >= 0:
+            raise ValueError(f"grasp_height_rule must be one of {GRASP_HEIGHT_RULES} and grasp_depth_below_surface_m "
+                             f">= 0, got {self.grasp_height_rule!r}, {self.grasp_depth_below_surface_m}")
 
 
 @dataclass
@@ -312,8 +348,19 @@ def perceive(depth_m, camera_k, base_T_camera, config: TabletopConfig | None = N
     # object's label within LABEL_REACH_M.
     grid_labels, near_labels = _nearest_labels(grid_labels, grid > 0, grid, config.jump_m, GROW_REACH_M / CELL_M,
                                                LABEL_REACH_M / CELL_M)
+    # The cells at the view's border: those of the image's border pixels and the grid's own edges (the box's).
+    h_p, w_p = depth.shape
+    border_cells = np.zeros(grid.shape, bool)
+    border_cells[[0, -1], :] = True
+    border_cells[:, [0, -1]] = True
+    border_cells.reshape(-1)[cell[(vs == 0) | (vs == h_p - 1) | (us == 0) | (us == w_p - 1)]] = True
+    grid_labels, near_labels = _label_leftovers(grid_labels, near_labels, grid, areas, config, border_cells)
+    grid_labels, near_labels, areas = _merge_appendages(grid_labels, near_labels, grid, areas)
+    at_border = {int(v) for v in np.unique(grid_labels[border_cells])} - {0}
+    grid_labels, near_labels, areas = _drop_table_warps(grid_labels, near_labels, grid, areas, at_border, config)
     processed_labels = np.zeros(depth.shape, np.uint8)
     processed_labels.reshape(-1)[index] = near_labels.reshape(-1)[cell]
+    processed_labels = fill_enclosed(processed_labels)
     processed_fg = np.zeros(depth.shape, bool)
     processed_fg.reshape(-1)[index] = not empty
     pixel_cell = np.full(depth.shape, -1, np.int32)
@@ -401,6 +448,162 @@ def _nearest_labels(labels: np.ndarray, occupied: np.ndarray, grid: np.ndarray, 
     reach = (d <= reach_cells) & ~continues
     for_pixels.reshape(-1)[cells[reach]] = flat_labels[source[reach]]
     return grown, for_pixels
+
+
+def _label_leftovers(labels: np.ndarray, for_pixels: np.ndarray, grid: np.ndarray, areas: dict,
+                     config: TabletopConfig, border_cells: np.ndarray) -> tuple:
+    """Occupied cells that no object reached, in groups that touch no object, of at least min_object_area_m2:
+    objects too, each group one (areas gets theirs). They are objects without a flat core that the jump and
+    crease cuts leave: a thin-walled cup or bowl (rim, walls and inner bottom all cut), a mug's outer wall seen
+    from the side. Groups touching an object stay unlabelled (its flanks, as before)."""
+    rest = (grid > 0) & (labels == 0)
+    if not rest.any() or len(areas) >= MAX_LABELS:
+        return labels, for_pixels
+    count, groups = cv2.connectedComponents(rest.view(np.uint8), connectivity=8)
+    touching = np.unique(groups[cv2.dilate((labels > 0).view(np.uint8), np.ones((3, 3), np.uint8)) > 0])
+    sizes = np.bincount(groups.reshape(-1), minlength=count)
+    min_cells = config.min_object_area_m2 / (CELL_M * CELL_M)
+    lut = np.zeros(count, np.uint8)
+    for g in set(touching.tolist()) - {0}:
+        lut[g] = _enclosed_label(groups == g, labels)
+    tallest = np.zeros(count, np.float32)
+    np.maximum.at(tallest, groups.reshape(-1), grid.reshape(-1))
+    # Not cut by the view's border, not rising to the box's ceiling (the robot's base, a shelf: structures
+    # seen in part), not a sliver (a rim counts with what it holds).
+    cut = set(np.unique(groups[border_cells]).tolist())
+    new = [g for g in range(1, count) if g not in set(touching.tolist()) and g not in cut and sizes[g] >= min_cells
+           and tallest[g] < config.workspace.max_height_m - LEFTOVER_CEILING_M
+           and _width_m(_filled(groups == g)) >= LEFTOVER_MIN_WIDTH_M]
+    if not new and not lut.any():
+        return labels, for_pixels
+    for g in sorted(new, key=lambda g: -sizes[g])[:MAX_LABELS - len(areas)]:
+        lut[g] = len(areas) + 1
+        areas[len(areas) + 1] = float(sizes[g]) * CELL_M * CELL_M
+    extra = lut[groups]
+    return np.where(extra > 0, extra, labels), np.where(extra > 0, extra, for_pixels)
+
+
+def _enclosed_label(group: np.ndarray, labels: np.ndarray) -> int:
+    """The one object a group of unlabelled cells encloses (a cup's rim and walls around its inner bottom), or 0:
+    the group takes it when it holds all that object's cells and touches no other object."""
+    near = cv2.dilate(group.view(np.uint8), np.ones((3, 3), np.uint8)) > 0
+    touched = np.unique(labels[near & (labels > 0)])
+    if touched.size != 1:
+        return 0
+    mine = labels == touched[0]
+    return int(touched[0]) if np.count_nonzero(_filled(group) & mine) >= 0.9 * np.count_nonzero(mine) else 0
+
+
+def _filled(mask: np.ndarray) -> np.ndarray:
+    """The mask with its holes filled (a cup's rim with its inside)."""
+    contours, _ = cv2.findContours(mask.view(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+    out = np.zeros(mask.shape, np.uint8)
+    cv2.drawContours(out, contours, -1, 1, thickness=cv2.FILLED)
+    return out > 0
+
+
+def fill_enclosed(labels: np.ndarray) -> np.ndarray:
+    """Image labels with every unlabelled region that one object alone encloses given that object's label: the
+    inside of a hollow object seen from above (the inner bottom of a cup or bowl, lower than the minimum object
+    height), missing returns inside an object. A region bordered by several objects (a gap between them, one
+    inside a bin's floor next to an object) stays as it is."""
+    free = (labels == 0).view(np.uint8)
+    count, regions = cv2.connectedComponents(free, connectivity=4)
+    if count <= 2:
+        return labels
+    border = np.unique(np.concatenate([regions[0], regions[-1], regions[:, 0], regions[:, -1]]))
+    enclosed = np.ones(count, bool)
+    enclosed[border] = False
+    enclosed[0] = False                         # labelled pixels
+    if not enclosed.any():
+        return labels
+    # Each enclosed region's neighbouring labels: a region takes a label when every labelled pixel next to it
+    # carries that one.
+    grown_max = cv2.dilate(labels, _CROSS_3X3)
+    grown_min = cv2.erode(np.where(labels > 0, labels, 255).astype(np.uint8), _CROSS_3X3)
+    index = regions.reshape(-1)
+    pick = enclosed[index]
+    hi = np.zeros(count, np.int32)
+    lo = np.full(count, 255, np.int32)
+    np.maximum.at(hi, index[pick], grown_max.reshape(-1)[pick])
+    np.minimum.at(lo, index[pick], grown_min.reshape(-1)[pick])
+    lut = np.where(enclosed & (hi == lo) & (hi > 0) & (hi < 255), hi, 0).astype(np.uint8)
+    extra = lut[regions]
+    return np.where(extra > 0, extra, labels)
+
+
+def _width_m(mask: np.ndarray) -> float:
+    """Twice the largest inscribed radius of a cell mask (m): the width of a strip, the diameter of a disc."""
+    return 2.0 * float(cv2.distanceTransform(np.pad(mask, 1).view(np.uint8), cv2.DIST_L2, 3).max()) * CELL_M
+
+
+def _merge_appendages(labels: np.ndarray, for_pixels: np.ndarray, grid: np.ndarray, areas: dict) -> tuple:
+    """(grid labels, pixel labels, areas) with each appendage (APPENDAGE_MAX_WIDTH_M) merged into the object it
+    hangs on, labels renumbered 1..N in their order. Touching distinct objects are wider, or not lower and
+    smaller than their neighbour (a can against a cereal box, a block against a sponge), and stay apart."""
+    if len(areas) < 2:
+        return labels, for_pixels, areas
+    gap = max(1, int(round(APPENDAGE_GAP_M / CELL_M)))
+    near = np.ones((2 * gap + 1, 2 * gap + 1), np.uint8)
+    cells = {label: labels == label for label in areas}
+    size = {label: int(np.count_nonzero(mask)) for label, mask in cells.items()}
+    height = {label: float(np.median(grid[mask])) if size[label] else 0.0 for label, mask in cells.items()}
+    target = {}
+    for label in sorted(areas, key=lambda lab: size[lab]):
+        mask = cells[label]
+        if not size[label]:
+            continue
+        if _width_m(mask) >= APPENDAGE_MAX_WIDTH_M:
+            continue
+        around = np.unique(labels[(cv2.dilate(mask.view(np.uint8), near) > 0) & ~mask])
+        around = [int(a) for a in around if a and a != label]
+        if len(around) == 1:
+            host = around[0]
+            if size[label] < APPENDAGE_MAX_AREA_SHARE * size[host] and height[label] < height[host]:
+                target[label] = host
+    return _relabel(labels, for_pixels, areas, target)
+
+
+def _relabel(labels: np.ndarray, for_pixels: np.ndarray, areas: dict, target: dict) -> tuple:
+    """(grid labels, pixel labels, areas) with each label in target merged into target[label] (0: dropped),
+    the others renumbered 1..N in their order."""
+    if not target:
+        return labels, for_pixels, areas
+
+    def root(label):
+        while target.get(label):
+            label = target[label]
+        return label
+    kept = [label for label in sorted(areas) if label not in target]
+    lut = np.zeros(256, np.uint8)
+    for new, label in enumerate(kept, start=1):
+        lut[label] = new
+    for label in target:
+        lut[label] = lut[root(label)] if target[label] else 0
+    merged = {}
+    for label, area in areas.items():
+        if lut[label]:
+            merged[int(lut[label])] = merged.get(int(lut[label]), 0.0) + area
+    return lut[labels], lut[for_pixels], merged
+
+
+def _drop_table_warps(labels: np.ndarray, for_pixels: np.ndarray, grid: np.ndarray, areas: dict, at_border: set,
+                      config: TabletopConfig) -> tuple:
+    """_relabel without the objects that are the table itself rising above the fitted plane at the view's edge
+    (a slightly curved or tilted table, 1-2 cm high along its far edge): regions cut by the image's or the
+    workspace's border whose outline against the table stands less than WARP_OUTLINE_STEP_M above the
+    minimum object height, i.e. a surface that rises out of the table without a wall. Every object has a wall
+    at its outline (a 1.5 cm block's outline cells: 14 mm; a warped table's: 6-7 mm)."""
+    if not at_border:
+        return labels, for_pixels, areas
+    empty_near = cv2.dilate((grid <= 0).view(np.uint8), _CROSS_3X3) > 0
+    step = config.workspace.min_height_m + WARP_OUTLINE_STEP_M
+    target = {}
+    for label in at_border & set(areas):
+        outline = (labels == label) & empty_near
+        if outline.any() and float(np.median(grid[outline])) < step:
+            target[label] = 0
+    return _relabel(labels, for_pixels, areas, target)
 
 
 def fill_holes(depth_m: np.ndarray) -> np.ndarray:

@@ -170,19 +170,20 @@ class LyingCylinder:
     yaw_rad: float = 0.0
     material: str = "matte"
     name: str = "lying cylinder"
+    z_bottom_m: float = 0.0            # its lowest line's height (above the table: held by another part)
 
     def bounds_corners(self) -> np.ndarray:
         return Box(self.center_xy_m, (self.length_m, 2 * self.radius_m, 2 * self.radius_m),
-                   self.yaw_rad).bounds_corners()
+                   self.yaw_rad, self.z_bottom_m).bounds_corners()
 
     def contains(self, points) -> np.ndarray:
         r = rotation_about_z(self.yaw_rad)
-        local = (np.asarray(points, float) - np.array([*self.center_xy_m, self.radius_m])) @ r
+        local = (np.asarray(points, float) - np.array([*self.center_xy_m, self.z_bottom_m + self.radius_m])) @ r
         return (local[:, 1] ** 2 + local[:, 2] ** 2 <= self.radius_m ** 2) & (np.abs(local[:, 0]) <= self.length_m / 2)
 
     def intersect(self, origin, rays):
         r = rotation_about_z(self.yaw_rad)
-        centre = np.array([*self.center_xy_m, self.radius_m])
+        centre = np.array([*self.center_xy_m, self.z_bottom_m + self.radius_m])
         o, d = (origin - centre) @ r, rays @ r      # axis = local x
         a = d[:, 1] ** 2 + d[:, 2] ** 2
         b = 2 * (o[1] * d[:, 1] + o[2] * d[:, 2])
@@ -224,6 +225,80 @@ class Sphere:
         hit = (disc >= 0) & (t > 0)
         normal = (o + t[:, None] * rays) / self.radius_m
         return np.where(hit, t, np.inf), normal
+
+
+@dataclass(frozen=True)
+class HollowCylinder:
+    """An open cup or bowl standing on the table: a wall of wall_m around an inside whose bottom lies
+    bottom_m above the table. From above: the rim, the inside of the far wall and the inner bottom."""
+    center_xy_m: tuple
+    radius_m: float
+    height_m: float
+    wall_m: float = 0.004
+    bottom_m: float = 0.012
+    material: str = "matte"
+    name: str = "cup"
+
+    def _outer(self) -> Cylinder:
+        return Cylinder(self.center_xy_m, self.radius_m, self.height_m)
+
+    def bounds_corners(self) -> np.ndarray:
+        return self._outer().bounds_corners()
+
+    def contains(self, points) -> np.ndarray:
+        p = np.asarray(points, float)
+        d = p[:, :2] - np.asarray(self.center_xy_m)
+        inside = (np.einsum("ij,ij->i", d, d) < (self.radius_m - self.wall_m) ** 2) & (p[:, 2] > self.bottom_m)
+        return self._outer().contains(p) & ~inside
+
+    def intersect(self, origin, rays):
+        t, normal = self._outer().intersect(origin, rays)
+        o = origin - np.array([*self.center_xy_m, 0.0])
+        inner = self.radius_m - self.wall_m
+        hit_xy = o[:2] + np.where(np.isfinite(t), t, 0.0)[:, None] * rays[:, :2]
+        into = np.isfinite(t) & (normal[:, 2] > 0.5) & (np.einsum("ij,ij->i", hit_xy, hit_xy) < inner ** 2)
+        if not into.any():
+            return t, normal
+        d = rays[into]
+        # Through the opening: the inside of the wall (the inner cylinder's far crossing) or the inner bottom.
+        a = d[:, 0] ** 2 + d[:, 1] ** 2
+        b = 2 * (o[0] * d[:, 0] + o[1] * d[:, 1])
+        c = o[0] ** 2 + o[1] ** 2 - inner ** 2
+        with np.errstate(invalid="ignore", divide="ignore"):
+            t_wall = (-b + np.sqrt(np.maximum(b * b - 4 * a * c, 0.0))) / (2 * a)
+            t_bottom = (self.bottom_m - o[2]) / d[:, 2]
+        z_wall = o[2] + t_wall * d[:, 2]
+        on_wall = z_wall > self.bottom_m
+        t_in = np.where(on_wall, t_wall, t_bottom)
+        n_in = np.zeros_like(d)
+        wall_xy = o[:2] + t_wall[:, None] * d[:, :2]
+        n_in[:, :2] = -wall_xy / inner
+        n_in[~on_wall] = (0.0, 0.0, 1.0)
+        t, normal = t.copy(), normal.copy()
+        t[into], normal[into] = t_in, n_in
+        return t, normal
+
+
+@dataclass(frozen=True)
+class Compound:
+    """One object made of several primitives (a drill, a mug with its handle): one label."""
+    parts: tuple
+    name: str = "compound"
+    material: str = "matte"
+
+    def bounds_corners(self) -> np.ndarray:
+        return np.concatenate([part.bounds_corners() for part in self.parts])
+
+    def contains(self, points) -> np.ndarray:
+        return np.any([part.contains(points) for part in self.parts], axis=0)
+
+    def intersect(self, origin, rays):
+        best_t, best_normal = np.full(len(rays), np.inf), np.zeros_like(rays)
+        for part in self.parts:
+            t, normal = part.intersect(origin, rays)
+            closer = t < best_t
+            best_t[closer], best_normal[closer] = t[closer], normal[closer]
+        return best_t, best_normal
 
 
 def robot_base_parts() -> tuple:
@@ -489,3 +564,92 @@ def overhead_with_fingers(obj, width_px: int = 640, height_px: int = 480, height
     fingers = hand_fingers_in_view(scene.base_T_camera, scene.camera_k, height_px, finger_distance_m)
     return TabletopScene(scene.objects, scene.base_T_camera, width_px, height_px,
                          robot_parts=scene.robot_parts + fingers)
+
+
+# --- real shapes (issue 47): one object of several parts, hollow objects, a warped table, bin clutter --------
+
+def drill_like(center_xy_m=(0.50, 0.0), yaw_rad: float = 0.0, name: str = "drill") -> Compound:
+    """A cordless drill standing on its battery: a battery pack on the table, a handle rising from its rear to
+    the body, a body lying across the top (a cylinder, its chuck overhanging the table in front). Its parts
+    meet only above the table: from above, the body crosses the battery, which shows around it."""
+    r = rotation_about_z(yaw_rad)[:2, :2]
+
+    def at(dx, dy):
+        x, y = np.asarray(center_xy_m, float) + r @ (dx, dy)
+        return float(x), float(y)
+    return Compound((
+        Box(at(0.0, 0.0), (0.11, 0.08, 0.065), yaw_rad, name="battery"),
+        Box(at(-0.03, 0.0), (0.04, 0.032, 0.12), yaw_rad, 0.06, name="handle"),
+        LyingCylinder(at(0.035, 0.0), 0.028, 0.17, yaw_rad, z_bottom_m=0.165, name="body"),
+        LyingCylinder(at(0.14, 0.0), 0.012, 0.045, yaw_rad, z_bottom_m=0.181, name="chuck"),
+    ), name=name)
+
+
+def mug_like(center_xy_m=(0.50, 0.0), yaw_rad: float = 0.0, radius_m: float = 0.04, height_m: float = 0.095,
+             name: str = "mug") -> Compound:
+    """An open mug with a handle on its side: the handle (a 12 mm wide loop, seen from above as a strip) is
+    joined to the wall between 2.5 cm above the table and just under the rim; the table shows beneath it."""
+    x, y = center_xy_m
+    c, s = math.cos(yaw_rad), math.sin(yaw_rad)
+    reach = 0.028
+    handle_xy = (x + c * (radius_m + reach / 2 - 0.002), y + s * (radius_m + reach / 2 - 0.002))
+    return Compound((
+        HollowCylinder(center_xy_m, radius_m, height_m, name="mug body"),
+        Box(handle_xy, (reach, 0.012, height_m - 0.035), yaw_rad, 0.025, name="handle"),
+    ), name=name)
+
+
+def curved_table_warp(rise_m: float = 0.018, start_x_m: float = 0.62, end_x_m: float = 0.85):
+    """A table that curves up towards its far edge (+x): flat up to start_x_m, rise_m higher at end_x_m."""
+    def warp(x, y):
+        u = np.clip((np.asarray(x) - start_x_m) / (end_x_m - start_x_m), 0.0, None)
+        return rise_m * u * u
+    return warp
+
+
+def bin_walls(center_xy_m=(0.50, 0.0), size_m=(0.30, 0.22), height_m: float = 0.09, wall_m: float = 0.006,
+              floor_m: float = 0.008) -> tuple:
+    """A tote bin's floor and four walls, as robot parts (ground truth 'not an object to pick')."""
+    x, y = center_xy_m
+    lx, ly = size_m
+    return (Box((x, y), (lx, ly, floor_m), name="bin floor"),
+            Box((x + (lx - wall_m) / 2, y), (wall_m, ly, height_m), name="bin wall"),
+            Box((x - (lx - wall_m) / 2, y), (wall_m, ly, height_m), name="bin wall"),
+            Box((x, y + (ly - wall_m) / 2), (lx, wall_m, height_m), name="bin wall"),
+            Box((x, y - (ly - wall_m) / 2), (lx, wall_m, height_m), name="bin wall"))
+
+
+def bin_clutter_objects(count: int = 24, center_xy_m=(0.50, 0.0), size_m=(0.30, 0.22), floor_m: float = 0.008,
+                        seed: int = 0, tall_m=(0.05, 0.08)) -> tuple:
+    """count small objects dense in a bin, a few millimetres to two centimetres apart: low ones (1-2 cm: lids,
+    flat boxes, small balls) and, every third, tall ones (5-8 cm: standing cans and blocks): the top objects
+    a gripper can take, its fingers going down beside them onto the low ones."""
+    rng = np.random.default_rng(seed)
+    cols = int(math.ceil(math.sqrt(count * size_m[0] / size_m[1])))
+    rows = int(math.ceil(count / cols))
+    pitch = ((size_m[0] - 0.02) / cols, (size_m[1] - 0.02) / rows)
+    objects = []
+    for n in range(count):
+        i, j = n % cols, n // cols
+        x = center_xy_m[0] - (size_m[0] - 0.02) / 2 + (i + 0.5) * pitch[0] + rng.uniform(-0.003, 0.003)
+        y = center_xy_m[1] - (size_m[1] - 0.02) / 2 + (j + 0.5) * pitch[1] + rng.uniform(-0.003, 0.003)
+        tall = (n + seed) % 3 == 0
+        h = float(rng.uniform(*tall_m) if tall else rng.uniform(0.01, 0.02))
+        kind = int(rng.integers(0, 2 if tall else 3))
+        if kind == 0:
+            size = (min(pitch) * rng.uniform(0.55, 0.85), min(pitch) * rng.uniform(0.5, 0.8), h)
+            objects.append(Box((x, y), size, float(rng.uniform(-0.5, 0.5)), floor_m, name=f"box {n}"))
+        elif kind == 1:
+            objects.append(Cylinder((x, y), min(pitch) * rng.uniform(0.28, 0.42), h, floor_m, name=f"can {n}"))
+        else:
+            rad = h / 2 + 0.004
+            objects.append(Sphere((x, y, floor_m + rad), rad, name=f"ball {n}"))
+    return tuple(objects)
+
+
+def overhead_072(objects, width_px: int = 640, height_px: int = 480, fx_px: float = 525.0, centre_xy_m=(0.5, 0.0),
+                 **scene) -> TabletopScene:
+    """The issue's real overhead frames: 640x480, fx 525, the camera 0.72 m above the table, looking down."""
+    eye = (centre_xy_m[0], centre_xy_m[1], 0.72)
+    return TabletopScene(tuple(objects), look_at(eye, (centre_xy_m[0], centre_xy_m[1], 0.0)), width_px, height_px,
+                         fx_px, **scene)

@@ -42,7 +42,7 @@ from defgg_ros.constants import (
     PANDA_FINGER_THICKNESS_M,
     PANDA_FINGERTIP_BELOW_TCP_M,
 )
-from defgg_ros.control.kinematics import WorkspaceError, check_workspace
+from defgg_ros.control.kinematics import MIN_TCP_HEIGHT_ABOVE_TABLE_M, WorkspaceError, check_workspace
 from defgg_ros.grasping.geometry import tcp_height_m
 from defgg_ros.grasping.postprocess import find_peaks, maps_from_network
 from defgg_ros.model.preprocess import network_input
@@ -73,6 +73,8 @@ REJECTIONS = (NO_PEAK, TOO_LOW, WIDTH, COLLISION, WORKSPACE, REACH)
 # A point is free when the surface seen along its ray lies this far behind it, plus three times the
 # camera's depth noise at that distance (TabletopView.depth_noise) on surfaces other than the table.
 CARVING_TOLERANCE_M = 0.002
+MEDIAN_WINDOW_PX = 5
+MEDIAN_NOISE_SHARE = 0.63
 
 
 @dataclass(frozen=True)
@@ -307,8 +309,15 @@ def _distinct(a: TabletopGrasp, b: TabletopGrasp) -> bool:
     return apart or cos < math.cos(math.radians(DISTINCT_ANGLE_DEG))
 
 
-def _tip_height_m(surface_height_m: float) -> float:
-    return tcp_height_m(surface_height_m, 0.0) - PANDA_FINGERTIP_BELOW_TCP_M
+def _tip_height_m(surface_height_m: float, config=None) -> float:
+    """The fingertips' height above the table for a grasp on a surface this high, by the executor's
+    grasp_height_rule (TabletopConfig: half_height, or below_surface by grasp_depth_below_surface_m; both with
+    the TCP at least MIN_TCP_HEIGHT_ABOVE_TABLE_M up, as control/pick_place.py does)."""
+    if config is not None and config.grasp_height_rule == "below_surface":
+        tcp = max(surface_height_m - config.grasp_depth_below_surface_m, MIN_TCP_HEIGHT_ABOVE_TABLE_M)
+    else:
+        tcp = tcp_height_m(surface_height_m, 0.0)
+    return tcp - PANDA_FINGERTIP_BELOW_TCP_M
 
 
 class FreeSpace:
@@ -331,7 +340,13 @@ class FreeSpace:
         # own depth without noise: the table is never an obstacle (the descent stops above it), so its noise
         # must not block the pads of a low object's grasp (issue 47: 6.7 mm at 0.72 m with a D435).
         sensor_fx = float(view.camera_k[0, 0])   # the noise is the sensor's, not the read stride's
-        depth = depth - 3.0 * view.depth_noise.sigma_m(depth, sensor_fx).astype(np.float32)
+        if MEDIAN_WINDOW_PX > 1:
+            # The median of a window: the surface with its i.i.d. noise mostly gone (MEDIAN_NOISE_SHARE is left)
+            # and its edges where they were (a shift of at most half the window).
+            finite = np.isfinite(depth)
+            median = cv2.medianBlur(np.where(finite, depth, 0).astype(np.float32), MEDIAN_WINDOW_PX)
+            depth = np.where(finite & (median > 0), median, depth)
+        depth = depth - 3.0 * MEDIAN_NOISE_SHARE * view.depth_noise.sigma_m(depth, sensor_fx).astype(np.float32)
         if view.processed_table_depth_m is not None and view.processed_table_depth_m.shape == depth.shape:
             table = np.isfinite(view.processed_table_depth_m)
             depth[table] = view.processed_table_depth_m[table]
@@ -418,7 +433,7 @@ def _centre_lines(view: TabletopView, space: FreeSpace, cells, angles, face_angl
     """Per grasp centre (row, col) with the network's angle there: (fingertip level, closing
     directions (A x 2, candidate_angles order), free samples along each direction's centre line
     (A x S)), all centres' samples in one free-space pass."""
-    levels = [_tip_height_m(float(view.grid_height_m[r, c])) + TIP_MARGIN_M for r, c in cells]
+    levels = [_tip_height_m(float(view.grid_height_m[r, c]), view.config) + TIP_MARGIN_M for r, c in cells]
     directions = np.stack([np.stack([np.sin(phis), np.cos(phis)], axis=1)        # (row, col) per cell step
                            for phis in (candidate_angles(a, face_angles) for a in angles)])
     centres = np.asarray(cells, float)

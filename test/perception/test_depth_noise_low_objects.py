@@ -2,6 +2,7 @@
 overhead camera 0.72 m above the table (640x480, fx 525, a D435's noise) sees objects 1.5 and 2 cm tall; the
 free-space test must not take the table's own noise for an obstacle under the pads. When no grasp is feasible,
 the plan says per object which test rejected it."""
+import numpy as np
 import pytest
 
 from defgg_ros.model.inference import GraspPredictor
@@ -84,8 +85,11 @@ def test_without_a_feasible_grasp_the_plan_says_per_object_which_test_rejected_i
         ts.Box((0.5 + dx, dy), size, name="fence") for dx, dy, size in (
             (0.03, 0.0, (0.02, 0.08, 0.08)), (-0.03, 0.0, (0.02, 0.08, 0.08)),
             (0.0, 0.03, (0.04, 0.02, 0.08)), (0.0, -0.03, (0.04, 0.02, 0.08)))]
-    _, plan = _plan(fence)
-    assert not plan.grasps and plan.rejected[1] == tg.COLLISION
+    frame = ts.render(ts.TabletopScene(tuple(fence), ts.look_at((0.5, 0.0, 0.55), (0.5, 0.0, 0.0))), seed=1)
+    view = perceive(frame.depth_m, frame.camera_k, frame.base_T_camera)
+    block = int(np.bincount(view.labels[frame.labels == 1]).argmax())
+    plan = tg.plan_tabletop(view, MODEL, None, 5, targets={block})
+    assert block and not plan.grasps and plan.rejected == {block: tg.COLLISION}
     # The planner's error names them.
     frame = ts.render(ts.TabletopScene((ts.Box((0.5, 0.0), (0.15, 0.13, 0.05)),), ts.look_at((0.5, 0, 0.55),
                                                                                               (0.5, 0, 0))), seed=1)
