@@ -54,6 +54,9 @@ DRIVER, INFERENCE = "fake_panda_driver", "grasp_inference_node"
 # camera's view: first straight up by this much, then in joint space.
 OBSERVE_LIFT_M = 0.12
 OBSERVE_MOVE_S = (2.0, 5.0)
+# PlanGrasp returns each object's best grasp before any second one: asking for this many grasps gets the target's
+# best one in a scene of up to this many objects (the demo's have at most eight).
+TARGET_SEARCH_TOP_K = 10
 EXIT_CELL_FAILED, EXIT_BAD_INPUT, EXIT_NOT_ALL_IN_BIN = 1, 2, 3
 
 
@@ -209,25 +212,26 @@ class DemoRun:
     def _plan(self, index, remaining, row):
         from defgg_interfaces.srv import PlanGrasp
 
-        from defgg_ros.nodes.conversions import camera_info_to_k, depth_msg_to_metres, numpy_to_image
+        from defgg_ros.nodes.conversions import camera_info_to_k, depth_msg_to_metres, image_to_numpy
         from defgg_ros.perception.grasp_planning import full_quality_image
-        from defgg_ros.perception.stiffness_assignment import make_entry
-        from defgg_ros.perception.stiffness_segmenter import SegmenterConfig, run_segmenter
 
         self.observe_pose()
         depth_msg, info = self.client.fresh_frame(time.monotonic())
         depth_m, k = depth_msg_to_metres(depth_msg), camera_info_to_k(info)
         positions = self.client.object_positions()
-        entries = tuple(make_entry(e.name, e.youngs_modulus_pa, (e.roi.x_offset, e.roi.y_offset, e.roi.width,
-                                                                  e.roi.height), e.region_only)
-                        for e in _stiffness_msgs(self.scene, positions, k, (info.width, info.height), remaining))
-        seg = run_segmenter(SegmenterConfig(entries=entries), depth_m, k)
+        entries = _stiffness_msgs(self.scene, positions, k, (info.width, info.height), remaining)
+        # The segmentation node perceives the frame (the cell's only perceiver); the target is the perceived
+        # object under the scene object's position, and its grasps are chosen among the planner's.
+        perceived = self.client.perceive(depth_msg, info, entries)
+        if not perceived.success:
+            row.failure_reason = f"Perceive: {perceived.message}"
+            return None
+        labels = image_to_numpy(perceived.perceived.labels)
         uv = project_base_points([positions[index]], base_T_camera(self.scene), k)[0]
-        label = label_of_object(seg.labels, uv)
-        target = (seg.labels == label) if label else np.zeros(seg.labels.shape, dtype=bool)
-        # Only the target object carries stiffness: the network's grasps are confined to it, the
-        # other objects stay in the depth as obstacles.
-        stiffness_pa = np.where(target, seg.youngs_modulus_pa, 0.0).astype(np.float32)
+        label = label_of_object(labels, uv)
+        target = (labels == label) if label else np.zeros(labels.shape, dtype=bool)
+        modulus = {o.label: o.stiffness.youngs_modulus_pa for o in perceived.perceived.objects}.get(label, 0.0)
+        stiffness_pa = np.where(target, modulus, 0.0).astype(np.float32)
         panel = FramePanels(row.name, depth_m, stiffness_pa)
         self.panels.append(panel)
         if not label:
@@ -237,13 +241,14 @@ class DemoRun:
             return None
         prediction = self.predictor.predict(depth_m, stiffness_pa, k, object_mask=target.astype(np.uint8), top_k=1)
         panel.quality = full_quality_image(prediction.q, prediction.crop_offset_px, depth_m.shape)
-        request = PlanGrasp.Request(depth=depth_msg, camera_info=info, top_k=1,
-                                    stiffness=numpy_to_image(stiffness_pa, "32FC1", depth_msg.header))
+        request = PlanGrasp.Request(depth=depth_msg, camera_info=info, perceived=perceived.perceived,
+                                    top_k=TARGET_SEARCH_TOP_K)
         response = self.client.plan(request)
-        if not response.success or not response.grasps:
-            row.failure_reason = f"PlanGrasp: {response.message}"
+        grasp = next((g for g in response.grasps if g.object_id == label), None) if response.success else None
+        if grasp is None:
+            row.failure_reason = (f"PlanGrasp: {response.message}" if not response.success else
+                                  f"PlanGrasp: none of its {len(response.grasps)} grasps is on the target")
             return None
-        grasp = response.grasps[0]
         row.grasp_width_m, row.quality = grasp.width_m, grasp.quality
         row.estimated_mass_kg = grasp.estimated_mass_kg
         panel.grasp_uv_px = (grasp.center_u_px, grasp.center_v_px)

@@ -216,18 +216,31 @@ def executor_cell(rclpy_context):
 
 @pytest.fixture
 def inference_service(executor):
-    """Factory: start a GraspInferenceNode on `executor` with these parameters, plus a client node whose
-    PlanGrasp client is ready. Returns (inference node, client node, client)."""
+    """Factory: start a GraspInferenceNode and the SegmentationNode it plans on (the cell's only perceiver) on
+    `executor`, each with those of these parameters its schema declares, plus a client node whose PlanGrasp
+    client is ready. Returns (inference node, client node, client); the inference node's `segmentation_node`
+    attribute is the segmentation node."""
     from defgg_interfaces.srv import PlanGrasp
     from rclpy.node import Node
     from rclpy.parameter import Parameter
 
     from defgg_ros.nodes.grasp_inference_node import GraspInferenceNode
+    from defgg_ros.nodes.segmentation_node import SegmentationNode
     from defgg_ros.ros import topics
+    from defgg_ros.ros.parameters import defaults
 
     def start(client_name: str, **parameters):
-        node = GraspInferenceNode(context=executor.context, parameter_overrides=[
-            Parameter(name, value=value) for name, value in parameters.items()])
+        declared = {name: set(defaults(name)) for name in ("grasp_inference_node", "segmentation_node")}
+        unknown = set(parameters) - declared["grasp_inference_node"] - declared["segmentation_node"]
+        assert not unknown, f"no node declares {sorted(unknown)}"
+
+        def overrides(node_name):
+            return [Parameter(n, value=v) for n, v in parameters.items() if n in declared[node_name]]
+
+        segmentation = SegmentationNode(context=executor.context, parameter_overrides=overrides("segmentation_node"))
+        executor.add_node(segmentation)
+        node = GraspInferenceNode(context=executor.context, parameter_overrides=overrides("grasp_inference_node"))
+        node.segmentation_node = segmentation
         executor.add_node(node)
         client_node = Node(client_name, context=executor.context)
         executor.add_node(client_node)

@@ -177,6 +177,9 @@ class DemoClient:
     def plan(self, request: PlanGrasp.Request, timeout_s=60.0):
         return self.cell.plan(request, timeout_s)
 
+    def perceive(self, depth, camera_info, objects=(), timeout_s=60.0):
+        return self.cell.perceive(depth, camera_info, objects, timeout_s)
+
     def pick(self, goal: PickAndPlace.Goal, on_feedback=None, timeout_s=600.0):
         """Send a PickAndPlace goal and wait for its result (PickAndPlace.Result)."""
         return self.cell.pick(goal, on_feedback, timeout_s)

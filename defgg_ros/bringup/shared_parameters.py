@@ -1,7 +1,7 @@
 """Parameters that describe one physical cell and so must agree between the nodes that declare them.
 
-The table height, the workspace box, the base frame, the camera's pose and the arm are each declared by
-two to four nodes (their own schemas), and a deployment sets them per node. A cell where the executor
+The table height, the base frame and the arm are each declared by two or three nodes (their own schemas),
+and a deployment sets them per node. A cell where the executor
 believes the table is at z = 0.02 m and the perception at 0.0 m plans grasps 2 cm into the table or
 above the object, without any node noticing. So the bringup resolves each node's effective value
 (schema default, then its parameter files in order, then the set's overrides, then -p) and refuses to
@@ -15,8 +15,9 @@ import yaml
 
 # One cell, one value: names declared by more than one node that describe the same physical thing.
 # (Topic and action names are left out: a deployment may remap one node's on purpose.)
-CELL_PARAMETERS = ("robot_type", "base_frame", "table_z_m", "workspace_box_m", "base_T_camera",
-                   "camera_pose_from_table", "min_object_height_m", "max_object_height_m")
+# The perception parameters (workspace box, camera pose, object heights) are the segmentation node's alone since
+# it is the only perceiver (the inference node reads them from its PerceivedObjects).
+CELL_PARAMETERS = ("robot_type", "base_frame", "table_z_m")
 
 
 def _file_section(path: str, node: str) -> dict:

@@ -48,6 +48,7 @@ ENCODINGS = {
     "16UC1": (np.uint16, 1),
     "mono16": (np.uint16, 1),
     "32FC1": (np.float32, 1),
+    "32SC1": (np.int32, 1),
     "mono8": (np.uint8, 1),
     "8UC1": (np.uint8, 1),
     "rgb8": (np.uint8, 3),

@@ -9,11 +9,12 @@
   min and max height above the table, min area).
 - stiffness_assignment.py: ObjectStiffness-like entries (ROI, region_only)
   -> per-pixel Young's modulus image; plausibility checks of moduli.
-- stiffness_segmenter.py: the two above as one configured step
-  (SegmenterConfig -> run_segmenter), shared by segmentation_node and the
-  PlanGrasp requests that carry `objects`.
-- grasp_planning.py: labels from a stiffness image, top_k rules, the
-  depth-sized quality image, finger boxes for markers.
+- stiffness_segmenter.py: the stiffness entries' parameter form (objects_json)
+  and the default modulus; the segmentation node (the only perceiver) assigns
+  them (planning/perceived_frame.py).
+- tabletop.py: the tabletop perception the segmentation node runs.
+- grasp_planning.py: top_k rules, the depth-sized quality image, finger boxes
+  for markers.
 - sync.py: StampSynchronizer, exact-stamp matching of a few streams.
 - synthetic_scene.py: analytic depth images of boxes/cylinders on a
   (tilted) table, for tests and benchmarks.

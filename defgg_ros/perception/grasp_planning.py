@@ -1,9 +1,7 @@
-"""Pure pieces of the grasp inference node (no rclpy): labels, maps, finger boxes."""
-import cv2
+"""Pure pieces of the grasp inference node (no rclpy): top_k, maps, finger boxes."""
 import numpy as np
 
 from defgg_ros.constants import FINGER_DEPTH_M, FINGER_PAD_WIDTH_M, GRIPPER_MAX_WIDTH_M
-from defgg_ros.perception.segmentation import MAX_OBJECTS
 
 # Finger thickness along the closing direction, for display only (the
 # Franka finger is ~1 cm thick at the pad).
@@ -15,19 +13,6 @@ MAX_TOP_K = 50
 
 class PlanningError(ValueError):
     """A planning request that cannot be served (reason in the message)."""
-
-
-def labels_from_stiffness(youngs_modulus_pa: np.ndarray) -> np.ndarray:
-    """uint8 object labels: connected components of the non-background pixels.
-
-    The segmentation node labels components of the same foreground in the
-    same raster order, so these labels match its mask.
-    """
-    foreground = (np.asarray(youngs_modulus_pa) > 0).astype(np.uint8)
-    count, labels = cv2.connectedComponents(foreground, connectivity=8)
-    if count - 1 > MAX_OBJECTS:
-        labels[labels > MAX_OBJECTS] = MAX_OBJECTS  # fold the rest into the last label; they still get grasps
-    return labels.astype(np.uint8)
 
 
 def check_top_k(top_k: int) -> int:

@@ -1,28 +1,11 @@
-"""Depth -> (stiffness image, labels) with the current assignments (no rclpy).
+"""The stiffness entries' parameter form (no rclpy): `objects_json` <-> StiffnessEntry tuples, the default.
 
-The one object the segmentation node and the grasp inference node (for
-PlanGrasp requests that carry `objects`) both use, so a request and the
-live stream are segmented identically.
+The segmentation node (the cell's only perceiver) assigns them to the objects it perceives
+(planning/perceived_frame.perceive_frame).
 """
 import json
-from dataclasses import dataclass, field
 
-import numpy as np
-
-from defgg_ros.perception.segmentation import (
-    OBJECT_MAX_HEIGHT_M,
-    OBJECT_MIN_AREA_PX,
-    OBJECT_MIN_HEIGHT_M,
-    SegmentationResult,
-    segment_objects,
-)
-from defgg_ros.perception.stiffness_assignment import (
-    StiffnessEntry,
-    assign_stiffness,
-    check_plausible_modulus,
-    make_entry,
-)
-from defgg_ros.perception.tabletop import TabletopConfig, perceive
+from defgg_ros.perception.stiffness_assignment import StiffnessEntry, check_plausible_modulus, make_entry
 
 # Objects nobody described get a mid-range modulus: 2e6 Pa (firm rubber) is
 # the geometric middle of the paper's soft moduli (2e4..2e9 Pa in decades),
@@ -30,60 +13,9 @@ from defgg_ros.perception.tabletop import TabletopConfig, perceive
 DEFAULT_YOUNGS_MODULUS_PA = 2e6
 
 
-@dataclass(frozen=True)
-class SegmenterConfig:
-    default_youngs_modulus_pa: float = DEFAULT_YOUNGS_MODULUS_PA
-    entries: tuple[StiffnessEntry, ...] = ()
-    min_height_m: float = OBJECT_MIN_HEIGHT_M
-    min_area_px: int = OBJECT_MIN_AREA_PX
-    background_depth_m: np.ndarray | None = field(default=None, compare=False)
-    max_height_m: float = OBJECT_MAX_HEIGHT_M
-    # Tabletop segmentation in the robot frame (perception/tabletop.py) when both are set and no
-    # empty-scene capture is in use: touching objects apart, the workspace box, the self-filter.
-    tabletop: TabletopConfig | None = None
-    base_T_camera: np.ndarray | None = field(default=None, compare=False)
-
-    def __post_init__(self):
-        check_plausible_modulus(self.default_youngs_modulus_pa, "default Young's modulus")
-        if not (np.isfinite(self.min_height_m) and 0 < self.min_height_m < self.max_height_m):
-            raise ValueError(f"need 0 < min_height_m < max_height_m, got {self.min_height_m}, {self.max_height_m}")
-        if int(self.min_area_px) < 1:
-            raise ValueError(f"min_area_px must be >= 1, got {self.min_area_px}")
-
-
-@dataclass(frozen=True)
-class SegmenterOutput:
-    youngs_modulus_pa: np.ndarray   # HxW float32, 0 = background
-    labels: np.ndarray              # HxW uint8, 0 = background
-    segmentation: SegmentationResult
-    per_object: dict                # label -> (entry name, Pa) of the whole-object assignment
-
-
-def run_segmenter(config: SegmenterConfig, depth_m: np.ndarray, camera_k, robot_mask=None,
-                  base_T_camera=None) -> SegmenterOutput:
-    """Segment float32 metres depth and paint the moduli; raises ValueError subclasses.
-    base_T_camera (4x4) overrides config.base_T_camera (the node's TF lookup)."""
-    pose = base_T_camera if base_T_camera is not None else config.base_T_camera
-    if config.tabletop is not None and pose is not None and config.background_depth_m is None:
-        result = tabletop_segmentation(config.tabletop, depth_m, camera_k, pose, robot_mask)
-    else:
-        result = segment_objects(depth_m, camera_k, config.background_depth_m,
-                                 config.min_height_m, int(config.min_area_px), config.max_height_m)
-    image, per_object = assign_stiffness(result.labels, result.centroids_px, config.entries,
-                                         config.default_youngs_modulus_pa)
-    return SegmenterOutput(image, result.labels, result, per_object)
-
-
-def tabletop_segmentation(tabletop: TabletopConfig, depth_m, camera_k, base_T_camera, robot_mask=None):
-    """perception/tabletop.py's objects as a SegmentationResult (labels, heights, centroids, areas)."""
-    view = perceive(depth_m, camera_k, base_T_camera, tabletop, robot_mask)
-    centroids, areas = {}, {}
-    for label in view.object_ids:
-        vs, us = np.nonzero(view.labels == label)
-        if vs.size:
-            centroids[int(label)] = (float(us.mean()), float(vs.mean()))
-            areas[int(label)] = int(vs.size)
-    return SegmentationResult(view.labels, view.height_m, tuple(sorted(centroids)), centroids, areas, None)
+def check_plausible_default(youngs_modulus_pa: float) -> float:
+    """The default modulus, or ValueError when it is not a plausible one."""
+    return float(check_plausible_modulus(youngs_modulus_pa, "default Young's modulus"))
 
 
 def entries_from_dicts(items) -> tuple[StiffnessEntry, ...]:

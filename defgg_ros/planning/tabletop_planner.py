@@ -15,7 +15,7 @@ import numpy as np
 
 from defgg_ros.perception.self_filter import RobotSelfFilter
 from defgg_ros.perception.stiffness_assignment import assign_stiffness
-from defgg_ros.perception.tabletop import TabletopConfig, TabletopView, processing_stride
+from defgg_ros.perception.tabletop import TabletopConfig, TabletopView
 from defgg_ros.perception.tabletop import perceive as perceive_view
 from defgg_ros.planning.tabletop_grasps import TabletopNetworkView, TabletopPlan, prepare_tabletop, search_tabletop
 
@@ -49,26 +49,6 @@ def object_centroids_px(labels: np.ndarray, object_ids) -> dict:
         if vs.size:
             out[int(label)] = (float(us.mean()), float(vs.mean()))
     return out
-
-
-# A perceived object is a grasp target of a stiffness image when at least this share of its pixels
-# carries a modulus there (the segmentation node paints the same objects; a client may paint one).
-MARKED_FRACTION = 0.2
-
-
-def objects_with_moduli(view: TabletopView, youngs_modulus_pa) -> set:
-    """The perceived objects a stiffness image gives a modulus to (the rest stay obstacles). Counted on the
-    pixels perception read (every stride-th: a 1280x720 frame's full-resolution labels cost an upscale and
-    two bincounts of 0.9 M pixels, ~3 ms a frame)."""
-    labels = view.processed_labels
-    step = processing_stride(view.camera_k)
-    moduli = np.asarray(youngs_modulus_pa)[::step, ::step]
-    if moduli.shape != labels.shape:
-        raise ValueError(f"stiffness image {np.shape(youngs_modulus_pa)} does not match the depth's "
-                         f"{view.depth_m.shape}")
-    count = np.bincount(labels.reshape(-1), minlength=256)    # label 0 (background) is never read
-    marked = np.bincount(labels[moduli > 0], minlength=256)
-    return {int(label) for label in view.object_ids if count[label] and marked[label] >= MARKED_FRACTION * count[label]}
 
 
 @dataclass(frozen=True)
@@ -121,16 +101,13 @@ class TabletopPlanner:
         if not view.object_ids:
             raise NoFeasibleGrasp("no object found above the table in the workspace box (blobs smaller than "
                                   f"{self.config.min_object_area_m2 * 1e4:.1f} cm^2 are ignored)")
-        targets = None
         if youngs_modulus_pa is None:
             youngs_modulus_pa, _ = assign_stiffness(view.labels, object_centroids_px(view.labels, view.object_ids),
                                                     entries, self.default_youngs_modulus_pa)
-        else:
-            targets = objects_with_moduli(view, youngs_modulus_pa)
-            if not targets:
-                raise NoFeasibleGrasp(f"the stiffness image has no object pixel on any of the "
-                                      f"{len(view.object_ids)} object(s) found in the depth (all background)")
-        return PerceivedObjects(view, targets, youngs_modulus_pa, robot)
+        elif np.shape(youngs_modulus_pa) != view.depth_m.shape:
+            raise ValueError(f"stiffness image {np.shape(youngs_modulus_pa)} does not match the depth's "
+                             f"{view.depth_m.shape}")
+        return PerceivedObjects(view, None, youngs_modulus_pa, robot)
 
     def network(self, objects: PerceivedObjects, checkpoint=None) -> PreparedFrame:
         """prepare's second part: the network on the height map, the free space."""

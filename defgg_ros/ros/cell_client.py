@@ -14,7 +14,7 @@ import threading
 import time
 
 from defgg_interfaces.action import PickAndPlace
-from defgg_interfaces.srv import PlanGrasp, SetStiffness
+from defgg_interfaces.srv import Perceive, PlanGrasp, SetStiffness
 from franka_msgs.action import Grasp
 
 from defgg_ros.ros import topics
@@ -47,6 +47,7 @@ class CellClient:
         self.recorder = recorder
         self._spin_until = spin_until
         self.plan_client = node.create_client(PlanGrasp, topics.PLAN_GRASP_SERVICE)
+        self.perceive_client = node.create_client(Perceive, topics.PERCEIVE_SERVICE)
         self.stiffness_client = node.create_client(SetStiffness, topics.SET_STIFFNESS_SERVICE)
         self.pick_client = ActionClient(node, PickAndPlace, topics.PICK_AND_PLACE_ACTION)
         self.gripper_client = ActionClient(node, Grasp, topics.GRIPPER_GRASP_ACTION)
@@ -106,6 +107,12 @@ class CellClient:
         if self.recorder is not None:
             self.recorder.record_plan(request, response, sent_ns)
         return response
+
+    def perceive(self, depth, camera_info, objects=(), timeout_s: float = 30.0):
+        """The segmentation node's Perceive of a frame this client holds; the response (success false with a
+        message is an answer, not an error)."""
+        request = Perceive.Request(depth=depth, camera_info=camera_info, objects=list(objects))
+        return self._call(self.perceive_client, request, timeout_s, "Perceive")
 
     def set_stiffness(self, objects, default_youngs_modulus_pa: float = 0.0, timeout_s: float = 10.0):
         """SetStiffness; CellCallError if the segmentation node refuses the assignments."""

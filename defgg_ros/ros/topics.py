@@ -43,6 +43,8 @@ OBJECT_MASK = "defgg/object_mask"                            # mono8 labels, 0 =
 STIFFNESS_ASSIGNMENTS = "defgg/stiffness_assignments"        # defgg_interfaces/StiffnessAssignment (latched)
 SET_STIFFNESS_SERVICE = "defgg/set_stiffness"                # defgg_interfaces/srv/SetStiffness
 CAPTURE_BACKGROUND_SERVICE = "defgg/segmentation/capture_background"  # std_srvs/srv/Trigger
+PERCEIVED_OBJECTS = "defgg/perceived_objects"                # defgg_interfaces/PerceivedObjects
+PERCEIVE_SERVICE = "defgg/perceive"                          # defgg_interfaces/srv/Perceive
 
 # Grasp inference node
 BEST_GRASP = "defgg/best_grasp"                              # defgg_interfaces/Grasp

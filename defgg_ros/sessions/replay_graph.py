@@ -17,9 +17,9 @@ from defgg_ros.sessions.session_topics import topics  # absolute names (bag chan
 MODELS_DIR = share_path("models")
 # Recorded parameters re-applied in the replay (topic names are not: the player uses the defaults).
 REPLAYED_PARAMETERS = {
-    "segmentation_node": ("default_youngs_modulus_pa", "min_object_height_m", "min_object_area_px", "segmentation"),
-    "grasp_inference_node": ("base_T_camera", "base_frame", "default_youngs_modulus_pa", "min_object_height_m",
-                             "min_object_area_px", "finger_clearance_opening_m", "contact_angle", "planner"),
+    # The only perceiver: the camera extrinsic, the frames and what decides which pixels are objects.
+    "segmentation_node": ("base_T_camera", "base_frame", "default_youngs_modulus_pa", "min_object_height_m"),
+    "grasp_inference_node": (),
     # Those that decide where and how a replayed pick grasps (a changed default must not change a replay).
     "executor_node": ("table_z_m", "pregrasp_height_m", "grasp_depth_below_surface_m", "grasp_height_rule",
                       "descent_speed_mps", "contact_force_threshold_n", "lift_height_m", "slip_width_fraction",
@@ -28,8 +28,6 @@ REPLAYED_PARAMETERS = {
 # What a recording made before a parameter existed did (recorded parameter sets lack the name).
 BEFORE_PARAMETER_EXISTED = {
     "executor_node": {"grasp_height_rule": "below_surface"},
-    "grasp_inference_node": {"planner": "camera_crop"},  # the tabletop planner and segmentation came later
-    "segmentation_node": {"segmentation": "camera_plane"},
 }
 # The fake driver renders its own camera; in a replay the recorded frames are the camera.
 DRIVER_CAMERA_REMAPS = {

@@ -87,9 +87,11 @@ def test_table_summary_and_figure(tmp_path):
 def test_multi_material_part_gets_its_own_modulus_in_the_stiffness_image(tmp_path):
     from defgg_interfaces.msg import ObjectStiffness  # noqa: F401  (the demo builds these messages)
 
+    from defgg_ros.bringup.demo_geometry import base_T_camera
     from defgg_ros.demo import _stiffness_msgs
     from defgg_ros.perception.stiffness_assignment import make_entry
-    from defgg_ros.perception.stiffness_segmenter import SegmenterConfig, run_segmenter
+    from defgg_ros.perception.tabletop import TabletopConfig
+    from defgg_ros.planning.perceived_frame import perceive_frame
     from defgg_ros.sim.cell import SimCell
     from defgg_ros.sim.scene_spec import load_scene
 
@@ -116,8 +118,8 @@ objects:
     assert [m.region_only for m in msgs] == [False, True]
     entries = tuple(make_entry(m.name, m.youngs_modulus_pa, (m.roi.x_offset, m.roi.y_offset, m.roi.width,
                                                              m.roi.height), m.region_only) for m in msgs)
-    out = run_segmenter(SegmenterConfig(entries=entries), depth_m.astype(np.float32), k)
-    on_object = out.youngs_modulus_pa[mask == 0]
+    _, _, image = perceive_frame(depth_m.astype(np.float32), k, base_T_camera(scene), TabletopConfig(), entries)
+    on_object = image[mask == 0]
     soft_share = np.mean(on_object == np.float32(2e4))
     assert 0.3 < soft_share < 0.7, f"the foam end should be about half the brick, got {soft_share:.2f}"
     assert np.mean(on_object == np.float32(2e9)) > 0.3

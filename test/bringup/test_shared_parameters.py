@@ -27,9 +27,9 @@ def test_one_node_with_another_table_height_is_refused_naming_every_node():
     with pytest.raises(NodeSetError, match="table_z_m") as err:
         check_cell_parameters_agree(load_node_set("real_cell"), overrides)
     text = str(err.value)
-    assert "executor_node=0.02" in text and "segmentation_node=0.0" in text and "grasp_inference_node=0.0" in text
-    # the same height for all three starts
-    argv = [a for node in ("executor_node", "segmentation_node", "grasp_inference_node")
+    assert "executor_node=0.02" in text and "segmentation_node=0.0" in text
+    # the same height for both starts (the inference node has no table: it plans on the perceived one)
+    argv = [a for node in ("executor_node", "segmentation_node")
             for a in ("-p", f"{node}:table_z_m:=0.02")]
     check_cell_parameters_agree(load_node_set("real_cell"), _overrides("real_cell", argv))
 
@@ -49,7 +49,7 @@ def test_the_documented_fr3_rehearsal_agrees_and_without_the_drivers_arm_it_woul
     lines = disagreements(load_node_set("sim_cell"), _overrides("sim_cell", argv[:i - 1] + argv[i + 1:]))
     assert lines == ["robot_type: fake_panda_driver='fer', executor_node='fr3'",
                      "base_frame: fake_panda_driver='fer_link0', segmentation_node='fr3_link0', "
-                     "grasp_inference_node='fr3_link0', executor_node='fr3_link0'"]
+                     "executor_node='fr3_link0'"]
 
 
 def test_parameter_files_count_with_their_wildcard_section(tmp_path):

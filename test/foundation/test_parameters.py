@@ -68,10 +68,10 @@ def test_node_set_overrides_are_overrides():
 
 @pytest.mark.unit
 def test_schema_defaults_agree_with_the_code_constants_they_mirror():
-    from defgg_ros.constants import GRIPPER_MAX_WIDTH_M, PREGRASP_HEIGHT_M
+    from defgg_ros.constants import PREGRASP_HEIGHT_M
     from defgg_ros.control.sequence_types import SequenceConfig
     from defgg_ros.control.trajectories import LIMITS_SAFETY_SCALE, SAMPLE_DT_S
-    from defgg_ros.perception.segmentation import OBJECT_MAX_HEIGHT_M, OBJECT_MIN_AREA_PX, OBJECT_MIN_HEIGHT_M
+    from defgg_ros.perception.segmentation import OBJECT_MAX_HEIGHT_M, OBJECT_MIN_HEIGHT_M
     from defgg_ros.perception.stiffness_segmenter import DEFAULT_YOUNGS_MODULUS_PA
     from defgg_ros.perception.sync import DEFAULT_CACHE_SIZE
 
@@ -85,15 +85,10 @@ def test_schema_defaults_agree_with_the_code_constants_they_mirror():
     assert executor["pregrasp_height_m"] == PREGRASP_HEIGHT_M
     assert executor["grasp_height_rule"] == config.grasp_height_rule
     inference, segmentation = defaults("grasp_inference_node"), defaults("segmentation_node")
-    for values in (inference, segmentation):
-        assert values["default_youngs_modulus_pa"] == DEFAULT_YOUNGS_MODULUS_PA
-        assert values["min_object_height_m"] == OBJECT_MIN_HEIGHT_M
-        assert values["max_object_height_m"] == OBJECT_MAX_HEIGHT_M
-        assert values["min_object_area_px"] == OBJECT_MIN_AREA_PX
+    assert segmentation["default_youngs_modulus_pa"] == DEFAULT_YOUNGS_MODULUS_PA
+    assert segmentation["min_object_height_m"] == OBJECT_MIN_HEIGHT_M
+    assert segmentation["max_object_height_m"] == OBJECT_MAX_HEIGHT_M
     assert inference["sync_cache_size"] == DEFAULT_CACHE_SIZE
-    assert inference["finger_clearance_opening_m"] == GRIPPER_MAX_WIDTH_M
-    # The cell's pipeline: the grasp service re-chooses the angle at the grasp centre (CHANGELOG).
-    assert inference["contact_angle"] is True
 
 
 @pytest.mark.unit

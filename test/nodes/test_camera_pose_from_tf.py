@@ -22,7 +22,8 @@ def test_segmentation_node_uses_the_calibrated_camera_pose_on_tf(executor, spin)
     tilted = np.eye(4)
     tilted[:3, :3] = [[0.0, -0.8, 0.6], [-1.0, 0.0, 0.0], [0.0, -0.6, -0.8]]
     tilted[:3, 3] = [0.1, 0.05, 0.55]
-    TfBroadcaster(calibration, static=True).send(transform_msg("panda_link0", "camera_depth_optical_frame", tilted))
+    TfBroadcaster(calibration, static=True).send(transform_msg(node.get_parameter("base_frame").value,
+                                                               "camera_depth_optical_frame", tilted))
     spin(executor, lambda: not np.allclose(node.base_T_camera_for(header), parameter_pose), 10.0,
          "the camera pose from /tf_static")
     np.testing.assert_allclose(node.base_T_camera_for(header), tilted, atol=1e-9)
@@ -71,7 +72,7 @@ def test_the_configured_camera_pose_is_published_under_the_cameras_own_tree(infe
     xyz, quaternion = transform_to_xyz_quaternion(base_T_camera)
     node, _, client = inference_service("pose_publisher_probe", base_T_camera=[*xyz.tolist(), *quaternion.tolist()],
                                         base_frame="fr3_link0", publish_camera_tf=True)
-    spin(executor, lambda: "camera_link" in node._camera_pose._listener.tree.frames(), 10.0,
+    spin(executor, lambda: "camera_link" in node.segmentation_node._camera_pose._listener.tree.frames(), 10.0,
          "the node knows realsense's tree")
     def connected():
         try:

@@ -1,6 +1,7 @@
-"""Fuzz PlanGrasp: hundreds of malformed requests, every one refused, then a valid one served."""
+"""Fuzz PlanGrasp: hundreds of malformed requests, every one refused, then a valid one served. Requests with
+depth alone go through the segmentation node's Perceive service; malformed perceived objects are refused too."""
 import numpy as np
-from defgg_interfaces.msg import ObjectStiffness
+from defgg_interfaces.msg import ObjectStiffness, PerceivedObjects
 from defgg_interfaces.srv import PlanGrasp
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -12,14 +13,19 @@ from defgg_ros.perception.synthetic_scene import SceneObject, SyntheticScene, de
 SERVICE = "/fuzz/plan_grasp"
 K = default_camera_k()
 DEPTH_M, TRUTH = render(SyntheticScene(objects=(SceneObject((0.0, 0.0), 0.05, (0.05, 0.05)),)))
-STIFFNESS_PA = np.where(TRUTH > 0, 2e5, 0.0).astype(np.float32)
 DEPTH_MSG = depth_metres_to_msg(DEPTH_M, "16UC1")
-STIFFNESS_MSG = numpy_to_image(STIFFNESS_PA, "32FC1")
 INFO_MSG = make_camera_info(K, 640, 480)
+PERCEIVE_PREFIX = "the segmentation node could not perceive the request's depth: "
 
 
 def valid_request() -> PlanGrasp.Request:
-    return PlanGrasp.Request(depth=DEPTH_MSG, camera_info=INFO_MSG, stiffness=STIFFNESS_MSG)
+    return PlanGrasp.Request(depth=DEPTH_MSG, camera_info=INFO_MSG)
+
+
+def _perceived(labels: Image, source="parameter", plane=(0.0, 0.0, 1.0, 0.0)) -> PerceivedObjects:
+    """Perceived objects of DEPTH_MSG's frame with this label image (the rest empty: malformed anyway)."""
+    return PerceivedObjects(header=DEPTH_MSG.header, labels=labels, camera_pose_source=source,
+                            table_plane=list(plane))
 
 
 def _copy_image(msg: Image, **changes) -> Image:
@@ -39,24 +45,19 @@ bad_moduli = st.one_of(st.floats(max_value=0.0), st.just(float("nan")), st.just(
                        st.floats(min_value=2e12, allow_infinity=False))
 
 
-def _bad_stiffness_pixels(values_and_positions):
-    image = STIFFNESS_PA.copy()
-    for value, v, u in values_and_positions:
-        image[v, u] = value
-    return numpy_to_image(image, "32FC1")
-
-
 MUTATIONS = {
     "depth encoding": st.sampled_from(["mono8", "rgb8", "8UC3", "", "16SC1"]).map(
         lambda e: ("depth", _copy_image(DEPTH_MSG, encoding=e))),
     "truncated depth": st.integers(0, len(DEPTH_MSG.data) - 1).map(
         lambda n: ("depth", _copy_image(DEPTH_MSG, data=bytes(DEPTH_MSG.data)[:n]))),
     "random depth": random_images.map(lambda m: ("depth", m)),
-    # An empty stiffness image means "not given" (the node then segments the depth), so not malformed.
-    "random stiffness": random_images.filter(lambda m: m.width and m.height).map(lambda m: ("stiffness", m)),
-    "bad stiffness pixels": st.lists(st.tuples(st.sampled_from([float("nan"), -1.0, float("inf"), -1e9]),
-                                               st.integers(0, 479), st.integers(0, 639)), min_size=1, max_size=4).map(
-        lambda items: ("stiffness", _bad_stiffness_pixels(items))),
+    # An empty perceived objects means "not given" (the segmentation node perceives the depth), so not malformed.
+    "random perceived labels": random_images.filter(lambda m: m.width and m.height).map(
+        lambda m: ("perceived", _perceived(m))),
+    "bad perceived pose source or plane": st.tuples(st.sampled_from(["", "guess", "parameter"]),
+                                                    st.sampled_from([(0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 2.0, 0.0),
+                                                                     (float("nan"), 0.0, 1.0, 0.0)])).map(
+        lambda t: ("perceived", _perceived(numpy_to_image(np.zeros((480, 640), np.uint8), "mono8"), *t))),
     "bad focal": st.tuples(st.sampled_from([0.0, -385.0, float("nan"), float("inf")]), st.integers(0, 1)).map(
         lambda t: ("k", t)),
     "camera size": st.tuples(st.integers(0, 2000), st.integers(0, 2000)).filter(lambda s: s != (640, 480)).map(
@@ -69,7 +70,7 @@ MUTATIONS = {
 
 def apply(request: PlanGrasp.Request, mutation) -> None:
     kind, value = mutation
-    if kind in ("depth", "stiffness"):
+    if kind in ("depth", "perceived"):
         setattr(request, kind, value)
     elif kind == "k":
         k = list(request.camera_info.k)
@@ -80,7 +81,7 @@ def apply(request: PlanGrasp.Request, mutation) -> None:
         request.camera_info = make_camera_info(K, 640, 480)
         request.camera_info.width, request.camera_info.height = value
     elif kind == "objects":
-        request.stiffness = Image()
+        request.perceived = PerceivedObjects()
         request.objects = [ObjectStiffness(name="fuzz", youngs_modulus_pa=v) for v in value]
     elif kind == "top_k":
         request.top_k = value
@@ -94,17 +95,15 @@ def apply(request: PlanGrasp.Request, mutation) -> None:
 
 
 malformed_requests = st.one_of(
-    st.builds(lambda d, s, t: PlanGrasp.Request(depth=d, stiffness=s, camera_info=INFO_MSG, top_k=t),
+    st.builds(lambda d, s, t: PlanGrasp.Request(depth=d, perceived=_perceived(s), camera_info=INFO_MSG, top_k=t),
               random_images, random_images, st.integers(0, 60)),
     st.lists(st.sampled_from(sorted(MUTATIONS)), min_size=1, max_size=3).flatmap(
         lambda names: st.tuples(*[MUTATIONS[n] for n in names])),
 )
 
 
-def test_fuzzed_requests_are_refused_then_a_valid_one_is_served(executor, spin, random_checkpoint, inference_service,
-                                                                call):
-    checkpoint = random_checkpoint()
-    _, _, client = inference_service("fuzz_client", model_path=str(checkpoint), plan_grasp_service=SERVICE)
+def test_fuzzed_requests_are_refused_then_a_valid_one_is_served(executor, spin, inference_service, call):
+    _, _, client = inference_service("fuzz_client", plan_grasp_service=SERVICE)
     seen = []
 
     @settings(max_examples=250, deadline=None, database=None, derandomize=True,
@@ -121,7 +120,7 @@ def test_fuzzed_requests_are_refused_then_a_valid_one_is_served(executor, spin, 
         assert not response.success, f"malformed request accepted: {example!r:.300}"
         assert response.message and not response.grasps
         assert not response.message.startswith("internal error"), response.message
-        seen.append(response.message)
+        seen.append(response.message.removeprefix(PERCEIVE_PREFIX))
 
     fuzz()
     assert len(seen) >= 200

@@ -1,8 +1,9 @@
-"""Perception on arrival in grasp_inference_node (tabletop planner), over real DDS with the shipped model.
+"""Preparation on arrival in grasp_inference_node, over real DDS with the shipped model and the segmentation node.
 
-A node that perceives each streamed frame as it arrives and a node that plans everything inside PlanGrasp
-(perceive_on_arrival false) receive the same stream; for the same frame their grasps must be identical,
-and identical to a request carrying that frame's images. Also: max_frame_age_s 0 answers from the latest
+The segmentation node perceives the stream once; a node that prepares each synchronised frame as it arrives and
+a node that does everything inside PlanGrasp (prepare_on_arrival false) receive the same depth and perceived
+objects; for the same frame their grasps must be identical, and identical to a request carrying that frame's
+depth (perceived by the segmentation node's Perceive service). Also: max_frame_age_s 0 answers from the latest
 synchronised frame, a frame perception cannot use gives its reason and the node keeps serving."""
 from pathlib import Path
 
@@ -16,7 +17,7 @@ from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
 
 from defgg_ros.nodes import qos
-from defgg_ros.nodes.conversions import depth_metres_to_msg, make_camera_info, numpy_to_image, stamp_to_ns
+from defgg_ros.nodes.conversions import depth_metres_to_msg, make_camera_info, stamp_to_ns
 from defgg_ros.nodes.grasp_inference_node import GraspInferenceNode
 from defgg_ros.perception import tabletop_scenes as ts
 from defgg_ros.perception.geometry import transform_to_xyz_quaternion
@@ -46,31 +47,32 @@ def camera_messages(frame, stamp_sec: int, depth_m=None):
     header = Header(frame_id="camera_depth_optical_frame")
     header.stamp.sec = stamp_sec
     h, w = depth.shape
-    return {"depth": depth_metres_to_msg(depth, "16UC1", header),
-            "stiffness": numpy_to_image(moduli, "32FC1", header),
-            "info": make_camera_info(k, w, h, header)}
+    return {"depth": depth_metres_to_msg(depth, "16UC1", header), "info": make_camera_info(k, w, h, header)}
 
 
 @pytest.fixture(params=[2, 1], ids=["two_stages", "one_stage"])
 def cell(request, executor, frames, inference_service):
-    """(node perceiving on arrival, its client, node planning synchronously, its client, probe node); the
-    on-arrival node's perception pipeline in two threads (the default) or in one (perception_stages)."""
+    """(node preparing on arrival, its client, node planning synchronously, its client, probe node); the
+    on-arrival node's pipeline in two threads (the default) or in one (prepare_stages)."""
     xyz, quat = transform_to_xyz_quaternion(frames[0][3])
     pose = [*xyz.tolist(), *quat.tolist()]
 
     def parameters(**extra):
         return {"model_path": str(MODEL_PATH), "base_T_camera": pose, **extra}
 
+    def inference_parameters(**extra):
+        return {"model_path": str(MODEL_PATH), **extra}
+
     arrival, probe, arrival_client = inference_service("on_arrival_probe", **parameters(max_frame_age_s=0.0,
-                                                                                     perception_stages=request.param))
+                                                                                     prepare_stages=request.param))
     assert arrival._worker.stages == request.param
     # The same node in another namespace, on the same camera topics.
-    inputs = {"depth_topic": topics.DEPTH_IMAGE, "stiffness_topic": topics.STIFFNESS_IMAGE,
+    inputs = {"depth_topic": topics.DEPTH_IMAGE, "perceived_topic": topics.PERCEIVED_OBJECTS,
               "camera_info_topic": topics.DEPTH_CAMERA_INFO}
     synchronous = GraspInferenceNode(
         context=executor.context, cli_args=["--ros-args", "-r", "__ns:=/synchronous"],
-        parameter_overrides=[Parameter(name, value=value) for name, value in parameters(
-            perceive_on_arrival=False, publish_on_sync=False, plan_grasp_service=SYNC_SERVICE,
+        parameter_overrides=[Parameter(name, value=value) for name, value in inference_parameters(
+            prepare_on_arrival=False, publish_on_sync=False, plan_grasp_service=SYNC_SERVICE,
             **{name: f"/{topic}" for name, topic in inputs.items()}).items()])
     executor.add_node(synchronous)
     sync_client = probe.create_client(PlanGrasp, SYNC_SERVICE)
@@ -83,7 +85,6 @@ class Camera:
 
     def __init__(self, probe: Node, executor, spin):
         self.pubs = {"depth": probe.create_publisher(Image, topics.DEPTH_IMAGE, qos.SENSOR_DATA),
-                     "stiffness": probe.create_publisher(Image, topics.STIFFNESS_IMAGE, qos.SENSOR_DATA),
                      "info": probe.create_publisher(CameraInfo, topics.DEPTH_CAMERA_INFO, qos.SENSOR_DATA)}
         self.executor, self.spin = executor, spin
 
@@ -93,7 +94,7 @@ class Camera:
         def check():
             ticks[0] += 1
             if ticks[0] % 10 == 1:
-                for name in ("stiffness", "info", "depth"):
+                for name in ("info", "depth"):
                     self.pubs[name].publish(messages[name])
             return done()
 
@@ -135,12 +136,12 @@ def test_grasps_on_arrival_are_those_of_the_synchronous_path_for_the_same_frame(
     for top_k in (3, 1, 5):
         on_arrival = ask(executor, call, arrival_client, top_k=top_k)
         assert all(stamp_to_ns(g.header.stamp) == 2 * 10**9 for g in on_arrival.grasps), on_arrival.message
-        assert "perceived on arrival" in on_arrival.message
+        assert "prepared on arrival" in on_arrival.message
         assert_same_grasps(on_arrival, ask(executor, call, sync_client, top_k=top_k), f"top_k {top_k}")
-        in_request = PlanGrasp.Request(depth=two["depth"], stiffness=two["stiffness"], camera_info=two["info"])
+        in_request = PlanGrasp.Request(depth=two["depth"], camera_info=two["info"])
         assert_same_grasps(on_arrival, ask(executor, call, arrival_client, in_request, top_k),
                            f"top_k {top_k}, images in the request")
-    assert arrival.perception_counts["perceived"] >= 2 and synchronous.perception_counts == {}
+    assert arrival.perception_counts["prepared"] >= 2 and synchronous.perception_counts == {}
 
 
 def test_unusable_frames_give_their_reason_and_the_node_keeps_serving(cell, frames, executor, spin, call):
@@ -153,13 +154,13 @@ def test_unusable_frames_give_their_reason_and_the_node_keeps_serving(cell, fram
     camera.stream_until(camera_messages(frames[0], 4), latest_is(arrival, 4), "a good frame")
     response = ask(executor, call, arrival_client)
     assert response.success and {stamp_to_ns(g.header.stamp) for g in response.grasps} == {4 * 10**9}
-    # A frame that cannot be converted (the stiffness image's size is not the depth's) is the latest frame:
-    # requests answer with its reason until a good frame follows.
+    # A frame that cannot be used (camera_info's size is not the depth's) is the latest frame: requests answer
+    # with its reason until a good frame follows.
     bad = camera_messages(frames[0], 5)
-    bad["stiffness"] = numpy_to_image(frames[0][1][:240, :320], "32FC1", bad["stiffness"].header)
+    bad["info"] = make_camera_info(frames[0][2], 320, 240, bad["info"].header)
     camera.stream_until(bad, lambda: latest_is(arrival, 5)() and arrival.skipped_frames > 0, "the malformed frame")
     response = ask(executor, call, arrival_client)
-    assert not response.success and "stiffness is 320x240" in response.message, response.message
+    assert not response.success and "camera_info is 320x240" in response.message, response.message
     camera.stream_until(camera_messages(frames[1], 6), latest_is(arrival, 6), "a good frame again")
     response = ask(executor, call, arrival_client)
     assert response.success and {stamp_to_ns(g.header.stamp) for g in response.grasps} == {6 * 10**9}
@@ -174,11 +175,11 @@ def test_a_top_k_asked_for_is_searched_on_arrival_for_the_next_frames(cell, fram
         return lambda: (latest_is(arrival, stamp_sec)() and latest_is(synchronous, stamp_sec)()
                         and worker.done is not None and worker.done.seq == worker.submitted)
 
-    camera.stream_until(camera_messages(frames[0], 7), prepared(7), "frame 7 perceived")
+    camera.stream_until(camera_messages(frames[0], 7), prepared(7), "frame 7 prepared")
     first = ask(executor, call, arrival_client, top_k=4)
     assert first.success and "on arrival" in first.message, first.message
     assert "top_k searched on arrival" not in first.message, first.message    # nobody asked for 4 before
-    camera.stream_until(camera_messages(frames[1], 8), prepared(8), "frame 8 perceived")
+    camera.stream_until(camera_messages(frames[1], 8), prepared(8), "frame 8 prepared")
     again = ask(executor, call, arrival_client, top_k=4)
     assert "top_k searched on arrival" in again.message, again.message
     assert {stamp_to_ns(g.header.stamp) for g in again.grasps} == {8 * 10**9}

@@ -20,7 +20,7 @@ from defgg_ros.ros.tf import TfBroadcaster, TfListener, pose_difference, transfo
 
 pytestmark = pytest.mark.ros
 CAMERA_FRAME = "camera_depth_optical_frame"
-BASE_FRAME = defaults("grasp_inference_node")["base_frame"]
+BASE_FRAME = defaults("segmentation_node")["base_frame"]
 
 
 def _frame(width=640, height=480, seed=7, fx_px=None):
@@ -155,7 +155,7 @@ def test_a_configured_pose_that_disagrees_with_tf_stops_planning_naming_both(inf
     assert not response.success
     assert "TF" in response.message and "base_T_camera parameter" in response.message
     assert "12.0 mm" in response.message
-    assert node._camera_pose.source == "conflict"
+    assert node.segmentation_node._camera_pose.source == "conflict"
 
 
 def test_a_configured_pose_within_tolerance_of_tf_plans(inference_service, executor, spin, call):
@@ -165,10 +165,11 @@ def test_a_configured_pose_within_tolerance_of_tf_plans(inference_service, execu
     distance_m, angle_deg = pose_difference(close, base_T_camera)
     assert distance_m < 0.005 and angle_deg < 0.5
     node, _, client = inference_service("agree_probe", base_T_camera=_pose_list(close))
-    spin(executor, lambda: CAMERA_FRAME in node._camera_pose._listener.tree.frames(), 10.0, "the calibration")
+    tree = node.segmentation_node._camera_pose._listener.tree
+    spin(executor, lambda: CAMERA_FRAME in tree.frames(), 10.0, "the calibration")
     response = call(executor, client, PlanGrasp.Request(depth=depth, camera_info=info), 60.0, "plan_grasp")
     assert response.success, response.message
-    assert node._camera_pose.source == "tf"
+    assert node.segmentation_node._camera_pose.source == "tf"
 
 
 def test_the_segmentation_node_rejects_frames_while_the_poses_disagree(executor, spin):

@@ -166,7 +166,7 @@ def test_shipped_yaml_config_loads(executor):
     node = SegmentationNode(context=executor.context, cli_args=["--ros-args", "--params-file", str(path)])
     executor.add_node(node)
     assert node.get_parameter("default_youngs_modulus_pa").value == 2e6
-    assert node.get_parameter("min_object_area_px").value == 60
+    assert node.get_parameter("perceived_topic").value == topics.PERCEIVED_OBJECTS
 
 
 def test_capture_background_removes_fixtures_that_are_not_table(harness, executor, spin, tmp_path):

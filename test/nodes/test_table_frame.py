@@ -10,7 +10,7 @@ from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
 
 from defgg_ros.nodes import qos
-from defgg_ros.nodes.conversions import depth_metres_to_msg, image_to_numpy, make_camera_info, numpy_to_image
+from defgg_ros.nodes.conversions import depth_metres_to_msg, image_to_numpy, make_camera_info
 from defgg_ros.nodes.executor_node import grasp_target
 from defgg_ros.nodes.segmentation_node import SegmentationNode
 from defgg_ros.perception import tabletop_scenes as ts
@@ -28,7 +28,6 @@ def _request(top_k=5):
     header = Header(frame_id="camera_depth_optical_frame")
     h, w = FRAME.depth_m.shape
     return PlanGrasp.Request(depth=depth_metres_to_msg(FRAME.depth_m, "16UC1", header),
-                             stiffness=numpy_to_image(MODULI[FRAME.labels], "32FC1", header),
                              camera_info=make_camera_info(FRAME.camera_k, w, h, header), top_k=top_k)
 
 

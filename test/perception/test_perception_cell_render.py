@@ -5,8 +5,10 @@ import numpy as np
 import pytest
 
 from defgg_ros.perception.depth import depth_to_metres
+from defgg_ros.perception.geometry import transform_from_list
 from defgg_ros.perception.segmentation import segment_objects
-from defgg_ros.perception.stiffness_segmenter import SegmenterConfig, run_segmenter
+from defgg_ros.perception.tabletop import TabletopConfig
+from defgg_ros.planning.perceived_frame import perceive_frame
 from defgg_ros.sim.cell import CellSettings, SimCell
 from defgg_ros.sim.cell_camera import DepthNoise, camera_matrix, depth_m_to_mm_u16
 from defgg_ros.sim.scene_spec import load_scene
@@ -41,5 +43,9 @@ def test_the_box_is_found_on_the_table(renders, which):
 
 def test_stiffness_image_of_the_render(renders):
     depth_m = depth_to_metres(renders[0], "16UC1")
-    out = run_segmenter(SegmenterConfig(default_youngs_modulus_pa=2e9), depth_m, camera_matrix())
-    assert set(np.unique(out.youngs_modulus_pa)) == {0.0, np.float32(2e9)}
+    base_T_camera = transform_from_list([0.5, 0.0, 0.40, 1.0, 0.0, 0.0, 0.0])     # the cell's camera mount
+    parts, _, image = perceive_frame(depth_m, camera_matrix(), base_T_camera, TabletopConfig(),
+                                     default_youngs_modulus_pa=2e9)
+    assert set(np.unique(image)) == {0.0, np.float32(2e9)}
+    assert [o.youngs_modulus_pa for o in parts.objects] == [2e9]
+    assert set(np.unique(parts.grid_youngs_modulus_pa)) == {0.0, np.float32(2e9)}

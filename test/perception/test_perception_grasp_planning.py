@@ -1,4 +1,4 @@
-"""Pure helpers of the grasp inference node: labels, top_k, quality image, finger boxes."""
+"""Pure helpers of the grasp inference node: top_k, quality image, finger boxes."""
 import numpy as np
 import pytest
 
@@ -17,18 +17,7 @@ from defgg_ros.perception.grasp_planning import (
     check_top_k,
     finger_boxes_in_grasp,
     full_quality_image,
-    labels_from_stiffness,
 )
-
-
-def test_labels_from_stiffness_split_components_not_materials():
-    moduli = np.zeros((20, 30), np.float32)
-    moduli[2:8, 2:8] = 2e4
-    moduli[2:8, 8:12] = 2e9     # a stiffer part touching the first: same object
-    moduli[12:18, 20:28] = 2e6
-    labels = labels_from_stiffness(moduli)
-    assert labels.dtype == np.uint8 and set(np.unique(labels)) == {0, 1, 2}
-    assert len(np.unique(labels[2:8, 2:12])) == 1
 
 
 @pytest.mark.parametrize("top_k,expected", [(0, 1), (1, 1), (7, 7), (MAX_TOP_K, MAX_TOP_K)])

@@ -9,7 +9,7 @@ from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
 
 from defgg_ros.nodes import qos
-from defgg_ros.nodes.conversions import depth_metres_to_msg, make_camera_info, numpy_to_image
+from defgg_ros.nodes.conversions import depth_metres_to_msg, make_camera_info
 from defgg_ros.nodes.segmentation_node import SegmentationNode
 from defgg_ros.perception.depth import DepthError, depth_to_metres
 from defgg_ros.perception.plausibility import check_moduli_plausible
@@ -60,47 +60,37 @@ def test_the_rule_itself():
 
 
 @pytest.fixture
-def cell(random_checkpoint, inference_service):
-    return inference_service("plausibility_client", model_path=str(random_checkpoint(seed=1)))
+def cell(inference_service):
+    return inference_service("plausibility_client")
 
 
 @pytest.mark.parametrize("depth,cause", [(byte_swapped_depth, "byte order"),
                                          (flagged_big_endian_depth, "is_bigendian")])
 def test_plan_grasp_refuses_byte_swapped_16uc1(cell, executor, call, depth, cause):
     _, _, client = cell
-    request = PlanGrasp.Request(depth=depth(), camera_info=make_camera_info(K, 640, 480, header()),
-                                stiffness=numpy_to_image(STIFFNESS_PA, "32FC1", header()))
+    request = PlanGrasp.Request(depth=depth(), camera_info=make_camera_info(K, 640, 480, header()))
     response = call(executor, client, request, 20.0, "plan_grasp")
     assert not response.success and not response.grasps
     assert "beyond the camera's 2.0 m range" in response.message and cause in response.message, response.message
-    # The same request carrying objects instead of a stiffness image: the same rule.
-    request.stiffness = Image()
+    # The same request carrying objects: the same rule.
     request.objects = [ObjectStiffness(name="box", youngs_modulus_pa=2e5)]
     response = call(executor, client, request, 20.0, "plan_grasp")
     assert not response.success and cause in response.message, response.message
     # And the node still serves a good request.
     good = PlanGrasp.Request(depth=depth_metres_to_msg(DEPTH_M, "16UC1", header()),
-                             camera_info=make_camera_info(K, 640, 480, header()),
-                             stiffness=numpy_to_image(STIFFNESS_PA, "32FC1", header()))
+                             camera_info=make_camera_info(K, 640, 480, header()))
     assert call(executor, client, good, 20.0, "plan_grasp").success
 
 
 def test_plan_grasp_and_set_stiffness_refuse_1e30_pa_alike(cell, executor, call, spin):
     _, client_node, client = cell
     request = PlanGrasp.Request(depth=depth_metres_to_msg(DEPTH_M, "16UC1", header()),
-                                camera_info=make_camera_info(K, 640, 480, header()),
-                                stiffness=numpy_to_image(np.where(TRUTH > 0, 1e30, 0).astype(np.float32), "32FC1",
-                                                         header()))
-    response = call(executor, client, request, 20.0, "plan_grasp")
-    assert not response.success and "plausible range [1, 1.2e+12] Pa" in response.message, response.message
+                                camera_info=make_camera_info(K, 640, 480, header()))
     # A request with objects at 1e30 Pa goes through SetStiffness's rule: refused with the same range.
-    request.stiffness = Image()
     request.objects = [ObjectStiffness(name="box", youngs_modulus_pa=1e30)]
     response = call(executor, client, request, 20.0, "plan_grasp")
     assert not response.success and "plausible range [1, 1.2e+12] Pa" in response.message, response.message
-
-    segmentation = SegmentationNode(context=executor.context)
-    executor.add_node(segmentation)
+    # SetStiffness on the cell's segmentation node (the fixture's): the same range.
     set_client = client_node.create_client(SetStiffness, topics.SET_STIFFNESS_SERVICE)
     assert set_client.wait_for_service(timeout_sec=10.0)
     answer = call(executor, set_client, SetStiffness.Request(objects=[ObjectStiffness(name="box",

@@ -164,7 +164,11 @@ random_images = st.builds(
     st.integers(0, 24), st.integers(0, 24), st.integers(0, 100), st.binary(max_size=1200), st.integers(0, 1))
 
 
-def test_fuzzed_frames_never_raise_out_of_the_depth_callback(executor):
+def test_fuzzed_frames_are_refused_with_a_reason_and_never_raise_anything_else(executor):
+    """The perception of a frame (what the worker thread runs for each frame the callback hands it) refuses a
+    malformed one with a ValueError (counted, published as the frame's error) and raises nothing else."""
+    from defgg_ros.perception.frame_worker import WorkerResult
+
     node = SegmentationNode(context=executor.context)
     executor.add_node(node)
 
@@ -174,7 +178,12 @@ def test_fuzzed_frames_never_raise_out_of_the_depth_callback(executor):
     def fuzz(msg, info_w, info_h):
         node._on_camera_info(make_camera_info(K, max(info_w, 1), max(info_h, 1)))
         before = node.frames_rejected + node.frames_processed
-        node._on_depth(msg)  # the real callback; any exception here would stop the node
+        item = (msg, node._camera_k, 0.0)
+        try:
+            result = WorkerResult(1, item, 0.0, node._perceive_stream_frame(item, lambda: None))
+        except ValueError as exc:
+            result = WorkerResult(1, item, 0.0, error=exc)
+        node._publish_perceived(result, lambda: None)
         assert node.frames_rejected + node.frames_processed == before + 1
 
     fuzz()
