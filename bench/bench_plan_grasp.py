@@ -1,25 +1,24 @@
 """PlanGrasp latency through DDS next to the bare planner call, per resolution, in one run.
 
-Starts grasp_inference_node as its own process (like the cell runs it; default planner: tabletop),
-on a private ROS_DOMAIN_ID, with `base_T_camera` set to the scene's camera. Scenes: the generated
+Starts segmentation_node (the only perceiver, `base_T_camera` set to the scene's camera) and
+grasp_inference_node as their own processes (like the cell runs them), on a private ROS_DOMAIN_ID. Scenes: the generated
 cluttered table (perception/tabletop_scenes.py: eight objects, some touching, a tilted D435 with
 the robot's base in view, sensor noise) at 640x480 and 1280x720 (--modes).
 A camera process streams the scene at --camera-hz (30, like the D435) for the whole run: depth
-(16UC1), stiffness (32FC1) and camera_info, reliable like realsense2_camera, a new stamp (the wall
+(16UC1) and camera_info, reliable like realsense2_camera, a new stamp (the wall
 clock) on every frame and the noise seed alternating between two renders, so the node always has a
 new frame to perceive and no answer comes from a cache of the frame before (--camera-hz 0: one frame
 published once, the old bench). Per mode, alternates per iteration:
   bare     TabletopPlanner.plan on the same frame in this process (perception, network on the
-           height map, feasibility), so the difference is what the service adds (DDS, conversions)
+           height map, feasibility), so the difference is what the services add (DDS, conversions)
   latest   PlanGrasp with an empty request (the node plans on its latest synchronised frame;
-           with perceive_on_arrival, the default, it only searches a frame perceived on arrival)
-  images   PlanGrasp carrying depth (16UC1), stiffness (32FC1) and camera_info
+           with prepare_on_arrival, the default, it only searches a frame prepared on arrival)
+  images   PlanGrasp carrying depth (16UC1) and camera_info (perceived through Perceive)
 Interleaving keeps the comparison fair while other jobs load the machine.
 Prints median / p99 / max per mode, the node's own planning time, the load average, the targets
 (issue 26): PlanGrasp p99 <= 15 ms at 640x480, <= 33 ms at 1280x720 (30 Hz); and how many frames per
-second the camera sent, the node synchronised and the node perceived (from the latest-frame answers'
+second the camera sent, the node synchronised and the node prepared (from the latest-frame answers'
 messages), with the age of the frame each latest-frame answer came from (request time - its stamp).
---planner camera_crop measures the original 300x300-window path on the same frames.
 """
 import argparse
 import multiprocessing
@@ -48,17 +47,16 @@ def parse_args(argv=None):
     parser.add_argument("--client-executor", choices=("events", "single"), default="events",
                         help="executor of the bench's client node (events = rclpy.experimental.EventsExecutor)")
     parser.add_argument("--modes", default="640x480,1280x720", help="resolutions, comma-separated WxH")
-    parser.add_argument("--planner", choices=("tabletop", "camera_crop"), default="tabletop")
     parser.add_argument("--top-k", type=int, default=1, help="grasps per request")
     parser.add_argument("--camera-hz", type=float, default=30.0, help="frames per second streamed; 0: one frame")
-    parser.add_argument("--perceive-on-arrival", choices=("true", "false"), default="true",
-                        help="the node's perceive_on_arrival parameter")
+    parser.add_argument("--prepare-on-arrival", choices=("true", "false"), default="true",
+                        help="the inference node's prepare_on_arrival parameter")
     parser.add_argument("--publish-on-sync", choices=("true", "false"), default="true",
                         help="the node's publish_on_sync parameter (the cell's: true, the best grasp of every frame "
                              "perceived is published; a top_k 1 request then reuses that frame's search)")
     parser.add_argument("--max-frame-age", type=float, default=None, help="the node's max_frame_age_s (its default)")
-    parser.add_argument("--perception-stages", type=int, default=None,
-                        help="the node's perception_stages (its default: 2 threads)")
+    parser.add_argument("--prepare-stages", type=int, default=None,
+                        help="the inference node's prepare_stages (its default: 2 threads)")
     parser.add_argument("--only-latest", action="store_true",
                         help="only latest-frame requests, one per --request-period (no bare planner or image "
                              "requests in this process: the node and the camera have the machine to themselves)")
@@ -78,23 +76,45 @@ def scene(width_px: int, height_px: int, seed: int | None = None):
     return frame.depth_m, lut[frame.labels], frame.camera_k, frame.base_T_camera
 
 
-def start_node(model: str, threads: int, base_T_camera, planner: str, perceive_on_arrival: str = "true",
+class PerceptionNodes:
+    """segmentation_node and grasp_inference_node, each in its own process; pid, returncode() and rss are the
+    inference node's (the one PlanGrasp measures), stop() stops both."""
+
+    def __init__(self, segmentation: NodeProcess, inference: NodeProcess):
+        self.segmentation, self.inference = segmentation, inference
+        self.pid = inference.pid
+
+    def returncode(self):
+        return self.inference.returncode() if self.segmentation.returncode() is None else \
+            self.segmentation.returncode()
+
+    def stop(self):
+        self.inference.stop()
+        self.segmentation.stop()
+
+
+def start_node(model: str, threads: int, base_T_camera, prepare_on_arrival: str = "true",
                publish_on_sync: str = "true", max_frame_age_s: float | None = None,
-               perception_stages: int | None = None) -> NodeProcess:
-    """grasp_inference_node in its own process, with the cell's parameters unless told otherwise."""
+               prepare_stages: int | None = None, max_image_size_px=None) -> PerceptionNodes:
+    """segmentation_node (the camera pose) and grasp_inference_node in their own processes, with the cell's
+    parameters unless told otherwise."""
     from defgg_ros.perception.geometry import transform_to_xyz_quaternion
 
     xyz, quat = transform_to_xyz_quaternion(base_T_camera)
     pose = ",".join(f"{v:.9f}" for v in (*xyz, *quat))
+    size = [] if max_image_size_px is None else ["-p", f"max_image_size_px:=[{max_image_size_px[0]},"
+                                                 f"{max_image_size_px[1]}]"]
+    segmentation = NodeProcess("segmentation_node", [
+        sys.executable, "-m", "defgg_ros.nodes.segmentation_node", "--ros-args", "-p", f"base_T_camera:=[{pose}]",
+        *size, "--log-level", "warn"], cwd=ROOT)
     cmd = [sys.executable, "-m", "defgg_ros.nodes.grasp_inference_node", "--ros-args",
            "-p", f"model_path:={model}", "-p", f"num_threads:={threads}", "-p", f"publish_on_sync:={publish_on_sync}",
-           "-p", f"base_T_camera:=[{pose}]", "-p", f"planner:={planner}",
-           "-p", f"perceive_on_arrival:={perceive_on_arrival}", "--log-level", "warn"]
+           "-p", f"prepare_on_arrival:={prepare_on_arrival}", *size, "--log-level", "warn"]
     if max_frame_age_s is not None:
         cmd[-2:-2] = ["-p", f"max_frame_age_s:={max_frame_age_s}"]
-    if perception_stages is not None:
-        cmd[-2:-2] = ["-p", f"perception_stages:={perception_stages}"]
-    return NodeProcess("grasp_inference_node", cmd, cwd=ROOT)
+    if prepare_stages is not None:
+        cmd[-2:-2] = ["-p", f"prepare_stages:={prepare_stages}"]
+    return PerceptionNodes(segmentation, NodeProcess("grasp_inference_node", cmd, cwd=ROOT))
 
 
 def rss_mb(pid: int) -> float:
@@ -144,7 +164,6 @@ class Cell:
 
         if self._pubs is None:
             self._pubs = [self.node.create_publisher(Image, topics.DEPTH_IMAGE, qos.SENSOR_DATA),
-                          self.node.create_publisher(Image, topics.STIFFNESS_IMAGE, qos.SENSOR_DATA),
                           self.node.create_publisher(CameraInfo, topics.DEPTH_CAMERA_INFO, qos.SENSOR_DATA)]
         return self._pubs
 
@@ -157,15 +176,15 @@ class Cell:
 
 
 def messages(depth_m, moduli_pa, camera_k, stamp_sec=1):
+    """(depth 16UC1, camera_info) of a frame (moduli_pa: unused, the segmentation node assigns the moduli)."""
     from std_msgs.msg import Header
 
-    from defgg_ros.nodes.conversions import depth_metres_to_msg, make_camera_info, numpy_to_image
+    from defgg_ros.nodes.conversions import depth_metres_to_msg, make_camera_info
 
     header = Header(frame_id="camera_depth_optical_frame")
     header.stamp.sec = stamp_sec
     h, w = depth_m.shape
-    return (depth_metres_to_msg(depth_m, "16UC1", header), numpy_to_image(moduli_pa, "32FC1", header),
-            make_camera_info(camera_k, w, h, header))
+    return depth_metres_to_msg(depth_m, "16UC1", header), make_camera_info(camera_k, w, h, header)
 
 
 def prime_latest_frame(cell, frame_msgs, deadline_s=60.0):
@@ -201,7 +220,6 @@ def camera_main(renders, hz: float, stop, sent) -> None:
     try:
         node = Node("bench_camera", context=context)
         pubs = [node.create_publisher(Image, topics.DEPTH_IMAGE, qos.IMAGE_PUBLISH),
-                node.create_publisher(Image, topics.STIFFNESS_IMAGE, qos.IMAGE_PUBLISH),
                 node.create_publisher(CameraInfo, topics.DEPTH_CAMERA_INFO, qos.IMAGE_PUBLISH)]
         frames = [messages(*render) for render in renders]
         period, start, tick = 1.0 / hz, time.monotonic(), 0
@@ -237,7 +255,7 @@ class Camera:
             self.process.terminate()
 
 
-PERCEIVED = re.compile(r"waited ([\d.]+) ms, searched ([\d.]+) ms; (\d+) of (\d+) synchronised frames perceived")
+PERCEIVED = re.compile(r"waited ([\d.]+) ms, searched ([\d.]+) ms; (\d+) of (\d+) synchronised frames prepared")
 
 
 def wait_for_node(cell, proc, deadline_s=120.0):
@@ -274,8 +292,8 @@ def main(argv=None):
     base_T_camera = scenes[modes[0]][3]
     predictor = GraspPredictor.from_checkpoint(args.model)
     planner = TabletopPlanner(predictor)
-    proc = start_node(args.model, args.threads, base_T_camera, args.planner, args.perceive_on_arrival,
-                      args.publish_on_sync, args.max_frame_age, args.perception_stages)
+    proc = start_node(args.model, args.threads, base_T_camera, args.prepare_on_arrival, args.publish_on_sync,
+                      args.max_frame_age, args.prepare_stages)
     context = Context()
     rclpy.init(context=context)
     camera = None
@@ -288,14 +306,10 @@ def main(argv=None):
                 other = scene(*mode, seed=mode[0] + 1)
                 camera = Camera([(depth_m, moduli_pa, camera_k), other[:3]], args.camera_hz)
             prime_latest_frame(cell, None if camera else frame_msgs)
-            image_request = PlanGrasp.Request(depth=frame_msgs[0], stiffness=frame_msgs[1],
-                                              camera_info=frame_msgs[2], top_k=args.top_k)
-            if args.planner == "tabletop":
-                def bare(d=depth_m, m=moduli_pa, k=camera_k):
-                    return planner.plan(d, k, base_T_camera, args.top_k, m)
-            else:
-                def bare(d=depth_m, m=moduli_pa, k=camera_k):
-                    return predictor.predict(d, m, k, (m > 0).astype(np.uint8), top_k=args.top_k)
+            image_request = PlanGrasp.Request(depth=frame_msgs[0], camera_info=frame_msgs[1], top_k=args.top_k)
+
+            def bare(d=depth_m, k=camera_k):
+                return planner.plan(d, k, base_T_camera, args.top_k)
             fns = {
                 "bare planner (in process)": bare,
                 "PlanGrasp (latest frame)": lambda: _ok(cell.call(PlanGrasp.Request(top_k=args.top_k))),
@@ -353,7 +367,7 @@ class Stream:
 
         self.ages_s.append((request_ns - stamp_to_ns(response.grasps[0].header.stamp)) / 1e9)
         match = PERCEIVED.search(response.message)
-        if match is None:     # perceive_on_arrival false: no counts in the answer
+        if match is None:     # prepare_on_arrival false: no counts in the answer
             return
         waited, searched, perceived, synchronised = match.groups()
         self.waits_ms.append(float(waited))
@@ -369,13 +383,13 @@ class Stream:
         print(f"latest-frame answers: age of the frame used (request - stamp) median {np.median(ages):.1f} ms, "
               f"p99 {np.percentile(ages, 99):.1f} ms, max {ages.max():.1f} ms")
         if self.first is None or self.last[0] <= self.first[0]:
-            print("(no perception counts: perceive_on_arrival is off)")
+            print("(no preparation counts: prepare_on_arrival is off)")
             return
         span = self.last[0] - self.first[0]
         sent, synced, perceived = (b - a for a, b in zip(self.first[1:], self.last[1:]))
-        print(f"camera sent {sent / span:.1f} frames/s, the node synchronised {synced / span:.1f}/s and perceived "
+        print(f"camera sent {sent / span:.1f} frames/s, the node synchronised {synced / span:.1f}/s and prepared "
               f"{perceived / span:.1f}/s ({perceived / max(synced, 1):.0%} of them) over {span:.0f} s")
-        print(f"inside the node per latest-frame answer: waiting for a perceived frame median "
+        print(f"inside the node per latest-frame answer: waiting for a prepared frame median "
               f"{np.median(self.waits_ms):.2f} ms (p99 {np.percentile(self.waits_ms, 99):.2f}), search median "
               f"{np.median(self.searches_ms):.2f} ms (p99 {np.percentile(self.searches_ms, 99):.2f})")
 
@@ -388,12 +402,12 @@ def _ok(response):
 
 def report(mode, times, in_node, args, runtime, cpu):
     target = TARGET_P99_MS.get(mode)
-    print(f"\n{mode[0]}x{mode[1]}: PlanGrasp latency, planner {args.planner}, top_k {args.top_k}, {args.calls} calls "
+    print(f"\n{mode[0]}x{mode[1]}: PlanGrasp latency, top_k {args.top_k}, {args.calls} calls "
           f"per mode, torch threads {args.threads}, runtime {runtime}, client executor {args.client_executor}, "
           f"Fast DDS profile {Path(os.environ.get(FASTDDS_PROFILE_VARIABLE, 'built-in')).name}, camera "
-          f"{args.camera_hz:g} Hz, perceive_on_arrival {args.perceive_on_arrival}, publish_on_sync "
+          f"{args.camera_hz:g} Hz, prepare_on_arrival {args.prepare_on_arrival}, publish_on_sync "
           f"{args.publish_on_sync}, max_frame_age_s {'default' if args.max_frame_age is None else args.max_frame_age}, "
-          f"perception_stages {args.perception_stages or 'default'}"
+          f"prepare_stages {args.prepare_stages or 'default'}"
           f"{f', only latest-frame requests every {args.request_period:g} s' if args.only_latest else ''}, "
           f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
     print(f"{'mode':32s} {'median ms':>10s} {'p99 ms':>8s} {'max ms':>8s}")

@@ -1,9 +1,9 @@
 """PlanGrasp under load: many calls from several client nodes, nothing dropped, memory flat.
 
-Starts grasp_inference_node in its own process (private ROS_DOMAIN_ID), primes
+Starts segmentation_node and grasp_inference_node in their own processes (private ROS_DOMAIN_ID), primes
 it with one synchronised frame, then `--clients` client nodes each keep
 `--in-flight` requests outstanding until `--calls` calls are answered in total
-(a `--image-fraction` of them carry depth + stiffness + camera_info, the rest
+(a `--image-fraction` of them carry depth + camera_info, perceived through Perceive, the rest
 are empty "latest frame" requests). Repeats for `--rounds` rounds and prints,
 per round: answered / dropped (no answer within --timeout) / failed
 (success=false), throughput, latency median and p99, and the node's resident
@@ -111,7 +111,7 @@ def main(argv=None):
     from tqdm import tqdm
 
     depth_m, moduli_pa, camera_k, base_T_camera = scene(640, 480)   # the generated cluttered table
-    proc = start_node(args.model, args.threads, base_T_camera, "tabletop")
+    proc = start_node(args.model, args.threads, base_T_camera)
     context = Context()
     rclpy.init(context=context)
     try:
@@ -119,7 +119,7 @@ def main(argv=None):
         wait_for_node(primer, proc)
         frame_msgs = messages(depth_m, moduli_pa, camera_k)
         prime_latest_frame(primer, frame_msgs)
-        image_request = PlanGrasp.Request(depth=frame_msgs[0], stiffness=frame_msgs[1], camera_info=frame_msgs[2])
+        image_request = PlanGrasp.Request(depth=frame_msgs[0], camera_info=frame_msgs[1])
         requests = (PlanGrasp.Request(), image_request, args.image_fraction)
         executor = make_executor(args.client_executor, context)
         clients = []
