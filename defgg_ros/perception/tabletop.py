@@ -81,6 +81,9 @@ LEFTOVER_CEILING_M = 0.01
 # A region at the view's border whose outline against the table stands less than this above the minimum object
 # height is the table rising there, not an object (_drop_table_warps).
 WARP_OUTLINE_STEP_M = 0.004
+# Gaps in a rim's outline bridged before what it encloses is found (cells of the height map, pixels).
+RIM_GAP_CELLS = 7
+_RIM_KERNEL = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (RIM_GAP_CELLS, RIM_GAP_CELLS))
 # Labels travel as mono8.
 MAX_LABELS = 254
 _CROSS_3X3 = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
@@ -484,30 +487,44 @@ def _label_leftovers(labels: np.ndarray, for_pixels: np.ndarray, grid: np.ndarra
 
 
 def _enclosed_label(group: np.ndarray, labels: np.ndarray) -> int:
-    """The one object a group of unlabelled cells encloses (a cup's rim and walls around its inner bottom), or 0:
-    the group takes it when it holds all that object's cells and touches no other object."""
+    """The one object a group of unlabelled cells belongs to (a cup's rim and walls around its inner bottom), or
+    0: the group takes the object it touches, if only one, when it holds (encloses) it or is larger than it."""
     near = cv2.dilate(group.view(np.uint8), np.ones((3, 3), np.uint8)) > 0
     touched = np.unique(labels[near & (labels > 0)])
     if touched.size != 1:
         return 0
     mine = labels == touched[0]
-    return int(touched[0]) if np.count_nonzero(_filled(group) & mine) >= 0.9 * np.count_nonzero(mine) else 0
+    inside = np.count_nonzero(_filled(group) & mine) >= 0.9 * np.count_nonzero(mine)
+    # A group larger than the one object it touches is that object's (a bowl's rim and walls around a speck
+    # of its bottom that survived the cuts, where the rim is too broken to enclose it).
+    return int(touched[0]) if inside or np.count_nonzero(group) > np.count_nonzero(mine) else 0
 
 
 def _filled(mask: np.ndarray) -> np.ndarray:
-    """The mask with its holes filled (a cup's rim with its inside)."""
-    contours, _ = cv2.findContours(mask.view(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+    """The mask with its holes filled (a cup's rim with its inside), gaps up to RIM_GAP_CELLS in its outline
+    bridged (a rim broken by a stereo shadow or dropouts)."""
+    closed = cv2.morphologyEx(mask.view(np.uint8), cv2.MORPH_CLOSE, _RIM_KERNEL)
+    contours, _ = cv2.findContours(closed, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
     out = np.zeros(mask.shape, np.uint8)
     cv2.drawContours(out, contours, -1, 1, thickness=cv2.FILLED)
     return out > 0
 
 
 def fill_enclosed(labels: np.ndarray) -> np.ndarray:
+    """_fill_enclosed, then again with the outlines closed over gaps of a few pixels (a rim broken by a shadow
+    still encloses its inside)."""
+    return _fill_enclosed(_fill_enclosed(labels, False), True)
+
+
+def _fill_enclosed(labels: np.ndarray, close_gaps: bool) -> np.ndarray:
     """Image labels with every unlabelled region that one object alone encloses given that object's label: the
     inside of a hollow object seen from above (the inner bottom of a cup or bowl, lower than the minimum object
     height), missing returns inside an object. A region bordered by several objects (a gap between them, one
     inside a bin's floor next to an object) stays as it is."""
-    free = (labels == 0).view(np.uint8)
+    labelled = (labels > 0).view(np.uint8)
+    if close_gaps:
+        labelled = cv2.morphologyEx(labelled, cv2.MORPH_CLOSE, _RIM_KERNEL)
+    free = (labelled == 0).view(np.uint8)
     count, regions = cv2.connectedComponents(free, connectivity=4)
     if count <= 2:
         return labels
@@ -529,7 +546,7 @@ def fill_enclosed(labels: np.ndarray) -> np.ndarray:
     np.minimum.at(lo, index[pick], grown_min.reshape(-1)[pick])
     lut = np.where(enclosed & (hi == lo) & (hi > 0) & (hi < 255), hi, 0).astype(np.uint8)
     extra = lut[regions]
-    return np.where(extra > 0, extra, labels)
+    return np.where((extra > 0) & (labels == 0), extra, labels)
 
 
 def _width_m(mask: np.ndarray) -> float:
