@@ -42,10 +42,11 @@ def test_pick_and_place_with_contact_on_the_way_down(executor_cell, spin):
     assert result.gripper_width_closed_m == pytest.approx(0.04)
     assert result.held_after_lift and result.held_after_transfer
     assert result.grasp_used.width_m == pytest.approx(0.05)
-    # The arm ends above the configured bin, fingers open.
+    # The arm ends above the bin's first free slot (no place pose: the bin), fingers open; the slot is used now.
     tcp = KIN.fk(driver.q)[:3, 3]
-    assert tcp[:2] == pytest.approx([0.35, -0.45], abs=2e-3)
+    assert tcp[:2] == pytest.approx(node._bin.centres[0], abs=2e-3)
     assert driver.width_m > 0.04
+    assert node._bin.used == 1 and node._bin.next_free() == 1
 
 
 def test_busy_goal_is_rejected_and_cancel_stops_the_arm(executor_cell, spin):
