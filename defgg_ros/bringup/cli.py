@@ -29,6 +29,7 @@ from defgg_ros.ros.domain import ISOLATION_ENV, apply_domain_choice, parse_domai
 from defgg_ros.ros.launcher import watch_supervisor
 
 DRIVER = "fake_panda_driver"
+EXECUTOR = "executor_node"
 
 
 def parse_args(argv=None):
@@ -208,8 +209,13 @@ def main(argv=None) -> int:
         print(f"defgg-bringup: {exc}", file=sys.stderr, flush=True)
         code = 0 if stop_requested.is_set() else 1
     finally:
-        codes = bringup.stop()
+        codes = bringup.stop()   # reverse start order: the executor (which stops the arm) before the driver
         print("defgg-bringup: stopped " + ", ".join(f"{n} ({c})" for n, c in codes.items()), flush=True)
+    if codes.get(EXECUTOR, 0) != 0:
+        # The executor exits non-zero when it could not confirm the arm at rest (or failed): say so, and so do we.
+        print(f"defgg-bringup: WARNING: {EXECUTOR} exited {codes[EXECUTOR]}: it may not have stopped the arm "
+              "(its last lines above); check the arm", file=sys.stderr, flush=True)
+        code = code or 1
     return code
 
 

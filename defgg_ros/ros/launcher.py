@@ -27,6 +27,8 @@ from defgg_ros.ros.transport import FASTDDS_PROFILE, FASTDDS_PROFILE_VARIABLE
 
 SUPERVISOR_PID_VARIABLE = "DEFGG_SUPERVISOR_PID"
 SUPERVISOR_POLL_S = 0.5
+# Longer than the executor's exit_stop_timeout_s (2 s): it stops the arm before it exits, and the driver it
+# stops through must still run (stop_all stops one process after the other).
 SIGINT_GRACE_S = 10.0
 SIGTERM_GRACE_S = 5.0
 SIGKILL_WAIT_S = 5.0

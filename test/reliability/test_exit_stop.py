@@ -10,7 +10,10 @@ Before issue 48 rclpy's signal handler shut the executor's context down at once;
 the action clients before the hold was sent ("action client pointer is invalid"), the arm went on to the end of
 its trajectory (0.49 rad/s 0.5-2 s after the signal) and the process exited 0.
 """
+import os
 import signal
+import subprocess
+import sys
 import time
 
 import numpy as np
@@ -119,3 +122,53 @@ def _in_thread(function):
     thread.start()
     time.sleep(0.01)
     return thread
+
+
+def test_the_bringup_says_so_when_the_executor_could_not_confirm_the_stop(tmp_path, executor, spin):
+    """defgg-bringup (the CLI) stopped mid-descent while the arm's driver is frozen (SIGSTOP: no joint states, like a
+    controller that no longer answers): the executor cannot confirm the stop, exits 1 naming why, and the bringup
+    warns and exits 1 instead of 0."""
+
+    set_path = _cell_set(tmp_path).config_dir / "driver_and_executor.yaml"
+    lines = []
+    with open(tmp_path / "bringup.log", "w") as out:
+        bringup = subprocess.Popen([sys.executable, "-m", "defgg_ros.bringup.cli", "--set", str(set_path),
+                                    "--ros-domain", "inherit"], stdout=out, stderr=subprocess.STDOUT, text=True)
+    driver_pid = None
+    try:
+        def log_has(text):
+            lines[:] = (tmp_path / "bringup.log").read_text().splitlines()
+            return any(text in line for line in lines)
+
+        spin(executor, lambda: log_has("cell ready in") or bringup.poll() is not None, 180.0, "the cell")
+        driver_pid = int(next(line for line in lines if "started " in line).split("fake_panda_driver (pid ")[1]
+                         .split(")")[0])
+        joints, feedback = [], []
+        probe = Node("exit_stop_cli_probe", context=executor.context)
+        probe.create_subscription(JointState, topics.JOINT_STATES, joints.append, qos.STATE)
+        client = ActionClient(probe, PickAndPlace, topics.PICK_AND_PLACE_ACTION)
+        executor.add_node(probe)
+        spin(executor, client.server_is_ready, 60.0, "the pick-and-place action server")
+        goal = PickAndPlace.Goal(grasp=grasp_msg((*BOX_XY_M, BOX_SIZE_M), BOX_YAW_RAD, 0.07))
+        assert spin(executor, client.send_goal_async(goal, feedback_callback=lambda f: feedback.append(f.feedback)),
+                    30.0, "the goal response").accepted
+        spin(executor, lambda: _in_phase("descend", feedback, joints), 240.0, "the descent")
+        os.kill(driver_pid, signal.SIGSTOP)
+        bringup.send_signal(signal.SIGTERM)
+        spin(executor, lambda: log_has("could not confirm that the arm stopped"), 30.0, "the executor's reason")
+        os.kill(driver_pid, signal.SIGCONT)   # so that the bringup's SIGINT stops it at once
+        code = bringup.wait(timeout=60)
+        executor.remove_node(probe)
+    finally:
+        if driver_pid is not None:
+            try:
+                os.kill(driver_pid, signal.SIGCONT)
+            except ProcessLookupError:
+                pass
+        if bringup.poll() is None:
+            bringup.kill()
+            bringup.wait()
+    log_has("")
+    assert code == 1, "\n".join(lines[-30:])
+    assert any("stopped " in line and "executor_node (1)" in line for line in lines), "\n".join(lines[-30:])
+    assert any("WARNING: executor_node exited 1" in line for line in lines), "\n".join(lines[-30:])
