@@ -58,6 +58,7 @@ from defgg_ros.nodes.node_main import run_node
 from defgg_ros.nodes.topic_watch import TopicWatch
 from defgg_ros.ros import topics
 from defgg_ros.ros.action import ActionClient, destroy_actions
+from defgg_ros.ros.diagnostics import NodeDiagnostics
 from defgg_ros.ros.parameters import declare_parameters, load_schema
 from defgg_ros.ros.service import ServiceTimeout, call_idempotent
 
@@ -251,6 +252,8 @@ class ExecutorNode(Node):
         self._server = ActionServer(self, PickAndPlace, p["action_name"], self._execute, callback_group=self._group,
                                     goal_callback=self._on_goal, cancel_callback=lambda _: CancelResponse.ACCEPT)
         self._set_up_bin(p)
+        # /diagnostics at 1 Hz (ros/diagnostics.py), like every cell node: whether a goal is running.
+        self.diagnostics = NodeDiagnostics(self, lambda: {"busy": self._busy})
 
     def _params(self) -> dict:
         """The parameters, with the names left empty filled in from robot_type (ValueError: unknown type, or

@@ -1,5 +1,7 @@
 """Issue 47 items 5-6 and issue 46 item 7 on real rclpy nodes: image size limit, /diagnostics, camera pose
 published on TF only when asked to, and a configured pose that disagrees with TF stops planning."""
+import time
+
 import numpy as np
 import pytest
 from defgg_interfaces.srv import PlanGrasp
@@ -199,3 +201,20 @@ def test_the_segmentation_node_rejects_frames_while_the_poses_disagree(executor,
                                         f"{node.frames_rejected} rejected: {node.last_rejection})")
     assert "1.00 deg" in node.last_rejection and "TF" in node.last_rejection
     assert node._camera_pose.source == "conflict"
+
+
+def test_the_executor_publishes_diagnostics_too(executor_cell):
+    ex, executor_node, _, _ = executor_cell
+    probe = Node("executor_diagnostics_probe", context=ex.context)
+    ex.add_node(probe)
+    seen = []
+    probe.create_subscription(DiagnosticArray, DIAGNOSTICS_TOPIC, seen.append, 10)
+
+    def reported():
+        ex.spin_once(timeout_sec=0.1)
+        return any(status.name.endswith("executor_node") and any(kv.key == "busy" for kv in status.values)
+                   for msg in seen for status in msg.status)
+
+    deadline = time.monotonic() + 10.0
+    while not reported():
+        assert time.monotonic() < deadline, "no /diagnostics status from the executor within 10 s"
