@@ -81,6 +81,9 @@ LEFTOVER_CEILING_M = 0.01
 # A region at the view's border whose outline against the table stands less than this above the minimum object
 # height is the table rising there, not an object (_drop_table_warps).
 WARP_OUTLINE_STEP_M = 0.004
+# Unlabelled groups smaller than this share of min_object_area_m2 neither join an object nor become one (specks
+# of flank between the cuts).
+JOIN_MIN_SHARE = 0.25
 # Gaps in a rim's outline bridged before what it encloses is found (cells of the height map, pixels).
 RIM_GAP_CELLS = 7
 _RIM_KERNEL = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (RIM_GAP_CELLS, RIM_GAP_CELLS))
@@ -458,25 +461,42 @@ def _label_leftovers(labels: np.ndarray, for_pixels: np.ndarray, grid: np.ndarra
     """Occupied cells that no object reached, in groups that touch no object, of at least min_object_area_m2:
     objects too, each group one (areas gets theirs). They are objects without a flat core that the jump and
     crease cuts leave: a thin-walled cup or bowl (rim, walls and inner bottom all cut), a mug's outer wall seen
-    from the side. Groups touching an object stay unlabelled (its flanks, as before)."""
+    from the side. A group touching one object joins it when it encloses it or is larger (_joins); other groups
+    touching objects stay unlabelled (their flanks, as before). Each group is looked at in its own box."""
     rest = (grid > 0) & (labels == 0)
     if not rest.any() or len(areas) >= MAX_LABELS:
         return labels, for_pixels
     count, groups = cv2.connectedComponents(rest.view(np.uint8), connectivity=8)
-    touching = np.unique(groups[cv2.dilate((labels > 0).view(np.uint8), np.ones((3, 3), np.uint8)) > 0])
     sizes = np.bincount(groups.reshape(-1), minlength=count)
     min_cells = config.min_object_area_m2 / (CELL_M * CELL_M)
+    # Per group the highest and lowest label next to it (one label: they agree; none: 0 and 255).
+    near_hi = cv2.dilate(labels, np.ones((3, 3), np.uint8))
+    near_lo = cv2.erode(np.where(labels > 0, labels, 255).astype(np.uint8), np.ones((3, 3), np.uint8))
+    flat = groups.reshape(-1)
+    edge = np.flatnonzero((flat > 0) & (near_hi.reshape(-1) > 0))
+    hi = np.zeros(count, np.int32)
+    lo = np.full(count, 255, np.int32)
+    np.maximum.at(hi, flat[edge], near_hi.reshape(-1)[edge])
+    np.minimum.at(lo, flat[edge], near_lo.reshape(-1)[edge])
+    cut = np.zeros(count, bool)
+    cut[np.unique(groups[border_cells])] = True
     lut = np.zeros(count, np.uint8)
-    for g in set(touching.tolist()) - {0}:
-        lut[g] = _enclosed_label(groups == g, labels)
-    tallest = np.zeros(count, np.float32)
-    np.maximum.at(tallest, groups.reshape(-1), grid.reshape(-1))
-    # Not cut by the view's border, not rising to the box's ceiling (the robot's base, a shelf: structures
-    # seen in part), not a sliver (a rim counts with what it holds).
-    cut = set(np.unique(groups[border_cells]).tolist())
-    new = [g for g in range(1, count) if g not in set(touching.tolist()) and g not in cut and sizes[g] >= min_cells
-           and tallest[g] < config.workspace.max_height_m - LEFTOVER_CEILING_M
-           and _width_m(_filled(groups == g)) >= LEFTOVER_MIN_WIDTH_M]
+    new = []
+    pad = RIM_GAP_CELLS + 1
+    for g in range(1, count):
+        if sizes[g] < JOIN_MIN_SHARE * min_cells:
+            continue                                # specks of flank: as before
+        window = _box(groups == g, pad)
+        mine = groups[window] == g
+        if hi[g] > 0:
+            if hi[g] == lo[g] and _joins(mine, labels[window] == hi[g], int(sizes[g]), labels == hi[g]):
+                lut[g] = hi[g]
+        # Not cut by the view's border, not rising to the box's ceiling (the robot's base, a shelf: structures
+        # seen in part), not a sliver (a rim counts with what it holds).
+        elif not cut[g] and sizes[g] >= min_cells \
+                and float(grid[window][mine].max()) < config.workspace.max_height_m - LEFTOVER_CEILING_M \
+                and _width_m(_filled(mine)) >= LEFTOVER_MIN_WIDTH_M:
+            new.append(g)
     if not new and not lut.any():
         return labels, for_pixels
     for g in sorted(new, key=lambda g: -sizes[g])[:MAX_LABELS - len(areas)]:
@@ -486,18 +506,21 @@ def _label_leftovers(labels: np.ndarray, for_pixels: np.ndarray, grid: np.ndarra
     return np.where(extra > 0, extra, labels), np.where(extra > 0, extra, for_pixels)
 
 
-def _enclosed_label(group: np.ndarray, labels: np.ndarray) -> int:
-    """The one object a group of unlabelled cells belongs to (a cup's rim and walls around its inner bottom), or
-    0: the group takes the object it touches, if only one, when it holds (encloses) it or is larger than it."""
-    near = cv2.dilate(group.view(np.uint8), np.ones((3, 3), np.uint8)) > 0
-    touched = np.unique(labels[near & (labels > 0)])
-    if touched.size != 1:
-        return 0
-    mine = labels == touched[0]
-    inside = np.count_nonzero(_filled(group) & mine) >= 0.9 * np.count_nonzero(mine)
-    # A group larger than the one object it touches is that object's (a bowl's rim and walls around a speck
-    # of its bottom that survived the cuts, where the rim is too broken to enclose it).
-    return int(touched[0]) if inside or np.count_nonzero(group) > np.count_nonzero(mine) else 0
+def _box(mask: np.ndarray, pad: int) -> tuple:
+    """(row slice, column slice) of a mask's bounding box grown by pad cells (clipped to the image)."""
+    x, y, w, h = cv2.boundingRect(mask.view(np.uint8))
+    return slice(max(0, y - pad), y + h + pad), slice(max(0, x - pad), x + w + pad)
+
+
+def _joins(group: np.ndarray, object_in_window: np.ndarray, group_cells: int, object_cells: np.ndarray) -> bool:
+    """Does a group of unlabelled cells belong to the one object it touches (a cup's rim and walls around its
+    inner bottom)? When it is larger than the object (a bowl's walls around a speck of its bottom that survived
+    the cuts) or encloses at least 90 % of it (the object lies within the group's window then)."""
+    total = int(np.count_nonzero(object_cells))
+    if group_cells > total:
+        return True
+    inside = int(np.count_nonzero(object_in_window))
+    return inside >= 0.9 * total and np.count_nonzero(_filled(group) & object_in_window) >= 0.9 * total
 
 
 def _filled(mask: np.ndarray) -> np.ndarray:
@@ -512,8 +535,13 @@ def _filled(mask: np.ndarray) -> np.ndarray:
 
 def fill_enclosed(labels: np.ndarray) -> np.ndarray:
     """_fill_enclosed, then again with the outlines closed over gaps of a few pixels (a rim broken by a shadow
-    still encloses its inside)."""
-    return _fill_enclosed(_fill_enclosed(labels, False), True)
+    still encloses its inside); worked in the labelled pixels' bounding box (nothing outside it is enclosed)."""
+    if not labels.any():
+        return labels
+    box = _box(labels > 0, 1)
+    out = labels.copy()
+    out[box] = _fill_enclosed(_fill_enclosed(labels[box], False), True)
+    return out
 
 
 def _fill_enclosed(labels: np.ndarray, close_gaps: bool) -> np.ndarray:
@@ -539,7 +567,7 @@ def _fill_enclosed(labels: np.ndarray, close_gaps: bool) -> np.ndarray:
     grown_max = cv2.dilate(labels, _CROSS_3X3)
     grown_min = cv2.erode(np.where(labels > 0, labels, 255).astype(np.uint8), _CROSS_3X3)
     index = regions.reshape(-1)
-    pick = enclosed[index]
+    pick = enclosed[index] & (grown_max.reshape(-1) > 0)       # the regions' pixels next to a label
     hi = np.zeros(count, np.int32)
     lo = np.full(count, 255, np.int32)
     np.maximum.at(hi, index[pick], grown_max.reshape(-1)[pick])
@@ -562,20 +590,25 @@ def _merge_appendages(labels: np.ndarray, for_pixels: np.ndarray, grid: np.ndarr
         return labels, for_pixels, areas
     gap = max(1, int(round(APPENDAGE_GAP_M / CELL_M)))
     near = np.ones((2 * gap + 1, 2 * gap + 1), np.uint8)
-    cells = {label: labels == label for label in areas}
-    size = {label: int(np.count_nonzero(mask)) for label, mask in cells.items()}
-    height = {label: float(np.median(grid[mask])) if size[label] else 0.0 for label, mask in cells.items()}
+    counts = np.bincount(labels.reshape(-1), minlength=256)
+    size = {label: int(counts[label]) for label in areas}
+    height = {}
     target = {}
     for label in sorted(areas, key=lambda lab: size[lab]):
-        mask = cells[label]
         if not size[label]:
             continue
+        whole = labels == label
+        box = _box(whole, gap + 1)
+        mask, around_labels = whole[box], labels[box]
+        height[label] = float(np.median(grid[box][mask]))
         if _width_m(mask) >= APPENDAGE_MAX_WIDTH_M:
             continue
-        around = np.unique(labels[(cv2.dilate(mask.view(np.uint8), near) > 0) & ~mask])
+        around = np.unique(around_labels[(cv2.dilate(mask.view(np.uint8), near) > 0) & ~mask])
         around = [int(a) for a in around if a and a != label]
         if len(around) == 1:
             host = around[0]
+            if host not in height:
+                height[host] = float(np.median(grid[labels == host]))
             if size[label] < APPENDAGE_MAX_AREA_SHARE * size[host] and height[label] < height[host]:
                 target[label] = host
     return _relabel(labels, for_pixels, areas, target)
