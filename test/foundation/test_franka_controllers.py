@@ -72,6 +72,8 @@ def controller_manager_entries(raw: dict) -> dict:
 def test_the_file_is_namespace_agnostic_like_franka_bringups():
     raw = load_ros_parameter_file(CONTROLLERS)
     assert list(raw) == ["/**"], "franka.launch.py's namespace:= only applies to a `/**:` file"
+    # one `/**:` root: any YAML reader sees every section (franka's repeated `/**:` needs rcl's merging)
+    assert yaml.safe_load(CONTROLLERS.read_text(encoding="utf-8")) == raw
     for node, section in raw["/**"].items():
         assert list(section) == ["ros__parameters"], f"{node}: a node section holds only ros__parameters"
     manager = controller_manager_entries(raw)
