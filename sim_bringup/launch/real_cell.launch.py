@@ -48,7 +48,8 @@ def generate_launch_description():
                                           "<camera_namespace>/<camera_name> (/camera/camera for a camera started "
                                           "outside the namespace)"),
         DeclareLaunchArgument("config_file",
-                              default_value=PathJoinSubstitution([CONFIG, "real_cell", [robot_type, ".yaml"]]),
+                              # a path element is one str or substitution on Jazzy: ".yaml" is appended outside
+                              default_value=[PathJoinSubstitution([CONFIG, "real_cell", robot_type]), ".yaml"],
                               description="the cell's parameter file, loaded after each node's own "
                                           "(default: sim_bringup/config/real_cell/<robot_type>.yaml)"),
     ]

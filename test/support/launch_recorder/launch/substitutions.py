@@ -2,13 +2,21 @@
 import os
 
 
+def _one(item, context) -> str:
+    # launch's normalize_to_list_of_substitutions: each item is a str or a Substitution, nothing else (Jazzy)
+    if isinstance(item, str):
+        return item
+    if hasattr(item, "perform"):
+        return item.perform(context)
+    raise TypeError(f"Failed to normalize given item of type '{type(item)}', when only 'str' or "
+                    "'launch.Substitution' were expected.")
+
+
 def perform_all(value, context) -> str:
-    """A SomeSubstitutionsType (str, substitution, or a list of them, concatenated) -> str."""
-    if isinstance(value, str):
-        return value
+    """A SomeSubstitutionsType (a str, a substitution, or a flat list of them, concatenated) -> str."""
     if isinstance(value, (list, tuple)):
-        return "".join(perform_all(item, context) for item in value)
-    return value.perform(context)
+        return "".join(_one(item, context) for item in value)
+    return _one(value, context)
 
 
 class LaunchConfiguration:
@@ -29,4 +37,4 @@ class PathJoinSubstitution:
         self.substitutions = list(substitutions)
 
     def perform(self, context) -> str:
-        return os.path.join(*(perform_all(part, context) for part in self.substitutions))
+        return os.path.join(*(_one(part, context) for part in self.substitutions))
