@@ -347,6 +347,7 @@ def perceive(depth_m, camera_k, base_T_camera, config: TabletopConfig | None = N
     grid, owner = _splat_max(cell, hgt, full_pixel, rows_n * cols_n)
     grid, owner = grid.reshape(rows_n, cols_n), owner.reshape(rows_n, cols_n)
     grid = _close_holes(grid, config.hole_close_cells)
+    grid = _fill_seams(grid, config.jump_m)
     checkpoint()
     grid_labels, areas = _segment_grid(grid, config)
     checkpoint()
@@ -743,6 +744,21 @@ def _close_holes(grid: np.ndarray, size_cells: int) -> np.ndarray:
         # Grey closing: the holes get the level of the surface around them.
         grey = cv2.morphologyEx(grid, cv2.MORPH_CLOSE, kernel)
         out[fill] = grey[fill]
+    return out
+
+
+_SEAM_KERNELS = (np.ones((1, 3), np.uint8), np.ones((3, 1), np.uint8))
+
+
+def _fill_seams(grid: np.ndarray, jump_m: float) -> np.ndarray:
+    """Occupied cells more than jump_m lower than both their neighbours on either side along a row or a column
+    (a one-cell valley that would cut a surface) raised to the lower of the two: the seams a tilted camera leaves in a surface it sees at a grazing
+    angle, where a cell got only the points of a lower surface seen past an overhang (a drill's body over its
+    battery cut in three by them). Empty cells (the table) stay empty: a gap between objects is not filled."""
+    out = grid
+    for kernel in _SEAM_KERNELS:
+        closed = cv2.morphologyEx(grid, cv2.MORPH_CLOSE, kernel)
+        out = np.maximum(out, np.where((grid > 0) & (closed - grid > jump_m), closed, np.float32(0.0)))
     return out
 
 

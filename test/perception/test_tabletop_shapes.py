@@ -35,6 +35,7 @@ SHAPES = {
     "drill from 0.72 m": ts.overhead_072([ts.drill_like()]),
     "drill turned from 0.72 m": ts.overhead_072([ts.drill_like(yaw_rad=0.7)]),
     "drill from 0.55 m": ts.overhead_single(ts.drill_like()),
+    "drill from the tilted camera": ts.cluttered_table(objects=(ts.drill_like((0.5, 0.0)),)),
     "mug from 0.72 m": ts.overhead_072([ts.mug_like(yaw_rad=0.4)]),
     "mug from the tilted camera": ts.cluttered_table(objects=(ts.mug_like((0.5, 0.0), yaw_rad=1.2),)),
     "cup, thin bottom, from 0.72 m": ts.overhead_072([ts.HollowCylinder((0.5, 0.0), 0.035, 0.09, bottom_m=0.004)]),
