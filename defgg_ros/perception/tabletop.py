@@ -754,7 +754,8 @@ def _fill_seams(grid: np.ndarray, jump_m: float) -> np.ndarray:
     """Occupied cells more than jump_m lower than both their neighbours on either side along a row or a column
     (a one-cell valley that would cut a surface) raised to the lower of the two: the seams a tilted camera
     leaves in a surface it sees at a grazing angle, where a cell got only the points of a lower surface seen
-    past an overhang (a drill's body over its battery cut in three by them). Empty cells (the table) stay empty: a gap between objects is not filled."""
+    past an overhang (a drill's body over its battery cut in three by them). Empty cells (the table) stay
+    empty: a gap between objects is not filled."""
     out = grid
     for kernel in _SEAM_KERNELS:
         closed = cv2.morphologyEx(grid, cv2.MORPH_CLOSE, kernel)
