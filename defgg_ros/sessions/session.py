@@ -15,7 +15,9 @@ from defgg_ros.sessions.bag import BagMessage, SessionBagError, read_bag
 from defgg_ros.sessions.selector import restamp
 from defgg_ros.sessions.session_topics import topics  # absolute names (bag channels)
 
-FORMAT = "defgg_session/1"
+# 2 (2026-11-29, one perceiver): PlanGrasp's request carries PerceivedObjects instead of a stiffness image, so a
+# format-1 bag's recorded requests do not decode with today's definitions; sessions were re-recorded.
+FORMAT = "defgg_session/2"
 
 
 def stamp_ns(stamp) -> int:

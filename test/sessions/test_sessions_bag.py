@@ -20,7 +20,7 @@ def test_round_trip_is_mcap_with_zstd_chunks_and_metadata_twice(tmp_path):
     mcap = (path / info["relative_file_paths"][0]).read_bytes()
     assert mcap.startswith(b"\x89MCAP0\r\n") and b"zstd" in mcap
     meta, messages = read_bag(path)
-    assert meta["format"] == "defgg_session/1" and meta["model"]["file"] == "defgg_cnn.pt"
+    assert meta["format"] == "defgg_session/2" and meta["model"]["file"] == "defgg_cnn.pt"
     assert len(meta["model"]["sha256"]) == 64 and meta["software"]["defgg_ros"]
     assert [m.topic for m in messages].count(topics.DEPTH_IMAGE) == 3
     grasp = next(m for m in messages if m.topic == st.PLAN_RESPONSE).decode().grasps[0]
