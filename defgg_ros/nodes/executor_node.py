@@ -232,6 +232,7 @@ class ExecutorNode(Node):
         self._busy = False
         self._sequence: PickPlaceSequence | None = None
         self._gripper_goal = None
+        self._gripper_serial = 0     # the newest gripper goal sent; only its result counts
         self._last_state: tuple[ArmState, float] | None = None
         self._velocity_estimate = PositionVelocityEstimator()   # for drivers without velocities
         self._last_force = np.zeros(3)
@@ -779,20 +780,29 @@ class ExecutorNode(Node):
         return self._gripper_feedback_width_m
 
     def _send_gripper(self, sequence: PickPlaceSequence, client: ActionClient, goal):
+        # Only the newest gripper goal answers the sequence: the result of one canceled or preempted before (a
+        # cancel during close, then the recovery's opening) came after the next was sent and read as its failure
+        # ("the hand did not open: preempted by a newer gripper command"; the arm stayed over the table).
+        self._gripper_serial += 1
+        serial = self._gripper_serial
+
+        def newest() -> bool:   # lock held
+            return self._sequence is sequence and serial == self._gripper_serial
+
         def on_feedback(feedback_msg):
             self._gripper_feedback_width_m = float(feedback_msg.feedback.current_width)
 
         def on_result(future):
             result = future.result().result
             with self._lock:
-                if self._sequence is sequence:  # a late result of an earlier goal must not leak in
+                if newest():  # a late result of an earlier goal must not leak in
                     sequence.on_gripper_result(result.success, self._gripper_width_m(), result.error)
 
         def on_goal(future):
             handle = future.result()
             if not handle.accepted:
                 with self._lock:
-                    if self._sequence is sequence:
+                    if newest():
                         sequence.on_gripper_result(False, float("nan"), "gripper goal rejected")
                 return
             with self._lock:

@@ -70,6 +70,26 @@ def test_busy_goal_is_rejected_and_cancel_stops_the_arm(executor_cell, spin):
     assert not KIN.fk(driver.q)[:3, 3] == pytest.approx(KIN.fk(node._kin.q_ready_rad)[:3, 3], abs=1e-3)
 
 
+def test_a_cancel_while_the_fingers_close_opens_the_hand_and_recovers(executor_cell, spin):
+    """The grasp goal, not canceled by the gripper, is preempted by the recovery's opening and answers after it was
+    sent: that late result must not be read as the opening's (it was: "the hand did not open: preempted by a newer
+    gripper command", the arm left over the table; issue 48)."""
+    ex, node, client, start_driver = executor_cell
+    driver = start_driver(object_width_m=0.0)   # nothing between the fingers: they close all the way, slowly
+    wait_driver_ready(ex, spin, node)
+    phases = []
+    handle = send(ex, client, spin, PickAndPlace.Goal(grasp=grasp_msg()), feedback=lambda f: phases.append(
+        f.feedback.phase))
+    spin(ex, lambda: "close" in phases and driver.gripper is not None, 30.0, "the fingers closing")
+    spin(ex, handle.cancel_goal_async(), 5.0, "cancel response")
+    response = result_of(ex, spin, handle)
+    assert response.status == 5 and "canceled during close" in response.result.failure_reason, \
+        response.result.failure_reason
+    assert "opened the hand" in response.result.recovery and "did not open" not in response.result.recovery, \
+        response.result.recovery
+    assert response.result.arm_state == "observation_pose"
+
+
 def test_driver_killed_mid_trajectory_aborts_then_serves_again(executor_cell, spin):
     ex, node, client, start_driver = executor_cell
     driver = start_driver()

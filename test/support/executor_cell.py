@@ -158,17 +158,28 @@ class InTestDriver(Node):
             self.gripper = None
             future.set_result(self.width_m)
 
-    async def on_move(self, goal_handle):
+    def _take_gripper(self, target_width_m, speed_mps) -> Future:
+        """The fingers' new command; the one it replaces ends now, preempted (as franka_gripper's and the simulated
+        gripper's goals do: their result comes after the newer goal was sent)."""
+        if self.gripper is not None:
+            self.gripper[2].set_result(None)
         future = Future()
-        self.gripper = (goal_handle.request.width, goal_handle.request.speed, future)
-        width = await future
+        self.gripper = (target_width_m, speed_mps, future)
+        return future
+
+    async def on_move(self, goal_handle):
+        width = await self._take_gripper(goal_handle.request.width, goal_handle.request.speed)
+        if width is None:
+            goal_handle.abort()
+            return GripperMove.Result(success=False, error="preempted by a newer gripper command")
         goal_handle.succeed()
         return GripperMove.Result(success=abs(width - goal_handle.request.width) < 1e-6)
 
     async def on_grasp(self, goal_handle):
-        future = Future()
-        self.gripper = (self.object_width_m or 0.0, goal_handle.request.speed, future)
-        width = await future
+        width = await self._take_gripper(self.object_width_m or 0.0, goal_handle.request.speed)
+        if width is None:
+            goal_handle.abort()
+            return GripperGrasp.Result(success=False, error="preempted by a newer gripper command")
         request = goal_handle.request
         ok = request.width - request.epsilon.inner <= width <= request.width + request.epsilon.outer
         goal_handle.succeed()
