@@ -367,11 +367,12 @@ def perceive(depth_m, camera_k, base_T_camera, config: TabletopConfig | None = N
     grid_labels, near_labels, areas = _drop_table_warps(grid_labels, near_labels, grid, areas, at_border, config)
     processed_labels = np.zeros(depth.shape, np.uint8)
     processed_labels.reshape(-1)[index] = near_labels.reshape(-1)[cell]
-    processed_labels = fill_enclosed(processed_labels)
     processed_fg = np.zeros(depth.shape, bool)
     processed_fg.reshape(-1)[index] = not empty
     pixel_cell = np.full(depth.shape, -1, np.int32)
     pixel_cell.reshape(-1)[index] = -1 if empty else cell
+    processed_labels = _with_enclosed_pixels(processed_labels, processed_fg, pixel_cell, depth, xn, yn, r, t, origin,
+                                             (rows_n, cols_n))
     table_depth = _table_depth(height, term, np.float32(normal @ pose[:3, 3] + offset), ws.min_height_m)
     noise = _depth_noise(config, height, depth, k_full[0, 0])
     return TabletopView(pose, k_full, normal, offset, height, processed_fg, processed_labels, pixel_cell, origin, grid,
@@ -532,6 +533,27 @@ def _filled(mask: np.ndarray) -> np.ndarray:
     out = np.zeros(mask.shape, np.uint8)
     cv2.drawContours(out, contours, -1, 1, thickness=cv2.FILLED)
     return out > 0
+
+
+def _with_enclosed_pixels(labels, foreground, pixel_cell, depth, xn, yn, r, t, origin, grid_shape) -> np.ndarray:
+    """fill_enclosed(labels), the pixels it adds made foreground with their height-map cell (in place), so every
+    labelled pixel has a cell, as every other one does; added pixels without a depth stay unlabelled."""
+    filled = fill_enclosed(labels)
+    added = np.flatnonzero((filled != labels).reshape(-1))
+    if added.size == 0:
+        return labels
+    z = depth.reshape(-1)[added]
+    seen = np.isfinite(z)
+    filled.reshape(-1)[added[~seen]] = 0
+    added, z = added[seen], z[seen]
+    vs, us = np.divmod(added, depth.shape[1])
+    x = z * (r[0, 0] * xn[us] + r[0, 1] * yn[vs] + r[0, 2]) + t[0]
+    y = z * (r[1, 0] * xn[us] + r[1, 1] * yn[vs] + r[1, 2]) + t[1]
+    rows = np.clip(np.rint((x - origin[0]) / CELL_M).astype(np.int32), 0, grid_shape[0] - 1)
+    cols = np.clip(np.rint((y - origin[1]) / CELL_M).astype(np.int32), 0, grid_shape[1] - 1)
+    pixel_cell.reshape(-1)[added] = rows * grid_shape[1] + cols
+    foreground.reshape(-1)[added] = True
+    return filled
 
 
 def fill_enclosed(labels: np.ndarray) -> np.ndarray:

@@ -142,7 +142,10 @@ def test_pads_of_several_grasps_in_one_pass_are_those_of_each_alone():
     phis = rng.random(40) * math.pi
     directions = np.stack([np.sin(phis), np.cos(phis)], axis=1)
     widths = 0.02 + 0.06 * rng.random(40)
-    together = tg._pads_free(view, space, 0.01, centres, directions, widths)
+    # At 5 cm some of these random pads are free and some not (at 1 cm one of 40 was, before issue 47's seam
+    # fill joined the cluttered table's objects' cells differently: the sample is random, the rule the same).
+    level = 0.05
+    together = tg._pads_free(view, space, level, centres, directions, widths)
     assert together.any() and not together.all()
     for k in range(40):
         across = np.array([-directions[k, 1], directions[k, 0]])
@@ -150,7 +153,7 @@ def test_pads_of_several_grasps_in_one_pass_are_those_of_each_alone():
                   for side in (-1.0, 1.0)
                   for s in np.linspace(-FINGER_PAD_WIDTH_M / 2, FINGER_PAD_WIDTH_M / 2, tg.PAD_SAMPLES)
                   for t in np.linspace(0.0, PANDA_FINGER_THICKNESS_M, tg.PAD_SAMPLES)]
-        free = space.free(tg._points(view, np.array(points), 0.01), strict=True)
+        free = space.free(tg._points(view, np.array(points), level), strict=True)
         assert together[k] == bool(free.all())
 
 
