@@ -42,6 +42,8 @@ def parse_args(argv=None):
     parser.add_argument("--request-period", type=float, default=0.1, help="seconds between PlanGrasp requests")
     parser.add_argument("--top-k", type=int, default=1, help="grasps per request")
     parser.add_argument("--model", default=str(ROOT / "models" / "defgg_cnn.pt"), help="checkpoint")
+    parser.add_argument("--max-frame-age", type=float, default=None,
+                        help="the inference node's max_frame_age_s (default: its schema's)")
     return parser.parse_args(argv)
 
 
@@ -116,7 +118,7 @@ def main(argv=None):
     from defgg_ros.nodes.conversions import stamp_to_ns
 
     frames = [scene(width, height), scene(width, height, seed=width + 1)]
-    nodes = start_node(args.model, 1, frames[0][3])
+    nodes = start_node(args.model, 1, frames[0][3], max_frame_age_s=args.max_frame_age)
     context = Context()
     rclpy.init(context=context)
     camera = hogs = None
@@ -159,7 +161,8 @@ def main(argv=None):
         nodes.stop()
         context.try_shutdown()
     print(f"\n{width}x{height} at {args.camera_hz:g} Hz, {args.hog} CPU hog process(es), {len(latencies_ms)} "
-          f"PlanGrasp latest-frame requests every {args.request_period:g} s over {span:.0f} s, top_k {args.top_k}; "
+          f"PlanGrasp latest-frame requests every {args.request_period:g} s over {span:.0f} s, top_k {args.top_k}, "
+          f"max_frame_age_s {'default' if args.max_frame_age is None else args.max_frame_age}; "
           f"load average {load:.2f} on {os.cpu_count()} cores")
     print(f"camera sent {sent} frames ({sent / span:.1f}/s)")
     p99 = float(np.percentile(latencies_ms, 99))

@@ -11,7 +11,8 @@ own view gives):
   `publish_on_sync`, whose best grasp, quality map and finger markers it publishes, and every top_k asked for
   in the last `prepare_requested_top_k_s`); newest frame wins at each stage (perception/frame_worker.py);
 - serves PlanGrasp: empty depth and perceived -> the latest synchronised frame (the newest prepared one when
-  no newer frame arrived or it arrived at most `max_frame_age_s` before the request, else the latest one);
+  no newer frame arrived or it arrived at most `max_frame_age_s` before the request, else the latest one
+  if the workers finish it within `max_wait_s`, else the newest prepared one: bounded latency under load);
   depth + camera_info + perceived -> that frame; depth + camera_info alone -> the segmentation node's
   Perceive service perceives it first (with the request's `objects`). Every bad request gets success=false
   + the reason; a frame the segmentation node could not perceive answers with its reason.
@@ -308,7 +309,7 @@ class GraspInferenceNode(Node):
             return grasps, time.perf_counter() - start, ""
         self._requested_top_k.note(top_k)
         try:
-            done = self._worker.latest(PERCEPTION_WAIT_S)
+            done = self._worker.latest(PERCEPTION_WAIT_S, float(self._p["max_wait_s"]))
         except (TimeoutError, WorkerClosed) as exc:
             raise PlanningError(f"the latest frame could not be prepared: {exc}") from exc
         if done is None:

@@ -20,6 +20,10 @@ Rules (docs/perception.md, "Latency"):
   stamp). Otherwise from the newest submitted frame: the call waits for the worker when a stage is on it,
   else takes it from the stage input it waits at and runs the remaining stages itself. So an answer never
   comes from a frame older than the newest prepared one, nor older than max_age_s while a newer frame exists.
+  With `latest(wait_s=...)` (bounded latency under load) the call waits at most wait_s for the stages to
+  finish the newest frame and otherwise answers from the newest prepared one (it prepares nothing itself
+  once a frame was prepared): an answer then never waits longer than wait_s, and its frame is as fresh as
+  the stages keep up.
 - A frame whose preparation raised ValueError (in any stage) is a prepared frame too: requests get its error.
 - While a request holds `priority()` the stage threads wait at their next checkpoint (the stage functions
   call `checkpoint()` between their steps) and start no new frame, so the request's work does not share the
@@ -128,9 +132,12 @@ class LatestFrameWorker:
         self._cond.notify_all()
 
     # --- consumer --------------------------------------------------------------------------------
-    def latest(self, timeout_s: float = 30.0) -> WorkerResult | None:
+    def latest(self, timeout_s: float = 30.0, wait_s: float | None = None) -> WorkerResult | None:
         """The prepared frame to answer a request from (module docstring); None when nothing was submitted.
-        Raises TimeoutError when the worker does not finish the frame within timeout_s, WorkerClosed."""
+        wait_s (bounded latency): when a prepared frame exists but is not fresh enough, wait at most wait_s for
+        the stages to finish the newest frame (never preparing it in the request), then answer from the
+        newest prepared frame. Raises TimeoutError when the worker does not finish the frame within timeout_s,
+        WorkerClosed."""
         now = self._clock()
         with self._cond:
             newest = self.submitted
@@ -139,6 +146,11 @@ class LatestFrameWorker:
             done = self._done
             if done is not None and (done.seq == newest or now - done.submitted_s <= self.max_age_s):
                 return done
+            if done is not None and wait_s is not None:
+                self._cond.wait_for(lambda: self._closed or self._done.seq >= newest, wait_s)
+                if self._closed:
+                    raise WorkerClosed("the perception worker is closed")
+                return self._done
             waiting = [index for index, item in enumerate(self._inbox) if item is not None and item.seq == newest]
             if waiting:
                 first = waiting[0]

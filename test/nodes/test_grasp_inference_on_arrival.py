@@ -63,8 +63,9 @@ def cell(request, executor, frames, inference_service):
     def inference_parameters(**extra):
         return {"model_path": str(MODEL_PATH), **extra}
 
-    arrival, probe, arrival_client = inference_service("on_arrival_probe", **parameters(max_frame_age_s=0.0,
-                                                                                     prepare_stages=request.param))
+    # max_frame_age_s 0 and a long max_wait_s: every answer from the latest synchronised frame.
+    arrival, probe, arrival_client = inference_service("on_arrival_probe", **parameters(
+        max_frame_age_s=0.0, max_wait_s=30.0, prepare_stages=request.param))
     assert arrival._worker.stages == request.param
     # The same node in another namespace, on the same camera topics.
     inputs = {"depth_topic": topics.DEPTH_IMAGE, "perceived_topic": topics.PERCEIVED_OBJECTS,

@@ -129,6 +129,28 @@ def test_a_stale_perceived_frame_makes_the_request_wait_for_the_latest_one(make)
     assert answer["done"].frame == "b" and prepare.threads["b"] is worker._thread
 
 
+def test_a_bounded_wait_answers_from_the_newest_prepared_frame_when_the_latest_is_not_ready(make):
+    """Fresh answers under load (issue 47.4): with wait_s the request waits that long at most, then answers from
+    the newest prepared frame; it prepares nothing itself, the stage goes on with the newest."""
+    clock = Clock()
+    prepare = Prepare(hold=("b", "c"))
+    worker = make(prepare, clock=clock)
+    worker.submit("a")
+    prepared_frames(worker, 1)
+    clock.now += 0.5                              # a is stale (max_age_s 0.1) once b arrives
+    worker.submit("b")
+    wait(prepare.event(prepare.started, "b"), "b to start")
+    worker.submit("c")                            # waits behind b at the stage's input
+    assert worker.latest(wait_s=0.05).frame == "a"    # neither b nor c is ready: the newest prepared one
+    assert "c" not in prepare.threads             # not prepared by the request
+    prepare.release["b"].set()
+    prepare.release["c"].set()
+    prepared_frames(worker, 2)
+    with worker._cond:
+        assert worker._cond.wait_for(lambda: worker._done.frame == "c", GUARD_S)
+    assert worker.latest(wait_s=0.05).frame == "c" and prepare.threads["c"] is worker._thread
+
+
 def test_max_age_zero_always_answers_from_the_latest_frame(make):
     prepare = Prepare(hold=("b",))
     worker = make(prepare, max_age_s=0.0)
