@@ -34,7 +34,7 @@ from defgg_ros.perception.geometry import rotation_about_z
 # D435 depth intrinsics per mode (fx = fy, principal point at the centre): the 1280x720 and 848x480
 # modes span the D435's 90 degree horizontal field of view (fx = (width / 2) / tan 45 deg); the
 # 640x480 mode is narrower, fx ~385 px in typical calibrations (the cell's CAMERA_FX_PX).
-REALSENSE_FX_PX = {(1280, 720): 640.0, (848, 480): 424.0, (640, 480): 385.0}
+REALSENSE_FX_PX = {(1280, 720): 640.0, (848, 480): 424.0, (640, 360): 320.0, (640, 480): 385.0}
 STEREO_BASELINE_M = REALSENSE_BASELINES_M["d435"]   # the scenes' default camera (TabletopScene.depth_noise)
 SUBPIXEL_RMS_PX = TYPICAL_SUBPIXEL_RMS_PX          # Intel's typical subpixel RMS for a well-textured surface
 MIN_Z_M = 0.17                      # D435 MinZ at 640x480 (0.28 m at 1280x720; objects here are farther)

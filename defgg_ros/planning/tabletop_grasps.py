@@ -526,7 +526,9 @@ def _out_of_workspace_or_reach(view: TabletopView, grasp: TabletopGrasp):
             return WORKSPACE
     table_z = float(view.table_z_at(x, y))
     try:
-        check_workspace((x, y, tcp_height_m(z, table_z)), table_z)
+        # Reach and the base's keep-out only: the TCP's height above the table is the height rule's (at its
+        # floor it equals check_workspace's minimum, which rounding would then refuse at random).
+        check_workspace((x, y, tcp_height_m(z, table_z)), table_z, min_height_m=0.0)
     except WorkspaceError:
         return REACH
     return None
