@@ -77,6 +77,7 @@ def test_the_arm_is_at_rest_within_half_a_second_of_stopping_the_executor(phase,
         client = ActionClient(probe, PickAndPlace, topics.PICK_AND_PLACE_ACTION)
         executor.add_node(probe)
         spin(executor, client.server_is_ready, 60.0, "the pick-and-place action server")
+        spin(executor, lambda: len(joints) > 10, 60.0, "joint states from the driver")   # the executor's too, by now
         goal = PickAndPlace.Goal(grasp=grasp_msg((*BOX_XY_M, BOX_SIZE_M), BOX_YAW_RAD, 0.07))
         handle = spin(executor, client.send_goal_async(goal, feedback_callback=lambda f: feedback.append(f.feedback)),
                       30.0, "the goal response")
@@ -149,6 +150,7 @@ def test_the_bringup_says_so_when_the_executor_could_not_confirm_the_stop(tmp_pa
         client = ActionClient(probe, PickAndPlace, topics.PICK_AND_PLACE_ACTION)
         executor.add_node(probe)
         spin(executor, client.server_is_ready, 60.0, "the pick-and-place action server")
+        spin(executor, lambda: len(joints) > 10, 60.0, "joint states from the driver")   # the executor's too, by now
         goal = PickAndPlace.Goal(grasp=grasp_msg((*BOX_XY_M, BOX_SIZE_M), BOX_YAW_RAD, 0.07))
         assert spin(executor, client.send_goal_async(goal, feedback_callback=lambda f: feedback.append(f.feedback)),
                     30.0, "the goal response").accepted
