@@ -90,6 +90,29 @@ def test_a_cancel_while_the_fingers_close_opens_the_hand_and_recovers(executor_c
     assert response.result.arm_state == "observation_pose"
 
 
+def test_a_full_bin_refuses_goals_until_it_is_reset(executor_cell, spin, call):
+    """Every slot used: a goal with no place pose is refused before the arm moves, naming the reset service; after
+    defgg/reset_bin the next one goes to the first slot (issue 48)."""
+    from rclpy.node import Node
+    from std_srvs.srv import Trigger
+
+    ex, node, client, start_driver = executor_cell
+    driver = start_driver(object_width_m=0.04)
+    wait_driver_ready(ex, spin, node)
+    for index in range(len(node._bin.centres)):
+        node._bin.mark_used(index)
+    refused = result_of(ex, spin, send(ex, client, spin, PickAndPlace.Goal(grasp=grasp_msg())))
+    assert refused.status == 6 and "the bin is full" in refused.result.failure_reason
+    assert "/defgg/reset_bin" in refused.result.failure_reason and len(driver.trajectory_msgs) == 0
+    caller = Node("reset_bin_caller", context=node.context)
+    ex.add_node(caller)
+    answer = call(ex, caller.create_client(Trigger, "defgg/reset_bin"), Trigger.Request(), 10.0, "reset_bin")
+    assert answer.success and answer.message.startswith(f"{len(node._bin.centres)} of")
+    done = result_of(ex, spin, send(ex, client, spin, PickAndPlace.Goal(grasp=grasp_msg())))
+    assert done.result.success, done.result.failure_reason
+    assert KIN.fk(driver.q)[:2, 3] == pytest.approx(node._bin.centres[0], abs=2e-3)
+
+
 def test_driver_killed_mid_trajectory_aborts_then_serves_again(executor_cell, spin):
     ex, node, client, start_driver = executor_cell
     driver = start_driver()
