@@ -70,10 +70,13 @@ def _box_grasp(base_frame: str):
 
 
 @pytest.mark.e2e
-@pytest.mark.parametrize("set_name", sorted(ROBOTS))
-def test_executor_with_the_robot_file_picks_in_a_cell_of_that_robot_type(executor, spin, set_name):
+@pytest.mark.parametrize("set_name, fingers", [("real_cell", "from_gripper"), ("real_cell_fer", "from_gripper"),
+                                               ("real_cell", "urdf_default")],
+                         ids=["fr3", "fer", "fr3_moveit_launch"])
+def test_executor_with_the_robot_file_picks_in_a_cell_of_that_robot_type(executor, spin, set_name, fingers):
     """The set's executor (its node file + robot file, on sim time) against the fake driver with the same
-    robot_type: it reads that type's joint states, finger width and wrench and picks the box into the bin."""
+    robot_type: it reads that type's joint states, finger width and wrench and picks the box into the bin; also
+    under the MoveIt launch's joint states (fingers a constant 0.0: the width comes from franka_gripper's)."""
     from defgg_interfaces.action import PickAndPlace
     from rclpy.node import Node
     from rclpy.parameter import Parameter
@@ -87,7 +90,8 @@ def test_executor_with_the_robot_file_picks_in_a_cell_of_that_robot_type(executo
     names = topics.robot_names(robot_type)
     driver = FakePandaDriver(context=executor.context, parameter_overrides=[
         Parameter("scene_file", value=str(CONFIG.parent / "scenes" / "rigid_box.yaml")),
-        Parameter("robot_type", value=robot_type), Parameter("depth_rate_hz", value=0.01)])
+        Parameter("robot_type", value=robot_type), Parameter("depth_rate_hz", value=0.01),
+        Parameter("joint_state_fingers", value=fingers)])
     executor.add_node(driver)
     node = ExecutorNode(context=executor.context, cli_args=[
         "--ros-args", "--params-file", str(CONFIG / "executor_node.yaml"), "--params-file", str(robot_file),

@@ -114,3 +114,21 @@ def test_the_diagnosis_tells_a_qos_mismatch_from_no_publisher(executor, spin):
     text = reliable_reader.diagnosis()
     assert "best effort" in text and "this reader: reliable, keep last 10" in text
     assert text.endswith("a reliable reader gets nothing from a best-effort publisher")
+
+
+def test_a_silent_input_is_reported_in_the_log(executor, spin):
+    """Without a goal to fail, the operator learns it from the executor's log (after silent_topic_s)."""
+    from rcl_interfaces.msg import Log
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+    node, franka = _start(executor, silent_topic_s=0.5)
+    lines = []
+    franka.create_subscription(Log, "/rosout", lambda m: lines.append(m.msg) if m.name == "executor_node" else None,
+                               QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
+                                          durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    franka.create_publisher(WrenchStamped, topics.EXTERNAL_WRENCH, qos.FRANKA_CONVENIENCE)   # never publishes
+
+    def reported():
+        return any(f"no message on /{topics.EXTERNAL_WRENCH}" in line and "1 publisher(s)" in line for line in lines)
+
+    spin(executor, reported, TIMEOUT_S, "the silent wrench in the executor's log")
