@@ -54,6 +54,7 @@ PLAN_GRASP_SERVICE = "defgg/plan_grasp"                      # defgg_interfaces/
 
 # Executor node
 PICK_AND_PLACE_ACTION = "defgg/pick_and_place"               # defgg_interfaces/action/PickAndPlace
+RESET_BIN_SERVICE = "defgg/reset_bin"                         # std_srvs/Trigger: the bin was emptied
 
 # Fake driver only (ground truth of the simulation)
 FAKE_SCENE = "fake_panda/scene"                              # std_msgs/String JSON (latched)

@@ -78,8 +78,10 @@ def test_schema_defaults_agree_with_the_code_constants_they_mirror():
     executor = defaults("executor_node")
     config = SequenceConfig()
     for field in dataclasses.fields(SequenceConfig):
-        # Fields the node builds from other parameters (use_transfer_via, recover_after_failure) are skipped.
-        if field.name in executor and field.name not in ("transfer_via_position_m", "observation_q_rad"):
+        # Fields the node builds from other parameters (use_transfer_via, recover_after_failure, the drop zone's
+        # [0, 0] = near the observation pose) are skipped.
+        if field.name in executor and field.name not in ("transfer_via_position_m", "observation_q_rad",
+                                                         "recovery_drop_xy_m"):
             assert executor[field.name] == getattr(config, field.name), field.name
     assert executor["limits_scale"] == LIMITS_SAFETY_SCALE and executor["trajectory_sample_dt_s"] == SAMPLE_DT_S
     assert executor["pregrasp_height_m"] == PREGRASP_HEIGHT_M
