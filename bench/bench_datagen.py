@@ -63,21 +63,20 @@ MESH_VARIANTS = {"fast_coarse": "fast", "fast_coarse80": "fast", "naive_remesh":
 COARSE80_MAX_TET_NODES = 80
 # Suffix: the same protocol with the confident stop of before 2026-11-25 (k >= 4, 40/sqrt(k)).
 CONF40 = "_conf40"
+CONF40_SETTINGS = {"confident_min_directions": 4, "confident_margin_mps2": 40.0}
 PROTOCOLS = DEFAULT_PROTOCOLS + tuple(MESH_VARIANTS) + tuple(VARIANTS) + tuple(
     p + CONF40 for p in ("fast", "fast_coarse", "fast_coarse80", "fast_lift03"))
 
 
 def protocol_settings(name: str, trial_protocol: str = "legacy"):
-    """The TrialSettings of a bench protocol (naive, fast, ...) under a trial protocol (sim.trial.PROTOCOLS)."""
-    from dataclasses import replace
-
-    from defgg_ros.sim.trial import LEGACY_CONFIDENT_SETTINGS, TrialSettings
+    """The TrialSettings of a bench protocol (naive, fast, ...) under a trial protocol (sim.protocol.PROTOCOLS)."""
+    from defgg_ros.sim.trial import TrialSettings
 
     if name.endswith(CONF40):
-        return replace(protocol_settings(name.removesuffix(CONF40), trial_protocol), **LEGACY_CONFIDENT_SETTINGS)
+        return protocol_settings(name.removesuffix(CONF40), trial_protocol).with_fields(**CONF40_SETTINGS)
     if name in VARIANTS:
-        return replace(TrialSettings.fast(), protocol=trial_protocol, **VARIANTS[name])
-    return replace(getattr(TrialSettings, MESH_VARIANTS.get(name, name))(), protocol=trial_protocol)
+        return TrialSettings.fast().with_fields(protocol=trial_protocol, **VARIANTS[name])
+    return getattr(TrialSettings, MESH_VARIANTS.get(name, name))().with_fields(protocol=trial_protocol)
 
 
 def protocol_shape(name: str, object_name: str, youngs_modulus_pa: float):

@@ -44,7 +44,7 @@ class _HeldTrial(_Trial):
 
 
 def squeeze_shares(name, grasp, e, mode, client):
-    settings = TrialSettings(protocol="defgraspsim")
+    settings = TrialSettings().with_fields(protocol="defgraspsim")
     run = _HeldTrial(client, objects.ObjectSpec(objects.get_shape(name), e), grasp, settings, (0, 0), 0.0,
                      mode=mode)
     run.grasp_and_lift()

@@ -54,13 +54,13 @@ def ramp_log(record: dict, directions, slip_m: float) -> list:
         mu_f_over_m = run.material["effective_friction"] * 2 * run.force_n / run.obj.mass_kg
         rows = []
         for k in directions:
-            d = shake_directions(settings.shake_directions)[k]
+            d = shake_directions(settings.motion.shake_directions)[k]
             run.restore()
             start = run.object_in_hand()
             onset, lost_at, moved_mm, slid = None, None, None, {}
-            n = run.seconds(settings.shake_ramp_time_s)
+            n = run.seconds(settings.motion.shake_ramp_time_s)
             for step in range(0, n, run.check_steps):
-                a = settings.shake_limit_mps2 * min(1.0, (step + run.check_steps) / n)
+                a = settings.evaluation.shake_limit_mps2 * min(1.0, (step + run.check_steps) / n)
                 run.world.set_gravity(run.gravity - a * d)
                 run.step(run.check_steps)
                 moved = float(np.linalg.norm(run.object_in_hand() - start))

@@ -35,7 +35,6 @@ import argparse
 import contextlib
 import statistics
 import sys
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -49,6 +48,7 @@ from defgg_ros.evaluation.store import read_results, results_path  # noqa: E402
 from defgg_ros.sim import hand as hand_mod  # noqa: E402
 from defgg_ros.sim import trial as trial_mod  # noqa: E402
 from defgg_ros.sim import world  # noqa: E402
+from defgg_ros.sim.protocol import TrialProtocol  # noqa: E402
 from defgg_ros.sim.trial import TWIST_AXES, TrialSettings, WorldGrasp, run_grasp_trial  # noqa: E402
 
 DEFAULT_VARIANTS = ("as_eval", "all_axes", "force_x4", "force_x15", "spin_0.01", "spin_0.05", "track", "track_all",
@@ -62,10 +62,10 @@ AXIS_NAMES = ("+x (pad axis)", "-x", "+y", "-y", "+z (approach)", "-z")
 @contextlib.contextmanager
 def _grip(force_scale: float = 1.0, spinning_friction: float | None = None, erp: float | None = None):
     """The trial's grip force rule, pad/object friction and palm tracking, changed for one trial."""
-    rule, create, load = trial_mod.grasp_force_n, hand_mod.create_hand, trial_mod.objects.load_object
+    rule, create, load = TrialProtocol.finger_force_n, hand_mod.create_hand, trial_mod.objects.load_object
 
-    def scaled_rule(youngs_modulus_pa):
-        return min(rule(youngs_modulus_pa) * force_scale, GRIPPER_MAX_FORCE_N)
+    def scaled_rule(protocol, youngs_modulus_pa, mass_kg):
+        return min(rule(protocol, youngs_modulus_pa, mass_kg) * force_scale, GRIPPER_MAX_FORCE_N)
 
     def create_changed(client, *args, **kwargs):
         hand = create(client, *args, **kwargs)
@@ -82,13 +82,13 @@ def _grip(force_scale: float = 1.0, spinning_friction: float | None = None, erp:
             p.changeDynamics(body, -1, spinningFriction=spinning_friction, physicsClientId=client)
         return obj
 
-    trial_mod.grasp_force_n, hand_mod.create_hand = scaled_rule, create_changed
+    TrialProtocol.finger_force_n, hand_mod.create_hand = scaled_rule, create_changed
     if spinning_friction is not None:
         trial_mod.objects.load_object = load_changed
     try:
         yield
     finally:
-        trial_mod.grasp_force_n, hand_mod.create_hand, trial_mod.objects.load_object = rule, create, load
+        TrialProtocol.finger_force_n, hand_mod.create_hand, trial_mod.objects.load_object = rule, create, load
 
 
 class HandIntegrity:
@@ -132,8 +132,8 @@ class HandIntegrity:
 
 def variant_setup(name: str, eval_settings: TrialSettings):
     """(TrialSettings, grip context) of a variant name."""
-    all_axes = replace(eval_settings, twist_fail_below_radps2=None)
-    tracked = replace(all_axes, check_every_s=TRACK_UPDATE_S)
+    all_axes = eval_settings.with_fields(twist_fail_below_radps2=None)
+    tracked = all_axes.with_fields(check_every_s=TRACK_UPDATE_S)
     if name == "as_eval":
         return eval_settings, _grip()
     if name == "all_axes":
@@ -143,9 +143,9 @@ def variant_setup(name: str, eval_settings: TrialSettings):
     if name.startswith("spin_"):
         return all_axes, _grip(spinning_friction=float(name.removeprefix("spin_")))
     if name.startswith("osc_"):
-        return replace(all_axes, twist_oscillation_radps=float(name.removeprefix("osc_"))), _grip()
+        return all_axes.with_fields(twist_oscillation_radps=float(name.removeprefix("osc_"))), _grip()
     if name.startswith("ramp_"):
-        return replace(all_axes, twist_ramp_time_s=float(name.removeprefix("ramp_"))), _grip()
+        return all_axes.with_fields(twist_ramp_time_s=float(name.removeprefix("ramp_"))), _grip()
     if name == "track":
         return tracked, _grip(erp=TRACK_ERP)
     if name == "track_all":

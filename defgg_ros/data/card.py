@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from defgg_ros.atomic import read_jsonl, write_text_atomic
-from defgg_ros.constants import MAX_SOFT_BODY_YOUNGS_MODULUS_PA, SHAKE_POSITIVE_THRESHOLD_MPS2
+from defgg_ros.constants import GRIPPER_MAX_FORCE_N, MAX_SOFT_BODY_YOUNGS_MODULUS_PA, SHAKE_POSITIVE_THRESHOLD_MPS2
 from defgg_ros.data.format import (
     STATUS_LIFT_FAILED,
     check_header,
@@ -18,7 +18,10 @@ from defgg_ros.data.format import (
     trials_of,
     trials_path,
 )
+from defgg_ros.data.header import recorded_grasp_height, recorded_protocol, recorded_trial_settings
 from defgg_ros.data.labels import slips_in_a_direction
+from defgg_ros.data.signal import SignalError, read_trial_records, render_markdown, signal_report
+from defgg_ros.sim.protocol import DEFGRASPSIM
 
 RIGID_NOTE = (
     f"Moduli above {MAX_SOFT_BODY_YOUNGS_MODULUS_PA:.0e} Pa are simulated as rigid bodies: PyBullet's FEM "
@@ -114,12 +117,10 @@ def render_card(root, grasps_per_scene: int | None = None, records_by_scene: dic
 
 def _last_column_note(gen: dict) -> str:
     # the evaluation's shake success follows the protocol (evaluation/tasks.shake_success_rule)
-    from defgg_ros.sim.trial import PROTOCOL_DEFGRASPSIM
-
     where = ("fail the every-direction criterion: the evaluation's second shake table (docs/results.md; its "
-             "success is the label's own rule, the mean)" if _recorded_settings(gen)["protocol"] ==
-             PROTOCOL_DEFGRASPSIM else "fail the evaluation's shake task under this protocol, where every "
-             "direction must hold (docs/results.md)")
+             "success is the label's own rule, the mean)" if recorded_protocol(gen).name == DEFGRASPSIM
+             else "fail the evaluation's shake task under this protocol, where every direction must hold "
+             "(docs/results.md)")
     return (f"Last column: positives (mean >= {SHAKE_POSITIVE_THRESHOLD_MPS2} m/s^2) of which at least one "
             "measured direction held less; skipped directions are not counted, so it is a lower bound. "
             f"Such grasps are positive training examples but {where}.")
@@ -146,20 +147,9 @@ def _coverage_lines(rows, planned) -> list[str]:
     return lines
 
 
-def _recorded_settings(gen: dict) -> dict:
-    from defgg_ros.data.header import effective_trial_settings
-    from defgg_ros.sim.trial import comparable_protocol
-
-    recorded = gen.get("trial_settings")
-    return comparable_protocol(recorded or effective_trial_settings(gen.get("settings", {}), legacy=True))
-
-
 def _force_line(gen: dict) -> str:
     """How hard the fingers squeezed: the rule of the dataset's recorded protocol (defgg_ros/grip_force.py)."""
-    from defgg_ros.constants import GRIPPER_MAX_FORCE_N
-    from defgg_ros.sim.trial import PROTOCOL_DEFGRASPSIM
-
-    if _recorded_settings(gen)["protocol"] == PROTOCOL_DEFGRASPSIM:
+    if recorded_protocol(gen).grip_force_rule == "weight_over_friction":
         return ("Grasp force: FOS * m * g / mu in total with FOS = 1 + log10(E) / 10, half on each finger, capped at "
                 f"{GRIPPER_MAX_FORCE_N:g} N a finger; m the object's mass, mu the rule's friction "
                 "(defgg_ros/grip_force.py).")
@@ -167,24 +157,23 @@ def _force_line(gen: dict) -> str:
 
 
 def _protocol_line(gen: dict) -> str:
-    from defgg_ros.data.header import protocol_summary, recorded_grasp_height
-
     recorded = gen.get("trial_settings")
-    settings = _recorded_settings(gen)
-    stop = (f"shake stopped early once the mean is {settings['confident_margin_mps2']:g}/sqrt(k) m/s^2 from the "
-            f"threshold after k >= {settings['confident_min_directions']} directions"
-            if settings["confident_stop"] else "no early stop on the measured mean")
+    settings = recorded_trial_settings(gen)
+    motion, stops = settings.motion, settings.generator
+    stop = (f"shake stopped early once the mean is {stops.confident_margin_mps2:g}/sqrt(k) m/s^2 from the "
+            f"threshold after k >= {stops.confident_min_directions} directions"
+            if stops.confident_stop else "no early stop on the measured mean")
     mesh = gen.get("sim_max_tet_nodes")
     return (f"Trial protocol{'' if recorded else ' (not recorded in the header: the generator of the time)'}: "
-            f"{protocol_summary(settings)}; close settle {settings['close_settle_s']} s, "
-            f"lift {settings['lift_height_m'] * 100:.0f} cm in "
-            f"{settings['lift_time_s']} s, hold {settings['hold_time_s']} s; {stop}; FEM mesh: "
+            f"{settings.protocol.summary()}; close settle {motion.close_settle_s} s, "
+            f"lift {motion.lift_height_m * 100:.0f} cm in "
+            f"{motion.lift_time_s} s, hold {motion.hold_time_s} s; {stop}; FEM mesh: "
             + (f"at most {mesh} nodes (soft bodies)" if mesh else "the shipped mesh")
             + ("; candidates at the evaluation's grasp height (--grasp-height executor)"
                if recorded_grasp_height(gen) == "executor" else
                "; candidates at their contacts' height, which the evaluation does not use: only the trials within a "
                "few mm of its height label the grasp it performs (results/notes_height.md)")
-            + ("" if settings["lift_time_s"] >= 0.6 else ". This lift dropped soft grasps that a 0.6 s lift holds "
+            + ("" if motion.lift_time_s >= 0.6 else ". This lift dropped soft grasps that a 0.6 s lift holds "
                "(bench/README.md): some soft lift failures here are artifacts of it"))
 
 
@@ -194,8 +183,6 @@ SIGNAL_FIGURE = "signal.png"   # beside card.md
 def write_signal_section(root, records: list[dict] | None = None) -> list[str]:
     """The signal report of the dataset's trials (records: already read, else read from <root>/trials) as
     card lines (empty when there is nothing to report); its figure is written beside the card."""
-    from defgg_ros.data.signal import SignalError, read_trial_records, render_markdown, signal_report
-
     if "shake" not in check_header(root)["generator"].get("tests", ["shake"]):
         return ["", "No signal report: these trials ran no shake (a twist-only pilot takes its shake from "
                     "another folder, bench/pilot_signal.py)."]
@@ -204,7 +191,7 @@ def write_signal_section(root, records: list[dict] | None = None) -> list[str]:
         report = signal_report(records)
     except SignalError:
         return []
-    from defgg_ros.data.signal_figure import signal_figure
+    from defgg_ros.data.signal_figure import signal_figure  # matplotlib: 1.7 s, only when a card is written
 
     signal_figure(report, records, Path(root) / SIGNAL_FIGURE, f"Signal report: {Path(root).name}")
     return ["", render_markdown(report, "Signal report (defgg-datagen signal)"), f"![signal report]({SIGNAL_FIGURE})",

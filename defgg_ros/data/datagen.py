@@ -15,14 +15,18 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import multiprocessing as mp
 import time
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
+import pybullet as p
+from tqdm import tqdm
 
 from defgg_ros.atomic import append_jsonl, write_json_atomic
 from defgg_ros.constants import GRASP_CANDIDATES_PER_OBJECT, TRAINING_YOUNGS_MODULI_PA
+from defgg_ros.data.card import write_card
 from defgg_ros.data.format import TRIAL_ERRORS_FILE as ERRORS_FILE
 from defgg_ros.data.format import (
     DatasetError,
@@ -30,9 +34,14 @@ from defgg_ros.data.format import (
     GraspRect,
     Scene,
     TrialRecord,
+    check_header,
     scene_id_for,
 )
-from defgg_ros.data.header import effective_trial_settings, recorded_grasp_height, recorded_protocol  # noqa: F401
+from defgg_ros.data.header import effective_trial_settings, recorded_grasp_height, recorded_trial_settings
+from defgg_ros.sim import camera, objects, world
+from defgg_ros.sim.sampler import SAMPLER_VERSION, grasp_rect, sample_grasps
+from defgg_ros.sim.trial import TrialSettings, WorldGrasp, run_grasp_trial
+from defgg_ros.sim.trial_settings import comparable_protocol
 
 CANDIDATE_FILE_VERSION = 1
 # The coarse FEM mesh measured against the shipped one (up to 220 nodes):
@@ -60,8 +69,8 @@ class DatagenConfig:
     # Tests each trial runs; the label reads the shake. ("shake", "twist") also records the twist
     # (the signal pilots' try of a twist-aware label, data/signal.py LABEL_RULES).
     tests: tuple = ("shake",)
-    # constants.GRASP_HEIGHT_RULES; executor since 2026-11-26: each label is of the grasp the evaluation
-    # and the cell perform (results/notes_height.md). A resumed dataset keeps its own (resolve_grasp_height).
+    # constants.GRASP_HEIGHT_RULES; executor: each label is of the grasp the evaluation and the cell perform
+    # (results/notes_height.md). A resumed dataset keeps its own (resolve_grasp_height).
     grasp_height: str = "executor"
     card_every: int = 20                           # regenerate the card every N finished trials
 
@@ -110,8 +119,6 @@ def trial_id_for(scene_id: str, candidate_index: int) -> str:
 
 def load_or_sample_candidates(root: Path, shape, cfg: DatagenConfig) -> list:
     """Collision-free antipodal candidates of one object, cached in <root>/candidates/<name>.json."""
-    from defgg_ros.sim.sampler import SAMPLER_VERSION, grasp_rect, sample_grasps
-
     path = root / "candidates" / f"{shape.name}.json"
     seed = object_seed(cfg.seed, shape.name)
     key = {"version": CANDIDATE_FILE_VERSION, "sampler": SAMPLER_VERSION, "seed": seed,
@@ -134,8 +141,6 @@ def load_or_sample_candidates(root: Path, shape, cfg: DatagenConfig) -> list:
 
 def render_scene(shape, youngs_modulus_pa: float, seed: int) -> Scene:
     """Render depth, stiffness and mask of the object resting at the origin (yaw 0)."""
-    from defgg_ros.sim import camera, objects, world
-
     client = world.connect()
     try:
         spec = objects.ObjectSpec(shape, youngs_modulus_pa)
@@ -143,8 +148,6 @@ def render_scene(shape, youngs_modulus_pa: float, seed: int) -> Scene:
         loaded = objects.load_object(client, spec)
         images = camera.render_object_images(client, loaded)
     finally:
-        import pybullet as p
-
         p.disconnect(client)
     meta = {"object_name": shape.name, "object_set": shape.set_name, "youngs_modulus_pa": youngs_modulus_pa,
             "poisson_ratio": spec.poisson_ratio, "seed": seed, "soft": [pt.soft for pt in loaded.parts],
@@ -156,13 +159,11 @@ def render_scene(shape, youngs_modulus_pa: float, seed: int) -> Scene:
 def selected_shapes(cfg: DatagenConfig) -> list:
     """The object set's shapes the config names (all of them when it names none); DatasetError for a name
     the set does not have."""
-    from defgg_ros.sim.objects import object_set
-
-    shapes = [s for s in object_set(cfg.object_set) if not cfg.objects or s.name in cfg.objects]
+    shapes = [s for s in objects.object_set(cfg.object_set) if not cfg.objects or s.name in cfg.objects]
     missing = set(cfg.objects) - {s.name for s in shapes}
     if missing:
         raise DatasetError(f"objects not in set {cfg.object_set!r}: {sorted(missing)}; its objects: "
-                           f"{', '.join(s.name for s in object_set(cfg.object_set))}")
+                           f"{', '.join(s.name for s in objects.object_set(cfg.object_set))}")
     return shapes
 
 
@@ -204,11 +205,8 @@ def pass_order(cfg: DatagenConfig, per_scene: dict) -> list:
 
 def run_trial_job(job: dict) -> dict:
     """Simulate one trial (worker side); returns a TrialRecord as JSON."""
-    from defgg_ros.sim import objects, world
-    from defgg_ros.sim.trial import TrialSettings, WorldGrasp, run_grasp_trial
-
     job = TrialJob(**job)
-    settings = replace(TrialSettings.fast(), **job.settings)
+    settings = TrialSettings.fast().with_fields(**job.settings)
     # Images and candidates come from the shipped mesh; only the FEM may run on a coarser one.
     shape = objects.simulation_shape(objects.get_shape(job.object_name), job.youngs_modulus_pa,
                                      job.sim_max_tet_nodes)
@@ -225,6 +223,17 @@ def run_trial_job(job: dict) -> dict:
         twist_accels_radps2=outcome.twist_accels_radps2,
         grasp_force_n=outcome.grasp_force_n, seed=job.seed, cpu_s=outcome.cpu_s, sim=sim, note=outcome.note)
     return record.to_json()
+
+
+def job_from_record(record: TrialRecord, sim_max_tet_nodes: int | None = None) -> dict:
+    """The job (run_trial_job's argument) that reruns a stored trial under its recorded settings (those it
+    predates at the value they had then, TrialSettings.from_record) on the mesh the dataset simulated."""
+    tests = ("shake", "twist") if record.twist_accels_radps2 is not None else ("shake",)
+    grasp = {"position_m": record.position_m, "yaw_rad": record.yaw_rad, "width_m": record.width_m}
+    settings = TrialSettings.from_record(record.sim.get("settings") or {}).to_record()
+    return TrialJob(record.trial_id, record.scene_id, record.object_name, record.youngs_modulus_pa,
+                    record.candidate_index, grasp, asdict(record.rect), record.seed, settings, sim_max_tet_nodes,
+                    tests).to_dict()
 
 
 def run_trial_job_guarded(job: dict) -> dict:
@@ -265,15 +274,13 @@ def execute(jobs: list, cfg: DatagenConfig, on_result) -> None:
         for job in payloads:
             on_result(run_trial_job_guarded(job))
     else:
-        import multiprocessing as mp
-
         with mp.get_context("spawn").Pool(cfg.workers, maxtasksperchild=50) as pool:
             for result in pool.imap_unordered(run_trial_job_guarded, payloads, chunksize=1):
                 on_result(result)
 
 
 def _execute_ray(payloads, cfg, on_result) -> None:
-    import ray
+    import ray  # an optional dependency: only a --ray run needs it
 
     started_here = not ray.is_initialized()
     if started_here:
@@ -296,36 +303,22 @@ def _execute_ray(payloads, cfg, on_result) -> None:
             ray.shutdown()
 
 
+def recorded_generator(out) -> dict | None:
+    """The generator section of the dataset at `out`, None when there is none yet."""
+    return check_header(out).get("generator", {}) if (Path(out) / "dataset.json").exists() else None
+
+
 def resolve_grasp_height(out, requested: str | None) -> str:
     """The candidates' height rule of a run: as requested; else the dataset's own when resuming one,
     else executor (DatagenConfig's default)."""
     if requested is not None:
         return requested
-    from defgg_ros.data.format import check_header
-
-    if (Path(out) / "dataset.json").exists():
-        return recorded_grasp_height(check_header(out).get("generator", {}))
-    return DatagenConfig.grasp_height
-
-
-def resolve_protocol(out, requested: str | None) -> str:
-    """The trial protocol of a run: as requested; else the dataset's own when resuming one, else the
-    default (TrialSettings.protocol, defgraspsim)."""
-    from defgg_ros.sim.trial import TrialSettings
-
-    if requested is not None:
-        return requested
-    from defgg_ros.data.format import check_header
-
-    if (Path(out) / "dataset.json").exists():
-        return recorded_protocol(check_header(out).get("generator", {}))
-    return TrialSettings.protocol
+    stored = recorded_generator(out)
+    return DatagenConfig.grasp_height if stored is None else recorded_grasp_height(stored)
 
 
 def check_resumable(cfg: DatagenConfig) -> None:
     """A resumed dataset keeps its FEM mesh and trial protocol (labels depend on both)."""
-    from defgg_ros.data.format import check_header
-
     stored = check_header(cfg.out).get("generator", {})
     mesh = stored.get("sim_max_tet_nodes")
     if mesh != cfg.sim_max_tet_nodes:
@@ -336,11 +329,7 @@ def check_resumable(cfg: DatagenConfig) -> None:
     if height != cfg.grasp_height:
         raise DatasetError(f"{cfg.out} was generated with --grasp-height {height}; resume it with the same rule "
                            f"(got {cfg.grasp_height}) or write a new dataset")
-    # headers before 2026-11-24 did not record the protocol: theirs was the legacy lift
-    from defgg_ros.sim.trial import comparable_protocol
-
-    protocol = comparable_protocol(
-        stored.get("trial_settings") or effective_trial_settings(stored.get("settings", {}), legacy=True))
+    protocol = comparable_protocol(recorded_trial_settings(stored).to_record())
     current = comparable_protocol(effective_trial_settings(cfg.settings))
     if protocol != current:
         needed = {k: v for k, v in protocol.items() if current.get(k) != v}
@@ -350,10 +339,6 @@ def check_resumable(cfg: DatagenConfig) -> None:
 
 def generate(cfg: DatagenConfig, progress_bar=True) -> dict:
     """Plan + execute; returns counts. Safe to rerun: finished trials are skipped."""
-    from tqdm import tqdm
-
-    from defgg_ros.data.card import write_card
-
     selected_shapes(cfg)           # a bad object name is refused before anything is written
     writer = DatasetWriter(cfg.out, cfg.header())
     check_resumable(cfg)

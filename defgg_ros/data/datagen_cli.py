@@ -6,8 +6,22 @@ import json
 import sys
 from pathlib import Path
 
+from defgg_ros.atomic import write_json_atomic, write_text_atomic
 from defgg_ros.cli_help import HelpFormatter
 from defgg_ros.constants import GRASP_CANDIDATES_PER_OBJECT, GRASP_HEIGHT_RULES, TRAINING_YOUNGS_MODULI_PA
+from defgg_ros.data.datagen import (
+    COARSE_SIM_MAX_TET_NODES,
+    DatagenConfig,
+    generate,
+    recorded_generator,
+    resolve_grasp_height,
+)
+from defgg_ros.data.format import DatasetError, dataset_fingerprint, seal_trials
+from defgg_ros.data.header import recorded_trial_settings
+from defgg_ros.data.signal import SignalError, read_trial_records, render_markdown, signal_report, with_shake_from
+from defgg_ros.sim.protocol import resolve_protocol
+from defgg_ros.sim.trial_settings import TrialSettings
+from defgg_ros.stiffness import InvalidYoungsModulus, check_youngs_modulus
 
 DESCRIPTION = """\
 Generate grasp trials: per object x Young's modulus, render depth/stiffness/mask,
@@ -38,8 +52,6 @@ Seal a finished dataset (compress its trial files; the fingerprint stays):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from defgg_ros.data.datagen import COARSE_SIM_MAX_TET_NODES
-
     ap = argparse.ArgumentParser(prog="defgg-datagen", description=DESCRIPTION, formatter_class=HelpFormatter,
                                  usage="%(prog)s --out DIR [options]   (generate or resume a dataset)\n"
                                        "       %(prog)s signal FOLDER [--json F] [--md F] [--png F]   "
@@ -107,8 +119,6 @@ def build_signal_parser() -> argparse.ArgumentParser:
 
 
 def seal_main(argv) -> int:
-    from defgg_ros.data.format import DatasetError, dataset_fingerprint, seal_trials
-
     ap = argparse.ArgumentParser(prog="defgg-datagen seal", formatter_class=HelpFormatter,
                                  description="Compress a finished dataset's trial files (trials/*.jsonl -> .jsonl.gz). "
                                              "Records and fingerprint stay the same; a sealed dataset is never "
@@ -130,9 +140,6 @@ def seal_main(argv) -> int:
 
 
 def signal_main(argv) -> int:
-    from defgg_ros.atomic import write_json_atomic, write_text_atomic
-    from defgg_ros.data.signal import SignalError, read_trial_records, render_markdown, signal_report, with_shake_from
-
     args = build_signal_parser().parse_args(argv)
     try:
         records = read_trial_records(args.folder)
@@ -145,7 +152,7 @@ def signal_main(argv) -> int:
     title = args.title or f"Signal report: {args.folder.name}"
     text = render_markdown(report, title)
     if args.png:
-        from defgg_ros.data.signal_figure import signal_figure
+        from defgg_ros.data.signal_figure import signal_figure  # matplotlib: 1.7 s to import, only for --png
 
         signal_figure(report, records, args.png, title)
     if args.json:
@@ -163,17 +170,14 @@ def main(argv=None) -> int:
     if argv[:1] == ["seal"]:
         return seal_main(argv[1:])
     args = build_parser().parse_args(argv)
-    from defgg_ros.data.datagen import DatagenConfig, generate, resolve_grasp_height, resolve_protocol
-    from defgg_ros.data.format import DatasetError
-    from defgg_ros.sim.trial import TrialSettings
-    from defgg_ros.stiffness import InvalidYoungsModulus, check_youngs_modulus
-
     try:
         settings = json.loads(args.settings)
         if not isinstance(settings, dict):
             raise TypeError("--settings must be a JSON object")
-        settings.setdefault("protocol", resolve_protocol(args.out, args.protocol))
-        TrialSettings(**settings)  # validate names now, not in a worker
+        stored = recorded_generator(args.out)       # a resumed dataset keeps its protocol
+        recorded = None if stored is None else recorded_trial_settings(stored).to_record()
+        settings.setdefault("protocol", resolve_protocol(args.protocol, recorded=recorded).name)
+        TrialSettings().with_fields(**settings)  # validate names and values now, not in a worker
     except (json.JSONDecodeError, TypeError, ValueError) as exc:
         print(f"defgg-datagen: bad --settings: {exc}", file=sys.stderr)
         return 2

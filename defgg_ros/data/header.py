@@ -4,71 +4,40 @@ Shared by the generator (datagen) and the card (card), which must not import eac
 """
 from __future__ import annotations
 
-from dataclasses import asdict, replace
+from defgg_ros.sim.protocol import TrialProtocol
+from defgg_ros.sim.trial_settings import TrialSettings
 
 
-def effective_trial_settings(overrides: dict, legacy: bool = False) -> dict:
-    """Every TrialSettings field of the generator's protocol with these overrides (legacy: the
-    pre-2026-11-24 lift, the pre-2026-11-25 confident stop and the pre-2026-11-26 protocol)."""
-    from defgg_ros.sim.trial import (
-        LEGACY_CONFIDENT_SETTINGS,
-        LEGACY_LIFT_SETTINGS,
-        LEGACY_PROTOCOL_SETTINGS,
-        TrialSettings,
-    )
+def effective_trial_settings(overrides: dict) -> dict:
+    """Every stored field of the generator's settings (TrialSettings.fast()) with these overrides."""
+    return TrialSettings.fast().with_fields(**overrides).to_record()
 
-    base = TrialSettings.fast()
-    if legacy:
-        base = replace(base, **LEGACY_LIFT_SETTINGS, **LEGACY_CONFIDENT_SETTINGS, **LEGACY_PROTOCOL_SETTINGS)
-    return asdict(replace(base, **overrides))
+
+def recorded_trial_settings(generator: dict) -> TrialSettings:
+    """The trial settings a dataset header's generator section records (TrialSettings.from_generator_header);
+    a synthetic dataset's header names a string: the default settings."""
+    return TrialSettings.from_generator_header(generator if isinstance(generator, dict) else {})
+
+
+def recorded_protocol(generator: dict) -> TrialProtocol:
+    """The trial protocol a dataset header records (a header without one: legacy)."""
+    return recorded_trial_settings(generator).protocol
 
 
 def recorded_grasp_height(generator: dict) -> str:
-    """The candidates' height rule a dataset header's generator settings record (headers before
-    2026-11-26 lack it: their candidates sat at the contacts' height)."""
+    """The candidates' height rule a dataset header's generator settings record (a header without one: its
+    candidates sat at the contacts' height)."""
     return generator.get("grasp_height", "contacts")
 
 
-def recorded_protocol(generator: dict) -> str:
-    """The trial protocol a dataset header records (headers before 2026-11-26 lack it: legacy)."""
-    return (generator.get("trial_settings") or {}).get("protocol", "legacy")
-
-
-def _trial_settings(settings: dict):
-    """sim.trial.TrialSettings of recorded settings (fields it does not know are dropped)."""
-    from defgg_ros.sim.trial import TrialSettings
-
-    return TrialSettings(**{k: v for k, v in settings.items() if k in TrialSettings.__dataclass_fields__})
-
-
 def protocol_summary(settings: dict) -> str:
-    """One line naming a recorded protocol's rules, friction and material (dataset cards, evaluation reports)."""
-    from defgg_ros.sim.trial import PROTOCOL_DEFGRASPSIM
-
-    material = _trial_settings(settings).material()
-    nu = material["poisson_ratio"]
-    nu_text = f"nu {nu}" if nu is not None else "nu of the object (0.4)"
-    if settings["protocol"] == PROTOCOL_DEFGRASPSIM:
-        hold = ("locked after it (soft bodies; the rigid stand-in held with F/2)"
-                if settings.get("finger_hold") == "lock" else "held with F/2 each after it")
-        mu = settings.get("grip_force_friction")
-        force_mu = f" with mu {mu} (not the contact's)" if mu else ""
-        rule = (f"**defgraspsim** (zero gravity after settling, grip force FOS*m*g/mu{force_mu} split over the "
-                f"fingers, table moved away for the pickup, fingers {hold}, lost when either finger has no contact)")
-    else:
-        rule = ("**legacy** (gravity on, 2 N + 0.5 N per decade a finger, fingers force-held, lost when both fingers "
-                "let go or the centroid moved 20 mm)")
-    return f"{rule}, effective friction {material['effective_friction']:.2f}, Neo-Hookean FEM, {nu_text}"
+    """One line naming a stored protocol setting's rules, friction and material (dataset cards, evaluation
+    reports)."""
+    return TrialProtocol.from_setting(settings).summary()
 
 
 def label_grip_rule(generator: dict) -> dict:
     """The grip force rule of a dataset's labels (grip_force.LabelGripRule's meta form): legacy, or
-    defgraspsim with the friction its force used (TrialSettings.grip_force_mu, as the trials did)."""
-    from defgg_ros.grip_force import LabelGripRule
-    from defgg_ros.sim.trial import PROTOCOL_DEFGRASPSIM
-
+    defgraspsim with the friction its force used (as the trials did)."""
     generator = generator if isinstance(generator, dict) else {}     # synthetic datasets name a string
-    if recorded_protocol(generator) != PROTOCOL_DEFGRASPSIM:
-        return LabelGripRule().to_meta()
-    mu = _trial_settings(generator.get("trial_settings") or {}).grip_force_mu()
-    return LabelGripRule(PROTOCOL_DEFGRASPSIM, float(mu)).to_meta()
+    return recorded_protocol(generator).label_grip_rule().to_meta()

@@ -38,6 +38,7 @@ from defgg_ros.constants import (
     STATUS_OK,
     TWIST_POSITIVE_THRESHOLD_RADPS2,
 )
+from defgg_ros.sim.material import MATERIALS
 
 TOP_K = 5
 NEAR_THRESHOLD_BAND_MPS2 = 2.5    # +-10 % of the 25 m/s^2 threshold
@@ -45,9 +46,8 @@ NEAR_THRESHOLD_BAND_MPS2 = 2.5    # +-10 % of the 25 m/s^2 threshold
 # and a mean held angular acceleration over the six twist axes >= half the paper's 500 rad/s^2 limit (the
 # shake's rule for the twist: contact area matters most in torsion).
 LABEL_RULES = ("shake", "shake_and_twist")
-# For records that do not state it (fem_v1-v4): 0.8 x 0.8, sim.physics.MATERIALS["legacy"] (not imported:
-# this report reads records without loading PyBullet).
-LEGACY_EFFECTIVE_FRICTION = 0.64
+# For records that do not state it (fem_v1-v4): the legacy material's 0.8 x 0.8.
+LEGACY_EFFECTIVE_FRICTION = MATERIALS["legacy"].effective_friction
 
 
 class SignalError(ValueError):

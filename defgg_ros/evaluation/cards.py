@@ -162,10 +162,10 @@ def _data_section(prov) -> list:
                   f"written). Reproduce the training: `mkdir -p runs/frozen && tar xzf {prov['data_archive']} -C "
                   f"runs/frozen`, then the training command above with `--data runs/frozen/train_data`.", ""]
     if header:
-        lines += [f"Trial protocol of the labels: **{recorded_protocol(header)}** (docs/dataset.md, 'Trial "
-                  "protocols').", "",
+        protocol = recorded_protocol(header)
+        lines += [f"Trial protocol of the labels: {protocol.summary()} (docs/dataset.md, 'Trial protocols').", "",
                   f"Generator settings (`dataset.json`, written by `defgg-datagen`): `{json.dumps(header)}`", ""]
-        if recorded_protocol(header) == "defgraspsim":
+        if protocol.name == "defgraspsim":
             lines += ["Grip force of these labels: FOS·m·g/μ, from the object's mass (defgg_ros/grip_force.py). "
                       "Weights trained since 2026-11-27 record the rule (`label_grip_rule`); with the tabletop "
                       "planner the cell then closes each grasp with it, the mass estimated from the height map "

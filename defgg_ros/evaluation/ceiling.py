@@ -26,11 +26,20 @@ candidates. Results are one fsync'd JSON line per trial
 """
 from __future__ import annotations
 
+import sys
 from collections import defaultdict
 from pathlib import Path
 
+import pybullet
+
 from defgg_ros.atomic import append_jsonl, read_jsonl, write_text_atomic
+from defgg_ros.data.datagen import object_seed
 from defgg_ros.evaluation.tasks import check_task, outcome_fields
+from defgg_ros.sim import objects, world
+from defgg_ros.sim.objects import simulation_shape
+from defgg_ros.sim.sampler import sample_grasps
+from defgg_ros.sim.trial import run_grasp_trial
+from defgg_ros.sim.trial_settings import protocol_differences
 
 RESULTS_FILE = "ceiling.jsonl"
 TABLE_FILE = "ceiling.md"
@@ -62,10 +71,6 @@ def plan_trials(shapes, moduli_pa, n_candidates: int, task: str, seed: int, max_
 
     grasp_height: the sampler's rule (constants.GRASP_HEIGHT_RULES); "executor" puts the candidates at
     the height the evaluation executes a model's grasp at, so the bound is of comparable grasps."""
-    from defgg_ros.data.datagen import object_seed
-    from defgg_ros.sim.objects import simulation_shape
-    from defgg_ros.sim.sampler import sample_grasps
-
     check_task(task)
     if n_candidates < 1:
         raise ValueError(f"candidates per object must be >= 1, got {n_candidates}")
@@ -86,16 +91,10 @@ def plan_trials(shapes, moduli_pa, n_candidates: int, task: str, seed: int, max_
 def run(out_dir, trials, task: str, settings, max_trials: int | None = None, progress=None,
         grasp_height: str = "contacts") -> int:
     """Simulate the trials not yet in OUT/ceiling.jsonl; returns how many ran."""
-    from dataclasses import asdict
-
-    from defgg_ros.sim import world
-
     path = Path(out_dir) / RESULTS_FILE
     path.parent.mkdir(parents=True, exist_ok=True)
     existing = read_jsonl(path)
-    from defgg_ros.sim.trial import protocol_differences
-
-    if protocol_differences(existing, asdict(settings), task):
+    if protocol_differences(existing, settings.to_record(), task):
         raise ValueError(f"{path} holds trials of another protocol; run the ceiling into a new --out folder")
     heights = {r.get("grasp_height", "contacts") for r in existing}
     if heights - {grasp_height}:
@@ -110,20 +109,12 @@ def run(out_dir, trials, task: str, settings, max_trials: int | None = None, pro
             if progress:
                 progress(n, len(pending), trial[0])
     finally:
-        import pybullet
-
         pybullet.disconnect(client)
     return len(pending)
 
 
 def _run_one(path, client, trial, task: str, settings, grasp_height: str) -> None:
     """One trial, appended to the results; a trial that raises is reported and left for the next run."""
-    import sys
-    from dataclasses import asdict
-
-    from defgg_ros.sim import objects
-    from defgg_ros.sim.trial import run_grasp_trial
-
     key, shape, e, i, grasp = trial
     try:
         out = run_grasp_trial(objects.ObjectSpec(shape, e), grasp, tests=(task,), settings=settings, client=client)
@@ -133,9 +124,9 @@ def _run_one(path, client, trial, task: str, settings, grasp_height: str) -> Non
     accels = out.shake_accels_mps2 if task == "shake" else out.twist_accels_radps2
     append_jsonl(path, {"key": key, "object": shape.name, "object_set": shape.set_name, "youngs_modulus_pa": e,
                         "candidate": i, "task": task, "status": out.status, "accels": accels,
-                        **outcome_fields(task, out.status, accels, settings.protocol), "cpu_s": out.cpu_s,
+                        **outcome_fields(task, out.status, accels, settings.protocol.name), "cpu_s": out.cpu_s,
                         "tet_nodes": [len(t.nodes_m) for t in shape.tet_parts],
-                        "grasp_force_n": out.grasp_force_n, "trial_settings": asdict(settings),
+                        "grasp_force_n": out.grasp_force_n, "trial_settings": settings.to_record(),
                         "grasp_height": grasp_height})
 
 

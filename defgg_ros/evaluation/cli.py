@@ -26,13 +26,17 @@ import shlex
 import sys
 from pathlib import Path
 
-from defgg_ros.atomic import write_json_atomic
+from defgg_ros.atomic import read_jsonl, write_json_atomic
 from defgg_ros.cli_help import HelpFormatter, use_for
 from defgg_ros.constants import EVAL_GRASPS_PER_OBJECT, GRASP_HEIGHT_RULES, TRAINING_YOUNGS_MODULI_PA
+from defgg_ros.data.format import check_header
 from defgg_ros.evaluation import jobs as jobs_mod
 from defgg_ros.evaluation import report as report_mod
 from defgg_ros.evaluation import sources
+from defgg_ros.evaluation.store import read_results, results_path
 from defgg_ros.evaluation.tasks import TASKS
+from defgg_ros.sim.protocol import TrialProtocol, resolve_protocol
+from defgg_ros.sim.trial_settings import TrialSettings, protocol_differences
 
 DEFAULT_MODELS = ("defgg_cnn=models/defgg_cnn.pt", "ggcnn_depth_only=models/ggcnn_depth_only.pt")
 
@@ -237,9 +241,7 @@ def build_views(args, predictors, objects) -> list:
     return views
 
 
-def write_manifest(out_dir, args, model_paths, predictors, objects, argv, settings) -> None:
-    from dataclasses import asdict
-
+def write_manifest(out_dir, args, model_paths, predictors, objects, argv, settings: TrialSettings) -> None:
     from defgg_ros.evaluation.cards import git_commit
 
     by_set = {}
@@ -254,50 +256,38 @@ def write_manifest(out_dir, args, model_paths, predictors, objects, argv, settin
         "experiments": list(args.experiments), "seed": args.seed,
         "sensitivity_errors_pct": list(jobs_mod.SENSITIVITY_ERRORS_PCT),
         "multimaterial_moduli_pa": list(args.multimaterial_moduli),
-        "trial_settings": asdict(settings), "quick": bool(args.quick),
+        "trial_settings": settings.to_record(), "quick": bool(args.quick),
     }
     write_json_atomic(Path(out_dir) / report_mod.MANIFEST_FILE, merge_manifest(out_dir, manifest))
 
 
-def resolve_protocol(out_dir, requested: str | None, records_file: str | None = None,
-                     from_dataset: str | None = None) -> dict:
-    """The trial protocol setting of a run (sim.trial.protocol_setting): the dataset's (`from_dataset`: the
-    labels' own protocol, material and grip force); else the requested protocol; else the folder's own when it
-    holds trials (those made before the setting existed are legacy); else the default (defgraspsim)."""
-    from defgg_ros.atomic import read_jsonl
-    from defgg_ros.data.format import check_header
-    from defgg_ros.evaluation.store import results_path
-    from defgg_ros.sim.trial import TrialSettings, protocol_setting
-
+def protocol_of_run(out_dir, requested: str | None, records_file: str | None = None,
+                    from_dataset: str | None = None) -> TrialProtocol:
+    """The trial protocol of a run, by the one resolver (sim.protocol.resolve_protocol) from what it needs: the
+    dataset's header (`from_dataset`: the labels' own protocol, material and grip force), the requested name,
+    the settings of the folder's first trial record (a record without one: legacy)."""
+    dataset_setting = recorded = None
     if from_dataset is not None:
-        recorded = check_header(from_dataset).get("generator", {}).get("trial_settings")
-        if not recorded:
-            raise ValueError(f"{from_dataset} records no trial settings (made before 2026-11-24): pass --protocol")
-        return protocol_setting(recorded)
-    if requested is not None:
-        return protocol_setting({"protocol": requested})
+        dataset_setting = check_header(from_dataset).get("generator", {}).get("trial_settings")
+        if not dataset_setting:
+            raise ValueError(f"{from_dataset} records no trial settings (its header has only the generator's "
+                             "overrides): pass --protocol")
     path = Path(out_dir) / records_file if records_file else results_path(out_dir)
-    if path.is_file():
-        for record in read_jsonl(path):
-            return protocol_setting(record.get("trial_settings") or {})
-    return protocol_setting({"protocol": TrialSettings.protocol})
+    if requested is None and dataset_setting is None and path.is_file():
+        recorded = next((r.get("trial_settings") or {} for r in read_jsonl(path)), None)
+    return resolve_protocol(requested, recorded=recorded, dataset_setting=dataset_setting)
 
 
-def check_same_protocol(out_dir, settings, tasks) -> None:
+def check_same_protocol(out_dir, settings: TrialSettings, tasks) -> None:
     """Trials of one folder share one protocol per task: finished trials are skipped by key, so a run
-    with other trial settings (e.g. before the 0.6 s lift of 2026-11-24) would silently mix them. Only
-    what a task reads is compared (sim.trial.task_protocol): a new twist ramp leaves the shake trials."""
-    from dataclasses import asdict
-
-    from defgg_ros.evaluation.store import read_results, results_path
-    from defgg_ros.sim.trial import protocol_differences
-
+    with other trial settings (e.g. another lift time) would silently mix them. Only what a task reads is
+    compared (sim.trial_settings.task_protocol): a new twist ramp leaves the shake trials."""
     path = results_path(out_dir)
     if not path.is_file():
         return
     records = read_results(path)
     for task in tasks:
-        differ = protocol_differences(records, asdict(settings), task)
+        differ = protocol_differences(records, settings.to_record(), task)
         if differ:
             raise ValueError(f"{out_dir} holds {task} trials of another protocol (differs in "
                              f"{', '.join(differ)}); evaluate into a new --out folder")
@@ -351,7 +341,7 @@ def cmd_run(args, argv) -> int:
     model_paths = parse_models(args.model or DEFAULT_MODELS)
     predictors = load_predictors(model_paths)
     objects = eval_objects(args)
-    protocol = resolve_protocol(args.out, args.protocol, from_dataset=args.protocol_from)
+    protocol = protocol_of_run(args.out, args.protocol, from_dataset=args.protocol_from)
     settings = runner.quick_trial_settings(protocol) if args.quick else runner.eval_trial_settings(protocol)
     check_same_protocol(args.out, settings, args.tasks)
     write_manifest(args.out, args, model_paths, predictors, objects, argv, settings)
@@ -492,7 +482,7 @@ def cmd_ceiling(args, argv) -> int:
         trials = ceiling.plan_trials(shapes, args.moduli, args.candidates, args.task, args.seed,
                                      args.sim_max_tet_nodes, args.grasp_height)
         ceiling.record_command(args.out, "defgg-eval " + " ".join(shlex.quote(a) for a in argv))
-        protocol = resolve_protocol(args.out, args.protocol, ceiling.RESULTS_FILE, args.protocol_from)
+        protocol = protocol_of_run(args.out, args.protocol, ceiling.RESULTS_FILE, args.protocol_from)
         ceiling.run(args.out, trials, args.task, eval_trial_settings(protocol), args.max_trials,
                     progress=lambda n, total, key: print(f"[{n}/{total}] {key}", flush=True),
                     grasp_height=args.grasp_height)

@@ -11,7 +11,11 @@ import re
 from pathlib import Path
 
 from defgg_ros.atomic import write_text_atomic
+from defgg_ros.data.header import protocol_summary
 from defgg_ros.evaluation import report as report_mod
+from defgg_ros.evaluation.diagnose import signal_lines
+from defgg_ros.evaluation.tasks import shake_success_rule
+from defgg_ros.sim.trial_settings import comparable_protocol
 
 
 def _read(path) -> str | None:
@@ -60,13 +64,9 @@ def _commits_md(manifest: dict) -> str:
 
 def _protocol_md(manifest: dict) -> str:
     """The trial protocol the run's trials were made with (run.json records its settings)."""
-    from defgg_ros.data.header import protocol_summary
-    from defgg_ros.evaluation.tasks import shake_success_rule
-    from defgg_ros.sim.trial import comparable_protocol
-
     recorded = manifest.get("trial_settings")
     if not recorded:
-        return "Trial protocol: not recorded in run.json (a run of before 2026-11-24)."
+        return "Trial protocol: not recorded in run.json (a run made before run.json recorded it)."
     settings = comparable_protocol(recorded)
     rule = ("held through the pickup and a mean held acceleration >= 25 m/s^2 over the 16 directions (the "
             "label's own criterion; the every-direction rate is the second table)"
@@ -87,8 +87,6 @@ def _data_flag(labels: dict) -> str:
 
 def _carry_lines(labels: dict) -> list:
     """Whether the training labels could have carried the targets' margins."""
-    from defgg_ros.evaluation.diagnose import signal_lines
-
     lines = signal_lines(labels.get("signal"), labels.get("data_root"))
     return lines or ["Whether the training labels could carry these margins: run `defgg-eval report --data "
                      "DATASET` for their signal report.", ""]
@@ -176,7 +174,7 @@ def results_markdown(out_dir, doc_path, notes_path=None) -> str:
     if ceiling_md:
         # ceiling.md starts with its own title; the report gives it a section heading instead
         body = ceiling_md.split("\n", 1)[1].strip()
-        from defgg_ros.evaluation.ceiling import recorded_commands
+        from defgg_ros.evaluation.ceiling import recorded_commands  # loads the simulator (~0.9 s): only here
 
         commands = "; ".join(f"`{c}`" for c in recorded_commands(out_dir)) or f"`defgg-eval ceiling --out {out_dir}`"
         lines += ["## What any grasp choice could reach: the sampler's candidates under the task", "",

@@ -13,12 +13,13 @@ from __future__ import annotations
 
 import multiprocessing as mp
 import time
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 
+import pybullet as p
 from tqdm import tqdm
 
-from defgg_ros.atomic import append_jsonl
+from defgg_ros.atomic import append_jsonl, write_json_atomic
 from defgg_ros.constants import SHAKE_ACCEL_LIMIT_MPS2, SHAKE_POSITIVE_THRESHOLD_MPS2, TWIST_ACCEL_LIMIT_RADPS2
 from defgg_ros.data.format import TRIAL_ERRORS_FILE as ERRORS_FILE
 from defgg_ros.evaluation import budget
@@ -28,11 +29,14 @@ from defgg_ros.evaluation.planning import plan_world_grasp
 from defgg_ros.evaluation.sources import make_spec, shape_from_ref
 from defgg_ros.evaluation.store import ResultStore
 from defgg_ros.evaluation.tasks import STATUS_NO_GRASP, outcome_fields
-from defgg_ros.sim.trial import TrialSettings, WorldGrasp, run_grasp_trial
+from defgg_ros.sim import world
+from defgg_ros.sim.protocol import DEFAULT_PROTOCOL, DEFGRASPSIM, TrialProtocol
+from defgg_ros.sim.trial import WorldGrasp, run_grasp_trial
+from defgg_ros.sim.trial_settings import TrialMotion, TrialSettings
 
 # The twist's angular acceleration oscillates at this angular frequency (6.4 Hz) under an amplitude
 # ramped to 500 rad/s^2 in 0.5 s, so the hand turns back and forth (at most ~0.3 rad) and spins at most
-# ~500 / 40 = 12.5 rad/s. Until 2026-11-25 it accelerated one way: the hand reached 125 rad/s, and from
+# ~500 / 40 = 12.5 rad/s. Accelerated one way (the generator's twist), the hand reaches 125 rad/s, and from
 # ~25 rad/s the simulated hand came apart (palm up to 112 mm off its held pose, force-limited fingers
 # forced open), so every grasp was "lost" at ~200 rad/s^2 whatever its grip (x15 force or torsional
 # friction changed nothing). Oscillating, the palm stays on its pose (<= 0.1 mm) and rigid grasps hold
@@ -41,36 +45,33 @@ from defgg_ros.sim.trial import TrialSettings, WorldGrasp, run_grasp_trial
 EVAL_TWIST_OSCILLATION_RADPS = 40.0
 
 
-def eval_trial_settings(protocol: str | dict | None = None) -> TrialSettings:
-    """The tasks' protocol: the generator's trial (same close, lift and ramp rates) with the shake ramped
+def eval_trial_settings(protocol: TrialProtocol | str | dict | None = None) -> TrialSettings:
+    """The tasks' settings: the generator's trial (same close, lift and ramp rates) with the shake ramped
     only to the task's 25 m/s^2 (0.25 s at the generator's 100 m/s^3), the twist oscillating
     (EVAL_TWIST_OSCILLATION_RADPS), and each task stopped at the first direction/axis that is not held (the
-    grasp has failed; the rest is recorded as unmeasured). `protocol`: a name of sim.trial.PROTOCOLS (None:
-    the default) or a protocol setting (sim.trial.protocol_setting: the name with its material overrides)."""
-    if isinstance(protocol, dict):
-        setting = dict(protocol)
-        return replace(eval_trial_settings(setting.pop("protocol")), **setting)
-    protocol = protocol or TrialSettings.protocol
-    if protocol == "defgraspsim":
+    grasp has failed; the rest is recorded as unmeasured). `protocol`: a TrialProtocol, a name or a stored
+    protocol setting (None: the default)."""
+    if protocol is None:
+        protocol = DEFAULT_PROTOCOL
+    elif not isinstance(protocol, TrialProtocol):
+        protocol = TrialProtocol.from_setting({"protocol": protocol} if isinstance(protocol, str) else protocol)
+    base = TrialSettings(protocol=protocol).with_fields(
+        stop_direction_when_lost=True, stop_when_label_decided=False,
+        twist_oscillation_radps=EVAL_TWIST_OSCILLATION_RADPS, twist_fail_below_radps2=TWIST_ACCEL_LIMIT_RADPS2)
+    if protocol.name == DEFGRASPSIM:
         # the label's own criterion: every direction ramped to 50 m/s^2 until lost, until the mean and the
         # every-direction outcome are both certain (shake_stop_when_decided: exact for both), the twist as before
-        return TrialSettings(protocol=protocol, stop_direction_when_lost=True, stop_when_label_decided=False,
-                             shake_stop_when_decided=True, twist_oscillation_radps=EVAL_TWIST_OSCILLATION_RADPS,
-                             twist_fail_below_radps2=TWIST_ACCEL_LIMIT_RADPS2)
-    rate_mps3 = SHAKE_ACCEL_LIMIT_MPS2 / TrialSettings().shake_ramp_time_s
-    return TrialSettings(protocol=protocol, stop_direction_when_lost=True,
-                         stop_when_label_decided=False,
-                         shake_limit_mps2=SHAKE_POSITIVE_THRESHOLD_MPS2,
-                         shake_ramp_time_s=SHAKE_POSITIVE_THRESHOLD_MPS2 / rate_mps3,
-                         shake_fail_below_mps2=SHAKE_POSITIVE_THRESHOLD_MPS2,
-                         twist_oscillation_radps=EVAL_TWIST_OSCILLATION_RADPS,
-                         twist_fail_below_radps2=TWIST_ACCEL_LIMIT_RADPS2)
+        return base.with_fields(shake_stop_when_decided=True)
+    rate_mps3 = SHAKE_ACCEL_LIMIT_MPS2 / TrialMotion().shake_ramp_time_s
+    return base.with_fields(shake_limit_mps2=SHAKE_POSITIVE_THRESHOLD_MPS2,
+                            shake_ramp_time_s=SHAKE_POSITIVE_THRESHOLD_MPS2 / rate_mps3,
+                            shake_fail_below_mps2=SHAKE_POSITIVE_THRESHOLD_MPS2)
 
 
-def quick_trial_settings(protocol: str | dict | None = None) -> TrialSettings:
+def quick_trial_settings(protocol: TrialProtocol | str | dict | None = None) -> TrialSettings:
     """Smoke-test protocol: the same tasks with 5x faster ramps and a shorter lift. Never for reported numbers."""
-    return replace(eval_trial_settings(protocol), lift_time_s=0.2, hold_time_s=0.05, shake_ramp_time_s=0.05,
-                   twist_ramp_time_s=0.1)
+    return eval_trial_settings(protocol).with_fields(lift_time_s=0.2, hold_time_s=0.05, shake_ramp_time_s=0.05,
+                                                     twist_ramp_time_s=0.1)
 
 
 @dataclass
@@ -120,13 +121,6 @@ PLANS_FILE = "plans.json"
 def write_plans(plan: EvalPlan, out_dir, show_progress: bool = True) -> tuple:
     """Render and plan every view (no simulation) into out_dir/plans.json; return its path and the budget of
     what a run would still simulate (budget.pending_budget)."""
-    from pathlib import Path
-
-    import pybullet as p
-
-    from defgg_ros.atomic import write_json_atomic
-    from defgg_ros.sim import world
-
     store = ResultStore(out_dir)
     client = world.connect()
     try:
@@ -153,7 +147,7 @@ def _base_record(job, plan: EvalPlan, obj, grasp) -> dict:
         "input_override_pa": v.input_override_pa, "rank": job.rank, "task": job.task, "seed": plan.seed,
         "object_yaw_rad": scene_mod.object_yaw_rad(v.object_name, plan.seed),
         "grasp": None if grasp is None else grasp.to_json(),
-        "trial_settings": asdict(plan.settings),
+        "trial_settings": plan.settings.to_record(),
     }
 
 
@@ -171,8 +165,6 @@ _WORKER_CLIENT = None
 def run_trial_payload(payload: dict) -> dict:
     """Worker side: one real PyBullet trial. Returns the outcome fields of a record."""
     global _WORKER_CLIENT
-    from defgg_ros.sim import world
-
     if _WORKER_CLIENT is None:
         _WORKER_CLIENT = world.connect()
     spec = make_spec(shape_from_ref(payload["ref"]), payload["youngs_modulus_pa"], payload["part0"])
@@ -196,8 +188,6 @@ def run_trial_payload_guarded(payload: dict) -> dict:
     try:
         return run_trial_payload(payload)
     except Exception as exc:  # noqa: BLE001 - recorded in ERRORS_FILE and retried by the next run
-        import pybullet as p
-
         if _WORKER_CLIENT is not None and p.isConnected(_WORKER_CLIENT):
             p.disconnect(_WORKER_CLIENT)
         _WORKER_CLIENT = None   # the next trial starts on a fresh PyBullet server
@@ -214,7 +204,7 @@ def pending_work(plan: EvalPlan, store: ResultStore, client: int, show_progress:
         grasps = plan_views(plan, views, client, show_progress) if views else {}
     objects = {(o.set_name, o.name): o for o in plan.objects}
     ready, to_run, done_sims = [], {}, store.by_sim_key()
-    settings = asdict(plan.settings)
+    settings = plan.settings.to_record()
     for job in todo:
         obj = objects[(job.view.object_set, job.view.object_name)]
         planned = grasps[job.view]
@@ -250,15 +240,11 @@ def run_evaluation(plan: EvalPlan, out_dir, workers: int = 1, show_progress: boo
 
     on_progress(n_simulated) is called after each stored trial (e.g. to rewrite the tables).
     """
-    from defgg_ros.sim import world
-
     store = ResultStore(out_dir)
     client = world.connect()
     try:
         ready, to_run = pending_work(plan, store, client, show_progress)
     finally:
-        import pybullet as p
-
         p.disconnect(client)
     for rec in ready:
         store.append(rec)

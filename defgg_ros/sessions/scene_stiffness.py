@@ -10,10 +10,10 @@ import numpy as np
 
 from defgg_ros.bringup.demo_geometry import ROI_MARGIN_PX, project_base_points
 from defgg_ros.perception.geometry import transform_from_xyz_quaternion
-from defgg_ros.sim.scene_spec import ObjectSpec, SceneSpec
+from defgg_ros.sim.scene_spec import SceneObject, SceneSpec
 
 
-def _footprint_corners(obj: ObjectSpec, x_range_m=None) -> np.ndarray:
+def _footprint_corners(obj: SceneObject, x_range_m=None) -> np.ndarray:
     """Top-face corners (4, 3) in the base frame; x_range_m limits the object's local x (a part's slab)."""
     if obj.shape == "cylinder":
         half_x = half_y = obj.size_m[0] / 2

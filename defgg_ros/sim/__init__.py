@@ -3,12 +3,15 @@
 No rclpy here. Settings come from docs/pybullet_fem.md (measured on this machine).
 
 Layers (imports point down only):
-- the physics core, ``physics``: material table (``MATERIALS``), world reset, soft-body parameters and
-  loading, finger coupling, friction, static bodies, depth-buffer conversion. Every PyBullet setting that
+- the physics core, ``physics``: the material table (``MATERIALS``, from ``material``), world reset, soft-body
+  parameters and loading, finger coupling, friction, static bodies, depth-buffer conversion. Every PyBullet setting that
   decides how a body behaves lives here, so the labels and the demo run the same physics.
 - geometry and meshes: ``shapes``, ``library``, ``meshes`` (no PyBullet state).
+- the trial protocol as one value and a trial's settings, no PyBullet: ``material`` (the material table),
+  ``protocol`` (``TrialProtocol``, ``resolve_protocol``), ``trial_settings`` (``TrialSettings`` and its stored
+  form; docs/dataset.md "Trial protocols").
 - the grasp trials (data generator, evaluation): ``world``, ``objects``, ``hand``, ``camera``,
-  ``sampler``, ``trial`` (the trial protocols, docs/dataset.md "Trial protocols").
+  ``sampler``, ``trial``.
 - the simulated cell (fake Panda + RealSense driver): ``scene_spec``, ``cell`` and its ``cell_*`` parts;
   ``cell_sequence`` runs a pick-and-place sequence against a cell in one process (tests, benches).
 

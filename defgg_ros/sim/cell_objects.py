@@ -9,9 +9,9 @@ E >= 2e7 Pa flung objects and forced the fingers open in the probe).
 import numpy as np
 import pybullet as p
 
-from defgg_ros.sim import physics
+from defgg_ros.sim import meshes, physics, shapes
 from defgg_ros.sim.physics import SoftBodyError, reset_world, soft_nodes_m  # noqa: F401 - the cell's names
-from defgg_ros.sim.scene_spec import BinSpec, ObjectSpec, SceneSpec
+from defgg_ros.sim.scene_spec import BinSpec, SceneObject, SceneSpec
 
 # The trial protocol whose labels the shipped weights learned (models/defgg_cnn.train.json's data_source,
 # datasets/fem_v5: defgraspsim). The cell's objects and fingers are made of its material (object friction 0.7,
@@ -56,9 +56,7 @@ def add_bin(client: int, spec: BinSpec) -> list:
     return [_static_box(client, half, pos, BIN_RGBA) for half, pos in walls]
 
 
-def _surface_mesh(spec: ObjectSpec):
-    from defgg_ros.sim import meshes, shapes
-
+def _surface_mesh(spec: SceneObject):
     if spec.shape == "box":
         return shapes.box(*spec.size_m)
     if spec.shape == "cylinder":
@@ -68,7 +66,7 @@ def _surface_mesh(spec: ObjectSpec):
     return mesh
 
 
-def add_rigid_object(client: int, spec: ObjectSpec) -> int:
+def add_rigid_object(client: int, spec: SceneObject) -> int:
     """A dynamic rigid body resting on the table at its scene pose."""
     orientation = p.getQuaternionFromEuler([0, 0, spec.yaw_rad])
     position = [spec.position_xy_m[0], spec.position_xy_m[1], spec.height_m / 2 + SPAWN_GAP_M]
@@ -78,7 +76,7 @@ def add_rigid_object(client: int, spec: ObjectSpec) -> int:
     return body
 
 
-def _rigid_shapes(client, spec: ObjectSpec):
+def _rigid_shapes(client, spec: SceneObject):
     if spec.shape == "box":
         half = [s / 2 for s in spec.size_m]
         return (p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=client),
@@ -87,15 +85,13 @@ def _rigid_shapes(client, spec: ObjectSpec):
         radius, height = spec.size_m[0] / 2, spec.size_m[1]
         return (p.createCollisionShape(p.GEOM_CYLINDER, radius=radius, height=height, physicsClientId=client),
                 p.createVisualShape(p.GEOM_CYLINDER, radius=radius, length=height, physicsClientId=client))
-    from defgg_ros.sim import meshes
-
     tet = meshes.tetrahedralize(centred_surface_mesh(spec))
     convex = meshes.convex_decomposition(tet)
     return (p.createCollisionShape(p.GEOM_MESH, fileName=str(convex), physicsClientId=client),
             p.createVisualShape(p.GEOM_MESH, fileName=str(tet.obj_path), physicsClientId=client))
 
 
-def centred_surface_mesh(spec: ObjectSpec):
+def centred_surface_mesh(spec: SceneObject):
     """The object's closed surface, centred on its bounding box (metres)."""
     mesh = _surface_mesh(spec).copy()
     lo, hi = mesh.bounds
@@ -103,7 +99,7 @@ def centred_surface_mesh(spec: ObjectSpec):
     return mesh
 
 
-def load_soft_body(client: int, spec: ObjectSpec, tet, position, orientation) -> int:
+def load_soft_body(client: int, spec: SceneObject, tet, position, orientation) -> int:
     """The FEM body of a tet mesh with the physics core's settings, the same as a grasp trial's object."""
     parameters = physics.soft_body_parameters(spec.youngs_modulus_pa, poisson_ratio(spec), spec.mass_kg,
                                               MATERIAL.object_friction)
@@ -113,7 +109,7 @@ def load_soft_body(client: int, spec: ObjectSpec, tet, position, orientation) ->
         raise SoftBodyError(f"{spec.name!r}: {exc}") from exc
 
 
-def poisson_ratio(spec: ObjectSpec) -> float | None:
+def poisson_ratio(spec: SceneObject) -> float | None:
     """The scene object's own Poisson's ratio, else the cell material's (None: the core's default)."""
     return MATERIAL.poisson_ratio if spec.poisson_ratio is None else spec.poisson_ratio
 

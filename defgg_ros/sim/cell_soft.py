@@ -17,7 +17,7 @@ import numpy as np
 import pybullet as p
 
 from defgg_ros.sim import cell_grid_mesh, cell_objects, meshes
-from defgg_ros.sim.scene_spec import ObjectSpec
+from defgg_ros.sim.scene_spec import SceneObject
 
 ACTIVATE_DISTANCE_M = 0.06    # TCP to the object's bounding box
 DEACTIVATE_DISTANCE_M = 0.08  # hysteresis; small enough that working on a neighbour 16 cm away lets it sleep
@@ -31,7 +31,7 @@ REST_CHECKS = 2
 
 @dataclass
 class SoftObject:
-    spec: ObjectSpec
+    spec: SceneObject
     tet: meshes.TetMesh
     nodes_m: np.ndarray           # world-frame nodes (kept current while active)
     body: int = -1
@@ -45,7 +45,7 @@ def _rotation_z(yaw_rad):
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
-def spawn_dormant(client: int, spec: ObjectSpec, scratch_dir: Path) -> SoftObject:
+def spawn_dormant(client: int, spec: SceneObject, scratch_dir: Path) -> SoftObject:
     """A soft object resting on the table at its scene pose, dormant."""
     if spec.shape == "box":
         tet = cell_grid_mesh.box_tet_mesh(spec.size_m, spec.fem_cell_size_m, scratch_dir)

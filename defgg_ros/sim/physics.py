@@ -13,12 +13,11 @@ the friction coefficients of the two bodies in a contact (rigid-rigid and soft-r
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 import pybullet as p
 
 from defgg_ros.constants import GRAVITY_MPS2, MAX_SOFT_BODY_YOUNGS_MODULUS_PA, POISSON_RATIO
+from defgg_ros.sim.material import DEFAULT_FRICTION, MATERIALS, Material  # noqa: F401 - the core's material table
 from defgg_ros.stiffness import check_youngs_modulus
 
 SPARSE_SDF_VOXEL_SIZE_M = 0.01
@@ -27,28 +26,6 @@ TIME_STEPS_S = ((2e5, 5e-4), (MAX_SOFT_BODY_YOUNGS_MODULUS_PA, 2.5e-4))
 RIGID_TIME_STEP_S = 1e-3
 NEO_HOOKEAN_DAMPING = 0.01
 SOFT_COLLISION_MARGIN_M = 0.002
-DEFAULT_FRICTION = 0.8        # every body's own coefficient unless a material says otherwise
-
-
-@dataclass(frozen=True)
-class Material:
-    """How a trial's object and the pads meet: each body's own friction (the contact's is their
-    product) and Poisson's ratio (None: the object's own, constants.POISSON_RATIO)."""
-    finger_friction: float
-    object_friction: float
-    poisson_ratio: float | None
-
-    @property
-    def effective_friction(self) -> float:
-        return self.finger_friction * self.object_friction
-
-
-# The material table. legacy: fem_v1-v4 and the simulated cell; defgraspsim: DefGraspSim's (mu 0.7, nu 0.3),
-# the pads at 1.0 so the contact's coefficient is the object's.
-MATERIALS = {
-    "legacy": Material(DEFAULT_FRICTION, DEFAULT_FRICTION, None),
-    "defgraspsim": Material(1.0, 0.7, 0.3),
-}
 
 
 class SoftBodyError(RuntimeError):

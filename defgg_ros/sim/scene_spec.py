@@ -43,7 +43,9 @@ class PartSpec:
 
 
 @dataclass(frozen=True)
-class ObjectSpec:
+class SceneObject:
+    """An object of a scene: its shape and size, where it stands, its modulus and mass (the grasp trials' object is
+    sim.objects.ObjectSpec: a library shape and a material)."""
     name: str
     shape: str
     size_m: tuple            # box: (x, y, z); cylinder: (diameter, height); mesh: scale (x, y, z)
@@ -119,7 +121,7 @@ def _modulus(value, what):
     return e_pa
 
 
-def _parse_object(raw: dict, index: int, scene_dir: Path) -> ObjectSpec:
+def _parse_object(raw: dict, index: int, scene_dir: Path) -> SceneObject:
     if not isinstance(raw, dict):
         raise SceneError(f"objects[{index}] must be a mapping, got {raw!r}")
     name = str(raw.get("name") or "")
@@ -151,7 +153,7 @@ def _parse_object(raw: dict, index: int, scene_dir: Path) -> ObjectSpec:
         raise SceneError(f"{what}: poisson_ratio must be in [0, 0.5), got {nu}")
     fem_cell_size_m = float(raw.get("fem_cell_size_m", DEFAULT_FEM_CELL_SIZE_M))
     _positive((fem_cell_size_m,), f"{what}: fem_cell_size_m")
-    return ObjectSpec(
+    return SceneObject(
         fem_cell_size_m=fem_cell_size_m, name=name, shape=shape, size_m=size,
         position_xy_m=_floats(raw.get("position_xy_m"), 2, f"{what}: position_xy_m"),
         yaw_rad=float(raw.get("yaw_rad", 0.0)),
@@ -213,8 +215,8 @@ def scene_warnings(scene: SceneSpec) -> list:
     """What a scene allows but a cell would not be built like, one sentence each (the driver logs them).
 
     The bin's walls beyond the table: the table is the bin's floor, so an object placed over the edge rests
-    on the FEM contact at the edge. Until 2026-11-28 the shipped scenes' bin reached 7 cm beyond the table and
-    the demo's rubber block fell off in 1 of 12 runs, 2 of 24 in-process placements
+    on the FEM contact at the edge. With a bin reaching 7 cm beyond the table (the shipped scenes' once) the
+    demo's rubber block fell off in 1 of 12 runs, 2 of 24 in-process placements
     (bench/bench_release_in_bin.py). A warning, not an error: a recorded session replays the scene it was
     recorded with (docs/sessions.md).
     """

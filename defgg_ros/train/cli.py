@@ -93,7 +93,8 @@ def config_from_args(args) -> TrainConfig:
     return TrainConfig(uses_stiffness=not args.no_stiffness, architecture=args.architecture, epochs=args.epochs,
                        batch_size=args.batch_size, learning_rate=args.lr,
                        positive_weight=args.positive_weight, samples_per_scene=args.samples_per_scene,
-                       seed=args.seed, split_seed=args.split_seed, val_fraction=args.val_fraction, test_fraction=args.test_fraction,
+                       seed=args.seed, split_seed=args.split_seed, val_fraction=args.val_fraction,
+                       test_fraction=args.test_fraction,
                        augment=augment, max_steps=args.max_steps, label_rule=args.label_rule,
                        max_height_offset_m=None if args.max_height_offset_mm is None
                        else args.max_height_offset_mm / 1000.0)
@@ -109,7 +110,8 @@ def main(argv=None) -> int:
         print(f"defgg-train: error: {exc}", file=sys.stderr)
         return 2
     if metrics:
-        summary = {"best_epoch": metrics.get("best_epoch"), "val": metrics["history"][-1]["val_per_modulus"],
+        summary = {"trial_protocol": metrics["data"]["trial_protocol"], "best_epoch": metrics.get("best_epoch"),
+                   "val": metrics["history"][-1]["val_per_modulus"],
                    "test": metrics.get("test"), "stiffness_response": metrics.get("stiffness_response")}
         print(json.dumps(summary, indent=1))
     return 0

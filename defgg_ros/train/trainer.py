@@ -26,8 +26,8 @@ from defgg_ros.atomic import atomic_path, write_json_atomic
 from defgg_ros.constants import TRAINING_YOUNGS_MODULI_PA
 from defgg_ros.data.dataset import GraspDataset, build_manifest, manifest_fingerprint
 from defgg_ros.data.format import DatasetError, check_header, read_scene
-from defgg_ros.data.header import label_grip_rule
-from defgg_ros.model.checkpoint import save_checkpoint
+from defgg_ros.data.header import label_grip_rule, recorded_protocol
+from defgg_ros.model.checkpoint import load_checkpoint, network_from_checkpoint, save_checkpoint
 from defgg_ros.model.network import GGCNN
 from defgg_ros.train.config import TrainConfig
 from defgg_ros.train.metrics import dataset_loss, grasp_loss, rectangle_accuracy, stiffness_response
@@ -113,8 +113,13 @@ class Trainer:
             if not self.manifest:
                 raise TrainingError(f"{self.data_root}: no scenes yet")
             self.fingerprint = manifest_fingerprint(self.data_root, self.manifest)
-        # recorded in every checkpoint: the cell grasps with the force the labels were made with
-        self.label_grip_rule = label_grip_rule(check_header(self.data_root).get("generator") or {})
+        # recorded in every checkpoint: the trial protocol of the labels, and the force the cell grasps with
+        generator = check_header(self.data_root).get("generator") or {}
+        self.label_grip_rule = label_grip_rule(generator)
+        protocol = recorded_protocol(generator)
+        self.trial_protocol = protocol.to_setting()
+        if self.rank == 0:
+            print(f"defgg-train: labels of the trial protocol {protocol.summary()}", flush=True)
         scene_objects = labelled_scene_objects(self.data_root, self.manifest)
         if not state:
             self.object_split = split_objects(scene_objects.values(), self.config.val_fraction,
@@ -241,7 +246,8 @@ class Trainer:
         return {"epoch": record["epoch"], "val_accuracy": record["val_accuracy"], "val_loss": record["val_loss"],
                 "val_per_modulus": record["val_per_modulus"], "train_config": self.config.to_dict(),
                 "object_split": self.object_split, "data_root": str(self.data_root),
-                "n_trials": int(sum(self.manifest.values())), "label_grip_rule": self.label_grip_rule}
+                "n_trials": int(sum(self.manifest.values())), "label_grip_rule": self.label_grip_rule,
+                "trial_protocol": self.trial_protocol}
 
     def _write_epoch_outputs(self) -> None:
         record = self.history[-1]
@@ -255,6 +261,7 @@ class Trainer:
     def _write_metrics(self, extra: dict | None = None) -> dict:
         metrics = {"config": self.config.to_dict(), "world_size": self.world,
                    "data": {"root": str(self.data_root), "fingerprint": self.fingerprint,
+                            "trial_protocol": self.trial_protocol,
                             "n_trials": int(sum(self.manifest.values())), "object_split": self.object_split,
                             "scenes": {k: len(v) for k, v in self.scene_split.items()},
                             "scenes_without_positive": {"train": self.train_set.skipped_scene_ids,
@@ -267,8 +274,6 @@ class Trainer:
     def _finish(self) -> dict:
         if self.rank != 0 or not self.history:
             return {}
-        from defgg_ros.model.checkpoint import load_checkpoint, network_from_checkpoint
-
         best_model = network_from_checkpoint(load_checkpoint(self.out / BEST_FILE))
         best_epoch = max(self.history, key=lambda h: (h["val_accuracy"], -h["val_loss"]))["epoch"]
         test = rectangle_accuracy(best_model, self.test_set.samples, self.config.uses_stiffness) \

@@ -17,7 +17,6 @@ import pytest
 from defgg_ros.atomic import read_jsonl
 from defgg_ros.data import datagen
 from defgg_ros.data.format import DatasetWriter, list_scene_ids, read_scene, read_trials
-from defgg_ros.sim.trial import LEGACY_CONFIDENT_SETTINGS
 
 OBJECTS = ("box_small", "cube")
 QUICK = {"close_settle_s": 0.05, "lift_time_s": 0.15, "hold_time_s": 0.05, "shake_ramp_time_s": 0.3}
@@ -147,6 +146,9 @@ def test_a_new_dataset_samples_at_the_executor_height_and_a_resumed_one_keeps_it
     assert datagen.resolve_grasp_height(executor, None) == "executor"
 
 
+KNOBS_BEFORE_THEY_WERE_RECORDED = {"confident_min_directions": 4, "confident_margin_mps2": 40.0}
+
+
 def test_resume_keeps_the_trial_protocol_of_the_dataset(tmp_path):
     from defgg_ros.data.format import DatasetError
 
@@ -170,7 +172,7 @@ def test_resume_keeps_the_trial_protocol_of_the_dataset(tmp_path):
     DatasetWriter(before_knobs, header)
     with pytest.raises(DatasetError, match='"confident_min_directions": 4'):
         datagen.check_resumable(datagen.DatagenConfig(out=before_knobs))
-    datagen.check_resumable(datagen.DatagenConfig(out=before_knobs, settings=LEGACY_CONFIDENT_SETTINGS))
+    datagen.check_resumable(datagen.DatagenConfig(out=before_knobs, settings=KNOBS_BEFORE_THEY_WERE_RECORDED))
     # a new dataset records its whole protocol; changing one value on resume is refused
     new = tmp_path / "new"
     DatasetWriter(new, datagen.DatagenConfig(out=new, settings={"shake_ramp_time_s": 0.5}).header())

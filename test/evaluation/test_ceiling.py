@@ -68,13 +68,12 @@ def test_stiffness_advantage_is_per_modulus_choice_minus_one_choice():
 
 
 def test_ceiling_refuses_a_folder_of_another_protocol(tmp_path, capsys):
-    from dataclasses import replace
 
     from defgg_ros.evaluation.runner import eval_trial_settings
     from defgg_ros.sim.objects import get_shape
 
     trials = ceiling.plan_trials([get_shape("common_sponge")], [2e9], 1, "shake", 0)
-    ceiling.run(tmp_path, trials, "shake", replace(eval_trial_settings(), lift_time_s=0.3))
+    ceiling.run(tmp_path, trials, "shake", eval_trial_settings().with_fields(lift_time_s=0.3))
     with pytest.raises(ValueError, match="another protocol"):
         ceiling.run(tmp_path, trials, "shake", eval_trial_settings())
 

@@ -1,5 +1,4 @@
 """The evaluation's trial protocol: a twist the simulated hand survives, and one protocol per task and folder."""
-import dataclasses
 import json
 import math
 
@@ -8,7 +7,8 @@ import pytest
 from defgg_ros.evaluation import cli
 from defgg_ros.evaluation.runner import eval_trial_settings
 from defgg_ros.sim import objects
-from defgg_ros.sim.trial import WorldGrasp, run_grasp_trial, task_protocol
+from defgg_ros.sim.trial import WorldGrasp, run_grasp_trial
+from defgg_ros.sim.trial_settings import task_protocol
 
 CENTRED = WorldGrasp((0.0, 0.0, 0.02), math.pi / 2, 0.03)     # across the 3 cm side of box_small
 
@@ -16,7 +16,7 @@ CENTRED = WorldGrasp((0.0, 0.0, 0.02), math.pi / 2, 0.03)     # across the 3 cm 
 def test_a_firm_rigid_grasp_holds_the_twist_about_every_axis():
     """Real PyBullet: with the one-way twist of before 2026-11-25 this grasp was "lost" at 185-415 rad/s^2
     (the hand itself came apart at ~25 rad/s of spin; bench/bench_twist_limit.py)."""
-    settings = dataclasses.replace(eval_trial_settings(), twist_fail_below_radps2=None)
+    settings = eval_trial_settings().with_fields(twist_fail_below_radps2=None)
     out = run_grasp_trial(objects.ObjectSpec(objects.get_shape("box_small"), 2e9), CENTRED, ("twist",), settings)
     assert out.status == "ok", out.note
     assert out.twist_accels_radps2 == [500.0] * 6 and all(out.twist_measured)
@@ -30,7 +30,7 @@ def _folder(tmp_path, records):
 
 
 def _settings(**changes) -> dict:
-    return dataclasses.asdict(dataclasses.replace(eval_trial_settings(), **changes))
+    return eval_trial_settings().with_fields(**changes).to_record()
 
 
 def test_task_protocol_drops_only_the_other_tasks_settings():
@@ -89,13 +89,13 @@ def test_the_evaluation_takes_the_datasets_protocol_setting_with_its_material_an
     header = json.loads(source.read_text(encoding="utf-8"))
     header["generator"]["trial_settings"].update(object_friction=0.4, grip_force_friction=0.7)
     (tmp_path / "dataset.json").write_text(json.dumps(header), encoding="utf-8")
-    setting = cli.resolve_protocol("unused", "legacy", from_dataset=str(tmp_path))   # the dataset's wins
-    assert setting == {"protocol": "defgraspsim", "object_friction": 0.4, "poisson_ratio": None,
-                       "finger_hold": "force", "grip_force_friction": 0.7}
-    settings = eval_trial_settings(setting)
-    assert settings.material()["effective_friction"] == 0.4 and settings.grip_force_friction == 0.7
-    assert dataclasses.replace(settings, object_friction=None, grip_force_friction=None) == eval_trial_settings()
-    assert cli.resolve_protocol("unused", "legacy")["protocol"] == "legacy"
+    protocol = cli.protocol_of_run("unused", "legacy", from_dataset=str(tmp_path))   # the dataset's wins
+    assert protocol.to_setting() == {"protocol": "defgraspsim", "object_friction": 0.4, "poisson_ratio": None,
+                                     "finger_hold": "force", "grip_force_friction": 0.7}
+    settings = eval_trial_settings(protocol)
+    assert settings.protocol.material.effective_friction == 0.4 and settings.protocol.grip_force_friction == 0.7
+    assert settings.with_fields(object_friction=None, grip_force_friction=None) == eval_trial_settings()
+    assert cli.protocol_of_run("unused", "legacy").name == "legacy"
 
 
 def test_protocol_from_a_dataset_without_recorded_trial_settings_is_refused(tmp_path):
@@ -107,7 +107,7 @@ def test_protocol_from_a_dataset_without_recorded_trial_settings_is_refused(tmp_
     del header["generator"]["trial_settings"]
     (tmp_path / "dataset.json").write_text(json.dumps(header), encoding="utf-8")
     with pytest.raises(ValueError, match="records no trial settings"):
-        cli.resolve_protocol("unused", None, from_dataset=str(tmp_path))
+        cli.protocol_of_run("unused", None, from_dataset=str(tmp_path))
 
 
 def test_protocol_from_a_folder_that_is_no_dataset_is_one_clear_line(tmp_path, capsys):

@@ -124,7 +124,7 @@ def test_results_doc_names_the_trial_protocol_and_whether_the_labels_could_carry
     doc = results_markdown(tmp_path, tmp_path / "results.md")
     assert "Trial protocol: not recorded" in doc and "run `defgg-eval report --data DATASET`" in doc
     manifest = json.loads((tmp_path / "run.json").read_text())
-    settings = TrialSettings.fast().__dict__ | {"protocol": "defgraspsim"}
+    settings = TrialSettings.fast().to_record() | {"protocol": "defgraspsim"}
     write_json_atomic(tmp_path / "run.json", {**manifest, "trial_settings": settings})
     data = tmp_path / "data"
     write_synthetic_dataset(data, n_objects=3, trials_per_scene=5)

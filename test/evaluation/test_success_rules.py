@@ -19,12 +19,13 @@ def test_mean_rule_is_the_label_criterion_and_every_is_the_strict_column():
 
 def test_defgraspsim_evaluation_ramps_every_direction_to_the_label_limit_until_both_outcomes_are_certain():
     s = eval_trial_settings("defgraspsim")
-    assert s.protocol == "defgraspsim" and shake_success_rule(s.protocol) == "mean"
-    assert s.shake_limit_mps2 == 50.0 and s.shake_fail_below_mps2 is None
-    assert s.stop_direction_when_lost and not s.stop_when_label_decided and not s.confident_stop
-    assert s.shake_stop_when_decided        # only once the mean AND the every-direction outcome are certain
+    assert s.protocol.name == "defgraspsim" and shake_success_rule(s.protocol.name) == "mean"
+    assert s.evaluation.shake_limit_mps2 == 50.0 and s.evaluation.shake_fail_below_mps2 is None
+    assert s.generator.stop_direction_when_lost and not s.generator.stop_when_label_decided
+    assert not s.generator.confident_stop
+    assert s.evaluation.shake_stop_when_decided   # only once the mean AND the every-direction outcome are certain
     legacy = eval_trial_settings("legacy")
-    assert legacy.shake_limit_mps2 == 25.0 and shake_success_rule(legacy.protocol) == "every"
+    assert legacy.evaluation.shake_limit_mps2 == 25.0 and shake_success_rule(legacy.protocol.name) == "every"
 
 
 def test_outcome_fields_follow_the_protocol():

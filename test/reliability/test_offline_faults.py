@@ -33,8 +33,8 @@ from defgg_ros.data.format import (
 from defgg_ros.sim import objects, world
 from defgg_ros.sim.trial import TrialSettings, WorldGrasp, run_grasp_trial
 
-QUICK = TrialSettings(close_settle_s=0.05, lift_time_s=0.15, hold_time_s=0.05, shake_ramp_time_s=0.3,
-                      shake_directions=2, time_step_s=0.01)
+QUICK = TrialSettings().with_fields(close_settle_s=0.05, lift_time_s=0.15, hold_time_s=0.05, shake_ramp_time_s=0.3,
+                                    shake_directions=2, time_step_s=0.01)
 GRASP = WorldGrasp((0.0, 0.0, 0.02), 0.0, 0.04)
 
 

@@ -1,7 +1,6 @@
 """One physics core: the grasp trials' objects and the simulated cell's objects are the same FEM bodies, made of
 the material of the protocol that labelled the shipped weights."""
 import json
-from dataclasses import asdict
 from pathlib import Path
 
 import pybullet as p
@@ -9,8 +8,7 @@ import pytest
 
 from defgg_ros.sim import cell_objects, cell_soft, objects, physics, world
 from defgg_ros.sim.cell import SimCell
-from defgg_ros.sim.scene_spec import ObjectSpec as CellObjectSpec
-from defgg_ros.sim.scene_spec import load_scene
+from defgg_ros.sim.scene_spec import SceneObject, load_scene
 from defgg_ros.sim.trial import TrialSettings
 
 pytestmark = pytest.mark.sim
@@ -24,12 +22,12 @@ def shipped_weights_material() -> dict:
     whose header records the trial settings."""
     dataset = json.loads(SHIPPED_TRAINING_RECORD.read_text())["data_source"]
     header = json.loads((ROOT / dataset / "dataset.json").read_text())
-    return TrialSettings.from_record(header["generator"]["trial_settings"]).material()
+    return TrialSettings.from_record(header["generator"]["trial_settings"]).protocol.material.facts()
 
 
 def test_the_cells_material_is_the_one_that_labelled_the_shipped_weights():
     material = shipped_weights_material()
-    assert {**asdict(cell_objects.MATERIAL), "effective_friction": cell_objects.MATERIAL.effective_friction} == material
+    assert cell_objects.MATERIAL.facts() == material
     assert material == {"finger_friction": 1.0, "object_friction": 0.7, "effective_friction": 0.7,
                         "poisson_ratio": 0.3}
 
@@ -39,7 +37,7 @@ def test_a_soft_body_of_the_cell_and_of_a_trial_of_the_shipped_protocol_get_iden
     trial_spec = objects.ObjectSpec(objects.get_shape("box_small"), 2e5, poisson_ratio=material["poisson_ratio"])
     world.create_world(client, trial_spec.part_moduli_pa())
     trial_body = objects.load_object(client, trial_spec, friction=material["object_friction"]).parts[0]
-    cell_spec = CellObjectSpec("box_small", "box", (0.05, 0.03, 0.04), (0.3, 0.1), 0.0, 2e5,
+    cell_spec = SceneObject("box_small", "box", (0.05, 0.03, 0.04), (0.3, 0.1), 0.0, 2e5,
                                mass_kg=trial_body.mass_kg)
     cell_objects.reset_world(client, deformable=True, time_step_s=physics.time_step_for([2e5]))
     soft = cell_soft.spawn_dormant(client, cell_spec, tmp_path)

@@ -3,7 +3,6 @@
 Kept short with fewer directions, quicker phases and a short ramp; the
 settings are the same for both moduli where results are compared.
 """
-import dataclasses
 import math
 
 import numpy as np
@@ -11,9 +10,9 @@ import pytest
 
 from defgg_ros.data.format import STATUS_LIFT_FAILED, STATUS_OK
 from defgg_ros.sim import objects, trial, world
-from defgg_ros.sim.trial import LEGACY_CONFIDENT_SETTINGS, TrialSettings, WorldGrasp, run_grasp_trial
+from defgg_ros.sim.trial import TrialSettings, WorldGrasp, run_grasp_trial
 
-QUICK = dataclasses.replace(TrialSettings.fast(), close_settle_s=0.05, lift_time_s=0.15, hold_time_s=0.05,
+QUICK = TrialSettings.fast().with_fields(close_settle_s=0.05, lift_time_s=0.15, hold_time_s=0.05,
                             shake_ramp_time_s=0.3, twist_ramp_time_s=0.3, stop_when_label_decided=False,
                             confident_stop=False)
 # Across the 3 cm side of the 5 x 3 x 4 cm box, 1.5 cm off-centre along its length
@@ -36,7 +35,7 @@ def test_rigid_box_all_16_directions_and_twist():
 
 def test_soft_box_is_held_less_than_a_stiff_one():
     """The physics the network must learn: same grasp, same settings, softer = lower held acceleration."""
-    settings = dataclasses.replace(QUICK, shake_directions=4)
+    settings = QUICK.with_fields(shake_directions=4)
     soft = run_grasp_trial(box(2e4), OFF_CENTRE, ("shake",), settings)
     stiff = run_grasp_trial(box(2e6), OFF_CENTRE, ("shake",), settings)
     for out in (soft, stiff):
@@ -96,7 +95,7 @@ def test_explosions_are_detected(client):
 def test_label_early_stop_keeps_the_label():
     """Deciding the label early must give the label of the full run (rigid: cheap, deterministic)."""
     full = run_grasp_trial(box(2e9), OFF_CENTRE, ("shake",), QUICK)
-    early = run_grasp_trial(box(2e9), OFF_CENTRE, ("shake",), dataclasses.replace(QUICK, stop_when_label_decided=True))
+    early = run_grasp_trial(box(2e9), OFF_CENTRE, ("shake",), QUICK.with_fields(stop_when_label_decided=True))
     assert (full.shake_mean_mps2 >= 25.0) == (early.shake_mean_mps2 >= 25.0)
     assert not all(early.shake_measured) and early.sim_steps < full.sim_steps
     n = sum(early.shake_measured)
@@ -104,20 +103,22 @@ def test_label_early_stop_keeps_the_label():
 
 
 def test_confident_stop_waits_for_enough_directions_and_a_wide_margin():
-    from defgg_ros.sim.trial import _confidently_decided, comparable_protocol
+    from defgg_ros.sim.trial import _confidently_decided
+    from defgg_ros.sim.trial_settings import comparable_protocol
 
     assert not _confidently_decided([50.0, 50.0], 3, 20.0)          # too few directions
     assert _confidently_decided([50.0, 40.0, 35.0], 3, 20.0)        # mean 41.7 >= 25 + 11.5
     assert not _confidently_decided([50.0, 30.0, 25.0], 3, 20.0)    # mean 35.0: could still fall
     assert _confidently_decided([10.0, 12.0, 14.0, 18.0], 3, 20.0)  # mean 13.5 <= 25 - 10
-    assert not _confidently_decided([10.0, 12.0, 14.0, 18.0], 4, 40.0)  # the pre-2026-11-25 rule
+    assert not _confidently_decided([10.0, 12.0, 14.0, 18.0], 4, 40.0)  # the rule of before the knobs existed
     # the surrogate's knobs only matter when it is on; absent knobs are the old rule's
-    off = dataclasses.asdict(QUICK)
+    off = QUICK.to_record()
     assert comparable_protocol(off) == comparable_protocol({**off, "confident_margin_mps2": 99.0})
-    on = dataclasses.asdict(dataclasses.replace(QUICK, confident_stop=True))
+    on = QUICK.with_fields(confident_stop=True).to_record()
     old = {k: v for k, v in on.items() if not k.startswith("confident_m")}
     assert comparable_protocol(old) != comparable_protocol(on)
-    assert comparable_protocol(old) == comparable_protocol({**on, **LEGACY_CONFIDENT_SETTINGS})
+    assert comparable_protocol(old) == comparable_protocol({**on, "confident_min_directions": 4,
+                                                            "confident_margin_mps2": 40.0})
 
 
 def test_bad_grasps_and_tests_are_refused():
@@ -133,7 +134,7 @@ def test_multi_material_object_rests_stably_and_a_grasp_on_its_soft_head_works()
     head = spec.shape.tet_parts[1].nodes_m
     centre = (head.max(axis=0) + head.min(axis=0)) / 2
     grasp = WorldGrasp((float(centre[0]), 0.0, 0.02), math.pi / 2, float(np.ptp(head[:, 1])))
-    out = run_grasp_trial(spec, grasp, ("shake",), dataclasses.replace(QUICK, shake_directions=2))
+    out = run_grasp_trial(spec, grasp, ("shake",), QUICK.with_fields(shake_directions=2))
     assert out.status in (STATUS_OK, STATUS_LIFT_FAILED), out.note
     assert out.sim["soft"] == [False, True]
 

@@ -28,7 +28,8 @@ def test_a_header_names_its_labels_rule():
 
 
 @pytest.mark.parametrize("protocol", ["legacy", "defgraspsim"])
-def test_trained_weights_carry_the_rule_of_their_labels(tiny_dataset, tmp_path, protocol):
+def test_trained_weights_carry_the_rule_and_the_trial_protocol_of_their_labels(tiny_dataset, tmp_path, protocol,
+                                                                              capsys):
     torch.set_num_threads(1)
     data = tmp_path / "data"
     shutil.copytree(tiny_dataset, data)
@@ -41,3 +42,8 @@ def test_trained_weights_carry_the_rule_of_their_labels(tiny_dataset, tmp_path, 
     rule = LabelGripRule.from_meta(meta)
     assert rule.protocol == protocol and rule.needs_mass == (protocol == "defgraspsim")
     assert meta["label_grip_rule"] == label_grip_rule(header["generator"])
+    assert meta["trial_protocol"] == {"protocol": protocol, "object_friction": None, "poisson_ratio": None,
+                                      "finger_hold": "force", "grip_force_friction": None}
+    out = capsys.readouterr().out
+    assert f"labels of the trial protocol **{protocol}** (" in out              # printed when training starts
+    assert json.loads(out[out.index("{"):])["trial_protocol"]["protocol"] == protocol   # and in the summary
