@@ -66,8 +66,10 @@ from defgg_ros.ros.service import ServiceTimeout, call_idempotent
 PARAMETERS = load_schema("executor_node")
 # How often the input topics' silence is checked (wall clock, s).
 INPUT_CHECK_PERIOD_S = 1.0
-# A finger width source older than this gives way to the next one (s): franka_gripper publishes at 15 Hz.
-FINGER_SOURCE_FRESH_S = 1.0
+# A finger width source older than this gives way to the next one (wall clock, s). franka_gripper publishes at
+# 15 Hz; the simulated one at 15 Hz of sim time, and its clock stalls up to ~2 s while a frame renders: a shorter
+# limit handed the width to the MoveIt launch's constant 0.0 in joint_states meanwhile.
+FINGER_SOURCE_FRESH_S = 3.0
 
 
 class GoalError(ValueError):
