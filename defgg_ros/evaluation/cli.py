@@ -38,8 +38,9 @@ from defgg_ros.evaluation.tasks import TASKS
 from defgg_ros.sim.protocol import TrialProtocol, resolve_protocol
 from defgg_ros.sim.trial_settings import TrialSettings, protocol_differences
 
-# The subcommands import torch (the model, the cards: ~2 s on a quiet machine) and the simulator (the runner, the
-# ceiling: ~0.9 s) inside their functions, so `defgg-eval report` and --help answer without loading them.
+# The subcommands import torch (the model, the cards) and the simulator (the runner, the ceiling) inside their
+# functions, so `defgg-eval report` and --help answer without loading them (python -X importtime on the shared
+# machine, 2026-11-29: torch 18 s, defgg_ros.sim.trial 2.8 s; sim.trial 0.9 s when the machine was quieter).
 
 DEFAULT_MODELS = ("defgg_cnn=models/defgg_cnn.pt", "ggcnn_depth_only=models/ggcnn_depth_only.pt")
 
