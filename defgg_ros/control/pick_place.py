@@ -729,6 +729,8 @@ class PickPlaceSequence:
     def _step_open(self, sim_s: float) -> list:
         if self._plan is None:  # nothing was grasped in this run: leave the hand as it is
             return []
+        if self._placed_open_sent:   # released already (only place_release_opening_m wide: opening on in the bin
+            return []                # pushed the wall, "fingers blocked at 76.6 mm", and the recovery stopped there)
         width = self._plan.gripper.pre_open_width_m
         if self._obs.state.gripper_width_m >= width - NOT_CLOSED_TOLERANCE_M:
             return []

@@ -99,3 +99,16 @@ def test_a_recovery_put_down_stops_on_what_is_below(kin):
     robot.world.contact_height_m = 0.08
     (tcp, _), = _releases(kin, robot, sequence)
     assert "touched down" in sequence.outcome.recovery and 0.075 < tcp[2] < 0.08, sequence.outcome.recovery
+
+
+def test_a_cancel_after_the_release_does_not_open_the_hand_further(kin):
+    """The hand opened only place_release_opening_m wider than closed: a cancel in the retreat must not open it to
+    the full width beside the bin's wall or a neighbour (the soak saw 'fingers blocked at 76.6 mm' end the
+    recovery over the bin); it lifts and goes to the observation pose."""
+    robot = FakeRobot(kin, World(object_width_m=0.045))
+    sequence = PickPlaceSequence(kin, CONFIG, GRASP, BIN)
+    run(sequence, robot, until=lambda r, s: s.phase == "retreat" and s.feedback(r.sim_s).phase_progress > 0.2)
+    robot.apply(sequence.cancel(robot.sim_s, robot.sim_s), sequence)
+    assert _releases(kin, robot, sequence) == []
+    out = sequence.outcome
+    assert out.canceled and "opened the hand" not in out.recovery and out.arm_state == "observation_pose", out.recovery
