@@ -123,3 +123,20 @@ def test_count_options_out_of_range_are_refused_before_anything_runs(tmp_path, c
     assert cli.main(["run", "--out", str(tmp_path / "out"), option, value, "--plan-only", "--no-progress"]) == 2
     assert f"defgg-eval: error: {option} must be >= " in capsys.readouterr().err
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("folder, protocol", [("sim_v5", "defgraspsim"), ("sim_v4", "legacy")])
+def test_the_stored_settings_of_a_shipped_evaluation_are_read_back_and_resume_it(folder, protocol):
+    """results/sim_v5's records hold exactly today's evaluation settings in their stored form (so its trial keys,
+    jobs.sim_key, are today's); sim_v4's predate shake_stop_when_decided and still compare as the same protocol."""
+    from pathlib import Path
+
+    from defgg_ros.evaluation.store import read_results, results_path
+
+    root = Path(__file__).resolve().parents[2] / "results" / folder
+    first = read_results(results_path(root))[0]
+    assert cli.protocol_of_run(root, None).name == protocol
+    settings = eval_trial_settings(protocol)
+    if folder == "sim_v5":
+        assert first["trial_settings"] == settings.to_record()
+    assert task_protocol(first["trial_settings"], first["task"]) == task_protocol(settings.to_record(), first["task"])
