@@ -117,13 +117,13 @@ def main(argv=None):
 
     from defgg_ros.nodes.conversions import stamp_to_ns
 
+    print(f"before the bench: load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores; other processes: "
+          f"{other_load()}")
     frames = [scene(width, height), scene(width, height, seed=width + 1)]
     nodes = start_node(args.model, 1, frames[0][3], max_frame_age_s=args.max_frame_age)
     context = Context()
     rclpy.init(context=context)
     camera = hogs = None
-    print(f"before the bench: load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores; other processes: "
-          f"{other_load()}")
     try:
         cell = Cell(context, "bench_fresh_answers_client")
         diagnostics = Diagnostics(cell.node)
