@@ -38,6 +38,14 @@ RIGID_ABOVE_PA = 5e6
 MODEL_FACTOR = 1.6
 
 
+# The squeeze's force schedule: gentle first (a 2e4 Pa foam compresses ~1 mm at 2 N), firmer only while the
+# compression is not resolved (needs_firmer): a stiff object does not mind 20 N, a soft one is not crushed.
+GENTLE_FORCES_N = (0.5, 1.0, 1.5, 2.0)
+FIRM_FORCES_N = (10.0, 20.0)
+# Resolved = the compression spans this many width resolutions (a <= 10 % reading error).
+RESOLVED_SPANS = 10.0
+
+
 class SqueezeError(ValueError):
     """Readings the estimate cannot use (fewer than two forces, non-finite, widths growing with force)."""
 
@@ -94,6 +102,12 @@ def squeeze_slope_npm(readings) -> tuple[float, float]:
     if sxx <= 0:
         return math.inf, 0.0
     return sum((xi - mx) * (fi - mf) for xi, fi in zip(x, f)) / sxx, span
+
+
+def needs_firmer(readings, width_resolution_m: float) -> bool:
+    """True while the readings' compression is not resolved (RESOLVED_SPANS resolutions): squeeze harder."""
+    widths = [r.width_m for r in sorted(readings, key=lambda r: r.force_n)]
+    return widths[0] - widths[-1] < RESOLVED_SPANS * width_resolution_m
 
 
 def estimate_modulus(readings, face_width_m: float, face_height_m: float, machine_stiffness_npm: float = math.inf,

@@ -61,3 +61,12 @@ def test_the_loaded_area_spreads_from_the_pad_and_stops_at_the_face():
 def test_unusable_readings_are_refused_with_the_reason(readings, says):
     with pytest.raises(SqueezeError, match=says):
         estimate_modulus(readings, 0.05, 0.05)
+
+
+def test_the_squeeze_goes_firmer_only_while_the_compression_is_unresolved():
+    from defgg_ros.squeeze import GENTLE_FORCES_N, needs_firmer
+
+    soft = readings_of(2e5, 0.03, 0.05, 0.05, forces=GENTLE_FORCES_N)     # ~0.14 mm over the gentle forces
+    stiff = readings_of(2e6, 0.05, 0.05, 0.05, forces=GENTLE_FORCES_N)    # ~0.03 mm
+    assert not needs_firmer(soft, 1e-5) and needs_firmer(stiff, 1e-5)
+    assert needs_firmer(soft, 1e-4)      # a hand that reads 0.1 mm must squeeze the same object harder
