@@ -55,3 +55,16 @@ def test_the_default_drop_zone_is_nearest_the_observation_pose_and_away_from_the
 def test_a_drop_point_outside_the_box_or_inside_the_keep_out_is_refused(drop):
     with pytest.raises(ValueError, match="recovery_drop_xy_m"):
         check_drop_xy(drop, WORKSPACE, 0.30)
+
+
+def test_the_shipped_drop_point_is_under_the_camera_and_away_from_the_base():
+    import numpy as np
+
+    from defgg_ros.control.kinematics import PandaKinematics
+    from defgg_ros.ros.parameters import defaults
+
+    p = defaults("executor_node")
+    assert p["recovery_drop_xy_m"] == [0.0, 0.0]   # the default: derived, not given
+    observation_xy = PandaKinematics().fk(np.array(p["observation_q_rad"]))[:2, 3]
+    x, y = default_drop_xy(observation_xy, p["workspace_box_m"], p["base_keep_out_radius_m"])
+    assert (x, y) == pytest.approx((0.40, 0.0), abs=1e-3) and math.hypot(x, y) >= 0.40
