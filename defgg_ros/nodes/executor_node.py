@@ -99,6 +99,8 @@ def trajectory_to_msg(trajectory, frame_id: str, joint_names=DEFAULT_NAMES["join
 HOLD_BLEND_S = 0.1
 # A joint state older than this is not carried on further to guess where the arm is now (s).
 HOLD_STATE_AGE_MAX_S = 0.05
+# The robot clock going back by more than this during a goal aborts it (s): see ExecutorNode._check_clock.
+CLOCK_JUMP_BACK_S = 0.5
 
 
 def hold_trajectory_msg(q_rad, frame_id: str, joint_names=DEFAULT_NAMES["joints"]) -> JointTrajectory:
@@ -665,9 +667,11 @@ class ExecutorNode(Node):
             sequence.on_force(self._last_force)
             self._carry_out(sequence, sequence.start(*self._clocks()))
         cancel_sent = False
+        robot_s = self._clocks()[0]
         while not sequence.finished:
             if self._shutdown.wait(period):
                 raise GoalError("executor is shutting down")
+            robot_s = self._check_clock(robot_s)
             with self._lock:
                 if goal_handle.is_cancel_requested and not cancel_sent:
                     cancel_sent = True
@@ -677,6 +681,17 @@ class ExecutorNode(Node):
             goal_handle.publish_feedback(PickAndPlace.Feedback(
                 phase=feedback.phase, phase_progress=feedback.phase_progress,
                 gripper_width_m=feedback.gripper_width_m, external_force_n=feedback.external_force_n))
+
+    def _check_clock(self, before_s: float) -> float:
+        """The robot clock now; GoalError when it went back more than CLOCK_JUMP_BACK_S since before_s. A restarted
+        simulator starts its /clock at 0 again: every motion and gripper wait of the sequence counts on the robot
+        clock and would wait until it came back to where it was (the safety soak's goal hung 300 s, unanswered),
+        while the new driver knows nothing of the goals the old one ran."""
+        now_s = self._clocks()[0]
+        if now_s < before_s - CLOCK_JUMP_BACK_S:
+            raise GoalError(f"the robot clock jumped back from {before_s:.1f} s to {now_s:.1f} s (a restarted "
+                            "driver or simulator): its trajectory and gripper goals are gone")
+        return now_s
 
     def _finish(self, goal_handle, outcome, result):
         for field in ("success", "failure_reason", "phase_reached", "contact_detected", "contact_height_m",

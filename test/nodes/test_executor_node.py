@@ -321,3 +321,50 @@ def test_a_pick_against_a_driver_without_velocities_and_with_position_noise(exec
     response = result_of(ex, spin, send(ex, client, spin, PickAndPlace.Goal(grasp=grasp_msg())))
     assert response.result.success, response.result.failure_reason
 
+
+
+def test_a_robot_clock_that_jumps_back_aborts_the_goal(rclpy_context, spin):
+    """A restarted simulator starts its /clock at 0 again while a goal runs: the goal is aborted at once, naming
+    the jump (it waited until the clock came back to where it was: 300 s unanswered in the safety soak; issue 48)."""
+    from builtin_interfaces.msg import Time
+    from rclpy.node import Node
+    from rosgraph_msgs.msg import Clock
+    from support.executor_cell import InTestDriver
+
+    from defgg_ros.ros.action import ActionClient, destroy_actions
+    from defgg_ros.ros.executor import ThreadedExecutor
+
+    ex = ThreadedExecutor(num_threads=8, context=rclpy_context)
+    clock_node = Node("test_sim_clock", context=rclpy_context)
+    publisher = clock_node.create_publisher(Clock, "/clock", 10)
+    sim = {"s": 1000.0}
+
+    def tick():
+        sim["s"] += 0.01
+        publisher.publish(Clock(clock=Time(sec=int(sim["s"]), nanosec=int(sim["s"] % 1 * 1e9))))
+
+    clock_node.create_timer(0.01, tick)
+    driver = InTestDriver(rclpy_context, object_width_m=0.04)
+    node = ExecutorNode(context=rclpy_context, parameter_overrides=[
+        Parameter(k, value=v) for k, v in FAST.items()] + [Parameter("use_sim_time", value=True)])
+    client_node = Node("clock_jump_client", context=rclpy_context)
+    client = ActionClient(client_node, PickAndPlace, topics.PICK_AND_PLACE_ACTION)
+    for n in (clock_node, driver, node, client_node):
+        ex.add_node(n)
+    try:
+        wait_driver_ready(ex, spin, node)
+        spin(ex, lambda: node.get_clock().now().nanoseconds > 900e9, 10.0, "the executor on the test's /clock")
+        progress = []
+        handle = send(ex, client, spin, PickAndPlace.Goal(grasp=grasp_msg()), feedback=lambda f: progress.append(
+            f.feedback.phase_progress))
+        spin(ex, lambda: progress and progress[-1] > 0.1, 20.0, "the arm moving")
+        sim["s"] = 5.0   # the simulator restarted
+        response = result_of(ex, spin, handle, timeout_s=10.0)
+        assert response.status == 6 and "robot clock jumped back" in response.result.failure_reason, \
+            response.result.failure_reason
+    finally:
+        for n in list(ex.get_nodes()):
+            ex.remove_node(n)
+            destroy_actions(n)
+            n.destroy_node()
+        ex.shutdown(timeout_sec=2.0)
