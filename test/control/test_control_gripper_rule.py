@@ -10,13 +10,14 @@ from defgg_ros.control.gripper_rule import (
     grasp_command,
     grasp_force_n,
 )
-from defgg_ros.sim.trial import grasp_force_n as label_force_n
+from defgg_ros.sim.protocol import LEGACY, PROTOCOLS
 
 
 def test_force_is_the_training_labels_force_growing_with_log_modulus():
     forces = [grasp_force_n(e) for e in TRAINING_YOUNGS_MODULI_PA]
     assert forces == sorted(forces) and len(set(forces)) == len(forces)
-    assert forces == [label_force_n(e) for e in TRAINING_YOUNGS_MODULI_PA]
+    # the legacy labels' trials closed with these forces (mass plays no part in that protocol's rule)
+    assert forces == [PROTOCOLS[LEGACY].finger_force_n(e, mass_kg=0.1) for e in TRAINING_YOUNGS_MODULI_PA]
     assert all(0 < f <= GRIPPER_MAX_FORCE_N for f in forces)
     # Linear in log10(E): the geometric midpoint gets the mean force.
     midpoint = math.sqrt(2e4 * 2e9)
