@@ -97,8 +97,6 @@ def trajectory_to_msg(trajectory, frame_id: str, joint_names=DEFAULT_NAMES["join
 # A hold trajectory reaches the measured position this long after it is received: the controller blends into it
 # from its current state, so the arm is brought to rest within this time without a step in the command (s).
 HOLD_BLEND_S = 0.1
-# A joint state older than this is not carried on further to guess where the arm is now (s).
-HOLD_STATE_AGE_MAX_S = 0.05
 # The robot clock going back by more than this during a goal aborts it (s): see ExecutorNode._check_clock. Over
 # 1 s: the simulated driver's stamps read 1 s back for single messages (its sec/nanosec split turns x.9999999997
 # into x.0, not x+1.0), which 0.5 s took for a restart 50 times in a 5-minute soak.
@@ -772,39 +770,29 @@ class ExecutorNode(Node):
         self._arm_goals_unanswered += 1
         self._arm_client.send_goal_async(goal).add_done_callback(on_goal)
 
-    def _hold_position(self) -> np.ndarray:
-        """Where to hold (lock held): where the arm is now, i.e. the last measured joints carried on at their
-        measured speed for the state's age (at most HOLD_STATE_AGE_MAX_S). The measured position itself lies
-        behind a moving arm: a hold there pulls it back (under load, over 0.01 rad/s for 0.47 s after the signal
-        in a transfer). Not further ahead: a controller that starts the hold from rest (the simulated one) would
-        drive the arm there at speed (3.5 rad/s with the stop point of a 0.1 s deceleration). Within the
-        planning joint ranges."""
-        state, wall_s = self._last_state
-        qd = np.nan_to_num(np.asarray(state.qd_radps, dtype=float))
-        ahead_s = min(max(0.0, time.monotonic() - wall_s), HOLD_STATE_AGE_MAX_S)
-        return np.clip(state.q_rad + qd * ahead_s, self._kin.q_min_rad, self._kin.q_max_rad)
-
     def _arm_may_move(self) -> bool:
         """Could a trajectory of this node's still move the arm (lock held)? A goal runs, a sent one is not yet
         answered, or a sequence drives the arm."""
         return self._sequence is not None or self._arm_goal is not None or self._arm_goals_unanswered > 0
 
     def _hold_arm(self) -> None:
-        """Stop the arm where it is (lock held): send a one-point trajectory where the arm stops (_hold_position;
-        an empty trajectory is refused by the controller), which replaces the running goal, and cancel that goal
-        (joint_trajectory_controller then holds its current state: the stop does not depend on the hold being
-        accepted). Only when this node has a goal that may still move the arm; a failed send is logged, never
-        raised: the caller is on its way out."""
+        """Stop the arm where it is (lock held): cancel the running goal (joint_trajectory_controller then holds its
+        current state) and, as a second command that does not depend on the cancel being answered, send a one-point
+        trajectory at the measured position (an empty trajectory is refused by the controller). Only when this node
+        has a goal that may still move the arm; a failed send is logged, never raised: the caller is on its way out.
+        Tried and dropped (2026-11-29, simulated arm, transfer): the hold sent before the cancel, at the measured
+        position carried on for the state's age (or further, to a 0.1 s deceleration's end): the simulated
+        controller starts a new trajectory from rest, and the arm then moved at 3.5-4.2 rad/s after the signal."""
         moving = self._arm_may_move()
         self._arm_goal_serial += 1
         self._held_serial = self._arm_goal_serial
-        try:   # the hold first: the controller blends into it from its motion (a cancel alone stops it dead)
-            if moving and self._last_state is not None:
-                hold = hold_trajectory_msg(self._hold_position(), self._params()["base_frame"], self._arm_joints)
-                self._arm_client.send_goal_async(FollowJointTrajectory.Goal(trajectory=hold))
+        try:
             if self._arm_goal is not None:
                 self._arm_goal.cancel_goal_async()
                 self._arm_goal = None
+            if moving and self._last_state is not None:
+                hold = hold_trajectory_msg(self._last_state[0].q_rad, self._params()["base_frame"], self._arm_joints)
+                self._arm_client.send_goal_async(FollowJointTrajectory.Goal(trajectory=hold))
         except Exception as error:  # noqa: BLE001 - rclpy raises RCLError/InvalidHandle once torn down
             self.get_logger().error(f"could not command the arm to stop: {error!r}")
 
