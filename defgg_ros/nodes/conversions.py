@@ -255,3 +255,9 @@ def stamp_to_ns(stamp: Time) -> int:
 def ns_to_stamp(stamp_ns: int) -> Time:
     """Integer nanoseconds -> builtin_interfaces/Time."""
     return Time(sec=int(stamp_ns // 1_000_000_000), nanosec=int(stamp_ns % 1_000_000_000))
+
+
+def seconds_to_stamp(time_s: float) -> Time:
+    """Seconds -> builtin_interfaces/Time, rounded to whole nanoseconds before the split, so x.9999999997 s
+    becomes (x + 1) s, not x s (splitting first stamped such messages 1 s in the past)."""
+    return ns_to_stamp(int(round(time_s * 1e9)))

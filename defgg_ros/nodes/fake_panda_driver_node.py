@@ -38,7 +38,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from defgg_ros.constants import CAMERA_HEIGHT_PX, CAMERA_WIDTH_PX, GRIPPER_MAX_WIDTH_M
 from defgg_ros.nodes import qos
-from defgg_ros.nodes.conversions import depth_metres_to_msg, make_camera_info, numpy_to_image
+from defgg_ros.nodes.conversions import depth_metres_to_msg, make_camera_info, numpy_to_image, seconds_to_stamp
 from defgg_ros.nodes.node_main import run_node
 from defgg_ros.ros import topics
 from defgg_ros.ros.action import destroy_actions
@@ -393,8 +393,7 @@ class FakePandaDriver(Node):
 
     def _stamp(self, now_s, frame_id):
         header = Header(frame_id=frame_id)
-        header.stamp.sec = int(now_s)
-        header.stamp.nanosec = int(round((now_s - int(now_s)) * 1e9)) % 1_000_000_000
+        header.stamp = seconds_to_stamp(now_s)
         return header
 
     def _publish_state(self, now_s, joints, force, torque, tcp, due):

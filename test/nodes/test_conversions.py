@@ -145,3 +145,14 @@ def test_grasp_msg_rejects_nan():
 
 def test_stamp_ns_round_trip():
     assert cv.stamp_to_ns(cv.ns_to_stamp(12_345_678_901)) == 12_345_678_901
+
+
+def test_seconds_to_stamp_carries_a_rounded_up_fraction_into_the_seconds():
+    # The simulated driver split seconds before rounding: 12.9999999997 s was stamped 12.000000000 s, 1 s in
+    # the past, which read as a clock jumping back.
+    from defgg_ros.nodes.conversions import seconds_to_stamp
+
+    stamp = seconds_to_stamp(12.9999999997)
+    assert (stamp.sec, stamp.nanosec) == (13, 0)
+    stamp = seconds_to_stamp(3.25)
+    assert (stamp.sec, stamp.nanosec) == (3, 250_000_000)
