@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Re-record the sessions of this folder from the simulated cell (a minute on 2 cores).
 #   bash sim_bringup/sessions/record_all.sh [NAME ...]     # default: every session below
-# Each session: bring up the sim cell on its scene in ROS_DOMAIN_ID (default 97, localhost-only discovery;
+# Each session: bring up the sim cell on its scene in ROS_DOMAIN_ID (default 50: the bringup's range, locked while it runs; localhost-only discovery;
 # defgg-bringup's own default, a private random domain, would hide it from defgg-record), then defgg-record
 # drives it (stiffness from the scene, PlanGrasp calls, one pick in the rigid session). SESSIONS_OUT: where
 # the recordings go (default: this folder). Exits 1 if any recording failed.
@@ -11,7 +11,7 @@ set -euo pipefail
 cd "$(dirname "$0")/../.."
 HERE=sim_bringup/sessions
 OUT=${SESSIONS_OUT:-$HERE}
-export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-97} ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
+export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-50} ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 export FASTRTPS_DEFAULT_PROFILES_FILE=${FASTRTPS_DEFAULT_PROFILES_FILE:-$PWD/defgg_ros/ros/fastdds_profile.xml}
 failed=()
 
