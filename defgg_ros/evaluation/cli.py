@@ -26,7 +26,7 @@ import shlex
 import sys
 from pathlib import Path
 
-from defgg_ros.atomic import read_jsonl, write_json_atomic
+from defgg_ros.atomic import read_jsonl, write_json_atomic, write_text_atomic
 from defgg_ros.cli_help import HelpFormatter, use_for
 from defgg_ros.constants import EVAL_GRASPS_PER_OBJECT, GRASP_HEIGHT_RULES, TRAINING_YOUNGS_MODULI_PA
 from defgg_ros.data.format import check_header
@@ -179,6 +179,14 @@ def _add_others(sub):
     p.add_argument("--max-trials", type=int, default=None, help="stop after simulating this many trials")
     _add_protocol_args(p)
     p.add_argument("--summary-only", action="store_true", help="only rewrite OUT/ceiling.md")
+
+    p = sub.add_parser("seeds", help="the seed study: each seed's paired margin, the mean with a bootstrap "
+                                     "interval over objects, the pooled sign test")
+    p.add_argument("--run", required=True, nargs="+", metavar="SEED=OUT",
+                   help="a seed's evaluation folder, e.g. 0=results/sim_v5 1=results/sim_v5_s1")
+    p.add_argument("--sets", nargs="+", default=["common", "adversarial"], help="default: %(default)s")
+    p.add_argument("--task", default="shake", choices=TASKS)
+    p.add_argument("--out", default=None, metavar="FILE", help="also write the Markdown table here")
 
     p = sub.add_parser("card", help="(re)write models/<name>.md from its provenance, weights and evaluation")
     p.add_argument("--name", required=True, nargs="+")
@@ -502,6 +510,22 @@ def cmd_card(args) -> int:
     return 0
 
 
+def cmd_seeds(args) -> int:
+    from defgg_ros.evaluation.seeds import seeds_markdown, summarise
+
+    runs = {}
+    for spec in args.run:
+        seed, sep, out = spec.partition("=")
+        if not sep or not seed or not out:
+            raise ValueError(f"--run takes SEED=OUT, got {spec!r}")
+        runs[seed] = read_results(results_path(out))
+    table = seeds_markdown([summarise(runs, s, args.task) for s in args.sets])
+    print(table, end="")
+    if args.out:
+        write_text_atomic(args.out, table)
+    return 0
+
+
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     args = build_parser().parse_args(argv)
@@ -518,7 +542,7 @@ def main(argv=None) -> int:
         if args.command == "ceiling":
             return cmd_ceiling(args, argv)
         commands = {"report": cmd_report, "strategy": cmd_strategy, "ship": cmd_ship, "card": cmd_card,
-                    "snapshot": cmd_snapshot, "freeze": cmd_freeze}
+                    "snapshot": cmd_snapshot, "freeze": cmd_freeze, "seeds": cmd_seeds}
         return commands[args.command](args)
     except (sources.SourceError, ReportError, ResultsError, CardError, CheckpointError, SnapshotError, DatasetError,
             OSError, ValueError) as exc:

@@ -1,0 +1,108 @@
+"""How much of the stiffness input's margin is the training seed? (issue 49, the seed study)
+
+Each seed's pair (the stiffness-aware model and the depth-only one, same data, schedule and split) is evaluated
+in its own folder; within a folder the two models' trials pair up by (object, E, rank) as in `paired`. Per seed
+and object set this reports the paired margin (points) and its sign test; over the seeds, the mean margin with a
+95 % bootstrap interval over **objects** (an object's trials are not independent draws: they share its shape, so
+objects are what the interval resamples), and the sign test on the discordant pairs pooled over the seeds.
+"""
+from __future__ import annotations
+
+import random
+from dataclasses import dataclass
+
+from defgg_ros.evaluation.paired import Paired, sign_test_p
+from defgg_ros.evaluation.tables import is_graded, is_main_correct_input
+
+BOOTSTRAP_RESAMPLES = 2000
+BOOTSTRAP_SEED = 0
+
+
+@dataclass(frozen=True)
+class SeedRow:
+    seed: str
+    counts: Paired
+
+
+@dataclass(frozen=True)
+class SeedSummary:
+    object_set: str
+    rows: tuple                 # SeedRow per seed, in the order given
+    mean_margin_pts: float | None
+    interval_pts: tuple | None  # 95 % bootstrap over objects of the mean margin
+    pooled: Paired              # discordant pairs summed over the seeds
+    objects: int
+
+    @property
+    def pooled_p(self) -> float:
+        return sign_test_p(self.pooled.a_only, self.pooled.b_only)
+
+
+def object_outcomes(records, task: str, object_set: str, model_a: str, model_b: str) -> dict:
+    """object -> [(a held, b held)] over the (E, rank) views both models have a graded main trial for."""
+    outcome = {model_a: {}, model_b: {}}
+    for r in records:
+        if (r["task"] != task or r["object_set"] != object_set or r["model"] not in outcome
+                or not is_main_correct_input(r) or not is_graded(r)):
+            continue
+        key = (r["object"], float(r["youngs_modulus_pa"]), int(r.get("rank") or 0))
+        outcome[r["model"]][key] = bool(r["success"])
+    by_object = {}
+    for key, a in outcome[model_a].items():
+        if key in outcome[model_b]:
+            by_object.setdefault(key[0], []).append((a, outcome[model_b][key]))
+    return by_object
+
+
+def _counts(pairs) -> Paired:
+    c = {"both": 0, "a_only": 0, "b_only": 0, "neither": 0}
+    for a, b in pairs:
+        c["both" if a and b else "a_only" if a else "b_only" if b else "neither"] += 1
+    return Paired(**c)
+
+
+def _mean_margin(per_seed_objects: list, objects: list) -> float | None:
+    """Mean over the seeds of each seed's paired margin over `objects` (an object drawn twice counts twice)."""
+    margins = []
+    for by_object in per_seed_objects:
+        pairs = [p for o in objects for p in by_object.get(o, [])]
+        if pairs:
+            margins.append(_counts(pairs).margin_pts)
+    return sum(margins) / len(margins) if margins else None
+
+
+def summarise(seed_records: dict, object_set: str, task: str = "shake", model_a: str = "defgg_cnn",
+              model_b: str = "ggcnn_depth_only", resamples: int = BOOTSTRAP_RESAMPLES) -> SeedSummary:
+    """seed_records: {seed label: that seed's trial records}."""
+    per_seed = {seed: object_outcomes(recs, task, object_set, model_a, model_b)
+                for seed, recs in seed_records.items()}
+    rows = tuple(SeedRow(seed, _counts([p for pairs in objs.values() for p in pairs])) for seed, objs in per_seed.items())
+    objects = sorted(set().union(*per_seed.values())) if per_seed else []
+    pooled = Paired(*(sum(getattr(r.counts, f) for r in rows) for f in ("both", "a_only", "b_only", "neither")))
+    mean = _mean_margin(list(per_seed.values()), objects)
+    interval = None
+    if objects and resamples > 0:
+        rng = random.Random(BOOTSTRAP_SEED)
+        draws = sorted(m for m in (_mean_margin(list(per_seed.values()), rng.choices(objects, k=len(objects)))
+                                   for _ in range(resamples)) if m is not None)
+        if draws:
+            interval = (draws[int(0.025 * (len(draws) - 1))], draws[int(round(0.975 * (len(draws) - 1)))])
+    return SeedSummary(object_set, rows, mean, interval, pooled, len(objects))
+
+
+def seeds_markdown(summaries) -> str:
+    """One table: a row per seed and object set, then the mean, its interval and the pooled test."""
+    lines = ["| object set | seed | pairs | with stiffness only | depth only only | margin (pts) | sign test p |",
+             "|---|---|---|---|---|---|---|"]
+    for s in summaries:
+        for row in s.rows:
+            c = row.counts
+            margin = "" if c.margin_pts is None else f"{c.margin_pts:+.1f}"
+            lines.append(f"| {s.object_set} | {row.seed} | {c.pairs} | {c.a_only} | {c.b_only} | {margin} | "
+                         f"{c.p_value:.3g} |" if c.pairs else f"| {s.object_set} | {row.seed} | 0 | | | | |")
+        mean = "" if s.mean_margin_pts is None else f"{s.mean_margin_pts:+.1f}"
+        interval = "" if s.interval_pts is None else f" (95 % over {s.objects} objects: {s.interval_pts[0]:+.1f} … " \
+                                                       f"{s.interval_pts[1]:+.1f})"
+        lines.append(f"| {s.object_set} | **mean of {len(s.rows)} seeds** | {s.pooled.pairs} | {s.pooled.a_only} | "
+                     f"{s.pooled.b_only} | {mean}{interval} | {s.pooled_p:.3g} (pooled) |")
+    return "\n".join(lines) + "\n"

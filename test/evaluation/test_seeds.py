@@ -1,0 +1,59 @@
+"""The seed study's report (evaluation/seeds.py, defgg-eval seeds): margins per seed, the mean with a bootstrap
+interval over objects, the pooled sign test."""
+import json
+
+import pytest
+
+from defgg_ros.evaluation.cli import main
+from defgg_ros.evaluation.seeds import summarise
+
+pytestmark = pytest.mark.unit
+
+
+def trial(model, obj, e_pa, rank, success, object_set="common"):
+    return {"model": model, "object": obj, "object_set": object_set, "youngs_modulus_pa": e_pa, "rank": rank,
+            "task": "shake", "experiment": "main", "input_error_pct": 0.0, "status": "ok", "success": success}
+
+
+def seed_records(a_wins: dict):
+    """Each object: 4 views; the stiffness-aware model holds a_wins[obj] of them that the baseline drops."""
+    out = []
+    for obj, wins in a_wins.items():
+        for view in range(4):
+            out.append(trial("defgg_cnn", obj, 2e4, view, view < wins or view == 3))
+            out.append(trial("ggcnn_depth_only", obj, 2e4, view, view == 3))
+    return out
+
+
+def test_margins_per_seed_their_mean_and_the_pooled_test():
+    runs = {"0": seed_records({"a": 2, "b": 0}), "1": seed_records({"a": 1, "b": 1})}
+    s = summarise(runs, "common", resamples=500)
+    assert [r.counts.margin_pts for r in s.rows] == [25.0, 25.0]        # 2 of 8 pairs each
+    assert s.mean_margin_pts == pytest.approx(25.0) and s.objects == 2
+    assert (s.pooled.a_only, s.pooled.b_only, s.pooled.pairs) == (4, 0, 16)
+    assert s.pooled_p == pytest.approx(0.125)
+    # Resampling objects: {a, a} gives 25 + 50 / 2 ... the interval spans what the objects allow, not more.
+    assert 0.0 <= s.interval_pts[0] <= 25.0 <= s.interval_pts[1] <= 50.0
+
+
+def test_no_difference_between_the_models_gives_a_zero_margin_and_p_1():
+    runs = {"0": seed_records({"a": 0, "b": 0})}
+    s = summarise(runs, "common", resamples=100)
+    assert s.mean_margin_pts == 0.0 and s.pooled_p == 1.0 and s.interval_pts == (0.0, 0.0)
+
+
+def test_the_cli_reads_each_seed_s_folder_and_writes_the_table(tmp_path, capsys):
+    folders = []
+    for seed, wins in (("0", {"a": 2}), ("1", {"a": 1})):
+        folder = tmp_path / f"s{seed}"
+        folder.mkdir()
+        with open(folder / "trials.jsonl", "w") as f:
+            for i, rec in enumerate(seed_records(wins)):
+                f.write(json.dumps({**rec, "key": f"{seed}|{i}"}) + "\n")
+        folders.append(f"{seed}={folder}")
+    out = tmp_path / "seeds.md"
+    assert main(["seeds", "--run", *folders, "--sets", "common", "--out", str(out)]) == 0
+    table = capsys.readouterr().out
+    assert "| common | 0 | 4 | 2 | 0 | +50.0 |" in table and "mean of 2 seeds" in table
+    assert out.read_text() == table
+    assert main(["seeds", "--run", "nonsense"]) == 2
