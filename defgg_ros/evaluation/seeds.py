@@ -76,7 +76,8 @@ def summarise(seed_records: dict, object_set: str, task: str = "shake", model_a:
     """seed_records: {seed label: that seed's trial records}."""
     per_seed = {seed: object_outcomes(recs, task, object_set, model_a, model_b)
                 for seed, recs in seed_records.items()}
-    rows = tuple(SeedRow(seed, _counts([p for pairs in objs.values() for p in pairs])) for seed, objs in per_seed.items())
+    rows = tuple(SeedRow(seed, _counts([p for pairs in objs.values() for p in pairs]))
+                 for seed, objs in per_seed.items())
     objects = sorted(set().union(*per_seed.values())) if per_seed else []
     pooled = Paired(*(sum(getattr(r.counts, f) for r in rows) for f in ("both", "a_only", "b_only", "neither")))
     mean = _mean_margin(list(per_seed.values()), objects)
