@@ -76,6 +76,10 @@ class GoalError(ValueError):
     """A goal the executor cannot work with (the message says why)."""
 
 
+class RobotRestarted(GoalError):
+    """The robot clock went back during a goal: the driver (a simulator) restarted and its goals are gone."""
+
+
 # The default robot type's names (the functions below are called with the node's own).
 DEFAULT_NAMES = topics.robot_names()
 
@@ -509,6 +513,10 @@ class ExecutorNode(Node):
         except (GoalError, ValueError) as error:
             with self._lock:   # raised while a sequence drove the arm (shutdown, a stop it could not plan):
                 driving = self._sequence is not None   # its motion must not run on unwatched
+                if isinstance(error, RobotRestarted):
+                    # The restarted controller holds its own state; a hold at the position measured before the
+                    # restart would send the new arm there at once (30 rad/s in the safety soak's simulator).
+                    self._last_state = None
                 if driving:
                     self._hold_arm()
             if driving:
@@ -689,7 +697,7 @@ class ExecutorNode(Node):
         while the new driver knows nothing of the goals the old one ran."""
         now_s = self._clocks()[0]
         if now_s < before_s - CLOCK_JUMP_BACK_S:
-            raise GoalError(f"the robot clock jumped back from {before_s:.1f} s to {now_s:.1f} s (a restarted "
+            raise RobotRestarted(f"the robot clock jumped back from {before_s:.1f} s to {now_s:.1f} s (a restarted "
                             "driver or simulator): its trajectory and gripper goals are gone")
         return now_s
 

@@ -358,10 +358,14 @@ def test_a_robot_clock_that_jumps_back_aborts_the_goal(rclpy_context, spin):
         handle = send(ex, client, spin, PickAndPlace.Goal(grasp=grasp_msg()), feedback=lambda f: progress.append(
             f.feedback.phase_progress))
         spin(ex, lambda: progress and progress[-1] > 0.1, 20.0, "the arm moving")
+        sent_before = len(driver.trajectory_msgs)
         sim["s"] = 5.0   # the simulator restarted
         response = result_of(ex, spin, handle, timeout_s=10.0)
         assert response.status == 6 and "robot clock jumped back" in response.result.failure_reason, \
             response.result.failure_reason
+        # No hold at the position measured before the restart: the new controller holds its own state, and a
+        # hold there sent the restarted simulated arm back to the old pose at 30 rad/s (safety soak).
+        assert len(driver.trajectory_msgs) == sent_before, driver.trajectory_msgs[sent_before:]
     finally:
         for n in list(ex.get_nodes()):
             ex.remove_node(n)
