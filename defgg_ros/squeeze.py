@@ -96,7 +96,7 @@ def squeeze_slope_npm(readings) -> tuple[float, float]:
     mx, mf = sum(x) / len(x), sum(f) / len(f)
     sxx = sum((xi - mx) ** 2 for xi in x)
     span = max(x) - min(x)
-    if span < -1e-9 or x[-1] < -1e-9:
+    if x[-1] < -1e-9:   # the strongest squeeze left the fingers wider than the first
         raise SqueezeError(f"the opening grew with the force ({[round(r.width_m * 1e3, 3) for r in readings]} mm): "
                            "the object moved or the fingers slipped; squeeze again")
     if sxx <= 0:
