@@ -26,11 +26,15 @@ FROZEN=${FROZEN:-runs/frozen_fem_v5}
 PY=${PY:-.venv/bin/python}
 EVAL="$PY -m defgg_ros.evaluation.cli"
 
-[ -d "$FROZEN/train_data" ] || { mkdir -p "$FROZEN" && tar xzf models/train_data_fem_v5.tar.gz -C "$FROZEN"; } || exit 1
+stored() { [ -f "results/seeds/weights_s$1/defgg_cnn.pt" ] && [ -f "results/seeds/weights_s$1/ggcnn_depth_only.pt" ]; }
+for seed in $SEEDS; do stored "$seed" || NEED_DATA=1; done
+[ -z "${NEED_DATA:-}" ] || [ -d "$FROZEN/train_data" ] \
+  || { mkdir -p "$FROZEN" && tar xzf models/train_data_fem_v5.tar.gz -C "$FROZEN"; } || exit 1
 
-train() {   # model seed [flags]: one resumable run, one torch thread
+train() {   # model seed [flags]: one resumable run, one torch thread (skipped once its weights are stored)
   local model=$1 seed=$2 run=runs/seeds/${1}_s${2}
   shift 2
+  [ -f "results/seeds/weights_s$seed/$model.pt" ] && [ ! -d "$run" ] && return 0
   mkdir -p runs/seeds
   $PY -m defgg_ros.train.cli --data "$FROZEN/train_data" --epochs "$EPOCHS" --samples-per-scene 8 \
     --seed "$seed" --split-seed 0 --threads 1 --no-progress --out "$run" --resume "$@" > "$run.log" 2>&1 \
