@@ -8,9 +8,10 @@ Markers (every test gets exactly one kind; `make check` runs `-m "not e2e and no
   ros   real rclpy nodes over real DDS in this process or a few child processes
   sim   PyBullet (FEM trials, the simulated cell's physics)
   e2e   whole cell or whole offline pipeline: several processes, tens of seconds to minutes
-A module may set `pytestmark = pytest.mark.<kind>`; otherwise the kind is derived from what the
-module uses (see `_kind_of`). Helpers shared between test modules live in test/support/ (a package;
-pytest puts test/ on sys.path because this conftest sits there, so no sys.path edits are needed).
+A module sets `pytestmark = pytest.mark.<kind>` or is listed in this file's kind table (UNIT_MODULES ...);
+a test's own kind marker wins. A test of a module in neither place fails, naming the table. Helpers shared
+between test modules live in test/support/ (a package; pytest puts test/ on sys.path because this conftest sits
+there, so no sys.path edits are needed).
 
 Timeout: every test phase (set-up, call, tear-down) is stopped after DEFGG_TEST_TIMEOUT_S seconds
 (default 300; e2e tests 900) or `@pytest.mark.timeout(seconds)`. pytest-timeout is not on the lock,
@@ -36,13 +37,62 @@ REPO_ROOT = TEST_ROOT.parent
 KINDS = ("unit", "ros", "sim", "e2e")
 DEFAULT_TIMEOUT_S = float(os.environ.get("DEFGG_TEST_TIMEOUT_S", "300"))
 E2E_TIMEOUT_S = max(DEFAULT_TIMEOUT_S, 900.0)
-# Whole-cell / whole-pipeline modules: kind e2e (minutes on a 2-core machine).
+# The kind of every test module that sets no `pytestmark` of its own (a test's own kind marker wins over both).
+# A module in neither place fails its tests with a message naming this table (test/foundation/test_test_kinds.py).
+UNIT_MODULES = {
+    "bringup/test_shared_parameters.py", "control/test_control_fingers_not_closed.py",
+    "control/test_control_fr3_limits.py", "control/test_control_pick_place.py",
+    "control/test_control_trajectories.py", "control/test_velocity_estimate.py", "data/test_augment.py",
+    "data/test_datagen.py", "data/test_dataset.py", "data/test_dataset_card_notes.py", "data/test_groundtruth.py",
+    "data/test_labels.py", "evaluation/test_diagnose.py", "evaluation/test_mini_eval.py",
+    "evaluation/test_ship_and_card.py", "evaluation/test_sources.py", "evaluation/test_tables.py",
+    "evaluation/test_tasks_and_store.py", "foundation/test_bench_help.py", "foundation/test_format_and_atomic.py",
+    "foundation/test_package.py", "grasping/test_contact_angle.py", "grasping/test_finger_clearance.py",
+    "grasping/test_grasping_geometry.py", "grasping/test_grasping_postprocess.py", "model/test_model_benches.py",
+    "model/test_model_checkpoint.py", "model/test_model_inference.py", "model/test_model_network.py",
+    "model/test_model_preprocess.py", "perception/test_depth_noise_low_objects.py", "perception/test_frame_worker.py",
+    "perception/test_grip_estimate.py", "perception/test_perception_grasp_planning.py",
+    "perception/test_perception_segmentation.py", "perception/test_perception_sync.py",
+    "perception/test_tabletop_kernels.py", "perception/test_tabletop_ranking.py",
+    "perception/test_tabletop_scenes.py", "perception/test_tabletop_shapes.py", "reliability/test_eval_kill.py",
+    "reliability/test_motion_safety_property.py", "reliability/test_trust_boundaries.py",
+    "sessions/test_replay_graph.py", "sessions/test_selector_frames.py", "sessions/test_sessions_bag.py",
+    "sessions/test_sessions_compare_report.py", "test_lint.py", "test_stiffness.py", "train/test_label_grip_rule.py",
+    "train/test_train_config.py", "train/test_train_ddp.py", "train/test_train_learning.py",
+    "train/test_train_resume.py", "train/test_retrain_pair.py",
+}
+ROS_MODULES = {
+    "bringup/test_bringup_supervision.py", "bringup/test_demo_helpers.py", "bringup/test_demo_place.py",
+    "bringup/test_node_set.py", "foundation/test_interfaces_roundtrip.py", "foundation/test_ros_executor.py",
+    "foundation/test_ros_service.py", "nodes/test_conversions.py", "nodes/test_executor_finish.py",
+    "nodes/test_executor_franka_inputs.py", "nodes/test_executor_messages.py", "nodes/test_executor_node.py",
+    "nodes/test_grasp_inference_cell.py", "nodes/test_grasp_inference_fuzz.py", "nodes/test_grasp_inference_node.py",
+    "nodes/test_grasp_inference_on_arrival.py", "nodes/test_segmentation_node.py", "nodes/test_table_frame.py",
+    "perception/test_plausibility_entries.py", "perception/test_self_filter.py", "reliability/test_pick_faults.py",
+    "reliability/test_plan_grasp_faults.py", "reliability/test_segmentation_faults.py",
+    "sessions/test_live_message.py", "sessions/test_replay_domain.py", "sessions/test_sessions_record.py",
+    "sessions/test_sessions_selector.py", "sim_cell/test_driver_node.py", "sim_cell/test_franka_contract.py",
+}
+SIM_MODULES = {
+    "control/test_control_gripper_rule.py", "control/test_control_kinematics.py",
+    "control/test_control_pick_in_cell.py", "control/test_tcp_closing_axis.py", "evaluation/test_ceiling.py",
+    "evaluation/test_eval_protocol.py", "evaluation/test_paired.py", "evaluation/test_planning_and_jobs.py",
+    "perception/test_perception_cell_render.py", "reliability/test_eval_trial_error.py",
+    "reliability/test_offline_faults.py", "sessions/test_sessions_scene_stiffness.py", "sim/test_camera.py",
+    "sim/test_objects.py", "sim/test_sampler.py", "sim/test_trial.py", "sim/test_trial_energy.py",
+    "sim_cell/test_cell.py", "sim_cell/test_grid_mesh.py", "sim_cell/test_gripper.py", "sim_cell/test_scene_spec.py",
+    "sim_cell/test_trajectory.py",
+}
+# Whole cell / whole pipeline: several processes, minutes on a 2-core machine.
 E2E_MODULES = {
     "test_demo.py",
     "nodes/test_executor_e2e.py",
     "sessions/test_sessions_replay.py",   # replays recorded sessions through the whole node graph
     "sessions/test_record_all.py",        # records a session with the committed recipe, then replays it
 }
+MODULE_KINDS = {module: kind for kind, modules in (("unit", UNIT_MODULES), ("ros", ROS_MODULES),
+                                                   ("sim", SIM_MODULES), ("e2e", E2E_MODULES))
+                for module in modules}
 # Not e2e, but too slow for `make check` (a test of several seconds each here); `make test` runs them.
 SLOW_MODULES = {
     "train/test_train_learning.py", "train/test_train_ddp.py", "train/test_train_resume.py",
@@ -58,10 +108,6 @@ SLOW_MODULES = {
     # a module's single slow test: "path::test name"
     "reliability/test_plan_grasp_faults.py::test_a_node_with_bad_start_up_files_or_parameters_exits_2_with_one_clear_line",
 }
-_ROS_FIXTURES = {"rclpy_context", "executor", "inference_service"}
-_ROS_SOURCE_HINTS = ("import rclpy", "from rclpy", "defgg_ros.nodes.", "defgg_ros.bringup.supervisor",
-                     "defgg_ros.ros", "Bringup(")
-_SIM_SOURCE_HINTS = ("pybullet", "defgg_ros.sim", "defgg_ros.evaluation.runner")
 
 
 def pytest_configure(config):
@@ -74,9 +120,6 @@ def pytest_configure(config):
         config.addinivalue_line("markers", f"{kind}: {what}")
 
 
-_module_kind_cache: dict = {}
-
-
 def _relative(path) -> str:
     try:
         return Path(path).resolve().relative_to(TEST_ROOT).as_posix()
@@ -84,31 +127,21 @@ def _relative(path) -> str:
         return Path(path).name
 
 
-def _kind_of(item) -> str:
-    """The test's kind from its module: listed e2e, else ros (rclpy fixtures or imports), else sim, else unit."""
-    relative = _relative(item.path)
-    if relative in E2E_MODULES:
-        return "e2e"
-    if _ROS_FIXTURES & set(getattr(item, "fixturenames", ())):
-        return "ros"
-    if relative not in _module_kind_cache:
-        source = Path(item.path).read_text(encoding="utf-8", errors="replace")
-        if any(hint in source for hint in _ROS_SOURCE_HINTS):
-            _module_kind_cache[relative] = "ros"
-        elif any(hint in source for hint in _SIM_SOURCE_HINTS):
-            _module_kind_cache[relative] = "sim"
-        else:
-            _module_kind_cache[relative] = "unit"
-    return _module_kind_cache[relative]
-
-
 def pytest_collection_modifyitems(config, items):
     for item in items:
-        if not any(item.get_closest_marker(kind) for kind in KINDS):
-            item.add_marker(getattr(pytest.mark, _kind_of(item)))
         relative = _relative(item.path)
+        if not any(item.get_closest_marker(kind) for kind in KINDS) and relative in MODULE_KINDS:
+            item.add_marker(getattr(pytest.mark, MODULE_KINDS[relative]))
         if relative in SLOW_MODULES or f"{relative}::{item.originalname}" in SLOW_MODULES:
             item.add_marker(pytest.mark.slow)
+
+
+@pytest.fixture(autouse=True)
+def _explicit_kind(request):
+    """Fails a test whose module has no kind: no `pytestmark`, not in the kind table, no marker of its own."""
+    if not any(request.node.get_closest_marker(kind) for kind in KINDS):
+        pytest.fail(f"{_relative(request.node.path)} has no test kind: set `pytestmark = pytest.mark.<kind>` "
+                    f"(one of {', '.join(KINDS)}) or list it in test/conftest.py's UNIT_MODULES ... E2E_MODULES")
 
 
 def _timeout_of(item) -> float:
