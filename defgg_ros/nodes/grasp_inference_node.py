@@ -47,7 +47,12 @@ from defgg_ros.nodes.conversions import (
 )
 from defgg_ros.nodes.node_main import run_node
 from defgg_ros.nodes.perceived_msg import is_empty, parts_from_msg
-from defgg_ros.perception.frame_worker import LatestFrameWorker, RecentValues, WorkerClosed
+from defgg_ros.perception.frame_worker import (
+    LatestFrameWorker,
+    RecentValues,
+    WorkerClosed,
+    keep_executor_responsive,
+)
 from defgg_ros.perception.grasp_planning import PlanningError, check_top_k, finger_boxes_in_grasp
 from defgg_ros.perception.sync import StampSynchronizer
 from defgg_ros.planning.grip_estimate import grip_estimate
@@ -135,6 +140,7 @@ class GraspInferenceNode(Node):
         super().__init__("grasp_inference_node", **kwargs)
         declare_parameters(self)  # a value outside its schema raises ParameterError here
         keep_freed_memory()       # frame-sized temporaries in worker threads: no page faults per frame
+        keep_executor_responsive()  # a PlanGrasp lookup is not held up by the preparation threads
         p = {name: self.get_parameter(name).value for name in PARAMETERS}
         self._p = p
         model_path = Path(p["model_path"]) if p["model_path"] else default_model_path(p["use_stiffness"])

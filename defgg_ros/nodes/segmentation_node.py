@@ -41,7 +41,7 @@ from defgg_ros.nodes.conversions import (
 from defgg_ros.nodes.node_main import run_node
 from defgg_ros.nodes.perceived_msg import perceived_to_msg
 from defgg_ros.perception.depth_noise import DepthNoiseModel
-from defgg_ros.perception.frame_worker import LatestFrameWorker, WorkerClosed
+from defgg_ros.perception.frame_worker import LatestFrameWorker, WorkerClosed, keep_executor_responsive
 from defgg_ros.perception.geometry import transform_from_list
 from defgg_ros.perception.self_filter import RobotSelfFilter
 from defgg_ros.perception.stiffness_assignment import check_entries_fit_image, make_entry
@@ -69,6 +69,7 @@ class SegmentationNode(Node):
     def __init__(self, **kwargs):
         super().__init__("segmentation_node", **kwargs)
         declare_parameters(self)  # a value outside its schema raises ParameterError here
+        keep_executor_responsive()  # the perception thread must not hold up the executor's depth callbacks
         self._lock = threading.Lock()
         self._captured_background = None  # from capture_background; a background_depth_file wins over it
         self._last_depth_m = None

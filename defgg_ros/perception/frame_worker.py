@@ -36,9 +36,21 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import functools
+import sys
 import threading
 import time
 from dataclasses import dataclass
+
+# The interpreter's switch interval in a node whose worker threads run Python-heavy perception or search beside
+# its executor: a thread that released the interpreter (a DDS wait, a take, a send) waits up to this long to get it
+# back from a busy worker, several times per service call. Python's default, 5 ms, made a PlanGrasp lookup of
+# 0.1 ms take tens of ms in the node under load (docs/perception.md, "Fresh answers under load").
+RESPONSIVE_SWITCH_INTERVAL_S = 0.0005
+
+
+def keep_executor_responsive() -> None:
+    """Shorten this process's interpreter switch interval (RESPONSIVE_SWITCH_INTERVAL_S); never lengthens it."""
+    sys.setswitchinterval(min(sys.getswitchinterval(), RESPONSIVE_SWITCH_INTERVAL_S))
 
 
 class WorkerClosed(RuntimeError):

@@ -102,10 +102,19 @@ def perceive_frame(depth_m, camera_k, base_T_camera, config: TabletopConfig, ent
 
 
 def _label_geometry(labels: np.ndarray, object_ids):
-    """label -> (x, y, w, h) box, label -> (u, v) centroid, label -> pixel count."""
+    """label -> (x, y, w, h) box, label -> (u, v) centroid, label -> pixel count.
+    One pass over the image (the labelled pixels grouped by a stable sort, so each label's pixels stay in raster
+    order and the centroids are bit for bit those of np.nonzero(labels == label)): a 1280x720 frame's eight
+    per-label scans took ~17 ms of perception's ~46."""
     boxes, centroids, pixels = {}, {}, {}
-    for label in object_ids:
-        vs, us = np.nonzero(labels == label)
+    index = np.flatnonzero(labels)
+    values = labels.reshape(-1)[index]
+    order = np.argsort(values, kind="stable")
+    index, values = index[order], values[order]
+    wanted = np.asarray(object_ids, values.dtype)
+    starts, ends = np.searchsorted(values, wanted, "left"), np.searchsorted(values, wanted, "right")
+    for label, start, end in zip(object_ids, starts, ends):
+        vs, us = np.divmod(index[start:end], labels.shape[1])
         if vs.size:
             boxes[int(label)] = (int(us.min()), int(vs.min()), int(us.max() - us.min() + 1),
                                  int(vs.max() - vs.min() + 1))
