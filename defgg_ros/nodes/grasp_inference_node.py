@@ -149,6 +149,8 @@ class GraspInferenceNode(Node):
             raise ValueError(f"{model_path} is a {'depth+stiffness' if self.predictor.uses_stiffness else 'depth-only'}"
                              f" network but use_stiffness is {p['use_stiffness']}")
         self._grip_rule = self._label_grip_rule(model_path)
+        self._grasp_rule = {"grasp_height_rule": p["grasp_height_rule"],
+                            "grasp_depth_below_surface_m": float(p["grasp_depth_below_surface_m"])}
         self._planner = TabletopPlanner(self.predictor, default_youngs_modulus_pa=REBUILT_DEFAULT_PA)
         self._max_image_size_px = tuple(int(v) for v in p["max_image_size_px"])
         self._state_lock = threading.Lock()
@@ -238,7 +240,7 @@ class GraspInferenceNode(Node):
         if not parts.objects:
             raise PlanningError("no object found above the table in the workspace box (the segmentation node "
                                 "perceived none)")
-        view = view_from_parts(parts, depth_m, camera_k)
+        view = view_from_parts(parts, depth_m, camera_k, **self._grasp_rule)
         objects = PlannerObjects(view, None, moduli_image(parts, depth_m.shape), None)
         return Frame(depth.header, camera_k, objects, perceived.base_frame)
 

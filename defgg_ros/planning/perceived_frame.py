@@ -141,8 +141,11 @@ def check_parts_fit(parts: PerceivedParts, depth_shape) -> None:
         raise ValueError(f"the perceived height map's cells are {parts.cell_m} m; this planner's are {CELL_M} m")
 
 
-def view_from_parts(parts: PerceivedParts, depth_m, camera_k) -> TabletopView:
-    """The TabletopView planning reads, rebuilt from a perceived frame and its depth (no perception)."""
+def view_from_parts(parts: PerceivedParts, depth_m, camera_k, grasp_height_rule: str = "half_height",
+                    grasp_depth_below_surface_m: float = 0.018) -> TabletopView:
+    """The TabletopView planning reads, rebuilt from a perceived frame and its depth (no perception).
+    grasp_height_rule, grasp_depth_below_surface_m: the executor's (the grasp search puts the fingertips where
+    the executor will; PerceivedObjects does not carry them: the inference node's parameters)."""
     full = np.asarray(depth_m, np.float32)
     check_parts_fit(parts, full.shape)
     k_full = check_camera_matrix(camera_k)
@@ -159,19 +162,22 @@ def view_from_parts(parts: PerceivedParts, depth_m, camera_k) -> TabletopView:
                         processed_labels, pixel_cell, parts.grid_origin_xy_m, parts.grid_height_m,
                         parts.grid_labels, parts.grid_pixel, parts.object_ids,
                         {o.label: o.area_m2 for o in parts.objects}, full, depth, k)
-    return _with_planning_inputs(view, parts, height)
+    config = config_of(parts, grasp_height_rule, grasp_depth_below_surface_m)
+    return _with_planning_inputs(view, parts, height, config)
 
 
-def config_of(parts: PerceivedParts) -> TabletopConfig:
-    """The TabletopConfig fields planning reads (the workspace box, the depth noise) as perception had them."""
+def config_of(parts: PerceivedParts, grasp_height_rule: str = "half_height",
+              grasp_depth_below_surface_m: float = 0.018) -> TabletopConfig:
+    """The TabletopConfig fields planning reads: the workspace box and the depth noise as perception had them,
+    the executor's grasp height rule (ValueError for an unknown rule)."""
     x0, x1, y0, y1 = parts.workspace_box_m
     workspace = WorkspaceBox((x0, x1), (y0, y1), *parts.object_height_range_m)
-    noise = DepthNoiseModel(*parts.depth_noise)
-    names = {f.name for f in dataclasses.fields(TabletopConfig)}
-    return TabletopConfig(workspace=workspace, **({"depth_noise": noise} if "depth_noise" in names else {}))
+    return TabletopConfig(workspace=workspace, depth_noise=DepthNoiseModel(*parts.depth_noise),
+                          grasp_height_rule=grasp_height_rule,
+                          grasp_depth_below_surface_m=float(grasp_depth_below_surface_m))
 
 
-def _with_planning_inputs(view: TabletopView, parts: PerceivedParts, height) -> TabletopView:
+def _with_planning_inputs(view: TabletopView, parts: PerceivedParts, height, config: TabletopConfig) -> TabletopView:
     """The view's fields for the free-space test and the workspace check, where this TabletopView has them:
     the table plane's depth at the pixels read as table, the depth noise, the configuration."""
     names = {f.name for f in dataclasses.fields(TabletopView)}
@@ -181,7 +187,7 @@ def _with_planning_inputs(view: TabletopView, parts: PerceivedParts, height) -> 
     if "depth_noise" in names:
         extra["depth_noise"] = DepthNoiseModel(*parts.depth_noise)
     if "config" in names:
-        extra["config"] = config_of(parts)
+        extra["config"] = config
     return dataclasses.replace(view, **extra) if extra else view
 
 

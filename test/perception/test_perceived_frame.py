@@ -84,3 +84,25 @@ def test_parts_that_do_not_fit_the_depth_are_refused():
     stray = dataclasses.replace(parts, grid_labels=np.full_like(parts.grid_labels, 200))
     with pytest.raises(ValueError, match="labels \\[200\\]"):
         check_parts_fit(stray, frame.depth_m.shape)
+
+
+def test_the_rebuilt_view_plans_with_the_executors_grasp_height_rule():
+    """PerceivedObjects does not carry the executor's grasp height rule: the inference node passes its own
+    (grasp_height_rule, grasp_depth_below_surface_m) and the grasps are those of perception's own view under
+    that rule. The cluttered table's grasps differ between the rules (fingertips 5 mm under the top reach
+    objects half_height finds too wide or blocked)."""
+    frame = SCENES["cluttered 640x480"]
+    below = TabletopConfig(grasp_height_rule="below_surface", grasp_depth_below_surface_m=0.005)
+    parts, view, image = perceive_frame(frame.depth_m, frame.camera_k, frame.base_T_camera, below)
+    expected = search_tabletop(prepare_tabletop(view, MODEL, image, 2e6), 5)
+    moduli = moduli_image(parts, frame.depth_m.shape)
+    rebuilt = view_from_parts(parts, frame.depth_m, frame.camera_k, "below_surface", 0.005)
+    assert rebuilt.config.grasp_height_rule == "below_surface"
+    assert rebuilt.config.grasp_depth_below_surface_m == 0.005
+    after = search_tabletop(prepare_tabletop(rebuilt, MODEL, moduli, 2e6), 5)
+    assert [_grasp_tuple(g) for g in after.grasps] == [_grasp_tuple(g) for g in expected.grasps]
+    half = view_from_parts(parts, frame.depth_m, frame.camera_k)
+    other = search_tabletop(prepare_tabletop(half, MODEL, moduli, 2e6), 5)
+    assert [_grasp_tuple(g) for g in other.grasps] != [_grasp_tuple(g) for g in expected.grasps]
+    with pytest.raises(ValueError, match="grasp_height_rule"):
+        view_from_parts(parts, frame.depth_m, frame.camera_k, "middle")
