@@ -1,11 +1,13 @@
-"""Layers point down: a walk of defgg_ros's import graph (every import statement, also those inside
-functions) fails on an import cycle, between packages or between modules, and on a core package
-importing rclpy or a layer above the cores (the ROS plumbing, nodes, bringup, sessions, the demo).
+"""Layers point down, as the table below says: a walk of defgg_ros's import graph (every import statement, also
+those inside functions) fails on an import between two packages that MAY_IMPORT does not list, on a package the
+table does not place, on a cycle in the table itself, on an import cycle between packages or between modules,
+and on a core package or a root module importing rclpy.
 
-Cores: model, grasping, perception, control, sim, data, planning (the tabletop planner that combines
-grasping, control, perception and model). Above them: train, evaluation (offline),
-ros (rclpy helpers), nodes (thin adapters), bringup, sessions, demo. Below them: the root modules
-(constants, errors, stiffness, grip_force, rotations, atomic).
+The layers, bottom up: the root modules (constants, errors, rotations, atomic, cli_help, stiffness, grip_force,
+squeeze; every package may import them); the cores, no rclpy (grasping, control, perception, model, sim, data,
+planning); offline above them (train, evaluation); the ROS side (ros: rclpy helpers and names; nodes: thin
+adapters; bringup: the process launcher; sessions: record/replay; demo). A package added to defgg_ros fails here
+until it has a row.
 """
 import ast
 from pathlib import Path
@@ -15,10 +17,32 @@ import pytest
 pytestmark = pytest.mark.unit
 
 PACKAGE_DIR = Path(__file__).resolve().parents[2] / "defgg_ros"
+ROOT_MODULES = {"constants", "errors", "rotations", "atomic", "cli_help", "stiffness", "grip_force", "squeeze"}
 CORES = ("model", "grasping", "perception", "control", "sim", "data", "planning")
-ABOVE_CORES = ("ros", "nodes", "bringup", "sessions", "demo", "train", "evaluation")
 ROS_MODULES = ("rclpy", "rosidl_runtime_py", "rosbag2_py")
-
+# Which package may import which (besides the root modules). Read a row as "<package> stands on these".
+MAY_IMPORT = {
+    # root modules among themselves
+    "__init__": set(), "constants": set(), "errors": set(), "rotations": set(), "atomic": set(), "cli_help": set(),
+    "stiffness": {"constants"}, "grip_force": {"constants"}, "squeeze": {"constants"},
+    # cores
+    "grasping": set(),
+    "control": {"grasping"},
+    "perception": {"control"},                       # the self filter needs the arm's kinematics
+    "model": {"grasping", "perception"},              # inference ranks grasps, checks plausibility
+    "sim": {"grasping", "control"},                   # control: the in-process pick (leaves with issue 50 item 3)
+    "data": {"grasping", "model", "sim"},             # the generator runs trials; the dataset reads model inputs
+    "planning": {"grasping", "control", "perception", "model"},
+    # offline
+    "train": {"grasping", "model", "data"},
+    "evaluation": {"grasping", "model", "sim", "data", "ros", "bringup", "demo"},  # the cell experiment runs the cell
+    # the ROS side
+    "ros": {"perception"},                            # tf: the table pose and frame geometry
+    "nodes": {"grasping", "control", "perception", "model", "sim", "planning", "ros"},
+    "bringup": {"control", "perception", "sim", "ros", "nodes"},
+    "sessions": {"perception", "model", "sim", "ros", "nodes", "bringup"},
+    "demo": {"control", "perception", "model", "sim", "ros", "nodes", "bringup"},
+}
 
 def _module_name(path: Path) -> str:
     parts = list(path.relative_to(PACKAGE_DIR.parent).with_suffix("").parts)
@@ -119,14 +143,45 @@ def test_the_walk_sees_the_package():
     assert _cycles({"a": {"b"}, "b": {"a"}, "c": {"a"}}) == [frozenset({"a", "b"})]
 
 
-def test_cores_import_neither_rclpy_nor_a_layer_above_them():
+def forbidden_imports(imports: dict) -> list:
+    """'a imports b' for every import between two packages that MAY_IMPORT does not allow."""
     bad = []
-    for module, imported in sorted(IMPORTS.items()):
-        if _package(module) not in CORES:
-            continue
+    for module, imported in sorted(imports.items()):
+        package = _package(module)
+        allowed = MAY_IMPORT.get(package, set()) | (ROOT_MODULES if package not in ROOT_MODULES else set())
         for other in sorted(imported):
-            if other.split(".")[0] in ROS_MODULES or (other in MODULES and _package(other) in ABOVE_CORES):
-                bad.append(f"{module} imports {other}")
+            if other in MODULES and _package(other) != package and _package(other) not in allowed:
+                bad.append(f"{module} ({package}) imports {other} ({_package(other)})")
+    return bad
+
+
+def test_every_package_has_a_row_and_every_row_a_package():
+    packages = {_package(module) for module in MODULES}
+    assert packages == set(MAY_IMPORT), (f"not in MAY_IMPORT: {sorted(packages - set(MAY_IMPORT))}; "
+                                         f"no such package: {sorted(set(MAY_IMPORT) - packages)}")
+
+
+def test_the_table_is_a_layering():
+    table = {package: set(allowed) | (ROOT_MODULES if package not in ROOT_MODULES else set())
+             for package, allowed in MAY_IMPORT.items()}
+    assert not _cycles(table), f"MAY_IMPORT has a cycle: {[sorted(c) for c in _cycles(table)]}"
+
+
+def test_every_import_between_packages_is_in_the_table():
+    bad = forbidden_imports(IMPORTS)
+    assert not bad, "imports MAY_IMPORT does not allow:\n" + "\n".join(bad)
+
+
+def test_an_adapter_importing_a_sibling_adapter_is_caught():
+    assert forbidden_imports({"defgg_ros.nodes.executor_node": {"defgg_ros.bringup.supervisor"}})
+    assert forbidden_imports({"defgg_ros.grasping.geometry": {"defgg_ros.model.inference"}})
+    assert not forbidden_imports({"defgg_ros.nodes.executor_node": {"defgg_ros.ros.topics", "defgg_ros.constants"}})
+
+
+def test_cores_and_root_modules_do_not_import_rclpy():
+    bad = [f"{module} imports {other}" for module, imported in sorted(IMPORTS.items())
+           if _package(module) in CORES or _package(module) in ROOT_MODULES
+           for other in sorted(imported) if other.split(".")[0] in ROS_MODULES]
     assert not bad, "\n".join(bad)
 
 
