@@ -1,0 +1,181 @@
+"""The cell experiment's report (issue 49 item 3): per-object success per stiffness input, the paper's figure,
+and the paired comparison of the correct input against each wrong one.
+
+Pairs: pick i of an object meets the same pose under every case, so "correct" and "rigid" (or "soft") pair up by
+(object, pick). Only the discordant pairs (one case picked it, the other not) say which input is better; the
+exact sign test on them is McNemar's exact test. The margin's 95 % interval is a bootstrap over **objects**
+(an object's picks share its shape: they are not independent draws), resampling objects with replacement and
+pooling their pairs.
+"""
+from __future__ import annotations
+
+import random
+from dataclasses import dataclass
+from pathlib import Path
+
+from defgg_ros.atomic import read_jsonl, write_text_atomic
+from defgg_ros.evaluation.cell_experiment import CASES, OBJECTS, RECORDS_NAME, outcomes
+from defgg_ros.evaluation.paired import Paired, sign_test_p
+
+BOOTSTRAP_RESAMPLES = 2000
+BOOTSTRAP_SEED = 0
+FIGURE_NAME, REPORT_NAME = "per_object.png", "report.md"
+
+
+def success_table(records) -> dict:
+    """object -> case -> [successes, picks] over the picks with an outcome."""
+    table = {}
+    for r in outcomes(records).values():
+        cell = table.setdefault(r["object"], {}).setdefault(r["case"], [0, 0])
+        cell[0] += bool(r["success"])
+        cell[1] += 1
+    return table
+
+
+def paired_by_object(records, case_a: str, case_b: str) -> dict:
+    """object -> [(a succeeded, b succeeded)] over the picks both cases have an outcome for."""
+    by_key = {(r["object"], r["pick"], r["case"]): bool(r["success"]) for r in outcomes(records).values()}
+    out = {}
+    for (name, pick, case), a in sorted(by_key.items()):
+        if case == case_a and (name, pick, case_b) in by_key:
+            out.setdefault(name, []).append((a, by_key[(name, pick, case_b)]))
+    return out
+
+
+def count_pairs(pairs) -> Paired:
+    c = {"both": 0, "a_only": 0, "b_only": 0, "neither": 0}
+    for a, b in pairs:
+        c["both" if a and b else "a_only" if a else "b_only" if b else "neither"] += 1
+    return Paired(**c)
+
+
+def bootstrap_margin_ci(by_object: dict, resamples: int = BOOTSTRAP_RESAMPLES, seed: int = BOOTSTRAP_SEED):
+    """95 % percentile interval (points) of the pooled paired margin, resampling objects; None without pairs."""
+    names = sorted(n for n, pairs in by_object.items() if pairs)
+    if not names:
+        return None
+    rng = random.Random(seed)
+    margins = []
+    for _ in range(resamples):
+        drawn = [rng.choice(names) for _ in names]
+        margins.append(count_pairs([p for n in drawn for p in by_object[n]]).margin_pts)
+    margins.sort()
+    return margins[int(0.025 * (resamples - 1))], margins[int(round(0.975 * (resamples - 1)))]
+
+
+@dataclass(frozen=True)
+class Comparison:
+    case_a: str
+    case_b: str
+    counts: Paired
+    interval_pts: tuple | None
+    objects: int
+
+    @property
+    def p_value(self) -> float:
+        return sign_test_p(self.counts.a_only, self.counts.b_only)
+
+
+def compare(records, case_a: str, case_b: str, only=None) -> Comparison:
+    """case_a vs case_b over every object (or the names in `only`)."""
+    by_object = {n: p for n, p in paired_by_object(records, case_a, case_b).items() if only is None or n in only}
+    pairs = [p for ps in by_object.values() for p in ps]
+    return Comparison(case_a, case_b, count_pairs(pairs), bootstrap_margin_ci(by_object), len(by_object))
+
+
+def _pct(cell) -> str:
+    return "–" if not cell or not cell[1] else f"{100 * cell[0] / cell[1]:.0f} % ({cell[0]}/{cell[1]})"
+
+
+def _ci(interval) -> str:
+    return "–" if interval is None else f"[{interval[0]:+.1f}, {interval[1]:+.1f}]"
+
+
+def per_object_figure(table: dict, path: Path, cases=CASES) -> None:
+    """The paper's figure: success rate per object, one bar per stiffness input, the average in the last column."""
+    from defgg_ros.evaluation.figures import _save, plt
+
+    names = [o.name for o in OBJECTS if o.name in table]
+    columns = names + ["average"]
+    fig, ax = plt.subplots(figsize=(max(6.0, 0.62 * len(columns) * len(cases) / 1.5), 3.8))
+    width = 0.8 / len(cases)
+    labels = {"correct": "correct E", "rigid": "all assumed rigid", "soft": "all assumed soft",
+              "measured": "measured E (squeeze)"}
+    for k, case in enumerate(cases):
+        rates = []
+        for name in names:
+            s, n = table[name].get(case, [0, 0])
+            rates.append(100.0 * s / n if n else float("nan"))
+        done = [table[n].get(case, [0, 0]) for n in names]
+        total = sum(c[1] for c in done)
+        rates.append(100.0 * sum(c[0] for c in done) / total if total else float("nan"))
+        ax.bar([i + (k - (len(cases) - 1) / 2) * width for i in range(len(columns))], rates, width,
+               label=labels.get(case, case))
+    ax.set_xticks(range(len(columns)))
+    ax.set_xticklabels([f"{i + 1}\n{n.replace('common_', '').replace('egad_test_', 'egad ')}" if n != "average"
+                        else "avg" for i, n in enumerate(columns)], fontsize=7, rotation=60)
+    ax.set_ylabel("grasp success rate per object [%]")
+    ax.set_ylim(0, 105)
+    ax.grid(True, axis="y", linestyle="--", alpha=0.5)
+    ax.legend(fontsize=8, ncol=len(cases), loc="upper center", bbox_to_anchor=(0.5, 1.18))
+    _save(fig, path)
+
+
+def _comparison_rows(records, cases) -> list:
+    soft = {o.name for o in OBJECTS if o.soft}
+    stiff = {o.name for o in OBJECTS if not o.soft}
+    rows = []
+    for other in [c for c in cases if c != "correct"]:
+        for scope, only in (("all", None), ("soft objects", soft), ("stiff objects", stiff)):
+            c = compare(records, "correct", other, only)
+            margin = "–" if c.counts.margin_pts is None else f"{c.counts.margin_pts:+.1f}"
+            rows.append(f"| correct vs {other} | {scope} | {c.objects} | {c.counts.pairs} | {c.counts.a_only} / "
+                        f"{c.counts.b_only} | {margin} | {_ci(c.interval_pts)} | {c.p_value:.3g} |")
+    return rows
+
+
+def report_markdown(records, planned_picks: int | None = None) -> str:
+    table = success_table(records)
+    cases = [c for c in (*CASES, "measured") if any(c in v for v in table.values())]
+    done = len(outcomes(records))
+    errors = sum(1 for r in records if r.get("cell_error"))
+    planned = (planned_picks or max((r["pick"] + 1 for r in records), default=0)) * len(OBJECTS) * len(cases)
+    walls = sorted(r["wall_s"] for r in outcomes(records).values() if r.get("wall_s"))
+    lines = [f"Picks with an outcome: **{done} of {planned}** planned ({len(OBJECTS)} objects × {len(cases)} "
+             f"cases × {planned_picks or '?'} picks); cell failures recorded (retried): {errors}.",
+             f"Wall time per pick (bring-up, plan, pick, settle, tear-down): median "
+             f"{walls[len(walls) // 2]:.0f} s, max {walls[-1]:.0f} s." if walls else "", "",
+             "| # | object | E (Pa) | " + " | ".join(cases) + " |",
+             "|---|---|---|" + "---|" * len(cases)]
+    for i, obj in enumerate(OBJECTS):
+        if obj.name in table:
+            lines.append(f"| {i + 1} | {obj.name} | {obj.youngs_modulus_pa:.0e} | "
+                         + " | ".join(_pct(table[obj.name].get(c)) for c in cases) + " |")
+    totals = {c: [sum(v.get(c, [0, 0])[0] for v in table.values()), sum(v.get(c, [0, 0])[1] for v in table.values())]
+              for c in cases}
+    lines.append("| | **all** | | " + " | ".join(_pct(totals[c]) for c in cases) + " |")
+    lines += ["", "Paired comparison (pairs = the same object at the same pose; margin = success rate of the "
+                  "correct input minus the other's, points; 95 % bootstrap interval over objects; exact sign "
+                  "test (McNemar) on the discordant pairs):", "",
+              "| comparison | objects | n objects | pairs | correct only / other only | margin (pts) | 95 % CI | p |",
+              "|---|---|---|---|---|---|---|---|", *_comparison_rows(records, cases)]
+    return "\n".join(lines) + "\n"
+
+
+def write_report(out: Path, planned_picks: int | None = None) -> str:
+    """OUT/per_object.png and the results part of OUT/report.md (between the markers; the rest is kept)."""
+    records = read_jsonl(Path(out) / RECORDS_NAME)
+    table = success_table(records)
+    if table:
+        per_object_figure(table, Path(out) / FIGURE_NAME,
+                          [c for c in (*CASES, "measured") if any(c in v for v in table.values())])
+    body = report_markdown(records, planned_picks)
+    path = Path(out) / REPORT_NAME
+    text = path.read_text(encoding="utf-8") if path.exists() else ""
+    begin, end = "<!-- results: defgg-cell-experiment report -->", "<!-- end of results -->"
+    if begin in text and end in text:
+        text = text.split(begin)[0] + begin + "\n" + body + end + text.split(end, 1)[1]
+    else:
+        text = text + ("\n" if text else "") + begin + "\n" + body + end + "\n"
+    write_text_atomic(path, text)
+    return body

@@ -1,0 +1,155 @@
+"""The cell experiment (issue 49 item 3): its plan (paired poses, cases, evaluation objects only), its records'
+resume rule, its statistics (paired margin, bootstrap over objects, sign test) and its report; one real pick
+through the node graph (e2e) with a restart that must not pick again."""
+import json
+import math
+
+import pytest
+
+from defgg_ros.evaluation import cell_experiment as ce
+from defgg_ros.evaluation import cell_report as cr
+
+pytestmark = pytest.mark.unit
+
+
+def pick(obj, case, index, success, **extra):
+    return {"key": ce.pick_key(obj, case, index), "object": obj, "case": case, "pick": index, "success": success,
+            "wall_s": 30.0, **extra}
+
+
+def test_every_object_is_an_evaluation_object_with_seven_soft_and_seven_stiff():
+    from defgg_ros.sim import objects as sim_objects
+
+    sets = {sim_objects.get_shape(o.name).set_name for o in ce.OBJECTS}
+    assert sets <= {"common", "adversarial"}
+    assert len({o.name for o in ce.OBJECTS}) == 14
+    soft = [o.youngs_modulus_pa for o in ce.OBJECTS if o.soft]
+    stiff = [o.youngs_modulus_pa for o in ce.OBJECTS if not o.soft]
+    assert len(soft) == 7 and all(2e4 <= e <= 2e5 for e in soft)
+    assert len(stiff) == 7 and all(2e6 <= e <= 2e9 for e in stiff)
+
+
+def test_a_training_object_is_refused():
+    with pytest.raises(ValueError, match="evaluation objects only"):
+        ce.scene_object(ce.CellObject("cube", "train", 2e9), ce.pick_pose(0, "cube", 0), "unused")
+
+
+def test_the_cases_tell_the_segmentation_node_the_true_a_rigid_or_a_soft_modulus():
+    obj = ce.CellObject("common_ball", "common", 2e5)
+    assert [ce.input_modulus_pa(c, obj) for c in ce.CASES] == [2e5, 2e9, 2e4]
+    with pytest.raises(ValueError, match="unknown case"):
+        ce.input_modulus_pa("medium", obj)
+
+
+def test_poses_are_seeded_per_object_and_pick_and_stay_on_the_camera_centre():
+    a = ce.pick_pose(0, "common_ball", 3)
+    assert a == ce.pick_pose(0, "common_ball", 3)          # the same pose for every case: paired
+    assert a != ce.pick_pose(0, "common_ball", 4) and a != ce.pick_pose(1, "common_ball", 3)
+    for i in range(20):
+        p = ce.pick_pose(0, "common_pear", i)
+        assert abs(p["x_m"] - ce.CENTRE_XY_M[0]) <= ce.MAX_OFFSET_M and abs(p["y_m"]) <= ce.MAX_OFFSET_M
+        assert 0 <= p["yaw_rad"] < math.pi
+
+
+def test_the_order_is_pick_major_so_a_stopped_run_holds_complete_pairs():
+    objects = ce.OBJECTS[:2]
+    plan = ce.planned_picks(objects, ce.CASES, 2)
+    assert len(plan) == 12
+    first = plan[:6]
+    assert {i for _, _, i in first} == {0} and {(o.name, c) for o, c, _ in first} == {
+        (o.name, c) for o in objects for c in ce.CASES}
+    order = ce.run_order(ce.OBJECTS)
+    assert sorted(o.name for o in order) == sorted(o.name for o in ce.OBJECTS)
+    assert [o.soft for o in order] == [True, False] * 7      # a round stopped early holds both kinds
+
+
+def test_resume_skips_outcomes_and_retries_a_failed_cell_at_most_twice():
+    records = [pick("a", "correct", 0, True),
+               {"key": ce.pick_key("a", "rigid", 0), "cell_error": "CellCallError: timed out"},
+               {"key": ce.pick_key("a", "soft", 0), "cell_error": "BringupError: died"},
+               {"key": ce.pick_key("a", "soft", 0), "cell_error": "BringupError: died"}]
+    done = ce.finished_keys(records)
+    assert ce.pick_key("a", "correct", 0) in done
+    assert ce.pick_key("a", "rigid", 0) not in done       # one failure: tried again
+    assert ce.pick_key("a", "soft", 0) in done            # two: given up
+    assert set(ce.outcomes(records)) == {ce.pick_key("a", "correct", 0)}
+    assert ce.is_cell_failure("driver silent: no joint states for 2.0 s (watchdog 2.0 s)")
+    assert not ce.is_cell_failure("the object slipped out of the fingers in transfer")
+
+
+def test_sign_test_and_paired_margin_over_picks():
+    # 3 objects x 4 picks: correct wins 5 discordant pairs, rigid 1.
+    records = []
+    wins = {"x": (2, 0), "y": (2, 1), "z": (1, 0)}
+    for obj, (a_only, b_only) in wins.items():
+        for i in range(4):
+            a = i < a_only or i == 3
+            b = (a_only <= i < a_only + b_only) or i == 3
+            records += [pick(obj, "correct", i, a), pick(obj, "rigid", i, b)]
+    c = cr.compare(records, "correct", "rigid")
+    assert (c.counts.a_only, c.counts.b_only, c.counts.both, c.counts.pairs) == (5, 1, 3, 12)
+    assert c.counts.margin_pts == pytest.approx(100 * 4 / 12)
+    assert c.p_value == pytest.approx(2 * (1 + 6) / 2**6)     # exact two-sided: 0.21875
+    lo, hi = c.interval_pts
+    assert lo <= c.counts.margin_pts <= hi and lo >= 100 * 1 / 4 - 1e-9 and hi <= 50.0 + 1e-9
+
+
+def test_the_bootstrap_resamples_objects_not_picks():
+    # One object decides everything: resampling objects must give an interval that reaches 0 (the draws without
+    # it), which resampling the 20 pairs independently would not.
+    by_object = {"big": [(True, False)] * 10, "a": [(True, True)] * 5, "b": [(False, False)] * 5}
+    lo, hi = cr.bootstrap_margin_ci(by_object)
+    assert lo == pytest.approx(0.0) and hi >= 80.0     # pooled margin 50 points; 0 when "big" is not drawn
+    assert cr.bootstrap_margin_ci({}) is None
+
+
+def test_unpaired_picks_are_left_out_of_the_comparison():
+    records = [pick("a", "correct", 0, True), pick("a", "correct", 1, True), pick("a", "soft", 0, False)]
+    c = cr.compare(records, "correct", "soft")
+    assert c.counts.pairs == 1 and c.counts.a_only == 1
+
+
+def test_report_tables_figure_and_text_outside_the_markers_is_kept(tmp_path):
+    from defgg_ros.atomic import append_jsonl
+
+    for obj in ("common_sponge", "egad_test_00_c1"):
+        for case, ok in (("correct", True), ("rigid", False), ("soft", obj == "egad_test_00_c1")):
+            append_jsonl(tmp_path / ce.RECORDS_NAME, pick(obj, case, 0, ok))
+    append_jsonl(tmp_path / ce.RECORDS_NAME, {"key": ce.pick_key("common_ball", "correct", 0), "cell_error": "x"})
+    (tmp_path / cr.REPORT_NAME).write_text("# Cell experiment\n\nprotocol text\n", encoding="utf-8")
+    body = cr.write_report(tmp_path, planned_picks=5)
+    text = (tmp_path / cr.REPORT_NAME).read_text(encoding="utf-8")
+    assert text.startswith("# Cell experiment\n\nprotocol text\n") and body in text
+    assert "**6 of 210** planned" in body and "cell failures recorded (retried): 1" in body
+    assert "| 1 | common_sponge | 2e+04 | 100 % (1/1) | 0 % (0/1) | 0 % (0/1) |" in body
+    assert "| correct vs rigid | all | 2 | 2 | 2 / 0 | +100.0 |" in body
+    assert (tmp_path / cr.FIGURE_NAME).stat().st_size > 1000
+    cr.write_report(tmp_path, planned_picks=5)     # rewriting replaces the results, not appends them
+    assert (tmp_path / cr.REPORT_NAME).read_text(encoding="utf-8").count("| correct vs rigid | all |") == 1
+
+
+def test_cli_refuses_unknown_objects_and_cases(capsys):
+    assert ce.main(["run", "--out", "unused", "--objects", "cube"]) == 2
+    assert "not objects of the experiment" in capsys.readouterr().err
+    assert ce.main(["run", "--out", "unused", "--cases", "correct,medium"]) == 2
+    assert "unknown case" in capsys.readouterr().err
+
+
+@pytest.mark.e2e
+def test_one_real_pick_is_recorded_and_a_restart_does_not_pick_again(tmp_path):
+    """A rigid evaluation object, the correct input, one pick through the whole node graph; then the same run
+    again, which must find the pick done; then the report."""
+    from defgg_ros.ros.share import share_path
+
+    out, work = tmp_path / "out", tmp_path / "work"
+    objects = [o for o in ce.OBJECTS if o.name == "egad_test_00_c1"]
+    model = share_path("models", "defgg_cnn.pt")
+    assert ce.run(out, work, model, 1, 0, objects, ["correct"], progress=False) == 1
+    (record,) = [json.loads(line) for line in (out / ce.RECORDS_NAME).read_text().splitlines()]
+    assert not record.get("cell_error"), record
+    assert record["key"] == "egad_test_00_c1|correct|0" and record["input_youngs_modulus_pa"] == 2e9
+    assert record["perceived_moduli_pa"] == [2e9]      # the segmentation node used the SetStiffness default
+    assert isinstance(record["success"], bool) and record["success"] == (
+        record["held_after_transfer"] and record["in_bin"])
+    assert ce.run(out, work, model, 1, 0, objects, ["correct"], progress=False) == 0
+    assert "**1 of" in cr.write_report(out, planned_picks=1)
