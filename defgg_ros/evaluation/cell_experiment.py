@@ -33,10 +33,9 @@ from pathlib import Path
 from defgg_ros.atomic import append_jsonl, read_jsonl
 from defgg_ros.cli_help import HelpFormatter
 from defgg_ros.constants import OBJECT_DENSITY_KG_M3, TRAINING_YOUNGS_MODULI_PA
+from defgg_ros.evaluation.cell_report import CASES, RECORDS_NAME, write_report
 
 RIGID_PA, SOFT_PA = max(TRAINING_YOUNGS_MODULI_PA), min(TRAINING_YOUNGS_MODULI_PA)
-CASES = ("correct", "rigid", "soft")
-RECORDS_NAME = "records.jsonl"
 MAX_ATTEMPTS = 2
 # The executor's words for "no joint states / an input silent" (wall clock): the simulator, not the grasp.
 CELL_FAILURE_PREFIXES = ("driver silent", "no joint states", "no external wrench")
@@ -132,11 +131,6 @@ def finished_keys(records) -> set:
         else:
             done.add(r["key"])
     return done | {k for k, n in errors.items() if n >= MAX_ATTEMPTS}
-
-
-def outcomes(records) -> dict:
-    """key -> the pick's record with an outcome (the last one if a key was recorded twice)."""
-    return {r["key"]: r for r in records if not r.get("cell_error")}
 
 
 # ---- the cell's objects ---------------------------------------------------------------------------------------
@@ -274,9 +268,7 @@ def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     try:
         if args.command == "report":
-            from defgg_ros.evaluation.cell_report import write_report
-
-            print(write_report(Path(args.out), args.picks))
+            print(write_report(Path(args.out), OBJECTS, args.picks))
             return 0
         if args.picks < 1:
             raise ValueError(f"--picks must be >= 1, got {args.picks}")

@@ -14,12 +14,18 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from defgg_ros.atomic import read_jsonl, write_text_atomic
-from defgg_ros.evaluation.cell_experiment import CASES, OBJECTS, RECORDS_NAME, outcomes
 from defgg_ros.evaluation.paired import Paired, sign_test_p
 
+CASES = ("correct", "rigid", "soft")
+RECORDS_NAME = "records.jsonl"
 BOOTSTRAP_RESAMPLES = 2000
 BOOTSTRAP_SEED = 0
 FIGURE_NAME, REPORT_NAME = "per_object.png", "report.md"
+
+
+def outcomes(records) -> dict:
+    """key -> the pick's record with an outcome (the last one if a key was recorded twice)."""
+    return {r["key"]: r for r in records if not r.get("cell_error")}
 
 
 def success_table(records) -> dict:
@@ -91,11 +97,11 @@ def _ci(interval) -> str:
     return "–" if interval is None else f"[{interval[0]:+.1f}, {interval[1]:+.1f}]"
 
 
-def per_object_figure(table: dict, path: Path, cases=CASES) -> None:
+def per_object_figure(table: dict, objects, path: Path, cases=CASES) -> None:
     """The paper's figure: success rate per object, one bar per stiffness input, the average in the last column."""
     from defgg_ros.evaluation.figures import _save, plt
 
-    names = [o.name for o in OBJECTS if o.name in table]
+    names = [o.name for o in objects if o.name in table]
     columns = names + ["average"]
     fig, ax = plt.subplots(figsize=(max(6.0, 0.62 * len(columns) * len(cases) / 1.5), 3.8))
     width = 0.8 / len(cases)
@@ -121,9 +127,9 @@ def per_object_figure(table: dict, path: Path, cases=CASES) -> None:
     _save(fig, path)
 
 
-def _comparison_rows(records, cases) -> list:
-    soft = {o.name for o in OBJECTS if o.soft}
-    stiff = {o.name for o in OBJECTS if not o.soft}
+def _comparison_rows(records, objects, cases) -> list:
+    soft = {o.name for o in objects if o.soft}
+    stiff = {o.name for o in objects if not o.soft}
     rows = []
     for other in [c for c in cases if c != "correct"]:
         for scope, only in (("all", None), ("soft objects", soft), ("stiff objects", stiff)):
@@ -134,20 +140,22 @@ def _comparison_rows(records, cases) -> list:
     return rows
 
 
-def report_markdown(records, planned_picks: int | None = None) -> str:
+def report_markdown(records, objects, planned_picks: int | None = None) -> str:
+    """The results: the per-object table (objects: the experiment's, with name, youngs_modulus_pa and soft) and
+    the paired comparisons."""
     table = success_table(records)
     cases = [c for c in (*CASES, "measured") if any(c in v for v in table.values())]
     done = len(outcomes(records))
     errors = sum(1 for r in records if r.get("cell_error"))
-    planned = (planned_picks or max((r["pick"] + 1 for r in records), default=0)) * len(OBJECTS) * len(cases)
+    planned = (planned_picks or max((r["pick"] + 1 for r in records), default=0)) * len(objects) * len(cases)
     walls = sorted(r["wall_s"] for r in outcomes(records).values() if r.get("wall_s"))
-    lines = [f"Picks with an outcome: **{done} of {planned}** planned ({len(OBJECTS)} objects × {len(cases)} "
+    lines = [f"Picks with an outcome: **{done} of {planned}** planned ({len(objects)} objects × {len(cases)} "
              f"cases × {planned_picks or '?'} picks); cell failures recorded (retried): {errors}.",
              f"Wall time per pick (bring-up, plan, pick, settle, tear-down): median "
              f"{walls[len(walls) // 2]:.0f} s, max {walls[-1]:.0f} s." if walls else "", "",
              "| # | object | E (Pa) | " + " | ".join(cases) + " |",
              "|---|---|---|" + "---|" * len(cases)]
-    for i, obj in enumerate(OBJECTS):
+    for i, obj in enumerate(objects):
         if obj.name in table:
             lines.append(f"| {i + 1} | {obj.name} | {obj.youngs_modulus_pa:.0e} | "
                          + " | ".join(_pct(table[obj.name].get(c)) for c in cases) + " |")
@@ -158,18 +166,18 @@ def report_markdown(records, planned_picks: int | None = None) -> str:
                   "correct input minus the other's, points; 95 % bootstrap interval over objects; exact sign "
                   "test (McNemar) on the discordant pairs):", "",
               "| comparison | objects | n objects | pairs | correct only / other only | margin (pts) | 95 % CI | p |",
-              "|---|---|---|---|---|---|---|---|", *_comparison_rows(records, cases)]
+              "|---|---|---|---|---|---|---|---|", *_comparison_rows(records, objects, cases)]
     return "\n".join(lines) + "\n"
 
 
-def write_report(out: Path, planned_picks: int | None = None) -> str:
+def write_report(out: Path, objects, planned_picks: int | None = None) -> str:
     """OUT/per_object.png and the results part of OUT/report.md (between the markers; the rest is kept)."""
     records = read_jsonl(Path(out) / RECORDS_NAME)
     table = success_table(records)
     if table:
-        per_object_figure(table, Path(out) / FIGURE_NAME,
+        per_object_figure(table, objects, Path(out) / FIGURE_NAME,
                           [c for c in (*CASES, "measured") if any(c in v for v in table.values())])
-    body = report_markdown(records, planned_picks)
+    body = report_markdown(records, objects, planned_picks)
     path = Path(out) / REPORT_NAME
     text = path.read_text(encoding="utf-8") if path.exists() else ""
     begin, end = "<!-- results: defgg-cell-experiment report -->", "<!-- end of results -->"

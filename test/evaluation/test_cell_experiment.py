@@ -72,7 +72,7 @@ def test_resume_skips_outcomes_and_retries_a_failed_cell_at_most_twice():
     assert ce.pick_key("a", "correct", 0) in done
     assert ce.pick_key("a", "rigid", 0) not in done       # one failure: tried again
     assert ce.pick_key("a", "soft", 0) in done            # two: given up
-    assert set(ce.outcomes(records)) == {ce.pick_key("a", "correct", 0)}
+    assert set(cr.outcomes(records)) == {ce.pick_key("a", "correct", 0)}
     assert ce.is_cell_failure("driver silent: no joint states for 2.0 s (watchdog 2.0 s)")
     assert not ce.is_cell_failure("the object slipped out of the fingers in transfer")
 
@@ -117,14 +117,14 @@ def test_report_tables_figure_and_text_outside_the_markers_is_kept(tmp_path):
             append_jsonl(tmp_path / ce.RECORDS_NAME, pick(obj, case, 0, ok))
     append_jsonl(tmp_path / ce.RECORDS_NAME, {"key": ce.pick_key("common_ball", "correct", 0), "cell_error": "x"})
     (tmp_path / cr.REPORT_NAME).write_text("# Cell experiment\n\nprotocol text\n", encoding="utf-8")
-    body = cr.write_report(tmp_path, planned_picks=5)
+    body = cr.write_report(tmp_path, ce.OBJECTS, planned_picks=5)
     text = (tmp_path / cr.REPORT_NAME).read_text(encoding="utf-8")
     assert text.startswith("# Cell experiment\n\nprotocol text\n") and body in text
     assert "**6 of 210** planned" in body and "cell failures recorded (retried): 1" in body
     assert "| 1 | common_sponge | 2e+04 | 100 % (1/1) | 0 % (0/1) | 0 % (0/1) |" in body
     assert "| correct vs rigid | all | 2 | 2 | 2 / 0 | +100.0 |" in body
     assert (tmp_path / cr.FIGURE_NAME).stat().st_size > 1000
-    cr.write_report(tmp_path, planned_picks=5)     # rewriting replaces the results, not appends them
+    cr.write_report(tmp_path, ce.OBJECTS, planned_picks=5)     # rewriting replaces the results, not appends them
     assert (tmp_path / cr.REPORT_NAME).read_text(encoding="utf-8").count("| correct vs rigid | all |") == 1
 
 
@@ -152,4 +152,4 @@ def test_one_real_pick_is_recorded_and_a_restart_does_not_pick_again(tmp_path):
     assert isinstance(record["success"], bool) and record["success"] == (
         record["held_after_transfer"] and record["in_bin"])
     assert ce.run(out, work, model, 1, 0, objects, ["correct"], progress=False) == 0
-    assert "**1 of" in cr.write_report(out, planned_picks=1)
+    assert "**1 of" in cr.write_report(out, objects, planned_picks=1)
