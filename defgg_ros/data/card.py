@@ -172,7 +172,7 @@ def _protocol_line(gen: dict) -> str:
             + ("; candidates at the evaluation's grasp height (--grasp-height executor)"
                if recorded_grasp_height(gen) == "executor" else
                "; candidates at their contacts' height, which the evaluation does not use: only the trials within a "
-               "few mm of its height label the grasp it performs (results/notes_height.md)")
+               "few mm of its height label the grasp it performs (docs/archive/notes_height.md)")
             + ("" if motion.lift_time_s >= 0.6 else ". This lift dropped soft grasps that a 0.6 s lift holds "
                "(bench/README.md): some soft lift failures here are artifacts of it"))
 

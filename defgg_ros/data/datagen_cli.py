@@ -84,7 +84,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="TCP height of a candidate: 'executor' (default for a new dataset) = at the height the "
                          "executor derives from the depth image (half the height seen at the grasp centre), the "
                          "contacts found again there, so each label is of the grasp that is later performed "
-                         "(results/notes_height.md); 'contacts' (the datasets up to fem_v3) = at the sampled "
+                         "(docs/archive/notes_height.md); 'contacts' (the datasets up to fem_v3) = at the sampled "
                          "contacts, anywhere on the object's side. Fixed for the life of a dataset: a resumed "
                          "dataset keeps its own rule when this is not given.")
     ap.add_argument("--protocol", choices=("defgraspsim", "legacy"), default=None,

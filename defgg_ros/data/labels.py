@@ -5,7 +5,7 @@
 direction held less, which is the evaluation's shake-task criterion under the legacy protocol (every
 direction must hold the threshold; under defgraspsim the evaluation's second table). Directions the
 generator skipped once the label was decided are not known, so the strict rule only removes positives
-that were seen to slip; it is an experiment (results/notes_v2.md), not the paper's protocol.
+that were seen to slip; it is an experiment (docs/archive/notes_v2.md), not the paper's protocol.
 """
 from __future__ import annotations
 

@@ -175,7 +175,7 @@ def _data_section(prov) -> list:
             lines += ["Known limitation of these labels: the candidates sit at their contacts' height, anywhere up "
                       "the object's side, while the evaluation executes a grasp at half the height seen at its "
                       "pixel; moved to that height, half of the off-height soft labels change "
-                      "(`results/notes_height.md`, `bench/README.md`).", ""]
+                      "(`docs/archive/notes_height.md`, `bench/README.md`).", ""]
     lines += [f"Objects by split (split by object, seed {prov['train_config']['seed']}): "
              + "; ".join(f"**{k}** ({len(v)}): {', '.join(sorted(v))}" for k, v in split.items()), "",
              "Trials used per object and Young's modulus (positive / labelled):", "",

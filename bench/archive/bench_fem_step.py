@@ -6,7 +6,7 @@
    with numSolverIterations 10 and 200, and with the object's collisions with the table off.
    The object's centroid after the steps is printed too: a setting that changes it changes physics.
 
-    .venv/bin/python bench/bench_fem_step.py [--object box_small] [--modulus 2e4] [--steps 400]
+    PYTHONPATH=bench .venv/bin/python bench/archive/bench_fem_step.py [--object box_small] [--modulus 2e4] [--steps 400]
 """
 import argparse
 import cProfile

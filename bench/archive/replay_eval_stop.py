@@ -9,7 +9,7 @@ Both outcomes are those of the full trial by construction (checked here on every
 each part skips. Cost model of bench/replay_confident_stop.py: a direction costs its ramp up to the loss (or
 the cap) plus a restore.
 
-    .venv/bin/python bench/replay_eval_stop.py [bench/results/datagen_defgraspsim.jsonl]
+    .venv/bin/python bench/archive/replay_eval_stop.py [bench/results/datagen_defgraspsim.jsonl]
 
 The default sample is bench/bench_datagen.py's naive trials under defgraspsim (all 16 directions measured).
 """
