@@ -261,3 +261,25 @@ def test_default_model_paths_are_the_shipped_checkpoints():
         path = default_model_path(use_stiffness)
         assert path.name == name and path.is_file()
         assert GraspPredictor.from_checkpoint(path).uses_stiffness == use_stiffness
+
+
+def test_the_executors_grasp_height_rule_reaches_the_planner(executor, checkpoint):
+    """PerceivedObjects carries no grasp height rule: the node's grasp_height_rule and
+    grasp_depth_below_surface_m (the executor's) go into the view its searches read."""
+    from defgg_ros.nodes.perceived_msg import perceived_to_msg
+    from defgg_ros.perception.geometry import transform_from_list
+    from defgg_ros.perception.tabletop import TabletopConfig
+    from defgg_ros.planning.perceived_frame import perceive_frame
+
+    parts, _, _ = perceive_frame(DEPTH_M, K, transform_from_list(BASE_T_CAMERA), TabletopConfig())
+    matched = {"depth": depth_metres_to_msg(DEPTH_M, "16UC1", header()),
+               "perceived": perceived_to_msg(parts, header(), BASE_FRAME, "parameter"),
+               "info": make_camera_info(K, 640, 480, header())}
+    node = GraspInferenceNode(context=executor.context, parameter_overrides=[
+        Parameter("model_path", value=str(checkpoint)), Parameter("grasp_height_rule", value="below_surface"),
+        Parameter("grasp_depth_below_surface_m", value=0.007), Parameter("prepare_on_arrival", value=False)])
+    try:
+        config = node._convert(matched).objects.view.config
+    finally:
+        node.destroy_node()
+    assert (config.grasp_height_rule, config.grasp_depth_below_surface_m) == ("below_surface", 0.007)
