@@ -7,6 +7,8 @@ the fake driver) under each stiffness input given to the segmentation node with 
     correct   the object's own modulus
     rigid     every object assumed rigid (2e9 Pa, the stiffest training modulus)
     soft      every object assumed soft (2e4 Pa, the softest training modulus)
+    measured  nothing told: the executor squeezes the object first (PickAndPlace measure_only) and sends its
+              estimate to the segmentation node, then plan and pick (issue 49 item 4; --cases measured)
 
 Each object is picked --picks times per case from a seeded pose (position and yaw on the table): pick i of an
 object has the same pose in every case, so the cases compare paired. The order is pick-major (every object's
@@ -36,6 +38,9 @@ from defgg_ros.constants import OBJECT_DENSITY_KG_M3, TRAINING_YOUNGS_MODULI_PA
 from defgg_ros.evaluation.cell_report import CASES, RECORDS_NAME, write_report
 
 RIGID_PA, SOFT_PA = max(TRAINING_YOUNGS_MODULI_PA), min(TRAINING_YOUNGS_MODULI_PA)
+# The fourth case (issue 49 item 4, beyond the paper): the executor squeezes the object first and tells the
+# segmentation node its estimate; then plan and pick. Run with --cases measured (a run of its own).
+MEASURED = "measured"
 MAX_ATTEMPTS = 2
 # The executor's words for "no joint states / an input silent" (wall clock): the simulator, not the grasp.
 CELL_FAILURE_PREFIXES = ("driver silent", "no joint states", "no external wrench")
@@ -87,7 +92,9 @@ def input_modulus_pa(case: str, obj: CellObject) -> float:
         return RIGID_PA
     if case == "soft":
         return SOFT_PA
-    raise ValueError(f"unknown case {case!r}; known: {', '.join(CASES)}")
+    if case == MEASURED:
+        return 0.0       # nothing told: the segmentation node's default until the squeeze's estimate arrives
+    raise ValueError(f"unknown case {case!r}; known: {', '.join((*CASES, MEASURED))}")
 
 
 def _uniform(seed: int, *key) -> float:
@@ -171,14 +178,14 @@ def scene_object(obj: CellObject, pose: dict, mesh_folder: Path) -> dict:
 
 # ---- the run ----------------------------------------------------------------------------------------------------
 def run(out: Path, work: Path, model: Path, picks: int, seed: int, objects, cases, pick_fn=None,
-        progress=True) -> int:
-    """Run every planned pick that has no outcome yet; returns how many picks ran now."""
+        progress=True, records_name: str = RECORDS_NAME) -> int:
+    """Run every planned pick that has no outcome yet in OUT/records_name; returns how many picks ran now."""
     from tqdm import tqdm
 
     from defgg_ros.evaluation.cell_picks import PickSetup, run_pick
 
     pick_fn = pick_fn or run_pick
-    records_path = Path(out) / RECORDS_NAME
+    records_path = Path(out) / records_name
     done = finished_keys(read_jsonl(records_path))
     plan = planned_picks(objects, cases, picks)
     todo = [(o, c, i) for o, c, i in plan if pick_key(o.name, c, i) not in done]
@@ -193,7 +200,8 @@ def run(out: Path, work: Path, model: Path, picks: int, seed: int, objects, case
                       "youngs_modulus_pa": obj.youngs_modulus_pa, "case": case, "pick": index, "seed": seed,
                       "input_youngs_modulus_pa": input_modulus_pa(case, obj), "pose": pose,
                       "model": str(model), "started_unix_s": round(time.time(), 1)}
-            setup = PickSetup(scene_object(obj, pose, Path(work) / "meshes"), record["input_youngs_modulus_pa"])
+            setup = PickSetup(scene_object(obj, pose, Path(work) / "meshes"), record["input_youngs_modulus_pa"],
+                              measure_first=case == MEASURED)
             record.update(_attempt(pick_fn, setup, Path(work), key, model))
             append_jsonl(records_path, record)
             ran += 1
@@ -243,6 +251,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--cases", default=",".join(CASES), help="comma-separated cases (default: %(default)s)")
     p.add_argument("--ros-domain", default=default_domain_choice(), metavar="private|inherit|ID",
                    help=f"ROS domain of the cells (default: private; from ${ISOLATION_ENV})")
+    p.add_argument("--records", default=RECORDS_NAME, metavar="NAME",
+                   help="records file in OUT (default: %(default)s; a second run beside a running one, e.g. the "
+                        "measured case: records_measured.jsonl; the report reads every records*.jsonl)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p = sub.add_parser("report", help="write OUT/report.md and OUT/per_object.png from the records",
                        formatter_class=HelpFormatter)
@@ -258,6 +269,8 @@ def _selected(args) -> tuple:
     unknown = sorted(set(names) - set(by_name))
     if unknown:
         raise ValueError(f"--objects {unknown} are not objects of the experiment ({', '.join(by_name)})")
+    if not args.records.startswith("records") or not args.records.endswith(".jsonl") or "/" in args.records:
+        raise ValueError(f"--records must be a file name records*.jsonl (the report reads those), got {args.records}")
     cases = args.cases.split(",")
     for case in cases:
         input_modulus_pa(case, OBJECTS[0])   # ValueError on an unknown case
@@ -279,8 +292,8 @@ def main(argv=None) -> int:
 
         print(f"defgg-cell-experiment: {apply_domain_choice(args.ros_domain)}", flush=True)
         ran = run(Path(args.out), Path(args.work), Path(args.model), args.picks, args.seed, objects, cases,
-                  progress=not args.no_progress)
-        print(f"defgg-cell-experiment: {ran} picks run now; records in {Path(args.out) / RECORDS_NAME}")
+                  progress=not args.no_progress, records_name=args.records)
+        print(f"defgg-cell-experiment: {ran} picks run now; records in {Path(args.out) / args.records}")
         return 0
     except (ValueError, OSError) as exc:
         print(f"defgg-cell-experiment: error: {exc}", file=sys.stderr)

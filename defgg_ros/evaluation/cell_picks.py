@@ -42,9 +42,11 @@ SETTLE_S, SETTLE_TIMEOUT_S, STILL_M = 1.0, 20.0, 0.002
 @dataclass(frozen=True)
 class PickSetup:
     """What one pick needs: the scene object (as a scene YAML mapping) and the modulus the segmentation node
-    is told."""
+    is told; or, with measure_first, nothing told: the executor squeezes the object first (PickAndPlace
+    measure_only, docs/squeeze.md) and tells the segmentation node what it measured."""
     scene_object: dict
     input_youngs_modulus_pa: float
+    measure_first: bool = False
 
 
 def write_scene(path: Path, scene_object: dict) -> Path:
@@ -120,6 +122,22 @@ def _execute(client, grasp, record: dict, executor_params: dict, pick_timeout_s:
                   sim_duration_s=result.duration_s)
 
 
+def _measure(client, record: dict, timeout_s: float) -> None:
+    """Measure first: a measure_only goal on the planned grasp (descend, squeeze, open, back to the observation
+    pose); the executor sends the estimate to the segmentation node. A failed measurement leaves the node's
+    default in force and the pick goes on (as a cell would)."""
+    from defgg_interfaces.action import PickAndPlace
+
+    result = client.pick(PickAndPlace.Goal(plan_grasp=True, measure_only=True), timeout_s=timeout_s)
+    record["squeeze"] = {
+        "success": bool(result.success), "failure_reason": result.failure_reason,
+        "measured_youngs_modulus_pa": result.measured_youngs_modulus_pa,
+        "low_pa": result.measured_modulus_low_pa, "high_pa": result.measured_modulus_high_pa,
+        "rigid": bool(result.measured_rigid), "sent_pa": result.stiffness_sent_pa,
+        "update": result.stiffness_update, "forces_n": list(result.squeeze_forces_n),
+        "widths_m": list(result.squeeze_widths_m), "sim_duration_s": result.duration_s}
+
+
 def run_pick(setup: PickSetup, scene_path: Path, model_path: Path, log, ready_timeout_s: float = 300.0,
              pick_timeout_s: float = 1800.0) -> dict:
     """Bring the cell up on a one-object scene, pick the object with the case's stiffness input, tear down.
@@ -144,8 +162,11 @@ def run_pick(setup: PickSetup, scene_path: Path, model_path: Path, log, ready_ti
         record["bringup_wall_s"] = round(cell.wait_ready(ready_timeout_s), 1)
         client = DemoClient()
         try:
-            client.set_stiffness([], default_youngs_modulus_pa=setup.input_youngs_modulus_pa)
             record["start_position_m"] = [round(float(c), 4) for c in client.object_positions()[0]]
+            if setup.measure_first:
+                _measure(client, record, pick_timeout_s)
+            else:
+                client.set_stiffness([], default_youngs_modulus_pa=setup.input_youngs_modulus_pa)
             grasp = _plan(client, record)
             if grasp is not None:
                 _execute(client, grasp, record, executor_params(node_set), pick_timeout_s)

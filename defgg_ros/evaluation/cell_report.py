@@ -9,6 +9,7 @@ pooling their pairs.
 """
 from __future__ import annotations
 
+import math
 import random
 from dataclasses import dataclass
 from pathlib import Path
@@ -17,10 +18,18 @@ from defgg_ros.atomic import read_jsonl, write_text_atomic
 from defgg_ros.evaluation.paired import Paired, sign_test_p
 
 CASES = ("correct", "rigid", "soft")
+MEASURED = "measured"
 RECORDS_NAME = "records.jsonl"
 BOOTSTRAP_RESAMPLES = 2000
 BOOTSTRAP_SEED = 0
 FIGURE_NAME, REPORT_NAME = "per_object.png", "report.md"
+# Two plans chose the same grasp when their centres are this close and their angles this near (modulo pi).
+SAME_GRASP_POSITION_M, SAME_GRASP_ANGLE_RAD = 0.005, math.radians(10.0)
+
+
+def records_files(out: Path) -> list:
+    """OUT/records.jsonl and any other run's records beside it (records_<name>.jsonl: the measured case)."""
+    return sorted(Path(out).glob("records*.jsonl"))
 
 
 def outcomes(records) -> dict:
@@ -106,7 +115,7 @@ def per_object_figure(table: dict, objects, path: Path, cases=CASES) -> None:
     fig, ax = plt.subplots(figsize=(max(6.0, 0.62 * len(columns) * len(cases) / 1.5), 3.8))
     width = 0.8 / len(cases)
     labels = {"correct": "correct E", "rigid": "all assumed rigid", "soft": "all assumed soft",
-              "measured": "measured E (squeeze)"}
+              MEASURED: "measured E (squeeze)"}
     for k, case in enumerate(cases):
         rates = []
         for name in names:
@@ -127,16 +136,72 @@ def per_object_figure(table: dict, objects, path: Path, cases=CASES) -> None:
     _save(fig, path)
 
 
+def comparisons(cases) -> list:
+    """(A, B) pairs to compare: correct against every other input; measured against the two wrong ones."""
+    out = [("correct", c) for c in cases if c != "correct"]
+    if MEASURED in cases:
+        out += [(MEASURED, c) for c in ("rigid", "soft") if c in cases]
+    return out
+
+
 def _comparison_rows(records, objects, cases) -> list:
     soft = {o.name for o in objects if o.soft}
     stiff = {o.name for o in objects if not o.soft}
     rows = []
-    for other in [c for c in cases if c != "correct"]:
+    for case_a, case_b in comparisons(cases):
         for scope, only in (("all", None), ("soft objects", soft), ("stiff objects", stiff)):
-            c = compare(records, "correct", other, only)
+            c = compare(records, case_a, case_b, only)
             margin = "–" if c.counts.margin_pts is None else f"{c.counts.margin_pts:+.1f}"
-            rows.append(f"| correct vs {other} | {scope} | {c.objects} | {c.counts.pairs} | {c.counts.a_only} / "
+            rows.append(f"| {case_a} vs {case_b} | {scope} | {c.objects} | {c.counts.pairs} | {c.counts.a_only} / "
                         f"{c.counts.b_only} | {margin} | {_ci(c.interval_pts)} | {c.p_value:.3g} |")
+    return rows
+
+
+def same_grasp(a: dict, b: dict, position_m: float = SAME_GRASP_POSITION_M,
+               angle_rad: float = SAME_GRASP_ANGLE_RAD) -> bool:
+    """Did two picks' plans choose the same grasp (centre within position_m, angle within angle_rad, modulo pi)?"""
+    ga, gb = a.get("grasp"), b.get("grasp")
+    if not ga or not gb:
+        return False
+    d_angle = abs((ga["angle_rad"] - gb["angle_rad"] + math.pi / 2) % math.pi - math.pi / 2)
+    return math.hypot(ga["x_m"] - gb["x_m"], ga["y_m"] - gb["y_m"]) <= position_m and d_angle <= angle_rad
+
+
+def channel_rows(records, cases) -> list:
+    """Through which channel an input changed the outcome: of the discordant pairs, how many had the same grasp
+    (then only the closing force, finger_force_n from the modulus, or chance differed) and how many another."""
+    by_key = {(r["object"], r["pick"], r["case"]): r for r in outcomes(records).values()}
+    rows = []
+    for case_a, case_b in comparisons(cases):
+        counts = {"same": [0, 0, 0], "other": [0, 0, 0]}     # [pairs, a only, b only]
+        for (name, pick, case), a in by_key.items():
+            b = by_key.get((name, pick, case_b))
+            if case != case_a or b is None:
+                continue
+            c = counts["same" if same_grasp(a, b) else "other"]
+            c[0] += 1
+            c[1] += bool(a["success"]) and not b["success"]
+            c[2] += bool(b["success"]) and not a["success"]
+        rows.append(f"| {case_a} vs {case_b} | {counts['same'][0]} | {counts['same'][1]} / {counts['same'][2]} | "
+                    f"{counts['other'][0]} | {counts['other'][1]} / {counts['other'][2]} |")
+    return rows
+
+
+def squeeze_rows(records, objects) -> list:
+    """The measured case's estimates per object: median estimate, its ratio to the true modulus, how many
+    within a factor 3 (issue 49 item 4's target) or called rigid."""
+    rows = []
+    for obj in objects:
+        found = [r["squeeze"] for r in outcomes(records).values()
+                 if r["object"] == obj.name and r.get("squeeze") and r["squeeze"]["success"]]
+        if not found:
+            continue
+        estimates = sorted(s["measured_youngs_modulus_pa"] for s in found)
+        median = estimates[len(estimates) // 2]
+        within = sum(1 / 3 <= e / obj.youngs_modulus_pa <= 3 for e in estimates)
+        rigid = sum(s["rigid"] for s in found)
+        rows.append(f"| {obj.name} | {obj.youngs_modulus_pa:.0e} | {median:.2g} | {median / obj.youngs_modulus_pa:.2g} "
+                    f"| {within}/{len(found)} | {rigid}/{len(found)} |")
     return rows
 
 
@@ -144,7 +209,7 @@ def report_markdown(records, objects, planned_picks: int | None = None) -> str:
     """The results: the per-object table (objects: the experiment's, with name, youngs_modulus_pa and soft) and
     the paired comparisons."""
     table = success_table(records)
-    cases = [c for c in (*CASES, "measured") if any(c in v for v in table.values())]
+    cases = [c for c in (*CASES, MEASURED) if any(c in v for v in table.values())]
     done = len(outcomes(records))
     errors = sum(1 for r in records if r.get("cell_error"))
     planned = (planned_picks or max((r["pick"] + 1 for r in records), default=0)) * len(objects) * len(cases)
@@ -162,21 +227,34 @@ def report_markdown(records, objects, planned_picks: int | None = None) -> str:
     totals = {c: [sum(v.get(c, [0, 0])[0] for v in table.values()), sum(v.get(c, [0, 0])[1] for v in table.values())]
               for c in cases}
     lines.append("| | **all** | | " + " | ".join(_pct(totals[c]) for c in cases) + " |")
-    lines += ["", "Paired comparison (pairs = the same object at the same pose; margin = success rate of the "
-                  "correct input minus the other's, points; 95 % bootstrap interval over objects; exact sign "
+    lines += ["", "Paired comparison (pairs = the same object at the same pose; margin = success rate with input A "
+                  "minus with input B, points; 95 % bootstrap interval over objects; exact sign "
                   "test (McNemar) on the discordant pairs):", "",
-              "| comparison | objects | n objects | pairs | correct only / other only | margin (pts) | 95 % CI | p |",
+              "| A vs B | objects | n objects | pairs | A only / B only | margin A − B (pts) | 95 % CI | p |",
               "|---|---|---|---|---|---|---|---|", *_comparison_rows(records, objects, cases)]
+    lines += ["", "The two channels of the stiffness input: the network's grasp and the closing force (the planner's "
+                  "finger_force_n follows the modulus). Pairs whose plans chose the same grasp (centre within "
+                  f"{SAME_GRASP_POSITION_M * 1e3:.0f} mm, angle within {math.degrees(SAME_GRASP_ANGLE_RAD):.0f}°) "
+                  "differ only in force (or by chance: on a 2e9 Pa object correct and rigid are the same input); the "
+                  "others in the grasp too:", "",
+              "| A vs B | pairs, same grasp | A only / B only | pairs, other grasp | A only / B only |",
+              "|---|---|---|---|---|", *channel_rows(records, cases)]
+    squeezed = squeeze_rows(records, objects)
+    if squeezed:
+        lines += ["", "The squeeze's estimates (measured case; a factor 3 of the true modulus is issue 49 item 4's "
+                      "target, 2e9 Pa should read rigid):", "",
+                  "| object | true E (Pa) | median estimate (Pa) | ratio | within ×3 | called rigid |",
+                  "|---|---|---|---|---|---|", *squeezed]
     return "\n".join(lines) + "\n"
 
 
 def write_report(out: Path, objects, planned_picks: int | None = None) -> str:
     """OUT/per_object.png and the results part of OUT/report.md (between the markers; the rest is kept)."""
-    records = read_jsonl(Path(out) / RECORDS_NAME)
+    records = [r for path in records_files(out) for r in read_jsonl(path)]
     table = success_table(records)
     if table:
         per_object_figure(table, objects, Path(out) / FIGURE_NAME,
-                          [c for c in (*CASES, "measured") if any(c in v for v in table.values())])
+                          [c for c in (*CASES, MEASURED) if any(c in v for v in table.values())])
     body = report_markdown(records, objects, planned_picks)
     path = Path(out) / REPORT_NAME
     text = path.read_text(encoding="utf-8") if path.exists() else ""

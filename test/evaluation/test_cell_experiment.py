@@ -37,6 +37,7 @@ def test_a_training_object_is_refused():
 def test_the_cases_tell_the_segmentation_node_the_true_a_rigid_or_a_soft_modulus():
     obj = ce.CellObject("common_ball", "common", 2e5)
     assert [ce.input_modulus_pa(c, obj) for c in ce.CASES] == [2e5, 2e9, 2e4]
+    assert ce.input_modulus_pa(ce.MEASURED, obj) == 0.0     # nothing told: the squeeze tells the node
     with pytest.raises(ValueError, match="unknown case"):
         ce.input_modulus_pa("medium", obj)
 
@@ -128,11 +129,43 @@ def test_report_tables_figure_and_text_outside_the_markers_is_kept(tmp_path):
     assert (tmp_path / cr.REPORT_NAME).read_text(encoding="utf-8").count("| correct vs rigid | all |") == 1
 
 
+def test_the_measured_case_is_compared_with_every_input_and_its_estimates_are_tabled(tmp_path):
+    from defgg_ros.atomic import append_jsonl
+
+    assert cr.comparisons(["correct", "rigid", "soft", "measured"]) == [
+        ("correct", "rigid"), ("correct", "soft"), ("correct", "measured"), ("measured", "rigid"),
+        ("measured", "soft")]
+    assert cr.comparisons(["correct", "rigid"]) == [("correct", "rigid")]
+    for i, estimate in enumerate((1e5, 3e5, 9e5)):       # true 2e5: the third is beyond a factor 3
+        append_jsonl(tmp_path / ce.RECORDS_NAME, pick("common_ball", "rigid", i, False))
+        squeeze = {"success": True, "measured_youngs_modulus_pa": estimate, "rigid": False}
+        append_jsonl(tmp_path / "records_measured.jsonl", pick("common_ball", "measured", i, True, squeeze=squeeze))
+    body = cr.write_report(tmp_path, ce.OBJECTS, planned_picks=3)
+    assert "| measured vs rigid | all | 1 | 3 | 3 / 0 | +100.0 |" in body
+    assert "| common_ball | 2e+05 | 3e+05 | 1.5 | 2/3 | 0/3 |" in body
+
+
+def test_discordant_pairs_are_split_by_whether_the_plans_chose_the_same_grasp():
+    def g(x, angle):
+        return {"x_m": x, "y_m": 0.0, "angle_rad": angle}
+
+    assert cr.same_grasp({"grasp": g(0.5, 1.55)}, {"grasp": g(0.503, -1.55)})    # 3 mm, 2.4 deg across +-pi/2
+    assert not cr.same_grasp({"grasp": g(0.5, 0.0)}, {"grasp": g(0.51, 0.0)})
+    assert not cr.same_grasp({"grasp": g(0.5, 0.0)}, {"grasp": g(0.5, 0.5)})
+    assert not cr.same_grasp({"grasp": None}, {"grasp": g(0.5, 0.0)})
+    records = [pick("a", "correct", 0, True, grasp=g(0.5, 0.0)), pick("a", "soft", 0, False, grasp=g(0.5, 0.0)),
+               pick("a", "correct", 1, True, grasp=g(0.5, 0.0)), pick("a", "soft", 1, False, grasp=g(0.52, 0.0)),
+               pick("a", "correct", 2, False, grasp=g(0.5, 0.0)), pick("a", "soft", 2, True, grasp=g(0.52, 0.0))]
+    assert cr.channel_rows(records, ["correct", "soft"]) == ["| correct vs soft | 1 | 1 / 0 | 2 | 1 / 1 |"]
+
+
 def test_cli_refuses_unknown_objects_and_cases(capsys):
     assert ce.main(["run", "--out", "unused", "--objects", "cube"]) == 2
     assert "not objects of the experiment" in capsys.readouterr().err
     assert ce.main(["run", "--out", "unused", "--cases", "correct,medium"]) == 2
     assert "unknown case" in capsys.readouterr().err
+    assert ce.main(["run", "--out", "unused", "--records", "../elsewhere.jsonl"]) == 2
+    assert "--records must be a file name" in capsys.readouterr().err
 
 
 @pytest.mark.e2e
