@@ -145,6 +145,11 @@ TABLE_CLEARANCE_M = 0.003            # fingertips stay this far above the table
 # TCP height of an executed top-down grasp, as a fraction of the object height seen at the grasp
 # centre (grasping.geometry.tcp_height_m). The image-space grasp has no height of its own.
 GRASP_HEIGHT_FRACTION = 0.5
+# The palm's underside stays this far above the surface seen at the grasp centre (tcp_height_m raises the
+# TCP on an object taller than 2 x (finger length - fingertip offset - this) = 9.1 cm: ycb_bottle, 11 cm; the
+# tallest evaluation object, common_can, is 9 cm, so the evaluation's grasps do not move). The sampler's
+# PyBullet check (0.5 mm tolerance) still saw the palm touch ycb_bottle's top at 1.0 mm, not at 1.5 mm.
+PALM_CLEARANCE_M = 0.0015
 # Where a training candidate's TCP goes (sim.sampler): "contacts" = at the sampled contacts' height
 # (the datasets up to fem_v3), "executor" = at tcp_height_m, the height the evaluation executes a grasp at.
 GRASP_HEIGHT_RULES = ("contacts", "executor")

@@ -131,12 +131,23 @@ def load_or_sample_candidates(root: Path, shape, cfg: DatagenConfig) -> list:
         if cached.get("key") == key:
             return cached["candidates"]
     found = sample_grasps(shape.surface(), seed, cfg.n_candidates, keep=cfg.grasps_per_scene,
-                          height_rule=cfg.grasp_height)
-    cands = [{"grasp": {"position_m": list(c.grasp.position_m), "yaw_rad": c.grasp.yaw_rad,
-                        "width_m": c.grasp.width_m},
-              "rect": asdict(grasp_rect(c.grasp))} for c in found]
+                          height_rule=cfg.grasp_height, fill_short=True)
+    cands = [{"grasp": grasp_fields(c.grasp), "rect": asdict(grasp_rect(c.grasp))} for c in found]
     write_json_atomic(path, {"key": key, "candidates": cands})
     return cands
+
+
+def grasp_fields(grasp: WorldGrasp) -> dict:
+    """A WorldGrasp as a candidate file and a TrialJob hold it; the opening only when the sampler set one
+    (the files and jobs before sampler 4 have none)."""
+    fields = {"position_m": list(grasp.position_m), "yaw_rad": grasp.yaw_rad, "width_m": grasp.width_m}
+    if grasp.opening_m is not None:
+        fields["opening_m"] = grasp.opening_m
+    return fields
+
+
+def world_grasp(fields: dict) -> WorldGrasp:
+    return WorldGrasp(tuple(fields["position_m"]), fields["yaw_rad"], fields["width_m"], fields.get("opening_m"))
 
 
 def render_scene(shape, youngs_modulus_pa: float, seed: int) -> Scene:
@@ -211,10 +222,12 @@ def run_trial_job(job: dict) -> dict:
     shape = objects.simulation_shape(objects.get_shape(job.object_name), job.youngs_modulus_pa,
                                      job.sim_max_tet_nodes)
     spec = objects.ObjectSpec(shape, job.youngs_modulus_pa)
-    grasp = WorldGrasp(tuple(job.grasp["position_m"]), job.grasp["yaw_rad"], job.grasp["width_m"])
+    grasp = world_grasp(job.grasp)
     outcome = run_grasp_trial(spec, grasp, tuple(job.tests), settings, client=_worker_client(world))
     sim = dict(outcome.sim, shake_measured=outcome.shake_measured, sim_steps=outcome.sim_steps,
                tet_nodes=[len(t.nodes_m) for t in shape.tet_parts])
+    if grasp.opening_m is not None:     # records without it opened to width + OPENING_CLEARANCE_M
+        sim["finger_opening_m"] = grasp.opening_m
     record = TrialRecord(
         trial_id=job.trial_id, scene_id=job.scene_id, object_name=job.object_name,
         youngs_modulus_pa=job.youngs_modulus_pa, candidate_index=job.candidate_index,
@@ -230,6 +243,8 @@ def job_from_record(record: TrialRecord, sim_max_tet_nodes: int | None = None) -
     predates at the value they had then, TrialSettings.from_record) on the mesh the dataset simulated."""
     tests = ("shake", "twist") if record.twist_accels_radps2 is not None else ("shake",)
     grasp = {"position_m": record.position_m, "yaw_rad": record.yaw_rad, "width_m": record.width_m}
+    if record.sim.get("finger_opening_m") is not None:
+        grasp["opening_m"] = record.sim["finger_opening_m"]
     settings = TrialSettings.from_record(record.sim.get("settings") or {}).to_record()
     return TrialJob(record.trial_id, record.scene_id, record.object_name, record.youngs_modulus_pa,
                     record.candidate_index, grasp, asdict(record.rect), record.seed, settings, sim_max_tet_nodes,

@@ -6,7 +6,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from defgg_ros.constants import GRASP_HEIGHT_FRACTION, PANDA_FINGERTIP_BELOW_TCP_M, TABLE_CLEARANCE_M
+from defgg_ros.constants import (
+    GRASP_HEIGHT_FRACTION,
+    PALM_CLEARANCE_M,
+    PANDA_FINGER_LENGTH_M,
+    PANDA_FINGERTIP_BELOW_TCP_M,
+    TABLE_CLEARANCE_M,
+)
 from defgg_ros.errors import InvalidInputError
 
 
@@ -48,6 +54,14 @@ def tcp_height_m(surface_z_m: float, table_top_z_m: float = 0.0) -> float:
     """TCP height for a top-down grasp whose centre pixel sees the surface at surface_z_m: the rule the
     evaluation executes grasps with (evaluation.planning.plan_world_grasp) and "executor"-height
     candidates are sampled at: GRASP_HEIGHT_FRACTION of the height seen there, fingertips above the
-    table. (The cell's executor node goes its grasp_depth_below_surface_m parameter below the surface.)"""
+    table, and high enough that the palm clears that surface (on an object taller than the fingers' reach
+    below the palm, twice: the half-height rule put the palm into ycb_bottle's top). (The cell's executor node
+    goes its grasp_depth_below_surface_m parameter below the surface.)"""
     lowest = table_top_z_m + PANDA_FINGERTIP_BELOW_TCP_M + TABLE_CLEARANCE_M
-    return float(max(table_top_z_m + GRASP_HEIGHT_FRACTION * (surface_z_m - table_top_z_m), lowest))
+    palm_clear = surface_z_m - palm_above_tcp_m() + PALM_CLEARANCE_M
+    return float(max(table_top_z_m + GRASP_HEIGHT_FRACTION * (surface_z_m - table_top_z_m), lowest, palm_clear))
+
+
+def palm_above_tcp_m() -> float:
+    """Height of the palm's underside above the TCP (the fingers' length minus the fingertip's offset below it)."""
+    return PANDA_FINGER_LENGTH_M - PANDA_FINGERTIP_BELOW_TCP_M

@@ -8,6 +8,12 @@ hand's boxes (hand.hand_boxes, opened wider by OPENING_CLEARANCE_M) at the
 grasp and along the vertical approach must not touch the object or the
 table. The collision check is PyBullet's own (static concave triangle mesh
 vs boxes), so it judges the same geometry the trial simulates.
+
+Second stage (sample_grasps(fill_short=True), the generator's since sampler 4): an object left with fewer
+candidates than asked for gets more, appended after the first stage's (which stay as they were): the
+refused pairs again at the opening that clears the object under the fingers' whole descent
+(swept_opening_m; tapered shapes widen below the TCP), then pairs whose closing axis is turned within the
+antipodal cone (a triangular prism has no pair along a face normal). docs/dataset.md, "Candidates".
 """
 from __future__ import annotations
 
@@ -35,13 +41,17 @@ from defgg_ros.sim.trial import OPENING_CLEARANCE_M, WorldGrasp
 from defgg_ros.sim.trimesh_import import trimesh
 
 # Bump when the sampling or the grasp height rule changes (invalidates cached candidates).
-SAMPLER_VERSION = 3
+SAMPLER_VERSION = 4     # 4: the second stage (fill_short) and the palm's floor in tcp_height_m (tall objects)
 ANTIPODAL_CONE_RAD = math.radians(36.0)   # friction cone of mu = 0.8 is 38.7 deg; 30 rejected every cone grasp
 MAX_NORMAL_TILT_RAD = math.radians(50.0)   # contact normal vs horizontal
 MIN_WIDTH_M = 0.005
 COLLISION_TOLERANCE_M = 0.0005
 APPROACH_STEP_M = 0.01
 MAX_SAMPLE_ROUNDS = 20
+SWEEP_CLEARANCE_M = 0.003      # a side, beyond the object's widest reach under the fingers (swept_opening_m)
+SWEEP_STEP_M = 0.001           # height step of swept_opening_m's rays
+SWEEP_RAYS_ACROSS = 5          # rays across the pad's width per height
+SECOND_STAGE_SEED = 1          # the second stage's own stream: the first stage's draws stay as they were
 
 
 @dataclass(frozen=True)
@@ -82,8 +92,11 @@ def check_height_rule(rule: str) -> str:
     return rule
 
 
-def antipodal_pairs(mesh: trimesh.Trimesh, n_points: int, rng, height_rule: str = "contacts") -> list:
-    """Up to n_points antipodal candidates on a closed surface (object frame)."""
+def antipodal_pairs(mesh: trimesh.Trimesh, n_points: int, rng, height_rule: str = "contacts",
+                    max_axis_turn_rad: float = 0.0) -> list:
+    """Up to n_points antipodal candidates on a closed surface (object frame). The closing axis runs along
+    the first contact's horizontal normal, turned about the vertical by a uniform angle up to
+    max_axis_turn_rad (0: no turn and no draw, the first stage's stream)."""
     check_height_rule(height_rule)
     points, faces = trimesh.sample.sample_surface(mesh, n_points, seed=int(rng.integers(2**31)))
     normals = mesh.face_normals[faces]
@@ -94,6 +107,8 @@ def antipodal_pairs(mesh: trimesh.Trimesh, n_points: int, rng, height_rule: str 
         if np.linalg.norm(horiz) < math.cos(MAX_NORMAL_TILT_RAD):
             continue
         axis = -horiz / np.linalg.norm(horiz)          # into the object, horizontal
+        if max_axis_turn_rad:
+            axis = _turned_about_z(axis, rng.uniform(-max_axis_turn_rad, max_axis_turn_rad))
         t, idx = _ray_hits(p1 + axis * 1e-5, axis, tris)
         exits = [(ti, fi) for ti, fi in zip(t, idx) if mesh.face_normals[fi] @ axis > 0]
         if not exits:
@@ -121,6 +136,11 @@ def antipodal_pairs(mesh: trimesh.Trimesh, n_points: int, rng, height_rule: str 
         out.append(Candidate(WorldGrasp((float(centre[0]), float(centre[1]), float(z)), yaw, float(t2)),
                              (tuple(p1), tuple(p2))))
     return out
+
+
+def _turned_about_z(vector, angle_rad: float) -> np.ndarray:
+    c, s = math.cos(angle_rad), math.sin(angle_rad)
+    return np.array([c * vector[0] - s * vector[1], s * vector[0] + c * vector[1], vector[2]])
 
 
 def pair_at_executor_height(centre, axis, mesh: trimesh.Trimesh):
@@ -186,7 +206,7 @@ class CollisionChecker:
         p.disconnect(self.client)
 
     def hand_collides(self, grasp: WorldGrasp) -> bool:
-        opening = min(grasp.width_m + OPENING_CLEARANCE_M, GRIPPER_MAX_WIDTH_M)
+        opening = grasp.finger_opening_m()
         lift = np.arange(0.0, max(0.0, self.top_z_m + PREGRASP_HEIGHT_M - grasp.position_m[2]) + 1e-9,
                          APPROACH_STEP_M)
         for dz in lift:  # at the grasp and along the top-down approach
@@ -208,23 +228,80 @@ class CollisionChecker:
 
 
 def sample_grasps(surface: trimesh.Trimesh, seed: int, n_candidates: int = GRASP_CANDIDATES_PER_OBJECT,
-                  keep: int | None = None, height_rule: str = "contacts") -> list:
-    """~n_candidates antipodal candidates, collision-filtered; at most `keep`, in a seeded order."""
+                  keep: int | None = None, height_rule: str = "contacts", fill_short: bool = False) -> list:
+    """~n_candidates antipodal candidates, collision-filtered; at most `keep`, in a seeded order. fill_short:
+    fewer than `keep` (or n_candidates) free ones are topped up by the second stage (module docstring),
+    appended, so the first stage's candidates keep their places."""
     rng = np.random.default_rng(seed)
-    candidates = []
-    for _ in range(MAX_SAMPLE_ROUNDS):
-        candidates += antipodal_pairs(surface, 4 * n_candidates, rng, height_rule)
-        if len(candidates) >= n_candidates:
-            break
-    candidates = candidates[:n_candidates]
+    candidates = _sampled_pairs(surface, n_candidates, rng, height_rule)
     checker = CollisionChecker(surface)
     try:
-        free = [c for c in candidates if not checker.hand_collides(c.grasp)]
+        refused = [checker.hand_collides(c.grasp) for c in candidates]
+        free = [c for c, hit in zip(candidates, refused) if not hit]
+        order = rng.permutation(len(free))
+        free = [free[i] for i in order]
+        wanted = keep or n_candidates
+        if fill_short and len(free) < wanted:
+            again = [c for c, hit in zip(candidates, refused) if hit]
+            free += second_stage(surface, checker, again, seed, n_candidates, height_rule)[:wanted - len(free)]
     finally:
         checker.close()
-    order = rng.permutation(len(free))
-    free = [free[i] for i in order]
     return free[:keep] if keep else free
+
+
+def _sampled_pairs(surface, n_candidates: int, rng, height_rule: str, max_axis_turn_rad: float = 0.0) -> list:
+    """The first n_candidates antipodal pairs of up to MAX_SAMPLE_ROUNDS rounds of samples."""
+    candidates = []
+    for _ in range(MAX_SAMPLE_ROUNDS):
+        candidates += antipodal_pairs(surface, 4 * n_candidates, rng, height_rule, max_axis_turn_rad)
+        if len(candidates) >= n_candidates:
+            break
+    return candidates[:n_candidates]
+
+
+def second_stage(surface, checker: CollisionChecker, refused: list, seed: int, n_candidates: int,
+                 height_rule: str) -> list:
+    """Collision-free candidates from the first stage's refused pairs at their swept opening, and from pairs
+    with a turned closing axis (at the default opening when it clears, else the swept one); seeded order."""
+    rng = np.random.default_rng([seed, SECOND_STAGE_SEED])
+    turned = _sampled_pairs(surface, n_candidates, rng, height_rule, ANTIPODAL_CONE_RAD)
+    found = [with_swept_opening(c, surface, checker) for c in refused]
+    found += [c if not checker.hand_collides(c.grasp) else with_swept_opening(c, surface, checker) for c in turned]
+    found = [c for c in found if c is not None]
+    return [found[i] for i in rng.permutation(len(found))]
+
+
+def with_swept_opening(candidate: Candidate, surface, checker: CollisionChecker) -> Candidate | None:
+    """The candidate opened to swept_opening_m when that is wider than its own and the hand then clears object
+    and table; None when it does not (or the opening exceeds the gripper's)."""
+    grasp = candidate.grasp
+    opening = swept_opening_m(grasp, surface)
+    if opening <= grasp.finger_opening_m() or opening > GRIPPER_MAX_WIDTH_M:
+        return None
+    wider = WorldGrasp(grasp.position_m, grasp.yaw_rad, grasp.width_m, opening_m=float(opening))
+    return None if checker.hand_collides(wider) else Candidate(wider, candidate.contacts_m)
+
+
+def swept_opening_m(grasp: WorldGrasp, surface: trimesh.Trimesh) -> float:
+    """The opening whose fingers clear the object over their whole descent: twice the object's farthest reach
+    from the TCP along the closing axis, in the fingers' band (the pad's width across the axis) from the
+    fingertips' height up, plus SWEEP_CLEARANCE_M a side. Rays from outside towards the TCP find the reach."""
+    axis = np.array([math.cos(grasp.yaw_rad), math.sin(grasp.yaw_rad), 0.0])
+    across = np.array([-axis[1], axis[0], 0.0])
+    tcp = np.asarray(grasp.position_m, dtype=float)
+    far_m = float(np.ptp(surface.bounds[:, :2], axis=0).max()) + 1.0     # outside the object
+    heights = np.arange(tcp[2] - PANDA_FINGERTIP_BELOW_TCP_M, surface.bounds[1, 2] + 1e-9, SWEEP_STEP_M)
+    offsets = np.linspace(-FINGER_PAD_WIDTH_M / 2, FINGER_PAD_WIDTH_M / 2, SWEEP_RAYS_ACROSS)
+    tris = surface.triangles
+    reach = 0.0
+    for side in (axis, -axis):
+        for z in heights:
+            for offset in offsets:
+                origin = np.array([tcp[0], tcp[1], z]) + side * far_m + across * offset
+                t, _ = _ray_hits(origin, -side, tris)
+                if len(t):
+                    reach = max(reach, far_m - float(t[0]))
+    return 2 * (reach + SWEEP_CLEARANCE_M)
 
 
 def grasp_rect(grasp: WorldGrasp, camera: TopDownCamera | None = None) -> GraspRect:

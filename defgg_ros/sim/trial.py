@@ -77,16 +77,27 @@ def shake_directions(n: int = SHAKE_DIRECTIONS) -> np.ndarray:
 
 @dataclass(frozen=True)
 class WorldGrasp:
-    """Top-down grasp in the world frame: TCP position (m), yaw of the closing direction, width (m)."""
+    """Top-down grasp in the world frame: TCP position (m), yaw of the closing direction, width (m), and the
+    opening the fingers start from (m): None = width + OPENING_CLEARANCE_M (every grasp before sampler 4);
+    the sampler sets a wider one where the object widens under the fingers (sim.sampler.swept_opening_m)."""
     position_m: tuple
     yaw_rad: float
     width_m: float
+    opening_m: float | None = None
 
     def __post_init__(self):
         if not np.all(np.isfinite(self.position_m)) or len(self.position_m) != 3:
             raise ValueError(f"grasp position must be 3 finite numbers, got {self.position_m}")
         if not 0.0 < self.width_m <= GRIPPER_MAX_WIDTH_M:
             raise ValueError(f"grasp width {self.width_m} m outside (0, {GRIPPER_MAX_WIDTH_M}]")
+        if self.opening_m is not None and not self.width_m <= self.opening_m <= GRIPPER_MAX_WIDTH_M:
+            raise ValueError(f"grasp opening {self.opening_m} m outside [width {self.width_m}, {GRIPPER_MAX_WIDTH_M}]")
+
+    def finger_opening_m(self) -> float:
+        """The opening the fingers start closing from."""
+        if self.opening_m is not None:
+            return self.opening_m
+        return min(self.width_m + OPENING_CLEARANCE_M, GRIPPER_MAX_WIDTH_M)
 
 
 @dataclass
@@ -162,7 +173,7 @@ class _Trial:
         m = self.motion
         self.step(self.seconds(m.settle_before_s))      # settles under gravity on the table
         self.world.set_gravity(self.gravity)             # zero from here on when the protocol says so
-        opening = min(self.grasp.width_m + OPENING_CLEARANCE_M, GRIPPER_MAX_WIDTH_M)
+        opening = self.grasp.finger_opening_m()
         self.tcp = world_T_hand(self.grasp.position_m, self.grasp.yaw_rad)
         self.hand = hand_mod.create_hand(self.client, self.tcp, opening, friction=self.material.finger_friction)
         self.hand.close(self.force_n, m.close_speed_mps)

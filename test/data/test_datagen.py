@@ -244,3 +244,23 @@ def test_bad_numbers_are_one_clear_line_and_write_nothing(tmp_path, capsys, argv
     out = tmp_path / "new"
     assert datagen_cli.main(["--out", str(out), "--objects", "cube", "--no-progress", *argv]) == 2
     assert says in capsys.readouterr().err and not out.exists()
+
+
+def test_a_widened_candidate_runs_and_replays_with_its_opening():
+    """A candidate the sampler opened wider (sampler 4) carries its opening through the candidate file, the
+    job, the trial record and job_from_record; a record without one replays at width + 10 mm as before."""
+    from defgg_ros.data.format import TrialRecord
+    from defgg_ros.sim.trial import WorldGrasp
+
+    grasp = WorldGrasp((0.0, 0.0, 0.025), 0.0, 0.032, opening_m=0.047)
+    fields = datagen.grasp_fields(grasp)
+    assert fields["opening_m"] == 0.047 and datagen.world_grasp(fields) == grasp
+    rect = {"center_u_px": 0.0, "center_v_px": 0.0, "angle_rad": 0.0, "width_px": 10.0, "finger_height_px": 5.0}
+    job = datagen.TrialJob("cone__E2e+09__g000", "cone__E2e+09", "cone", 2e9, 0, fields, rect, 1, QUICK)
+    record = datagen.run_trial_job(job.to_dict())
+    assert record["sim"]["finger_opening_m"] == 0.047
+    replay = datagen.job_from_record(TrialRecord.from_json(record))
+    assert replay["grasp"]["opening_m"] == 0.047
+    plain = dict(record, sim={k: v for k, v in record["sim"].items() if k != "finger_opening_m"})
+    assert "opening_m" not in datagen.job_from_record(TrialRecord.from_json(plain))["grasp"]
+    assert "opening_m" not in datagen.grasp_fields(WorldGrasp((0.0, 0.0, 0.025), 0.0, 0.032))
