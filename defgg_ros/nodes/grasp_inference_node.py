@@ -1,69 +1,50 @@
 """grasp_inference_node: depth + PerceivedObjects (+camera_info) -> Def-GG-CNN grasps. It does not perceive.
 
-The segmentation node is the cell's only perceiver (docs/perception.md, "One perceiver"); this node runs only
-the network on the height map it sent and the grasp search (planning/perceived_frame.py rebuilds the
-planner's view from the PerceivedObjects and the depth, so the grasps are those planning on the perception's
-own view gives):
-- synchronises depth, the segmentation node's PerceivedObjects and camera_info by exact stamp
-  (defgg_ros.perception.sync, no message_filters);
-- `prepare_on_arrival` (default): worker threads prepare each synchronised frame as it arrives (the view
-  rebuilt, the network, the free space, and the searches requests will want: top_k 1 with
-  `publish_on_sync`, whose best grasp, quality map and finger markers it publishes, and every top_k asked for
-  in the last `prepare_requested_top_k_s`); newest frame wins at each stage (perception/frame_worker.py);
-- serves PlanGrasp: empty depth and perceived -> the latest synchronised frame (the newest prepared one when
-  no newer frame arrived or it arrived at most `max_frame_age_s` before the request, else the latest one
-  if the workers finish it within `max_wait_s`, else the newest prepared one: bounded latency under load);
-  depth + camera_info + perceived -> that frame; depth + camera_info alone -> the segmentation node's
-  Perceive service perceives it first (with the request's `objects`). Every bad request gets success=false
-  + the reason; a frame the segmentation node could not perceive answers with its reason.
+The segmentation node is the cell's only perceiver (docs/perception.md, "One perceiver"); this node holds the
+parameters and the ROS I/O and runs only the network on the height map it sent and the grasp search:
+- synchronises depth, PerceivedObjects and camera_info by exact stamp (perception/sync.py); the view is rebuilt
+  from them (nodes/perceived_msg.frame_from_messages), with the executor's grasp height rule;
+- `prepare_on_arrival` (default): worker threads prepare each synchronised frame as it arrives (the network,
+  the free space, the searches requests will want: top_k 1 with `publish_on_sync`, which publishes the best
+  grasp, quality map and finger markers, and every top_k asked for in the last `prepare_requested_top_k_s`);
+  newest frame wins at each stage (perception/frame_worker.py, perception/prepared_frames.py);
+- serves PlanGrasp: empty depth and perceived -> the latest frame: a lookup of the newest prepared frame's
+  search (`max_frame_age_s`, `max_wait_s`); depth + camera_info + perceived -> that frame; depth + camera_info
+  alone -> perceived first by the segmentation node's Perceive service (with the request's `objects`). A bad
+  request or a frame the segmentation node could not perceive answers success=false with the reason.
 """
-import dataclasses
 import threading
 import time
 from pathlib import Path
 
-import numpy as np
 from defgg_interfaces.msg import Grasp, PerceivedObjects
 from defgg_interfaces.srv import Perceive, PlanGrasp
-from geometry_msgs.msg import PoseStamped
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image
-from std_msgs.msg import Header
-from visualization_msgs.msg import Marker, MarkerArray
+from visualization_msgs.msg import MarkerArray
 
-from defgg_ros.grip_force import GripRuleError, LabelGripRule
 from defgg_ros.model.inference import CheckpointError, GraspPredictor
 from defgg_ros.nodes import qos
-from defgg_ros.nodes.conversions import (
-    camera_info_to_k,
-    check_image_size,
-    check_same_size,
-    depth_msg_to_metres,
-    numpy_to_image,
-    pose_from_transform,
-    stamp_to_ns,
-    transform_from_pose,
-)
+from defgg_ros.nodes.conversions import check_image_size, numpy_to_image, stamp_to_ns, transform_from_pose
+from defgg_ros.nodes.grasp_msg import finger_markers, grasp_msg, label_grip_rule
 from defgg_ros.nodes.node_main import run_node
-from defgg_ros.nodes.perceived_msg import is_empty, parts_from_msg
+from defgg_ros.nodes.perceived_msg import frame_from_messages, is_empty
 from defgg_ros.perception.frame_worker import (
     LatestFrameWorker,
     RecentValues,
     WorkerClosed,
     keep_executor_responsive,
 )
-from defgg_ros.perception.grasp_planning import PlanningError, check_top_k, finger_boxes_in_grasp
+from defgg_ros.perception.grasp_planning import PlanningError, check_top_k
+from defgg_ros.perception.prepared_frames import Frame, PreparedFrame
 from defgg_ros.perception.sync import StampSynchronizer
-from defgg_ros.planning.grip_estimate import grip_estimate
-from defgg_ros.planning.perceived_frame import REBUILT_DEFAULT_PA, moduli_image, view_from_parts
-from defgg_ros.planning.tabletop_grasps import base_T_grasp, image_projection
-from defgg_ros.planning.tabletop_planner import PerceivedObjects as PlannerObjects
+from defgg_ros.planning.perceived_frame import REBUILT_DEFAULT_PA
 from defgg_ros.planning.tabletop_planner import TabletopPlanner
 from defgg_ros.ros.diagnostics import NodeDiagnostics
 from defgg_ros.ros.memory import keep_freed_memory
 from defgg_ros.ros.parameters import declare_parameters, load_schema
-from defgg_ros.ros.service import ServiceTimeout, call_idempotent
+from defgg_ros.ros.service import ServiceTimeout, answer, call_idempotent
 from defgg_ros.ros.share import share_path
 from defgg_ros.ros.tf import TfBroadcaster, transform_msg
 
@@ -81,60 +62,6 @@ def default_model_path(use_stiffness: bool) -> Path:
     return share_path("models", MODEL_FILES[bool(use_stiffness)])
 
 
-@dataclasses.dataclass(frozen=True)
-class Frame:
-    """One planning input: a depth frame and its perception, converted (the view rebuilt)."""
-
-    header: object                  # std_msgs/Header of the depth image
-    camera_k: np.ndarray            # 3x3
-    objects: PlannerObjects         # the rebuilt view and the moduli planning reads
-    pose_frame_id: str              # the grasps' frame: the base frame, or defgg_table_estimate
-
-
-class _Searches:
-    """One frame's searches by top_k, each made once by whoever asks first (the worker's publish_on_sync
-    search for top_k 1, or a request); a later asker of the same top_k waits for it and gets the same grasps."""
-
-    def __init__(self):
-        self._lock = threading.Lock()
-        self._entries = {}          # top_k -> [done Event, (result, grasps), error]
-
-    def made(self, top_k: int) -> bool:
-        """Whether the search for top_k is finished (made by the worker or an earlier request)."""
-        with self._lock:
-            entry = self._entries.get(top_k)
-        return entry is not None and entry[0].is_set()
-
-    def get(self, top_k: int, search):
-        with self._lock:
-            entry = self._entries.get(top_k)
-            mine = entry is None
-            if mine:
-                entry = self._entries[top_k] = [threading.Event(), None, None]
-        if mine:
-            try:
-                entry[1] = search()
-            except Exception as exc:  # noqa: BLE001 - every asker gets the same error
-                entry[2] = exc
-            finally:
-                entry[0].set()
-        else:
-            entry[0].wait()
-        if entry[2] is not None:
-            raise entry[2]
-        return entry[1]
-
-
-@dataclasses.dataclass(frozen=True)
-class PreparedFrame:
-    """A frame through the network (TabletopPlanner.network), ready for any number of searches."""
-
-    frame: Frame
-    prepared: object                # planning.tabletop_planner.PreparedFrame
-    seconds: float                  # wall time of the preparation
-    searches: _Searches = dataclasses.field(default_factory=_Searches, compare=False)
-
-
 class GraspInferenceNode(Node):
     def __init__(self, **kwargs):
         super().__init__("grasp_inference_node", **kwargs)
@@ -148,7 +75,7 @@ class GraspInferenceNode(Node):
         if self.predictor.uses_stiffness != bool(p["use_stiffness"]):
             raise ValueError(f"{model_path} is a {'depth+stiffness' if self.predictor.uses_stiffness else 'depth-only'}"
                              f" network but use_stiffness is {p['use_stiffness']}")
-        self._grip_rule = self._label_grip_rule(model_path)
+        self._grip_rule = label_grip_rule(self.predictor, model_path)
         self._grasp_rule = {"grasp_height_rule": p["grasp_height_rule"],
                             "grasp_depth_below_surface_m": float(p["grasp_depth_below_surface_m"])}
         self._planner = TabletopPlanner(self.predictor, default_youngs_modulus_pa=REBUILT_DEFAULT_PA)
@@ -224,25 +151,10 @@ class GraspInferenceNode(Node):
             self._publish_outputs(prepared.frame, result, grasps)
 
     def _convert(self, matched) -> Frame:
-        """Synchronised (or requested) depth + PerceivedObjects + camera_info as a Frame; raises ValueError
-        (ConversionError, PlanningError) with the reason, counted in skipped_frames for the stream."""
-        depth, perceived, info = matched["depth"], matched["perceived"], matched["info"]
-        if perceived.error:
-            raise PlanningError(f"the segmentation node could not perceive this frame: {perceived.error}")
-        check_image_size("depth", depth, self._max_image_size_px)
-        check_same_size("depth", depth, "camera_info", info)
-        check_same_size("depth", depth, "perceived labels", perceived.labels)
-        if stamp_to_ns(perceived.header.stamp) != stamp_to_ns(depth.header.stamp):
-            raise PlanningError("the perceived objects are of another frame (stamp) than the depth")
-        camera_k = camera_info_to_k(info)
-        depth_m = depth_msg_to_metres(depth)
-        parts = parts_from_msg(perceived)
-        if not parts.objects:
-            raise PlanningError("no object found above the table in the workspace box (the segmentation node "
-                                "perceived none)")
-        view = view_from_parts(parts, depth_m, camera_k, **self._grasp_rule)
-        objects = PlannerObjects(view, None, moduli_image(parts, depth_m.shape), None)
-        return Frame(depth.header, camera_k, objects, perceived.base_frame)
+        """Synchronised (or requested) depth + PerceivedObjects + camera_info as a Frame; ValueError with the
+        reason (perceived_msg.frame_from_messages)."""
+        return frame_from_messages(matched["depth"], matched["perceived"], matched["info"], self._max_image_size_px,
+                                   self._grasp_rule)
 
     def _convert_stage(self, matched, checkpoint) -> Frame:
         try:
@@ -291,7 +203,8 @@ class GraspInferenceNode(Node):
         """(TabletopResult, Grasp messages) of a prepared frame, searched once per top_k (_Searches)."""
         def search():
             result = self._planner.search(prepared.prepared, top_k)
-            return result, [self._grasp_msg(g, prepared.frame, prepared.prepared.network) for g in result.grasps]
+            return result, [grasp_msg(g, prepared.frame, prepared.prepared.network, self._grip_rule,
+                                      self._p["object_density_kg_m3"], self._warn) for g in result.grasps]
         return prepared.searches.get(top_k, search)
 
     def _publish_outputs(self, frame: Frame, result, grasps):
@@ -301,7 +214,7 @@ class GraspInferenceNode(Node):
             self._quality_pub.publish(numpy_to_image(result.plan.quality_image(result.view), "32FC1", frame.header))
         if grasps:
             self._grasp_pub.publish(grasps[0])
-            self._marker_pub.publish(self._markers(grasps[0]))
+            self._marker_pub.publish(finger_markers(grasps[0]))
             self._publish_grasp_frame(grasps[0])
 
     # --- PlanGrasp ----------------------------------------------------------
@@ -369,30 +282,19 @@ class GraspInferenceNode(Node):
         return response.perceived
 
     def _on_plan_grasp(self, request, response):
-        try:
+        def plan() -> str:
             top_k = check_top_k(request.top_k)
             if _unset(request.depth) and is_empty(request.perceived) and not request.objects:
                 grasps, seconds, note = self._plan_latest(top_k)
             else:
                 grasps, seconds, note = self._plan_request(request, top_k)
-        except ValueError as exc:  # ConversionError, PlanningError, NoFeasibleGrasp, predictor errors
-            response.success, response.message = False, str(exc) or type(exc).__name__
-            self.diagnostics.error(f"plan_grasp: {response.message}")
-            return response
-        except Exception as exc:  # noqa: BLE001 - a service must answer, whatever broke
-            self.get_logger().error(f"plan_grasp failed unexpectedly: {exc!r}")
-            response.success, response.message = False, f"internal error: {exc!r}"
-            return response
-        response.success = True
-        response.grasps = grasps
-        response.inference_time_s = seconds
-        self.diagnostics.latency("plan_grasp", seconds)
-        best = grasps[0]
-        self._publish_grasp_frame(best)
-        response.message = (f"{len(grasps)} grasp(s); best q={best.quality:.3f} at ({best.center_u_px:.0f}, "
-                            f"{best.center_v_px:.0f}) px, width {best.width_m * 1000:.1f} mm, object {best.object_id}"
-                            f"{note}")
-        return response
+            response.grasps, response.inference_time_s = grasps, seconds
+            self.diagnostics.latency("plan_grasp", seconds)
+            best = grasps[0]
+            self._publish_grasp_frame(best)
+            return (f"{len(grasps)} grasp(s); best q={best.quality:.3f} at ({best.center_u_px:.0f}, "
+                    f"{best.center_v_px:.0f}) px, width {best.width_m * 1000:.1f} mm, object {best.object_id}{note}")
+        return answer(response, plan, "plan_grasp", self.get_logger(), self.diagnostics.error)
 
     def _publish_grasp_frame(self, grasp: Grasp) -> None:
         """The grasp's TCP pose as TF frame `grasp_frame` under the grasp's base frame (on /tf), so rviz and
@@ -405,60 +307,6 @@ class GraspInferenceNode(Node):
             return
         self._tf_broadcaster.send(transform_msg(pose.header.frame_id, self._p["grasp_frame"], base_T_grasp_m,
                                                 pose.header.stamp))
-
-    def _label_grip_rule(self, model_path) -> LabelGripRule:
-        """The grip force rule of the model's labels (its weights record it; legacy when they do not)."""
-        try:
-            return LabelGripRule.from_meta(self.predictor.checkpoint_meta.get("meta"))
-        except GripRuleError as exc:
-            raise CheckpointError(f"{model_path}: {exc}") from exc
-
-    def _grip_fields(self, msg: Grasp, grasp, network) -> None:
-        """Grasp.estimated_mass_kg and finger_force_n (planning/grip_estimate.py)."""
-        try:
-            grip = grip_estimate(network, grasp.object_id, self._grip_rule, float(self._p["object_density_kg_m3"]))
-        except ValueError as exc:     # a grasp is always on an object's cells; never lose the grasp over this
-            self._warn(f"no grip estimate for object {grasp.object_id} ({exc}); Grasp.finger_force_n 0: the "
-                       "executor's legacy force")
-            return
-        msg.estimated_mass_kg = grip.mass_kg
-        msg.finger_force_n = grip.finger_force_n
-        if self._grip_rule.needs_mass and grip.finger_force_n <= 0.0:
-            self._warn(f"object {grasp.object_id}: no volume seen, so no mass for the labels' grip force; the "
-                       "executor will close with its legacy force")
-
-    def _grasp_msg(self, grasp, frame: Frame, network) -> Grasp:
-        """pose_base is in the perception's pose frame: the base frame, or the table frame (the executor
-        refuses it)."""
-        base_T_camera = frame.objects.view.base_T_camera
-        b_T_g = base_T_grasp(grasp)
-        image = image_projection(grasp, base_T_camera, frame.camera_k)
-        msg = Grasp(header=frame.header)
-        camera_T_grasp = np.linalg.inv(base_T_camera) @ b_T_g
-        msg.pose_camera = PoseStamped(header=frame.header, pose=pose_from_transform(camera_T_grasp))
-        msg.pose_base = PoseStamped(header=Header(stamp=frame.header.stamp, frame_id=frame.pose_frame_id),
-                                    pose=pose_from_transform(b_T_g))
-        msg.width_m = float(grasp.width_m)
-        msg.quality = float(grasp.quality)
-        msg.angle_rad = image["angle_rad"]
-        msg.center_u_px, msg.center_v_px = image["u_px"], image["v_px"]
-        msg.width_px = image["width_px"]
-        msg.youngs_modulus_pa = float(grasp.youngs_modulus_pa)
-        msg.object_id = int(grasp.object_id)
-        self._grip_fields(msg, grasp, network)
-        return msg
-
-    # --- visualisation ------------------------------------------------------
-    def _markers(self, grasp: Grasp) -> MarkerArray:
-        base_T_grasp_m = transform_from_pose(grasp.pose_base.pose)
-        markers = MarkerArray()
-        for index, (grasp_T_finger, size) in enumerate(finger_boxes_in_grasp(grasp.width_m)):
-            marker = Marker(header=grasp.pose_base.header, ns="defgg_grasp", id=index, type=Marker.CUBE,
-                            action=Marker.ADD, pose=pose_from_transform(base_T_grasp_m @ grasp_T_finger))
-            marker.scale.x, marker.scale.y, marker.scale.z = size
-            marker.color.r, marker.color.g, marker.color.a = float(1.0 - grasp.quality), float(grasp.quality), 0.8
-            markers.markers.append(marker)
-        return markers
 
     def _warn(self, text: str):
         self.get_logger().warning(text, throttle_duration_sec=WARN_THROTTLE_S)

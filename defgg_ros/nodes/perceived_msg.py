@@ -4,12 +4,20 @@ from defgg_interfaces.msg import ObjectStiffness, PerceivedObject, PerceivedObje
 
 from defgg_ros.nodes.conversions import (
     ConversionError,
+    camera_info_to_k,
+    check_image_size,
+    check_same_size,
+    depth_msg_to_metres,
     image_to_numpy,
     numpy_to_image,
     pose_from_transform,
+    stamp_to_ns,
     transform_from_pose,
 )
-from defgg_ros.planning.perceived_frame import ObjectSummary, PerceivedParts
+from defgg_ros.perception.grasp_planning import PlanningError
+from defgg_ros.perception.prepared_frames import Frame
+from defgg_ros.planning.perceived_frame import ObjectSummary, PerceivedParts, moduli_image, view_from_parts
+from defgg_ros.planning.tabletop_planner import PerceivedObjects as PlannerObjects
 
 CAMERA_POSE_SOURCES = ("tf", "parameter", "table")
 
@@ -84,3 +92,25 @@ def _image(msg, name: str, encodings) -> np.ndarray:
         return image_to_numpy(msg)
     except ConversionError as exc:
         raise ConversionError(f"perceived objects: {name}: {exc}") from exc
+
+
+def frame_from_messages(depth, perceived, info, max_image_size_px, grasp_rule: dict) -> Frame:
+    """Depth + its PerceivedObjects + camera_info as the planner's Frame (the view rebuilt, no perception);
+    grasp_rule: the executor's grasp_height_rule and grasp_depth_below_surface_m. Raises ValueError
+    (ConversionError, PlanningError) with the reason."""
+    if perceived.error:
+        raise PlanningError(f"the segmentation node could not perceive this frame: {perceived.error}")
+    check_image_size("depth", depth, max_image_size_px)
+    check_same_size("depth", depth, "camera_info", info)
+    check_same_size("depth", depth, "perceived labels", perceived.labels)
+    if stamp_to_ns(perceived.header.stamp) != stamp_to_ns(depth.header.stamp):
+        raise PlanningError("the perceived objects are of another frame (stamp) than the depth")
+    camera_k = camera_info_to_k(info)
+    depth_m = depth_msg_to_metres(depth)
+    parts = parts_from_msg(perceived)
+    if not parts.objects:
+        raise PlanningError("no object found above the table in the workspace box (the segmentation node "
+                            "perceived none)")
+    view = view_from_parts(parts, depth_m, camera_k, **grasp_rule)
+    return Frame(depth.header, camera_k, PlannerObjects(view, None, moduli_image(parts, depth_m.shape), None),
+                 perceived.base_frame)

@@ -55,6 +55,7 @@ from defgg_ros.perception.tabletop import TabletopConfig, WorkspaceBox
 from defgg_ros.planning.perceived_frame import perceive_frame
 from defgg_ros.ros.diagnostics import NodeDiagnostics
 from defgg_ros.ros.parameters import at_default, declare_parameters, load_schema
+from defgg_ros.ros.service import answer
 from defgg_ros.ros.tf import CameraPose
 
 WARN_THROTTLE_S = 2.0
@@ -255,8 +256,8 @@ class SegmentationNode(Node):
 
     # --- services -------------------------------------------------------------------------------------------
     def _on_perceive(self, request, response):
-        start = time.perf_counter()
-        try:
+        def perceive() -> str:
+            start = time.perf_counter()
             entries = None
             if request.objects:
                 entries = tuple(make_entry(o.name, o.youngs_modulus_pa, (o.roi.x_offset, o.roi.y_offset,
@@ -266,20 +267,11 @@ class SegmentationNode(Node):
             if request.camera_info.width == 0 and request.camera_info.height == 0:
                 raise ConversionError("request has depth but no camera_info")
             response.perceived = self._perceive(request.depth, request.camera_info, entries)[0]
-        except ValueError as exc:
-            response.success, response.message = False, str(exc) or type(exc).__name__
-            self.diagnostics.error(f"perceive: {response.message}")
-            return response
-        except Exception as exc:  # noqa: BLE001 - a service must answer, whatever broke
-            self.get_logger().error(f"perceive failed unexpectedly: {exc!r}")
-            response.success, response.message = False, f"internal error: {exc!r}"
-            return response
-        seconds = time.perf_counter() - start
-        self.diagnostics.latency("perceive service", seconds)
-        response.success = True
-        response.message = (f"{len(response.perceived.objects)} object(s), camera pose from "
-                            f"{response.perceived.camera_pose_source}, {seconds * 1e3:.0f} ms")
-        return response
+            seconds = time.perf_counter() - start
+            self.diagnostics.latency("perceive service", seconds)
+            return (f"{len(response.perceived.objects)} object(s), camera pose from "
+                    f"{response.perceived.camera_pose_source}, {seconds * 1e3:.0f} ms")
+        return answer(response, perceive, "perceive", self.get_logger(), self.diagnostics.error)
 
     def _on_set_stiffness(self, request, response):
         try:

@@ -54,3 +54,23 @@ def call_idempotent(client, request, timeout_s: float, what: str, resend_every_s
         for future in futures:  # unanswered sends: drop them from the client's pending table
             if not future.done():
                 future.cancel()
+
+
+def answer(response, work, what: str, logger, note_error=None):
+    """A service callback's answer: work() fills the response's own fields and returns its message, then
+    success is true. A ValueError (a bad request, a frame that cannot be used) answers success false with its
+    text (note_error(text), e.g. the node's diagnostics); any other exception is a bug, logged as an error and
+    answered as "internal error: ..." (a service must answer, whatever broke)."""
+    try:
+        message = work()
+    except ValueError as exc:
+        response.success, response.message = False, str(exc) or type(exc).__name__
+        if note_error is not None:
+            note_error(f"{what}: {response.message}")
+        return response
+    except Exception as exc:  # noqa: BLE001 - a service must answer, whatever broke
+        logger.error(f"{what} failed unexpectedly: {exc!r}")
+        response.success, response.message = False, f"internal error: {exc!r}"
+        return response
+    response.success, response.message = True, message
+    return response

@@ -1,0 +1,71 @@
+"""A planned grasp as defgg_interfaces/Grasp (poses in the camera and the base frame, image projection, the
+object's estimated mass and finger force) and as rviz finger markers: the inference node's outputs."""
+import numpy as np
+from defgg_interfaces.msg import Grasp
+from geometry_msgs.msg import PoseStamped
+from std_msgs.msg import Header
+from visualization_msgs.msg import Marker, MarkerArray
+
+from defgg_ros.grip_force import GripRuleError, LabelGripRule
+from defgg_ros.model.inference import CheckpointError
+from defgg_ros.nodes.conversions import pose_from_transform, transform_from_pose
+from defgg_ros.perception.grasp_planning import finger_boxes_in_grasp
+from defgg_ros.planning.grip_estimate import grip_estimate
+from defgg_ros.planning.tabletop_grasps import base_T_grasp, image_projection
+
+
+def label_grip_rule(predictor, model_path) -> LabelGripRule:
+    """The grip force rule of the model's labels (its weights record it; legacy when they do not)."""
+    try:
+        return LabelGripRule.from_meta(predictor.checkpoint_meta.get("meta"))
+    except GripRuleError as exc:
+        raise CheckpointError(f"{model_path}: {exc}") from exc
+
+
+def grasp_msg(grasp, frame, network, grip_rule: LabelGripRule, density_kg_m3: float, warn) -> Grasp:
+    """A TabletopGrasp of a prepared frame (perception/prepared_frames.Frame) as a Grasp message. pose_base is
+    in the perception's pose frame: the base frame, or the table frame (the executor refuses it)."""
+    base_T_camera = frame.objects.view.base_T_camera
+    b_T_g = base_T_grasp(grasp)
+    image = image_projection(grasp, base_T_camera, frame.camera_k)
+    msg = Grasp(header=frame.header)
+    msg.pose_camera = PoseStamped(header=frame.header, pose=pose_from_transform(np.linalg.inv(base_T_camera) @ b_T_g))
+    msg.pose_base = PoseStamped(header=Header(stamp=frame.header.stamp, frame_id=frame.pose_frame_id),
+                                pose=pose_from_transform(b_T_g))
+    msg.width_m = float(grasp.width_m)
+    msg.quality = float(grasp.quality)
+    msg.angle_rad = image["angle_rad"]
+    msg.center_u_px, msg.center_v_px = image["u_px"], image["v_px"]
+    msg.width_px = image["width_px"]
+    msg.youngs_modulus_pa = float(grasp.youngs_modulus_pa)
+    msg.object_id = int(grasp.object_id)
+    _grip_fields(msg, grasp, network, grip_rule, density_kg_m3, warn)
+    return msg
+
+
+def _grip_fields(msg: Grasp, grasp, network, grip_rule: LabelGripRule, density_kg_m3: float, warn) -> None:
+    """Grasp.estimated_mass_kg and finger_force_n (planning/grip_estimate.py)."""
+    try:
+        grip = grip_estimate(network, grasp.object_id, grip_rule, float(density_kg_m3))
+    except ValueError as exc:     # a grasp is always on an object's cells; never lose the grasp over this
+        warn(f"no grip estimate for object {grasp.object_id} ({exc}); Grasp.finger_force_n 0: the executor's "
+             "legacy force")
+        return
+    msg.estimated_mass_kg = grip.mass_kg
+    msg.finger_force_n = grip.finger_force_n
+    if grip_rule.needs_mass and grip.finger_force_n <= 0.0:
+        warn(f"object {grasp.object_id}: no volume seen, so no mass for the labels' grip force; the executor will "
+             "close with its legacy force")
+
+
+def finger_markers(grasp: Grasp) -> MarkerArray:
+    """The two finger boxes at the grasp, coloured by its quality (red 0 .. green 1)."""
+    base_T_grasp_m = transform_from_pose(grasp.pose_base.pose)
+    markers = MarkerArray()
+    for index, (grasp_T_finger, size) in enumerate(finger_boxes_in_grasp(grasp.width_m)):
+        marker = Marker(header=grasp.pose_base.header, ns="defgg_grasp", id=index, type=Marker.CUBE,
+                        action=Marker.ADD, pose=pose_from_transform(base_T_grasp_m @ grasp_T_finger))
+        marker.scale.x, marker.scale.y, marker.scale.z = size
+        marker.color.r, marker.color.g, marker.color.a = float(1.0 - grasp.quality), float(grasp.quality), 0.8
+        markers.markers.append(marker)
+    return markers
