@@ -127,8 +127,9 @@ def per_object_figure(table: dict, objects, path: Path, cases=CASES) -> None:
         ax.bar([i + (k - (len(cases) - 1) / 2) * width for i in range(len(columns))], rates, width,
                label=labels.get(case, case))
     ax.set_xticks(range(len(columns)))
-    ax.set_xticklabels([f"{i + 1}\n{n.replace('common_', '').replace('egad_test_', 'egad ')}" if n != "average"
-                        else "avg" for i, n in enumerate(columns)], fontsize=7, rotation=60)
+    number = {o.name: i + 1 for i, o in enumerate(objects)}     # the report table's numbers
+    ax.set_xticklabels([f"{number[n]}\n{n.replace('common_', '').replace('egad_test_', 'egad ')}" if n != "average"
+                        else "avg" for n in columns], fontsize=7, rotation=60)
     ax.set_ylabel("grasp success rate per object [%]")
     ax.set_ylim(0, 105)
     ax.grid(True, axis="y", linestyle="--", alpha=0.5)
