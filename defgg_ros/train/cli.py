@@ -66,6 +66,12 @@ def build_parser() -> argparse.ArgumentParser:
                         "on the same validation objects")
     p.add_argument("--val-fraction", type=float, default=DEFAULTS.val_fraction, help="fraction of OBJECTS for val")
     p.add_argument("--test-fraction", type=float, default=DEFAULTS.test_fraction, help="fraction of OBJECTS for test")
+    p.add_argument("--val-objects", nargs="+", default=[], metavar="NAME",
+                   help="a fixed split instead of the fractions: these validation objects, the --test-objects (none "
+                        "by default), every other object trains; e.g. a run's object_split.val from its "
+                        "metrics.json, to keep validation by object while the data or the test part changes")
+    p.add_argument("--test-objects", nargs="+", default=[], metavar="NAME",
+                   help="with --val-objects: the objects held out as the test part (default: none)")
     p.add_argument("--architecture", choices=ARCHITECTURES, default=DEFAULTS.architecture,
                    help="ggcnn_bilinear (fast decoder, default) or ggcnn (the reference GG-CNN)")
     p.add_argument("--no-augment", action="store_true", help="disable random rotations, zooms and shifts")
@@ -94,7 +100,8 @@ def config_from_args(args) -> TrainConfig:
                        batch_size=args.batch_size, learning_rate=args.lr,
                        positive_weight=args.positive_weight, samples_per_scene=args.samples_per_scene,
                        seed=args.seed, split_seed=args.split_seed, val_fraction=args.val_fraction,
-                       test_fraction=args.test_fraction,
+                       test_fraction=args.test_fraction, val_objects=tuple(args.val_objects),
+                       test_objects=tuple(args.test_objects),
                        augment=augment, max_steps=args.max_steps, label_rule=args.label_rule,
                        max_height_offset_m=None if args.max_height_offset_mm is None
                        else args.max_height_offset_mm / 1000.0)

@@ -29,6 +29,10 @@ class TrainConfig:
     split_seed: int | None = None
     val_fraction: float = 0.15
     test_fraction: float = 0.15
+    # A fixed split instead (split.fixed_split): these validation objects, these test objects (may be none),
+    # every other object trains; the fractions and split_seed are then unused. Empty = the seeded split.
+    val_objects: tuple = ()
+    test_objects: tuple = ()
     augment: AugmentConfig = field(default_factory=AugmentConfig)
     max_steps: int | None = None   # stop early (smoke tests); None = all epochs
     # Which trials are positives (defgg_ros/data/labels.py): "mean" is the paper's rule.
@@ -52,6 +56,8 @@ class TrainConfig:
             if not value > 0:
                 raise ValueError(f"{name} must be > 0, got {value}")
         check_split_fractions(self.val_fraction, self.test_fraction)
+        if self.test_objects and not self.val_objects:
+            raise ValueError("test_objects need val_objects (a fixed split names its validation objects)")
 
     @property
     def object_split_seed(self) -> int:
@@ -63,6 +69,11 @@ class TrainConfig:
     def to_dict(self) -> dict:
         d = asdict(self)
         d["augment"]["zoom_range"] = list(self.augment.zoom_range)
+        for key in ("val_objects", "test_objects"):    # runs before the option have neither: they compare equal
+            if d[key]:
+                d[key] = list(d[key])
+            else:
+                d.pop(key)
         return d
 
     @classmethod
@@ -70,4 +81,6 @@ class TrainConfig:
         d = dict(d)
         aug = dict(d.pop("augment"))
         aug["zoom_range"] = tuple(aug["zoom_range"])
+        for key in ("val_objects", "test_objects"):
+            d[key] = tuple(d.get(key, ()))
         return cls(augment=AugmentConfig(**aug), **d)

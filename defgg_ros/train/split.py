@@ -32,6 +32,25 @@ def split_objects(object_names, val_fraction: float, test_fraction: float, seed:
             "train": sorted(shuffled[n_val + n_test:])}
 
 
+def fixed_split(object_names, val_objects, test_objects=()) -> dict:
+    """{split: sorted object names} with the validation (and test) objects named; every other object trains.
+    Keeps a validation set fixed while the data or the rest of the split changes (issue 49: the objects a
+    dataset adds, or the test objects moved into training, must not move the validation objects)."""
+    names = set(object_names)
+    val, test = set(val_objects), set(test_objects)
+    unknown = sorted((val | test) - names)
+    if unknown:
+        raise ValueError(f"split objects {unknown} have no labelled scene in the data; its objects: {sorted(names)}")
+    if not val:
+        raise ValueError("a fixed split needs at least one validation object")
+    if val & test:
+        raise ValueError(f"objects both in validation and test: {sorted(val & test)}")
+    train = names - val - test
+    if not train:
+        raise ValueError("a fixed split must leave objects to train on")
+    return {"val": sorted(val), "test": sorted(test), "train": sorted(train)}
+
+
 def split_scenes(scene_objects: dict, object_split: dict) -> dict:
     """scene_objects: {scene_id: object_name} -> {split: sorted scene ids}."""
     where = {name: split for split, names in object_split.items() for name in names}

@@ -32,7 +32,7 @@ from defgg_ros.model.network import GGCNN
 from defgg_ros.train.config import TrainConfig
 from defgg_ros.train.metrics import dataset_loss, grasp_loss, rectangle_accuracy, stiffness_response
 from defgg_ros.train.plots import plot_curves, plot_stiffness_response
-from defgg_ros.train.split import split_objects, split_scenes
+from defgg_ros.train.split import fixed_split, split_objects, split_scenes
 
 STATE_FORMAT = "defgg-train-state"
 STATE_FILE, MODEL_FILE, BEST_FILE = "state.pt", "model.pt", "best.pt"
@@ -121,7 +121,9 @@ class Trainer:
         if self.rank == 0:
             print(f"defgg-train: labels of the trial protocol {protocol.summary()}", flush=True)
         scene_objects = labelled_scene_objects(self.data_root, self.manifest)
-        if not state:
+        if not state and self.config.val_objects:
+            self.object_split = fixed_split(scene_objects.values(), self.config.val_objects, self.config.test_objects)
+        elif not state:
             self.object_split = split_objects(scene_objects.values(), self.config.val_fraction,
                                               self.config.test_fraction, self.config.object_split_seed)
         self.scene_split = split_scenes(scene_objects, self.object_split)

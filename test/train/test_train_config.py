@@ -71,3 +71,29 @@ def test_a_seed_study_keeps_the_object_split_of_its_split_seed(tiny_dataset, tmp
     config = config_from_args(args)
     assert (config.seed, config.object_split_seed) == (3, 0)
     assert TrainConfig.from_dict(config.to_dict()) == config
+
+
+def test_a_fixed_split_keeps_its_validation_objects_whatever_the_data_adds():
+    """--val-objects (issue 49): the validation objects stay the ones named when objects are added or the test
+    part moves into training; the options round-trip; a config without them stores neither key (runs started
+    before the option resume)."""
+    from defgg_ros.train.split import fixed_split
+
+    args = build_parser().parse_args(["--data", "d", "--out", "o", "--val-objects", "sphere", "cube",
+                                      "--test-objects", "cone"])
+    config = config_from_args(args)
+    assert config.val_objects == ("sphere", "cube") and config.test_objects == ("cone",)
+    assert TrainConfig.from_dict(config.to_dict()) == config
+    assert "val_objects" not in TrainConfig().to_dict()
+    assert TrainConfig.from_dict(TrainConfig().to_dict()) == TrainConfig()
+    names = ["box", "cone", "cube", "sphere", "torus"]
+    assert fixed_split(names, ["sphere", "cube"]) == {"val": ["cube", "sphere"], "test": [],
+                                                      "train": ["box", "cone", "torus"]}
+    assert fixed_split(names + ["mug"], ["sphere", "cube"], ["cone"])["val"] == ["cube", "sphere"]
+    for val, test, says in ((["pear"], [], "no labelled scene"), ([], [], "at least one validation"),
+                            (["cube"], ["cube"], "both in validation and test"),
+                            (names, [], "leave objects to train")):
+        with pytest.raises(ValueError, match=says):
+            fixed_split(names, val, test)
+    with pytest.raises(ValueError, match="test_objects need val_objects"):
+        TrainConfig(test_objects=("cone",))
