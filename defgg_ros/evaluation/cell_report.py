@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from defgg_ros.atomic import read_jsonl, write_text_atomic
-from defgg_ros.evaluation.paired import Paired, sign_test_p
+from defgg_ros.evaluation.paired import Paired, count_pairs, sign_test_p
 
 CASES = ("correct", "rigid", "soft")
 MEASURED = "measured"
@@ -55,13 +55,6 @@ def paired_by_object(records, case_a: str, case_b: str) -> dict:
         if case == case_a and (name, pick, case_b) in by_key:
             out.setdefault(name, []).append((a, by_key[(name, pick, case_b)]))
     return out
-
-
-def count_pairs(pairs) -> Paired:
-    c = {"both": 0, "a_only": 0, "b_only": 0, "neither": 0}
-    for a, b in pairs:
-        c["both" if a and b else "a_only" if a else "b_only" if b else "neither"] += 1
-    return Paired(**c)
 
 
 def bootstrap_margin_ci(by_object: dict, resamples: int = BOOTSTRAP_RESAMPLES, seed: int = BOOTSTRAP_SEED):

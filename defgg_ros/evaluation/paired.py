@@ -79,6 +79,14 @@ def sign_test_p(wins: int, losses: int) -> float:
     return min(1.0, 2.0 * tail)
 
 
+def count_pairs(pairs) -> Paired:
+    """Paired counts of (A succeeded, B succeeded) tuples."""
+    c = {"both": 0, "a_only": 0, "b_only": 0, "neither": 0}
+    for a, b in pairs:
+        c["both" if a and b else "a_only" if a else "b_only" if b else "neither"] += 1
+    return Paired(**c)
+
+
 def _count_pairs(outcome_a: dict, outcome_b: dict) -> Paired:
     """Paired counts over the keys both outcome maps ({pairing key: held?}) have."""
     counts = {"both": 0, "a_only": 0, "b_only": 0, "neither": 0}

@@ -11,7 +11,7 @@ from __future__ import annotations
 import random
 from dataclasses import dataclass
 
-from defgg_ros.evaluation.paired import Paired, sign_test_p
+from defgg_ros.evaluation.paired import Paired, count_pairs, sign_test_p
 from defgg_ros.evaluation.tables import is_graded, is_main_correct_input
 
 BOOTSTRAP_RESAMPLES = 2000
@@ -55,10 +55,7 @@ def object_outcomes(records, task: str, object_set: str, model_a: str, model_b: 
 
 
 def _counts(pairs) -> Paired:
-    c = {"both": 0, "a_only": 0, "b_only": 0, "neither": 0}
-    for a, b in pairs:
-        c["both" if a and b else "a_only" if a else "b_only" if b else "neither"] += 1
-    return Paired(**c)
+    return count_pairs(pairs)
 
 
 def _mean_margin(per_seed_objects: list, objects: list) -> float | None:
