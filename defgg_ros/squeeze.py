@@ -113,9 +113,10 @@ def needs_firmer(readings, width_resolution_m: float) -> bool:
 def estimate_modulus(readings, face_width_m: float, face_height_m: float, machine_stiffness_npm: float = math.inf,
                      width_resolution_m: float = 1e-4, model_factor: float = MODEL_FACTOR) -> ModulusEstimate:
     """The object's Young's modulus from squeeze readings (see the module doc) with its one-sigma band."""
+    # A face extent may be math.inf (not known: the pad's spread alone is loaded); the resolution must be finite.
     for name, value in (("face_width_m", face_width_m), ("face_height_m", face_height_m),
                         ("width_resolution_m", width_resolution_m)):
-        if not (math.isfinite(value) and value > 0):
+        if not (value > 0 and (math.isfinite(value) or name != "width_resolution_m")):
             raise SqueezeError(f"{name} must be > 0, got {value}")
     readings = sorted(readings, key=lambda r: r.force_n)
     k, span = squeeze_slope_npm(readings)

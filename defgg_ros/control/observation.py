@@ -56,6 +56,12 @@ class ObservationWatch:
         if not (np.array_equal(q, self.observation_q_rad) and float(tolerance_rad) == self.tolerance_rad):
             self.observation_q_rad, self.tolerance_rad, self.since_s = q, float(tolerance_rad), None
 
+    def frames_from(self, stamp_s: float) -> None:
+        """Only frames stamped stamp_s or later count as clear from now on (the perception changed then: a
+        squeeze's modulus reached the segmentation node, and frames perceived before carry the old one)."""
+        if self.since_s is not None:
+            self.since_s = max(self.since_s, float(stamp_s))
+
     def at_observation(self) -> bool:
         return self.since_s is not None
 

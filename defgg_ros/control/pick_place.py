@@ -52,11 +52,14 @@ from defgg_ros.control.sequence_types import (
     PlaceTarget,
     SendTrajectory,
     SequenceConfig,
+    SequenceFailure,
+    SqueezeRequest,
     _Motion,
     _Observed,
     _Pending,
     _Plan,
 )
+from defgg_ros.control.squeeze_phase import SqueezePhase
 from defgg_ros.control.trajectories import (
     arm_limits,
     check_trajectory,
@@ -96,20 +99,17 @@ TRANSFER_RETIMING_TRIES = 3
 TOUCHDOWN_MARGIN_M = 0.02
 
 
-class SequenceFailure(Exception):
-    """Ends the sequence with the message as the failure reason."""
-
-
 def _finite(name: str, values) -> np.ndarray:
     return finite_array(name, values, SequenceFailure)
 
 
-class PickPlaceSequence:
-    """One pick-and-place run; create a new one per goal."""
+class PickPlaceSequence(SqueezePhase):
+    """One pick-and-place run; create a new one per goal (squeeze: measure the stiffness after the descent)."""
 
     def __init__(self, kin: PandaKinematics, config: SequenceConfig, grasp: GraspTarget | None,
-                 place: PlaceTarget | None):
+                 place: PlaceTarget | None, squeeze: SqueezeRequest | None = None):
         config.validate()
+        self._init_squeeze(squeeze)
         self._kin, self._cfg, self._grasp, self._place = kin, config, grasp, place
         self._limits = arm_limits(kin.arm, config.limits_scale)   # the kinematics' arm model
         self._obs = _Observed()
@@ -182,7 +182,8 @@ class PickPlaceSequence:
         if self._recovering:
             return self._guarded(self._tick_recover, sim_s, wall_s)
         handlers = {"pre_grasp": self._tick_pre_grasp, "descend": self._tick_descend, "close": self._tick_close,
-                    "lift": self._tick_lift, "transfer": self._tick_transfer, "place": self._tick_place,
+                    "lift": self._tick_lift, "squeeze": self._tick_squeeze,
+                    "transfer": self._tick_transfer, "place": self._tick_place,
                     "retreat": self._tick_retreat}
         return self._guarded(handlers[self._phase], sim_s, wall_s)
 
@@ -405,7 +406,7 @@ class PickPlaceSequence:
         return self._motion is not None and sim_s - self._motion.start_s < self._motion.trajectory.duration_s
 
     def _progress(self, sim_s: float) -> float:
-        if self._phase in ("close",) or (self._phase == "place" and self._placed_open_sent):
+        if self._phase in ("close", "squeeze") or (self._phase == "place" and self._placed_open_sent):
             return 0.5 if self._pending.gripper else 1.0
         if self._motion is None or self._motion.trajectory.duration_s <= 0:
             return 0.0
@@ -458,6 +459,8 @@ class PickPlaceSequence:
         if not self._arrived(sim_s):
             return []
         self.outcome.contact_height_m = self._tcp_z_m()
+        if self._squeeze is not None:
+            return self._begin_squeeze(sim_s)
         self._phase = "close"
         return self._send_gripper(GraspGripper(self._plan.gripper), sim_s)
 
@@ -602,6 +605,8 @@ class PickPlaceSequence:
     # --- endings --------------------------------------------------------------
     def _fail(self, reason: str, sim_s: float, wait_for_stop: bool = True) -> list:
         """Stop the arm; the run ends once it is at rest (or recovers first: _tick_stopping)."""
+        if self._returning:   # measure only, on the way back: the goal's own failure
+            self._end_way_back_on_failure()
         if self._recovering and self._holding_step and not self._holds_object():
             # The carried object fell out: from here on it is a recovery holding nothing.
             self._recovery_log.append(f"stopped: {reason}")
@@ -818,6 +823,7 @@ class PickPlaceSequence:
         return self._recovery_motion("retreated up", self._line_up(self._cfg.place_approach_height_m, sim_s))
 
     def _finish(self, sim_s: float, arm_state: str) -> None:
+        self._squeeze_outcome()
         phase = self._failed_phase or self._phase
         self.outcome.phase_reached = phase if phase not in ("idle", RECOVER_PHASE) else "pre_grasp"
         self.outcome.duration_s = max(0.0, sim_s - self._start_s)

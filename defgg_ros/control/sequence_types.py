@@ -14,7 +14,8 @@ from defgg_ros.control.trajectories import LIMITS_SAFETY_SCALE, SAMPLE_DT_S, Sam
 # evaluation grasps at and datasets made with `defgg-datagen --grasp-height executor` are labelled at.
 CELL_GRASP_HEIGHT_RULES = ("below_surface", "half_height")
 
-PHASES = ("pre_grasp", "descend", "close", "lift", "transfer", "place", "retreat", "done")
+# "squeeze": the stiffness measurement between the descent and the close (a goal with measure_stiffness).
+PHASES = ("pre_grasp", "descend", "squeeze", "close", "lift", "transfer", "place", "retreat", "done")
 # Feedback phase while the executor brings the arm back after a failure or cancel (not in phase_reached).
 RECOVER_PHASE = "recover"
 
@@ -136,6 +137,25 @@ class PlaceTarget:
     # the lowering goes on down, guarded by the contact force, until the object stands on what is below it
     # (SequenceConfig.place_lowering_speed_mps). False: lowered to position_m and released there (a goal's pose).
     lower_to_contact: bool = False
+
+
+@dataclass(frozen=True)
+class SqueezeRequest:
+    """Measure the object's stiffness after the descent (docs/squeeze.md; defgg_ros.control.squeeze_phase)."""
+
+    only: bool = False                 # measure, open, lift back (to the observation pose): no pick
+    # The width reading's resolution (m): a compression within it gives a lower bound (squeeze.estimate_modulus).
+    width_resolution_m: float = 1e-4
+    # The opening is read this long after each squeeze's gripper result (robot clock): the fingers and a soft
+    # object settle (the bench reads 0.2 s after the fingers stopped).
+    settle_s: float = 0.3
+    speed_mps: float = 0.02            # closing speed of each squeeze (franka_gripper's Grasp speed)
+
+    def validate(self) -> None:
+        for name in ("width_resolution_m", "settle_s", "speed_mps"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"squeeze {name} must be a positive number, got {value}")
 
 
 @dataclass(frozen=True)

@@ -50,10 +50,13 @@ from defgg_ros.control.sequence_types import (
     PlaceTarget,
     SendTrajectory,
     SequenceConfig,
+    SqueezeRequest,
 )
+from defgg_ros.control.squeeze_phase import planning_modulus_pa
 from defgg_ros.control.velocity_estimate import PositionVelocityEstimator
 from defgg_ros.nodes import qos
 from defgg_ros.nodes.conversions import ConversionError, stamp_to_ns, transform_from_pose
+from defgg_ros.nodes.executor_stiffness import StiffnessUpdater
 from defgg_ros.nodes.node_main import run_node
 from defgg_ros.nodes.topic_watch import TopicWatch
 from defgg_ros.ros import topics
@@ -264,6 +267,8 @@ class ExecutorNode(Node):
         self._server = ActionServer(self, PickAndPlace, p["action_name"], self._execute, callback_group=self._group,
                                     goal_callback=self._on_goal, cancel_callback=lambda _: CancelResponse.ACCEPT)
         self._set_up_bin(p)
+        self._stiffness = StiffnessUpdater(self, p["set_stiffness_service"], p["stiffness_assignments_topic"],
+                                           self._group)
         # /diagnostics at 1 Hz (ros/diagnostics.py), like every cell node: whether a goal is running.
         self.diagnostics = NodeDiagnostics(self, lambda: {"busy": self._busy})
 
@@ -340,7 +345,7 @@ class ExecutorNode(Node):
         place = place_target(request.place_pose, p["base_frame"], p["place_position_m"],
                              None if p["place_keep_grasp_yaw"] else p["place_yaw_rad"])
         self._goal_slot = None
-        if request.place_pose.header.frame_id != "":
+        if request.place_pose.header.frame_id != "" or request.measure_only:   # measure only: never placed
             return place
         with self._lock:
             try:
@@ -504,7 +509,7 @@ class ExecutorNode(Node):
             result.grasp_used = grasp = self._resolve_grasp(goal_handle.request)
             p = self._params()
             place = self._place_for(goal_handle.request, p)
-            sequence = self._sequence_for(grasp, place, p)
+            sequence = self._sequence_for(grasp, place, p, self._squeeze_for(goal_handle.request, p))
             if goal_handle.request.plan_grasp and p["plan_grasp_alternatives"] > 1:
                 result.grasp_used, sequence = self._reachable_alternative(grasp, sequence, place, p)
             self._wait_for_servers(p["server_wait_s"])
@@ -569,9 +574,18 @@ class ExecutorNode(Node):
             raise GoalError(f"no external wrench, the descent's contact guard would be blind: "
                             f"{self._wrench_watch.diagnosis()}; check franka_robot_state_broadcaster")
 
-    def _sequence_for(self, grasp, place, p: dict) -> PickPlaceSequence:
+    def _sequence_for(self, grasp, place, p: dict, squeeze: SqueezeRequest | None = None) -> PickPlaceSequence:
         return PickPlaceSequence(self._kin, self._config,
-                                 grasp_target(grasp, p["base_frame"], p["default_youngs_modulus_pa"]), place)
+                                 grasp_target(grasp, p["base_frame"], p["default_youngs_modulus_pa"]), place, squeeze)
+
+    @staticmethod
+    def _squeeze_for(request, p: dict) -> SqueezeRequest | None:
+        """The goal's squeeze (measure_stiffness, measure_only), or None."""
+        if not (request.measure_stiffness or request.measure_only):
+            return None
+        return SqueezeRequest(only=bool(request.measure_only),
+                              width_resolution_m=float(p["squeeze_width_resolution_m"]),
+                              settle_s=float(p["squeeze_settle_s"]), speed_mps=float(p["squeeze_speed_mps"]))
 
     def _reachable_alternative(self, grasp, sequence: PickPlaceSequence, place, p: dict):
         """(grasp, sequence) to run: the planned best grasp, unless the sequence would refuse it before the arm
@@ -587,7 +601,7 @@ class ExecutorNode(Node):
         self.get_logger().info(f"best grasp would be refused ({reason}); asking for {count} ranked grasps")
         for rank, candidate in enumerate(self._planned_grasps(count), start=1):
             try:
-                other = self._sequence_for(candidate, place, p)
+                other = self._sequence_for(candidate, place, p, sequence.squeeze_request)
             except (GoalError, ValueError):
                 continue
             if not other.plan_failure(q_now):
@@ -663,7 +677,31 @@ class ExecutorNode(Node):
             if self._goal_slot is not None and sequence.released_at_place:
                 with self._lock:
                     self._bin.mark_used(self._goal_slot)
+        if sequence.squeeze_requested:
+            self._report_squeeze(sequence, result)
         return self._finish(goal_handle, sequence.outcome, result)
+
+    def _report_squeeze(self, sequence: PickPlaceSequence, result) -> None:
+        """The squeeze's readings and estimate into the result; the estimate to the segmentation node."""
+        result.squeeze_forces_n = [r.force_n for r in sequence.squeeze_readings]
+        result.squeeze_widths_m = [r.width_m for r in sequence.squeeze_readings]
+        estimate = sequence.squeeze_estimate
+        if estimate is None:
+            result.stiffness_update = "not measured: the goal ended before the squeeze was done"
+            return
+        result.stiffness_measured, result.measured_rigid = True, estimate.rigid
+        result.measured_youngs_modulus_pa = estimate.youngs_modulus_pa
+        result.stiffness_lower_bound = estimate.lower_bound
+        result.measured_modulus_low_pa, result.measured_modulus_high_pa = estimate.low_pa, estimate.high_pa
+        result.squeeze_stiffness_npm = estimate.stiffness_npm
+        modulus_pa = planning_modulus_pa(estimate)
+        result.stiffness_update = self._stiffness.tell(result.grasp_used, modulus_pa,
+                                                       float(self._params()["stiffness_update_timeout_s"]))
+        if result.stiffness_update.startswith("sent"):
+            result.stiffness_sent_pa = modulus_pa
+            with self._lock:   # the next plan_grasp goal plans on a frame perceived with the measurement
+                self._watch.frames_from(self._clocks()[0])
+        self.get_logger().info(f"squeeze: {estimate.describe()}; {result.stiffness_update}")
 
     def _drive(self, goal_handle, sequence: PickPlaceSequence) -> None:
         """Run the control loop until the sequence finishes (a cancel request goes to the sequence)."""

@@ -20,7 +20,7 @@ SIM_NODES = {
     "fake_panda_driver": {},
     "segmentation_node": {"stream_timeout_s": 60.0},      # the simulated camera pauses while the arm moves
     "grasp_inference_node": {"stream_timeout_s": 60.0},
-    "executor_node": {},
+    "executor_node": {"squeeze_width_resolution_m": 1.0e-5},   # the simulated fingers' opening is exact to ~1 um
 }
 
 

@@ -6,16 +6,14 @@ that it did not as a failure of its own.
 """
 import numpy as np
 import pytest
-from support.control_fake_robot import TICK_S, FakeRobot, World, run
+from support.control_fake_robot import GRASP, PLACE, RECOVERING_CONFIG, TICK_S, FakeRobot, World, run
 
 from defgg_ros.constants import PANDA_READY_Q_RAD
 from defgg_ros.control.kinematics import PandaKinematics
 from defgg_ros.control.pick_place import ObservationMove, PickPlaceSequence
 from defgg_ros.control.sequence_types import (
     ArmState,
-    GraspTarget,
     MoveGripper,
-    PlaceTarget,
     SendTrajectory,
     SequenceConfig,
 )
@@ -23,10 +21,8 @@ from defgg_ros.control.trajectories import tcp_peak_acceleration_mps2
 
 pytestmark = pytest.mark.unit
 
-GRASP = GraspTarget(position_m=(0.5, 0.05, 0.05), yaw_rad=0.4, width_m=0.05, youngs_modulus_pa=2e9)
-PLACE = PlaceTarget(position_m=(0.35, -0.45, 0.12))
 OBSERVE_Q = np.array(PANDA_READY_Q_RAD)
-CONFIG = SequenceConfig(watchdog_timeout_s=0.5, observation_q_rad=tuple(PANDA_READY_Q_RAD))
+CONFIG = RECOVERING_CONFIG
 
 
 @pytest.fixture(scope="module")

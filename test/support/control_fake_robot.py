@@ -10,11 +10,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from defgg_ros.constants import PANDA_READY_Q_RAD
+from defgg_ros.control import sequence_types
 from defgg_ros.control.pick_place import PickPlaceSequence
 from defgg_ros.control.sequence_types import ArmState, CancelGripper, GraspGripper, MoveGripper, SendTrajectory
 
 TICK_S = 0.01
 CONTACT_STIFFNESS_N_PER_M = 5000.0
+# A rigid 5 cm block's grasp, the bin's place pose, and a config that recovers to the ready pose (shared by tests).
+GRASP = sequence_types.GraspTarget(position_m=(0.5, 0.05, 0.05), yaw_rad=0.4, width_m=0.05, youngs_modulus_pa=2e9)
+PLACE = sequence_types.PlaceTarget(position_m=(0.35, -0.45, 0.12))
+RECOVERING_CONFIG = sequence_types.SequenceConfig(watchdog_timeout_s=0.5, observation_q_rad=tuple(PANDA_READY_Q_RAD))
 
 
 @dataclass
@@ -26,6 +31,7 @@ class World:
     slip_closing_mps: float = 0.0            # after the slip the fingers close at this rate (0: at once, to 0)
     gripper_report_delay_s: float = 0.0      # fingers report this long after they stopped (a slow squeeze)
     slip_below_tcp_z_m: float | None = None  # with slip_at_phase: the slip waits until the TCP is below this
+    object_compliance_m_per_n: float = 0.0   # a grasp at force F stops at object_width_m - F * this (a squeeze)
 
 
 class FakeRobot:
@@ -49,6 +55,8 @@ class FakeRobot:
                 self.gripper = ("move", command.width_m, command.speed_mps)
             elif isinstance(command, GraspGripper):
                 target = self.world.object_width_m or 0.0
+                if target:
+                    target -= command.command.force_n * self.world.object_compliance_m_per_n
                 self.gripper = ("grasp", target, command.command.speed_mps)
             elif isinstance(command, CancelGripper):
                 self.gripper = None

@@ -1,0 +1,100 @@
+"""The squeeze phase of the sequence (issue 49 item 4), on a fake clock: measure only, measure then pick, a
+stiffness the squeeze cannot resolve, a cancel while squeezing.
+
+The fake robot's object yields linearly (World.object_compliance_m_per_n): a grasp at F stops at width - F c, so
+the expected modulus is squeeze.estimate_modulus's model with k = 1 / c.
+"""
+import math
+
+import numpy as np
+import pytest
+from support.control_fake_robot import GRASP, PLACE, RECOVERING_CONFIG, FakeRobot, World, run
+
+from defgg_ros.constants import PANDA_READY_Q_RAD
+from defgg_ros.control.gripper_rule import grasp_command
+from defgg_ros.control.kinematics import PandaKinematics
+from defgg_ros.control.observation import ObservationWatch
+from defgg_ros.control.pick_place import PickPlaceSequence
+from defgg_ros.control.sequence_types import GraspGripper, SendTrajectory, SqueezeRequest
+from defgg_ros.squeeze import FIRM_FORCES_N, GENTLE_FORCES_N, loaded_area_m2
+
+pytestmark = pytest.mark.unit
+
+CONFIG = RECOVERING_CONFIG
+COMPLIANCE_M_PER_N = 1.3e-4   # ~2e5 Pa for a 5 cm block under the hand's pads
+SQUEEZE = SqueezeRequest(width_resolution_m=1e-5)
+
+
+@pytest.fixture(scope="module")
+def kin():
+    return PandaKinematics()
+
+
+def expected_modulus_pa(width_m=0.05, compliance=COMPLIANCE_M_PER_N, face_height_m=0.05):
+    first_width = width_m - GENTLE_FORCES_N[0] * compliance
+    return first_width / (loaded_area_m2(first_width, math.inf, face_height_m) * compliance)
+
+
+def grasps_sent(robot):
+    return [c.command for c in robot.sent if isinstance(c, GraspGripper)]
+
+
+def test_measure_only_squeezes_opens_and_returns_without_a_pick(kin):
+    sequence = PickPlaceSequence(kin, CONFIG, GRASP, PLACE, SqueezeRequest(only=True, width_resolution_m=1e-5))
+    robot = FakeRobot(kin, World(object_compliance_m_per_n=COMPLIANCE_M_PER_N))
+    run(sequence, robot, max_s=120.0)
+    out, estimate = sequence.outcome, sequence.squeeze_estimate
+    assert out.success, out.failure_reason
+    assert out.phase_reached == "done" and out.arm_state == "observation_pose" and out.recovery == ""
+    assert [r.force_n for r in sequence.squeeze_readings] == list(GENTLE_FORCES_N)   # resolved: no firm squeeze
+    assert [g.force_n for g in grasps_sent(robot)] == list(GENTLE_FORCES_N)
+    assert estimate.youngs_modulus_pa == pytest.approx(expected_modulus_pa(), rel=0.02)
+    assert estimate.low_pa < estimate.youngs_modulus_pa < estimate.high_pa and not estimate.rigid
+    assert robot.width_m > 0.07                      # the hand let go
+    tcp_lowest = min(kin.fk(t.trajectory.final_q_rad)[2, 3] for t in robot.sent if isinstance(t, SendTrajectory))
+    assert tcp_lowest > 0.0 and not sequence.released_at_place   # never went to the place
+
+
+def test_measure_then_pick_closes_with_the_measured_modulus_force(kin):
+    sequence = PickPlaceSequence(kin, CONFIG, GRASP, PLACE, SQUEEZE)
+    robot = FakeRobot(kin, World(object_compliance_m_per_n=COMPLIANCE_M_PER_N))
+    run(sequence, robot, max_s=120.0)
+    assert sequence.outcome.success, sequence.outcome.failure_reason
+    close = grasps_sent(robot)[len(GENTLE_FORCES_N)]
+    measured = sequence.squeeze_estimate.youngs_modulus_pa
+    assert close.force_n == pytest.approx(grasp_command(measured, GRASP.width_m).force_n)
+    assert close.force_n != pytest.approx(grasp_command(GRASP.youngs_modulus_pa, GRASP.width_m).force_n)
+
+
+def test_an_unresolved_compression_squeezes_firmer_and_reads_rigid(kin):
+    sequence = PickPlaceSequence(kin, CONFIG, GRASP, PLACE, SqueezeRequest(only=True, width_resolution_m=1e-5))
+    robot = FakeRobot(kin, World(object_compliance_m_per_n=0.0))
+    run(sequence, robot, max_s=120.0)
+    assert sequence.outcome.success, sequence.outcome.failure_reason
+    assert [r.force_n for r in sequence.squeeze_readings] == list(GENTLE_FORCES_N + FIRM_FORCES_N)
+    assert sequence.squeeze_estimate.rigid and sequence.squeeze_estimate.lower_bound
+
+
+def test_cancel_while_squeezing_recovers_to_the_observation_pose(kin):
+    sequence = PickPlaceSequence(kin, CONFIG, GRASP, PLACE, SqueezeRequest(only=True, width_resolution_m=1e-5))
+    robot = FakeRobot(kin, World(object_compliance_m_per_n=COMPLIANCE_M_PER_N))
+    run(sequence, robot, until=lambda r, s: len(s.squeeze_readings) == 2)
+    robot.apply(sequence.cancel(robot.sim_s, robot.sim_s), sequence)
+    run_on = 0
+    while not sequence.finished and run_on < 12000:
+        robot.step(sequence)
+        run_on += 1
+    out = sequence.outcome
+    assert out.canceled and not out.success and out.phase_reached == "squeeze"
+    assert out.arm_state == "observation_pose" and "opened the hand" in out.recovery
+    assert np.max(np.abs(robot.q - np.array(PANDA_READY_Q_RAD))) < CONFIG.arrival_joint_atol_rad
+
+
+def test_frames_perceived_before_a_measurement_reached_perception_do_not_count():
+    watch = ObservationWatch(PANDA_READY_Q_RAD, 0.05)
+    watch.update(PANDA_READY_Q_RAD, 10.0)
+    assert watch.frame_is_clear(10.5)
+    watch.frames_from(11.0)          # the squeeze's modulus was sent at 11 s
+    assert not watch.frame_is_clear(10.5) and watch.frame_is_clear(11.2)
+    watch.frames_from(5.0)           # never back
+    assert not watch.frame_is_clear(10.5)
