@@ -105,6 +105,7 @@ SLOW_MODULES = {
     "evaluation/test_eval_protocol.py", "perception/test_tabletop_scenes.py", "sessions/test_replay_domain.py",
     "perception/test_depth_noise_low_objects.py", "perception/test_tabletop_shapes.py",
     "train/test_label_grip_rule.py", "foundation/test_bench_help.py", "bringup/test_demo_place.py",
+    "test_examples.py",                  # each example in a process of its own
     # a module's single slow test: "path::test name"
     "reliability/test_plan_grasp_faults.py::test_a_node_with_bad_start_up_files_or_parameters_exits_2_with_one_clear_line",
 }
