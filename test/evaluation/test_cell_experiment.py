@@ -186,3 +186,23 @@ def test_one_real_pick_is_recorded_and_a_restart_does_not_pick_again(tmp_path):
         record["held_after_transfer"] and record["in_bin"])
     assert ce.run(out, work, model, 1, 0, objects, ["correct"], progress=False) == 0
     assert "**1 of" in cr.write_report(out, objects, planned_picks=1)
+
+
+@pytest.mark.e2e
+def test_the_measured_case_squeezes_first_and_the_plan_carries_the_estimate(tmp_path):
+    """The fourth case on a rigid evaluation object: the executor's squeeze (measure_only) reads it as rigid and
+    sends that to the segmentation node, whose next frame gives the object the measurement; then the pick."""
+    from defgg_ros.ros.share import share_path
+
+    out, work = tmp_path / "out", tmp_path / "work"
+    objects = [o for o in ce.OBJECTS if o.name == "egad_test_00_c1"]
+    assert ce.run(out, work, share_path("models", "defgg_cnn.pt"), 1, 0, objects, [ce.MEASURED], progress=False,
+                  records_name="records_measured.jsonl") == 1
+    (record,) = [json.loads(line) for line in (out / "records_measured.jsonl").read_text().splitlines()]
+    assert not record.get("cell_error"), record
+    squeeze = record["squeeze"]
+    assert squeeze["success"], squeeze
+    assert squeeze["rigid"] and squeeze["update"].startswith("sent"), squeeze
+    assert record["perceived_moduli_pa"] == [pytest.approx(squeeze["sent_pa"])]
+    assert record["grasp"]["youngs_modulus_pa"] == pytest.approx(squeeze["sent_pa"])
+    assert "| egad_test_00_c1 | 2e+09 |" in cr.write_report(out, objects, planned_picks=1)
