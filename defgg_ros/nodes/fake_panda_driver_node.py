@@ -55,6 +55,12 @@ OBJECT_POSES_TOPIC = topics.FAKE_OBJECT_POSES
 CAPTURE_SERVICE = topics.FAKE_CAPTURE_SERVICE
 HOMING_SPEED_MPS = 0.1        # franka_gripper's default speed
 FEEDBACK_PERIOD_S = 0.1       # FollowJointTrajectory feedback while a goal runs (wall clock)
+# On SIGINT/SIGTERM (stop_for_exit) the driver holds its own arm and keeps stepping and publishing until every arm
+# joint has been slower than EXIT_STILL_RADPS for EXIT_REST_S (wall clock), at most EXIT_STOP_TIMEOUT_S: under
+# `ros2 launch` every process gets the signal at once, and the executor's own stop needs joint states to confirm.
+EXIT_STILL_RADPS = 0.01
+EXIT_REST_S = 0.5
+EXIT_STOP_TIMEOUT_S = 3.0
 # Camera frames are published reliably (like realsense2_camera): best-effort
 # subscribers still match, and reliable ones (the cell's nodes pick reliable
 # for a reliable publisher, qos.SensorSubscription) get lost fragments repaired.
@@ -459,6 +465,30 @@ class FakePandaDriver(Node):
         with self._lock:
             self.cell.close()
 
+    def stop_for_exit(self, spin_once) -> str:
+        """On a stop signal (run_node, stops_hardware), before anything is torn down: this process is the simulated
+        arm's controller, so it holds the arm where it is (as a cancel does), then keeps simulating and publishing
+        (spin_once serves the executor's cancel and hold goals meanwhile) until the arm has been at rest for
+        EXIT_REST_S. '' when it was, else why not (the process then exits 1)."""
+        with self._lock:
+            self._arm_goal_serial += 1     # a running trajectory goal ends, as replaced
+            self.cell.command_trajectory([])
+        started, still_since, speed = time.monotonic(), None, float("inf")
+        while time.monotonic() - started < EXIT_STOP_TIMEOUT_S and self._thread.is_alive():
+            spin_once(0.01)
+            with self._lock:
+                speed = float(max(abs(v) for v in self.cell.joint_state().velocities[:len(self._arm_joints)]))
+            now = time.monotonic()
+            if speed >= EXIT_STILL_RADPS:
+                still_since = None
+            elif still_since is None:
+                still_since = now
+            elif now - still_since >= EXIT_REST_S:
+                self.get_logger().info(f"stopping: the simulated arm is held at rest ({now - started:.2f} s)")
+                return ""
+        return (f"the simulated arm did not come to rest within {EXIT_STOP_TIMEOUT_S:.0f} s of its hold "
+                f"(joints at up to {speed:.3f} rad/s)")
+
     def destroy_node(self):
         self.shutdown()  # the simulation thread first: it publishes through this node
         destroy_actions(self)  # the gripper actions must vanish with the driver (see destroy_actions)
@@ -481,7 +511,8 @@ class _Schedule:
 
 
 def main(args=None):
-    run_node("fake_panda_driver", FakePandaDriver, startup_errors=(SceneError, ValueError), threads=4, args=args)
+    run_node("fake_panda_driver", FakePandaDriver, startup_errors=(SceneError, ValueError), threads=4, args=args,
+             stops_hardware=True)
 
 
 if __name__ == "__main__":

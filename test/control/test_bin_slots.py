@@ -7,12 +7,13 @@ from defgg_ros.control.bin_slots import BinArea, BinFull, BinSlots, check_drop_x
 
 pytestmark = pytest.mark.unit
 
-SHIPPED_BIN = [0.25, 0.45, -0.55, -0.35]   # executor_node.yaml's bin_inner_m (rigid_box.yaml's 20 cm bin)
+SHIPPED_BIN = [0.19, 0.51, -0.61, -0.29]   # executor_node.yaml's bin_inner_m (the scenes' 32 cm bin)
+SMALL_BIN = [0.25, 0.45, -0.55, -0.35]     # the 20 cm bin shipped before issue 48: 4 slots
 WORKSPACE = [0.22, 0.85, -0.40, 0.40]
 
 
 def test_slots_keep_the_pitch_and_the_wall_margin():
-    for area_m, count in ((SHIPPED_BIN, 4), ([0.19, 0.51, -0.61, -0.29], 9)):
+    for area_m, count in ((SMALL_BIN, 4), (SHIPPED_BIN, 9)):
         area = BinArea.from_list(area_m, 0.08, 0.05)
         centres = slot_centres(area)
         assert len(centres) == count
@@ -23,7 +24,7 @@ def test_slots_keep_the_pitch_and_the_wall_margin():
 
 
 def test_slots_are_used_once_until_the_bin_is_reset():
-    slots = BinSlots(BinArea.from_list(SHIPPED_BIN, 0.08, 0.05))
+    slots = BinSlots(BinArea.from_list(SMALL_BIN, 0.08, 0.05))
     taken = []
     for _ in range(4):
         index = slots.next_free()
@@ -68,3 +69,45 @@ def test_the_shipped_drop_point_is_under_the_camera_and_away_from_the_base():
     observation_xy = PandaKinematics().fk(np.array(p["observation_q_rad"]))[:2, 3]
     x, y = default_drop_xy(observation_xy, p["workspace_box_m"], p["base_keep_out_radius_m"])
     assert (x, y) == pytest.approx((0.40, 0.0), abs=1e-3) and math.hypot(x, y) >= 0.40
+
+
+def test_the_shipped_bin_holds_eight_and_every_scene_has_it():
+    """Issue 48.2: eight picks in a row with an empty place_pose must fit in the shipped cell's bin, so the executor's
+    bin_inner_m and every shipped scene's bin are one bin, of at least 8 slots (the 20 cm bin held 4)."""
+    from pathlib import Path
+
+    import yaml
+
+    from defgg_ros.ros.parameters import defaults
+
+    p = defaults("executor_node")
+    area = BinArea.from_list(p["bin_inner_m"], p["bin_slot_pitch_m"], p["bin_wall_margin_m"])
+    assert len(slot_centres(area)) >= 8
+    assert area.contains(*p["place_position_m"][:2])
+    scenes = sorted((Path(__file__).resolve().parents[2] / "sim_bringup" / "scenes").glob("*.yaml"))
+    assert scenes
+    for scene in scenes:
+        (cx, cy), (ix, iy, _h) = (v for v in yaml.safe_load(scene.read_text())["bin"].values())
+        assert [cx - ix / 2, cx + ix / 2, cy - iy / 2, cy + iy / 2] == pytest.approx(p["bin_inner_m"]), scene.name
+
+
+def test_every_shipped_slot_can_be_placed_into_from_a_pick_under_the_camera():
+    """The sequence's own check before the arm moves (IK at the slot, the straight guarded lowering and the retreat)
+    for a 4.5 cm block picked at each corner of the camera's table area and placed into each slot."""
+    import numpy as np
+
+    from defgg_ros.constants import PANDA_READY_Q_RAD
+    from defgg_ros.control.kinematics import PandaKinematics
+    from defgg_ros.control.pick_place import PickPlaceSequence
+    from defgg_ros.control.sequence_types import GraspTarget, PlaceTarget, SequenceConfig
+    from defgg_ros.ros.parameters import defaults
+
+    p, kin = defaults("executor_node"), PandaKinematics()
+    area = BinArea.from_list(p["bin_inner_m"], p["bin_slot_pitch_m"], p["bin_wall_margin_m"])
+    q_ready = np.array(PANDA_READY_Q_RAD)
+    for grasp_xy in ((0.36, 0.19), (0.66, -0.19)):
+        grasp = GraspTarget((*grasp_xy, 0.045), 0.0, 0.065, 2e9)
+        for x, y in slot_centres(area):
+            place = PlaceTarget((x, y, p["place_position_m"][2]), None, lower_to_contact=True)
+            reason = PickPlaceSequence(kin, SequenceConfig(), grasp, place).plan_failure(q_ready)
+            assert reason == "", (grasp_xy, (x, y), reason)

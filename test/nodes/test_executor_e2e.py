@@ -32,7 +32,7 @@ from defgg_ros.ros.executor import ThreadedExecutor
 
 SCENE = Path(__file__).resolve().parents[2] / "sim_bringup" / "scenes" / "rigid_box.yaml"
 BOX_XY_M, BOX_YAW_RAD, BOX_SIZE_M = (0.5, 0.05), 0.3, 0.05   # as in rigid_box.yaml
-BIN_XY_M, BIN_INNER_M = (0.35, -0.45), 0.2
+BIN_XY_M, BIN_INNER_M = (0.35, -0.45), 0.32   # the scenes' bin (test/control/test_bin_slots.py)
 WATCHDOG_S = 2.0
 TIMEOUT_S = 90.0
 KIN = PandaKinematics()

@@ -1,4 +1,4 @@
-"""Eight picks in a row into the bin with an empty place_pose (issue 48.2).
+"""Eight picks in a row into the shipped cell's bin with an empty place_pose (issue 48.2).
 
 The simulated driver (PyBullet, sim time) with eight rigid blocks and the executor, as processes; each goal takes
 the block's top-down grasp and no place pose, so the executor chooses the bin's next free slot and lowers into it
@@ -29,13 +29,13 @@ pytestmark = [pytest.mark.e2e, pytest.mark.timeout(900)]
 BLOCK_M = 0.045
 # Two rows of four under the camera, 10 cm apart (the open fingers need 4 cm either side of a block).
 BLOCKS_XY_M = [(x, y) for y in (0.07, 0.19) for x in (0.36, 0.46, 0.56, 0.66)]
-# A 32 cm bin: 3 x 3 slots at the executor's default pitch and wall margin (the shipped 20 cm bin holds 2 x 2: the
-# fingers opening beside a 4.5 cm block reach 41.5 mm from its centre).
-BIN_XY_M, BIN_INNER_M = (0.35, -0.45), 0.32
-BIN_AREA_M = [BIN_XY_M[0] - BIN_INNER_M / 2, BIN_XY_M[0] + BIN_INNER_M / 2,
-              BIN_XY_M[1] - BIN_INNER_M / 2, BIN_XY_M[1] + BIN_INNER_M / 2]
 PICK_TIMEOUT_S = 240.0
 EXECUTOR = defaults("executor_node")
+# The shipped cell's bin (sim_bringup/scenes/*.yaml, the executor's default bin_inner_m: 32 cm, 3 x 3 slots at the
+# default pitch and wall margin; test/control/test_bin_slots.py checks they agree). Before issue 48 it was 20 cm,
+# 2 x 2 slots: the fingers opening beside a 4.5 cm block reach 41.5 mm from its centre.
+_X_MIN, _X_MAX, _Y_MIN, _Y_MAX = EXECUTOR["bin_inner_m"]
+BIN_XY_M, BIN_INNER_M = ((_X_MIN + _X_MAX) / 2, (_Y_MIN + _Y_MAX) / 2), _X_MAX - _X_MIN
 
 
 def _scene(tmp_path):
@@ -60,7 +60,7 @@ def test_eight_picks_with_no_place_pose_fill_the_bin_without_collisions(tmp_path
     poses, report = [], []
     threshold_n = EXECUTOR["contact_force_threshold_n"]
     with open(log_path, "w") as log, Bringup(driver_and_executor_set(
-            tmp_path, _scene(tmp_path), {"bin_inner_m": BIN_AREA_M}), out=log) as bringup:
+            tmp_path, _scene(tmp_path)), out=log) as bringup:
         bringup.wait_ready(180.0)
         probe = Node("bin_fill_probe", context=executor.context)
         probe.create_subscription(PoseArray, topics.FAKE_OBJECT_POSES, poses.append, qos.STATE)

@@ -56,6 +56,23 @@ def _stamp_s(state: JointState) -> float:
     return state.header.stamp.sec + 1e-9 * state.header.stamp.nanosec
 
 
+def _start_pick(executor, spin, probe_name: str):
+    """A probe node watching the joint states and a pick of the rigid box sent through it: (probe, joints, feedback,
+    goal handle)."""
+    joints, feedback = [], []
+    probe = Node(probe_name, context=executor.context)
+    probe.create_subscription(JointState, topics.JOINT_STATES, joints.append, qos.STATE)
+    client = ActionClient(probe, PickAndPlace, topics.PICK_AND_PLACE_ACTION)
+    executor.add_node(probe)
+    spin(executor, client.server_is_ready, 60.0, "the pick-and-place action server")
+    spin(executor, lambda: len(joints) > 10, 60.0, "joint states from the driver")   # the executor's too, by now
+    goal = PickAndPlace.Goal(grasp=grasp_msg((*BOX_XY_M, BOX_SIZE_M), BOX_YAW_RAD, 0.07))
+    handle = spin(executor, client.send_goal_async(goal, feedback_callback=lambda f: feedback.append(f.feedback)),
+                  30.0, "the goal response")
+    assert handle.accepted
+    return probe, joints, feedback, handle
+
+
 def _in_phase(phase: str, feedback, joints) -> bool:
     if not feedback or not joints or feedback[-1].phase != phase:
         return False
@@ -69,19 +86,9 @@ def _in_phase(phase: str, feedback, joints) -> bool:
                                         ("descend", "bringup_stop")])
 def test_the_arm_is_at_rest_within_half_a_second_of_stopping_the_executor(phase, how, tmp_path, executor, spin):
     log_path = tmp_path / "cell.log"
-    joints, feedback = [], []
     with open(log_path, "w") as log, Bringup(_cell_set(tmp_path), out=log) as bringup:
         bringup.wait_ready(180.0)
-        probe = Node("exit_stop_probe", context=executor.context)
-        probe.create_subscription(JointState, topics.JOINT_STATES, joints.append, qos.STATE)
-        client = ActionClient(probe, PickAndPlace, topics.PICK_AND_PLACE_ACTION)
-        executor.add_node(probe)
-        spin(executor, client.server_is_ready, 60.0, "the pick-and-place action server")
-        spin(executor, lambda: len(joints) > 10, 60.0, "joint states from the driver")   # the executor's too, by now
-        goal = PickAndPlace.Goal(grasp=grasp_msg((*BOX_XY_M, BOX_SIZE_M), BOX_YAW_RAD, 0.07))
-        handle = spin(executor, client.send_goal_async(goal, feedback_callback=lambda f: feedback.append(f.feedback)),
-                      30.0, "the goal response")
-        assert handle.accepted
+        probe, joints, feedback, handle = _start_pick(executor, spin, "exit_stop_probe")
         result = handle.get_result_async()
         spin(executor, lambda: result.done() or _in_phase(phase, feedback, joints), 240.0, f"the {phase} phase")
         assert not result.done(), ("the pick ended before the phase", result.result().result.failure_reason)
@@ -144,16 +151,7 @@ def test_the_bringup_says_so_when_the_executor_could_not_confirm_the_stop(tmp_pa
         spin(executor, lambda: log_has("cell ready in") or bringup.poll() is not None, 180.0, "the cell")
         driver_pid = int(next(line for line in lines if "started " in line).split("fake_panda_driver (pid ")[1]
                          .split(")")[0])
-        joints, feedback = [], []
-        probe = Node("exit_stop_cli_probe", context=executor.context)
-        probe.create_subscription(JointState, topics.JOINT_STATES, joints.append, qos.STATE)
-        client = ActionClient(probe, PickAndPlace, topics.PICK_AND_PLACE_ACTION)
-        executor.add_node(probe)
-        spin(executor, client.server_is_ready, 60.0, "the pick-and-place action server")
-        spin(executor, lambda: len(joints) > 10, 60.0, "joint states from the driver")   # the executor's too, by now
-        goal = PickAndPlace.Goal(grasp=grasp_msg((*BOX_XY_M, BOX_SIZE_M), BOX_YAW_RAD, 0.07))
-        assert spin(executor, client.send_goal_async(goal, feedback_callback=lambda f: feedback.append(f.feedback)),
-                    30.0, "the goal response").accepted
+        probe, joints, feedback, _handle = _start_pick(executor, spin, "exit_stop_cli_probe")
         spin(executor, lambda: _in_phase("descend", feedback, joints), 240.0, "the descent")
         os.kill(driver_pid, signal.SIGSTOP)
         bringup.send_signal(signal.SIGTERM)
@@ -174,3 +172,33 @@ def test_the_bringup_says_so_when_the_executor_could_not_confirm_the_stop(tmp_pa
     assert code == 1, "\n".join(lines[-30:])
     assert any("stopped " in line and "executor_node (1)" in line for line in lines), "\n".join(lines[-30:])
     assert any("WARNING: executor_node exited 1" in line for line in lines), "\n".join(lines[-30:])
+
+
+def test_sigint_to_every_process_at_once_still_stops_the_arm_and_both_confirm(tmp_path, executor, spin):
+    """`ros2 launch` (sim_cell.launch.py) sends SIGINT to every process at once, so the driver may be gone before the
+    executor's hold is confirmed. The simulated driver is the arm's controller: on the signal it holds its own arm
+    and keeps simulating and publishing until the arm has rested 0.5 s (fake_panda_driver_node.stop_for_exit), so
+    the executor sees the rest and both exit 0. Before: the driver's context shut down at the signal, its joint
+    states stopped, and the executor could only exit 1 ("could not confirm that the arm stopped")."""
+    log_path = tmp_path / "cell.log"
+    with open(log_path, "w") as log, Bringup(_cell_set(tmp_path), out=log) as bringup:
+        bringup.wait_ready(180.0)
+        probe, joints, feedback, handle = _start_pick(executor, spin, "exit_stop_launch_probe")
+        result = handle.get_result_async()
+        spin(executor, lambda: result.done() or _in_phase("descend", feedback, joints), 240.0, "the descent")
+        assert not result.done(), ("the pick ended before the descent", result.result().result.failure_reason)
+        signal_s = _stamp_s(joints[-1])
+        processes = [bringup.processes[name] for name in ("executor_node", "fake_panda_driver")]
+        for process in processes:
+            process.popen.send_signal(signal.SIGINT)
+        spin(executor, lambda: all(p.returncode() is not None for p in processes), 30.0, "both processes' exit")
+        codes = [p.returncode() for p in processes]
+        executor.remove_node(probe)
+    after = [(_stamp_s(j) - signal_s, float(np.max(np.abs(_arm(j)[1])))) for j in joints if _stamp_s(j) > signal_s]
+    text = log_path.read_text()
+    print(f"SIGINT to both in the descent: exit codes {codes}; {len(after)} joint states after it, the last "
+          f"{after[-1][0] if after else float('nan'):.2f} s after (sim) at "
+          f"{after[-1][1] if after else float('nan'):.4f} rad/s")
+    assert codes == [0, 0], (codes, text[-3000:])
+    assert "the arm is at rest" in text and "the simulated arm is held at rest" in text, text[-3000:]
+    assert after and after[-1][1] <= REST_SPEED_RADPS, (after[-5:], text[-3000:])

@@ -29,7 +29,7 @@ pytestmark = [pytest.mark.e2e, pytest.mark.timeout(900)]
 
 SCENES = load_node_set("sim_cell").config_dir.parent / "scenes"
 BOX_TOP_M = 0.05                     # rigid_box.yaml: a 5 cm wooden block
-BIN_XY_M, BIN_INNER_M = (0.35, -0.45), 0.2
+BIN_XY_M, BIN_INNER_M = (0.35, -0.45), 0.32   # the scenes' bin (test/control/test_bin_slots.py)
 PICK_TIMEOUT_S = 300.0
 KIN = PandaKinematics()
 
