@@ -3,12 +3,14 @@
 Starts segmentation_node and grasp_inference_node in their own processes (bench_plan_grasp.start_node) and
 sends PlanGrasp requests carrying depth + camera_info (the segmentation node perceives them through its
 Perceive service): --calls requests at each size of --sizes (the generated cluttered table; sizes without a
-RealSense mode get a D435-like focal length), then one 8000x6000 request. Prints, per size, each node's
-resident memory (VmRSS) and peak (VmHWM) after the requests, the answers, and the oversized request's answer.
+RealSense mode get a D435-like focal length), then --oversized-calls 8000x6000 requests (96 MB, refused by
+the image size limit). Prints, per size, each node's resident memory (VmRSS) and peak (VmHWM) after the
+requests, the answers, the oversized requests' answers, and the memory 3 s after the last.
 """
 import argparse
 import dataclasses
 import os
+import time
 
 from bench_plan_grasp import Cell, rss_mb, start_node, wait_for_node
 
@@ -56,6 +58,7 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--calls", type=int, default=5, help="requests per size")
     parser.add_argument("--sizes", default="640x480,1280x720,1280x800", help="WxH, comma-separated")
+    parser.add_argument("--oversized-calls", type=int, default=3, help="8000x6000 requests (refused) at the end")
     args = parser.parse_args(argv)
     os.environ["ROS_DOMAIN_ID"] = str(pick_private_domain())
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
@@ -85,8 +88,14 @@ def main(argv=None):
             ok = sum(a.success for a in answers)
             print(f"{size[0]}x{size[1]}: {ok}/{len(answers)} answered with grasps"
                   f"{'' if ok == len(answers) else ' (' + answers[-1].message[:80] + ')'}; {memory()}")
-        answer = cell.call(oversized_request(), timeout_s=120.0)
-        print(f"8000x6000: success {answer.success}: {answer.message}; {memory()}")
+        oversized = oversized_request()
+        for index in range(args.oversized_calls):
+            answer = cell.call(oversized, timeout_s=120.0)
+            print(f"8000x6000 #{index + 1}: success {answer.success}: {answer.message[:70]}...; {memory()}")
+        settle = time.monotonic() + 3.0
+        while time.monotonic() < settle:
+            cell.executor.spin_once(timeout_sec=0.1)
+        print(f"3 s later: {memory()}")
     finally:
         nodes.stop()
         context.try_shutdown()
