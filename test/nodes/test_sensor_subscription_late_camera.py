@@ -54,7 +54,8 @@ def test_a_camera_started_after_the_subscriber_loses_no_frame(executor, spin):
     reader = qos.SensorSubscription(node, Image, TOPIC, lambda m: stamps.append(m.header.stamp.sec),
                                     warn_after_s=0.0, depth=FRAMES)
     env = {k: v for k, v in os.environ.items()
-           if k not in ("FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE")}
+           if k not in ("FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE",
+                         "RMW_FASTRTPS_USE_QOS_FROM_XML")}
     camera = subprocess.Popen([sys.executable, "-c", CAMERA, str(FRAMES), TOPIC], env=env)
     try:
         spin(executor, lambda: len(stamps) >= FRAMES or camera.poll() is not None, 60.0, "the camera's frames")

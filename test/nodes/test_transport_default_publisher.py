@@ -66,7 +66,8 @@ time.sleep(5.0)  # stay while readers ask for missing fragments
 def _default_fastdds_env() -> dict:
     """This test process's ROS domain, without any Fast DDS profile: the publisher runs on the defaults."""
     return {k: v for k, v in os.environ.items()
-            if k not in ("FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE")}
+            if k not in ("FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE",
+                         "RMW_FASTRTPS_USE_QOS_FROM_XML")}
 
 
 def test_default_publisher_frames_reach_segmentation_and_inference(executor, spin):
