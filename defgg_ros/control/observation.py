@@ -68,3 +68,30 @@ class ObservationWatch:
     def frame_is_clear(self, frame_stamp_s: float) -> bool:
         """Was a frame stamped frame_stamp_s taken while the arm rested at the observation pose?"""
         return self.since_s is not None and frame_stamp_s >= self.since_s
+
+
+class RestWatch:
+    """Joint states newer than since_s (monotonic) showing every joint slower than still_radps for hold_s."""
+
+    def __init__(self, still_radps: float, hold_s: float, since_s: float):
+        self.still_radps, self.hold_s, self.since_s = still_radps, hold_s, since_s
+        self.still_since_s = None
+        self.last_speed_radps = None
+        self.confirmed = False
+
+    def update(self, last_state) -> None:
+        if last_state is None or last_state[1] <= self.since_s or self.confirmed:
+            return
+        state, wall_s = last_state
+        self.last_speed_radps = max_joint_speed_radps(state.qd_radps)
+        if self.last_speed_radps >= self.still_radps:
+            self.still_since_s = None
+        elif self.still_since_s is None:
+            self.still_since_s = wall_s
+        elif wall_s - self.still_since_s >= self.hold_s:
+            self.confirmed = True
+
+    def describe(self) -> str:
+        if self.last_speed_radps is None:
+            return "no joint states arrived after the stop"
+        return f"joints still at up to {self.last_speed_radps:.3f} rad/s"

@@ -1,0 +1,176 @@
+"""The executor node's commands to the arm and the hand, and its stop before the process exits.
+
+FollowJointTrajectory goals to the arm's joint_trajectory_controller, franka_msgs Move/Grasp goals to
+franka_gripper (docs/real_cell.md); a hold (cancel, then a one-point trajectory at the measured position) on every
+way out (docs/reliability.md). Only the newest goal of each kind answers the sequence.
+"""
+import time
+
+from control_msgs.action import FollowJointTrajectory
+from franka_msgs.action import Grasp, Move
+from franka_msgs.msg import GraspEpsilon
+
+from defgg_ros.control.observation import RestWatch
+from defgg_ros.control.pick_place import PickPlaceSequence
+from defgg_ros.control.sequence_types import CancelGripper, GraspGripper, MoveGripper, SendTrajectory
+from defgg_ros.nodes.executor_messages import hold_trajectory_msg, trajectory_to_msg
+from defgg_ros.ros.action import ActionClient
+
+
+class ArmCommands:
+    """Trajectory and gripper goals out, the stop on the way out (mixed into ExecutorNode: its lock, clients and
+    the state they guard)."""
+
+    def stop_for_exit(self, spin_once) -> str:
+        """Before the process tears anything down (run_node calls this on SIGINT/SIGTERM or a callback's
+        exception): end the control loop, cancel the trajectory goal and command a hold at the measured
+        position, then keep spinning (spin_once(timeout_s)) until joint states confirm the arm at rest and the
+        running goal is answered. Returns '' when the arm is confirmed at rest (or this node never moved it),
+        else why not (the process then exits 1)."""
+        p = self._params()
+        timeout_s, hold_s = float(p["exit_stop_timeout_s"]), float(p["rest_hold_s"])
+        started = time.monotonic()
+        self._shutdown.set()
+        with self._lock:
+            moving = self._arm_may_move()
+            self._hold_arm()
+        if not moving:
+            self.get_logger().info("stopping: no trajectory of this executor's is running")
+            return ""
+        rest = RestWatch(float(p["still_speed_radps"]), hold_s, since_s=started)
+        deadline = started + timeout_s
+        while time.monotonic() < deadline and not (rest.confirmed and not self._busy):
+            spin_once(0.01)
+            with self._lock:
+                rest.update(self._last_state)
+        took = time.monotonic() - started
+        if rest.confirmed:
+            self.get_logger().info(f"stopping: the arm is at rest ({took:.2f} s after the stop was commanded)")
+            return ""
+        return (f"could not confirm that the arm stopped within {timeout_s:.1f} s: {rest.describe()}; "
+                "check the arm")
+
+    def _wait_for_rest(self) -> None:
+        """After a hold: answer only once joint states show the arm at rest (at most stop_timeout_s, wall clock;
+        the result's arm_state then says 'moving'), so no motion follows a terminal result."""
+        config = self._config
+        rest = RestWatch(config.still_speed_radps, config.rest_hold_s, since_s=time.monotonic())
+        deadline = time.monotonic() + config.stop_timeout_s
+        while not rest.confirmed and time.monotonic() < deadline:
+            time.sleep(0.01)
+            with self._lock:
+                rest.update(self._last_state)
+
+    def _carry_out(self, sequence: PickPlaceSequence, commands):
+        """Execute the sequence's commands (called with the lock held)."""
+        for command in commands:
+            if isinstance(command, SendTrajectory):
+                self._send_arm(command.trajectory)
+            elif isinstance(command, MoveGripper):
+                goal = Move.Goal(width=command.width_m, speed=command.speed_mps)
+                self._send_gripper(sequence, self._move_client, goal)
+            elif isinstance(command, GraspGripper):
+                c = command.command
+                epsilon = GraspEpsilon(inner=c.epsilon_inner_m, outer=c.epsilon_outer_m)
+                goal = Grasp.Goal(width=c.width_m, epsilon=epsilon, speed=c.speed_mps, force=c.force_n)
+                self._send_gripper(sequence, self._grasp_client, goal)
+            elif isinstance(command, CancelGripper) and self._gripper_goal is not None:
+                self._gripper_goal.cancel_goal_async()
+                self._gripper_goal = None
+
+    def _send_arm(self, trajectory) -> None:
+        """Send a trajectory as a FollowJointTrajectory goal (lock held); it replaces the running one.
+
+        The joint_trajectory_controller starts a goal stamped 0 on receipt and blends it from where the
+        arm is, so each new command replaces the previous goal there. The sequence watches the joint
+        states for arrival; a rejected or aborted goal is logged here (the sequence then fails on its
+        settle timeout, naming the phase).
+        """
+        self._arm_goal_serial += 1
+        serial = self._arm_goal_serial
+        goal = FollowJointTrajectory.Goal(
+            trajectory=trajectory_to_msg(trajectory, self._params()["base_frame"], self._arm_joints))
+
+        def on_result(future):
+            result = future.result().result
+            with self._lock:
+                if serial == self._arm_goal_serial:
+                    self._arm_goal = None   # ended: nothing left to cancel
+            if serial == self._arm_goal_serial and result.error_code != FollowJointTrajectory.Result.SUCCESSFUL:
+                self.get_logger().error(f"arm trajectory failed (error_code {result.error_code}): "
+                                        f"{result.error_string}")
+
+        def on_goal(future):
+            handle = future.result()
+            with self._lock:
+                self._arm_goals_unanswered -= 1
+            if not handle.accepted:
+                self.get_logger().error("the arm's trajectory controller rejected a trajectory goal")
+                return
+            with self._lock:
+                if serial == self._arm_goal_serial:
+                    self._arm_goal = handle
+                elif self._held_serial == self._arm_goal_serial:
+                    handle.cancel_goal_async()  # accepted after a stop was requested: it must not run
+            handle.get_result_async().add_done_callback(on_result)
+
+        self._arm_goals_unanswered += 1
+        self._arm_client.send_goal_async(goal).add_done_callback(on_goal)
+
+    def _arm_may_move(self) -> bool:
+        """Could a trajectory of this node's still move the arm (lock held)? A goal runs, a sent one is not yet
+        answered, or a sequence drives the arm."""
+        return self._sequence is not None or self._arm_goal is not None or self._arm_goals_unanswered > 0
+
+    def _hold_arm(self) -> None:
+        """Stop the arm where it is (lock held): cancel the running goal (joint_trajectory_controller then holds its
+        current state) and, as a second command that does not depend on the cancel being answered, send a one-point
+        trajectory at the measured position (an empty trajectory is refused by the controller). Only when this node
+        has a goal that may still move the arm; a failed send is logged, never raised: the caller is on its way out.
+        Tried and dropped (2026-11-29, simulated arm, transfer): the hold sent before the cancel, at the measured
+        position carried on for the state's age (or further, to a 0.1 s deceleration's end): the simulated
+        controller starts a new trajectory from rest, and the arm then moved at 3.5-4.2 rad/s after the signal."""
+        moving = self._arm_may_move()
+        self._arm_goal_serial += 1
+        self._held_serial = self._arm_goal_serial
+        try:
+            if self._arm_goal is not None:
+                self._arm_goal.cancel_goal_async()
+                self._arm_goal = None
+            if moving and self._last_state is not None:
+                hold = hold_trajectory_msg(self._last_state[0].q_rad, self._params()["base_frame"], self._arm_joints)
+                self._arm_client.send_goal_async(FollowJointTrajectory.Goal(trajectory=hold))
+        except Exception as error:  # noqa: BLE001 - rclpy raises RCLError/InvalidHandle once torn down
+            self.get_logger().error(f"could not command the arm to stop: {error!r}")
+
+    def _send_gripper(self, sequence: PickPlaceSequence, client: ActionClient, goal):
+        # Only the newest gripper goal answers the sequence: the result of one canceled or preempted before (a
+        # cancel during close, then the recovery's opening) came after the next was sent and read as its failure
+        # ("the hand did not open: preempted by a newer gripper command"; the arm stayed over the table).
+        self._gripper_serial += 1
+        serial = self._gripper_serial
+
+        def newest() -> bool:   # lock held
+            return self._sequence is sequence and serial == self._gripper_serial
+
+        def on_feedback(feedback_msg):
+            self._gripper_feedback_width_m = float(feedback_msg.feedback.current_width)
+
+        def on_result(future):
+            result = future.result().result
+            with self._lock:
+                if newest():  # a late result of an earlier goal must not leak in
+                    sequence.on_gripper_result(result.success, self._gripper_width_m(), result.error)
+
+        def on_goal(future):
+            handle = future.result()
+            if not handle.accepted:
+                with self._lock:
+                    if newest():
+                        sequence.on_gripper_result(False, float("nan"), "gripper goal rejected")
+                return
+            with self._lock:
+                self._gripper_goal = handle
+            handle.get_result_async().add_done_callback(on_result)
+
+        client.send_goal_async(goal, feedback_callback=on_feedback).add_done_callback(on_goal)

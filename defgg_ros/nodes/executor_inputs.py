@@ -1,0 +1,146 @@
+"""The executor node's inputs: the arm's joint states, the fingers' width, the external wrench, and their silence.
+
+Every franka topic is read best effort, depth 1 (docs/franka_contract.md); a silent topic is named in the log
+with what the graph shows (TopicWatch), and a goal is refused while joint states or the wrench are missing.
+"""
+import dataclasses
+import math
+import time
+
+import numpy as np
+from geometry_msgs.msg import WrenchStamped
+from rclpy.clock import Clock, ClockType
+from sensor_msgs.msg import JointState
+
+from defgg_ros.nodes import qos
+from defgg_ros.nodes.conversions import stamp_to_ns
+from defgg_ros.nodes.executor_messages import GoalError, joint_state_to_arm
+from defgg_ros.nodes.topic_watch import TopicWatch
+
+# How often the input topics' silence is checked (wall clock, s).
+INPUT_CHECK_PERIOD_S = 1.0
+# A finger width source older than this gives way to the next one (wall clock, s). franka_gripper publishes at
+# 15 Hz; the simulated one at 15 Hz of sim time, and its clock stalls up to ~2 s while a frame renders: a shorter
+# limit handed the width to the MoveIt launch's constant 0.0 in joint_states meanwhile.
+FINGER_SOURCE_FRESH_S = 3.0
+
+class RobotInputs:
+    """Joint states, the fingers and the external wrench in (mixed into ExecutorNode)."""
+
+    def _subscribe_inputs(self, p: dict) -> None:
+        """Every franka topic is read best effort, depth 1 (qos.ROBOT_STATE_READ): that matches franka's
+        best-effort broadcaster topics and its reliable joint states alike (docs/franka_contract.md)."""
+        read, group = qos.ROBOT_STATE_READ, self._group
+        self._joint_watch = TopicWatch(self, p["joint_states_topic"], read)
+        self._wrench_watch = TopicWatch(self, p["external_wrench_topic"], read)
+        self._arm_topic_watch = None   # the arm's own joint states, subscribed when joint_states has no publisher
+        self.create_subscription(JointState, p["joint_states_topic"], self._on_joint_state, read, callback_group=group)
+        self.create_subscription(WrenchStamped, p["external_wrench_topic"], self._on_wrench, read, callback_group=group)
+        self.create_subscription(JointState, p["gripper_joint_states_topic"], self._on_gripper_joint_state, read,
+                                 callback_group=group)
+        self._input_warned_at_s = {}   # topic -> silence (s) at which it is reported next (doubling)
+        steady = Clock(clock_type=ClockType.STEADY_TIME)   # a stopped sim clock must not stop the check
+        self.create_timer(INPUT_CHECK_PERIOD_S, self._watch_inputs, callback_group=group, clock=steady)
+
+    def _input_watches(self) -> list:
+        return [w for w in (self._joint_watch, self._arm_topic_watch, self._wrench_watch) if w is not None]
+
+    def _watch_inputs(self) -> None:
+        """Say in the log which input topic is silent and why (TopicWatch.diagnosis); read the arm from
+        arm_joint_states_topic when joint_states_topic has no publisher and that one has."""
+        p = self._params()
+        silent_limit_s = float(p["silent_topic_s"])
+        if (self._arm_topic_watch is None and self._joint_watch.silent_s() >= silent_limit_s
+                and not self._joint_watch.publishers()):
+            candidate = TopicWatch(self, p["arm_joint_states_topic"], qos.ROBOT_STATE_READ)
+            if candidate.publishers():
+                self.get_logger().warning(
+                    f"{self._joint_watch.resolved} has no publisher: reading the arm from {candidate.resolved} "
+                    f"(the finger width from {p['gripper_joint_states_topic']} or the gripper's action feedback)")
+                self._arm_topic_watch = candidate
+                self.create_subscription(JointState, p["arm_joint_states_topic"], self._on_joint_state,
+                                         qos.ROBOT_STATE_READ, callback_group=self._group)
+        for watch in self._input_watches():
+            silent_s = watch.silent_s()
+            if silent_s < silent_limit_s:
+                self._input_warned_at_s.pop(watch.topic, None)
+                continue
+            if silent_s >= self._input_warned_at_s.get(watch.topic, silent_limit_s):
+                self.get_logger().warning(watch.diagnosis())
+                self._input_warned_at_s[watch.topic] = silent_s * 2.0
+
+    def _joint_states_diagnosis(self, timeout_s: float) -> str:
+        """'' when the arm's joint states arrived within timeout_s, else why not (TopicWatch.diagnosis)."""
+        watches = [w for w in (self._joint_watch, self._arm_topic_watch) if w is not None]
+        if any(w.silent_s() <= timeout_s for w in watches):
+            return ""
+        return "; ".join(w.diagnosis() for w in watches)
+
+    def _on_joint_state(self, msg: JointState):
+        try:
+            state = joint_state_to_arm(msg, self._arm_joints, self._finger_joints)
+        except (GoalError, IndexError) as error:
+            self.get_logger().warning(f"ignoring joint state: {error}", throttle_duration_sec=2.0)
+            return
+        stamp_ns = stamp_to_ns(msg.header.stamp) or self.get_clock().now().nanoseconds
+        with self._lock:
+            for watch in self._input_watches():
+                if watch is not self._wrench_watch:
+                    watch.heard()   # either arm topic: the fallback's subscription shares this callback
+            if math.isfinite(state.gripper_width_m):
+                self._finger_widths["joint_states"] = (state.gripper_width_m, time.monotonic())
+            state = dataclasses.replace(state, gripper_width_m=self._gripper_width_m())
+            if len(msg.velocity) != len(msg.name):   # a driver without velocities: zeros would read "at rest"
+                qd = self._velocity_estimate.update(state.q_rad, stamp_ns * 1e-9)
+                state = dataclasses.replace(state, qd_radps=qd)
+            self._last_state = (state, time.monotonic())
+            self._watch.update(state.q_rad, stamp_ns * 1e-9)
+            if self._sequence is not None:
+                self._sequence.on_joint_state(state, self._last_state[1])
+
+    def _on_gripper_joint_state(self, msg: JointState):
+        """franka_gripper's own joint states: the two fingers, each at half the width."""
+        index = {name: i for i, name in enumerate(msg.name)}
+        if not all(n in index and index[n] < len(msg.position) for n in self._finger_joints):
+            self.get_logger().warning(f"ignoring gripper joint state: it lacks {list(self._finger_joints)} "
+                                      f"(got {list(msg.name)})", throttle_duration_sec=5.0)
+            return
+        width_m = float(sum(msg.position[index[n]] for n in self._finger_joints))
+        if math.isfinite(width_m):
+            with self._lock:
+                self._finger_widths["gripper"] = (width_m, time.monotonic())
+
+    def _on_wrench(self, msg: WrenchStamped):
+        force = np.array([msg.wrench.force.x, msg.wrench.force.y, msg.wrench.force.z])
+        if not np.all(np.isfinite(force)):
+            return
+        with self._lock:
+            self._wrench_watch.heard()
+            self._last_force, self._last_force_wall_s = force, time.monotonic()
+            if self._sequence is not None:
+                self._sequence.on_force(force)
+
+    def _check_inputs(self, p: dict) -> None:
+        """GoalError unless joint states and an external wrench arrived within watchdog_timeout_s, saying which
+        topic is silent and what the graph shows (TopicWatch.diagnosis). Without the wrench the descent would
+        read zeros and descend blind into the object or the table (a wrong topic, a QoS mismatch, a dead
+        broadcaster); without joint states nothing can be planned from where the arm is."""
+        timeout_s = float(p["watchdog_timeout_s"])
+        joints = self._joint_states_diagnosis(timeout_s)
+        if joints:
+            raise GoalError(f"no joint states: {joints}")
+        if self._wrench_watch.silent_s() > timeout_s:
+            raise GoalError(f"no external wrench, the descent's contact guard would be blind: "
+                            f"{self._wrench_watch.diagnosis()}; check franka_robot_state_broadcaster")
+
+    def _gripper_width_m(self) -> float:
+        """The finger width now (lock held), from the first source that has spoken within FINGER_SOURCE_FRESH_S:
+        franka_gripper's own joint states, then the fingers in the merged joint states (under franka_ros2's
+        MoveIt launch these stay at the URDF default 0.0 m, so they come second), else the gripper action's
+        last feedback (franka_msgs results carry no width). NaN when none has."""
+        now_s = time.monotonic()
+        for source in ("gripper", "joint_states"):
+            width_m, heard_s = self._finger_widths.get(source, (None, -math.inf))
+            if now_s - heard_s <= FINGER_SOURCE_FRESH_S:
+                return width_m
+        return self._gripper_feedback_width_m

@@ -1,0 +1,155 @@
+"""The executor node's messages: goals and grasps in, trajectories out, results back (ROS types <-> the sequence's).
+
+Conversions only: the node (executor_node.py) calls them; the sequence (control/pick_place.py) never sees a
+message. Every error is a GoalError whose text says what is wrong with the goal.
+"""
+import math
+
+import numpy as np
+from builtin_interfaces.msg import Duration
+from sensor_msgs.msg import JointState
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+from defgg_ros.constants import ARM_MODELS
+from defgg_ros.control.poses import PoseError, top_down_yaw
+from defgg_ros.control.sequence_types import ArmState, GraspTarget, PlaceTarget
+from defgg_ros.nodes.conversions import ConversionError, transform_from_pose
+from defgg_ros.ros import topics
+
+
+class GoalError(ValueError):
+    """A goal the executor cannot work with (the message says why)."""
+
+
+class RobotRestarted(GoalError):
+    """The robot clock went back during a goal: the driver (a simulator) restarted and its goals are gone."""
+
+
+# The default robot type's names (the functions below are called with the node's own).
+DEFAULT_NAMES = topics.robot_names()
+
+
+def trajectory_to_msg(trajectory, frame_id: str, joint_names=DEFAULT_NAMES["joints"]) -> JointTrajectory:
+    """The trajectory (arm joints 1..7 in order) for a joint_trajectory_controller; stamp 0 = start on receipt."""
+    msg = JointTrajectory()
+    msg.header.frame_id = frame_id
+    msg.joint_names = list(joint_names)
+    for t, q, qd, qdd in zip(trajectory.times_s, trajectory.q_rad, trajectory.qd_radps, trajectory.qdd_radps2):
+        # Split whole nanoseconds, so rounding can never carry into a wrong second.
+        sec, nanosec = divmod(int(round(float(t) * 1e9)), 1_000_000_000)
+        msg.points.append(JointTrajectoryPoint(
+            positions=q.tolist(), velocities=qd.tolist(), accelerations=qdd.tolist(),
+            time_from_start=Duration(sec=sec, nanosec=nanosec)))
+    return msg
+
+
+# A hold trajectory reaches the measured position this long after it is received: the controller blends into it
+# from its current state, so the arm is brought to rest within this time without a step in the command (s).
+HOLD_BLEND_S = 0.1
+
+
+def hold_trajectory_msg(q_rad, frame_id: str, joint_names=DEFAULT_NAMES["joints"]) -> JointTrajectory:
+    """One point at q_rad, zero velocity, HOLD_BLEND_S after receipt: 'stay here' for a joint_trajectory_controller."""
+    sec, nanosec = divmod(int(round(HOLD_BLEND_S * 1e9)), 1_000_000_000)
+    msg = JointTrajectory()
+    msg.header.frame_id = frame_id
+    msg.joint_names = list(joint_names)
+    msg.points.append(JointTrajectoryPoint(positions=[float(v) for v in q_rad], velocities=[0.0] * len(q_rad),
+                                           accelerations=[0.0] * len(q_rad),
+                                           time_from_start=Duration(sec=sec, nanosec=nanosec)))
+    return msg
+
+
+def joint_state_to_arm(msg: JointState, joint_names=DEFAULT_NAMES["joints"],
+                       finger_names=DEFAULT_NAMES["fingers"]) -> ArmState:
+    """Arm joints 1..7 (any order, other joints ignored) and the finger width (NaN without both fingers)."""
+    index = {name: i for i, name in enumerate(msg.name)}
+    missing = [n for n in joint_names if n not in index]
+    if missing:
+        raise GoalError(f"joint state lacks {missing}")
+    q = np.array([msg.position[index[n]] for n in joint_names])
+    has_velocity = len(msg.velocity) == len(msg.name)
+    qd = np.array([msg.velocity[index[n]] for n in joint_names]) if has_velocity else np.zeros(7)
+    fingers = [msg.position[index[n]] for n in finger_names if n in index]
+    width = float(sum(fingers)) if len(fingers) == 2 else float("nan")
+    return ArmState(q, qd, width)
+
+
+def grasp_target(grasp, base_frame: str, default_modulus_pa: float) -> GraspTarget:
+    frame = grasp.pose_base.header.frame_id
+    if frame not in ("", base_frame):
+        raise GoalError(f"grasp pose is in frame '{frame}', expected '{base_frame}'")
+    try:
+        base_M_tcp = transform_from_pose(grasp.pose_base.pose)
+        yaw = top_down_yaw(base_M_tcp)
+    except (ConversionError, PoseError) as error:
+        raise GoalError(f"bad grasp pose: {error}") from error
+    modulus = grasp.youngs_modulus_pa if grasp.youngs_modulus_pa > 0 else default_modulus_pa
+    force = float(grasp.finger_force_n)
+    if not math.isfinite(force) or force < 0.0:
+        raise GoalError(f"grasp finger_force_n must be >= 0 N (0: the modulus rule), got {force}")
+    return GraspTarget(tuple(base_M_tcp[:3, 3]), yaw, float(grasp.width_m), float(modulus), force)
+
+
+def place_target(pose_stamped, base_frame: str, default_position, default_yaw: float | None) -> PlaceTarget:
+    """Place pose of a goal; an empty frame_id means the configured bin.
+
+    The orientation is a top-down TCP orientation; an identity (or all-zero)
+    quaternion means 'position only' and keeps the default yaw (None: the grasp's).
+    """
+    frame = pose_stamped.header.frame_id
+    if frame == "":
+        return PlaceTarget(tuple(default_position), default_yaw)
+    if frame != base_frame:
+        raise GoalError(f"place pose is in frame '{frame}', expected '{base_frame}'")
+    p, o = pose_stamped.pose.position, pose_stamped.pose.orientation
+    position = (p.x, p.y, p.z)
+    if not all(math.isfinite(v) for v in position):
+        raise GoalError(f"place position has non-finite values: {position}")
+    if (o.x, o.y, o.z) == (0.0, 0.0, 0.0) and o.w in (0.0, 1.0):
+        return PlaceTarget(position, default_yaw)
+    try:
+        return PlaceTarget(position, top_down_yaw(transform_from_pose(pose_stamped.pose)))
+    except (ConversionError, PoseError) as error:
+        raise GoalError(f"bad place pose: {error}") from error
+
+
+def check_arm_limits(robot_type: str, joint_limits: str) -> str:
+    """The joint limits to plan within: robot_type's ('' = those); ValueError when a robot is planned with
+    another arm's limits (an FR3 planned with the Panda's ranges and, above limits_scale 0.5, accelerations
+    and jerks the FR3 does not allow) or robot_type is unknown."""
+    own = topics.robot_names(robot_type)["joint_limits"]
+    if joint_limits and joint_limits != own:
+        raise ValueError(f"robot_type {robot_type} with joint_limits {joint_limits}: set joint_limits: {own} or "
+                         "leave it empty (sim_bringup/config/real_cell/<robot>.yaml)")
+    if own not in ARM_MODELS:
+        raise ValueError(f"no joint limits known for robot_type {robot_type} (known: {', '.join(ARM_MODELS)})")
+    return own
+
+
+# The result fields the sequence's Outcome carries under the same names.
+OUTCOME_FIELDS = ("success", "failure_reason", "phase_reached", "contact_detected", "contact_height_m",
+                  "gripper_width_closed_m", "gripper_force_n", "held_after_lift", "held_after_transfer", "duration_s",
+                  "arm_state", "recovery")
+
+
+def copy_outcome(result, outcome) -> None:
+    """The sequence's Outcome into a PickAndPlace result."""
+    for name in OUTCOME_FIELDS:
+        setattr(result, name, getattr(outcome, name))
+
+
+def copy_squeeze(result, sequence):
+    """A squeeze's readings and estimate into a PickAndPlace result; the estimate (None: the goal ended before it)."""
+    result.squeeze_forces_n = [r.force_n for r in sequence.squeeze_readings]
+    result.squeeze_widths_m = [r.width_m for r in sequence.squeeze_readings]
+    estimate = sequence.squeeze_estimate
+    if estimate is None:
+        result.stiffness_update = "not measured: the goal ended before the squeeze was done"
+        return None
+    result.stiffness_measured, result.measured_rigid = True, estimate.rigid
+    result.measured_youngs_modulus_pa = estimate.youngs_modulus_pa
+    result.stiffness_lower_bound = estimate.lower_bound
+    result.measured_modulus_low_pa, result.measured_modulus_high_pa = estimate.low_pa, estimate.high_pa
+    result.squeeze_stiffness_npm = estimate.stiffness_npm
+    return estimate
