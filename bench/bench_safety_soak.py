@@ -7,7 +7,10 @@ Starts the simulated driver (rigid_box.yaml: one 5 cm block) and the executor as
 (no perception: each goal carries the block's top-down grasp from the simulator's true pose). The schedule cycles:
 - a pick with an empty place_pose (into the bin's next free slot) while the block is on the table; from the bin
   back onto the table (an explicit place pose, after defgg/reset_bin) when it is in the bin;
-- the same goals canceled once they reach a phase, the phases in turn (pre_grasp ... retreat);
+- every third of those goals measures the block's stiffness first (measure_stiffness: the squeeze, then the pick),
+  every sixth only measures (measure_only: squeeze, open, back to the observation pose);
+- the same goals canceled once they reach a phase, the phases in turn (pre_grasp ... retreat; "squeeze" with a
+  measuring goal);
 - every fourth step a bad goal (grasp in another frame, a NaN grasp, a place pose in another frame): it must be
   refused with a reason within a few seconds;
 - once, at half time, the driver is killed (SIGKILL) mid-goal and started again (a fresh simulation).
@@ -28,7 +31,7 @@ ROOT = Path(__file__).resolve().parents[1]
 SCENE = ROOT / "sim_bringup" / "scenes" / "rigid_box.yaml"
 BLOCK_M = 0.05
 TABLE_SPOTS_M = ((0.50, 0.05), (0.45, -0.10))   # where a block taken out of the bin goes (under the camera)
-PHASES = ("pre_grasp", "descend", "close", "lift", "transfer", "place", "retreat")
+PHASES = ("pre_grasp", "descend", "squeeze", "close", "lift", "transfer", "place", "retreat")
 STATUS = {4: "succeeded", 5: "canceled", 6: "aborted"}
 REST_RADPS = 0.01
 MEMORY_LIMIT_MB = 50.0
@@ -209,6 +212,11 @@ def main(argv=None) -> int:
                         time.sleep(0.1)
                     block = cell.poses.poses[0]
                     goal = PickAndPlace.Goal(grasp=block_grasp(block))
+                    measures = stats["goal"] % 3 == 2 if kind == "goal" else (
+                        kind == "cancel" and PHASES[stats["cancel"] % len(PHASES)] == "squeeze")
+                    goal.measure_stiffness = measures
+                    goal.measure_only = kind == "goal" and stats["goal"] % 6 == 5
+                    stats["measuring"] += measures
                     if in_bin(block):   # out of the bin, back onto the table (the bin is empty again)
                         cell.wait(cell.reset_bin.call_async(Trigger.Request()), 10.0)
                         goal.place_pose.header.frame_id = topics.BASE_FRAME
@@ -263,8 +271,11 @@ def main(argv=None) -> int:
                     moved_after.append((index, kind, status, speed))
                 if index in (0,) or time.monotonic() - started >= args.duration:
                     memory.append(rss_mb(executor_pid))
-                print(f"bench_safety_soak: step {index} {kind}{' at ' + phase if kind == 'cancel' else ''}: "
-                      f"{status} in {answered - sent:.1f} s ({response.result.failure_reason[:80]}); arm "
+                measured = (f"; E {response.result.measured_youngs_modulus_pa:.2e} Pa"
+                            if response.result.stiffness_measured else "")
+                print(f"bench_safety_soak: step {index} {kind}{' at ' + phase if kind == 'cancel' else ''}"
+                      f"{' (measure only)' if goal.measure_only else ''}: "
+                      f"{status} in {answered - sent:.1f} s ({response.result.failure_reason[:80]}{measured}); arm "
                       f"{response.result.arm_state}; max joint speed {speed:.4f} rad/s in the {args.watch_s} s "
                       f"after (t = {time.monotonic() - started:.0f} s)", flush=True)
             memory.append(rss_mb(executor_pid))
