@@ -13,6 +13,7 @@ frame every --request-period s for --seconds s and prints:
 - failed answers (success false) and their first message;
 - each node's last /diagnostics: frames in, perceived / prepared, dropped (newest frame wins: a frame that
   arrives while one waits replaces it), its latency percentiles; and frames the camera sent;
+- each node's CPU time per frame it perceived / prepared over the measured window (where the CPU goes);
 - the load average and what else ran (`ps` top CPU consumers outside this bench), so the conditions are on
   record.
 """
@@ -44,6 +45,8 @@ def parse_args(argv=None):
     parser.add_argument("--model", default=str(ROOT / "models" / "defgg_cnn.pt"), help="checkpoint")
     parser.add_argument("--max-frame-age", type=float, default=None,
                         help="the inference node's max_frame_age_s (default: its schema's)")
+    parser.add_argument("--prepare-stages", type=int, default=None,
+                        help="the inference node's prepare_stages (default: its schema's)")
     return parser.parse_args(argv)
 
 
@@ -100,6 +103,13 @@ def other_load() -> str:
     return "; ".join(rows[:6]) or "nothing over 5 %"
 
 
+def cpu_s(pid: int) -> float:
+    """User + system CPU seconds of a process so far (all its threads)."""
+    with open(f"/proc/{pid}/stat") as stat:
+        fields = stat.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
 def stats(values_ms) -> str:
     v = np.asarray(values_ms, float)
     return f"median {np.median(v):.1f} ms, p99 {np.percentile(v, 99):.1f} ms, max {v.max():.1f} ms"
@@ -120,7 +130,8 @@ def main(argv=None):
     print(f"before the bench: load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores; other processes: "
           f"{other_load()}")
     frames = [scene(width, height), scene(width, height, seed=width + 1)]
-    nodes = start_node(args.model, 1, frames[0][3], max_frame_age_s=args.max_frame_age)
+    nodes = start_node(args.model, 1, frames[0][3], max_frame_age_s=args.max_frame_age,
+                       prepare_stages=args.prepare_stages)
     context = Context()
     rclpy.init(context=context)
     camera = hogs = None
@@ -134,6 +145,9 @@ def main(argv=None):
         while time.monotonic() < deadline:
             cell.executor.spin_once(timeout_sec=0.1)
         sent_before = camera.sent.value
+        pids = {"segmentation_node": nodes.segmentation.pid, "grasp_inference_node": nodes.inference.pid}
+        cpu_before = {name: cpu_s(pid) for name, pid in pids.items()}
+        counts_before = {name: dict(values) for name, values in diagnostics.last.items()}
         latencies_ms, ages_ms, failures = [], [], []
         start = time.monotonic()
         next_request = start
@@ -149,6 +163,8 @@ def main(argv=None):
                 failures.append(response.message)
         span = time.monotonic() - start
         sent = camera.sent.value - sent_before
+        cpu = {name: cpu_s(pid) - cpu_before[name] for name, pid in pids.items()}
+        counts_after = {name: dict(values) for name, values in diagnostics.last.items()}
         end = time.monotonic() + 2.5          # the nodes' next 1 Hz /diagnostics
         while time.monotonic() < end:
             cell.executor.spin_once(timeout_sec=0.1)
@@ -162,7 +178,8 @@ def main(argv=None):
         context.try_shutdown()
     print(f"\n{width}x{height} at {args.camera_hz:g} Hz, {args.hog} CPU hog process(es), {len(latencies_ms)} "
           f"PlanGrasp latest-frame requests every {args.request_period:g} s over {span:.0f} s, top_k {args.top_k}, "
-          f"max_frame_age_s {'default' if args.max_frame_age is None else args.max_frame_age}; "
+          f"max_frame_age_s {'default' if args.max_frame_age is None else args.max_frame_age}, prepare_stages "
+          f"{'default' if args.prepare_stages is None else args.prepare_stages}; "
           f"load average {load:.2f} on {os.cpu_count()} cores")
     print(f"camera sent {sent} frames ({sent / span:.1f}/s)")
     p99 = float(np.percentile(latencies_ms, 99))
@@ -177,6 +194,11 @@ def main(argv=None):
         keys = [k for k in values if k.startswith("frames") or k.endswith("p99 ms") or k.endswith("median ms")
                 or k == "camera pose source"]
         print(f"{name}: " + ", ".join(f"{k} {values[k]}" for k in keys))
+        done_key = "frames perceived" if "frames perceived" in values else "frames prepared"
+        if name in cpu and done_key in counts_after.get(name, {}) and done_key in counts_before.get(name, {}):
+            done = int(counts_after[name][done_key]) - int(counts_before[name][done_key])
+            print(f"  {name}: CPU {cpu[name]:.1f} s in the {span:.0f} s measured ({100 * cpu[name] / span:.0f} % of a "
+                  f"core), {1e3 * cpu[name] / max(done, 1):.0f} ms per frame {done_key.split()[1]} ({done})")
 
 
 if __name__ == "__main__":
