@@ -69,11 +69,21 @@ def _surface_mesh(spec: SceneObject):
 def add_rigid_object(client: int, spec: SceneObject) -> int:
     """A dynamic rigid body resting on the table at its scene pose."""
     orientation = p.getQuaternionFromEuler([0, 0, spec.yaw_rad])
-    position = [spec.position_xy_m[0], spec.position_xy_m[1], spec.height_m / 2 + SPAWN_GAP_M]
+    position = [spec.position_xy_m[0], spec.position_xy_m[1], rigid_height_m(spec) / 2 + SPAWN_GAP_M]
     col, vis = _rigid_shapes(client, spec)
     body = p.createMultiBody(spec.mass_kg, col, vis, position, orientation, physicsClientId=client)
     physics.set_rigid_object_friction(client, body, [-1], MATERIAL, resting=True)
     return body
+
+
+def rigid_height_m(spec: SceneObject) -> float:
+    """The object's height: a mesh's size_m is its scale, so its height is the scaled surface's. (With the
+    scale's z taken as the height, a 5 cm rigid mesh at scale 1 was dropped from 0.5 m and rolled 10 cm off its
+    scene pose: the cell experiment's EGAD shapes, 2026-11-29.)"""
+    if spec.shape == "mesh":
+        lo, hi = centred_surface_mesh(spec).bounds
+        return float(hi[2] - lo[2])
+    return spec.height_m
 
 
 def _rigid_shapes(client, spec: SceneObject):

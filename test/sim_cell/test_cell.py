@@ -183,3 +183,27 @@ def test_an_object_that_falls_off_the_table_is_found_under_it(rigid_cell):
     rigid_cell.advance(0.5)
     ((name, xyz),) = rigid_cell.objects_off_the_table(rigid_cell.object_poses())
     assert name == "wooden_block" and xyz[2] < -0.5
+
+
+def test_a_rigid_mesh_object_starts_at_its_scene_pose_resting_on_the_table(tmp_path):
+    """A mesh's size_m is its scale: with the scale's z (1.0) taken as its height, a 5 cm rigid shape spawned
+    0.5 m above the table and rolled ~10 cm off its scene pose before the first frame."""
+    import yaml
+
+    from defgg_ros.sim import objects as sim_objects
+
+    mesh_path = tmp_path / "shape.obj"
+    sim_objects.get_shape("egad_test_00_c1").surface().export(mesh_path, file_type="obj")
+    scene = {"name": "rigid_mesh", "objects": [{"name": "egad", "shape": "mesh", "mesh": str(mesh_path),
+                                                "size_m": [1.0, 1.0, 1.0], "position_xy_m": [0.5163, 0.0157],
+                                                "yaw_rad": 1.4657, "youngs_modulus_pa": 2e9, "mass_kg": 0.05}]}
+    (tmp_path / "scene.yaml").write_text(yaml.safe_dump(scene), encoding="utf-8")
+    cell = SimCell(load_scene(tmp_path / "scene.yaml"))
+    try:
+        start = cell.object_poses()[0][0]
+        cell.advance(1.0)
+        rest = cell.object_poses()[0][0]
+        assert start[2] < 0.03, start            # spawned resting, not dropped (the shape is 4.9 cm tall)
+        assert np.hypot(rest[0] - 0.5163, rest[1] - 0.0157) < 0.005, rest
+    finally:
+        cell.close()
