@@ -22,12 +22,17 @@ def test_the_profile_frees_service_requests_and_keeps_rmw_defaults_elsewhere():
     assert writer.find("f:qos/f:publishMode/f:kind", NS).text == "ASYNCHRONOUS"
 
 
-def test_qos_from_xml_is_set_with_the_cells_profile_only(monkeypatch):
+def test_qos_from_xml_is_set_only_by_the_call_that_chooses_the_profile(monkeypatch):
     monkeypatch.delenv(transport.FASTDDS_PROFILE_VARIABLE, raising=False)
     monkeypatch.delenv(transport.QOS_FROM_XML_VARIABLE, raising=False)
     transport.use_large_message_transport()
+    assert transport.os.environ[transport.FASTDDS_PROFILE_VARIABLE] == str(transport.FASTDDS_PROFILE)
     assert transport.os.environ[transport.QOS_FROM_XML_VARIABLE] == "1"
-    monkeypatch.setenv(transport.FASTDDS_PROFILE_VARIABLE, "/somewhere/their_own_profile.xml")
-    monkeypatch.delenv(transport.QOS_FROM_XML_VARIABLE)
-    transport.use_large_message_transport()
-    assert transport.QOS_FROM_XML_VARIABLE not in transport.os.environ
+    # A profile variable set before (the user's own file, or ours set by a test that removes it again after):
+    # the variable is left alone, so it never outlives the profile it needs.
+    for profile in ("/somewhere/their_own_profile.xml", str(transport.FASTDDS_PROFILE)):
+        monkeypatch.setenv(transport.FASTDDS_PROFILE_VARIABLE, profile)
+        monkeypatch.delenv(transport.QOS_FROM_XML_VARIABLE)
+        transport.use_large_message_transport()
+        assert transport.QOS_FROM_XML_VARIABLE not in transport.os.environ
+        monkeypatch.setenv(transport.QOS_FROM_XML_VARIABLE, "0")
