@@ -27,8 +27,14 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
+from defgg_interfaces.action import PickAndPlace
+from defgg_interfaces.msg import ObjectStiffness
+from defgg_interfaces.srv import PlanGrasp
+from geometry_msgs.msg import PoseStamped
+from sensor_msgs.msg import RegionOfInterest
 from tqdm import tqdm
 
+from defgg_ros.bringup.demo_client import DemoClient
 from defgg_ros.bringup.demo_geometry import (
     base_T_camera,
     bin_place_xy,
@@ -41,10 +47,18 @@ from defgg_ros.bringup.demo_geometry import (
 )
 from defgg_ros.bringup.demo_report import FramePanels, PickRow, format_table, save_figure, write_summary
 from defgg_ros.bringup.node_set import NodeSetError, load_node_set
+from defgg_ros.bringup.shared_parameters import effective_parameters
 from defgg_ros.bringup.supervisor import Bringup, BringupError
 from defgg_ros.cli_help import HelpFormatter
+from defgg_ros.constants import PANDA_READY_Q_RAD
+from defgg_ros.control.kinematics import KinematicsError, PandaKinematics
+from defgg_ros.nodes.conversions import camera_info_to_k, depth_msg_to_metres, image_to_numpy
+from defgg_ros.perception.grasp_planning import full_quality_image
+from defgg_ros.ros.cell_client import CellCallError
 from defgg_ros.ros.domain import ISOLATION_ENV, apply_domain_choice, default_domain_choice
+from defgg_ros.ros.parameters import defaults
 from defgg_ros.ros.share import demo_scene_file, share_path
+from defgg_ros.sim.scene_spec import SceneError, load_scene
 
 ROOT = Path(__file__).resolve().parents[1]  # runs/ of the working copy
 DEFAULT_SCENE = demo_scene_file()
@@ -100,9 +114,6 @@ def _out_dir(args) -> Path:
 
 def _stiffness_msgs(scene, positions, k, image_wh, names):
     """ObjectStiffness entries (whole objects, ROI around each) for the named objects."""
-    from defgg_interfaces.msg import ObjectStiffness
-    from sensor_msgs.msg import RegionOfInterest
-
     b_t_c = base_T_camera(scene)
     out = []
     for obj, pos in zip(scene["objects"], positions):
@@ -135,7 +146,7 @@ class DemoRun:
     """One demo: the client, the local predictor (for the quality pictures) and the results."""
 
     def __init__(self, client, model_path, bringup, pick_timeout_s=900.0, executor_params=None):
-        from defgg_ros.model.inference import GraspPredictor
+        from defgg_ros.model.inference import GraspPredictor  # torch: ~1.3 CPU-s, not for --help or bad input
 
         self.client = client
         self.executor_params = executor_params or {}  # without them, the executor's own place pose
@@ -147,8 +158,6 @@ class DemoRun:
         self.rows, self.panels = [], []
 
     def assign_stiffness(self, names):
-        from defgg_ros.nodes.conversions import camera_info_to_k
-
         depth, info = self.client.fresh_frame(0.0)
         k = camera_info_to_k(info)
         entries = _stiffness_msgs(self.scene, self.client.object_positions(), k, (info.width, info.height), names)
@@ -191,9 +200,6 @@ class DemoRun:
         A failed pick leaves the arm where it stopped, over the objects; a frame
         taken from there would show the arm instead of the scene.
         """
-        from defgg_ros.constants import PANDA_READY_Q_RAD
-        from defgg_ros.control.kinematics import KinematicsError, PandaKinematics
-
         ready = np.array(PANDA_READY_Q_RAD)
         q_now = self.client.arm_positions()
         if np.abs(q_now - ready).max() < 0.02:
@@ -210,11 +216,6 @@ class DemoRun:
         self.client.move_arm(waypoints)
 
     def _plan(self, index, remaining, row):
-        from defgg_interfaces.srv import PlanGrasp
-
-        from defgg_ros.nodes.conversions import camera_info_to_k, depth_msg_to_metres, image_to_numpy
-        from defgg_ros.perception.grasp_planning import full_quality_image
-
         self.observe_pose()
         depth_msg, info = self.client.fresh_frame(time.monotonic())
         depth_m, k = depth_msg_to_metres(depth_msg), camera_info_to_k(info)
@@ -256,8 +257,6 @@ class DemoRun:
         return grasp
 
     def _execute(self, grasp, row, progress):
-        from defgg_interfaces.action import PickAndPlace
-
         def on_feedback(feedback):
             if feedback.phase != row.phase_reached:  # one progress line per phase, not per message
                 row.phase_reached = feedback.phase
@@ -283,8 +282,6 @@ class DemoRun:
 
         An empty frame (no bin in the scene, or no release height) leaves it to the executor.
         """
-        from geometry_msgs.msg import PoseStamped
-
         pose = PoseStamped()
         p = self.executor_params
         if self.scene.get("bin") and "place_position_m" in p and "base_frame" in p:
@@ -299,17 +296,11 @@ class DemoRun:
 
 def executor_params(node_set) -> dict:
     """The executor's start-up parameters (place pose, base frame): as the bringup resolves them."""
-    from defgg_ros.bringup.shared_parameters import effective_parameters
-    from defgg_ros.ros.parameters import defaults
-
     entry = next((e for e in node_set.nodes if e.name == "executor_node"), None)
     return effective_parameters(entry) if entry is not None else defaults("executor_node")
 
 
 def run_demo(args, out_dir: Path, log) -> int:
-    from defgg_ros.bringup.demo_client import DemoClient
-    from defgg_ros.ros.cell_client import CellCallError
-
     overrides = {DRIVER: {"scene_file": str(Path(args.scene).resolve()), "gui": bool(args.gui),
                           "max_real_time_factor": float(args.max_rtf)},
                  INFERENCE: {"model_path": str(Path(args.model).resolve())}}
@@ -360,8 +351,6 @@ def run_demo(args, out_dir: Path, log) -> int:
 
 def _check_inputs(args) -> str | None:
     """What is wrong with the scene, model or --objects, found before the cell starts (else None)."""
-    from defgg_ros.sim.scene_spec import SceneError, load_scene
-
     if not args.max_rtf >= 0:
         return f"--max-rtf must be >= 0 (0: as fast as possible), got {args.max_rtf:g}"
     for flag, value in (("--ready-timeout", args.ready_timeout), ("--pick-timeout", args.pick_timeout)):

@@ -23,10 +23,14 @@ import threading
 import time
 
 from defgg_ros.bringup.node_set import NodeSetError, load_node_set
+from defgg_ros.bringup.shared_parameters import disagreements, effective_parameters
 from defgg_ros.bringup.supervisor import DEFAULT_READY_TIMEOUT_S, Bringup, BringupError
 from defgg_ros.cli_help import HelpFormatter
 from defgg_ros.ros.domain import ISOLATION_ENV, apply_domain_choice, parse_domain_choice
 from defgg_ros.ros.launcher import watch_supervisor
+from defgg_ros.ros.parameters import check_value, coerce_value, load_schema, schema_path
+from defgg_ros.ros.share import demo_scene_file
+from defgg_ros.sim.scene_spec import SceneError, load_scene
 
 DRIVER = "fake_panda_driver"
 EXECUTOR = "executor_node"
@@ -74,8 +78,6 @@ def checked_overrides(node_set, overrides: dict) -> dict:
     schema does not declare, or with a value its schema refuses; and for a scene file that is not a valid scene.
     Checked before any process starts: a typo would otherwise leave the parameter at its default (or kill a node
     mid start-up)."""
-    from defgg_ros.ros.parameters import check_value, coerce_value, load_schema, schema_path
-
     names = [entry.name for entry in node_set.nodes]
     out = {}
     for node, params in overrides.items():
@@ -97,8 +99,6 @@ def checked_overrides(node_set, overrides: dict) -> dict:
                 raise NodeSetError(f"--param {node}:{problem}")
     scene = out.get(DRIVER, {}).get("scene_file")
     if scene:
-        from defgg_ros.sim.scene_spec import SceneError, load_scene
-
         try:
             load_scene(scene)
         except SceneError as exc:
@@ -109,8 +109,6 @@ def checked_overrides(node_set, overrides: dict) -> dict:
 def check_cell_parameters_agree(node_set, overrides: dict) -> None:
     """NodeSetError when the nodes would start with different values for one cell's geometry or arm
     (bringup/shared_parameters.py): each would act on its own idea of the table, frame or camera."""
-    from defgg_ros.bringup.shared_parameters import disagreements
-
     lines = disagreements(node_set, overrides)
     if lines:
         raise NodeSetError("the nodes disagree on the cell (set one value for every node, e.g. in "
@@ -127,9 +125,6 @@ def record_hook(path: str, node_set, overrides: dict) -> dict:
     """The recorder as one more supervised process (its CLI: defgg_ros/sessions/record.py), its exit code
     the recorder's own. On a set with the simulated driver the session records the scene that driver runs
     (--scene, or its parameter files' scene_file): a simulated session, replayable with its picks."""
-    from defgg_ros.bringup.shared_parameters import effective_parameters
-    from defgg_ros.ros.share import demo_scene_file
-
     argv = [sys.executable, "-c", "import sys; from defgg_ros.sessions.record import main; sys.exit(main())", path]
     driver = next((entry for entry in node_set.nodes if entry.name == DRIVER), None)
     if driver is not None:

@@ -5,6 +5,7 @@ the scene file (`base_T_camera`), intrinsics from camera_info.
 """
 import numpy as np
 
+from defgg_ros.constants import PANDA_FINGER_LENGTH_M, PANDA_FINGERTIP_BELOW_TCP_M
 from defgg_ros.perception.geometry import transform_from_xyz_quaternion
 
 # Margin around an object's projected footprint for its stiffness ROI (px).
@@ -133,8 +134,6 @@ def release_tcp_z(grasp_point_z_m: float, bin_dict: dict, max_z_m: float) -> flo
     table, the bin's floor): a TCP at grasp_point_z + RELEASE_DROP_M lets it drop at most that far plus
     the grasp's depth. Never lower than the palm's clearance over the walls, never higher than the
     executor's configured release height."""
-    from defgg_ros.constants import PANDA_FINGER_LENGTH_M, PANDA_FINGERTIP_BELOW_TCP_M
-
     palm_above_tcp_m = PANDA_FINGER_LENGTH_M - PANDA_FINGERTIP_BELOW_TCP_M
     lowest = bin_dict["inner_size_m"][2] + PALM_WALL_CLEARANCE_M - palm_above_tcp_m
     return float(min(max_z_m, max(grasp_point_z_m + RELEASE_DROP_M, lowest)))

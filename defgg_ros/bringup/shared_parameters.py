@@ -13,6 +13,9 @@ from pathlib import Path
 
 import yaml
 
+from defgg_ros.ros.parameters import defaults, schema_path
+from defgg_ros.ros.topics import robot_names
+
 # One cell, one value: names declared by more than one node that describe the same physical thing.
 # (Topic and action names are left out: a deployment may remap one node's on purpose.)
 # The perception parameters (workspace box, camera pose, object heights) are the segmentation node's alone since
@@ -32,8 +35,6 @@ def _file_section(path: str, node: str) -> dict:
 def effective_parameters(entry, extra: dict | None = None) -> dict:
     """A node entry's parameter values as the node will see them at start-up (only those its schema declares;
     {} for a node without a schema)."""
-    from defgg_ros.ros.parameters import defaults, schema_path
-
     if not schema_path(entry.name).is_file():
         return {}
     declared = defaults(entry.name)
@@ -47,8 +48,6 @@ def effective_parameters(entry, extra: dict | None = None) -> dict:
 
 def _with_robot_type_names(values: dict) -> dict:
     """A name left empty is the node's robot_type's (base_frame '' = <robot_type>_link0), as the node fills it."""
-    from defgg_ros.ros.topics import robot_names
-
     if values.get("base_frame") == "" and "robot_type" in values:
         try:
             values["base_frame"] = robot_names(values["robot_type"])["base_frame"]

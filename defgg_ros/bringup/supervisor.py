@@ -8,6 +8,7 @@ import time
 from dataclasses import dataclass
 
 from defgg_ros.bringup.node_set import NodeSet, node_command
+from defgg_ros.bringup.readiness import ReadinessProbe
 from defgg_ros.ros.launcher import NodeProcess, stop_all
 from defgg_ros.ros.transport import use_large_message_transport
 
@@ -73,8 +74,6 @@ class Bringup:
 
         stop_requested: an optional threading.Event that ends the wait early (Ctrl-C while starting).
         """
-        from defgg_ros.bringup.readiness import ReadinessProbe
-
         t0 = time.monotonic()
         probe = ReadinessProbe()
         try:
@@ -98,7 +97,6 @@ class Bringup:
         """Which of `names` are nodes in this process's ROS domain right now (after a short discovery wait)."""
         if not names:
             return []
-        from defgg_ros.bringup.readiness import ReadinessProbe
 
         probe = ReadinessProbe()
         try:

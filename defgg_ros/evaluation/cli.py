@@ -24,19 +24,29 @@ import argparse
 import json
 import shlex
 import sys
+import tarfile
 from pathlib import Path
 
 from defgg_ros.atomic import read_jsonl, write_json_atomic, write_text_atomic
 from defgg_ros.cli_help import HelpFormatter, use_for
 from defgg_ros.constants import EVAL_GRASPS_PER_OBJECT, GRASP_HEIGHT_RULES, TRAINING_YOUNGS_MODULI_PA
-from defgg_ros.data.format import check_header
+from defgg_ros.data.format import DatasetError, check_header
+from defgg_ros.evaluation import ceiling, diagnose, docs, runner, sources, strategy
 from defgg_ros.evaluation import jobs as jobs_mod
 from defgg_ros.evaluation import report as report_mod
-from defgg_ros.evaluation import sources
-from defgg_ros.evaluation.store import read_results, results_path
+from defgg_ros.evaluation.budget import budget_lines
+from defgg_ros.evaluation.report import ReportError
+from defgg_ros.evaluation.runner import PLANS_FILE, eval_trial_settings
+from defgg_ros.evaluation.seeds import seeds_markdown, summarise
+from defgg_ros.evaluation.store import ResultsError, read_results, results_path
 from defgg_ros.evaluation.tasks import TASKS
+from defgg_ros.sim import world
 from defgg_ros.sim.protocol import TrialProtocol, resolve_protocol
 from defgg_ros.sim.trial_settings import TrialSettings, protocol_differences
+
+# Imported inside the commands that need them: the modules that load torch (model.*, evaluation.cards and
+# .snapshot, data.dataset: ~1.3 CPU-s over this module's own imports, 2026-11-29), so `defgg-eval --help` and
+# the commands that never load a model start without it.
 
 # The subcommands import torch (the model, the cards) and the simulator (the runner, the ceiling) inside their
 # functions, so `defgg-eval report` and --help answer without loading them (python -X importtime on the shared
@@ -347,7 +357,6 @@ def check_run_counts(args) -> None:
 
 
 def cmd_run(args, argv) -> int:
-    from defgg_ros.evaluation import runner
 
     check_run_counts(args)
     model_paths = parse_models(args.model or DEFAULT_MODELS)
@@ -360,7 +369,6 @@ def cmd_run(args, argv) -> int:
     plan = runner.EvalPlan(objects, predictors, build_views(args, predictors, objects), args.grasps,
                            tuple(args.tasks), args.seed, settings, args.ranks)
     if args.plan_only:
-        from defgg_ros.evaluation.budget import budget_lines
 
         path, budget = runner.write_plans(plan, args.out, not args.no_progress)
         print(path)
@@ -384,7 +392,6 @@ def _reporter(out_dir, every: int):
 
 
 def cmd_report(args) -> int:
-    from defgg_ros.evaluation import docs
 
     summary = report_mod.write_outputs(args.out)
     write_diagnostics(args.out, args.data)
@@ -398,9 +405,6 @@ def write_diagnostics(out_dir, data_root) -> None:
     """OUT/diagnostics.json + .md from the training labels (if --data), OUT/plans.json (if present), the
     repeatability of the folder's trials (if it ran the sensitivity experiment) and how well the
     predicted quality ranks each view's grasps (if it ran more than one rank)."""
-    from defgg_ros.evaluation import diagnose
-    from defgg_ros.evaluation.runner import PLANS_FILE
-    from defgg_ros.evaluation.store import read_results, results_path
 
     out_dir = Path(out_dir)
     path = out_dir / "diagnostics.json"
@@ -417,15 +421,12 @@ def write_diagnostics(out_dir, data_root) -> None:
     write_json_atomic(path, {"labels": labels, "data_root": str(data_root or old.get("data_root")),
                              "plan_shifts": shifts, "replicates": replicates, "quality_ranking": ranking,
                              "twist_by_axis": twist_axes, "model_grasp_pairs": model_pairs})
-    from defgg_ros.atomic import write_text_atomic
 
     write_text_atomic(out_dir / "diagnostics.md", diagnose.diagnostics_markdown(labels, shifts, replicates, ranking,
                                                                                     twist_axes, model_pairs))
 
 
 def cmd_strategy(args) -> int:
-    from defgg_ros.evaluation import strategy
-    from defgg_ros.sim import world
 
     (name, path), = parse_models([args.model]).items()
     predictor = load_predictors({name: path})[name]
@@ -461,8 +462,6 @@ def cmd_snapshot(args) -> int:
 
 
 def cmd_freeze(args) -> int:
-    import tarfile
-
     from defgg_ros.data.dataset import build_manifest, manifest_fingerprint
     from defgg_ros.evaluation import snapshot
 
@@ -482,8 +481,6 @@ def cmd_freeze(args) -> int:
 
 
 def cmd_ceiling(args, argv) -> int:
-    from defgg_ros.evaluation import ceiling
-    from defgg_ros.evaluation.runner import eval_trial_settings
 
     if not args.summary_only:
         sources.check_moduli(args.moduli)
@@ -511,7 +508,6 @@ def cmd_card(args) -> int:
 
 
 def cmd_seeds(args) -> int:
-    from defgg_ros.evaluation.seeds import seeds_markdown, summarise
 
     runs = {}
     for spec in args.run:
@@ -529,11 +525,10 @@ def cmd_seeds(args) -> int:
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     args = build_parser().parse_args(argv)
-    from defgg_ros.data.format import DatasetError
+    # torch (~1.3 CPU-s at import, measured over this module's own imports): only once a command runs, so
+    # `defgg-eval --help` and the commands that never load a model start without it.
     from defgg_ros.evaluation.cards import CardError
-    from defgg_ros.evaluation.report import ReportError
     from defgg_ros.evaluation.snapshot import SnapshotError
-    from defgg_ros.evaluation.store import ResultsError
     from defgg_ros.model.checkpoint import CheckpointError
 
     try:

@@ -37,6 +37,7 @@ import numpy as np
 from defgg_ros.constants import MAX_SOFT_BODY_YOUNGS_MODULUS_PA, TWIST_ACCEL_LIMIT_RADPS2
 from defgg_ros.data.format import STATUS_LIFT_FAILED, STATUS_OK, list_scene_ids, read_scene, read_trials
 from defgg_ros.data.labels import height_offset_m, measured_mean_mps2
+from defgg_ros.data.signal import TOP_K, SignalError, signal_report, what_labels_carry
 from defgg_ros.evaluation.tables import is_main_correct_input
 from defgg_ros.evaluation.tasks import LIMIT_TOLERANCE
 
@@ -96,8 +97,6 @@ def label_stats(data_root) -> dict:
 def _signal(records: list) -> dict | None:
     """The dataset's signal report (data.signal) from its trial records: can its labels carry a
     stiffness-aware margin at all?"""
-    from defgg_ros.data.signal import SignalError, signal_report
-
     try:
         return signal_report(records)
     except SignalError:
@@ -419,7 +418,6 @@ def signal_lines(signal: dict | None, data_root: str | None) -> list:
     """The training labels' oracle gap and what it lets a ranking learn (data.signal's own statements)."""
     if not signal or not signal["oracle"].get("objects"):
         return []
-    from defgg_ros.data.signal import TOP_K, what_labels_carry
 
     o = signal["oracle"]
     gaps = ", ".join(f"{label} {round(o[key]['gap_points'], 1) + 0.0:+.1f} points (aware "

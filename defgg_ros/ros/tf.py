@@ -21,6 +21,7 @@ import time
 
 import numpy as np
 
+from defgg_ros.perception.geometry import transform_to_xyz_quaternion
 from defgg_ros.perception.table_pose import TABLE_FRAME_ID
 from defgg_ros.rotations import matrix_to_quaternion_xyzw, quaternion_xyzw_to_matrix
 
@@ -213,8 +214,6 @@ def pose_difference(a_T_b: np.ndarray, a_T_c: np.ndarray) -> tuple[float, float]
 
 
 def _pose_text(pose: np.ndarray) -> str:
-    from defgg_ros.perception.geometry import transform_to_xyz_quaternion
-
     xyz, quaternion = transform_to_xyz_quaternion(pose)
     return "[" + ", ".join(f"{v:.4f}" for v in (*xyz, *quaternion)) + "]"
 

@@ -58,7 +58,7 @@ def _model_path(args, parameters: dict) -> tuple[Path, bool]:
         return Path(args.model), use_stiffness
     if inference.get("model_path"):
         return Path(inference["model_path"]), use_stiffness
-    from defgg_ros.nodes.grasp_inference_node import default_model_path
+    from defgg_ros.nodes.grasp_inference_node import default_model_path  # loads torch (~1.5 CPU-s): only here
     return default_model_path(use_stiffness), use_stiffness
 
 

@@ -10,6 +10,7 @@ that gets no grasp within --timeout-s is one), 2 a session or the cell could
 not be replayed (bad bag, node died, a service or action call timed out).
 """
 import argparse
+import math
 import sys
 import tempfile
 import threading
@@ -229,10 +230,6 @@ def build_parser() -> argparse.ArgumentParser:
 
 def check_args(args) -> None:
     """ValueError naming the first option out of range (before any node starts)."""
-    import math
-
-    from defgg_ros.ros.domain import SAFE_DOMAIN_RANGE
-
     for flag, value in (("--position-tol-mm", args.position_tol_mm), ("--angle-tol-deg", args.angle_tol_deg),
                         ("--width-tol-mm", args.width_tol_mm)):
         if value is not None and not (math.isfinite(value) and value >= 0):

@@ -64,7 +64,7 @@ class ModelChoice:
 
 
 def _checkpoint_uses_stiffness(path: Path) -> bool:
-    from defgg_ros.model.checkpoint import load_checkpoint  # torch: only when a model is given explicitly
+    from defgg_ros.model.checkpoint import load_checkpoint  # torch (~1.2 CPU-s): only for a model given explicitly
 
     return int(load_checkpoint(path)["network_config"]["input_channels"]) == 2
 
