@@ -208,8 +208,12 @@ def main(argv=None) -> int:
                 if kind == "bad":
                     goal = bad_goal(index // 4)
                 else:
-                    while cell.poses is None:
+                    waited = time.monotonic()
+                    while cell.poses is None and time.monotonic() - waited < 120.0:
                         time.sleep(0.1)
+                    if cell.poses is None:   # a driver that publishes nothing: say so, do not wait forever
+                        problems.append(f"step {index}: no object poses from the driver for 120 s")
+                        break
                     block = cell.poses.poses[0]
                     goal = PickAndPlace.Goal(grasp=block_grasp(block))
                     measures = stats["goal"] % 3 == 2 if kind == "goal" else (
