@@ -128,6 +128,10 @@ def _add_others(sub):
     p.add_argument("--docs", metavar="FILE", help="also write the Markdown report (e.g. docs/results.md)")
     p.add_argument("--notes", metavar="FILE", help="hand-written analysis to include in the report verbatim")
     p.add_argument("--data", metavar="DIR", help="training dataset: add label diagnostics (OUT/diagnostics.json)")
+    p.add_argument("--seeds", nargs="+", metavar="SEED=OUT", default=None,
+                   help="with --docs: add the seed study's table over these folders (as `defgg-eval seeds --run`)")
+    p.add_argument("--cell", metavar="DIR", default=None,
+                   help="with --docs: add the cell experiment's report from DIR/report.md (defgg-cell-experiment)")
 
     p = sub.add_parser("strategy", help="strategy figure: quality map and best grasp at a low and a high E")
     p.add_argument("--out", required=True, help="evaluation folder (writes strategy.png and strategy.json)")
@@ -396,7 +400,10 @@ def cmd_report(args) -> int:
     summary = report_mod.write_outputs(args.out)
     write_diagnostics(args.out, args.data)
     if args.docs:
-        docs.write_results_doc(args.out, args.docs, args.notes)
+        seed_runs = _seed_runs(args.seeds) if args.seeds else None
+        seeds_md = (seeds_markdown([summarise({k: read_results(results_path(v)) for k, v in seed_runs.items()}, s)
+                                    for s in ("common", "adversarial")]) if seed_runs else None)
+        docs.write_results_doc(args.out, args.docs, args.notes, seeds_md, seed_runs, args.cell)
     print(json.dumps({"records": summary["records"], "targets": summary["targets"]}, indent=1))
     return 0
 
@@ -507,14 +514,20 @@ def cmd_card(args) -> int:
     return 0
 
 
-def cmd_seeds(args) -> int:
-
+def _seed_runs(specs) -> dict:
+    """['0=results/sim_v5', ...] -> {'0': 'results/sim_v5', ...}; a malformed one is refused by name."""
     runs = {}
-    for spec in args.run:
+    for spec in specs:
         seed, sep, out = spec.partition("=")
         if not sep or not seed or not out:
-            raise ValueError(f"--run takes SEED=OUT, got {spec!r}")
-        runs[seed] = read_results(results_path(out))
+            raise ValueError(f"a seed's run is SEED=OUT, got {spec!r}")
+        runs[seed] = out
+    return runs
+
+
+def cmd_seeds(args) -> int:
+
+    runs = {seed: read_results(results_path(out)) for seed, out in _seed_runs(args.run).items()}
     table = seeds_markdown([summarise(runs, s, args.task) for s in args.sets])
     print(table, end="")
     if args.out:

@@ -86,6 +86,16 @@ def test_outputs_have_the_papers_table_structure(mini_run, tmp_path):
     every = (out / "tables" / "shake_every_direction.md").read_text()     # the second column's table
     assert "| 2e5 |" in every and every.strip() in text
     assert "## What any grasp choice could reach" in text and "| shake | 2e+09 | 1 | 1 |" in text
+    # the seed study's table and the cell experiment's report join the same document (issue 49 item 5)
+    cell = tmp_path / "cell"
+    cell.mkdir()
+    (cell / "report.md").write_text("# Cell experiment\n\n| object | correct |\n\n![per object](per_object.png)\n")
+    assert cli.main(["report", "--out", str(out), "--docs", str(doc), "--seeds", f"0={out}", f"1={out}",
+                     "--cell", str(cell)]) == 0
+    text = doc.read_text()
+    assert "## Seeds: how much of the margin is the training seed?" in text and "mean of 2 seeds" in text
+    assert "## The paper's real-robot experiment in the simulated cell" in text and "| object | correct |" in text
+    assert "![per object](cell/per_object.png)" in text and f"--seeds 0={out} 1={out} --cell {cell}" in text
 
 
 def test_rerun_skips_finished_trials(mini_run, capsys):
