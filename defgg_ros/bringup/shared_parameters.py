@@ -20,7 +20,9 @@ from defgg_ros.ros.topics import robot_names
 # (Topic and action names are left out: a deployment may remap one node's on purpose.)
 # The perception parameters (workspace box, camera pose, object heights) are the segmentation node's alone since
 # it is the only perceiver (the inference node reads them from its PerceivedObjects).
-CELL_PARAMETERS = ("robot_type", "base_frame", "table_z_m")
+# The grasp height rule is the executor's, and the grasp search must put the fingertips where the executor takes
+# them: the inference node declares the same two names.
+CELL_PARAMETERS = ("robot_type", "base_frame", "table_z_m", "grasp_height_rule", "grasp_depth_below_surface_m")
 
 
 def _file_section(path: str, node: str) -> dict:

@@ -13,6 +13,8 @@ HERE=sim_bringup/sessions
 OUT=${SESSIONS_OUT:-$HERE}
 export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-50} ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 export FASTRTPS_DEFAULT_PROFILES_FILE=${FASTRTPS_DEFAULT_PROFILES_FILE:-$PWD/defgg_ros/ros/fastdds_profile.xml}
+# rmw_fastrtps reads the profile's per-reader memory policy only with this set (docs/perception.md, input bounds)
+export RMW_FASTRTPS_USE_QOS_FROM_XML=${RMW_FASTRTPS_USE_QOS_FROM_XML:-1}
 failed=()
 
 record() {  # name, then defgg-record options

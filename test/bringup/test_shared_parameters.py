@@ -34,6 +34,13 @@ def test_one_node_with_another_table_height_is_refused_naming_every_node():
     check_cell_parameters_agree(load_node_set("real_cell"), _overrides("real_cell", argv))
 
 
+def test_a_grasp_height_rule_set_for_the_executor_alone_is_refused():
+    overrides = _overrides("sim_cell", ["-p", "executor_node:grasp_height_rule:=below_surface"])
+    with pytest.raises(NodeSetError, match="grasp_height_rule") as err:
+        check_cell_parameters_agree(load_node_set("sim_cell"), overrides)
+    assert "executor_node='below_surface'" in str(err.value) and "grasp_inference_node=" in str(err.value)
+
+
 def _fr3_rehearsal_argv():
     text = DOCS.read_text()
     block = re.search(r"```bash\n(defgg-bringup --ros-domain 42 -p fake_panda_driver:robot_type:=fr3.*?)```", text,
