@@ -160,7 +160,12 @@ def _tetrahedralize(mesh: trimesh.Trimesh, max_nodes: int, variant: str) -> TetM
                 np.savez_compressed(f, nodes_m=nodes, tets=tets)
     with np.load(npz_path, allow_pickle=False) as z:
         nodes, tets = z["nodes_m"], z["tets"]
-    vtk_path, obj_path = folder / f"{digest}.vtk", folder / f"{digest}.obj"
+    # The VTK the soft body loads and the OBJ are named after the nodes they hold, not only the surface: two
+    # processes meshing one new surface at once (fTetWild is not deterministic) each write the npz, and a VTK
+    # written from the first beside the second's npz made resetMeshData fail on every later activation (75 vs 64
+    # nodes, the cell experiment's two runs, 2026-11-29).
+    stem = f"{digest}-{hashlib.sha1(nodes.tobytes() + tets.tobytes()).hexdigest()[:10]}"
+    vtk_path, obj_path = folder / f"{stem}.vtk", folder / f"{stem}.obj"
     surface = boundary_faces(nodes, tets)
     if not vtk_path.exists():
         with atomic_path(vtk_path) as tmp:

@@ -43,6 +43,22 @@ def test_tet_mesh_is_coarse_valid_and_cached(monkeypatch, tmp_path):
     np.testing.assert_array_equal(again.tets, tet.tets)
 
 
+def test_the_vtk_always_holds_the_nodes_of_the_npz_it_is_read_with(monkeypatch, tmp_path):
+    """Two processes meshing one new surface at once each write the npz (fTetWild is not deterministic): a VTK
+    written from the first beside the second's npz made every later soft body fail resetMeshData."""
+    monkeypatch.setenv(meshes.MESH_CACHE_ENV, str(tmp_path))
+    box = shapes.box(0.05, 0.03, 0.04)
+    first = meshes.tetrahedralize(box)
+    # the other process's npz lands after this one wrote its VTK: a different mesh of the same surface
+    other = meshes.tetrahedralize(box, max_nodes=20)        # surely another node count
+    assert len(other.nodes_m) != len(first.nodes_m)
+    np.savez_compressed(tmp_path / f"{first.content_hash}.npz", nodes_m=other.nodes_m, tets=other.tets)
+    again = meshes.tetrahedralize(box)
+    points = next(line for line in again.vtk_path.read_text().splitlines() if line.startswith("POINTS"))
+    assert int(points.split()[1]) == len(again.nodes_m) == len(other.nodes_m)
+    np.testing.assert_array_equal(again.nodes_m, other.nodes_m)
+
+
 def test_every_library_object_has_a_shipped_mesh():
     from defgg_ros.sim.freeze_meshes import surfaces_to_mesh
 
