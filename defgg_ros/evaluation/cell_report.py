@@ -47,6 +47,16 @@ def success_table(records) -> dict:
     return table
 
 
+def complete_totals(records, cases) -> tuple:
+    """({case: [successes, picks]}, number of sets) over the (object, pick) sets that have an outcome in every one
+    of `cases`: the average a partial run can show without mixing objects that only some cases reached."""
+    by_set = {}
+    for r in outcomes(records).values():
+        by_set.setdefault((r["object"], r["pick"]), {})[r["case"]] = bool(r["success"])
+    complete = [s for s in by_set.values() if all(c in s for c in cases)]
+    return {c: [sum(s[c] for s in complete), len(complete)] for c in cases}, len(complete)
+
+
 def paired_by_object(records, case_a: str, case_b: str) -> dict:
     """object -> [(a succeeded, b succeeded)] over the picks both cases have an outcome for."""
     by_key = {(r["object"], r["pick"], r["case"]): bool(r["success"]) for r in outcomes(records).values()}
@@ -99,32 +109,32 @@ def _ci(interval) -> str:
     return "–" if interval is None else f"[{interval[0]:+.1f}, {interval[1]:+.1f}]"
 
 
-def per_object_figure(table: dict, objects, path: Path, cases=CASES) -> None:
-    """The paper's figure: success rate per object, one bar per stiffness input, the average in the last column."""
+def per_object_figure(table: dict, objects, path: Path, cases=CASES, totals=None) -> None:
+    """The paper's figure: success rate per object, one bar per stiffness input (labelled successes/picks), the
+    average over the complete pick sets (`totals`, from complete_totals) in the last column."""
     from defgg_ros.evaluation.figures import _save, plt
 
     names = [o.name for o in objects if o.name in table]
+    totals, sets = totals or ({c: [0, 0] for c in cases}, 0)
     columns = names + ["average"]
     fig, ax = plt.subplots(figsize=(max(6.0, 0.62 * len(columns) * len(cases) / 1.5), 3.8))
     width = 0.8 / len(cases)
     labels = {"correct": "correct E", "rigid": "all assumed rigid", "soft": "all assumed soft",
               MEASURED: "measured E (squeeze)"}
     for k, case in enumerate(cases):
-        rates = []
-        for name in names:
-            s, n = table[name].get(case, [0, 0])
-            rates.append(100.0 * s / n if n else float("nan"))
-        done = [table[n].get(case, [0, 0]) for n in names]
-        total = sum(c[1] for c in done)
-        rates.append(100.0 * sum(c[0] for c in done) / total if total else float("nan"))
-        ax.bar([i + (k - (len(cases) - 1) / 2) * width for i in range(len(columns))], rates, width,
-               label=labels.get(case, case))
+        cells = [table[name].get(case, [0, 0]) for name in names] + [totals[case]]
+        xs = [i + (k - (len(cases) - 1) / 2) * width for i in range(len(columns))]
+        rates = [100.0 * s / n if n else float("nan") for s, n in cells]
+        ax.bar(xs, rates, width, label=labels.get(case, case))
+        for x, rate, (s, n) in zip(xs, rates, cells):
+            if n:   # a 0 % bar is invisible: its count says it ran
+                ax.text(x, rate + 1.5, f"{s}/{n}", ha="center", va="bottom", fontsize=5, rotation=90)
     ax.set_xticks(range(len(columns)))
     number = {o.name: i + 1 for i, o in enumerate(objects)}     # the report table's numbers
     ax.set_xticklabels([f"{number[n]}\n{n.replace('common_', '').replace('egad_test_', 'egad ')}" if n != "average"
-                        else "avg" for n in columns], fontsize=7, rotation=60)
+                        else f"avg\n({sets} complete)" for n in columns], fontsize=7, rotation=60)
     ax.set_ylabel("grasp success rate per object [%]")
-    ax.set_ylim(0, 105)
+    ax.set_ylim(0, 112)
     ax.grid(True, axis="y", linestyle="--", alpha=0.5)
     ax.legend(fontsize=8, ncol=len(cases), loc="upper center", bbox_to_anchor=(0.5, 1.18))
     _save(fig, path)
@@ -220,7 +230,10 @@ def report_markdown(records, objects, planned_picks: int | None = None) -> str:
                          + " | ".join(_pct(table[obj.name].get(c)) for c in cases) + " |")
     totals = {c: [sum(v.get(c, [0, 0])[0] for v in table.values()), sum(v.get(c, [0, 0])[1] for v in table.values())]
               for c in cases}
-    lines.append("| | **all** | | " + " | ".join(_pct(totals[c]) for c in cases) + " |")
+    lines.append("| | **all picks** | | " + " | ".join(_pct(totals[c]) for c in cases) + " |")
+    complete, sets = complete_totals(records, cases)
+    lines.append(f"| | **{sets} complete sets** (object and pose in every case) | | "
+                 + " | ".join(_pct(complete[c]) for c in cases) + " |")
     lines += ["", "Paired comparison (pairs = the same object at the same pose; margin = success rate with input A "
                   "minus with input B, points; 95 % bootstrap interval over objects; exact sign "
                   "test (McNemar) on the discordant pairs):", "",
@@ -247,8 +260,8 @@ def write_report(out: Path, objects, planned_picks: int | None = None) -> str:
     records = [r for path in records_files(out) for r in read_jsonl(path)]
     table = success_table(records)
     if table:
-        per_object_figure(table, objects, Path(out) / FIGURE_NAME,
-                          [c for c in (*CASES, MEASURED) if any(c in v for v in table.values())])
+        cases = [c for c in (*CASES, MEASURED) if any(c in v for v in table.values())]
+        per_object_figure(table, objects, Path(out) / FIGURE_NAME, cases, complete_totals(records, cases))
     body = report_markdown(records, objects, planned_picks)
     path = Path(out) / REPORT_NAME
     text = path.read_text(encoding="utf-8") if path.exists() else ""

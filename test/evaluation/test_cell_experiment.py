@@ -104,6 +104,12 @@ def test_the_bootstrap_resamples_objects_not_picks():
     assert cr.bootstrap_margin_ci({}) is None
 
 
+def test_the_average_counts_only_sets_that_every_case_reached():
+    records = [pick("a", "correct", 0, True), pick("a", "soft", 0, False),
+               pick("b", "correct", 0, True)]          # b: no soft pick yet
+    assert cr.complete_totals(records, ["correct", "soft"]) == ({"correct": [1, 1], "soft": [0, 1]}, 1)
+
+
 def test_unpaired_picks_are_left_out_of_the_comparison():
     records = [pick("a", "correct", 0, True), pick("a", "correct", 1, True), pick("a", "soft", 0, False)]
     c = cr.compare(records, "correct", "soft")
@@ -124,6 +130,7 @@ def test_report_tables_figure_and_text_outside_the_markers_is_kept(tmp_path):
     assert "**6 of 210** planned" in body and "cell failures recorded (retried): 1" in body
     assert "| 1 | common_sponge | 2e+04 | 100 % (1/1) | 0 % (0/1) | 0 % (0/1) |" in body
     assert "| correct vs rigid | all | 2 | 2 | 2 / 0 | +100.0 |" in body
+    assert "| | **2 complete sets** (object and pose in every case) | | 100 % (2/2) | 0 % (0/2) | 50 % (1/2) |" in body
     assert (tmp_path / cr.FIGURE_NAME).stat().st_size > 1000
     cr.write_report(tmp_path, ce.OBJECTS, planned_picks=5)     # rewriting replaces the results, not appends them
     assert (tmp_path / cr.REPORT_NAME).read_text(encoding="utf-8").count("| correct vs rigid | all |") == 1
