@@ -331,7 +331,7 @@ def test_a_bin_over_the_table_edge_is_warned_about_at_start_up(executor, rclpy_c
 
         spin(executor, warnings, TIMEOUT_S, "the start-up warning on /rosout")
         (warning,) = warnings()
-        assert warning.level == Log.WARN and "y -0.560 ... -0.340 m) reach beyond the table's top" in warning.msg
+        assert warning.level == Log.WARN and "y -0.620 ... -0.280 m) reach beyond the table's top" in warning.msg
     finally:
         node.shutdown()
 
