@@ -23,9 +23,11 @@ from rclpy.node import Node  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 
-from defgg_ros.nodes import qos  # noqa: E402
 from defgg_ros.nodes.fake_panda_driver_node import FakePandaDriver  # noqa: E402
-from defgg_ros.ros import topics  # noqa: E402
+from defgg_ros.ros import (
+    qos,  # noqa: E402
+    topics,  # noqa: E402
+)
 from defgg_ros.ros.domain import pick_private_domain, release_domain  # noqa: E402
 
 TOPICS = ((topics.EXTERNAL_WRENCH, WrenchStamped, "pub_wrench"),

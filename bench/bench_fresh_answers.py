@@ -125,7 +125,7 @@ def main(argv=None):
     from defgg_interfaces.srv import PlanGrasp
     from rclpy.context import Context
 
-    from defgg_ros.nodes.conversions import stamp_to_ns
+    from defgg_ros.ros.conversions import stamp_to_ns
 
     print(f"before the bench: load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores; other processes: "
           f"{other_load()}")

@@ -156,11 +156,10 @@ class Cell:
     def pubs(self):
         """Camera publishers of this process, made when first used (--camera-hz 0 only): while they exist,
         the node's camera readers see a best-effort publisher beside the camera process's reliable one and
-        subscribe best effort (nodes/qos.py), which no real cell does."""
+        subscribe best effort (ros/qos.py), which no real cell does."""
         from sensor_msgs.msg import CameraInfo, Image
 
-        from defgg_ros.nodes import qos
-        from defgg_ros.ros import topics
+        from defgg_ros.ros import qos, topics
 
         if self._pubs is None:
             self._pubs = [self.node.create_publisher(Image, topics.DEPTH_IMAGE, qos.SENSOR_DATA),
@@ -179,7 +178,7 @@ def messages(depth_m, moduli_pa, camera_k, stamp_sec=1):
     """(depth 16UC1, camera_info) of a frame (moduli_pa: unused, the segmentation node assigns the moduli)."""
     from std_msgs.msg import Header
 
-    from defgg_ros.nodes.conversions import depth_metres_to_msg, make_camera_info
+    from defgg_ros.ros.conversions import depth_metres_to_msg, make_camera_info
 
     header = Header(frame_id="camera_depth_optical_frame")
     header.stamp.sec = stamp_sec
@@ -212,8 +211,7 @@ def camera_main(renders, hz: float, stop, sent) -> None:
     from rclpy.node import Node
     from sensor_msgs.msg import CameraInfo, Image
 
-    from defgg_ros.nodes import qos
-    from defgg_ros.ros import topics
+    from defgg_ros.ros import qos, topics
 
     context = Context()
     rclpy.init(context=context)
@@ -363,7 +361,7 @@ class Stream:
     def answer(self, response, request_ns):
         if self.camera is None:
             return
-        from defgg_ros.nodes.conversions import stamp_to_ns
+        from defgg_ros.ros.conversions import stamp_to_ns
 
         self.ages_s.append((request_ns - stamp_to_ns(response.grasps[0].header.stamp)) / 1e9)
         match = PERCEIVED.search(response.message)

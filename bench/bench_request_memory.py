@@ -30,8 +30,8 @@ def request_for(width: int, height: int):
     from defgg_interfaces.srv import PlanGrasp
     from std_msgs.msg import Header
 
-    from defgg_ros.nodes.conversions import depth_metres_to_msg, make_camera_info
     from defgg_ros.perception import tabletop_scenes as ts
+    from defgg_ros.ros.conversions import depth_metres_to_msg, make_camera_info
 
     scene = ts.cluttered_table(width, height)
     if (width, height) not in ts.REALSENSE_FX_PX:
@@ -47,7 +47,7 @@ def oversized_request():
     import numpy as np
     from defgg_interfaces.srv import PlanGrasp
 
-    from defgg_ros.nodes.conversions import make_camera_info, numpy_to_image
+    from defgg_ros.ros.conversions import make_camera_info, numpy_to_image
 
     k = np.array([[4000.0, 0, 4000], [0, 4000.0, 3000], [0, 0, 1]])
     return PlanGrasp.Request(depth=numpy_to_image(np.full((6000, 8000), 700, np.uint16), "16UC1"),

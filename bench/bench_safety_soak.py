@@ -122,8 +122,7 @@ class Cell:
         from sensor_msgs.msg import JointState
         from std_srvs.srv import Trigger
 
-        from defgg_ros.nodes import qos
-        from defgg_ros.ros import topics
+        from defgg_ros.ros import qos, topics
         from defgg_ros.ros.action import ActionClient
         from defgg_ros.ros.executor import ThreadedExecutor
 

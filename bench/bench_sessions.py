@@ -27,7 +27,7 @@ def transport_child(n_frames: int) -> None:
     import rclpy
     from sensor_msgs.msg import Image
 
-    from defgg_ros.nodes import qos
+    from defgg_ros.ros import qos
     from defgg_ros.ros.cell_client import CellClient
     from defgg_ros.ros.executor import ThreadedExecutor
     from defgg_ros.sessions.player import SessionPlayer

@@ -3,7 +3,7 @@
 The publisher is a plain rclpy node in its own process with Fast DDS's defaults (no profile file, no
 environment of ours) and the default QoS (reliable, keep last 10), 30 Hz, like realsense2_camera.
 The subscriber, in another process, is varied: its QoS (best effort = qos_profile_sensor_data, as the
-nodes used before issue 26; reliable; the adaptive choice of defgg_ros.nodes.qos) and its own
+nodes used before issue 26; reliable; the adaptive choice of defgg_ros.ros.qos) and its own
 Fast DDS set-up (defaults, or defgg_ros/ros/fastdds_profile.xml as the nodes now set for themselves).
 
     .venv/bin/python bench/bench_transport.py [--frames 60] [--width 1280 --height 720] [--rate-hz 30]
@@ -49,7 +49,7 @@ def subscriber_child(mode: str, frames: int, rate_hz: float) -> None:
     from rclpy.node import Node
     from sensor_msgs.msg import Image
 
-    from defgg_ros.nodes import qos
+    from defgg_ros.ros import qos
 
     rclpy.init()
     node = Node("counting_subscriber")

@@ -52,15 +52,14 @@ from defgg_ros.bringup.supervisor import Bringup, BringupError
 from defgg_ros.cli_help import HelpFormatter
 from defgg_ros.constants import PANDA_READY_Q_RAD
 from defgg_ros.control.kinematics import KinematicsError, PandaKinematics
-from defgg_ros.nodes.conversions import camera_info_to_k, depth_msg_to_metres, image_to_numpy
 from defgg_ros.perception.grasp_planning import full_quality_image
 from defgg_ros.ros.cell_client import CellCallError
+from defgg_ros.ros.conversions import camera_info_to_k, depth_msg_to_metres, image_to_numpy
 from defgg_ros.ros.domain import ISOLATION_ENV, apply_domain_choice, default_domain_choice
 from defgg_ros.ros.parameters import defaults
-from defgg_ros.ros.share import demo_scene_file, share_path
+from defgg_ros.ros.share import SOURCE_ROOT, demo_scene_file, share_path
 from defgg_ros.sim.scene_spec import SceneError, load_scene
 
-ROOT = Path(__file__).resolve().parents[1]  # runs/ of the working copy
 DEFAULT_SCENE = demo_scene_file()
 DEFAULT_MODEL = share_path("models", "defgg_cnn.pt")
 DRIVER, INFERENCE = "fake_panda_driver", "grasp_inference_node"
@@ -109,7 +108,7 @@ def exit_code(cell_ran: bool, rows, strict: bool) -> int:
 def _out_dir(args) -> Path:
     if args.out:
         return Path(args.out)
-    return ROOT / "runs" / "demo" / datetime.now(UTC).strftime("%Y%m%d-%H%M%S")
+    return SOURCE_ROOT / "runs" / "demo" / datetime.now(UTC).strftime("%Y%m%d-%H%M%S")
 
 
 def _stiffness_msgs(scene, positions, k, image_wh, names):

@@ -20,8 +20,8 @@ from defgg_interfaces.srv import PlanGrasp
 from rclpy.node import Node
 from std_msgs.msg import Header
 
-from defgg_ros.nodes.conversions import depth_metres_to_msg, make_camera_info
 from defgg_ros.perception.tabletop_scenes import realsense_k
+from defgg_ros.ros.conversions import depth_metres_to_msg, make_camera_info
 from defgg_ros.ros.service import call_idempotent
 
 

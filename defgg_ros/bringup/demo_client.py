@@ -27,12 +27,10 @@ from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from defgg_ros.constants import GRIPPER_MAX_WIDTH_M
-from defgg_ros.nodes import qos
-from defgg_ros.nodes.conversions import stamp_to_ns
-from defgg_ros.nodes.fake_panda_driver_node import CAPTURE_SERVICE, IMAGE_QOS, OBJECT_POSES_TOPIC, SCENE_TOPIC
-from defgg_ros.ros import topics
+from defgg_ros.ros import qos, topics
 from defgg_ros.ros.action import ActionClient, destroy_actions
 from defgg_ros.ros.cell_client import CellCallError, CellClient
+from defgg_ros.ros.conversions import stamp_to_ns
 from defgg_ros.ros.service import ServiceTimeout, call_idempotent
 
 # The simulated cell runs the default robot type (fer: the Panda).
@@ -49,12 +47,12 @@ class DemoClient:
         self._depth = {}            # stamp ns -> (Image, wall time received)
         self._info = {}             # stamp ns -> CameraInfo
         n = self.node
-        n.create_subscription(String, SCENE_TOPIC, self._on_scene, qos.LATCHED)
-        n.create_subscription(PoseArray, OBJECT_POSES_TOPIC, self._on_poses, qos.STATE)
+        n.create_subscription(String, topics.FAKE_SCENE, self._on_scene, qos.LATCHED)
+        n.create_subscription(PoseArray, topics.FAKE_OBJECT_POSES, self._on_poses, qos.STATE)
         # Reliable: the driver publishes camera frames reliably and the demo must not lose one.
-        n.create_subscription(Image, topics.DEPTH_IMAGE, self._on_depth, IMAGE_QOS)
-        n.create_subscription(CameraInfo, topics.DEPTH_CAMERA_INFO, self._on_info, IMAGE_QOS)
-        self.capture_client = n.create_client(Trigger, CAPTURE_SERVICE)
+        n.create_subscription(Image, topics.DEPTH_IMAGE, self._on_depth, qos.IMAGE_PUBLISH)
+        n.create_subscription(CameraInfo, topics.DEPTH_CAMERA_INFO, self._on_info, qos.IMAGE_PUBLISH)
+        self.capture_client = n.create_client(Trigger, topics.FAKE_CAPTURE_SERVICE)
         self._joints = None
         n.create_subscription(JointState, topics.JOINT_STATES, self._on_joints, qos.ROBOT_STATE_READ)
         self._trajectory_pub = n.create_publisher(JointTrajectory, topics.JOINT_TRAJECTORY, qos.COMMAND)
@@ -138,14 +136,14 @@ class DemoClient:
 
     # ---- queries -----------------------------------------------------------
     def scene(self, timeout_s=30.0) -> dict:
-        self._wait(lambda: self._scene is not None, timeout_s, f"the scene on {SCENE_TOPIC}")
+        self._wait(lambda: self._scene is not None, timeout_s, f"the scene on {topics.FAKE_SCENE}")
         return self._scene
 
     def object_positions(self, timeout_s=30.0) -> list:
         """Ground-truth object positions (base frame) from a message received after this call."""
         asked = time.monotonic()
         self._wait(lambda: self._poses is not None and self._poses[1] > asked, timeout_s,
-                   f"object poses on {OBJECT_POSES_TOPIC}")
+                   f"object poses on {topics.FAKE_OBJECT_POSES}")
         return list(self._poses[0])
 
     def fresh_frame(self, after_wall_s: float, timeout_s=60.0):

@@ -12,10 +12,10 @@ from geometry_msgs.msg import WrenchStamped
 from rclpy.clock import Clock, ClockType
 from sensor_msgs.msg import JointState
 
-from defgg_ros.nodes import qos
-from defgg_ros.nodes.conversions import stamp_to_ns
 from defgg_ros.nodes.executor_messages import GoalError, joint_state_to_arm
 from defgg_ros.nodes.topic_watch import TopicWatch
+from defgg_ros.ros import qos
+from defgg_ros.ros.conversions import stamp_to_ns
 
 # How often the input topics' silence is checked (wall clock, s).
 INPUT_CHECK_PERIOD_S = 1.0

@@ -13,8 +13,8 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from defgg_ros.constants import ARM_MODELS
 from defgg_ros.control.poses import PoseError, top_down_yaw
 from defgg_ros.control.sequence_types import ArmState, GraspTarget, PlaceTarget
-from defgg_ros.nodes.conversions import ConversionError, transform_from_pose
 from defgg_ros.ros import topics
+from defgg_ros.ros.conversions import ConversionError, transform_from_pose
 
 
 class GoalError(ValueError):

@@ -11,8 +11,8 @@ from defgg_interfaces.srv import PlanGrasp
 
 from defgg_ros.control.pick_place import ObservationMove, PickPlaceSequence
 from defgg_ros.control.sequence_types import SqueezeRequest
-from defgg_ros.nodes.conversions import stamp_to_ns
 from defgg_ros.nodes.executor_messages import GoalError, grasp_target
+from defgg_ros.ros.conversions import stamp_to_ns
 from defgg_ros.ros.service import ServiceTimeout, call_idempotent
 
 

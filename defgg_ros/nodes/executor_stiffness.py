@@ -14,7 +14,7 @@ import threading
 from defgg_interfaces.msg import ObjectStiffness, StiffnessAssignment
 from defgg_interfaces.srv import SetStiffness
 
-from defgg_ros.nodes import qos
+from defgg_ros.ros import qos
 from defgg_ros.ros.service import ServiceTimeout, call_idempotent
 
 MIN_ROI_PX = 16

@@ -37,11 +37,10 @@ from tf2_msgs.msg import TFMessage
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from defgg_ros.constants import CAMERA_HEIGHT_PX, CAMERA_WIDTH_PX, GRIPPER_MAX_WIDTH_M
-from defgg_ros.nodes import qos
-from defgg_ros.nodes.conversions import depth_metres_to_msg, make_camera_info, numpy_to_image, seconds_to_stamp
 from defgg_ros.nodes.node_main import run_node
-from defgg_ros.ros import topics
+from defgg_ros.ros import qos, topics
 from defgg_ros.ros.action import destroy_actions
+from defgg_ros.ros.conversions import depth_metres_to_msg, make_camera_info, numpy_to_image, seconds_to_stamp
 from defgg_ros.ros.parameters import declare_parameters, load_schema
 from defgg_ros.ros.share import demo_scene_file
 from defgg_ros.sim.cell import CellSettings, SimCell

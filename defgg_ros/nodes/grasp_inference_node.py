@@ -25,8 +25,6 @@ from sensor_msgs.msg import CameraInfo, Image
 from visualization_msgs.msg import MarkerArray
 
 from defgg_ros.model.inference import CheckpointError, GraspPredictor
-from defgg_ros.nodes import qos
-from defgg_ros.nodes.conversions import check_image_size, numpy_to_image, stamp_to_ns, transform_from_pose
 from defgg_ros.nodes.grasp_msg import finger_markers, grasp_msg, label_grip_rule
 from defgg_ros.nodes.node_main import run_node
 from defgg_ros.nodes.perceived_msg import frame_from_messages, is_empty
@@ -41,6 +39,8 @@ from defgg_ros.perception.prepared_frames import Frame, PreparedFrame
 from defgg_ros.perception.sync import StampSynchronizer
 from defgg_ros.planning.perceived_frame import REBUILT_DEFAULT_PA
 from defgg_ros.planning.tabletop_planner import TabletopPlanner
+from defgg_ros.ros import qos
+from defgg_ros.ros.conversions import check_image_size, numpy_to_image, stamp_to_ns, transform_from_pose
 from defgg_ros.ros.diagnostics import NodeDiagnostics
 from defgg_ros.ros.memory import keep_freed_memory
 from defgg_ros.ros.parameters import declare_parameters, load_schema

@@ -8,10 +8,10 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from defgg_ros.grip_force import GripRuleError, LabelGripRule
 from defgg_ros.model.inference import CheckpointError
-from defgg_ros.nodes.conversions import pose_from_transform, transform_from_pose
 from defgg_ros.perception.grasp_planning import finger_boxes_in_grasp
 from defgg_ros.planning.grip_estimate import grip_estimate
 from defgg_ros.planning.tabletop_grasps import base_T_grasp, image_projection
+from defgg_ros.ros.conversions import pose_from_transform, transform_from_pose
 
 
 def label_grip_rule(predictor, model_path) -> LabelGripRule:

@@ -2,7 +2,11 @@
 import numpy as np
 from defgg_interfaces.msg import ObjectStiffness, PerceivedObject, PerceivedObjects
 
-from defgg_ros.nodes.conversions import (
+from defgg_ros.perception.grasp_planning import PlanningError
+from defgg_ros.perception.prepared_frames import Frame
+from defgg_ros.planning.perceived_frame import ObjectSummary, PerceivedParts, moduli_image, view_from_parts
+from defgg_ros.planning.tabletop_planner import PerceivedObjects as PlannerObjects
+from defgg_ros.ros.conversions import (
     ConversionError,
     camera_info_to_k,
     check_image_size,
@@ -14,10 +18,6 @@ from defgg_ros.nodes.conversions import (
     stamp_to_ns,
     transform_from_pose,
 )
-from defgg_ros.perception.grasp_planning import PlanningError
-from defgg_ros.perception.prepared_frames import Frame
-from defgg_ros.planning.perceived_frame import ObjectSummary, PerceivedParts, moduli_image, view_from_parts
-from defgg_ros.planning.tabletop_planner import PerceivedObjects as PlannerObjects
 
 CAMERA_POSE_SOURCES = ("tf", "parameter", "table")
 

@@ -29,15 +29,6 @@ from sensor_msgs.msg import CameraInfo, Image, JointState
 from std_srvs.srv import Trigger
 
 from defgg_ros.atomic import atomic_path
-from defgg_ros.nodes import qos
-from defgg_ros.nodes.conversions import (
-    ConversionError,
-    camera_info_to_k,
-    check_image_size,
-    check_same_size,
-    depth_msg_to_metres,
-    numpy_to_image,
-)
 from defgg_ros.nodes.node_main import run_node
 from defgg_ros.nodes.perceived_msg import perceived_to_msg
 from defgg_ros.perception.depth_noise import DepthNoiseModel
@@ -53,6 +44,15 @@ from defgg_ros.perception.stiffness_segmenter import (
 from defgg_ros.perception.table_pose import TABLE_FRAME_ID, PoseFromTable
 from defgg_ros.perception.tabletop import TabletopConfig, WorkspaceBox
 from defgg_ros.planning.perceived_frame import perceive_frame
+from defgg_ros.ros import qos
+from defgg_ros.ros.conversions import (
+    ConversionError,
+    camera_info_to_k,
+    check_image_size,
+    check_same_size,
+    depth_msg_to_metres,
+    numpy_to_image,
+)
 from defgg_ros.ros.diagnostics import NodeDiagnostics
 from defgg_ros.ros.parameters import at_default, declare_parameters, load_schema
 from defgg_ros.ros.service import answer

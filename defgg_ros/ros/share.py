@@ -28,6 +28,12 @@ def share_roots() -> list[Path]:
     return unique
 
 
+def interface_definition_dirs() -> list[Path]:
+    """Where defgg_interfaces' .msg/.srv/.action texts live: its installed share folder, then the source tree's
+    msg_defs/ (the sessions' bag reader parses them)."""
+    return [Path(sys.prefix) / "share" / "defgg_interfaces", SOURCE_ROOT / "msg_defs"]
+
+
 def demo_scene_file() -> Path:
     """The simulated cell's default scene (the fake driver's scene_file '' and `defgg-demo`'s --scene)."""
     return share_path("sim_bringup", "scenes", "demo.yaml")

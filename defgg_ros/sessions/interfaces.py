@@ -10,11 +10,12 @@ the names rclpy's `PlanGrasp.Request` etc. carry, so the CDR bytes from
 `rclpy.serialization.serialize_message` are exactly what these types decode.
 No rclpy here.
 """
-import sys
 from functools import lru_cache
 from pathlib import Path
 
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+from defgg_ros.ros.share import interface_definition_dirs
 
 PACKAGE = "defgg_interfaces"
 # Parts of a .srv / .action file, in file order, as rosidl names them.
@@ -28,7 +29,7 @@ class InterfaceError(RuntimeError):
 
 def interface_dirs() -> list[Path]:
     """Where the .msg/.srv/.action texts may live: the installed share/, then the source tree."""
-    return [Path(sys.prefix) / "share" / PACKAGE, Path(__file__).resolve().parents[2] / "msg_defs"]
+    return interface_definition_dirs()
 
 
 def _split_parts(text: str, n_parts: int, path: Path) -> list[str]:

@@ -12,10 +12,9 @@ from dataclasses import asdict
 from importlib import metadata as importlib_metadata
 from pathlib import Path
 
+from defgg_ros.ros.share import SOURCE_ROOT
 from defgg_ros.sessions.compare import Tolerances
 from defgg_ros.sessions.session import FORMAT
-
-REPO_ROOT = Path(__file__).resolve().parents[2]
 
 
 class MetadataError(ValueError):
@@ -38,7 +37,7 @@ def software_version() -> dict:
         version = "unknown"
     out = {"defgg_ros": version, "python": sys.version.split()[0]}
     try:
-        commit = subprocess.run(["git", "-C", str(REPO_ROOT), "describe", "--always", "--dirty"],
+        commit = subprocess.run(["git", "-C", str(SOURCE_ROOT), "describe", "--always", "--dirty"],
                                 capture_output=True, text=True, timeout=5, check=True).stdout.strip()
         out["git"] = commit
     except (OSError, subprocess.SubprocessError):
@@ -66,7 +65,7 @@ def model_entry(model_path, use_stiffness: bool) -> dict:
 def _repo_relative(path: Path) -> str:
     """Paths inside the repository are stored relative to it (sessions move between machines)."""
     try:
-        return str(path.resolve().relative_to(REPO_ROOT))
+        return str(path.resolve().relative_to(SOURCE_ROOT))
     except ValueError:
         return str(path)
 

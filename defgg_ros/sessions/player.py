@@ -17,9 +17,9 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image, JointState
 
-from defgg_ros.nodes import qos
-from defgg_ros.nodes.conversions import ns_to_stamp
+from defgg_ros.ros import qos
 from defgg_ros.ros.cell_client import CellCallError
+from defgg_ros.ros.conversions import ns_to_stamp
 from defgg_ros.sessions.compare import GraspSummary, PickOutcome, Tolerances, grasp_problems, pick_problems
 from defgg_ros.sessions.live_message import live_message
 from defgg_ros.sessions.report import Row, diff_text

@@ -31,9 +31,9 @@ from sensor_msgs.msg import CameraInfo
 from tqdm import tqdm
 
 from defgg_ros.cli_help import HelpFormatter
-from defgg_ros.nodes import qos
-from defgg_ros.nodes.conversions import camera_info_to_k
+from defgg_ros.ros import qos
 from defgg_ros.ros.cell_client import CellCallError, CellClient
+from defgg_ros.ros.conversions import camera_info_to_k
 from defgg_ros.ros.executor import ThreadedExecutor
 from defgg_ros.ros.launcher import watch_supervisor
 from defgg_ros.ros.transport import use_large_message_transport

@@ -13,7 +13,7 @@ from rclpy.serialization import serialize_message
 from sensor_msgs.msg import CameraInfo, Image, JointState
 from std_msgs.msg import String
 
-from defgg_ros.nodes import qos
+from defgg_ros.ros import qos
 from defgg_ros.sessions import session_topics as st
 from defgg_ros.sessions.selector import FrameSelector, StampError, header_stamp_ns
 from defgg_ros.sessions.session_topics import topics  # absolute names (bag channels)

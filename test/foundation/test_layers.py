@@ -39,9 +39,9 @@ MAY_IMPORT = {
     # the ROS side
     "ros": {"perception"},                            # tf: the table pose and frame geometry
     "nodes": {"grasping", "control", "perception", "model", "sim", "planning", "ros"},
-    "bringup": {"control", "perception", "sim", "ros", "nodes"},
+    "bringup": {"control", "perception", "sim", "ros"},     # starts the nodes as processes, imports none
     "sessions": {"perception", "model", "sim", "ros", "nodes", "bringup"},
-    "demo": {"control", "perception", "model", "sim", "ros", "nodes", "bringup"},
+    "demo": {"control", "perception", "model", "sim", "ros", "bringup"},
 }
 
 def _module_name(path: Path) -> str:

@@ -35,8 +35,8 @@ def _frame_request():
     """A tilted cluttered-table frame as a PlanGrasp request, and its true base_T_camera."""
     from defgg_interfaces.srv import PlanGrasp
 
-    from defgg_ros.nodes.conversions import depth_metres_to_msg, make_camera_info
     from defgg_ros.perception import tabletop_scenes as ts
+    from defgg_ros.ros.conversions import depth_metres_to_msg, make_camera_info
 
     frame = ts.render(ts.cluttered_table(640, 480), seed=7)
     header = Header(frame_id="camera_depth_optical_frame")

@@ -7,8 +7,8 @@ from sensor_msgs.msg import Image
 from std_msgs.msg import Header
 
 from defgg_ros.constants import GRIPPER_MAX_WIDTH_M
-from defgg_ros.nodes import conversions as cv
 from defgg_ros.perception.geometry import quaternion_xyzw_to_matrix, transform_from_list
+from defgg_ros.ros import conversions as cv
 
 RNG = np.random.default_rng(7)
 
@@ -150,7 +150,7 @@ def test_stamp_ns_round_trip():
 def test_seconds_to_stamp_carries_a_rounded_up_fraction_into_the_seconds():
     # The simulated driver split seconds before rounding: 12.9999999997 s was stamped 12.000000000 s, 1 s in
     # the past, which read as a clock jumping back.
-    from defgg_ros.nodes.conversions import seconds_to_stamp
+    from defgg_ros.ros.conversions import seconds_to_stamp
 
     stamp = seconds_to_stamp(12.9999999997)
     assert (stamp.sec, stamp.nanosec) == (13, 0)

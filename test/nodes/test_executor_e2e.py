@@ -24,9 +24,8 @@ from defgg_ros.constants import OBJECT_DENSITY_KG_M3, PANDA_READY_Q_RAD
 from defgg_ros.control.kinematics import PandaKinematics
 from defgg_ros.control.poses import matrix_to_quaternion, top_down_pose
 from defgg_ros.grip_force import LabelGripRule
-from defgg_ros.nodes import qos
 from defgg_ros.nodes.executor_node import ExecutorNode
-from defgg_ros.ros import topics
+from defgg_ros.ros import qos, topics
 from defgg_ros.ros.action import ActionClient
 from defgg_ros.ros.executor import ThreadedExecutor
 

@@ -10,10 +10,9 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 
 from defgg_ros.constants import PANDA_READY_Q_RAD
-from defgg_ros.nodes import qos
 from defgg_ros.nodes.executor_node import ExecutorNode, GoalError
 from defgg_ros.nodes.topic_watch import TopicWatch
-from defgg_ros.ros import topics
+from defgg_ros.ros import qos, topics
 
 NAMES = topics.robot_names()   # fer
 TIMEOUT_S = 10.0

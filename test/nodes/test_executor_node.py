@@ -272,7 +272,7 @@ def test_without_an_external_wrench_the_pick_is_refused_before_the_arm_moves(exe
 
     from geometry_msgs.msg import WrenchStamped
 
-    from defgg_ros.nodes import qos
+    from defgg_ros.ros import qos
 
     ex, node, client, start_driver = executor_cell
     driver = start_driver()

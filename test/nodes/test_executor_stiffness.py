@@ -12,8 +12,8 @@ from defgg_interfaces.srv import SetStiffness
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 
-from defgg_ros.nodes import qos
 from defgg_ros.nodes.executor_stiffness import MIN_ROI_PX, StiffnessUpdater, measured_roi
+from defgg_ros.ros import qos
 
 pytestmark = pytest.mark.ros
 

@@ -12,10 +12,9 @@ from rclpy.parameter import Parameter
 from defgg_ros.constants import GRIPPER_MAX_WIDTH_M, OBJECT_DENSITY_KG_M3
 from defgg_ros.grip_force import LabelGripRule
 from defgg_ros.model.checkpoint import make_random_checkpoint
-from defgg_ros.nodes import qos
 from defgg_ros.nodes.grasp_inference_node import GraspInferenceNode
 from defgg_ros.nodes.segmentation_node import SegmentationNode
-from defgg_ros.ros import topics
+from defgg_ros.ros import qos, topics
 
 SCENE = Path(__file__).resolve().parents[2] / "sim_bringup" / "scenes" / "rigid_box.yaml"
 BOX_HALF_SIZE_M = 0.025  # rigid_box.yaml: a 5 cm cube

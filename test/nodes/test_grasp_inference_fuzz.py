@@ -7,8 +7,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from sensor_msgs.msg import Image
 
-from defgg_ros.nodes.conversions import depth_metres_to_msg, make_camera_info, numpy_to_image
 from defgg_ros.perception.synthetic_scene import SceneObject, SyntheticScene, default_camera_k, render
+from defgg_ros.ros.conversions import depth_metres_to_msg, make_camera_info, numpy_to_image
 
 SERVICE = "/fuzz/plan_grasp"
 K = default_camera_k()

@@ -12,18 +12,17 @@ from std_msgs.msg import Header
 from visualization_msgs.msg import MarkerArray
 
 from defgg_ros.constants import GRIPPER_MAX_WIDTH_M
-from defgg_ros.nodes import qos
-from defgg_ros.nodes.conversions import (
+from defgg_ros.nodes.grasp_inference_node import GraspInferenceNode
+from defgg_ros.perception.geometry import quaternion_xyzw_to_matrix
+from defgg_ros.perception.synthetic_scene import SceneObject, SyntheticScene, default_camera_k, render
+from defgg_ros.ros import qos, topics
+from defgg_ros.ros.conversions import (
     depth_metres_to_msg,
     image_to_numpy,
     make_camera_info,
     numpy_to_image,
     stamp_to_ns,
 )
-from defgg_ros.nodes.grasp_inference_node import GraspInferenceNode
-from defgg_ros.perception.geometry import quaternion_xyzw_to_matrix
-from defgg_ros.perception.synthetic_scene import SceneObject, SyntheticScene, default_camera_k, render
-from defgg_ros.ros import topics
 from defgg_ros.ros.parameters import defaults
 
 K = default_camera_k()

@@ -16,12 +16,11 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
 
-from defgg_ros.nodes import qos
-from defgg_ros.nodes.conversions import depth_metres_to_msg, make_camera_info, stamp_to_ns
 from defgg_ros.nodes.grasp_inference_node import GraspInferenceNode
 from defgg_ros.perception import tabletop_scenes as ts
 from defgg_ros.perception.geometry import transform_to_xyz_quaternion
-from defgg_ros.ros import topics
+from defgg_ros.ros import qos, topics
+from defgg_ros.ros.conversions import depth_metres_to_msg, make_camera_info, stamp_to_ns
 
 MODEL_PATH = Path(__file__).resolve().parents[2] / "models" / "defgg_cnn.pt"
 SYNC_SERVICE = "/test/plan_grasp_synchronous"

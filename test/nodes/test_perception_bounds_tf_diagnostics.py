@@ -10,12 +10,11 @@ from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
 
-from defgg_ros.nodes import qos
-from defgg_ros.nodes.conversions import depth_metres_to_msg, make_camera_info
 from defgg_ros.nodes.segmentation_node import SegmentationNode
 from defgg_ros.perception import tabletop_scenes as ts
 from defgg_ros.perception.geometry import transform_to_xyz_quaternion
-from defgg_ros.ros import topics
+from defgg_ros.ros import qos, topics
+from defgg_ros.ros.conversions import depth_metres_to_msg, make_camera_info
 from defgg_ros.ros.diagnostics import DIAGNOSTICS_TOPIC
 from defgg_ros.ros.parameters import defaults
 from defgg_ros.ros.tf import TfBroadcaster, TfListener, pose_difference, transform_msg

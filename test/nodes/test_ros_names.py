@@ -13,11 +13,11 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_msgs.msg import Header
 
-from defgg_ros.nodes.conversions import depth_metres_to_msg, make_camera_info, transform_from_pose
 from defgg_ros.nodes.grasp_inference_node import GraspInferenceNode
 from defgg_ros.nodes.segmentation_node import SegmentationNode
 from defgg_ros.perception.synthetic_scene import SceneObject, SyntheticScene, default_camera_k, render
 from defgg_ros.ros import topics
+from defgg_ros.ros.conversions import depth_metres_to_msg, make_camera_info, transform_from_pose
 from defgg_ros.ros.tf import TfListener
 
 pytestmark = pytest.mark.ros

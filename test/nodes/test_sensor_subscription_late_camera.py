@@ -46,7 +46,7 @@ def test_a_camera_started_after_the_subscriber_loses_no_frame(executor, spin):
     from rclpy.node import Node
     from sensor_msgs.msg import Image
 
-    from defgg_ros.nodes import qos
+    from defgg_ros.ros import qos
 
     node = Node("late_camera_reader", context=executor.context)
     executor.add_node(node)

@@ -9,13 +9,12 @@ from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
 
-from defgg_ros.nodes import qos
-from defgg_ros.nodes.conversions import depth_metres_to_msg, image_to_numpy, make_camera_info
 from defgg_ros.nodes.executor_node import grasp_target
 from defgg_ros.nodes.segmentation_node import SegmentationNode
 from defgg_ros.perception import tabletop_scenes as ts
 from defgg_ros.perception.table_pose import TABLE_FRAME_ID
-from defgg_ros.ros import topics
+from defgg_ros.ros import qos, topics
+from defgg_ros.ros.conversions import depth_metres_to_msg, image_to_numpy, make_camera_info
 
 MODEL_PATH = Path(__file__).resolve().parents[2] / "models" / "defgg_cnn.pt"
 TIMEOUT_S = 60.0

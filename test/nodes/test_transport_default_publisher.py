@@ -74,7 +74,7 @@ def test_default_publisher_frames_reach_segmentation_and_inference(executor, spi
     from rclpy.node import Node
     from sensor_msgs.msg import Image
 
-    from defgg_ros.nodes import qos
+    from defgg_ros.ros import qos
 
     segmentation = SegmentationNode(context=executor.context)
     inference = GraspInferenceNode(context=executor.context, parameter_overrides=[Parameter("num_threads", value=1)])
@@ -113,7 +113,7 @@ def test_default_publisher_frames_reach_segmentation_and_inference(executor, spi
 def test_reliability_follows_the_publishers():
     from rclpy.qos import ReliabilityPolicy as R
 
-    from defgg_ros.nodes.qos import reliability_for
+    from defgg_ros.ros.qos import reliability_for
 
     assert reliability_for([]) == R.BEST_EFFORT                      # nobody yet: match anyone
     assert reliability_for([R.RELIABLE, R.RELIABLE]) == R.RELIABLE    # repair lost fragments
@@ -144,7 +144,7 @@ def test_a_silent_stream_is_reported_and_its_return_too(executor, spin):
     from rclpy.node import Node
     from sensor_msgs.msg import Image
 
-    from defgg_ros.nodes import qos
+    from defgg_ros.ros import qos
 
     node = Node("silence_watch", context=executor.context)
     executor.add_node(node)
@@ -169,7 +169,7 @@ def test_a_best_effort_publisher_beside_a_reliable_one_is_warned_about(executor,
     from rclpy.node import Node
     from sensor_msgs.msg import Image
 
-    from defgg_ros.nodes import qos
+    from defgg_ros.ros import qos
 
     node = Node("mixed_watch", context=executor.context)
     executor.add_node(node)

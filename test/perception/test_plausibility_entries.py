@@ -8,13 +8,12 @@ from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
 
-from defgg_ros.nodes import qos
-from defgg_ros.nodes.conversions import depth_metres_to_msg, make_camera_info
 from defgg_ros.nodes.segmentation_node import SegmentationNode
 from defgg_ros.perception.depth import DepthError, depth_to_metres
 from defgg_ros.perception.plausibility import check_moduli_plausible
 from defgg_ros.perception.synthetic_scene import SceneObject, SyntheticScene, default_camera_k, render
-from defgg_ros.ros import topics
+from defgg_ros.ros import qos, topics
+from defgg_ros.ros.conversions import depth_metres_to_msg, make_camera_info
 from defgg_ros.stiffness import InvalidYoungsModulus
 
 K = default_camera_k()

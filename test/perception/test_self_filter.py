@@ -10,14 +10,13 @@ from std_msgs.msg import Header
 from defgg_ros.constants import PANDA_JOINT_NAMES
 from defgg_ros.control.kinematics import PandaKinematics
 from defgg_ros.model.inference import GraspPredictor
-from defgg_ros.nodes import qos
-from defgg_ros.nodes.conversions import depth_metres_to_msg, make_camera_info
 from defgg_ros.perception import tabletop_scenes as ts
 from defgg_ros.perception.geometry import transform_to_xyz_quaternion
 from defgg_ros.perception.self_filter import RobotSelfFilter
 from defgg_ros.perception.tabletop import perceive
 from defgg_ros.planning.tabletop_grasps import image_projection, plan_tabletop_grasps
-from defgg_ros.ros import topics
+from defgg_ros.ros import qos, topics
+from defgg_ros.ros.conversions import depth_metres_to_msg, make_camera_info
 
 MODEL_PATH = __import__("pathlib").Path(__file__).resolve().parents[2] / "models" / "defgg_cnn.pt"
 BLOCK = ts.Box((0.56, -0.08), (0.05, 0.04, 0.05), yaw_rad=0.4, name="block")

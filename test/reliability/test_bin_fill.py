@@ -19,8 +19,7 @@ from support.cell_sets import driver_and_executor_set
 from support.executor_cell import grasp_msg
 
 from defgg_ros.bringup.supervisor import Bringup
-from defgg_ros.nodes import qos
-from defgg_ros.ros import topics
+from defgg_ros.ros import qos, topics
 from defgg_ros.ros.action import ActionClient
 from defgg_ros.ros.parameters import defaults
 

@@ -27,8 +27,7 @@ from support.executor_cell import grasp_msg
 from defgg_ros.bringup.node_set import config_dir
 from defgg_ros.bringup.supervisor import Bringup
 from defgg_ros.control.kinematics import PandaKinematics
-from defgg_ros.nodes import qos
-from defgg_ros.ros import topics
+from defgg_ros.ros import qos, topics
 from defgg_ros.ros.action import ActionClient
 
 pytestmark = [pytest.mark.e2e, pytest.mark.timeout(600)]

@@ -20,9 +20,9 @@ from defgg_interfaces.srv import PlanGrasp
 from rclpy.parameter import Parameter
 
 from defgg_ros.model.checkpoint import CheckpointError
-from defgg_ros.nodes.conversions import depth_metres_to_msg, make_camera_info
 from defgg_ros.nodes.grasp_inference_node import GraspInferenceNode
 from defgg_ros.perception.synthetic_scene import SceneObject, SyntheticScene, default_camera_k, render
+from defgg_ros.ros.conversions import depth_metres_to_msg, make_camera_info
 
 SERVICE = "/reliability/plan_grasp"
 K = default_camera_k()

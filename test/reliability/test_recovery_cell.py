@@ -21,8 +21,7 @@ from defgg_ros.bringup.node_set import load_node_set
 from defgg_ros.bringup.supervisor import Bringup
 from defgg_ros.constants import PANDA_READY_Q_RAD
 from defgg_ros.control.kinematics import PandaKinematics
-from defgg_ros.nodes import qos
-from defgg_ros.ros import topics
+from defgg_ros.ros import qos, topics
 from defgg_ros.ros.action import ActionClient
 
 pytestmark = [pytest.mark.e2e, pytest.mark.timeout(900)]

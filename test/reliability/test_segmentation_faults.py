@@ -17,17 +17,16 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
 
-from defgg_ros.nodes import qos
-from defgg_ros.nodes.conversions import (
+from defgg_ros.nodes.segmentation_node import SegmentationNode
+from defgg_ros.perception.synthetic_scene import SceneObject, SyntheticScene, default_camera_k, render
+from defgg_ros.ros import qos, topics
+from defgg_ros.ros.conversions import (
     depth_metres_to_msg,
     image_to_numpy,
     make_camera_info,
     numpy_to_image,
     stamp_to_ns,
 )
-from defgg_ros.nodes.segmentation_node import SegmentationNode
-from defgg_ros.perception.synthetic_scene import SceneObject, SyntheticScene, default_camera_k, render
-from defgg_ros.ros import topics
 
 K = default_camera_k()
 DEPTH_M, TRUTH = render(SyntheticScene(objects=(SceneObject((0.0, 0.0), 0.05, (0.05, 0.04)),)))

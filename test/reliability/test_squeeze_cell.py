@@ -17,8 +17,7 @@ from rclpy.node import Node
 
 from defgg_ros.bringup.node_set import load_node_set
 from defgg_ros.bringup.supervisor import Bringup
-from defgg_ros.nodes import qos
-from defgg_ros.ros import topics
+from defgg_ros.ros import qos, topics
 from defgg_ros.ros.action import ActionClient
 from defgg_ros.ros.parameters import defaults
 

@@ -4,7 +4,7 @@ from rclpy.serialization import serialize_message
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
 
-from defgg_ros.nodes.conversions import ns_to_stamp
+from defgg_ros.ros.conversions import ns_to_stamp
 from defgg_ros.sessions.selector import BUFFER_STAMPS, FrameSelector, StampError, header_stamp_ns
 
 DEPTH, INFO = "/depth", "/info"

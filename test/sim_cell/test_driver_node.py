@@ -49,7 +49,7 @@ def test_joint_states_clock_and_wrench_flow(driver, client, executor, spin):
     from rosgraph_msgs.msg import Clock
     from sensor_msgs.msg import JointState
 
-    from defgg_ros.nodes import qos
+    from defgg_ros.ros import qos
 
     joints = _latest(client, JointState, topics.JOINT_STATES, qos.ROBOT_STATE_READ)
     clocks = _latest(client, Clock, "/clock", qos.STATE)
@@ -71,7 +71,7 @@ def test_a_reliable_reader_gets_no_wrench_and_a_best_effort_one_does(driver, cli
     from geometry_msgs.msg import WrenchStamped
     from sensor_msgs.msg import JointState
 
-    from defgg_ros.nodes import qos
+    from defgg_ros.ros import qos
 
     reliable = _latest(client, WrenchStamped, topics.EXTERNAL_WRENCH, qos.STATE)
     best_effort = _latest(client, WrenchStamped, topics.EXTERNAL_WRENCH, qos.ROBOT_STATE_READ)
@@ -85,7 +85,7 @@ def test_trajectory_is_executed_in_sim_time(driver, client, executor, spin):
     from sensor_msgs.msg import JointState
     from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-    from defgg_ros.nodes import qos
+    from defgg_ros.ros import qos
 
     joints = _latest(client, JointState, topics.JOINT_STATES, qos.STATE)
     pub = client.create_publisher(JointTrajectory, topics.JOINT_TRAJECTORY, qos.COMMAND)
@@ -116,7 +116,7 @@ def test_gripper_actions(driver, client, executor, spin):
     from franka_msgs.msg import GraspEpsilon
     from sensor_msgs.msg import JointState
 
-    from defgg_ros.nodes import qos
+    from defgg_ros.ros import qos
     from defgg_ros.ros.action import ActionClient
 
     joints = _latest(client, JointState, topics.JOINT_STATES, qos.STATE)
@@ -159,7 +159,7 @@ def test_follow_joint_trajectory_action(driver, client, executor, spin):
     from sensor_msgs.msg import JointState
     from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-    from defgg_ros.nodes import qos
+    from defgg_ros.ros import qos
     from defgg_ros.ros.action import ActionClient
 
     joints = _latest(client, JointState, topics.JOINT_STATES, qos.STATE)
@@ -194,8 +194,8 @@ def test_fr3_robot_type_names_the_joints_and_the_camera_pose_is_on_tf_static(exe
     from tf2_msgs.msg import TFMessage
     from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-    from defgg_ros.nodes import qos
     from defgg_ros.nodes.fake_panda_driver_node import FakePandaDriver
+    from defgg_ros.ros import qos
     from defgg_ros.ros.action import ActionClient
     from defgg_ros.sim.scene_spec import load_scene
 
@@ -234,9 +234,9 @@ def test_camera_scene_and_object_poses(driver, client, executor, spin):
     from sensor_msgs.msg import CameraInfo, Image
     from std_msgs.msg import String
 
-    from defgg_ros.nodes import qos
-    from defgg_ros.nodes.conversions import camera_info_to_k, depth_msg_to_metres
     from defgg_ros.nodes.fake_panda_driver_node import OBJECT_POSES_TOPIC, SCENE_TOPIC
+    from defgg_ros.ros import qos
+    from defgg_ros.ros.conversions import camera_info_to_k, depth_msg_to_metres
 
     depth = _latest(client, Image, topics.DEPTH_IMAGE, qos.SENSOR_DATA)
     info = _latest(client, CameraInfo, topics.DEPTH_CAMERA_INFO, qos.SENSOR_DATA)
@@ -260,7 +260,7 @@ def test_malformed_trajectory_is_rejected_and_the_driver_keeps_serving(driver, c
     from sensor_msgs.msg import JointState
     from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-    from defgg_ros.nodes import qos
+    from defgg_ros.ros import qos
 
     joints = _latest(client, JointState, topics.JOINT_STATES, qos.STATE)
     pub = client.create_publisher(JointTrajectory, topics.JOINT_TRAJECTORY, qos.COMMAND)
@@ -287,8 +287,8 @@ def test_an_object_that_leaves_the_table_is_reported_once_on_rosout(driver, clie
     from rcl_interfaces.msg import Log
     from rosgraph_msgs.msg import Clock
 
-    from defgg_ros.nodes import qos
-    from defgg_ros.nodes.conversions import stamp_to_ns
+    from defgg_ros.ros import qos
+    from defgg_ros.ros.conversions import stamp_to_ns
 
     logs = []
     client.create_subscription(Log, "/rosout", logs.append, 100)

@@ -69,7 +69,7 @@ def _record(executor, client, rows):
     from geometry_msgs.msg import PoseStamped, WrenchStamped
     from sensor_msgs.msg import JointState
 
-    from defgg_ros.nodes import qos
+    from defgg_ros.ros import qos
 
     types = {"sensor_msgs/JointState": JointState, "geometry_msgs/WrenchStamped": WrenchStamped,
              "geometry_msgs/PoseStamped": PoseStamped}
@@ -131,7 +131,7 @@ def test_the_moveit_launchs_merged_joint_states(executor, spin, mode):
     default 0.0 m (urdf_default), or a merger without the hand has none; the gripper's own topic still has them."""
     from rclpy.node import Node
 
-    from defgg_ros.nodes import qos
+    from defgg_ros.ros import qos
 
     names = topics.robot_names("fr3")
     driver = _driver(executor, robot_type="fr3", joint_state_fingers=mode)

@@ -35,9 +35,8 @@ from sensor_msgs.msg import JointState
 from defgg_ros.constants import PANDA_READY_Q_RAD
 from defgg_ros.control.kinematics import PandaKinematics
 from defgg_ros.control.poses import matrix_to_quaternion, top_down_pose
-from defgg_ros.nodes import qos
 from defgg_ros.nodes.executor_node import ExecutorNode
-from defgg_ros.ros import topics
+from defgg_ros.ros import qos, topics
 from defgg_ros.ros.action import ActionClient, destroy_actions
 from defgg_ros.ros.executor import ThreadedExecutor
 from support.executor_goals import send_goal

@@ -5,7 +5,7 @@ from defgg_interfaces.srv import PlanGrasp
 from rclpy.serialization import serialize_message
 from std_msgs.msg import Header
 
-from defgg_ros.nodes.conversions import depth_metres_to_msg, make_camera_info, ns_to_stamp
+from defgg_ros.ros.conversions import depth_metres_to_msg, make_camera_info, ns_to_stamp
 from defgg_ros.sessions import session_topics as st
 from defgg_ros.sessions.bag import SessionWriter
 from defgg_ros.sessions.compare import Tolerances

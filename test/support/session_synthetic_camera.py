@@ -9,10 +9,9 @@ from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
 
-from defgg_ros.nodes import qos
-from defgg_ros.nodes.conversions import depth_metres_to_msg, make_camera_info, ns_to_stamp
 from defgg_ros.perception.synthetic_scene import SceneObject, SyntheticScene, render
-from defgg_ros.ros import topics
+from defgg_ros.ros import qos, topics
+from defgg_ros.ros.conversions import depth_metres_to_msg, make_camera_info, ns_to_stamp
 
 SCENE = SyntheticScene(objects=(SceneObject((0.05, 0.02), 0.05, (0.05, 0.05), 0.3),
                                 SceneObject((-0.08, -0.03), 0.04, (0.04, 0.07), -0.5)))
