@@ -1,8 +1,8 @@
 """What the simulated cell's object material changes in a pick: the legacy material (friction 0.8 x 0.8 =
 0.64, Poisson's ratio 0.4) against the shipped weights' protocol's (defgraspsim: pads 1.0 x object 0.7 = 0.7,
-Poisson's ratio 0.3; defgg_ros/sim/cell_objects.MATERIAL).
+Poisson's ratio 0.3; defgg_ros/sim/cell/objects.MATERIAL).
 
-Each pick runs in one process (defgg_ros.sim.cell_sequence.CellSequenceDriver, the executor's sequence and
+Each pick runs in one process (defgg_ros.bringup.cell_sequence.CellSequenceDriver, the executor's sequence and
 parameters of the sim cell), in a fresh cell of its scene: a grasp at the object's top centre (moved by
 --offset-mm in --picks directions, the first at the centre), closing across its x side with the fem_v5 pair's
 grip rule (defgraspsim, friction 0.7: half of FOS * m * g / 0.7 a finger), placed in the bin as the demo places
@@ -24,6 +24,7 @@ import pybullet as p
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from defgg_ros.bringup.cell_sequence import CellSequenceDriver  # noqa: E402
 from defgg_ros.bringup.demo_geometry import bin_place_xy, in_bin, release_tcp_z  # noqa: E402
 from defgg_ros.bringup.demo_in_process import MAX_SEQUENCE_SIM_S, closing_width_m  # noqa: E402
 from defgg_ros.bringup.node_set import load_node_set  # noqa: E402
@@ -33,9 +34,9 @@ from defgg_ros.control.sequence_types import GraspTarget, PlaceTarget  # noqa: E
 from defgg_ros.demo import executor_params  # noqa: E402
 from defgg_ros.grip_force import LabelGripRule  # noqa: E402
 from defgg_ros.nodes.executor_node import ExecutorNode  # noqa: E402
-from defgg_ros.sim import cell_objects, physics  # noqa: E402
-from defgg_ros.sim.cell import SimCell  # noqa: E402
-from defgg_ros.sim.cell_sequence import CellSequenceDriver  # noqa: E402
+from defgg_ros.sim import physics  # noqa: E402
+from defgg_ros.sim.cell import objects as cell_objects  # noqa: E402
+from defgg_ros.sim.cell.sim_cell import SimCell  # noqa: E402
 from defgg_ros.sim.scene_spec import load_scene  # noqa: E402
 
 SCENES = ROOT / "sim_bringup" / "scenes"

@@ -24,7 +24,7 @@ import pybullet as p
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from defgg_ros.constants import PANDA_READY_Q_RAD  # noqa: E402
-from defgg_ros.sim.cell import CellSettings, SimCell  # noqa: E402
+from defgg_ros.sim.cell.sim_cell import CellSettings, SimCell  # noqa: E402
 from defgg_ros.sim.scene_spec import load_scene  # noqa: E402
 
 SCENES = Path(__file__).resolve().parents[1] / "sim_bringup" / "scenes"

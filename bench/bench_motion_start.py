@@ -41,14 +41,14 @@ def release_sent(sequence) -> bool:
 def in_process(lag_periods: int) -> str:
     import pybullet as p
 
+    from defgg_ros.bringup.cell_sequence import CellSequenceDriver
     from defgg_ros.bringup.node_set import load_node_set
     from defgg_ros.control.kinematics import PandaKinematics
     from defgg_ros.control.pick_place import PickPlaceSequence
     from defgg_ros.control.sequence_types import GraspTarget, PlaceTarget
     from defgg_ros.demo import executor_params
     from defgg_ros.nodes.executor_node import ExecutorNode
-    from defgg_ros.sim.cell import SimCell
-    from defgg_ros.sim.cell_sequence import CellSequenceDriver
+    from defgg_ros.sim.cell.sim_cell import SimCell
     from defgg_ros.sim.scene_spec import load_scene
 
     config = ExecutorNode._sequence_config(executor_params(load_node_set("sim_cell")))

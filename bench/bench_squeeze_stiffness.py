@@ -25,7 +25,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from defgg_ros.control.kinematics import PandaKinematics  # noqa: E402
-from defgg_ros.sim.cell import SimCell  # noqa: E402
+from defgg_ros.sim.cell.sim_cell import SimCell  # noqa: E402
 from defgg_ros.sim.scene_spec import load_scene  # noqa: E402
 from defgg_ros.squeeze import (  # noqa: E402
     FIRM_FORCES_N,

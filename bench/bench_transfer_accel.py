@@ -15,12 +15,12 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from defgg_ros.bringup.cell_sequence import CellSequenceDriver  # noqa: E402
 from defgg_ros.control.kinematics import PandaKinematics  # noqa: E402
 from defgg_ros.control.pick_place import PickPlaceSequence  # noqa: E402
 from defgg_ros.control.sequence_types import GraspTarget, PlaceTarget, SendTrajectory, SequenceConfig  # noqa: E402
 from defgg_ros.control.trajectories import tcp_peak_acceleration_mps2  # noqa: E402
-from defgg_ros.sim.cell import SimCell  # noqa: E402
-from defgg_ros.sim.cell_sequence import CellSequenceDriver  # noqa: E402
+from defgg_ros.sim.cell.sim_cell import SimCell  # noqa: E402
 from defgg_ros.sim.scene_spec import load_scene  # noqa: E402
 
 GRASP = GraspTarget((0.50396, 0.04357, 0.05), 0.30092, 0.0634, 2e6, 1.4426)

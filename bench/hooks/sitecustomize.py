@@ -2,7 +2,7 @@
 
 Python imports `sitecustomize` at start-up from the path; the bench puts this folder first on PYTHONPATH and
 sets DEFGG_BENCH_CELL_LOG, so every process of the demo loads this file, and the one that imports
-defgg_ros.sim.cell (the fake driver) gets SimCell wrapped: every 5th physics step writes the sim time, the
+defgg_ros.sim.cell.sim_cell (the fake driver) gets SimCell wrapped: every 5th physics step writes the sim time, the
 TCP position, the first object's position in the TCP frame and the gripper opening; every trajectory the
 driver starts writes its first point and the arm's position then; every gripper grasp (G) and move (M) its
 sim time. Nothing else changes.
@@ -51,7 +51,7 @@ def _instrument(cell_module):
 
 class _CellFinder(importlib.abc.MetaPathFinder):
     def find_spec(self, name, path, target=None):
-        if name != "defgg_ros.sim.cell":
+        if name != "defgg_ros.sim.cell.sim_cell":
             return None
         sys.meta_path.remove(self)
         spec = importlib.util.find_spec(name)

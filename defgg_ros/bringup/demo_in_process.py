@@ -1,17 +1,17 @@
 """One of the demo's picks in one process, without ROS: the demo's place rule, the executor's sequence and
-the simulated cell (defgg_ros.sim.cell_sequence). Deterministic, so a pick that misbehaved can be replayed
+the simulated cell (defgg_ros.bringup.cell_sequence). Deterministic, so a pick that misbehaved can be replayed
 (bench/bench_release_in_bin.py) and pinned by a test.
 """
 from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from defgg_ros.bringup.cell_sequence import PERIOD_S, CellSequenceDriver
 from defgg_ros.bringup.demo_geometry import bin_place_xy, in_bin, release_tcp_z
 from defgg_ros.control.kinematics import PandaKinematics
 from defgg_ros.control.pick_place import PickPlaceSequence
 from defgg_ros.control.sequence_types import GraspTarget, PlaceTarget
-from defgg_ros.sim.cell import SimCell
-from defgg_ros.sim.cell_sequence import PERIOD_S, CellSequenceDriver
+from defgg_ros.sim.cell.sim_cell import SimCell
 from defgg_ros.sim.scene_spec import SceneSpec
 
 MAX_SEQUENCE_SIM_S = 60.0

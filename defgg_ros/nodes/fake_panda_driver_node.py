@@ -1,6 +1,6 @@
 """fake_panda_driver: the simulated Panda + RealSense cell as ROS interfaces.
 
-A thin adapter over `defgg_ros.sim.cell.SimCell` (PyBullet). It serves franka_ros2 3.x's contract as
+A thin adapter over `defgg_ros.sim.cell.sim_cell.SimCell` (PyBullet). It serves franka_ros2 3.x's contract as
 a real cell started with franka_bringup's franka.launch.py (load_gripper:=true) and a
 JointTrajectoryController would, QoS and rates included (docs/franka_contract.md), plus
 realsense2_camera's depth + camera_info: the merged `joint_states` (joint_state_publisher, 30 Hz),
@@ -43,10 +43,10 @@ from defgg_ros.ros.action import destroy_actions
 from defgg_ros.ros.conversions import depth_metres_to_msg, make_camera_info, numpy_to_image, seconds_to_stamp
 from defgg_ros.ros.parameters import declare_parameters, load_schema
 from defgg_ros.ros.share import demo_scene_file
-from defgg_ros.sim.cell import CellSettings, SimCell
-from defgg_ros.sim.cell_camera import DepthNoise
-from defgg_ros.sim.cell_gripper import GripperCommandError
-from defgg_ros.sim.cell_trajectory import TrajectoryError
+from defgg_ros.sim.cell.camera import DepthNoise
+from defgg_ros.sim.cell.gripper import GripperCommandError
+from defgg_ros.sim.cell.sim_cell import CellSettings, SimCell
+from defgg_ros.sim.cell.trajectory import TrajectoryError
 from defgg_ros.sim.scene_spec import SceneError, load_scene, scene_warnings
 
 SCENE_TOPIC = topics.FAKE_SCENE

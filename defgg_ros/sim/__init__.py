@@ -12,8 +12,8 @@ Layers (imports point down only):
   form; docs/dataset.md "Trial protocols").
 - the grasp trials (data generator, evaluation): ``world``, ``objects``, ``hand``, ``camera``,
   ``sampler``, ``trial``.
-- the simulated cell (fake Panda + RealSense driver): ``scene_spec``, ``cell`` and its ``cell_*`` parts;
-  ``cell_sequence`` runs a pick-and-place sequence against a cell in one process (tests, benches).
+- the simulated cell (fake Panda + RealSense driver): ``scene_spec`` and the ``cell`` package (``cell.sim_cell``
+  and its parts); bringup/cell_sequence.py runs a pick-and-place sequence against a cell in one process.
 
 API overview (stable):
 

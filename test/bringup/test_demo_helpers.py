@@ -23,7 +23,7 @@ SCENES = Path(__file__).resolve().parents[2] / "sim_bringup" / "scenes"
 
 @pytest.fixture(scope="module")
 def rendered():
-    from defgg_ros.sim.cell import SimCell
+    from defgg_ros.sim.cell.sim_cell import SimCell
     from defgg_ros.sim.scene_spec import load_scene
 
     cell = SimCell(load_scene(SCENES / "demo.yaml"))
@@ -92,7 +92,7 @@ def test_multi_material_part_gets_its_own_modulus_in_the_stiffness_image(tmp_pat
     from defgg_ros.perception.stiffness_assignment import make_entry
     from defgg_ros.perception.tabletop import TabletopConfig
     from defgg_ros.planning.perceived_frame import perceive_frame
-    from defgg_ros.sim.cell import SimCell
+    from defgg_ros.sim.cell.sim_cell import SimCell
     from defgg_ros.sim.scene_spec import load_scene
 
     scene_path = tmp_path / "two_material.yaml"

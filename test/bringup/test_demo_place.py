@@ -13,7 +13,7 @@ import pytest
 from defgg_ros.bringup.demo_in_process import pick_into_bin
 from defgg_ros.nodes.executor_node import ExecutorNode
 from defgg_ros.ros.parameters import defaults
-from defgg_ros.sim.cell_objects import SOFT_COLLISION_MARGIN_M
+from defgg_ros.sim.cell.objects import SOFT_COLLISION_MARGIN_M
 from defgg_ros.sim.scene_spec import load_scene
 
 DEMO_SCENE = Path(__file__).resolve().parents[2] / "sim_bringup" / "scenes" / "demo.yaml"

@@ -9,11 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from defgg_ros.bringup.cell_sequence import CellSequenceDriver
 from defgg_ros.control.kinematics import PandaKinematics
 from defgg_ros.control.pick_place import PickPlaceSequence
 from defgg_ros.control.sequence_types import GraspTarget, PlaceTarget, SequenceConfig
-from defgg_ros.sim.cell import SimCell
-from defgg_ros.sim.cell_sequence import CellSequenceDriver
+from defgg_ros.sim.cell.sim_cell import SimCell
 from defgg_ros.sim.scene_spec import load_scene
 
 SCENE = Path(__file__).resolve().parents[2] / "sim_bringup" / "scenes" / "rigid_box.yaml"

@@ -30,7 +30,7 @@ MAY_IMPORT = {
     "control": {"grasping"},
     "perception": {"control"},                       # the self filter needs the arm's kinematics
     "model": {"grasping", "perception"},              # inference ranks grasps, checks plausibility
-    "sim": {"grasping", "control"},                   # control: the in-process pick (leaves with issue 50 item 3)
+    "sim": {"grasping"},
     "data": {"grasping", "model", "sim"},             # the generator runs trials; the dataset reads model inputs
     "planning": {"grasping", "control", "perception", "model"},
     # offline

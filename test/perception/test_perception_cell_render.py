@@ -9,8 +9,8 @@ from defgg_ros.perception.geometry import transform_from_list
 from defgg_ros.perception.segmentation import segment_objects
 from defgg_ros.perception.tabletop import TabletopConfig
 from defgg_ros.planning.perceived_frame import perceive_frame
-from defgg_ros.sim.cell import CellSettings, SimCell
-from defgg_ros.sim.cell_camera import DepthNoise, camera_matrix, depth_m_to_mm_u16
+from defgg_ros.sim.cell.camera import DepthNoise, camera_matrix, depth_m_to_mm_u16
+from defgg_ros.sim.cell.sim_cell import CellSettings, SimCell
 from defgg_ros.sim.scene_spec import load_scene
 
 SCENE = Path(__file__).resolve().parents[2] / "sim_bringup" / "scenes" / "rigid_box.yaml"

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from defgg_ros.sim import cell_soft
-from defgg_ros.sim.cell import SimCell
+from defgg_ros.sim.cell import soft as cell_soft
+from defgg_ros.sim.cell.sim_cell import SimCell
 from defgg_ros.sim.scene_spec import load_scene
 
 pytestmark = pytest.mark.sim

@@ -6,8 +6,10 @@ from pathlib import Path
 import pybullet as p
 import pytest
 
-from defgg_ros.sim import cell_objects, cell_soft, objects, physics, world
-from defgg_ros.sim.cell import SimCell
+from defgg_ros.sim import objects, physics, world
+from defgg_ros.sim.cell import objects as cell_objects
+from defgg_ros.sim.cell import soft as cell_soft
+from defgg_ros.sim.cell.sim_cell import SimCell
 from defgg_ros.sim.scene_spec import SceneObject, load_scene
 from defgg_ros.sim.trial import TrialSettings
 

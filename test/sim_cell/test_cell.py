@@ -7,8 +7,8 @@ import pytest
 from support.cell_faults import put_beyond_the_table_edge
 
 from defgg_ros.constants import CAMERA_HEIGHT_ABOVE_TABLE_M, PANDA_READY_Q_RAD
-from defgg_ros.sim.cell import CellSettings, SimCell
-from defgg_ros.sim.cell_trajectory import TrajectoryError
+from defgg_ros.sim.cell.sim_cell import CellSettings, SimCell
+from defgg_ros.sim.cell.trajectory import TrajectoryError
 from defgg_ros.sim.scene_spec import load_scene
 
 SCENES = Path(__file__).resolve().parents[2] / "sim_bringup" / "scenes"
@@ -161,7 +161,7 @@ def test_soft_object_wakes_near_the_hand_and_sleeps_when_left(soft_cell):
 
 
 def test_noise_drops_pixels_only_when_asked():
-    from defgg_ros.sim.cell_camera import DepthNoise
+    from defgg_ros.sim.cell.camera import DepthNoise
 
     scene = load_scene(SCENES / "rigid_box.yaml")
     cell = SimCell(scene, CellSettings(depth_noise=DepthNoise(0.004, 0.02, True)))

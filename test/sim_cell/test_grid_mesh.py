@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from defgg_ros.sim import meshes
-from defgg_ros.sim.cell_grid_mesh import box_grid, box_tet_mesh, grid_counts
+from defgg_ros.sim.cell.grid_mesh import box_grid, box_tet_mesh, grid_counts
 
 
 @pytest.mark.parametrize("size", [(0.05, 0.05, 0.05), (0.08, 0.04, 0.03), (0.02, 0.1, 0.06)])

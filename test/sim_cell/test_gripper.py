@@ -1,7 +1,7 @@
 """The gripper state machine (pure): move/grasp outcomes from measured openings."""
 import pytest
 
-from defgg_ros.sim.cell_gripper import STALL_TIME_S, GripperCommandError, GripperController
+from defgg_ros.sim.cell.gripper import STALL_TIME_S, GripperCommandError, GripperController
 
 
 def _feed(ctrl, widths, t0=0.0, dt=0.01):

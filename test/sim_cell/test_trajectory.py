@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from defgg_ros.sim.cell_trajectory import TrajectoryError, TrajectoryTracker, make_waypoints
+from defgg_ros.sim.cell.trajectory import TrajectoryError, TrajectoryTracker, make_waypoints
 
 Q0 = np.zeros(7)
 Q1 = np.linspace(0.1, 0.7, 7)

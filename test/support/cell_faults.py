@@ -1,4 +1,4 @@
-"""Faults put into a real simulated cell (defgg_ros.sim.cell.SimCell) by tests."""
+"""Faults put into a real simulated cell (defgg_ros.sim.cell.sim_cell.SimCell) by tests."""
 import pybullet as p
 
 

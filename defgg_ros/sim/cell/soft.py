@@ -16,7 +16,9 @@ from pathlib import Path
 import numpy as np
 import pybullet as p
 
-from defgg_ros.sim import cell_grid_mesh, cell_objects, meshes
+from defgg_ros.sim import meshes
+from defgg_ros.sim.cell import grid_mesh as cell_grid_mesh
+from defgg_ros.sim.cell import objects as cell_objects
 from defgg_ros.sim.scene_spec import SceneObject
 
 ACTIVATE_DISTANCE_M = 0.06    # TCP to the object's bounding box

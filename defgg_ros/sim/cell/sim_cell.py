@@ -24,10 +24,12 @@ from defgg_ros.constants import (
     PANDA_JOINT_NAMES,
     PANDA_READY_Q_RAD,
 )
-from defgg_ros.sim import cell_objects, cell_soft, physics
-from defgg_ros.sim.cell_camera import DepthCamera, DepthNoise, camera_matrix
-from defgg_ros.sim.cell_gripper import GripperController, GripperOutcome
-from defgg_ros.sim.cell_trajectory import TrajectoryTracker, make_waypoints
+from defgg_ros.sim import physics
+from defgg_ros.sim.cell import objects as cell_objects
+from defgg_ros.sim.cell import soft as cell_soft
+from defgg_ros.sim.cell.camera import DepthCamera, DepthNoise, camera_matrix
+from defgg_ros.sim.cell.gripper import GripperController, GripperOutcome
+from defgg_ros.sim.cell.trajectory import TrajectoryTracker, make_waypoints
 from defgg_ros.sim.scene_spec import SceneSpec
 
 # Rigid-only scenes: 1 ms keeps 70 N finger contacts calm and runs faster than real time.

@@ -8,7 +8,7 @@ import numpy as np
 
 from defgg_ros.control.pick_place import PickPlaceSequence
 from defgg_ros.control.sequence_types import ArmState, CancelGripper, GraspGripper, MoveGripper, SendTrajectory
-from defgg_ros.sim.cell import SimCell
+from defgg_ros.sim.cell.sim_cell import SimCell
 
 PERIOD_S = 0.01   # the executor's control period (its 100 Hz loop)
 
