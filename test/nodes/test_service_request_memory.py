@@ -20,6 +20,10 @@ def test_the_profile_frees_service_requests_and_keeps_rmw_defaults_elsewhere():
     assert reader.find("f:historyMemoryPolicy", NS).text == "PREALLOCATED_WITH_REALLOC"
     assert writer.find("f:historyMemoryPolicy", NS).text == "PREALLOCATED_WITH_REALLOC"
     assert writer.find("f:qos/f:publishMode/f:kind", NS).text == "ASYNCHRONOUS"
+    # rmw_fastrtps's own choice, which it does not apply when the file chooses: left AUTO, plain types' writers
+    # (/clock) failed under load with "cannot publish data"
+    for endpoint in (reader, writer, root.find("f:data_reader[@profile_name='service']", NS)):
+        assert endpoint.find("f:qos/f:data_sharing/f:kind", NS).text == "OFF"
 
 
 def test_qos_from_xml_is_set_only_by_the_call_that_chooses_the_profile(monkeypatch):
