@@ -2,11 +2,11 @@
 # The budgeted evaluation of the shipped models (results/sim_v1: the weights of 2026-11-22;
 # results/sim_v2, sim_v3: the weights of 2026-11-23; results/sim_v4: the weights of 2026-11-25), in the
 # background (setsid: stop it with kill -TERM -- -<its process group>, which reaches the workers too):
-#   WORKERS=2 NOTES=results/notes_v4.md setsid nohup results/run_budgeted_eval.sh results/sim_v4 \
+#   WORKERS=2 NOTES=docs/archive/notes_v4.md setsid nohup results/run_budgeted_eval.sh results/sim_v4 \
 #       > results/sim_v4.log 2>&1 &
 # The pair trained on datasets/fem_v5 (issue 25) is evaluated under that dataset's own trial protocol,
 # and its report carries the dataset's signal report (DATA):
-#   WORKERS=2 PROTOCOL_FROM=datasets/fem_v5 DATA=datasets/fem_v5 NOTES=results/notes_v5.md COMMIT_EVERY_TRIALS=391 \
+#   WORKERS=2 PROTOCOL_FROM=datasets/fem_v5 DATA=datasets/fem_v5 NOTES=docs/archive/notes_v5.md COMMIT_EVERY_TRIALS=391 \
 #       setsid nohup results/run_budgeted_eval.sh results/sim_v5 > results/sim_v5.log 2>&1 &
 # Every step is resumable: rerunning this script skips every finished trial. The order puts what
 # issue 25's targets are measured on first, the shake (the labels' own criterion): every common
@@ -14,7 +14,7 @@
 # best and five best (the paired sign test); then the twist's best grasps, the multi-material object,
 # the stiffness-error sensitivity of the best grasp, and the rest. (Until 2026-11-28 the order was
 # common best grasp, multi-material, twist, sensitivity, five ranks, adversarial: sim_v1-v4.)
-# After each step the tables and docs/results.md are rewritten (with NOTES: default results/notes_vN.md
+# After each step the tables and docs/results.md are rewritten (with NOTES: default docs/archive/notes_vN.md
 # for results/sim_vN) and OUT + docs/results.md are COMMITTED to git (if git is free; with
 # COMMIT_EVERY_TRIALS=N only once N records more than the last commit holds have run: the issue's one
 # commit per 10 % of progress, e.g. 391 for sim_v5's ~3,906 planned trials; it ran 3,960). A rerun keeps the folder's
@@ -27,7 +27,7 @@ if [ $# -ne 1 ] || [ "$1" = "-h" ] || [ "$1" = "--help" ]; then
   exit 2
 fi
 OUT=$1
-NOTES=${NOTES:-results/notes_${OUT##*sim_}.md}
+NOTES=${NOTES:-docs/archive/notes_${OUT##*sim_}.md}
 [ -f "$NOTES" ] || { echo "no notes file $NOTES (set NOTES=FILE)" >&2; exit 2; }
 EVAL=".venv/bin/python -m defgg_ros.evaluation.cli"
 RUN="$EVAL run --out $OUT --workers ${WORKERS:-1} --grasps 5 --no-progress${PROTOCOL_FROM:+ --protocol-from $PROTOCOL_FROM}"
