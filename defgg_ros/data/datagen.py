@@ -70,7 +70,7 @@ class DatagenConfig:
     # (the signal pilots' try of a twist-aware label, data/signal.py LABEL_RULES).
     tests: tuple = ("shake",)
     # constants.GRASP_HEIGHT_RULES; executor: each label is of the grasp the evaluation and the cell perform
-    # (results/notes_height.md). A resumed dataset keeps its own (resolve_grasp_height).
+    # (docs/archive/notes_height.md). A resumed dataset keeps its own (resolve_grasp_height).
     grasp_height: str = "executor"
     card_every: int = 20                           # regenerate the card every N finished trials
 
