@@ -32,10 +32,18 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from defgg_ros.atomic import append_jsonl, read_jsonl
+from tqdm import tqdm
+
+from defgg_ros.atomic import append_jsonl, atomic_path, read_jsonl
+from defgg_ros.bringup.supervisor import BringupError
 from defgg_ros.cli_help import HelpFormatter
 from defgg_ros.constants import OBJECT_DENSITY_KG_M3, TRAINING_YOUNGS_MODULI_PA
+from defgg_ros.evaluation.cell_picks import PickSetup, run_pick
 from defgg_ros.evaluation.cell_report import CASES, RECORDS_NAME, write_report
+from defgg_ros.ros.cell_client import CellCallError
+from defgg_ros.ros.domain import ISOLATION_ENV, apply_domain_choice, default_domain_choice
+from defgg_ros.ros.share import share_path
+from defgg_ros.sim import objects as sim_objects
 
 RIGID_PA, SOFT_PA = max(TRAINING_YOUNGS_MODULI_PA), min(TRAINING_YOUNGS_MODULI_PA)
 # The fourth case (issue 49 item 4, beyond the paper): the executor squeezes the object first and tells the
@@ -142,7 +150,6 @@ def finished_keys(records) -> set:
 
 # ---- the cell's objects ---------------------------------------------------------------------------------------
 def _library_shape(obj: CellObject):
-    from defgg_ros.sim import objects as sim_objects
 
     shape = sim_objects.get_shape(obj.name)
     if shape.set_name not in ("common", "adversarial"):
@@ -152,7 +159,6 @@ def _library_shape(obj: CellObject):
 
 def mesh_file(obj: CellObject, folder: Path) -> Path:
     """The library object's surface (its shipped tet mesh's boundary, metres) as an .obj the scene names."""
-    from defgg_ros.atomic import atomic_path
 
     path = Path(folder) / f"{obj.name}.obj"
     if not path.exists():
@@ -180,9 +186,7 @@ def scene_object(obj: CellObject, pose: dict, mesh_folder: Path) -> dict:
 def run(out: Path, work: Path, model: Path, picks: int, seed: int, objects, cases, pick_fn=None,
         progress=True, records_name: str = RECORDS_NAME) -> int:
     """Run every planned pick that has no outcome yet in OUT/records_name; returns how many picks ran now."""
-    from tqdm import tqdm
 
-    from defgg_ros.evaluation.cell_picks import PickSetup, run_pick
 
     pick_fn = pick_fn or run_pick
     records_path = Path(out) / records_name
@@ -210,8 +214,6 @@ def run(out: Path, work: Path, model: Path, picks: int, seed: int, objects, case
 
 
 def _attempt(pick_fn, setup, work: Path, key: str, model: Path) -> dict:
-    from defgg_ros.bringup.supervisor import BringupError
-    from defgg_ros.ros.cell_client import CellCallError
 
     stem = key.replace("|", "__")
     log_path = work / "logs" / f"{stem}.log"
@@ -235,8 +237,6 @@ def is_cell_failure(failure_reason: str) -> bool:
 
 # ---- CLI --------------------------------------------------------------------------------------------------------
 def build_parser() -> argparse.ArgumentParser:
-    from defgg_ros.ros.domain import ISOLATION_ENV, default_domain_choice
-    from defgg_ros.ros.share import share_path
 
     parser = argparse.ArgumentParser(prog="defgg-cell-experiment", formatter_class=HelpFormatter,
                                      description=__doc__.split("\n\n")[0], epilog=__doc__.split("\n\n", 1)[1])
@@ -288,7 +288,6 @@ def main(argv=None) -> int:
         objects, cases = _selected(args)
         if not Path(args.model).is_file():
             raise ValueError(f"model file {args.model} does not exist")
-        from defgg_ros.ros.domain import apply_domain_choice
 
         print(f"defgg-cell-experiment: {apply_domain_choice(args.ros_domain)}", flush=True)
         ran = run(Path(args.out), Path(args.work), Path(args.model), args.picks, args.seed, objects, cases,

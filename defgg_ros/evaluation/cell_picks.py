@@ -20,8 +20,15 @@ from pathlib import Path
 
 import numpy as np
 import yaml
+from defgg_interfaces.action import PickAndPlace
+from defgg_interfaces.srv import PlanGrasp
+from geometry_msgs.msg import PoseStamped
 
+from defgg_ros.bringup.demo_client import DemoClient
 from defgg_ros.bringup.demo_geometry import bin_place_xy, in_bin, release_tcp_z
+from defgg_ros.bringup.node_set import load_node_set
+from defgg_ros.bringup.supervisor import Bringup, BringupError
+from defgg_ros.demo import executor_params
 
 DRIVER, INFERENCE, EXECUTOR = "fake_panda_driver", "grasp_inference_node", "executor_node"
 # The executor's wall-clock guards (no joint states for watchdog_timeout_s, an input silent for silent_topic_s;
@@ -60,7 +67,6 @@ def write_scene(path: Path, scene_object: dict) -> Path:
 def _place_pose(grasp_pose, bin_dict: dict, executor_params: dict):
     """The bin's first slot, released just above its floor, the hand turned as at the grasp (as the demo
     places: a transfer that turns the hand about the vertical spun soft blocks out of the fingers)."""
-    from geometry_msgs.msg import PoseStamped
 
     pose = PoseStamped()
     pose.header.frame_id = executor_params["base_frame"]
@@ -73,7 +79,6 @@ def _place_pose(grasp_pose, bin_dict: dict, executor_params: dict):
 
 def _plan(client, record: dict):
     """Perceive a fresh frame and plan on it; the best grasp on the object, or None (record says why)."""
-    from defgg_interfaces.srv import PlanGrasp
 
     depth, info = client.fresh_frame(time.monotonic())
     perceived = client.perceive(depth, info)
@@ -108,7 +113,6 @@ def _settled_position(client) -> np.ndarray:
 
 
 def _execute(client, grasp, record: dict, executor_params: dict, pick_timeout_s: float) -> None:
-    from defgg_interfaces.action import PickAndPlace
 
     scene = client.scene()
     goal = PickAndPlace.Goal(plan_grasp=False, grasp=grasp,
@@ -126,7 +130,6 @@ def _measure(client, record: dict, timeout_s: float) -> None:
     """Measure first: a measure_only goal on the planned grasp (descend, squeeze, open, back to the observation
     pose); the executor sends the estimate to the segmentation node. A failed measurement leaves the node's
     default in force and the pick goes on (as a cell would)."""
-    from defgg_interfaces.action import PickAndPlace
 
     result = client.pick(PickAndPlace.Goal(plan_grasp=True, measure_only=True), timeout_s=timeout_s)
     record["squeeze"] = {
@@ -145,10 +148,6 @@ def run_pick(setup: PickSetup, scene_path: Path, model_path: Path, log, ready_ti
     Returns the pick's record fields (success by the paper's rule). Raises BringupError / CellCallError when
     the cell itself failed (a node died, a call timed out): no outcome to record then.
     """
-    from defgg_ros.bringup.demo_client import DemoClient
-    from defgg_ros.bringup.node_set import load_node_set
-    from defgg_ros.bringup.supervisor import Bringup
-    from defgg_ros.demo import executor_params
 
     write_scene(scene_path, setup.scene_object)
     overrides = {DRIVER: {"scene_file": str(scene_path.resolve()), "max_real_time_factor": 0.0},
@@ -177,7 +176,6 @@ def run_pick(setup: PickSetup, scene_path: Path, model_path: Path, log, ready_ti
             client.close()
         dead = cell.failed_node()
         if dead is not None:
-            from defgg_ros.bringup.supervisor import BringupError
             raise BringupError(dead.describe())
     record["success"] = bool(record["held_after_transfer"] and record["in_bin"])
     record["wall_s"] = round(time.monotonic() - started, 1)
