@@ -217,15 +217,16 @@ def build_parser() -> argparse.ArgumentParser:
     return use_for(parser)
 
 
-def parse_models(specs) -> dict:
+def parse_pairs(specs, option: str = "--model", form: str = "NAME=PATH") -> dict:
+    """['a=x', 'b=y'] -> {'a': 'x', 'b': 'y'}; a malformed pair or a name given twice is refused by name."""
     out = {}
     for spec in specs:
-        name, sep, path = spec.partition("=")
-        if not sep or not name or not path:
-            raise ValueError(f"--model expects NAME=PATH, got {spec!r}")
+        name, sep, value = spec.partition("=")
+        if not sep or not name or not value:
+            raise ValueError(f"{option} expects {form}, got {spec!r}")
         if name in out:
-            raise ValueError(f"model name {name!r} given twice")
-        out[name] = path
+            raise ValueError(f"{option}: {name!r} given twice")
+        out[name] = value
     return out
 
 
@@ -363,7 +364,7 @@ def check_run_counts(args) -> None:
 def cmd_run(args, argv) -> int:
 
     check_run_counts(args)
-    model_paths = parse_models(args.model or DEFAULT_MODELS)
+    model_paths = parse_pairs(args.model or DEFAULT_MODELS)
     predictors = load_predictors(model_paths)
     objects = eval_objects(args)
     protocol = protocol_of_run(args.out, args.protocol, from_dataset=args.protocol_from)
@@ -400,7 +401,7 @@ def cmd_report(args) -> int:
     summary = report_mod.write_outputs(args.out)
     write_diagnostics(args.out, args.data)
     if args.docs:
-        seed_runs = _seed_runs(args.seeds) if args.seeds else None
+        seed_runs = parse_pairs(args.seeds, "--seeds", "SEED=OUT") if args.seeds else None
         seeds_md = (seeds_markdown([summarise({k: read_results(results_path(v)) for k, v in seed_runs.items()}, s)
                                     for s in ("common", "adversarial")]) if seed_runs else None)
         docs.write_results_doc(args.out, args.docs, args.notes, seeds_md, seed_runs, args.cell)
@@ -435,7 +436,7 @@ def write_diagnostics(out_dir, data_root) -> None:
 
 def cmd_strategy(args) -> int:
 
-    (name, path), = parse_models([args.model]).items()
+    (name, path), = parse_pairs([args.model]).items()
     predictor = load_predictors({name: path})[name]
     obj = next((o for s in sources.EVAL_SETS for o in sources.named_set(s) if o.name == args.object), None)
     if obj is None:
@@ -514,20 +515,9 @@ def cmd_card(args) -> int:
     return 0
 
 
-def _seed_runs(specs) -> dict:
-    """['0=results/sim_v5', ...] -> {'0': 'results/sim_v5', ...}; a malformed one is refused by name."""
-    runs = {}
-    for spec in specs:
-        seed, sep, out = spec.partition("=")
-        if not sep or not seed or not out:
-            raise ValueError(f"a seed's run is SEED=OUT, got {spec!r}")
-        runs[seed] = out
-    return runs
-
-
 def cmd_seeds(args) -> int:
 
-    runs = {seed: read_results(results_path(out)) for seed, out in _seed_runs(args.run).items()}
+    runs = {seed: read_results(results_path(out)) for seed, out in parse_pairs(args.run, "--run", "SEED=OUT").items()}
     table = seeds_markdown([summarise(runs, s, args.task) for s in args.sets])
     print(table, end="")
     if args.out:
