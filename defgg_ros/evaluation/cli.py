@@ -402,8 +402,7 @@ def cmd_report(args) -> int:
     write_diagnostics(args.out, args.data)
     if args.docs:
         seed_runs = parse_pairs(args.seeds, "--seeds", "SEED=OUT") if args.seeds else None
-        seeds_md = (seeds_markdown([summarise({k: read_results(results_path(v)) for k, v in seed_runs.items()}, s)
-                                    for s in ("common", "adversarial")]) if seed_runs else None)
+        seeds_md = seed_table(seed_runs, ("common", "adversarial")) if seed_runs else None
         docs.write_results_doc(args.out, args.docs, args.notes, seeds_md, seed_runs, args.cell)
     print(json.dumps({"records": summary["records"], "targets": summary["targets"]}, indent=1))
     return 0
@@ -515,10 +514,15 @@ def cmd_card(args) -> int:
     return 0
 
 
+def seed_table(seed_runs: dict, sets, task: str = "shake") -> str:
+    """The seed study's Markdown table over {seed: evaluation folder}, each folder read once."""
+    runs = {seed: read_results(results_path(out)) for seed, out in seed_runs.items()}
+    return seeds_markdown([summarise(runs, s, task) for s in sets])
+
+
 def cmd_seeds(args) -> int:
 
-    runs = {seed: read_results(results_path(out)) for seed, out in parse_pairs(args.run, "--run", "SEED=OUT").items()}
-    table = seeds_markdown([summarise(runs, s, args.task) for s in args.sets])
+    table = seed_table(parse_pairs(args.run, "--run", "SEED=OUT"), args.sets, args.task)
     print(table, end="")
     if args.out:
         write_text_atomic(args.out, table)
