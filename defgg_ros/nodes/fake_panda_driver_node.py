@@ -16,7 +16,8 @@ joint_state_fingers reproduces the MoveIt launch's merged joint states.
 Threads: one sim thread owns PyBullet, advances sim time in control periods
 and publishes; ROS callbacks (trajectory, gripper goals) hand commands to it
 under a lock. The sim thread never reads the ROS clock, because it is the
-clock. It is throttled to at most `max_real_time_factor`.
+clock. It is throttled to at most `max_real_time_factor` and, like a real arm, never catches up: time the
+simulation lost on a busy machine stays lost (`SimPacer`).
 """
 import json
 import threading
@@ -72,6 +73,34 @@ MAX_STAMP_OFFSET_S = 1.0
 # Names, types, defaults and bounds: defgg_ros/ros/params/fake_panda_driver.yaml.
 PARAMETERS = load_schema("fake_panda_driver")
 
+
+
+class SimPacer:
+    """How long the sim thread sleeps so that sim time runs at most `max_real_time_factor` times wall time.
+
+    Paced from an anchor that moves forward when the simulation falls behind by more than MAX_LAG_S: the
+    lost time is never made up in a burst. A cumulative pace (the anchor fixed at start-up) ran the arm
+    at the simulation's capacity (2-5x real time) after every stall on a busy machine, so 0.5 s of sim
+    time passed in 0.1-0.2 s of wall time while the executor, starved of the same CPU, had not yet reacted
+    (CI 2026-11-29: the arm moved 0.73 s of sim time after SIGTERM). A real arm loses no time, so nothing
+    downstream may count on sim time racing ahead of the wall clock.
+    """
+    MAX_LAG_S = 0.02
+
+    def __init__(self, max_real_time_factor: float, wall_s: float, sim_s: float):
+        self.rtf = max_real_time_factor
+        self.anchor = (wall_s, sim_s)
+
+    def ahead_s(self, wall_s: float, sim_s: float) -> float:
+        """Seconds (wall) the simulation is ahead of its pace at sim time sim_s; <= 0: step on."""
+        if self.rtf <= 0:
+            return 0.0   # unthrottled
+        wall0, sim0 = self.anchor
+        ahead_s = wall0 + (sim_s - sim0) / self.rtf - wall_s
+        if ahead_s < -self.MAX_LAG_S:
+            self.anchor = (wall_s, sim_s)   # behind: the lost time stays lost
+            return 0.0
+        return ahead_s
 
 class FakePandaDriver(Node):
     def __init__(self, **kwargs):
@@ -324,8 +353,9 @@ class FakePandaDriver(Node):
         schedule = _Schedule({"clock": min(self.cfg["clock_rate_hz"], self.cfg["robot_state_rate_hz"]),
                               "joints": self.cfg["joint_state_rate_hz"], "gripper": self.cfg["gripper_state_rate_hz"]})
         next_depth_s = next_pose_s = 0.0
-        wall0, sim0 = time.monotonic(), self.cell.time_s
-        self._log_mark = (wall0, sim0)
+        wall0 = time.monotonic()
+        pacer = SimPacer(self.cfg["max_real_time_factor"], wall0, self.cell.time_s)
+        self._log_mark = (wall0, self.cell.time_s)
         next_log = wall0 + min(2.0, self.cfg["rtf_log_period_s"])  # a first figure soon after start-up
         publish_failures = 0
         while self._running and self.context.ok():
@@ -361,17 +391,12 @@ class FakePandaDriver(Node):
                 publish_failures += 1
                 self.get_logger().warning(f"publishing failed ({publish_failures} times so far): {error}; "
                                           "the simulation goes on", throttle_duration_sec=5.0)
-            self._throttle(wall0, now_s - sim0)
+            ahead_s = pacer.ahead_s(time.monotonic(), now_s)
+            if ahead_s > 0:
+                time.sleep(ahead_s)  # pacing the simulation to wall time, not waiting for a message
             if time.monotonic() >= next_log:
                 next_log = time.monotonic() + self.cfg["rtf_log_period_s"]
                 self._log_rtf(now_s)
-
-    def _throttle(self, wall0, sim_elapsed_s):
-        rtf = self.cfg["max_real_time_factor"]
-        if rtf > 0:
-            ahead_s = wall0 + sim_elapsed_s / rtf - time.monotonic()
-            if ahead_s > 0:
-                time.sleep(ahead_s)  # pacing the simulation to wall time, not waiting for a message
 
     def _log_rtf(self, now_s):
         """Real-time factor since the last log, and what the simulation alone could do (capacity)."""
