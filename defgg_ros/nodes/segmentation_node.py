@@ -99,7 +99,8 @@ class SegmentationNode(Node):
         self.diagnostics = NodeDiagnostics(self, self._diagnostic_status)
         # Newest frame wins: the subscription only hands frames to one worker thread.
         self._worker = LatestFrameWorker(self._perceive_stream_frame, 0.0, self._publish_perceived,
-                                         name="segmentation_perception", on_error=self._on_worker_error)
+                                         name="segmentation_perception", on_error=self._on_worker_error,
+                                         max_busy_fraction=float(p["perception_max_core_fraction"]))
         # Reliability follows the camera driver's, and silence is logged (qos.SensorSubscription, issue 26).
         self._info_sub = qos.SensorSubscription(self, CameraInfo, p["camera_info_topic"], self._on_camera_info,
                                                 warn_after_s=0.0)

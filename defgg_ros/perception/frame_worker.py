@@ -25,6 +25,10 @@ Rules (docs/perception.md, "Latency"):
   once a frame was prepared): an answer then never waits longer than wait_s, and its frame is as fresh as
   the stages keep up.
 - A frame whose preparation raised ValueError (in any stage) is a prepared frame too: requests get its error.
+- max_busy_fraction f < 1: after each frame a stage thread rests busy_s * (1/f - 1) (wall clock) before it takes
+  the next, so it keeps at most the fraction f of a core and frames arriving meanwhile are dropped (newest wins).
+  On a busy machine a frame takes longer, so the rest grows with it: the stage backs off instead of queueing
+  work behind the other processes (docs/perception.md, "Fresh answers under load").
 - While a request holds `priority()` the stage threads wait at their next checkpoint (the stage functions
   call `checkpoint()` between their steps) and start no new frame, so the request's work does not share the
   interpreter with them. A frame that a request prepared itself makes the stages drop the older frames they
@@ -51,6 +55,11 @@ RESPONSIVE_SWITCH_INTERVAL_S = 0.0005
 def keep_executor_responsive() -> None:
     """Shorten this process's interpreter switch interval (RESPONSIVE_SWITCH_INTERVAL_S); never lengthens it."""
     sys.setswitchinterval(min(sys.getswitchinterval(), RESPONSIVE_SWITCH_INTERVAL_S))
+
+
+# The longest rest after one frame (max_busy_fraction): a frame that took seconds (a stall) must not leave the
+# stage idle for longer than this.
+MAX_REST_S = 1.0
 
 
 class WorkerClosed(RuntimeError):
@@ -92,11 +101,15 @@ def _no_checkpoint() -> None:
 
 class LatestFrameWorker:
     def __init__(self, prepare, max_age_s: float, on_prepared=None, name: str = "perception_on_arrival",
-                 clock=time.monotonic, on_error=None):
+                 clock=time.monotonic, on_error=None, max_busy_fraction: float = 1.0):
         """prepare(frame, checkpoint) -> result, or a sequence of such stage functions (module docstring).
         max_age_s: the freshness rule's age. on_prepared(prepared, checkpoint): called in the last stage's
         thread after each frame it prepared is stored (e.g. publish its grasps). on_error(frame, exception):
-        an unexpected (non-ValueError) exception of a stage; the frame's requests get it as their error."""
+        an unexpected (non-ValueError) exception of a stage; the frame's requests get it as their error.
+        max_busy_fraction: in (0, 1], the most of a core each stage thread takes (module docstring)."""
+        if not 0.0 < max_busy_fraction <= 1.0:
+            raise ValueError(f"max_busy_fraction must be in (0, 1], got {max_busy_fraction}")
+        self._rest_per_busy = 1.0 / max_busy_fraction - 1.0
         self._stages = tuple(prepare) if isinstance(prepare, (tuple, list)) else (prepare,)
         if not self._stages:
             raise ValueError("at least one stage")
@@ -116,6 +129,7 @@ class LatestFrameWorker:
         self.prepared = 0             # frames prepared (by the worker or by requests)
         self.dropped = 0              # frames replaced at a stage input before that stage started them
         self.superseded = 0           # frames a stage stopped because a newer one was prepared
+        self.rested_s = 0.0           # wall time the stage threads rested (max_busy_fraction)
         self._threads = [threading.Thread(target=self._run, args=(index,), daemon=True,
                                           name=name if n == 1 else f"{name}_{index + 1}") for index in range(n)]
         self._thread = self._threads[-1]    # the last stage's: on_prepared runs there
@@ -254,6 +268,7 @@ class LatestFrameWorker:
                     return
                 item, self._inbox[index] = self._inbox[index], None
                 self._in_flight[index] = item
+            started_s = time.monotonic()
             try:
                 if last:
                     prepared = self._prepare_from(index, item, checkpoint)
@@ -275,6 +290,16 @@ class LatestFrameWorker:
                 with self._cond:
                     self._in_flight[index] = None
                     self._cond.notify_all()
+            self._rest(time.monotonic() - started_s)
+
+    def _rest(self, busy_s: float) -> None:
+        """After a frame: rest in proportion to the time it took (max_busy_fraction); close ends the rest."""
+        rest_s = min(busy_s * self._rest_per_busy, MAX_REST_S)
+        if rest_s <= 0.0:
+            return
+        with self._cond:
+            self._cond.wait_for(lambda: self._closed, rest_s)
+            self.rested_s += rest_s
 
 
 class RecentValues:

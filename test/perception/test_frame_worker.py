@@ -3,6 +3,7 @@
 The worker's prepare function is driven by events, so every case is deterministic; the waits below only
 guard against a hang (no assertion depends on how long anything took)."""
 import threading
+import time
 
 import pytest
 
@@ -317,3 +318,32 @@ def test_recent_values_forget_after_their_window():
     assert off.recent() == set()
     with pytest.raises(ValueError, match="window_s"):
         RecentValues(-1.0)
+
+
+def test_a_busy_fraction_makes_the_stage_rest_after_each_frame_and_keep_only_the_newest(make):
+    """max_busy_fraction 0.5: after a frame that took >= 0.1 s the stage rests as long again before it starts
+    the next; frames that arrived meanwhile are dropped but the newest. (Lower bounds only: a slow machine
+    can make the rest longer, never shorter.)"""
+    starts, ends = {}, {}
+
+    def slow(frame, checkpoint):
+        starts[frame] = time.monotonic()
+        time.sleep(0.1)
+        ends[frame] = time.monotonic()
+        return frame
+
+    worker = make(slow, max_age_s=0.0, max_busy_fraction=0.5)
+    worker.submit("a")
+    prepared_frames(worker, 1)
+    for frame in ("b", "c"):
+        worker.submit(frame)
+    prepared_frames(worker, 2)
+    assert worker.latest().frame == "c" and worker.dropped == 1 and "b" not in starts
+    assert starts["c"] - ends["a"] >= 0.1 - 1e-3
+    assert worker.rested_s >= 0.1 - 1e-3
+
+
+def test_a_busy_fraction_outside_0_1_is_refused(make):
+    for fraction in (0.0, -0.5, 1.5):
+        with pytest.raises(ValueError, match="max_busy_fraction"):
+            make(Prepare(), max_busy_fraction=fraction)
