@@ -5,6 +5,10 @@ in its own folder; within a folder the two models' trials pair up by (object, E,
 and object set this reports the paired margin (points) and its sign test; over the seeds, the mean margin with a
 95 % bootstrap interval over **objects** (an object's trials are not independent draws: they share its shape, so
 objects are what the interval resamples), and the sign test on the discordant pairs pooled over the seeds.
+
+While the seeds' evaluations run, they cover different views: every seed is then compared on the views
+(object, E, rank) that every seed with trials has (`matched`), so a partial seed is not set against the
+shipped seed's five ranks (a rank-1 grasp succeeds more often than a rank-5 one).
 """
 from __future__ import annotations
 
@@ -32,14 +36,15 @@ class SeedSummary:
     interval_pts: tuple | None  # 95 % bootstrap over objects of the mean margin
     pooled: Paired              # discordant pairs summed over the seeds
     objects: int
+    matched_views: int | None = None   # compared on this many views that every seed with trials has
 
     @property
     def pooled_p(self) -> float:
         return sign_test_p(self.pooled.a_only, self.pooled.b_only)
 
 
-def object_outcomes(records, task: str, object_set: str, model_a: str, model_b: str) -> dict:
-    """object -> [(a held, b held)] over the (E, rank) views both models have a graded main trial for."""
+def view_outcomes(records, task: str, object_set: str, model_a: str, model_b: str) -> dict:
+    """(object, E, rank) -> (a held, b held) over the views both models have a graded main trial for."""
     outcome = {model_a: {}, model_b: {}}
     for r in records:
         if (r["task"] != task or r["object_set"] != object_set or r["model"] not in outcome
@@ -47,10 +52,15 @@ def object_outcomes(records, task: str, object_set: str, model_a: str, model_b: 
             continue
         key = (r["object"], float(r["youngs_modulus_pa"]), int(r.get("rank") or 0))
         outcome[r["model"]][key] = bool(r["success"])
+    return {key: (a, outcome[model_b][key]) for key, a in outcome[model_a].items() if key in outcome[model_b]}
+
+
+def object_outcomes(views: dict, keep=None) -> dict:
+    """object -> [(a held, b held)] of views ((object, E, rank) -> pair), only the keys in `keep` if given."""
     by_object = {}
-    for key, a in outcome[model_a].items():
-        if key in outcome[model_b]:
-            by_object.setdefault(key[0], []).append((a, outcome[model_b][key]))
+    for key, pair in sorted(views.items()):
+        if keep is None or key in keep:
+            by_object.setdefault(key[0], []).append(pair)
     return by_object
 
 
@@ -69,10 +79,14 @@ def _mean_margin(per_seed_objects: list, objects: list) -> float | None:
 
 
 def summarise(seed_records: dict, object_set: str, task: str = "shake", model_a: str = "defgg_cnn",
-              model_b: str = "ggcnn_depth_only", resamples: int = BOOTSTRAP_RESAMPLES) -> SeedSummary:
-    """seed_records: {seed label: that seed's trial records}."""
-    per_seed = {seed: object_outcomes(recs, task, object_set, model_a, model_b)
-                for seed, recs in seed_records.items()}
+              model_b: str = "ggcnn_depth_only", resamples: int = BOOTSTRAP_RESAMPLES,
+              matched: bool = True) -> SeedSummary:
+    """seed_records: {seed label: that seed's trial records}. matched: only the views every seed with trials
+    has (module docstring); False: each seed's own views."""
+    views = {seed: view_outcomes(recs, task, object_set, model_a, model_b) for seed, recs in seed_records.items()}
+    present = [set(v) for v in views.values() if v]
+    keep = set.intersection(*present) if matched and present else None
+    per_seed = {seed: object_outcomes(v, keep) for seed, v in views.items()}
     rows = tuple(SeedRow(seed, _counts([p for pairs in objs.values() for p in pairs]))
                  for seed, objs in per_seed.items())
     objects = sorted(set().union(*per_seed.values())) if per_seed else []
@@ -85,7 +99,7 @@ def summarise(seed_records: dict, object_set: str, task: str = "shake", model_a:
                                    for _ in range(resamples)) if m is not None)
         if draws:
             interval = (draws[int(0.025 * (len(draws) - 1))], draws[int(round(0.975 * (len(draws) - 1)))])
-    return SeedSummary(object_set, rows, mean, interval, pooled, len(objects))
+    return SeedSummary(object_set, rows, mean, interval, pooled, len(objects), None if keep is None else len(keep))
 
 
 def seeds_markdown(summaries) -> str:
@@ -103,4 +117,6 @@ def seeds_markdown(summaries) -> str:
                                                        f"{s.interval_pts[1]:+.1f})"
         lines.append(f"| {s.object_set} | **mean of {len(s.rows)} seeds** | {s.pooled.pairs} | {s.pooled.a_only} | "
                      f"{s.pooled.b_only} | {mean}{interval} | {s.pooled_p:.3g} (pooled) |")
-    return "\n".join(lines) + "\n"
+    notes = [f"{s.object_set}: every seed on the same {s.matched_views} views (object, E, rank) that each seed with "
+             "trials has" for s in summaries if s.matched_views is not None]
+    return "\n".join(lines) + "\n" + ("\n" + "; ".join(notes) + ".\n" if notes else "")

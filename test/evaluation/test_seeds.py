@@ -57,3 +57,20 @@ def test_the_cli_reads_each_seed_s_folder_and_writes_the_table(tmp_path, capsys)
     assert "| common | 0 | 4 | 2 | 0 | +50.0 |" in table and "mean of 2 seeds" in table
     assert out.read_text() == table
     assert main(["seeds", "--run", "nonsense"]) == 2
+
+
+def test_a_partial_seed_is_compared_on_the_views_every_seed_has():
+    """Seed 1 has only rank 0 of each object: seed 0 is then counted on rank 0 too (matched), not on its four
+    ranks, where its rank-3 pairs (both held) would dilute its margin against seed 1's."""
+    full = seed_records({"a": 1, "b": 1})
+    partial = [r for r in seed_records({"a": 1, "b": 0}) if r["rank"] == 0]
+    s = summarise({"0": full, "1": partial}, "common", resamples=50)
+    assert [r.counts.pairs for r in s.rows] == [2, 2] and s.matched_views == 2
+    assert [r.counts.margin_pts for r in s.rows] == [100.0, 50.0]
+    unmatched = summarise({"0": full, "1": partial}, "common", resamples=50, matched=False)
+    assert [r.counts.pairs for r in unmatched.rows] == [8, 2] and unmatched.matched_views is None
+
+
+def test_a_seed_without_trials_does_not_empty_the_comparison():
+    s = summarise({"0": seed_records({"a": 2}), "1": []}, "common", resamples=50)
+    assert [r.counts.pairs for r in s.rows] == [4, 0] and s.matched_views == 4
