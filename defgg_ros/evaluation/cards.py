@@ -116,7 +116,8 @@ def _pct(x) -> str:
     return "–" if x is None else f"{100 * x:.1f} %"
 
 
-def render_card(name: str, models_dir, eval_summary: dict | None = None, eval_dir: str = "") -> str:
+def render_card(name: str, models_dir, eval_summary: dict | None = None, eval_dir: str = "",
+                seeds_dir=None) -> str:
     models_dir = Path(models_dir)
     prov_path = models_dir / f"{name}{PROVENANCE_SUFFIX}"
     if not prov_path.is_file():
@@ -146,6 +147,8 @@ def render_card(name: str, models_dir, eval_summary: dict | None = None, eval_di
     lines += _data_section(prov)
     lines += _validation_section(prov)
     lines += _eval_section(name, eval_summary, eval_dir, payload["weights_sha256"][:16])
+    if seeds_dir is not None:
+        lines += _seeds_section(name, prov, Path(seeds_dir))
     return "\n".join(lines) + "\n"
 
 
@@ -243,11 +246,40 @@ def _eval_section(name, summary, eval_dir, sha16: str) -> list:
     return lines + [""]
 
 
-def write_card(name: str, models_dir, eval_dir=None) -> Path:
+def _seed_metrics(name: str, seeds_dir: Path) -> list:
+    """[(seed, best epoch, best validation accuracy, test accuracy)] of the other seeds' training runs
+    (<seeds_dir>/weights_s<seed>/<name>.metrics.json, as results/run_seed_study.sh stores them)."""
+    rows = []
+    for path in sorted(seeds_dir.glob(f"weights_s*/{name}.metrics.json")):
+        metrics = json.loads(path.read_text())
+        best = next(e for e in metrics["history"] if e["epoch"] == metrics["best_epoch"])
+        rows.append((path.parent.name.removeprefix("weights_s"), metrics["best_epoch"], best.get("val_accuracy"),
+                     (metrics.get("test") or {}).get("accuracy")))
+    return rows
+
+
+def _seeds_section(name: str, prov: dict, seeds_dir: Path) -> list:
+    """The other training seeds (same data, schedule and split): what each gave on validation, and which was
+    shipped. The shipped seed is chosen on validation only; the evaluation of every seed is docs/results.md's."""
+    rows = _seed_metrics(name, seeds_dir)
+    if not rows:
+        return []
+    seed = prov.get("train_config", {}).get("seed", 0)
+    lines = ["## Training seeds", "",
+             f"The shipped weights are seed {seed}'s, chosen on validation only (never on the evaluation). The same "
+             f"training with other seeds (`{seeds_dir}`, results/run_seed_study.sh) gave:", "",
+             "| seed | best validation epoch | validation accuracy | test objects |", "|---|---|---|---|",
+             f"| {seed} (shipped) | {prov['best_epoch']} | {_pct(prov['val_best'].get('val_accuracy'))} | "
+             f"{_pct((prov.get('test') or {}).get('accuracy'))} |"]
+    lines += [f"| {s} | {epoch} | {_pct(val)} | {_pct(test)} |" for s, epoch, val, test in rows]
+    return lines + ["", "What each seed's pair gives in the simulator: docs/results.md, \"Seeds\".", ""]
+
+
+def write_card(name: str, models_dir, eval_dir=None, seeds_dir=None) -> Path:
     summary = None
     if eval_dir is not None and (Path(eval_dir) / "summary.json").is_file():
         summary = json.loads((Path(eval_dir) / "summary.json").read_text())
     path = Path(models_dir) / f"{name}.md"
-    write_text_atomic(path, render_card(name, models_dir, summary, str(eval_dir or "")))
+    write_text_atomic(path, render_card(name, models_dir, summary, str(eval_dir or ""), seeds_dir))
     path.chmod(0o644)
     return path

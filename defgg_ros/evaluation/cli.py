@@ -205,6 +205,8 @@ def _add_others(sub):
     p = sub.add_parser("card", help="(re)write models/<name>.md from its provenance, weights and evaluation")
     p.add_argument("--name", required=True, nargs="+")
     p.add_argument("--eval", default=None, metavar="OUT", help="evaluation folder whose summary.json to include")
+    p.add_argument("--seeds", default=None, metavar="DIR",
+                   help="the seed study's weights folder (results/seeds): list what the other seeds gave")
     p.add_argument("--models-dir", default="models")
 
 
@@ -510,7 +512,7 @@ def cmd_card(args) -> int:
     from defgg_ros.evaluation import cards
 
     for name in args.name:
-        print(cards.write_card(name, args.models_dir, args.eval))
+        print(cards.write_card(name, args.models_dir, args.eval, args.seeds))
     return 0
 
 

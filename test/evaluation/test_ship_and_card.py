@@ -101,3 +101,24 @@ def test_card_reads_the_generator_header_from_the_archive_and_states_the_height_
         "n_candidates": 200, "grasp_height": "executor", "trial_settings": {"protocol": "defgraspsim"}}))}))
     assert "Grip force of these labels: FOS·m·g/μ" in weight_rule
     assert "record the rule (`label_grip_rule`)" in weight_rule
+
+
+def test_card_lists_the_other_training_seeds_and_which_was_shipped(trained, tmp_path):
+    """`card --seeds DIR`: each other seed's best validation epoch and accuracy (from the seed study's stored
+    metrics) beside the shipped seed's, so a reader sees how lucky the shipped seed was (issue 49 item 1)."""
+    root, data, run, command = trained
+    models = tmp_path / "models"
+    assert cli.main(["ship", "--run", str(run), "--name", "m", "--command", command, "--wall-s", "1",
+                     "--models-dir", str(models)]) == 0
+    metrics = json.loads((run / "metrics.json").read_text())
+    seeds = tmp_path / "seeds"
+    for seed, accuracy in (("1", 0.75), ("2", 0.8125)):
+        other = {**metrics, "history": [{**e, "val_accuracy": accuracy} for e in metrics["history"]]}
+        (seeds / f"weights_s{seed}").mkdir(parents=True)
+        (seeds / f"weights_s{seed}" / "m.metrics.json").write_text(json.dumps(other))
+    assert cli.main(["card", "--name", "m", "--models-dir", str(models), "--seeds", str(seeds)]) == 0
+    card = (models / "m.md").read_text()
+    assert "## Training seeds" in card and "| 0 (shipped) |" in card
+    assert "| 1 | 1 | 75.0 % |" in card and "| 2 | 1 | 81.2 % |" in card
+    assert cli.main(["card", "--name", "m", "--models-dir", str(models)]) == 0
+    assert "## Training seeds" not in (models / "m.md").read_text()
