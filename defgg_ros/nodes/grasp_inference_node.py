@@ -197,6 +197,8 @@ class GraspInferenceNode(Node):
         self._publish_outputs(prepared.frame, result, grasps)
 
     def _on_worker_error(self, frame, exc):
+        if not self.context.ok():
+            return   # the context was shut down under a publish of the worker: the node is stopping, not failing
         self.get_logger().error(f"preparation on arrival failed unexpectedly: {exc!r}")
 
     def _search(self, prepared: PreparedFrame, top_k: int):

@@ -242,6 +242,8 @@ class SegmentationNode(Node):
         self.diagnostics.latency("perception", time.perf_counter() - received_s)
 
     def _on_worker_error(self, frame, exc):
+        if not self.context.ok():
+            return   # the context was shut down under a publish of the worker: the node is stopping, not failing
         self.get_logger().error(f"perception failed unexpectedly: {exc!r}")
 
     def _diagnostic_status(self) -> dict:
