@@ -20,8 +20,10 @@ the image or without a return are not):
   same object gets the same opening at any resolution; the network's width is kept for reference),
   and must fit the hand's GRIPPER_MAX_WIDTH_M: so no grasp on a face wider than the gripper (a
   cereal box's top);
-- both finger pads (thickness x pad width, just outside the opening) must land in free space at
-  the tip height (objects, neighbours, the robot, unseen space are not);
+- both finger pads (thickness x pad width) must land in free space at the tip height (objects,
+  neighbours, the robot, unseen space are not) over their whole sweep: from just outside the opening
+  out to the executor's pre-grasp opening (control/gripper_rule.pre_grasp_opening_m, the full 80 mm:
+  the hand descends opened that wide), so a ring's hole narrower than that takes no finger;
 - the closing direction: the feasible one with the narrowest extent (within OPENING_TIE_M), ties
   in this order: across the object's faces (the axes of its footprint's minimum-area rectangle,
   the one nearer the network's angle first), the network's angle, 15 degree steps away from it;
@@ -42,6 +44,7 @@ from defgg_ros.constants import (
     PANDA_FINGER_THICKNESS_M,
     PANDA_FINGERTIP_BELOW_TCP_M,
 )
+from defgg_ros.control.gripper_rule import pre_grasp_opening_m
 from defgg_ros.control.kinematics import MIN_TCP_HEIGHT_ABOVE_TABLE_M, WorkspaceError, check_workspace
 from defgg_ros.grasping.geometry import tcp_height_m
 from defgg_ros.grasping.postprocess import find_peaks, maps_from_network
@@ -59,6 +62,9 @@ DISTINCT_ANGLE_DEG = 20.0
 MAX_HALF_EXTENT_CELLS = int(math.ceil(GRIPPER_MAX_WIDTH_M / CELL_M))
 PAD_SAMPLES = 5
 PAD_BLOCKED_FRACTION = 0.0
+# Pad positions sampled between a grasp's opening and the executor's wider pre-grasp opening (the sweep of
+# the closing pads): at most (80 - 12) / 2 mm / 12 = 2.8 mm apart, under the pads' 3.5 mm sample spacing.
+SWEEP_SAMPLES = 12
 # Samples along the closing line, in height-map cells (half a cell: the extent to ~0.5 mm).
 LINE_STEP_CELLS = 0.5
 # Closing directions whose extents differ by less than this count as equally narrow.
@@ -498,7 +504,8 @@ def _feasible_at_peaks(view, label, cells, probes, network_widths_m, qualities, 
     on = (rc[:, 0] >= 0) & (rc[:, 0] < rows_n) & (rc[:, 1] >= 0) & (rc[:, 1] < cols_n)
     on[on] = view.grid_labels[rc[on, 0], rc[on, 1]] == label
     if on.any():
-        on[on] = _pads_free(view, space, levels[peak_of[cand[on]]], mid[on], flat_dirs[cand[on]], widths[on])
+        on[on] = _pads_free(view, space, levels[peak_of[cand[on]]], mid[on], flat_dirs[cand[on]], widths[on],
+                            pre_grasp_opening_m())
     for k in np.flatnonzero(on):
         p = int(peak_of[cand[k]])
         if result[p] is None:
@@ -569,25 +576,39 @@ def _extent_cells(occupied: np.ndarray):
     return (int(low[0]), int(high[0])) if ok[0] else (None, None)
 
 
-def _pads_free(view, space: FreeSpace, level_m, centres, directions, widths_m) -> np.ndarray:
+def _pads_free(view, space: FreeSpace, level_m, centres, directions, widths_m, opening_m: float = 0.0) -> np.ndarray:
     """Per grasp (n centres in cells, unit closing directions, openings in m): both pads (thickness
     along the closing line just outside the opening, pad width across it) over free space at the
     fingertips' level (level_m: one for all, or one per grasp; PAD_BLOCKED_FRACTION of a pad's samples
-    may fail)."""
+    may fail). opening_m > a grasp's opening: the hand descends opened that wide (the executor's
+    pre-grasp opening) and closes to the grasp's opening, so the pads' whole sweep between the two
+    must be free too (SWEEP_SAMPLES more positions along the line, checked only where the pads at the
+    opening are free: most candidates fail there, and the sweep's samples would double a search)."""
     centres, directions = np.asarray(centres, float), np.asarray(directions, float)
+    level_m = np.broadcast_to(np.asarray(level_m, float), (len(centres),))
+    half = np.asarray(widths_m, float)[:, None] / 2
+    free = _pad_samples_free(view, space, level_m, centres, directions,
+                             half + np.linspace(0.0, PANDA_FINGER_THICKNESS_M, PAD_SAMPLES))
+    if opening_m > 0.0 and free.any():
+        sweep = np.linspace(0.0, 1.0, SWEEP_SAMPLES + 1)[1:] * np.maximum(opening_m / 2 - half[free], 0.0)
+        free[free] = _pad_samples_free(view, space, level_m[free], centres[free], directions[free],
+                                       half[free] + PANDA_FINGER_THICKNESS_M + sweep)
+    return free
+
+
+def _pad_samples_free(view, space: FreeSpace, level_m, centres, directions, along_m) -> np.ndarray:
+    """_pads_free's test for pads at the given distances along the closing line (n x K m from each centre),
+    PAD_SAMPLES across the pad's width at each."""
+    n, n_along = along_m.shape
     across = np.stack([-directions[:, 1], directions[:, 0]], axis=1)
-    thickness = np.linspace(0.0, PANDA_FINGER_THICKNESS_M, PAD_SAMPLES)
-    s_along = (np.asarray(widths_m, float)[:, None] / 2 + thickness) / CELL_M
     s_across = np.linspace(-FINGER_PAD_WIDTH_M / 2, FINGER_PAD_WIDTH_M / 2, PAD_SAMPLES) / CELL_M
-    # Sample k = (across index) * PAD_SAMPLES + (along index), as np.meshgrid(along, across) orders them.
-    a = np.broadcast_to(s_along[:, None, :], (len(centres), PAD_SAMPLES, PAD_SAMPLES)).reshape(len(centres), -1, 1)
-    b = np.repeat(s_across, PAD_SAMPLES)[None, :, None]
+    # Sample k = (across index) * n_along + (along index), as np.meshgrid(along, across) orders them.
+    a = np.broadcast_to(along_m[:, None, :] / CELL_M, (n, PAD_SAMPLES, n_along)).reshape(n, -1, 1)
+    b = np.repeat(s_across, n_along)[None, :, None]
     pads = [centres[:, None, :] + side * a * directions[:, None, :] + b * across[:, None, :] for side in (-1.0, 1.0)]
     points = np.stack(pads, axis=1).reshape(-1, 2)                            # n x 2 pads x samples
-    if np.ndim(level_m):
-        level_m = np.repeat(np.asarray(level_m, float), len(points) // len(centres))
-    free = space.free(_points(view, points, level_m), strict=True).reshape(len(centres), 2, -1)
-    return np.all(np.mean(~free, axis=2) <= PAD_BLOCKED_FRACTION, axis=1)
+    free = space.free(_points(view, points, np.repeat(level_m, 2 * PAD_SAMPLES * n_along)), strict=True)
+    return np.all(np.mean(~free.reshape(n, 2, -1), axis=2) <= PAD_BLOCKED_FRACTION, axis=1)
 
 
 def _grasp(view, label, qualities, r, c, direction, width, extent_m, network_width_m, modulus) -> TabletopGrasp:
