@@ -22,7 +22,10 @@ No ROS and no wall clock inside: the owner feeds events (joint states,
 external force, gripper results) and calls `tick(sim_s, wall_s)`; the
 machine answers with commands (trajectories, gripper goals). Motion progress
 runs on the robot's clock (`sim_s`: sim time in simulation); the driver
-watchdog runs on `wall_s`, because a dead simulator stops sim time.
+watchdog runs on `wall_s`, because a dead simulator stops sim time. It counts
+only the time the owner was ticking: a gap between two ticks longer than
+OWN_STALL_S is the owner's own stall (its process stopped or starved), not
+the driver's silence.
 Every way of ending carries a reason a person can read.
 """
 
@@ -97,6 +100,10 @@ TRANSFER_RETIMING_TRIES = 3
 # The place lowering watches the hold until the held object's bottom (assumed on the table at the grasp) comes
 # this close to the table: touching down pushes an object up between the fingers, which can read as a drop.
 TOUCHDOWN_MARGIN_M = 0.02
+# A gap between two ticks longer than this is the owner's own stall, not silence of the driver (the owner ticks
+# every control period, 10 ms): a cell whose processes were all suspended for a minute (SIGSTOP) aborted its
+# pick as "driver silent" on resume, before the first joint state after the pause could arrive (2026-11-29).
+OWN_STALL_S = 0.5
 
 
 def _finite(name: str, values) -> np.ndarray:
@@ -141,6 +148,7 @@ class PickPlaceSequence(SqueezePhase):
     def on_joint_state(self, state: ArmState, wall_s: float) -> None:
         self._obs.state = state
         self._obs.state_wall_s = wall_s
+        self._obs.own_stall_s = 0.0
 
     def on_force(self, force_xyz_n) -> None:
         self._obs.force_n = np.asarray(force_xyz_n, dtype=float)
@@ -219,7 +227,11 @@ class PickPlaceSequence(SqueezePhase):
             return self._fail(str(error), sim_s)
 
     def _watchdog(self, wall_s: float) -> None:
-        age = wall_s - self._obs.state_wall_s
+        obs = self._obs
+        if obs.last_tick_wall_s is not None and wall_s - obs.last_tick_wall_s > OWN_STALL_S:
+            obs.own_stall_s += wall_s - obs.last_tick_wall_s
+        obs.last_tick_wall_s = wall_s
+        age = wall_s - obs.state_wall_s - obs.own_stall_s
         if self._obs.state is None:
             raise _DriverSilent("driver silent: no joint states received")
         if age > self._cfg.watchdog_timeout_s:

@@ -250,5 +250,7 @@ class _Pending:
 class _Observed:
     state: ArmState | None = None
     state_wall_s: float = -math.inf
+    own_stall_s: float = 0.0            # wall time the owner did not tick since that state (not the driver's)
+    last_tick_wall_s: float | None = None
     force_n: np.ndarray = field(default_factory=lambda: np.zeros(3))
     force_bias_n: np.ndarray = field(default_factory=lambda: np.zeros(3))

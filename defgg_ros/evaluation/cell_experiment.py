@@ -224,9 +224,20 @@ def _attempt(pick_fn, setup, work: Path, key: str, model: Path) -> dict:
             record = pick_fn(setup, work / "scenes" / f"{stem}.yaml", model, log)
         except (BringupError, CellCallError, TimeoutError) as exc:
             return {"cell_error": f"{type(exc).__name__}: {exc}", "wall_s": round(time.monotonic() - started, 1)}
-    if is_cell_failure(record.get("failure_reason", "")):
-        return {**record, "cell_error": f"the simulator, not the grasp: {record['failure_reason']}"}
+    reason = cell_failure_of(record)
+    if reason:
+        return {**record, "cell_error": f"the simulator, not the grasp: {reason}"}
     return record
+
+
+def cell_failure_of(record: dict) -> str:
+    """The reason a pick's record is the cell's failure, not the grasp's ('' when it is not): the pick's own, or
+    its squeeze's in the measured case (a squeeze ended 'driver silent' left the object's modulus unmeasured, so
+    the pick after it does not test the measured input)."""
+    for reason in (record.get("failure_reason", ""), (record.get("squeeze") or {}).get("failure_reason", "")):
+        if is_cell_failure(reason):
+            return reason
+    return ""
 
 
 def is_cell_failure(failure_reason: str) -> bool:

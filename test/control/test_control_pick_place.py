@@ -221,6 +221,29 @@ def test_driver_silent_aborts_within_the_watchdog_time(kin):
     assert robot.sim_s - silent_since <= CONFIG.watchdog_timeout_s + 0.05
 
 
+def test_a_stall_of_the_owner_itself_is_not_a_silent_driver(kin):
+    """The whole cell suspended for 60 s (SIGSTOP of every process): the executor's first tick after the pause
+    comes before the driver's first joint state after it; the pick goes on (it aborted "driver silent: no joint
+    states for 60 s" before), and a driver that stays silent afterwards is still caught."""
+    sequence, robot = make(kin), FakeRobot(kin, World())
+    run(sequence, robot, until=lambda r, s: s.phase == "lift")
+    robot.wall_ahead_s = 60.0   # everything stopped for 60 s: the wall clock moved on, sim time did not
+    robot.apply(sequence.tick(robot.sim_s, robot.wall_s), sequence)
+    assert not sequence.finished, sequence.outcome.failure_reason
+    run_until_finished(sequence, robot)
+    assert sequence.outcome.success, sequence.outcome.failure_reason
+
+    sequence, robot = make(kin), FakeRobot(kin, World())
+    run(sequence, robot, until=lambda r, s: s.phase == "lift")
+    robot.wall_ahead_s = 60.0   # everything stopped for 60 s: the wall clock moved on, sim time did not
+    robot.apply(sequence.tick(robot.sim_s, robot.wall_s), sequence)
+    robot.world.silent = True
+    silent_since = robot.sim_s
+    run_until_finished(sequence, robot)
+    assert "driver silent" in sequence.outcome.failure_reason
+    assert robot.sim_s - silent_since <= CONFIG.watchdog_timeout_s + 0.05
+
+
 def test_no_joint_states_at_all_fails_at_start(kin):
     sequence = make(kin)
     commands = sequence.start(0.0, 0.0)

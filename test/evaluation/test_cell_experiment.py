@@ -78,6 +78,14 @@ def test_resume_skips_outcomes_and_retries_a_failed_cell_at_most_twice():
     assert not ce.is_cell_failure("the object slipped out of the fingers in transfer")
 
 
+def test_a_squeeze_ended_by_the_simulator_makes_the_measured_pick_a_cell_failure():
+    silent = "driver silent: no joint states for 1187.8 s (watchdog 60.0 s)"
+    measured = {"failure_reason": "PlanGrasp: no object found", "squeeze": {"failure_reason": silent}}
+    assert ce.cell_failure_of(measured) == silent
+    assert ce.cell_failure_of({"failure_reason": silent}) == silent
+    assert ce.cell_failure_of({"failure_reason": "object dropped during lift", "squeeze": {"failure_reason": ""}}) == ""
+
+
 def test_sign_test_and_paired_margin_over_picks():
     # 3 objects x 4 picks: correct wins 5 discordant pairs, rigid 1.
     records = []

@@ -41,6 +41,7 @@ class FakeRobot:
         self.qd = np.zeros(7)
         self.width_m = width_m
         self.sim_s = 0.0
+        self.wall_ahead_s = 0.0   # wall clock - sim time (a pause of the whole cell moves the wall clock only)
         self.trajectory, self.trajectory_start_s = None, 0.0
         self.gripper = None   # (kind, target_width, speed)
         self.gripper_stopped_s = None
@@ -95,8 +96,12 @@ class FakeRobot:
         depth = max(0.0, self.world.contact_height_m - tcp_z)
         sequence.on_force([0.0, 0.0, CONTACT_STIFFNESS_N_PER_M * depth])
         if not self.world.silent:
-            sequence.on_joint_state(ArmState(self.q.copy(), self.qd.copy(), self.width_m), self.sim_s)
-        self.apply(sequence.tick(self.sim_s, self.sim_s), sequence)
+            sequence.on_joint_state(ArmState(self.q.copy(), self.qd.copy(), self.width_m), self.wall_s)
+        self.apply(sequence.tick(self.sim_s, self.wall_s), sequence)
+
+    @property
+    def wall_s(self) -> float:
+        return self.sim_s + self.wall_ahead_s
 
 
 def run(sequence: PickPlaceSequence, robot: FakeRobot, max_s: float = 60.0, until=None):
