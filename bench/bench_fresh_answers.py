@@ -45,6 +45,8 @@ def parse_args(argv=None):
     parser.add_argument("--model", default=str(ROOT / "models" / "defgg_cnn.pt"), help="checkpoint")
     parser.add_argument("--max-frame-age", type=float, default=None,
                         help="the inference node's max_frame_age_s (default: its schema's)")
+    parser.add_argument("--perception-fraction", type=float, default=None,
+                        help="the segmentation node's perception_max_core_fraction (default: its schema's)")
     parser.add_argument("--prepare-stages", type=int, default=None,
                         help="the inference node's prepare_stages (default: its schema's)")
     return parser.parse_args(argv)
@@ -131,7 +133,7 @@ def main(argv=None):
           f"{other_load()}")
     frames = [scene(width, height), scene(width, height, seed=width + 1)]
     nodes = start_node(args.model, 1, frames[0][3], max_frame_age_s=args.max_frame_age,
-                       prepare_stages=args.prepare_stages)
+                       prepare_stages=args.prepare_stages, perception_max_core_fraction=args.perception_fraction)
     context = Context()
     rclpy.init(context=context)
     camera = hogs = None
@@ -179,7 +181,8 @@ def main(argv=None):
     print(f"\n{width}x{height} at {args.camera_hz:g} Hz, {args.hog} CPU hog process(es), {len(latencies_ms)} "
           f"PlanGrasp latest-frame requests every {args.request_period:g} s over {span:.0f} s, top_k {args.top_k}, "
           f"max_frame_age_s {'default' if args.max_frame_age is None else args.max_frame_age}, prepare_stages "
-          f"{'default' if args.prepare_stages is None else args.prepare_stages}; "
+          f"{'default' if args.prepare_stages is None else args.prepare_stages}, perception_max_core_fraction "
+          f"{'default' if args.perception_fraction is None else args.perception_fraction}; "
           f"load average {load:.2f} on {os.cpu_count()} cores")
     print(f"camera sent {sent} frames ({sent / span:.1f}/s)")
     p99 = float(np.percentile(latencies_ms, 99))

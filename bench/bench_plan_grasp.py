@@ -95,7 +95,8 @@ class PerceptionNodes:
 
 def start_node(model: str, threads: int, base_T_camera, prepare_on_arrival: str = "true",
                publish_on_sync: str = "true", max_frame_age_s: float | None = None,
-               prepare_stages: int | None = None, max_image_size_px=None) -> PerceptionNodes:
+               prepare_stages: int | None = None, max_image_size_px=None,
+               perception_max_core_fraction: float | None = None) -> PerceptionNodes:
     """segmentation_node (the camera pose) and grasp_inference_node in their own processes, with the cell's
     parameters unless told otherwise."""
     from defgg_ros.perception.geometry import transform_to_xyz_quaternion
@@ -104,9 +105,11 @@ def start_node(model: str, threads: int, base_T_camera, prepare_on_arrival: str 
     pose = ",".join(f"{v:.9f}" for v in (*xyz, *quat))
     size = [] if max_image_size_px is None else ["-p", f"max_image_size_px:=[{max_image_size_px[0]},"
                                                  f"{max_image_size_px[1]}]"]
+    fraction = [] if perception_max_core_fraction is None else [
+        "-p", f"perception_max_core_fraction:={perception_max_core_fraction}"]
     segmentation = NodeProcess("segmentation_node", [
         sys.executable, "-m", "defgg_ros.nodes.segmentation_node", "--ros-args", "-p", f"base_T_camera:=[{pose}]",
-        *size, "--log-level", "warn"], cwd=ROOT)
+        *size, *fraction, "--log-level", "warn"], cwd=ROOT)
     cmd = [sys.executable, "-m", "defgg_ros.nodes.grasp_inference_node", "--ros-args",
            "-p", f"model_path:={model}", "-p", f"num_threads:={threads}", "-p", f"publish_on_sync:={publish_on_sync}",
            "-p", f"prepare_on_arrival:={prepare_on_arrival}", *size, "--log-level", "warn"]

@@ -27,8 +27,9 @@ Rules (docs/perception.md, "Latency"):
 - A frame whose preparation raised ValueError (in any stage) is a prepared frame too: requests get its error.
 - max_busy_fraction f < 1: after each frame a stage thread rests busy_s * (1/f - 1) (wall clock) before it takes
   the next, so it keeps at most the fraction f of a core and frames arriving meanwhile are dropped (newest wins).
-  On a busy machine a frame takes longer, so the rest grows with it: the stage backs off instead of queueing
-  work behind the other processes (docs/perception.md, "Fresh answers under load").
+  busy_s is a moving average of the frames' times (BUSY_AVERAGE_WEIGHT), so one slow frame does not leave a long
+  gap without a fresh frame. On a busy machine frames take longer, so the rest grows with them: the stage backs
+  off instead of queueing work behind the other processes (docs/perception.md, "Fresh answers under load").
 - While a request holds `priority()` the stage threads wait at their next checkpoint (the stage functions
   call `checkpoint()` between their steps) and start no new frame, so the request's work does not share the
   interpreter with them. A frame that a request prepared itself makes the stages drop the older frames they
@@ -60,6 +61,10 @@ def keep_executor_responsive() -> None:
 # The longest rest after one frame (max_busy_fraction): a frame that took seconds (a stall) must not leave the
 # stage idle for longer than this.
 MAX_REST_S = 1.0
+# Weight of the newest frame in the moving average of the time a frame takes (max_busy_fraction's rest). With the
+# last frame's time alone, one slow frame (a 80 ms frame where 43 ms is usual) made a 110 ms rest: the answers'
+# frame age p99 followed those gaps (bench_fresh_answers, 2026-11-29).
+BUSY_AVERAGE_WEIGHT = 0.2
 
 
 class WorkerClosed(RuntimeError):
@@ -130,6 +135,7 @@ class LatestFrameWorker:
         self.dropped = 0              # frames replaced at a stage input before that stage started them
         self.superseded = 0           # frames a stage stopped because a newer one was prepared
         self.rested_s = 0.0           # wall time the stage threads rested (max_busy_fraction)
+        self._busy_average_s = [None] * n   # per stage: moving average of a frame's time
         self._threads = [threading.Thread(target=self._run, args=(index,), daemon=True,
                                           name=name if n == 1 else f"{name}_{index + 1}") for index in range(n)]
         self._thread = self._threads[-1]    # the last stage's: on_prepared runs there
@@ -290,11 +296,15 @@ class LatestFrameWorker:
                 with self._cond:
                     self._in_flight[index] = None
                     self._cond.notify_all()
-            self._rest(time.monotonic() - started_s)
+            self._rest(index, time.monotonic() - started_s)
 
-    def _rest(self, busy_s: float) -> None:
-        """After a frame: rest in proportion to the time it took (max_busy_fraction); close ends the rest."""
-        rest_s = min(busy_s * self._rest_per_busy, MAX_REST_S)
+    def _rest(self, index: int, busy_s: float) -> None:
+        """After a frame: rest in proportion to the average time a frame takes (max_busy_fraction); close ends
+        the rest."""
+        average = self._busy_average_s[index]
+        average = busy_s if average is None else average + BUSY_AVERAGE_WEIGHT * (busy_s - average)
+        self._busy_average_s[index] = average
+        rest_s = min(average * self._rest_per_busy, MAX_REST_S)
         if rest_s <= 0.0:
             return
         with self._cond:

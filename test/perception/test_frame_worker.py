@@ -347,3 +347,15 @@ def test_a_busy_fraction_outside_0_1_is_refused(make):
     for fraction in (0.0, -0.5, 1.5):
         with pytest.raises(ValueError, match="max_busy_fraction"):
             make(Prepare(), max_busy_fraction=fraction)
+
+
+def test_the_rest_follows_the_average_frame_time_so_one_slow_frame_leaves_no_long_gap(make):
+    """Rests after frames of 50, 50, 50 then 300 ms at max_busy_fraction 0.5: 50, 50, 50 then 100 ms (the moving
+    average, weight 0.2), not 300 ms (the last frame's time alone gave a gap as long as the slow frame)."""
+    worker = make(Prepare(), max_busy_fraction=0.5)
+    rests = []
+    for busy_s in (0.05, 0.05, 0.05, 0.3):
+        before = worker.rested_s
+        worker._rest(0, busy_s)
+        rests.append(worker.rested_s - before)
+    assert rests == pytest.approx([0.05, 0.05, 0.05, 0.1])
