@@ -1,18 +1,26 @@
 """Stiffness by squeezing in the simulated cell (issue 49 item 4): how close defgg_ros/squeeze.py's modulus
 estimate comes to the true Young's modulus of the cell's FEM objects, and how repeatable it is.
 
-  .venv/bin/python bench/bench_squeeze_stiffness.py [--repeats 3] [--moduli 2e4 6e4 2e5 6e5 2e6 2e9]
+  .venv/bin/python bench/bench_squeeze_stiffness.py [--repeats 1] [--moduli 2e4 2e5 2e6 2e9]
+      [--objects tuning | held_out | NAME ...] [--readings FILE.jsonl] [--calibrate]
 
 Jig (not the executor's sequence): the arm is set at a top-down grasp at half the object's height, then the
 hand grasps at squeeze.GENTLE_FORCES_N, then at FIRM_FORCES_N while squeeze.needs_firmer says the compression
 is not resolved; the opening is read 0.2 s after each grasp stopped. Each repeat turns the object (yaw 0, 0.3,
-0.6 rad ...). Prints per object and modulus the estimate (median over repeats), its ratio to the truth, the
-repeats' spread (max/min) and the force-compression slope. No machine compliance is taken out (see the
-printout's last lines for why). The figures go into docs/real_cell.md ("Stiffness by squeezing").
+0.6 rad ...). Objects: the four boxes of the cell's regular FEM grid and library shapes (their shipped tet
+meshes, as the cell experiment builds them). Two sets: TUNING (boxes and training primitives: what the model's
+choices were made on) and HELD_OUT (evaluation objects: common and EGAD-like, never looked at while choosing).
+
+Every squeeze's readings are appended to --readings (JSON lines) and reused on a rerun: the estimate is pure
+arithmetic, so the old model (flat pads, nothing taken out) and the new (hand calibration, contact law from
+the curve's exponent) are compared on the same readings. --calibrate squeezes the rigid calibration block and
+prints the hand's stiffness (squeeze.calibrate_hand), the value sim_bringup/config/sim_cell.yaml carries.
 """
 from __future__ import annotations
 
 import argparse
+import json
+import math
 import statistics
 import sys
 from dataclasses import replace
@@ -24,32 +32,112 @@ import pybullet as p
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from defgg_ros.constants import FINGER_DEPTH_M, FINGER_PAD_WIDTH_M, OBJECT_DENSITY_KG_M3  # noqa: E402
 from defgg_ros.control.kinematics import PandaKinematics  # noqa: E402
+from defgg_ros.sim import objects as sim_objects  # noqa: E402
+from defgg_ros.sim.cell.objects import centred_surface_mesh  # noqa: E402
 from defgg_ros.sim.cell.sim_cell import SimCell  # noqa: E402
 from defgg_ros.sim.scene_spec import load_scene  # noqa: E402
 from defgg_ros.squeeze import (  # noqa: E402
     FIRM_FORCES_N,
     GENTLE_FORCES_N,
+    HandCalibration,
     SqueezeReading,
+    calibrate_hand,
     estimate_modulus,
     needs_firmer,
 )
 
 WIDTH_RESOLUTION_M = 1e-5       # the simulated hand's opening is exact to well below this
+# A pad lies on a flat face when the surface under its whole footprint is within this of its most advanced point.
+FLAT_RECESSION_M = 5e-4
 # (size along the closing axis, across it, height) m, FEM cell size m
 BOXES = {"cube_5cm": ((0.05, 0.05, 0.05), 0.025), "slab_4x6x3": ((0.04, 0.06, 0.03), 0.02),
          "block_6x4.5x4": ((0.06, 0.045, 0.04), 0.03), "thin_3x5x5": ((0.03, 0.05, 0.05), 0.025)}
+TUNING = (*BOXES, "sphere", "cylinder_tall", "ellipsoid")
+HELD_OUT = ("common_ball", "common_pear", "common_toy_bone", "egad_test_02_c1", "egad_test_05_c2", "egad_test_11_c3",
+            "egad_test_00_c1", "egad_test_04_c2")
+CALIBRATION_BLOCK = "cube_5cm"      # a steel block's stand-in: the 5 cm cube as a rigid body (2e9 Pa)
+CALIBRATION_YAWS_RAD = (0.0, 0.3, 0.6, 0.9)
 KIN = PandaKinematics()
+MESHES = Path("/tmp/bench_squeeze_meshes")
 
 
-def squeeze_once(size_m, cell_m, modulus_pa, yaw_rad) -> list:
+def scene_object(name: str, modulus_pa: float, yaw_rad: float):
+    """The soft_box scene's object replaced by `name` (a box of BOXES or a library shape's surface)."""
+    base = load_scene(ROOT / "sim_bringup" / "scenes" / "soft_box.yaml").objects[0]
+    if name in BOXES:
+        size_m, cell_m = BOXES[name]
+        return replace(base, name=name, youngs_modulus_pa=modulus_pa, size_m=tuple(size_m), fem_cell_size_m=cell_m,
+                       yaw_rad=yaw_rad, mass_kg=0.05)
+    surface = sim_objects.get_shape(name).surface()
+    path = MESHES / f"{name}.obj"
+    if not path.exists():
+        MESHES.mkdir(parents=True, exist_ok=True)
+        surface.export(path, file_type="obj")
+    mass_kg = round(float(abs(surface.volume)) * OBJECT_DENSITY_KG_M3, 4)
+    return replace(base, name=name, shape="mesh", mesh_path=str(path), size_m=(1.0, 1.0, 1.0), yaw_rad=yaw_rad,
+                   youngs_modulus_pa=modulus_pa, mass_kg=mass_kg)
+
+
+def face_m(spec) -> tuple[float, float]:
+    """The object's extent across the closing axis and its height (what the depth image gives)."""
+    if spec.shape == "box":
+        return spec.size_m[1], spec.size_m[2]
+    lo, hi = centred_surface_mesh(spec).bounds
+    return float(hi[1] - lo[1]), float(hi[2] - lo[2])
+
+
+def surface_x_along_closing(triangles, ys, zs):
+    """x of every crossing of the lines (y, z) along the closing axis with the triangles: (points, triangles), nan
+    where a line misses a triangle (barycentric test in the y-z plane)."""
+    a, b, c = (triangles[None, :, i, :] for i in range(3))
+    q = np.stack([ys, zs], axis=1)[:, None, :]
+    v0, v1, v2 = (b - a)[..., 1:], (c - a)[..., 1:], q - a[..., 1:]
+    det = v0[..., 0] * v1[..., 1] - v0[..., 1] * v1[..., 0]
+    with np.errstate(divide="ignore", invalid="ignore"):    # triangles edge-on to the closing axis: det 0
+        u = (v2[..., 0] * v1[..., 1] - v2[..., 1] * v1[..., 0]) / det
+        v = (v0[..., 0] * v2[..., 1] - v0[..., 1] * v2[..., 0]) / det
+        inside = (u >= 0) & (v >= 0) & (u + v <= 1) & (np.abs(det) > 1e-14)
+        x = a[..., 0] + u * (b - a)[..., 0] + v * (c - a)[..., 0]
+    return np.where(inside, x, np.nan)
+
+
+def contact_radii_m(spec) -> tuple | None:
+    """The surface's radius of curvature where each pad touches it (None: flat faces under both pads).
+
+    What a perceived shape gives, here from the true surface: rays along the closing axis over the pad's footprint
+    (at half the height) find the surface's recession d(y, z) from its most advanced point; d = (y-y*)^2 / (2 R_h) +
+    (z-z*)^2 / (2 R_v) fitted by least squares; the contact's radius is sqrt(R_h R_v), each at most half the
+    object's width (a straight direction: a line contact, as wide as the body lets it spread)."""
+    if spec.shape == "box":
+        return None
+    surface = centred_surface_mesh(spec)
+    half_width = float(surface.bounds[1][0] - surface.bounds[0][0]) / 2
+    ys, zs = np.meshgrid(np.linspace(-FINGER_PAD_WIDTH_M / 2, FINGER_PAD_WIDTH_M / 2, 9),
+                         np.linspace(-FINGER_DEPTH_M / 2, FINGER_DEPTH_M / 2, 9))
+    radii, flat = [], []
+    hits_x = surface_x_along_closing(surface.triangles, ys.ravel(), zs.ravel())
+    for side in (1.0, -1.0):
+        reach = np.max(side * hits_x, axis=1, initial=-np.inf, where=np.isfinite(hits_x))
+        hit = np.isfinite(reach)
+        best = int(np.argmax(reach))
+        d = reach[best] - reach[hit]
+        dy, dz = ys.ravel()[hit] - ys.ravel()[best], zs.ravel()[hit] - zs.ravel()[best]
+        (a, b), *_ = np.linalg.lstsq(np.column_stack([dy ** 2, dz ** 2]), d, rcond=None)
+        flat.append(bool(hit.all() and d.max() <= FLAT_RECESSION_M))
+        r_h, r_v = (min(1 / (2 * c), half_width) if c > 0 else half_width for c in (a, b))
+        radii.append(float(np.sqrt(r_h * r_v)))
+    return None if all(flat) else tuple(radii)
+
+
+def squeeze_once(spec) -> list:
+    """The readings of one squeeze of `spec` (gentle forces, then firm ones while unresolved)."""
     scene = load_scene(ROOT / "sim_bringup" / "scenes" / "soft_box.yaml")
-    obj = replace(scene.objects[0], youngs_modulus_pa=modulus_pa, size_m=tuple(size_m), fem_cell_size_m=cell_m,
-                  yaw_rad=yaw_rad, mass_kg=0.05)
-    cell = SimCell(replace(scene, objects=[obj]))
+    cell = SimCell(replace(scene, objects=[spec]))
     try:
         position, _ = cell.object_poses()[0]
-        ik, _ = KIN.top_down_ik((position[0], position[1], size_m[2] / 2), yaw_rad)
+        ik, _ = KIN.top_down_ik((position[0], position[1], face_m(spec)[1] / 2), spec.yaw_rad)
         for joint, q in zip(cell.arm_joints, ik.q_rad):
             p.resetJointState(cell.robot, joint, q, 0.0, physicsClientId=cell.client)
         cell.tracker = type(cell.tracker)(np.asarray(ik.q_rad))
@@ -69,35 +157,86 @@ def squeeze_once(size_m, cell_m, modulus_pa, yaw_rad) -> list:
         cell.close()
 
 
+def cached_readings(path: Path, name: str, modulus_pa: float, yaw_rad: float) -> list:
+    """The readings of (name, modulus, yaw) from the file, else squeezed now and appended."""
+    key = {"object": name, "modulus_pa": modulus_pa, "yaw_rad": round(yaw_rad, 3)}
+    if path.exists():
+        for line in path.read_text().splitlines():
+            row = json.loads(line)
+            if all(row.get(k) == v for k, v in key.items()):
+                return [SqueezeReading(f, w) for f, w in zip(row["forces_n"], row["widths_m"])]
+    readings = squeeze_once(scene_object(name, modulus_pa, yaw_rad))
+    with open(path, "a") as out:
+        out.write(json.dumps({**key, "forces_n": [r.force_n for r in readings],
+                              "widths_m": [r.width_m for r in readings]}) + "\n")
+    return readings
+
+
+def calibration(path: Path) -> HandCalibration:
+    """The hand's stiffness from squeezes of the rigid calibration block at a few yaws."""
+    squeezes = [cached_readings(path, CALIBRATION_BLOCK, 2e9, yaw) for yaw in CALIBRATION_YAWS_RAD]
+    return calibrate_hand(squeezes, f"bench_squeeze_stiffness.py --calibrate: rigid {CALIBRATION_BLOCK} "
+                          f"(PyBullet rigid body) at yaws {list(CALIBRATION_YAWS_RAD)} rad")
+
+
+def verdict(estimates) -> str:
+    if all(e.rigid for e in estimates):
+        return "rigid"
+    return ">= bound" if any(e.lower_bound for e in estimates) else ""
+
+
+def factor_text(estimates, modulus_pa) -> str:
+    if all(e.rigid for e in estimates):
+        return "rigid"
+    return f"{statistics.median(e.youngs_modulus_pa for e in estimates) / modulus_pa:.2f}"
+
+
+def within(ratios, factor) -> int:
+    return sum(1 / factor <= r <= factor for r in ratios)
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--moduli", type=float, nargs="+", default=[2e4, 6e4, 2e5, 6e5, 2e6, 2e9])
-    parser.add_argument("--objects", nargs="+", default=list(BOXES), choices=list(BOXES))
+    parser.add_argument("--repeats", type=int, default=1)
+    parser.add_argument("--moduli", type=float, nargs="+", default=[2e4, 2e5, 2e6, 2e9])
+    parser.add_argument("--objects", nargs="+", default=["tuning"])
+    parser.add_argument("--readings", type=Path, default=Path("/tmp/bench_squeeze_readings.jsonl"))
+    parser.add_argument("--calibrate", action="store_true", help="print the hand's calibration and stop")
     args = parser.parse_args(argv)
-    print(f"{'object':15s} {'E true':>8s} {'E est':>9s} {'ratio':>6s} {'spread':>7s} {'k N/m':>8s}  verdict")
-    ratios = []
-    for name in args.objects:
-        size_m, cell_m = BOXES[name]
+    hand = calibration(args.readings)
+    print(f"hand: {hand.describe()}", flush=True)
+    if args.calibrate:
+        return 0
+    names = [n for o in args.objects for n in {"tuning": TUNING, "held_out": HELD_OUT}.get(o, (o,))]
+    print(f"{'object':16s} {'E true':>8s} {'old':>7s} {'new':>7s} {'law':>6s} {'spread':>7s}  verdict (new)")
+    soft_old, soft_new, rigid_rows = [], [], []
+    for name in names:
         for modulus in args.moduli:
-            estimates = []
+            old, new = [], []
             for r in range(args.repeats):
-                readings = squeeze_once(size_m, cell_m, modulus, 0.3 * r)
-                estimates.append(estimate_modulus(readings, size_m[1], size_m[2],
-                                                  width_resolution_m=WIDTH_RESOLUTION_M))
-            values = [e.youngs_modulus_pa for e in estimates]
-            median = statistics.median(values)
-            ratio = median / modulus
-            spread = max(values) / min(values)
+                readings = cached_readings(args.readings, name, modulus, 0.3 * r)
+                spec = scene_object(name, modulus, 0.3 * r)
+                face_w, face_h = face_m(spec)
+                old.append(estimate_modulus(readings, face_w, face_h, width_resolution_m=WIDTH_RESOLUTION_M,
+                                            hand=None, contact_law="flat"))
+                new.append(estimate_modulus(readings, face_w, face_h, width_resolution_m=WIDTH_RESOLUTION_M,
+                                            hand=hand, contact_radii_m=contact_radii_m(spec)))
+            values = [e.youngs_modulus_pa for e in new]
+            spread = max(values) / min(values) if all(math.isfinite(v) for v in values) else math.nan
             if modulus < 1e7:
-                ratios.append(ratio)
-            verdict = "rigid" if all(e.rigid for e in estimates) else \
-                ">= bound" if any(e.lower_bound for e in estimates) else ""
-            print(f"{name:15s} {modulus:8.0e} {median:9.2e} {ratio:6.2f} {spread:7.2f} "
-                  f"{statistics.median(e.stiffness_npm for e in estimates):8.0f}  {verdict}", flush=True)
-    if ratios:
-        print(f"soft objects (E < 1e7 Pa): estimate / truth {min(ratios):.2f} .. {max(ratios):.2f}, "
-              f"{sum(1 / 3 <= r <= 3 for r in ratios)} of {len(ratios)} within a factor 3")
+                soft_old.append(statistics.median(e.youngs_modulus_pa for e in old) / modulus)
+                soft_new.append(statistics.median(values) / modulus if not all(e.rigid for e in new) else math.inf)
+            else:
+                rigid_rows.append((all(e.rigid for e in old), all(e.rigid for e in new)))
+            print(f"{name:16s} {modulus:8.0e} {factor_text(old, modulus):>7s} {factor_text(new, modulus):>7s} "
+                  f"{new[0].contact_law:>6s} {spread:7.2f}  {verdict(new)}  {new[0].describe()}", flush=True)
+    for label, ratios in (("old", soft_old), ("new", soft_new)):
+        if ratios:
+            print(f"{label}: soft (E < 1e7 Pa) estimate / truth within x2 {within(ratios, 2)}, x3 {within(ratios, 3)} "
+                  f"of {len(ratios)}")
+    if rigid_rows:
+        print(f"rigid (2e9 Pa) flagged rigid: old {sum(o for o, _ in rigid_rows)}, new {sum(n for _, n in rigid_rows)} "
+              f"of {len(rigid_rows)}")
     return 0
 
 

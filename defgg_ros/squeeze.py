@@ -3,24 +3,26 @@
 Pure arithmetic (no ROS, no simulator), below the cores like grip_force.py: the executor and the cell's
 benches call it. docs/real_cell.md ("Stiffness by squeezing") says how it maps on a Franka Hand.
 
-Model. A two-finger squeeze compresses the object between two flat pads. Its force-compression slope
-k (N/m) is a series of the object and of everything else that yields (finger, contact):
+Model (docs/squeeze.md writes the equations out). Everything that yields is in series: the hand (fingers, pads,
+their contact), measured once by squeezing a rigid calibration block (`calibrate_hand`, HandCalibration), and the
+object. The object's own compression x(F) (the opening's decrease from the first force, less the hand's) follows
+one of two contact laws, chosen by the object's shape where the pads touch it (`contact_radii_m`: None for flat
+faces). The curve's exponent (x = C (F^m - F0^m), F ~ x^n, n = 1/m: `fit_contact_exponent`) is fitted and
+reported, but does not choose: in the simulated cell flat boxes fitted n = 1.3-2.5 (docs/squeeze.md).
 
-    1 / k = 1 / k_machine + L / (E * A)
+  flat   (m near 1, F proportional to the compression): two flat pads on flat faces,
+         x = F L / (E A), A = min(pad_w + L/2, face_w) * min(pad_h + L/2, face_h)
+         (L the object's width along the closing axis; A the cross-section loaded at the mid-plane, the pad widened
+         by the "2:1" load-spread rule: the patch grows by z at depth z, two pads so z = L/2; clipped to the face);
+  hertz  (m = 2/3, F proportional to the compression^1.5): a curved surface against each flat pad (Hertz: a
+         sphere of radius R_i on a plane, R_i the surface's radius at contact i, at most L/2), each contact
+         approaching by d_i = (9 F^2 / (16 E*^2 R_i))^(1/3), E* = E / (1 - nu^2), so x = d(F) - d(F0) summed
+         over the two contacts.
 
-with L the object's width along the closing axis (the width at the first squeeze) and A the loaded
-cross-section. A pad smaller than the object's face does not load the whole face: the load spreads into
-the body, the "2:1" rule of foundation engineering widening the loaded patch by z at depth z. The two pads
-press from both sides, so the patch at the mid-plane (depth L/2) is
-
-    A = min(pad_w + L/2, face_w) * min(pad_h + L/2, face_h)
-
-(face_w: the object's extent across the closing axis, face_h: its height). E follows as L / (A (1/k - 1/k_machine)).
-
-Resolution. Widths are read to `width_resolution_m` (the Franka Hand reports its opening to ~0.1 mm; the
-simulated cell to ~1 um); a compression that resolution cannot separate from the machine's own compliance
-gives a lower bound ("at least this stiff"), never a number: `rigid` is then True when even that lower
-bound is above `RIGID_ABOVE_PA`.
+Rigid. An object compliance (1/k less the hand's) within two standard deviations of the calibration's (and of the
+width reading's) noise of zero is "rigid": only a lower bound, the stiffest object that noise could hide, is
+given. Without a calibration, a compression the width resolution cannot separate gives the lower bound, `rigid`
+when it is above `RIGID_ABOVE_PA`.
 """
 from __future__ import annotations
 
@@ -57,13 +59,36 @@ class SqueezeReading:
 
 
 @dataclass(frozen=True)
+class HandCalibration:
+    """The hand's own stiffness (fingers, pads, contact), from squeezes of a rigid block: subtracted in series."""
+    stiffness_npm: float          # 1 / the mean compliance of the calibration squeezes
+    compliance_sd_mpn: float      # their standard deviation (m/N): the calibration's noise
+    source: str = ""              # where it came from (block, date, command)
+
+    def __post_init__(self):
+        if not (self.stiffness_npm > 0 and self.compliance_sd_mpn >= 0 and math.isfinite(self.compliance_sd_mpn)):
+            raise SqueezeError(f"a hand calibration needs a stiffness > 0 and a noise >= 0, got {self.stiffness_npm} "
+                               f"N/m, {self.compliance_sd_mpn} m/N")
+
+    @property
+    def compliance_mpn(self) -> float:
+        return 1.0 / self.stiffness_npm
+
+    def describe(self) -> str:
+        return (f"k_hand {self.stiffness_npm:.0f} N/m (compliance {self.compliance_mpn * 1e6:.1f} +- "
+                f"{self.compliance_sd_mpn * 1e6:.1f} um/N; {self.source or 'source not given'})")
+
+
+@dataclass(frozen=True)
 class ModulusEstimate:
     youngs_modulus_pa: float    # the estimate; with `lower_bound` set, only "at least this"
     low_pa: float               # one-sigma band (model factor and width resolution)
     high_pa: float              # math.inf when the compression was not resolved
-    stiffness_npm: float        # measured force-compression slope (machine included)
-    lower_bound: bool           # the compression was within the width resolution
-    rigid: bool                 # stiffer than RIGID_ABOVE_PA for the grasp's purposes
+    stiffness_npm: float        # measured force-compression slope (hand included)
+    lower_bound: bool           # the compression was within the width resolution / the calibration's noise
+    rigid: bool                 # no compliance of its own that the hand can resolve (see the module doc)
+    contact_law: str = "flat"   # "flat" or "hertz": the law the estimate used
+    exponent: float = math.nan  # fitted n of F ~ compression^n (1 flat, 1.5 Hertz); nan: not fitted
 
     def describe(self) -> str:
         if self.rigid:
@@ -71,7 +96,7 @@ class ModulusEstimate:
         if self.lower_bound:
             return f"E >= {self.youngs_modulus_pa:.1e} Pa (compression not resolved; k {self.stiffness_npm:.0f} N/m)"
         return (f"E ~ {self.youngs_modulus_pa:.1e} Pa ({self.low_pa:.1e} .. {self.high_pa:.1e}; "
-                f"k {self.stiffness_npm:.0f} N/m)")
+                f"k {self.stiffness_npm:.0f} N/m; {self.contact_law} contact, F ~ x^{self.exponent:.2f})")
 
 
 def loaded_area_m2(width_m: float, face_width_m: float, face_height_m: float,
@@ -81,8 +106,7 @@ def loaded_area_m2(width_m: float, face_width_m: float, face_height_m: float,
     return min(pad_width_m + spread, face_width_m) * min(pad_height_m + spread, face_height_m)
 
 
-def squeeze_slope_npm(readings) -> tuple[float, float]:
-    """Least-squares slope of force against compression (N/m) and the compression spanned (m)."""
+def _checked(readings) -> list:
     readings = sorted(readings, key=lambda r: r.force_n)
     if len(readings) < 2:
         raise SqueezeError(f"a squeeze needs readings at two forces at least, got {len(readings)}")
@@ -91,17 +115,88 @@ def squeeze_slope_npm(readings) -> tuple[float, float]:
             raise SqueezeError(f"reading {r} is not a positive, finite force and width")
     if readings[-1].force_n - readings[0].force_n <= 0:
         raise SqueezeError("the readings' forces must differ")
+    if readings[0].width_m - readings[-1].width_m < -1e-9:   # the strongest squeeze left the fingers wider
+        raise SqueezeError(f"the opening grew with the force ({[round(r.width_m * 1e3, 3) for r in readings]} mm): "
+                           "the object moved or the fingers slipped; squeeze again")
+    return readings
+
+
+def squeeze_slope_npm(readings) -> tuple[float, float]:
+    """Least-squares slope of force against compression (N/m) and the compression spanned (m)."""
+    readings = _checked(readings)
     x = [readings[0].width_m - r.width_m for r in readings]     # compression, m
     f = [r.force_n for r in readings]
     mx, mf = sum(x) / len(x), sum(f) / len(f)
     sxx = sum((xi - mx) ** 2 for xi in x)
     span = max(x) - min(x)
-    if x[-1] < -1e-9:   # the strongest squeeze left the fingers wider than the first
-        raise SqueezeError(f"the opening grew with the force ({[round(r.width_m * 1e3, 3) for r in readings]} mm): "
-                           "the object moved or the fingers slipped; squeeze again")
     if sxx <= 0:
         return math.inf, 0.0
     return sum((xi - mx) * (fi - mf) for xi, fi in zip(x, f)) / sxx, span
+
+
+def calibrate_hand(squeezes, source: str) -> HandCalibration:
+    """The hand's stiffness from squeezes (lists of readings) of a rigid block: mean compliance and its spread."""
+    compliances = []
+    for readings in squeezes:
+        k, _ = squeeze_slope_npm(readings)
+        if not (math.isfinite(k) and k > 0):
+            raise SqueezeError(f"a calibration squeeze resolved no compliance (k = {k} N/m): a finer width reading "
+                               "or firmer forces are needed")
+        compliances.append(1.0 / k)
+    mean = sum(compliances) / len(compliances)
+    sd = math.sqrt(sum((c - mean) ** 2 for c in compliances) / (len(compliances) - 1)) if len(compliances) > 1 else 0.0
+    return HandCalibration(1.0 / mean, sd, source)
+
+
+def object_compression_m(readings, hand: HandCalibration | None) -> list:
+    """(force, the object's own compression since the first force) with the hand's share taken out."""
+    readings = _checked(readings)
+    f0, w0 = readings[0].force_n, readings[0].width_m
+    hand_c = hand.compliance_mpn if hand is not None else 0.0
+    return [(r.force_n, (w0 - r.width_m) - (r.force_n - f0) * hand_c) for r in readings]
+
+
+def _power_fit(points, m: float) -> tuple[float, float]:
+    """Least squares of x = C (F^m - F0^m) through the first point: (C, residual sum of squares)."""
+    f0 = points[0][0]
+    u = [f ** m - f0 ** m for f, _ in points]
+    suu = sum(ui * ui for ui in u)
+    c = sum(ui * x for ui, (_, x) in zip(u, points)) / suu
+    return c, sum((x - c * ui) ** 2 for ui, (_, x) in zip(u, points))
+
+
+def fit_contact_exponent(points) -> float:
+    """n of F ~ compression^n (1: flat contact, 1.5: Hertz) fitted to (force, compression) points: x ~ F^(1/n).
+
+    A grid over the exponent m = 1/n of x = C (F^m - F0^m) (the first point's own compression is unknown, so the
+    law is fitted to the differences); nan with fewer than three points (two points fit any exponent)."""
+    if len(points) < 3:
+        return math.nan
+    best = min(EXPONENT_GRID_M, key=lambda m: _power_fit(points, m)[1])
+    return 1.0 / best
+
+
+# The fitted x ~ F^m's exponent is searched over 0.4 .. 1.3 (n = 2.5 .. 0.77).
+EXPONENT_GRID_M = tuple(0.4 + 0.005 * i for i in range(181))
+# Poisson's ratio assumed for E* = E / (1 - nu^2): the cell's material (sim/cell/objects.py MATERIAL); 0.5 (a
+# rubber) instead would change E by 18 %, within the model's factor.
+ASSUMED_POISSON_RATIO = 0.3
+
+
+def hertz_modulus_pa(points, first_width_m: float, radii_m: tuple | None = None,
+                     poisson_ratio: float = ASSUMED_POISSON_RATIO) -> float:
+    """E from (force, compression) points of a body touching each flat pad on a curved surface (Hertz; module doc).
+
+    radii_m: the surface's radius of curvature at each of the two contacts (a sphere's radius; for unequal principal
+    radii their geometric mean), each at most half the body's unloaded width; None: half that width at both."""
+    c, _ = _power_fit(points, 2.0 / 3.0)   # x = C (F^(2/3) - F0^(2/3)), C = (9/(16 E*^2))^(1/3) sum(R_i^(-1/3))
+    if c <= 0:
+        return math.inf
+    half_width_m = (first_width_m + c * points[0][0] ** (2.0 / 3.0)) / 2.0   # the first force's approach added
+    radii_m = radii_m or (half_width_m, half_width_m)
+    shape = sum(min(r, half_width_m) ** (-1.0 / 3.0) for r in radii_m)
+    e_star = 0.75 * (shape / c) ** 1.5
+    return e_star * (1.0 - poisson_ratio ** 2)
 
 
 def needs_firmer(readings, width_resolution_m: float) -> bool:
@@ -110,33 +205,52 @@ def needs_firmer(readings, width_resolution_m: float) -> bool:
     return widths[0] - widths[-1] < RESOLVED_SPANS * width_resolution_m
 
 
-def estimate_modulus(readings, face_width_m: float, face_height_m: float, machine_stiffness_npm: float = math.inf,
-                     width_resolution_m: float = 1e-4, model_factor: float = MODEL_FACTOR) -> ModulusEstimate:
-    """The object's Young's modulus from squeeze readings (see the module doc) with its one-sigma band."""
+def _bound(e_pa: float, k: float, law: str = "flat", exponent: float = math.nan) -> ModulusEstimate:
+    """A lower bound only; rigid when the bound is above RIGID_ABOVE_PA."""
+    return ModulusEstimate(e_pa, e_pa, math.inf, k, True, e_pa >= RIGID_ABOVE_PA, law, exponent)
+
+
+def estimate_modulus(readings, face_width_m: float, face_height_m: float, hand: HandCalibration | None = None,
+                     width_resolution_m: float = 1e-4, model_factor: float = MODEL_FACTOR,
+                     contact_law: str = "auto", contact_radii_m: tuple | None = None) -> ModulusEstimate:
+    """The object's Young's modulus from squeeze readings (see the module doc) with its one-sigma band.
+
+    contact_radii_m: the object's radius of curvature where each pad touches it (from its perceived shape; None:
+    flat faces under the pads). contact_law: "auto" (hertz when the contacts are curved, else flat), "flat" or
+    "hertz" (without radii: half the object's width). The curve's exponent is fitted and reported either way; it
+    does not choose the law (docs/squeeze.md: in the simulated cell flat boxes fit n = 1.3-2.5)."""
     # A face extent may be math.inf (not known: the pad's spread alone is loaded); the resolution must be finite.
     for name, value in (("face_width_m", face_width_m), ("face_height_m", face_height_m),
                         ("width_resolution_m", width_resolution_m)):
         if not (value > 0 and (math.isfinite(value) or name != "width_resolution_m")):
             raise SqueezeError(f"{name} must be > 0, got {value}")
-    readings = sorted(readings, key=lambda r: r.force_n)
+    if contact_law not in ("auto", "flat", "hertz"):
+        raise SqueezeError(f"contact_law must be auto, flat or hertz, got {contact_law!r}")
+    readings = _checked(readings)
     k, span = squeeze_slope_npm(readings)
     width_m = readings[0].width_m
     area = loaded_area_m2(width_m, face_width_m, face_height_m)
     force_span = readings[-1].force_n - readings[0].force_n
 
-    def modulus(compliance_mpn: float) -> float:
+    def flat_modulus(compliance_mpn: float) -> float:
         return width_m / (area * compliance_mpn) if compliance_mpn > 0 else math.inf
 
-    machine = 1.0 / machine_stiffness_npm if machine_stiffness_npm > 0 else 0.0
-    resolved = span > 2.0 * width_resolution_m
-    if not resolved:
-        # The most compliant object this reading allows: all the unresolved compression its own.
-        bound = modulus(max(2.0 * width_resolution_m / force_span - machine, 1e-12))
-        return ModulusEstimate(bound, bound, math.inf, k, True, bound >= RIGID_ABOVE_PA)
-    e = modulus(1.0 / k - machine)
+    hand_c = hand.compliance_mpn if hand is not None else 0.0
+    # The object's compliance is within this of zero when it cannot be told from the hand's noise and the reading's
+    # (two standard deviations of each, added in quadrature).
+    noise_mpn = 2.0 * math.hypot(hand.compliance_sd_mpn if hand is not None else 0.0, width_resolution_m / force_span)
+    object_c = (1.0 / k if k > 0 else math.inf) - hand_c
+    if span <= 2.0 * width_resolution_m or object_c <= noise_mpn:
+        bound = flat_modulus(noise_mpn if hand is not None else max(noise_mpn - hand_c, 1e-12))
+        if hand is not None:   # calibrated: within the hand's noise of zero is rigid ("at least bound")
+            return ModulusEstimate(bound, bound, math.inf, k, True, True)
+        return _bound(bound, k)
+    points = object_compression_m(readings, hand)
+    exponent = fit_contact_exponent(points)
+    law = contact_law if contact_law != "auto" else ("hertz" if contact_radii_m else "flat")
+    e = hertz_modulus_pa(points, width_m, contact_radii_m) if law == "hertz" else flat_modulus(object_c)
     if not math.isfinite(e):
-        bound = modulus(max(2.0 * width_resolution_m / force_span, 1e-12))
-        return ModulusEstimate(bound, bound, math.inf, k, True, bound >= RIGID_ABOVE_PA)
+        return _bound(flat_modulus(noise_mpn), k, law, exponent)
     rel = width_resolution_m / span     # the compression's relative reading error
     sigma = math.exp(math.hypot(math.log(model_factor), rel))
-    return ModulusEstimate(e, e / sigma, e * sigma, k, False, False)
+    return ModulusEstimate(e, e / sigma, e * sigma, k, False, False, law, exponent)

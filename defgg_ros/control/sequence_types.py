@@ -7,6 +7,7 @@ import numpy as np
 from defgg_ros.constants import FINGER_DEPTH_M, PREGRASP_HEIGHT_M
 from defgg_ros.control.gripper_rule import GraspCommand
 from defgg_ros.control.trajectories import LIMITS_SAFETY_SCALE, SAMPLE_DT_S, SampledTrajectory
+from defgg_ros.squeeze import HandCalibration
 
 # Where the cell's TCP goes down to for a grasp whose point lies on the seen surface:
 # "below_surface" = grasp_depth_below_surface_m under that point (one finger pad: the pads overlap the
@@ -150,6 +151,8 @@ class SqueezeRequest:
     # object settle (the bench reads 0.2 s after the fingers stopped).
     settle_s: float = 0.3
     speed_mps: float = 0.02            # closing speed of each squeeze (franka_gripper's Grasp speed)
+    # The hand's own compliance, taken out in series (squeeze.HandCalibration); None: not calibrated.
+    hand: HandCalibration | None = None
 
     def validate(self) -> None:
         for name in ("width_resolution_m", "settle_s", "speed_mps"):

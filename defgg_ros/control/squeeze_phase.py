@@ -93,7 +93,7 @@ class SqueezePhase:
         # is not known here (inf: the pads' spread alone is loaded, docs/squeeze.md).
         face_height_m = max(float(self._grasp.position_m[2]) - self._cfg.table_z_m, MIN_FACE_HEIGHT_M)
         try:
-            return estimate_modulus(self.squeeze_readings, math.inf, face_height_m,
+            return estimate_modulus(self.squeeze_readings, math.inf, face_height_m, hand=self._squeeze.hand,
                                     width_resolution_m=self._squeeze.width_resolution_m)
         except SqueezeError as error:
             raise SequenceFailure(f"squeeze: {error}") from error

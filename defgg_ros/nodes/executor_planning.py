@@ -14,6 +14,7 @@ from defgg_ros.control.sequence_types import SqueezeRequest
 from defgg_ros.nodes.executor_messages import GoalError, grasp_target
 from defgg_ros.ros.conversions import stamp_to_ns
 from defgg_ros.ros.service import ServiceTimeout, call_idempotent
+from defgg_ros.squeeze import HandCalibration
 
 
 class GraspPlanning:
@@ -101,9 +102,14 @@ class GraspPlanning:
         """The goal's squeeze (measure_stiffness, measure_only), or None."""
         if not (request.measure_stiffness or request.measure_only):
             return None
+        hand = None
+        if p["squeeze_hand_stiffness_npm"] > 0:    # 0: not calibrated (nothing taken out)
+            hand = HandCalibration(float(p["squeeze_hand_stiffness_npm"]),
+                                   float(p["squeeze_hand_compliance_sd_mpn"]), str(p["squeeze_hand_calibration"]))
         return SqueezeRequest(only=bool(request.measure_only),
                               width_resolution_m=float(p["squeeze_width_resolution_m"]),
-                              settle_s=float(p["squeeze_settle_s"]), speed_mps=float(p["squeeze_speed_mps"]))
+                              settle_s=float(p["squeeze_settle_s"]), speed_mps=float(p["squeeze_speed_mps"]),
+                              hand=hand)
 
     def _wait_for_servers(self, timeout_s: float):
         for client, name in ((self._arm_client, "arm_trajectory_action"), (self._move_client, "gripper_move_action"),
