@@ -42,6 +42,7 @@ from defgg_ros.squeeze import (  # noqa: E402
     FIRM_FORCES_N,
     GENTLE_FORCES_N,
     HandCalibration,
+    SqueezeError,
     SqueezeReading,
     calibrate_hand,
     estimate_modulus,
@@ -217,10 +218,20 @@ def main(argv=None) -> int:
                 readings = cached_readings(args.readings, name, modulus, 0.3 * r)
                 spec = scene_object(name, modulus, 0.3 * r)
                 face_w, face_h = face_m(spec)
-                old.append(estimate_modulus(readings, face_w, face_h, width_resolution_m=WIDTH_RESOLUTION_M,
-                                            hand=None, contact_law="flat"))
-                new.append(estimate_modulus(readings, face_w, face_h, width_resolution_m=WIDTH_RESOLUTION_M,
-                                            hand=hand, contact_radii_m=contact_radii_m(spec)))
+                try:
+                    old.append(estimate_modulus(readings, face_w, face_h, width_resolution_m=WIDTH_RESOLUTION_M,
+                                                hand=None, contact_law="flat"))
+                    new.append(estimate_modulus(readings, face_w, face_h, width_resolution_m=WIDTH_RESOLUTION_M,
+                                                hand=hand, contact_radii_m=contact_radii_m(spec)))
+                except SqueezeError as error:   # the executor fails such a squeeze: counted as a miss
+                    print(f"{name:16s} {modulus:8.0e} refused: {error}", flush=True)
+            if not new:     # every repeat refused: a miss in the counts
+                if modulus < 1e7:
+                    soft_old.append(math.nan)
+                    soft_new.append(math.nan)
+                else:
+                    rigid_rows.append((False, False))
+                continue
             values = [e.youngs_modulus_pa for e in new]
             spread = max(values) / min(values) if all(math.isfinite(v) for v in values) else math.nan
             if modulus < 1e7:

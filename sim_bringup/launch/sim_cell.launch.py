@@ -20,7 +20,11 @@ SIM_NODES = {
     "fake_panda_driver": {},
     "segmentation_node": {"stream_timeout_s": 60.0},      # the simulated camera pauses while the arm moves
     "grasp_inference_node": {"stream_timeout_s": 60.0},
-    "executor_node": {"squeeze_width_resolution_m": 1.0e-5},   # the simulated fingers' opening is exact to ~1 um
+    # the simulated fingers' opening is exact to ~1 um; the hand's calibration (sim_cell.yaml says where from)
+    "executor_node": {"squeeze_width_resolution_m": 1.0e-5, "squeeze_hand_stiffness_npm": 13509.0,
+                      "squeeze_hand_compliance_sd_mpn": 9.7e-6,
+                      "squeeze_hand_calibration": "rigid 5 cm block at yaws 0-0.9 rad, bench_squeeze_stiffness.py "
+                                                  "--calibrate, 2026-11-29"},
 }
 
 
