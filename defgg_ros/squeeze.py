@@ -20,7 +20,7 @@ reported, but does not choose: in the simulated cell flat boxes fitted n = 1.3-2
          over the two contacts.
 
 Rigid. An object compliance (1/k less the hand's) within two standard deviations of the calibration's (and of the
-width reading's) noise of zero is "rigid": only a lower bound, the stiffest object that noise could hide, is
+width reading's) noise of zero is "rigid": only a lower bound, the softest object that noise could hide, is
 given. Without a calibration, a compression the width resolution cannot separate gives the lower bound, `rigid`
 when it is above `RIGID_ABOVE_PA`.
 """

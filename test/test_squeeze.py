@@ -157,3 +157,18 @@ def test_the_squeeze_goes_firmer_only_while_the_compression_is_unresolved():
     stiff = readings_of(2e6, 0.05, 0.05, 0.05, forces=GENTLE_FORCES_N)    # ~0.03 mm
     assert not needs_firmer(soft, 1e-5) and needs_firmer(stiff, 1e-5)
     assert needs_firmer(soft, 1e-4)      # a hand that reads 0.1 mm must squeeze the same object harder
+
+
+def test_the_executor_takes_the_hand_s_calibration_from_its_parameters():
+    from types import SimpleNamespace
+
+    from defgg_ros.nodes.executor_planning import GraspPlanning
+    from defgg_ros.ros.parameters import defaults
+
+    p = defaults("executor_node")
+    goal = SimpleNamespace(measure_stiffness=False, measure_only=True)
+    assert GraspPlanning._squeeze_for(goal, p).hand is None      # the schema's default: not calibrated
+    p = {**p, "squeeze_hand_stiffness_npm": 13509.0, "squeeze_hand_compliance_sd_mpn": 9.7e-6,
+         "squeeze_hand_calibration": "a steel block"}
+    hand = GraspPlanning._squeeze_for(goal, p).hand
+    assert hand == HandCalibration(13509.0, 9.7e-6, "a steel block")
