@@ -126,6 +126,11 @@ def _execute(client, grasp, record: dict, executor_params: dict, pick_timeout_s:
                   sim_duration_s=result.duration_s)
 
 
+def _json_number(value: float) -> float | None:
+    """A float for a JSON record: null for inf / NaN (a rigid reading's upper bound), which JSON cannot hold."""
+    return float(value) if math.isfinite(value) else None
+
+
 def _measure(client, record: dict, timeout_s: float) -> None:
     """Measure first: a measure_only goal on the planned grasp (descend, squeeze, open, back to the observation
     pose); the executor sends the estimate to the segmentation node. A failed measurement leaves the node's
@@ -134,8 +139,9 @@ def _measure(client, record: dict, timeout_s: float) -> None:
     result = client.pick(PickAndPlace.Goal(plan_grasp=True, measure_only=True), timeout_s=timeout_s)
     record["squeeze"] = {
         "success": bool(result.success), "failure_reason": result.failure_reason,
-        "measured_youngs_modulus_pa": result.measured_youngs_modulus_pa,
-        "low_pa": result.measured_modulus_low_pa, "high_pa": result.measured_modulus_high_pa,
+        "measured_youngs_modulus_pa": _json_number(result.measured_youngs_modulus_pa),
+        "low_pa": _json_number(result.measured_modulus_low_pa),
+        "high_pa": _json_number(result.measured_modulus_high_pa),   # a rigid reading has no upper bound: inf
         "rigid": bool(result.measured_rigid), "sent_pa": result.stiffness_sent_pa,
         "update": result.stiffness_update, "forces_n": list(result.squeeze_forces_n),
         "widths_m": list(result.squeeze_widths_m), "sim_duration_s": result.duration_s}
