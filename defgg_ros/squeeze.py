@@ -241,7 +241,7 @@ def estimate_modulus(readings, face_width_m: float, face_height_m: float, hand: 
     noise_mpn = 2.0 * math.hypot(hand.compliance_sd_mpn if hand is not None else 0.0, width_resolution_m / force_span)
     object_c = (1.0 / k if k > 0 else math.inf) - hand_c
     if span <= 2.0 * width_resolution_m or object_c <= noise_mpn:
-        bound = flat_modulus(noise_mpn if hand is not None else max(noise_mpn - hand_c, 1e-12))
+        bound = flat_modulus(noise_mpn)   # the most compliant object the noise could hide
         if hand is not None:   # calibrated: within the hand's noise of zero is rigid ("at least bound")
             return ModulusEstimate(bound, bound, math.inf, k, True, True)
         return _bound(bound, k)

@@ -186,8 +186,6 @@ def scene_object(obj: CellObject, pose: dict, mesh_folder: Path) -> dict:
 def run(out: Path, work: Path, model: Path, picks: int, seed: int, objects, cases, pick_fn=None,
         progress=True, records_name: str = RECORDS_NAME) -> int:
     """Run every planned pick that has no outcome yet in OUT/records_name; returns how many picks ran now."""
-
-
     pick_fn = pick_fn or run_pick
     records_path = Path(out) / records_name
     done = finished_keys(read_jsonl(records_path))

@@ -74,7 +74,6 @@ MAX_STAMP_OFFSET_S = 1.0
 PARAMETERS = load_schema("fake_panda_driver")
 
 
-
 class SimPacer:
     """How long the sim thread sleeps so that sim time runs at most `max_real_time_factor` times wall time.
 
@@ -101,6 +100,7 @@ class SimPacer:
             self.anchor = (wall_s, sim_s)   # behind: the lost time stays lost
             return 0.0
         return ahead_s
+
 
 class FakePandaDriver(Node):
     def __init__(self, **kwargs):
