@@ -39,9 +39,9 @@ from defgg_ros.grip_force import grasp_force_n as label_grasp_force_n
 SOFT_CLOSING_SPEED_MPS = 0.02
 RIGID_CLOSING_SPEED_MPS = 0.05
 OPENING_SPEED_MPS = 0.08
-# Kept for callers that size finger clearances from it; the pre-grasp opening
-# itself is now the hand's full opening (see `pre_grasp_opening_m`).
-PREGRASP_OPENING_MARGIN_M = 0.02
+# The hand opens this much wider than the planned grasp before the descent (5 mm a side): the training
+# trials' start (sim.trial.OPENING_CLEARANCE_M). See `pre_grasp_opening_m`.
+PRE_GRASP_EXTRA_OPENING_M = 0.01
 # Fingers closed to less than this = nothing between them (missed/dropped).
 MISSED_WIDTH_M = 0.004
 
@@ -71,19 +71,18 @@ def grasp_force_n(youngs_modulus_pa: float) -> float:
     return min(float(label_grasp_force_n(e)), GRIPPER_MAX_FORCE_N)
 
 
-def pre_grasp_opening_m() -> float:
-    """How far to open before the descent: the hand's full opening, whatever the predicted width.
+def pre_grasp_opening_m(grasp_width_m: float) -> float:
+    """How far to open before the descent: the planned grasp's opening + PRE_GRASP_EXTRA_OPENING_M, at most
+    the hand's full opening.
 
-    Why not "predicted width + a margin": the training trials started with the
-    fingers clear of the object (true contact width + 10 mm, `sim.trial`), and
-    the predicted width is the network's least reliable output (GG-CNN's too).
-    In the demo it was 14-40 mm narrower than the object's extent along the
-    closing direction (e.g. 28.6 mm for a 50 mm cube), so a 20 mm margin put the
-    fingers on top of the object: they jammed on FEM objects and were forced
-    open to 73-80 mm, or pinched an edge that slipped out. Opening fully
-    reproduces the trials' start; the grasp pose and the force are unchanged.
+    The planned opening is geometric (planning/tabletop_grasps: the object's extent seen along the closing
+    line + 6 mm clearance a side), so the fingers come down 11 mm clear of what the camera saw, as in the
+    training trials. Opening fully instead (80 mm, the rule while the width was the network's, which ran
+    14-40 mm narrower than the object) swept up to 4 cm from the grasp's centre: a ring's far tube, a
+    neighbour in a dense bin or the bin's wall took the finger (docs/perception.md, "Pre-grasp opening").
+    The planner checks the pads over the same sweep (it calls this function), so the two cannot disagree.
     """
-    return GRIPPER_MAX_WIDTH_M
+    return min(float(grasp_width_m) + PRE_GRASP_EXTRA_OPENING_M, GRIPPER_MAX_WIDTH_M)
 
 
 def commanded_force_n(youngs_modulus_pa: float, finger_force_n: float = 0.0) -> float:
@@ -106,7 +105,7 @@ def grasp_command(youngs_modulus_pa: float, grasp_width_m: float, finger_force_n
                                f"{GRIPPER_MAX_WIDTH_M * 1000:.0f} mm")
     force = commanded_force_n(youngs_modulus_pa, finger_force_n)
     soft = youngs_modulus_pa <= MAX_SOFT_BODY_YOUNGS_MODULUS_PA
-    pre_open = pre_grasp_opening_m()
+    pre_open = pre_grasp_opening_m(w)
     width = min(w, pre_open)
     return GraspCommand(
         pre_open_width_m=pre_open,

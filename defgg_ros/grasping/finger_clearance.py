@@ -1,8 +1,8 @@
 """Would a finger land on an object? A top-down grasp checked against the depth image.
 
-The executor opens the hand to its pre-grasp opening before it descends (the full 80 mm,
-because predicted widths are often narrower than the object: see control/gripper_rule.py) and
-lowers the TCP FINGER_DEPTH_M under the surface seen at the grasp centre. A finger whose pad
+A hand opened to `opening_m` before it descends (the full 80 mm when the width is the network's,
+often narrower than the object) lowers the TCP FINGER_DEPTH_M under the surface seen at the grasp
+centre. (The executor opens per grasp since 2026-11-29: control/gripper_rule.pre_grasp_opening_m.) A finger whose pad
 footprint holds an object surface higher than the fingertip's lowest point lands on that object:
 the descent stops on contact and the hand closes on the wrong thing ("a finger is on the object").
 GG-CNN takes the best pixel without this check. The predictor (model/inference.py), when asked,

@@ -22,8 +22,8 @@ the image or without a return are not):
   cereal box's top);
 - both finger pads (thickness x pad width) must land in free space at the tip height (objects,
   neighbours, the robot, unseen space are not) over their whole sweep: from just outside the opening
-  out to the executor's pre-grasp opening (control/gripper_rule.pre_grasp_opening_m, the full 80 mm:
-  the hand descends opened that wide), so a ring's hole narrower than that takes no finger;
+  out to the executor's pre-grasp opening (control/gripper_rule.pre_grasp_opening_m: the opening + 10 mm,
+  at most 80 mm; the hand descends opened that wide);
 - the closing direction: the feasible one with the narrowest extent (within OPENING_TIE_M), ties
   in this order: across the object's faces (the axes of its footprint's minimum-area rectangle,
   the one nearer the network's angle first), the network's angle, 15 degree steps away from it;
@@ -504,8 +504,9 @@ def _feasible_at_peaks(view, label, cells, probes, network_widths_m, qualities, 
     on = (rc[:, 0] >= 0) & (rc[:, 0] < rows_n) & (rc[:, 1] >= 0) & (rc[:, 1] < cols_n)
     on[on] = view.grid_labels[rc[on, 0], rc[on, 1]] == label
     if on.any():
+        pre_open = np.array([pre_grasp_opening_m(w) for w in widths[on]])
         on[on] = _pads_free(view, space, levels[peak_of[cand[on]]], mid[on], flat_dirs[cand[on]], widths[on],
-                            pre_grasp_opening_m())
+                            pre_open)
     for k in np.flatnonzero(on):
         p = int(peak_of[cand[k]])
         if result[p] is None:
@@ -576,21 +577,23 @@ def _extent_cells(occupied: np.ndarray):
     return (int(low[0]), int(high[0])) if ok[0] else (None, None)
 
 
-def _pads_free(view, space: FreeSpace, level_m, centres, directions, widths_m, opening_m: float = 0.0) -> np.ndarray:
+def _pads_free(view, space: FreeSpace, level_m, centres, directions, widths_m, opening_m=0.0) -> np.ndarray:
     """Per grasp (n centres in cells, unit closing directions, openings in m): both pads (thickness
     along the closing line just outside the opening, pad width across it) over free space at the
     fingertips' level (level_m: one for all, or one per grasp; PAD_BLOCKED_FRACTION of a pad's samples
     may fail). opening_m > a grasp's opening: the hand descends opened that wide (the executor's
     pre-grasp opening) and closes to the grasp's opening, so the pads' whole sweep between the two
     must be free too (SWEEP_SAMPLES more positions along the line, checked only where the pads at the
-    opening are free: most candidates fail there, and the sweep's samples would double a search)."""
+    opening are free: most candidates fail there, and the sweep's samples would double a search); one opening_m
+    for all or one per grasp."""
     centres, directions = np.asarray(centres, float), np.asarray(directions, float)
     level_m = np.broadcast_to(np.asarray(level_m, float), (len(centres),))
+    opening_m = np.broadcast_to(np.asarray(opening_m, float), (len(centres),))
     half = np.asarray(widths_m, float)[:, None] / 2
     free = _pad_samples_free(view, space, level_m, centres, directions,
                              half + np.linspace(0.0, PANDA_FINGER_THICKNESS_M, PAD_SAMPLES))
-    if opening_m > 0.0 and free.any():
-        sweep = np.linspace(0.0, 1.0, SWEEP_SAMPLES + 1)[1:] * np.maximum(opening_m / 2 - half[free], 0.0)
+    if free.any() and (opening_m[free] > 0.0).any():
+        sweep = np.linspace(0.0, 1.0, SWEEP_SAMPLES + 1)[1:] * np.maximum(opening_m[free, None] / 2 - half[free], 0.0)
         free[free] = _pad_samples_free(view, space, level_m[free], centres[free], directions[free],
                                        half[free] + PANDA_FINGER_THICKNESS_M + sweep)
     return free

@@ -34,6 +34,14 @@ def test_command_window_accepts_anything_but_empty_fingers():
     assert grasp_command(2e4, 0.04).speed_mps < grasp_command(2e9, 0.04).speed_mps
 
 
+def test_the_hand_opens_10_mm_wider_than_the_grasp_not_fully():
+    """Opened fully (80 mm) for a 32 mm grasp, a finger came down 2.6 cm beyond the grasp's pads: onto a ring's
+    far tube or a neighbour in a bin. 10 mm wider: the training trials' start; never beyond the hand."""
+    assert grasp_command(2e5, 0.032).pre_open_width_m == pytest.approx(0.042)
+    assert grasp_command(2e5, 0.075).pre_open_width_m == pytest.approx(GRIPPER_MAX_WIDTH_M)
+    assert grasp_command(2e5, GRIPPER_MAX_WIDTH_M).epsilon_outer_m == 0.0
+
+
 @pytest.mark.parametrize("modulus, width, message", [
     (float("nan"), 0.04, "Young's modulus"),
     (-5.0, 0.04, "Young's modulus"),

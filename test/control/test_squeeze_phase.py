@@ -50,7 +50,7 @@ def test_measure_only_squeezes_opens_and_returns_without_a_pick(kin):
     assert [g.force_n for g in grasps_sent(robot)] == list(GENTLE_FORCES_N)
     assert estimate.youngs_modulus_pa == pytest.approx(expected_modulus_pa(), rel=0.02)
     assert estimate.low_pa < estimate.youngs_modulus_pa < estimate.high_pa and not estimate.rigid
-    assert robot.width_m > 0.07                      # the hand let go
+    assert robot.width_m == pytest.approx(grasp_command(2e9, GRASP.width_m).pre_open_width_m)   # the hand let go
     tcp_lowest = min(kin.fk(t.trajectory.final_q_rad)[2, 3] for t in robot.sent if isinstance(t, SendTrajectory))
     assert tcp_lowest > 0.0 and not sequence.released_at_place   # never went to the place
 

@@ -1,11 +1,12 @@
 """The tabletop planner's pad test covers the executor's opening: the hand descends opened to
-pre_grasp_opening_m (80 mm) and closes to the grasp, so everything the pads sweep between the two must be
-free, not only the pads just outside the planned opening.
+pre_grasp_opening_m(the grasp's opening) and closes to the grasp, so everything the pads sweep between the two
+must be free, not only the pads just outside the planned opening.
 
 Seen in the cell experiment (2026-11-29): every pick of common_ring (75 mm across, a 35 mm hole) failed with
 "the fingers did not close ... a finger is on the object": the planner took a radial grasp across the tube
 (opening 33 mm, pads checked 17-31 mm from the centre, in the hole), the executor opened to 80 mm and the
 inner finger came down on the far side of the tube (pad 15-29 mm beyond the ring's centre; tube 17.5-37.5 mm).
+The executor now opens 10 mm wider than the grasp (not fully), so a neighbour beyond that is no obstacle.
 """
 import math
 
@@ -38,15 +39,28 @@ def _grasp_on_the_middle_box(objects):
     return tg.feasible_grasp(view, label, row, col, math.pi / 2, 0.03, 0.9, tg.grid_moduli(view), tg.FreeSpace(view))
 
 
-@pytest.mark.unit
-def test_a_neighbour_where_the_opened_finger_comes_down_blocks_the_grasp():
-    # A 20 mm wide bar (90 mm long: only closing along x fits the hand) and a second bar 25 mm beside it: the
-    # pads just outside the planned 32 mm opening are free, the finger opened to 80 mm lands on the neighbour.
+def _bar_and_neighbour(gap_m: float):
+    """A 20 mm wide bar (90 mm long: only closing along x fits the hand) and the grasp on it with a second bar
+    whose near face is gap_m from the bar's centre along the closing line (None: no neighbour)."""
     bar = ts.Box((0.5, 0.0), (0.02, 0.09, 0.04))
-    alone = _grasp_on_the_middle_box([bar])
+    if gap_m is None:
+        return _grasp_on_the_middle_box([bar])
+    return _grasp_on_the_middle_box([bar, ts.Box((0.5 + gap_m + 0.01, 0.0), (0.02, 0.09, 0.04), name="neighbour")])
+
+
+@pytest.mark.unit
+def test_a_neighbour_where_the_opened_finger_comes_down_blocks_the_grasp_and_one_beyond_does_not():
+    alone = _bar_and_neighbour(None)
     assert alone is not None and abs(alone.closing_direction_base[0]) == pytest.approx(1.0, abs=1e-3)
     assert alone.width_m < 0.04
-    assert _grasp_on_the_middle_box([bar, ts.Box((0.545, 0.0), (0.02, 0.09, 0.04), name="neighbour")]) is None
+    pads_outer_m = alone.width_m / 2 + PANDA_FINGER_THICKNESS_M              # the pads at the planned opening
+    opened_outer_m = pre_grasp_opening_m(alone.width_m) / 2 + PANDA_FINGER_THICKNESS_M
+    assert opened_outer_m - pads_outer_m == pytest.approx(0.005)
+    # Its near face 2.5 mm past the pads at the grasp's opening, under the finger opened 5 mm wider: blocked.
+    assert _bar_and_neighbour(pads_outer_m + 0.0025) is None
+    # 4 mm past the opened finger: the grasp stands (opened fully to 80 mm, the finger reached 16 mm further).
+    beside = _bar_and_neighbour(opened_outer_m + 0.004)
+    assert beside is not None and beside.width_m == pytest.approx(alone.width_m, abs=0.002)
 
 
 def _ring_scene(tmp_path):
@@ -101,9 +115,10 @@ def test_the_ring_grasp_leaves_the_opened_fingers_off_the_ring(tmp_path):
     planner = TabletopPlanner(GraspPredictor.from_checkpoint(share_path("models", "defgg_cnn.pt"), num_threads=1))
     prepared = planner.network(PerceivedObjects(view, None, moduli_image(parts, depth.shape), None))
     grasp = planner.search(prepared, 1).grasps[0]
-    r = np.hypot(*(_pad_sweep_xy(grasp, pre_grasp_opening_m()) - centre).T)
+    opening_m = pre_grasp_opening_m(grasp.width_m)
+    r = np.hypot(*(_pad_sweep_xy(grasp, opening_m) - centre).T)
     # Off the ring's top-down outline (the fingertips go below the tube's top), 1 mm for the render's pixels.
     on_ring = (r > hole_m - 0.001) & (r < outer_m + 0.001)
-    assert not on_ring.any(), (f"a pad opened to {pre_grasp_opening_m() * 1e3:.0f} mm sweeps the ring: r "
+    assert not on_ring.any(), (f"a pad opened to {opening_m * 1e3:.0f} mm sweeps the ring: r "
                                f"{r[on_ring].min() * 1e3:.1f}-{r[on_ring].max() * 1e3:.1f} mm from its centre "
                                f"(tube {hole_m * 1e3:.1f}-{outer_m * 1e3:.1f} mm), grasp {grasp}")
