@@ -125,6 +125,9 @@ class GraspTarget:
     width_m: float
     youngs_modulus_pa: float
     finger_force_n: float = 0.0   # the force the grasp carries (its model's label rule); 0: the modulus rule's
+    # Per pad (-closing side first) the object's contact radius, m (Grasp.contact_radii_m); (): flat or not known:
+    # the squeeze's flat law.
+    contact_radii_m: tuple = ()
 
 
 @dataclass(frozen=True)

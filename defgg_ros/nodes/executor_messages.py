@@ -88,7 +88,17 @@ def grasp_target(grasp, base_frame: str, default_modulus_pa: float) -> GraspTarg
     force = float(grasp.finger_force_n)
     if not math.isfinite(force) or force < 0.0:
         raise GoalError(f"grasp finger_force_n must be >= 0 N (0: the modulus rule), got {force}")
-    return GraspTarget(tuple(base_M_tcp[:3, 3]), yaw, float(grasp.width_m), float(modulus), force)
+    return GraspTarget(tuple(base_M_tcp[:3, 3]), yaw, float(grasp.width_m), float(modulus), force,
+                       contact_radii_m(grasp))
+
+
+def contact_radii_m(grasp) -> tuple:
+    """Grasp.contact_radii_m checked: () or one radius > 0 m per pad (two); a grasp without the field: ()."""
+    radii = tuple(float(r) for r in getattr(grasp, "contact_radii_m", ()))
+    if radii and (len(radii) != 2 or not all(math.isfinite(r) and r > 0.0 for r in radii)):
+        raise GoalError(f"grasp contact_radii_m must be empty (flat or not known) or two radii > 0 m, one per pad, "
+                        f"got {list(radii)}")
+    return radii
 
 
 def place_target(pose_stamped, base_frame: str, default_position, default_yaw: float | None) -> PlaceTarget:

@@ -1,5 +1,6 @@
 """A planned grasp as defgg_interfaces/Grasp (poses in the camera and the base frame, image projection, the
-object's estimated mass and finger force) and as rviz finger markers: the inference node's outputs."""
+object's estimated mass and finger force, the pads' contact radii) and as rviz finger markers: the inference
+node's outputs."""
 import numpy as np
 from defgg_interfaces.msg import Grasp
 from geometry_msgs.msg import PoseStamped
@@ -39,6 +40,7 @@ def grasp_msg(grasp, frame, network, grip_rule: LabelGripRule, density_kg_m3: fl
     msg.width_px = image["width_px"]
     msg.youngs_modulus_pa = float(grasp.youngs_modulus_pa)
     msg.object_id = int(grasp.object_id)
+    msg.contact_radii_m = [float(r) for r in grasp.contact_radii_m]
     _grip_fields(msg, grasp, network, grip_rule, density_kg_m3, warn)
     return msg
 

@@ -22,7 +22,8 @@ Two sources of the surface, one convention:
   widest point's height z0 free (a straight side, a box's face or a standing cylinder's: no recession, R_v
   infinite, capped at half the width);
   flat when the fitted recession over the pad's footprint is within FLAT_RECESSION_M (the fit, not the samples:
-  a face turned half a cell against the grid steps by a cell).
+  a face turned half a cell against the grid steps by a cell; the sag across less SAG_SIGMAS standard errors of
+  its fit: the cell steps alone fit up to ~0.5 mm).
 """
 from __future__ import annotations
 
@@ -50,6 +51,8 @@ MARGIN_OUT_M = 0.004
 # it is smoothed over (cells).
 OUTLINE_BLUR_CELLS = 1.0
 WINDOW_PAD_CELLS = 4
+# The outline's sag across the pad counts towards "curved" only beyond this many standard errors of its fit.
+SAG_SIGMAS = 2.0
 
 
 def contact_radius_m(r_h_m: float, r_v_m: float, half_width_m: float) -> float:
@@ -113,33 +116,36 @@ def _reach_m(occupancy: np.ndarray, along_m: np.ndarray) -> np.ndarray:
 
 
 def _quadratic_radius(s_m: np.ndarray, reach_m: np.ndarray, footprint_m: float) -> tuple[float, float]:
-    """(R, the fitted recession over the footprint) of reach = c0 + c1 s + c2 s^2 (c2 < 0: receding)."""
+    """(R, the fitted sag over the footprint's half width) of reach = c0 + c1 s + c2 s^2 (c2 < 0: receding; c1: a
+    face turned against the pad, not curvature). The sag is taken SAG_SIGMAS standard errors towards zero: the
+    outline's cell steps alone fit a sag of up to ~0.5 mm on a box's face (a face at 0.4 rad to the grid)."""
     ok = np.isfinite(reach_m)
-    if ok.sum() < 3:
+    if ok.sum() < 5:
         return math.nan, math.nan
-    c2, c1, _ = np.polyfit(s_m[ok], reach_m[ok], 2)
+    (c2, _, _), cov = np.polyfit(s_m[ok], reach_m[ok], 2, cov=True)
     if c2 >= 0:
         return math.inf, 0.0
-    vertex = float(np.clip(-c1 / (2 * c2), -footprint_m / 2, footprint_m / 2))
-    return _radius_of_curvature(-c2), float(-c2 * (footprint_m / 2 + abs(vertex)) ** 2)
+    half_sq = (footprint_m / 2) ** 2
+    return _radius_of_curvature(-c2), float(max(-c2 - SAG_SIGMAS * math.sqrt(max(cov[0, 0], 0.0)), 0.0) * half_sq)
 
 
 def _vertical_radius(z_m: np.ndarray, reach_m: np.ndarray) -> tuple[float, float]:
     """(R_v, the fitted recession at the pad's top) of d(z) = max(0, z - z0)^2 / (2 R_v), d the reach's drop below
-    the lowest sample's, z0 free over the sample heights (least squares)."""
+    the lowest sample's, z0 free over the sample heights (least squares); the recession taken SAG_SIGMAS standard
+    errors of the fit towards zero, as across."""
     ok = np.isfinite(reach_m)
-    if ok.sum() < 2:
+    if ok.sum() < 3:
         return math.inf, 0.0
     z, d = z_m[ok], reach_m[ok][0] - reach_m[ok]
-    best = (float(np.sum(d ** 2)), 0.0, z[-1])     # no recession at all
+    best = (float(np.sum(d ** 2)), 0.0, z[-1], 0.0)     # no recession at all
     for z0 in z[:-1]:
         u = np.maximum(z - z0, 0.0) ** 2
         a = float(u @ d / (u @ u))
         residual = float(np.sum((d - a * u) ** 2))
         if a > 0 and residual < best[0]:
-            best = (residual, a, z0)
-    _, a, z0 = best
-    return _radius_of_curvature(a), float(a * (z_m[-1] - z0) ** 2)
+            best = (residual, a, z0, math.sqrt(residual / max(z.size - 2, 1) / float(u @ u)))
+    _, a, z0, sd = best
+    return _radius_of_curvature(a), float(max(a - SAG_SIGMAS * sd, 0.0) * (z_m[-1] - z0) ** 2)
 
 
 def perceived_contact_radii_m(grid_height_m: np.ndarray, grid_labels: np.ndarray, label: int, centre_rc,

@@ -50,6 +50,7 @@ from defgg_ros.grasping.geometry import tcp_height_m
 from defgg_ros.grasping.postprocess import find_peaks, maps_from_network
 from defgg_ros.model.preprocess import network_input
 from defgg_ros.perception.tabletop import CELL_M, TabletopView, fill_holes, partly_seen_objects
+from defgg_ros.planning.contact_radii import perceived_contact_radii_m
 
 # Free space the fingers need between the object and each pad while closing.
 CLEARANCE_M = 0.006
@@ -98,6 +99,10 @@ class TabletopGrasp:
     # The smoothed quality at the peak before its clip to [0, 1]: what grasps are ranked on (the clipped
     # quality ties at 1.0 wherever the network overshoots; docs/model.md "Post-processing").
     rank_quality: float = float("nan")
+    # Per pad, the pad on the -closing side first: the radius (m) of the sphere standing for the object's surface
+    # where the pad touches it (planning/contact_radii.py, from the height map); (): flat faces, the squeeze's
+    # flat law (docs/squeeze.md).
+    contact_radii_m: tuple = ()
 
 
 def virtual_depth(view: TabletopView) -> np.ndarray:
@@ -628,7 +633,10 @@ def _grasp(view, label, qualities, r, c, direction, width, extent_m, network_wid
                          approach_direction_base=tuple((-normal).tolist()), width_m=float(width),
                          extent_m=float(extent_m), network_width_m=float(network_width_m),
                          youngs_modulus_pa=float(modulus), cell_rc=(int(r), int(c)),
-                         rank_quality=float(rank_quality))
+                         rank_quality=float(rank_quality),
+                         contact_radii_m=perceived_contact_radii_m(
+                             view.grid_height_m, view.grid_labels, label, (r, c), direction,
+                             _tip_height_m(float(view.grid_height_m[r, c]), view.config), extent_m))
 
 
 def base_T_grasp(grasp: TabletopGrasp) -> np.ndarray:

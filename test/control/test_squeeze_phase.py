@@ -4,6 +4,7 @@ stiffness the squeeze cannot resolve, a cancel while squeezing.
 The fake robot's object yields linearly (World.object_compliance_m_per_n): a grasp at F stops at width - F c, so
 the expected modulus is squeeze.estimate_modulus's model with k = 1 / c.
 """
+import dataclasses
 import math
 
 import numpy as np
@@ -16,7 +17,7 @@ from defgg_ros.control.kinematics import PandaKinematics
 from defgg_ros.control.observation import ObservationWatch
 from defgg_ros.control.pick_place import PickPlaceSequence
 from defgg_ros.control.sequence_types import GraspGripper, SendTrajectory, SqueezeRequest
-from defgg_ros.squeeze import FIRM_FORCES_N, GENTLE_FORCES_N, loaded_area_m2
+from defgg_ros.squeeze import FIRM_FORCES_N, GENTLE_FORCES_N, estimate_modulus, loaded_area_m2
 
 pytestmark = pytest.mark.unit
 
@@ -64,6 +65,25 @@ def test_measure_then_pick_closes_with_the_measured_modulus_force(kin):
     measured = sequence.squeeze_estimate.youngs_modulus_pa
     assert close.force_n == pytest.approx(grasp_command(measured, GRASP.width_m).force_n)
     assert close.force_n != pytest.approx(grasp_command(GRASP.youngs_modulus_pa, GRASP.width_m).force_n)
+
+
+def test_the_grasps_contact_radii_reach_the_estimate_hertz_where_curved(kin):
+    """A grasp carrying the perceived contact radii (Grasp.contact_radii_m) is read with Hertz's law on them; the
+    same squeeze without radii with the flat law."""
+    radii = (0.02, 0.03)
+    estimates = {}
+    for name, grasp in (("curved", dataclasses.replace(GRASP, contact_radii_m=radii)), ("flat", GRASP)):
+        sequence = PickPlaceSequence(kin, CONFIG, grasp, PLACE, SqueezeRequest(only=True, width_resolution_m=1e-5))
+        run(sequence, FakeRobot(kin, World(object_compliance_m_per_n=COMPLIANCE_M_PER_N)), max_s=120.0)
+        assert sequence.outcome.success, sequence.outcome.failure_reason
+        estimates[name] = (sequence.squeeze_estimate, sequence.squeeze_readings)
+    curved, readings = estimates["curved"]
+    face_height_m = GRASP.position_m[2] - CONFIG.table_z_m
+    expected = estimate_modulus(readings, math.inf, face_height_m, width_resolution_m=1e-5, contact_radii_m=radii)
+    assert curved.contact_law == "hertz" and expected.contact_law == "hertz"
+    assert curved.youngs_modulus_pa == pytest.approx(expected.youngs_modulus_pa, rel=1e-9)
+    assert estimates["flat"][0].contact_law == "flat"
+    assert estimates["flat"][0].youngs_modulus_pa == pytest.approx(expected_modulus_pa(), rel=0.02)
 
 
 def test_an_unresolved_compression_squeezes_firmer_and_reads_rigid(kin):

@@ -78,6 +78,23 @@ def test_grasp_target_from_a_grasp_message():
     assert grasp_target(msg, BASE, 2e6).finger_force_n == 0.8
 
 
+def test_the_grasps_contact_radii_reach_the_target():
+    """Grasp.contact_radii_m (one per pad, -closing side first) becomes GraspTarget.contact_radii_m; empty: ()."""
+    assert grasp_target(grasp(), BASE, 2e6).contact_radii_m == ()
+    msg = grasp()
+    msg.contact_radii_m = [0.021, 0.034]
+    assert grasp_target(msg, BASE, 2e6).contact_radii_m == pytest.approx((0.021, 0.034))
+
+
+@pytest.mark.parametrize("radii", [[0.02], [0.02, 0.03, 0.04], [0.02, -0.01], [0.02, float("nan")], [0.0, 0.02],
+                                   [float("inf"), 0.02]])
+def test_bad_contact_radii_refuse_the_goal_saying_why(radii):
+    msg = grasp()
+    msg.contact_radii_m = radii
+    with pytest.raises(GoalError, match="contact_radii_m must be empty .* or two radii > 0 m, one per pad"):
+        grasp_target(msg, BASE, 2e6)
+
+
 @pytest.mark.parametrize("mutate, message", [
     (lambda g: setattr(g.pose_base.header, "frame_id", "camera_depth_optical_frame"), "expected 'fer_link0'"),
     (lambda g: setattr(g.pose_base.pose.orientation, "w", 7.0), "bad grasp pose"),
