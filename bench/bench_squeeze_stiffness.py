@@ -12,8 +12,10 @@ meshes, as the cell experiment builds them). Two sets: TUNING (boxes and trainin
 choices were made on) and HELD_OUT (evaluation objects: common and EGAD-like, never looked at while choosing).
 
 Every squeeze's readings are appended to --readings (JSON lines) and reused on a rerun: the estimate is pure
-arithmetic, so the old model (flat pads, nothing taken out) and the new (hand calibration, contact law from
-the curve's exponent) are compared on the same readings. --calibrate squeezes the rigid calibration block and
+arithmetic, so the old model (flat pads, nothing taken out), the hand's calibration with the flat law, the new
+(hand calibration, Hertz on the surface's contact radii) and "perceived" (Hertz on the radii the cell perceives
+from its own camera's depth: planning/contact_radii.py, what the executor gets on the grasp) are compared on the
+same readings. --calibrate squeezes the rigid calibration block and
 prints the hand's stiffness (squeeze.calibrate_hand), the value sim_bringup/config/sim_cell.yaml carries.
 """
 from __future__ import annotations
@@ -33,8 +35,15 @@ import trimesh
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from defgg_ros.constants import FINGER_DEPTH_M, FINGER_PAD_WIDTH_M, OBJECT_DENSITY_KG_M3  # noqa: E402
+from defgg_ros.constants import (  # noqa: E402
+    FINGER_DEPTH_M,
+    FINGER_PAD_WIDTH_M,
+    OBJECT_DENSITY_KG_M3,
+    PANDA_FINGERTIP_BELOW_TCP_M,
+)
 from defgg_ros.control.kinematics import PandaKinematics  # noqa: E402
+from defgg_ros.perception.tabletop import CELL_M, TabletopConfig, perceive  # noqa: E402
+from defgg_ros.planning.contact_radii import perceived_contact_radii_m, surface_pad_radius  # noqa: E402
 from defgg_ros.sim import objects as sim_objects  # noqa: E402
 from defgg_ros.sim.cell.objects import centred_surface_mesh  # noqa: E402
 from defgg_ros.sim.cell.sim_cell import SimCell  # noqa: E402
@@ -51,8 +60,6 @@ from defgg_ros.squeeze import (  # noqa: E402
 )
 
 WIDTH_RESOLUTION_M = 1e-5       # the simulated hand's opening is exact to well below this
-# A pad lies on a flat face when the surface under its whole footprint is within this of its most advanced point.
-FLAT_RECESSION_M = 5e-4
 # (size along the closing axis, across it, height) m, FEM cell size m
 BOXES = {"cube_5cm": ((0.05, 0.05, 0.05), 0.025), "slab_4x6x3": ((0.04, 0.06, 0.03), 0.02),
          "block_6x4.5x4": ((0.06, 0.045, 0.04), 0.03), "thin_3x5x5": ((0.03, 0.05, 0.05), 0.025)}
@@ -111,29 +118,53 @@ def surface_x_along_closing(triangles, ys, zs):
 def contact_radii_m(spec) -> tuple | None:
     """The surface's radius of curvature where each pad touches it (None: flat faces under both pads).
 
-    What a perceived shape gives, here from the true surface: rays along the closing axis over the pad's footprint
-    (at half the height) find the surface's recession d(y, z) from its most advanced point; d = (y-y*)^2 / (2 R_h) +
-    (z-z*)^2 / (2 R_v) fitted by least squares; the contact's radius is sqrt(R_h R_v), each at most half the
-    object's width (a straight direction: a line contact, as wide as the body lets it spread)."""
+    From the true surface: rays along the closing axis over the pad's footprint (at half the height) find the
+    surface's reach; planning/contact_radii.surface_pad_radius fits its recession d = (y-y*)^2 / (2 R_h) +
+    (z-z*)^2 / (2 R_v); the contact's radius is sqrt(R_h R_v), each at most half the object's width. Pad on the
+    -x side (the -closing side) first, as Grasp.contact_radii_m."""
     if spec.shape == "box":
         return None
     surface = centred_surface_mesh(spec)
     half_width = float(surface.bounds[1][0] - surface.bounds[0][0]) / 2
     ys, zs = np.meshgrid(np.linspace(-FINGER_PAD_WIDTH_M / 2, FINGER_PAD_WIDTH_M / 2, 9),
                          np.linspace(-FINGER_DEPTH_M / 2, FINGER_DEPTH_M / 2, 9))
-    radii, flat = [], []
     hits_x = surface_x_along_closing(surface.triangles, ys.ravel(), zs.ravel())
-    for side in (1.0, -1.0):
+    radii, flat = [], []
+    for side in (-1.0, 1.0):
         reach = np.max(side * hits_x, axis=1, initial=-np.inf, where=np.isfinite(hits_x))
-        hit = np.isfinite(reach)
-        best = int(np.argmax(reach))
-        d = reach[best] - reach[hit]
-        dy, dz = ys.ravel()[hit] - ys.ravel()[best], zs.ravel()[hit] - zs.ravel()[best]
-        (a, b), *_ = np.linalg.lstsq(np.column_stack([dy ** 2, dz ** 2]), d, rcond=None)
-        flat.append(bool(hit.all() and d.max() <= FLAT_RECESSION_M))
-        r_h, r_v = (min(1 / (2 * c), half_width) if c > 0 else half_width for c in (a, b))
-        radii.append(float(np.sqrt(r_h * r_v)))
+        radius, pad_flat = surface_pad_radius(ys, zs, np.where(np.isfinite(reach), reach, np.nan), half_width)
+        radii.append(radius)
+        flat.append(pad_flat)
     return None if all(flat) else tuple(radii)
+
+
+def perceived_radii_m(spec) -> tuple | None:
+    """The contact radii the cell perceives (None: flat faces, the flat law): the object rendered by the cell's own
+    camera (SimCell.render_depth, the scene's camera 0.40 m above the table), perceived as the segmentation node
+    does (perception/tabletop.perceive), and the jig's grasp (the object's position, closing along its yaw, the
+    fingertips at half its height less their offset below the TCP) given to planning/contact_radii: what the
+    planner puts on TabletopGrasp.contact_radii_m. Pad on the -closing side first."""
+    scene = load_scene(ROOT / "sim_bringup" / "scenes" / "soft_box.yaml")
+    cell = SimCell(replace(scene, objects=[spec]))
+    try:
+        position, _ = cell.object_poses()[0]
+        depth_m, _, _ = cell.render_depth()
+        camera_k = cell.camera_k
+    finally:
+        cell.close()
+    base_T_camera = np.eye(4)
+    base_T_camera[:3, :3] = np.reshape(p.getMatrixFromQuaternion(scene.base_quat_camera_xyzw), (3, 3))
+    base_T_camera[:3, 3] = scene.base_xyz_camera_m
+    view = perceive(depth_m, camera_k, base_T_camera, TabletopConfig())
+    centre = ((position[0] - view.grid_origin_xy_m[0]) / CELL_M, (position[1] - view.grid_origin_xy_m[1]) / CELL_M)
+    row, col = (int(round(v)) for v in centre)
+    label = int(view.grid_labels[row, col])
+    if label == 0:
+        raise SystemExit(f"{spec.name}: perception found no object under its position")
+    tip_m = face_m(spec)[1] / 2 - PANDA_FINGERTIP_BELOW_TCP_M
+    radii = perceived_contact_radii_m(view.grid_height_m, view.grid_labels, label, centre,
+                                      (math.cos(spec.yaw_rad), math.sin(spec.yaw_rad)), tip_m)
+    return tuple(radii) or None
 
 
 def squeeze_once(spec) -> list:
@@ -185,18 +216,26 @@ def calibration(path: Path) -> HandCalibration:
 
 
 # The estimates compared on the same readings: the old model (flat pads, nothing taken out), the hand's calibration
-# taken out with the flat law (what the executor does: it has no contact radii), and the new model (calibration and
-# the contact radii of the object's surface).
-VARIANTS = ("old", "hand", "new")
+# taken out with the flat law (what the executor did without contact radii), the new model (calibration and the
+# contact radii of the object's surface), and "perceived": the calibration and the contact radii the cell perceives
+# (what the executor now does: the grasp carries them).
+VARIANTS = ("old", "hand", "new", "perceived")
 
 
-def estimates_of(readings, spec, hand: HandCalibration) -> dict:
-    """Each variant's estimate of one squeeze (SqueezeError: the executor refuses such readings)."""
+def estimates_of(readings, spec, hand: HandCalibration, radii: dict) -> dict:
+    """Each variant's estimate of one squeeze (SqueezeError: the executor refuses such readings). radii: "surface"
+    and "perceived" contact radii (None: flat)."""
     face_w, face_h = face_m(spec)
     kw = {"width_resolution_m": WIDTH_RESOLUTION_M}
     return {"old": estimate_modulus(readings, face_w, face_h, hand=None, contact_law="flat", **kw),
             "hand": estimate_modulus(readings, face_w, face_h, hand=hand, contact_law="flat", **kw),
-            "new": estimate_modulus(readings, face_w, face_h, hand=hand, contact_radii_m=contact_radii_m(spec), **kw)}
+            "new": estimate_modulus(readings, face_w, face_h, hand=hand, contact_radii_m=radii["surface"], **kw),
+            "perceived": estimate_modulus(readings, face_w, face_h, hand=hand, contact_radii_m=radii["perceived"],
+                                          **kw)}
+
+
+def radii_text(radii) -> str:
+    return "flat" if not radii else ", ".join(f"{r * 100:.1f}" for r in radii)
 
 
 def factor(estimates, modulus_pa) -> float:
@@ -247,25 +286,29 @@ def main(argv=None) -> int:
     if args.calibrate:
         return 0
     names = [n for o in args.objects for n in {"tuning": TUNING, "held_out": HELD_OUT}.get(o, (o,))]
-    print(f"{'object':16s} {'E true':>8s} " + " ".join(f"{v:>7s}" for v in VARIANTS) + "  spread  new estimate")
+    print(f"{'object':16s} {'E true':>8s} " + " ".join(f"{v:>9s}" for v in VARIANTS) +
+          "  radii (cm): surface | perceived  spread  perceived estimate")
     rows = []
     for name in names:
         for modulus in args.moduli:
             by_variant = {v: [] for v in VARIANTS}
+            radii = {}
             for r in range(args.repeats):
                 spec = scene_object(name, modulus, 0.3 * r)
+                radii = {"surface": contact_radii_m(spec), "perceived": perceived_radii_m(spec)}
                 try:
                     for variant, estimate in estimates_of(cached_readings(args.readings, name, modulus, 0.3 * r),
-                                                          spec, hand).items():
+                                                          spec, hand, radii).items():
                         by_variant[variant].append(estimate)
                 except SqueezeError as error:   # the executor fails such a squeeze: a miss in the counts
                     print(f"{name:16s} {modulus:8.0e} refused: {error}", flush=True)
             factors = [factor(by_variant[v], modulus) for v in VARIANTS]
             rows.append((name, modulus, factors))
-            values = [e.youngs_modulus_pa for e in by_variant["new"]]
+            values = [e.youngs_modulus_pa for e in by_variant["perceived"]]
             spread = max(values) / min(values) if values and all(math.isfinite(v) for v in values) else math.nan
-            print(f"{name:16s} {modulus:8.0e} " + " ".join(f"{factor_text(f, modulus):>7s}" for f in factors) +
-                  f" {spread:7.2f}  {by_variant['new'][0].describe() if by_variant['new'] else ''}", flush=True)
+            print(f"{name:16s} {modulus:8.0e} " + " ".join(f"{factor_text(f, modulus):>9s}" for f in factors) +
+                  f"  {radii_text(radii.get('surface'))} | {radii_text(radii.get('perceived'))} {spread:7.2f}  "
+                  f"{by_variant['perceived'][0].describe() if by_variant['perceived'] else ''}", flush=True)
     for line in summary(rows):
         print(line)
     return 0
