@@ -85,16 +85,15 @@ def surface_pad_radius(dy_m, dz_m, reach_m, half_width_m: float) -> tuple[float,
 
 
 def _bilinear(values: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
-    """values (R x C [x Z]) read bilinearly at fractional (rows, cols) (N each): N [x Z]; 0 outside the grid."""
-    padded = np.pad(values, [(1, 1), (1, 1)] + [(0, 0)] * (values.ndim - 2))
+    """values (R x C x Z) read bilinearly at fractional (rows, cols) (N each): N x Z; 0 outside the grid."""
+    padded = np.zeros((values.shape[0] + 2, values.shape[1] + 2, values.shape[2]), values.dtype)
+    padded[1:-1, 1:-1] = values
     r = np.clip(rows + 1.0, 0.0, padded.shape[0] - 1.001)
     c = np.clip(cols + 1.0, 0.0, padded.shape[1] - 1.001)
-    r0, c0 = np.floor(r).astype(np.int64), np.floor(c).astype(np.int64)
-    fr, fc = r - r0, c - c0
-    if values.ndim == 3:
-        fr, fc = fr[:, None], fc[:, None]
-    return ((1 - fr) * (1 - fc) * padded[r0, c0] + (1 - fr) * fc * padded[r0, c0 + 1]
-            + fr * (1 - fc) * padded[r0 + 1, c0] + fr * fc * padded[r0 + 1, c0 + 1])
+    r0, c0 = r.astype(np.int64), c.astype(np.int64)
+    fr, fc = (r - r0)[:, None], (c - c0)[:, None]
+    return ((1 - fr) * ((1 - fc) * padded[r0, c0] + fc * padded[r0, c0 + 1])
+            + fr * ((1 - fc) * padded[r0 + 1, c0] + fc * padded[r0 + 1, c0 + 1]))
 
 
 def _reach_m(occupancy: np.ndarray, along_m: np.ndarray) -> np.ndarray:
@@ -120,7 +119,7 @@ def _quadratic_radius(s_m: np.ndarray, reach_m: np.ndarray, footprint_m: float) 
     face turned against the pad, not curvature). The sag is taken SAG_SIGMAS standard errors towards zero: the
     outline's cell steps alone fit a sag of up to ~0.5 mm on a box's face (a face at 0.4 rad to the grid)."""
     ok = np.isfinite(reach_m)
-    if ok.sum() < 5:
+    if ok.sum() < 6:     # polyfit's covariance needs more points than the order + 2
         return math.nan, math.nan
     (c2, _, _), cov = np.polyfit(s_m[ok], reach_m[ok], 2, cov=True)
     if c2 >= 0:
@@ -137,15 +136,16 @@ def _vertical_radius(z_m: np.ndarray, reach_m: np.ndarray) -> tuple[float, float
     if ok.sum() < 3:
         return math.inf, 0.0
     z, d = z_m[ok], reach_m[ok][0] - reach_m[ok]
-    best = (float(np.sum(d ** 2)), 0.0, z[-1], 0.0)     # no recession at all
-    for z0 in z[:-1]:
-        u = np.maximum(z - z0, 0.0) ** 2
-        a = float(u @ d / (u @ u))
-        residual = float(np.sum((d - a * u) ** 2))
-        if a > 0 and residual < best[0]:
-            best = (residual, a, z0, math.sqrt(residual / max(z.size - 2, 1) / float(u @ u)))
-    _, a, z0, sd = best
-    return _radius_of_curvature(a), float(max(a - SAG_SIGMAS * sd, 0.0) * (z_m[-1] - z0) ** 2)
+    u = np.maximum(z[None, :] - z[:-1, None], 0.0) ** 2          # one row per z0 (every sample height but the top)
+    uu = np.einsum("ij,ij->i", u, u)
+    a = u @ d / uu
+    residual = np.sum((d[None, :] - a[:, None] * u) ** 2, axis=1)
+    residual = np.where(a > 0, residual, np.inf)
+    best = int(np.argmin(residual))
+    if not residual[best] < float(np.sum(d ** 2)):     # no recession fits better than none at all
+        return math.inf, 0.0
+    sd = math.sqrt(residual[best] / max(z.size - 2, 1) / uu[best])
+    return _radius_of_curvature(float(a[best])), float(max(a[best] - SAG_SIGMAS * sd, 0.0) * (z_m[-1] - z[best]) ** 2)
 
 
 def perceived_contact_radii_m(grid_height_m: np.ndarray, grid_labels: np.ndarray, label: int, centre_rc,

@@ -31,6 +31,7 @@ the image or without a return are not):
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -99,10 +100,17 @@ class TabletopGrasp:
     # The smoothed quality at the peak before its clip to [0, 1]: what grasps are ranked on (the clipped
     # quality ties at 1.0 wherever the network overshoots; docs/model.md "Post-processing").
     rank_quality: float = float("nan")
-    # Per pad, the pad on the -closing side first: the radius (m) of the sphere standing for the object's surface
-    # where the pad touches it (planning/contact_radii.py, from the height map); (): flat faces, the squeeze's
-    # flat law (docs/squeeze.md).
-    contact_radii_m: tuple = ()
+    # contact_radii_m's value, or what makes it when first read (a search makes grasps at every peak it checks,
+    # ~1-3 ms each under load; only the grasps a request returns need their radii).
+    contact_radii_source: object = field(default=(), compare=False, repr=False)
+
+    @functools.cached_property
+    def contact_radii_m(self) -> tuple:
+        """Per pad, the pad on the -closing side first: the radius (m) of the sphere standing for the object's
+        surface where the pad touches it (planning/contact_radii.py, from the height map); (): flat faces, the
+        squeeze's flat law (docs/squeeze.md)."""
+        source = self.contact_radii_source
+        return tuple(source() if callable(source) else source)
 
 
 def virtual_depth(view: TabletopView) -> np.ndarray:
@@ -634,9 +642,9 @@ def _grasp(view, label, qualities, r, c, direction, width, extent_m, network_wid
                          extent_m=float(extent_m), network_width_m=float(network_width_m),
                          youngs_modulus_pa=float(modulus), cell_rc=(int(r), int(c)),
                          rank_quality=float(rank_quality),
-                         contact_radii_m=perceived_contact_radii_m(
-                             view.grid_height_m, view.grid_labels, label, (r, c), direction,
-                             _tip_height_m(float(view.grid_height_m[r, c]), view.config), extent_m))
+                         contact_radii_source=functools.partial(
+                             perceived_contact_radii_m, view.grid_height_m, view.grid_labels, label, (r, c),
+                             tuple(direction), _tip_height_m(float(view.grid_height_m[r, c]), view.config), extent_m))
 
 
 def base_T_grasp(grasp: TabletopGrasp) -> np.ndarray:

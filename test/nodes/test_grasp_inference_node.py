@@ -98,6 +98,19 @@ def test_a_request_with_its_depth_is_perceived_by_the_segmentation_node(cell, ex
     assert node.segmentation_node.diagnostics.values()["perceive service count"] >= 1
 
 
+def test_grasps_carry_the_pads_contact_radii_curved_on_the_cylinder_none_on_the_box(cell, executor, call):
+    """Grasp.contact_radii_m (planning/contact_radii.py via TabletopGrasp): the 2.5 cm cylinder's side two radii
+    (R_h its radius, R_v straight: capped at half its width), the box's faces none (the squeeze's flat law)."""
+    _, _, client = cell
+    response = plan(executor, call, client, image_request(top_k=2))
+    assert response.success, response.message
+    radii = {int(TRUTH[int(round(g.center_v_px)), int(round(g.center_u_px))]): list(g.contact_radii_m)
+             for g in response.grasps}
+    assert set(radii) == {1, 2}, radii          # one grasp per object first
+    assert radii[1] == [], radii
+    assert len(radii[2]) == 2 and all(0.0125 <= r <= 0.05 for r in radii[2]), radii
+
+
 def test_plan_grasp_on_a_perceive_answer_gives_the_same_grasps(cell, executor, call):
     node, client_node, client = cell
     perceive = client_node.create_client(Perceive, topics.PERCEIVE_SERVICE)
