@@ -147,8 +147,11 @@ def test_bad_goals_are_aborted_with_a_reason_and_the_node_keeps_serving(executor
     node.set_parameters([Parameter("server_wait_s", value=1.0)])  # the grasp service never comes
     nan_grasp = grasp_msg()
     nan_grasp.pose_base.pose.position.x = float("nan")
+    bad_radii = grasp_msg()
+    bad_radii.contact_radii_m = [0.02, float("nan")]
     cases = [
         (PickAndPlace.Goal(grasp=nan_grasp), "bad grasp pose"),
+        (PickAndPlace.Goal(grasp=bad_radii), "contact_radii_m must be empty (flat or not known) or two radii > 0 m"),
         (PickAndPlace.Goal(grasp=grasp_msg(xyz=(1.3, 0.0, 0.05))), "grasp outside the workspace"),
         (PickAndPlace.Goal(grasp=grasp_msg(width_m=0.2)), "maximum opening"),
         (PickAndPlace.Goal(grasp=grasp_msg(finger_force_n=-1.0)), "finger_force_n"),
