@@ -52,14 +52,16 @@ def test_a_goal_recorded_before_grasp_gained_fields_is_sent_as_todays_goal():
     assert (g.pose_base.pose.position.x, g.pose_base.header.stamp.sec, g.header.frame_id) == (0.5, 12, "panda_link0")
     assert goal.place_pose.pose.position.x == 0.3 and goal.place_pose.pose.orientation.x == 1.0
     assert g.estimated_mass_kg == 0.0 and g.finger_force_n == 0.0     # unknown then: the executor's own rule
+    assert list(g.contact_radii_m) == []                                # unknown then: the squeeze's flat law
 
 
 def test_a_message_of_the_installed_layout_round_trips():
     goal = PickAndPlace.Goal(plan_grasp=True)
-    goal.grasp.finger_force_n, goal.grasp.width_m = 0.7, 0.05
+    goal.grasp.finger_force_n, goal.grasp.width_m, goal.grasp.contact_radii_m = 0.7, 0.05, [0.02, 0.03]
     raw = serialize_message(goal)
     current = "bool plan_grasp\ndefgg_interfaces/Grasp grasp\ngeometry_msgs/PoseStamped place_pose\n" + "=" * 80 + \
-        "\nMSG: defgg_interfaces/Grasp\n" + OLD_GRASP + "float64 estimated_mass_kg\nfloat64 finger_force_n\n"
+        "\nMSG: defgg_interfaces/Grasp\n" + OLD_GRASP + "float64 estimated_mass_kg\nfloat64 finger_force_n\n" + \
+        "float64[] contact_radii_m\n"
     for msgdef in ("", current):         # no definition recorded: the installed one
         back = live_message(BagMessage("/defgg/session/pick_goal", GOAL, 0, raw, msgdef), PickAndPlace.Goal)
         assert back == goal
