@@ -40,9 +40,24 @@ def grasp_msg(grasp, frame, network, grip_rule: LabelGripRule, density_kg_m3: fl
     msg.width_px = image["width_px"]
     msg.youngs_modulus_pa = float(grasp.youngs_modulus_pa)
     msg.object_id = int(grasp.object_id)
-    msg.contact_radii_m = [float(r) for r in grasp.contact_radii_m]
+    _contact_radii(msg, grasp, warn)
     _grip_fields(msg, grasp, network, grip_rule, density_kg_m3, warn)
     return msg
+
+
+def _contact_radii(msg: Grasp, grasp, warn) -> None:
+    """Grasp.contact_radii_m (planning/contact_radii.py). A Grasp type without the field is an interface build older
+    than this source: said once, and the grasp goes without them (the executor's squeeze then uses the flat law)."""
+    global _STALE_INTERFACES_SAID
+    if hasattr(msg, "contact_radii_m"):
+        msg.contact_radii_m = [float(r) for r in grasp.contact_radii_m]
+    elif not _STALE_INTERFACES_SAID:
+        _STALE_INTERFACES_SAID = True
+        warn("the installed defgg_interfaces/Grasp has no contact_radii_m: its build is older than this source "
+             "(rebuild it: scripts/bootstrap.sh); grasps go without contact radii, the squeeze uses the flat law")
+
+
+_STALE_INTERFACES_SAID = False
 
 
 def _grip_fields(msg: Grasp, grasp, network, grip_rule: LabelGripRule, density_kg_m3: float, warn) -> None:
