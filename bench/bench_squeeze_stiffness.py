@@ -279,7 +279,8 @@ def main(argv=None) -> int:
     parser.add_argument("--moduli", type=float, nargs="+", default=[2e4, 2e5, 2e6, 2e9])
     parser.add_argument("--objects", nargs="+", default=["tuning"])
     parser.add_argument("--readings", type=Path, default=ROOT / "results" / "squeeze" / "readings.jsonl",
-                        help="squeeze readings cache (JSON lines, appended; the stored file has every reading docs/squeeze.md quotes)")
+                        help="squeeze readings cache (JSON lines, appended; the stored file: every reading "
+                             "docs/squeeze.md quotes)")
     parser.add_argument("--calibrate", action="store_true", help="print the hand's calibration and stop")
     args = parser.parse_args(argv)
     hand = calibration(args.readings)

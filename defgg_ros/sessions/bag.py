@@ -13,6 +13,7 @@ import json
 import os
 import re
 import shutil
+import struct
 import tempfile
 from dataclasses import dataclass, field
 from functools import lru_cache
@@ -49,8 +50,26 @@ class BagMessage:
         decode with the definition the bag recorded: a bag made before a message gained fields (e.g. the
         PickAndPlace result's arm_state) still reads, with the fields it had."""
         if self.msgdef and self.msgtype.startswith(f"{PACKAGE}/"):
-            return recorded_typestore(self.msgtype, self.msgdef).deserialize_cdr(self.raw, self.msgtype)
-        return session_typestore().deserialize_cdr(self.raw, self.msgtype)
+            return deserialize_cdr(recorded_typestore(self.msgtype, self.msgdef), self.raw, self.msgtype)
+        return deserialize_cdr(session_typestore(), self.raw, self.msgtype)
+
+
+def deserialize_cdr(store, raw: bytes, msgtype: str):
+    """store.deserialize_cdr, but up to 7 bytes may follow the last field (rosbags allows 3). Fast CDR (what
+    rclpy and every rmw_fastrtps node serialise with) aligns an empty sequence's end to its element's size:
+    a Grasp whose last field, contact_radii_m (float64[]), is empty ends with 4 padding bytes after the
+    length, which rosbags refuses ("CDR message size mismatch")."""
+    if len(raw) < 4 or bytes(raw[:2]) not in (b"\x00\x00", b"\x00\x01"):
+        raise SessionBagError(f"{msgtype}: not a CDR message (encapsulation {bytes(raw[:2]).hex()})")
+    msgdef = store.get_msgdef(msgtype)
+    read = msgdef.deserialize_cdr_le if raw[1] else msgdef.deserialize_cdr_be
+    try:
+        message, end = read(memoryview(raw)[4:], 0, msgdef.cls, store)
+    except (struct.error, UnicodeDecodeError, ValueError) as exc:
+        raise SessionBagError(f"{msgtype}: cannot be decoded: {exc}") from exc
+    if len(raw) - 4 - end > 7:
+        raise SessionBagError(f"{msgtype}: {len(raw) - 4 - end} bytes after the message's last field")
+    return message
 
 
 @lru_cache(maxsize=64)

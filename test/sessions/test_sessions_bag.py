@@ -144,3 +144,18 @@ def test_committed_sessions_decode_with_an_independent_mcap_ros2_reader():
             decoded = {channel.topic: message for _, channel, _, message in reader.iter_decoded_messages()}
         assert decoded[topics.DEPTH_IMAGE].encoding in ("16UC1", "32FC1")
         assert decoded[st.PLAN_RESPONSE].grasps[0].width_m > 0
+
+
+def test_a_grasp_as_rclpy_serialises_it_decodes_with_or_without_contact_radii():
+    # Fast CDR pads an empty float64[] at a message's end to 8 bytes; rosbags' own reader refused that.
+    from defgg_interfaces.msg import Grasp
+    from rclpy.serialization import serialize_message
+
+    from defgg_ros.sessions.bag import BagMessage
+
+    for radii in ([], [0.02, 0.03]):
+        raw = bytes(serialize_message(Grasp(finger_force_n=1.5, contact_radii_m=radii)))
+        decoded = BagMessage(topics.BEST_GRASP, "defgg_interfaces/msg/Grasp", 0, raw).decode()
+        assert decoded.finger_force_n == 1.5 and list(decoded.contact_radii_m) == radii
+    with pytest.raises(SessionBagError, match="bytes after"):
+        BagMessage(topics.BEST_GRASP, "defgg_interfaces/msg/Grasp", 0, raw + bytes(8)).decode()
