@@ -32,7 +32,7 @@ import math
 import cv2
 import numpy as np
 
-from defgg_ros.constants import FINGER_DEPTH_M, FINGER_PAD_WIDTH_M
+from defgg_ros.constants import FINGER_DEPTH_M, FINGER_PAD_WIDTH_M, GRIPPER_MAX_WIDTH_M
 from defgg_ros.perception.tabletop import CELL_M
 
 # A pad lies on a flat face when the surface under its whole footprint is within this of its most advanced point.
@@ -167,7 +167,7 @@ def perceived_contact_radii_m(grid_height_m: np.ndarray, grid_labels: np.ndarray
     ys = np.linspace(-pad_width_m / 2, pad_width_m / 2, ACROSS_SAMPLES)
     zs = tip_height_m + np.linspace(0.0, pad_length_m, HEIGHT_SAMPLES)
     if extent_m is None:
-        along = np.arange(0.0, 0.08 / 2 + MARGIN_OUT_M, ALONG_STEP_M)
+        along = np.arange(0.0, GRIPPER_MAX_WIDTH_M / 2 + MARGIN_OUT_M, ALONG_STEP_M)
     else:
         along = np.arange(max(extent_m / 2 - SEARCH_IN_M, 0.0), extent_m / 2 + MARGIN_OUT_M, ALONG_STEP_M)
     mine = (grid_labels == label) | (grid_labels == 0)   # unlabelled occupied cells: flanks cut at a crease
