@@ -88,7 +88,8 @@ def _on_four_distinct_objects(on: list, distinct: int = 4) -> bool:
 # Seed 1 has three graspable objects: its fourth one (a can beside the bin wall) has a 42.6 mm grasp whose
 # finger, opened to the executor's 52.6 mm, reaches 40.3 mm from the grasp's centre; the wall stands at
 # 41.7 mm in the render's truth, inside the free-space test's depth-noise tolerance. Seeds 0-9: 9 of 10 bins
-# have their top five on >= 4 objects (opened fully to 80 mm: 8 of 10; test_pads_sweep.py).
+# have their top five on >= 4 objects (opened fully to 80 mm: 9 of 10, five distinct in 2 bins instead of 8;
+# bench/bench_pre_grasp_opening.py, test_pads_sweep.py).
 @pytest.mark.parametrize("seed, distinct", [(0, 4), (1, 3), (2, 4), (3, 4)])
 def test_dense_bin_clutter_gets_its_top_five_grasps_on_four_distinct_objects(seed, distinct):
     """24 objects in a bin, a third of them 5-8 cm tall among 1-2 cm ones (the executor's half_height rule)."""
