@@ -241,18 +241,28 @@ def write_obj(path, vertices, faces) -> None:
     Path(path).write_text("\n".join(lines) + "\n", encoding="ascii")
 
 
-def convex_decomposition(tet: TetMesh) -> Path:
-    """V-HACD convex pieces of the surface (dynamic rigid bodies need convex shapes), cached."""
+# V-HACD's settings for a rigid body's convex pieces: voxels of the decomposition and vertices per piece. The
+# pieces come out larger than the surface (bench/bench_rigid_collision_fidelity.py measures by how much); the
+# training labels' rigid trials were made with these, so they stay (docs/simulation.md "Rigid bodies").
+VHACD_RESOLUTION = 200000
+VHACD_MAX_VERTICES_PER_PIECE = 32
+
+
+def convex_decomposition(tet: TetMesh, resolution: int = VHACD_RESOLUTION,
+                         max_vertices_per_piece: int = VHACD_MAX_VERTICES_PER_PIECE) -> Path:
+    """V-HACD convex pieces of the surface (dynamic rigid bodies need convex shapes), cached by the surface's
+    content and the settings (a file of other settings is never taken for these)."""
     import pybullet as p
 
-    out = tet.obj_path.with_name(f"{tet.content_hash}_vhacd.obj")
+    out = tet.obj_path.with_name(f"{tet.content_hash}_vhacd_r{resolution}_v{max_vertices_per_piece}.obj")
     if not out.exists():
-        log = tet.obj_path.with_name(f"{tet.content_hash}_vhacd.log")
+        log = out.with_suffix(".log")
         with atomic_path(out) as tmp:
             # pybullet.vhacd needs the file name to end in .obj
             tmp_obj = Path(str(tmp) + ".obj")
             with _stdout_silenced():  # V-HACD prints its progress from C
-                p.vhacd(str(tet.obj_path), str(tmp_obj), str(log), resolution=200000, maxNumVerticesPerCH=32)
+                p.vhacd(str(tet.obj_path), str(tmp_obj), str(log), resolution=resolution,
+                        maxNumVerticesPerCH=max_vertices_per_piece)
             os.replace(tmp_obj, tmp)
         log.unlink(missing_ok=True)
     return out

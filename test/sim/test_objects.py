@@ -43,6 +43,18 @@ def test_tet_mesh_is_coarse_valid_and_cached(monkeypatch, tmp_path):
     np.testing.assert_array_equal(again.tets, tet.tets)
 
 
+def test_convex_pieces_are_cached_per_vhacd_setting(monkeypatch, tmp_path):
+    """A decomposition made with other V-HACD settings is never taken for these (the cache key names them)."""
+    monkeypatch.setenv(meshes.MESH_CACHE_ENV, str(tmp_path))
+    tet = meshes.tetrahedralize(objects.get_shape("box_small")._surfaces[0])     # from the store: no fTetWild
+    fine = meshes.convex_decomposition(tet, resolution=40000, max_vertices_per_piece=16)
+    coarse = meshes.convex_decomposition(tet, resolution=20000, max_vertices_per_piece=4)
+    assert fine != coarse and fine.exists() and coarse.exists()
+
+    assert coarse.read_text() != fine.read_text()
+    assert meshes.convex_decomposition(tet, resolution=40000, max_vertices_per_piece=16) == fine
+
+
 def test_the_vtk_always_holds_the_nodes_of_the_npz_it_is_read_with(monkeypatch, tmp_path):
     """Two processes meshing one new surface at once each write the npz (fTetWild is not deterministic): a VTK
     written from the first beside the second's npz made every later soft body fail resetMeshData."""
