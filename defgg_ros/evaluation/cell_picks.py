@@ -95,7 +95,9 @@ def _plan(client, record: dict):
     p = grasp.pose_base.pose.position
     record["grasp"] = {"x_m": p.x, "y_m": p.y, "z_m": p.z, "angle_rad": grasp.angle_rad, "width_m": grasp.width_m,
                        "quality": grasp.quality, "youngs_modulus_pa": grasp.youngs_modulus_pa,
-                       "finger_force_n": grasp.finger_force_n, "estimated_mass_kg": grasp.estimated_mass_kg}
+                       "finger_force_n": grasp.finger_force_n, "estimated_mass_kg": grasp.estimated_mass_kg,
+                       # the squeeze's law: Hertz on these radii, the flat law when empty (docs/squeeze.md)
+                       "contact_radii_m": [float(r) for r in grasp.contact_radii_m]}
     return grasp
 
 
