@@ -51,6 +51,7 @@ from defgg_ros.sim.scene_spec import load_scene  # noqa: E402
 from defgg_ros.squeeze import (  # noqa: E402
     FIRM_FORCES_N,
     GENTLE_FORCES_N,
+    MODEL_FACTOR,
     HandCalibration,
     SqueezeError,
     SqueezeReading,
@@ -290,7 +291,7 @@ def main(argv=None) -> int:
     names = [n for o in args.objects for n in {"tuning": TUNING, "held_out": HELD_OUT}.get(o, (o,))]
     print(f"{'object':16s} {'E true':>8s} " + " ".join(f"{v:>9s}" for v in VARIANTS) +
           "  radii (cm): surface | perceived  spread  perceived estimate")
-    rows = []
+    rows, in_band, log_errors = [], [], []
     for name in names:
         for modulus in args.moduli:
             by_variant = {v: [] for v in VARIANTS}
@@ -304,6 +305,9 @@ def main(argv=None) -> int:
                         by_variant[variant].append(estimate)
                 except SqueezeError as error:   # the executor fails such a squeeze: a miss in the counts
                     print(f"{name:16s} {modulus:8.0e} refused: {error}", flush=True)
+            if modulus < 1e7:      # does the perceived estimate's one-sigma band hold the true modulus?
+                in_band += [e.low_pa <= modulus <= e.high_pa for e in by_variant["perceived"]]
+                log_errors += [math.log(e.youngs_modulus_pa / modulus) for e in by_variant["perceived"] if not e.rigid]
             factors = [factor(by_variant[v], modulus) for v in VARIANTS]
             rows.append((name, modulus, factors))
             values = [e.youngs_modulus_pa for e in by_variant["perceived"]]
@@ -313,6 +317,12 @@ def main(argv=None) -> int:
                   f"{by_variant['perceived'][0].describe() if by_variant['perceived'] else ''}", flush=True)
     for line in summary(rows):
         print(line)
+    print(f"perceived: the one-sigma band holds the true modulus in {sum(in_band)} of {len(in_band)} soft squeezes "
+          "(a band of one sd holds it in ~68 % when the model is right)")
+    if log_errors:      # what squeeze.MODEL_FACTOR stands for: the model's own error, one sd in log space
+        rms = math.sqrt(sum(x * x for x in log_errors) / len(log_errors))
+        print(f"perceived: rms of ln(estimate / true) over the {len(log_errors)} soft squeezes read as a number: "
+              f"{rms:.2f} (a factor {math.exp(rms):.2f}; squeeze.MODEL_FACTOR is {MODEL_FACTOR})")
     return 0
 
 

@@ -5,6 +5,7 @@ import pytest
 
 from defgg_ros.squeeze import (
     ASSUMED_POISSON_RATIO,
+    MODEL_FACTOR,
     RIGID_ABOVE_PA,
     HandCalibration,
     SqueezeError,
@@ -14,6 +15,7 @@ from defgg_ros.squeeze import (
     fit_contact_exponent,
     loaded_area_m2,
     object_compression_m,
+    squeeze_slope_npm,
 )
 
 pytestmark = pytest.mark.unit
@@ -54,6 +56,28 @@ def test_the_hand_s_compliance_is_taken_out_in_series():
     assert est.youngs_modulus_pa == pytest.approx(2e5, rel=1e-6) and est.contact_law == "flat"
     # Left in, it reads the object softer than it is.
     assert estimate_modulus(r, 0.06, 0.03, width_resolution_m=1e-6).youngs_modulus_pa < 0.8 * 2e5
+
+
+def test_the_band_widens_as_the_object_s_compliance_nears_the_calibration_s_noise():
+    """The hand's calibration noise is in the band: a 1e6 Pa block (26 um/N of its own, the hand's sd 9.7 um/N)
+    reads with a wider band than a 2e4 Pa one (1.3 mm/N: the model's own); Hertz's share 1.5 times the flat law's."""
+    noisy = HandCalibration(1.35e4, 9.7e-6, "test: the simulated cell's calibration")
+    band = {}
+    for e_pa in (2e4, 1e6):
+        r = readings_of(e_pa, 0.05, 0.05, 0.05, machine_npm=noisy.stiffness_npm)
+        est = estimate_modulus(r, 0.05, 0.05, hand=noisy, width_resolution_m=1e-6)
+        assert est.youngs_modulus_pa == pytest.approx(e_pa, rel=1e-6) and not est.rigid
+        band[e_pa] = math.log(est.high_pa / est.youngs_modulus_pa)
+    assert band[2e4] == pytest.approx(math.log(MODEL_FACTOR), rel=0.01)
+    object_c = 0.05 / (1e6 * loaded_area_m2(0.05, 0.05, 0.05))
+    assert band[1e6] == pytest.approx(math.hypot(math.log(MODEL_FACTOR), 9.7e-6 / object_c), rel=0.01)
+    assert band[1e6] > 1.05 * band[2e4]
+    sphere = sphere_readings(2e5, 0.05, machine_npm=noisy.stiffness_npm)
+    hertz = estimate_modulus(sphere, 0.05, 0.05, hand=noisy, width_resolution_m=1e-6,
+                             contact_radii_m=(0.025, 0.025))
+    flat_c = 1.0 / squeeze_slope_npm(sphere)[0] - noisy.compliance_mpn
+    assert math.log(hertz.high_pa / hertz.youngs_modulus_pa) == pytest.approx(
+        math.hypot(math.log(MODEL_FACTOR), 1.5 * 9.7e-6 / flat_c), rel=0.01)
 
 
 def test_an_object_no_more_compliant_than_the_calibration_s_noise_is_rigid_with_a_bound():
