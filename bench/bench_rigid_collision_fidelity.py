@@ -24,6 +24,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import trimesh
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -39,21 +40,8 @@ RAY_REACH_M = 0.2
 
 
 def pieces_volume_m3(obj_path: Path) -> float:
-    """Summed volume of the convex pieces of a V-HACD .obj (one `o` group per piece)."""
-    vertices, pieces = [], []
-    for line in obj_path.read_text().splitlines():
-        if line.startswith("o "):
-            pieces.append([])
-        elif line.startswith("v "):
-            vertices.append([float(x) for x in line.split()[1:4]])
-        elif line.startswith("f ") and pieces:
-            pieces[-1].append([int(t.split("/")[0]) - 1 for t in line.split()[1:4]])
-    v = np.asarray(vertices)
-    total = 0.0
-    for faces in pieces:
-        f = np.asarray(faces)
-        total += abs(np.einsum("ij,ij->i", v[f[:, 0]], np.cross(v[f[:, 1]], v[f[:, 2]])).sum()) / 6.0
-    return total
+    """Summed volume of the closed convex pieces of a V-HACD .obj (read as one mesh: the signed volumes add)."""
+    return abs(float(trimesh.load(obj_path, force="mesh", process=False).volume))
 
 
 def hull_margin_m() -> float:

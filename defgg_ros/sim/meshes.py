@@ -243,7 +243,7 @@ def write_obj(path, vertices, faces) -> None:
 
 # V-HACD's settings for a rigid body's convex pieces: voxels of the decomposition and vertices per piece. The
 # pieces come out larger than the surface (bench/bench_rigid_collision_fidelity.py measures by how much); the
-# training labels' rigid trials were made with these, so they stay (docs/simulation.md "Rigid bodies").
+# training labels' rigid trials were made with these, so they stay (docs/pybullet_fem.md "Rigid bodies").
 VHACD_RESOLUTION = 200000
 VHACD_MAX_VERTICES_PER_PIECE = 32
 

@@ -50,7 +50,6 @@ def test_convex_pieces_are_cached_per_vhacd_setting(monkeypatch, tmp_path):
     fine = meshes.convex_decomposition(tet, resolution=40000, max_vertices_per_piece=16)
     coarse = meshes.convex_decomposition(tet, resolution=20000, max_vertices_per_piece=4)
     assert fine != coarse and fine.exists() and coarse.exists()
-
     assert coarse.read_text() != fine.read_text()
     assert meshes.convex_decomposition(tet, resolution=40000, max_vertices_per_piece=16) == fine
 
