@@ -49,6 +49,11 @@ RIGID_PA, SOFT_PA = max(TRAINING_YOUNGS_MODULI_PA), min(TRAINING_YOUNGS_MODULI_P
 # The fourth case (issue 49 item 4, beyond the paper): the executor squeezes the object first and tells the
 # segmentation node its estimate; then plan and pick. Run with --cases measured (a run of its own).
 MEASURED = "measured"
+# The paper's real-robot protocol closes the same gripper on every grasp: the stiffness input can only change
+# which grasp the network chooses. In our cell it also sets the closing force and speed (the labels' FOS(E)
+# rule), so a wrong input changes both. The grasp-only cases ("rigid_grasp", "soft_grasp") plan with the wrong
+# input but close as for the object's true modulus: the grasp channel alone. Run with --cases rigid_grasp,soft_grasp.
+GRASP_ONLY_SUFFIX = "_grasp"
 MAX_ATTEMPTS = 2
 # The executor's words for "no joint states / an input silent" (wall clock): the simulator, not the grasp.
 CELL_FAILURE_PREFIXES = ("driver silent", "no joint states", "no external wrench")
@@ -94,6 +99,8 @@ OBJECTS = (
 
 def input_modulus_pa(case: str, obj: CellObject) -> float:
     """The modulus the segmentation node is told for `obj` in `case`."""
+    if case.endswith(GRASP_ONLY_SUFFIX) and case != GRASP_ONLY_SUFFIX:
+        return input_modulus_pa(case[:-len(GRASP_ONLY_SUFFIX)], obj)
     if case == "correct":
         return obj.youngs_modulus_pa
     if case == "rigid":
@@ -102,7 +109,22 @@ def input_modulus_pa(case: str, obj: CellObject) -> float:
         return SOFT_PA
     if case == MEASURED:
         return 0.0       # nothing told: the segmentation node's default until the squeeze's estimate arrives
-    raise ValueError(f"unknown case {case!r}; known: {', '.join((*CASES, MEASURED))}")
+    raise ValueError(f"unknown case {case!r}; known: {', '.join((*CASES, MEASURED, *GRASP_ONLY_CASES))}")
+
+
+GRASP_ONLY_CASES = tuple(f"{c}{GRASP_ONLY_SUFFIX}" for c in ("rigid", "soft"))
+
+
+def grip_modulus_pa(case: str, obj: CellObject) -> float | None:
+    """The modulus the executor closes for (force and speed): the object's own in a grasp-only case, else
+    None (the planned grasp's, i.e. the input's)."""
+    return obj.youngs_modulus_pa if case in GRASP_ONLY_CASES else None
+
+
+def same_as_plain_case(case: str, obj: CellObject) -> bool:
+    """A grasp-only case whose input is the object's own modulus is its plain case (same plan, same grip):
+    not run again; the report takes the plain case's picks."""
+    return case in GRASP_ONLY_CASES and input_modulus_pa(case, obj) == obj.youngs_modulus_pa
 
 
 def _uniform(seed: int, *key) -> float:
@@ -134,7 +156,8 @@ def run_order(objects) -> list:
 
 def planned_picks(objects, cases, picks: int) -> list:
     """(object, case, pick) in run order: pick-major, then object (soft and stiff alternating), then case."""
-    return [(o, c, i) for i in range(picks) for o in run_order(objects) for c in cases]
+    return [(o, c, i) for i in range(picks) for o in run_order(objects) for c in cases
+            if not same_as_plain_case(c, o)]
 
 
 def finished_keys(records) -> set:
@@ -201,9 +224,11 @@ def run(out: Path, work: Path, model: Path, picks: int, seed: int, objects, case
             record = {"key": key, "object": obj.name, "object_set": obj.set_name, "soft": obj.soft,
                       "youngs_modulus_pa": obj.youngs_modulus_pa, "case": case, "pick": index, "seed": seed,
                       "input_youngs_modulus_pa": input_modulus_pa(case, obj), "pose": pose,
+                      "grip_youngs_modulus_pa": grip_modulus_pa(case, obj),
                       "model": str(model), "started_unix_s": round(time.time(), 1)}
             setup = PickSetup(scene_object(obj, pose, Path(work) / "meshes"), record["input_youngs_modulus_pa"],
-                              measure_first=case == MEASURED)
+                              measure_first=case == MEASURED,
+                              grip_youngs_modulus_pa=record["grip_youngs_modulus_pa"])
             record.update(_attempt(pick_fn, setup, Path(work), key, model))
             append_jsonl(records_path, record)
             ran += 1

@@ -29,6 +29,8 @@ from defgg_ros.bringup.demo_geometry import bin_place_xy, in_bin, release_tcp_z
 from defgg_ros.bringup.node_set import load_node_set
 from defgg_ros.bringup.supervisor import Bringup, BringupError
 from defgg_ros.demo import executor_params
+from defgg_ros.grip_force import LabelGripRule
+from defgg_ros.model.checkpoint import load_checkpoint
 
 DRIVER, INFERENCE, EXECUTOR = "fake_panda_driver", "grasp_inference_node", "executor_node"
 # The executor's wall-clock guards (no joint states for watchdog_timeout_s, an input silent for silent_topic_s;
@@ -50,10 +52,12 @@ SETTLE_S, SETTLE_TIMEOUT_S, STILL_M = 1.0, 20.0, 0.002
 class PickSetup:
     """What one pick needs: the scene object (as a scene YAML mapping) and the modulus the segmentation node
     is told; or, with measure_first, nothing told: the executor squeezes the object first (PickAndPlace
-    measure_only, docs/squeeze.md) and tells the segmentation node what it measured."""
+    measure_only, docs/squeeze.md) and tells the segmentation node what it measured. grip_youngs_modulus_pa:
+    close as for this modulus (force and speed) whatever the input was (a grasp-only case); None: as planned."""
     scene_object: dict
     input_youngs_modulus_pa: float
     measure_first: bool = False
+    grip_youngs_modulus_pa: float | None = None
 
 
 def write_scene(path: Path, scene_object: dict) -> Path:
@@ -99,6 +103,19 @@ def _plan(client, record: dict):
                        # the squeeze's law: Hertz on these radii, the flat law when empty (docs/squeeze.md)
                        "contact_radii_m": [float(r) for r in grasp.contact_radii_m]}
     return grasp
+
+
+def grip_as(grasp, youngs_modulus_pa: float, model_path: Path, record: dict) -> None:
+    """Make the planned grasp close as for `youngs_modulus_pa`: the modulus it carries (the executor's closing
+    speed) and its force by the model's label rule on the plan's mass estimate (what the inference node
+    computes for a grasp planned with that modulus: planning/grip_estimate.py)."""
+    rule = LabelGripRule.from_meta(load_checkpoint(model_path).get("meta"))
+    if rule.needs_mass and grasp.estimated_mass_kg > 0:
+        grasp.finger_force_n = rule.finger_force_n(youngs_modulus_pa, grasp.estimated_mass_kg)
+    else:
+        grasp.finger_force_n = 0.0     # no mass or the legacy rule: the executor's force of the modulus
+    grasp.youngs_modulus_pa = float(youngs_modulus_pa)
+    record["grip"] = {"youngs_modulus_pa": grasp.youngs_modulus_pa, "finger_force_n": grasp.finger_force_n}
 
 
 def _settled_position(client) -> np.ndarray:
@@ -175,6 +192,8 @@ def run_pick(setup: PickSetup, scene_path: Path, model_path: Path, log, ready_ti
             else:
                 client.set_stiffness([], default_youngs_modulus_pa=setup.input_youngs_modulus_pa)
             grasp = _plan(client, record)
+            if grasp is not None and setup.grip_youngs_modulus_pa:
+                grip_as(grasp, setup.grip_youngs_modulus_pa, model_path, record)
             if grasp is not None:
                 _execute(client, grasp, record, executor_params(node_set), pick_timeout_s)
             position = _settled_position(client)
