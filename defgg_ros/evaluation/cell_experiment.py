@@ -9,6 +9,12 @@ the fake driver) under each stiffness input given to the segmentation node with 
     soft      every object assumed soft (2e4 Pa, the softest training modulus)
     measured  nothing told: the executor squeezes the object first (PickAndPlace measure_only) and sends its
               estimate to the segmentation node, then plan and pick (issue 49 item 4; --cases measured)
+    rigid_grasp, soft_grasp
+              the grasp channel alone: plan with the wrong input, close with the force and speed of the
+              object's true modulus (the paper's robot closes the same gripper on every grasp; ours closes
+              with the labels' FOS(E) force, so a plain wrong input changes the grasp and the force).
+              Where the wrong input is the object's own modulus the plain case's picks stand in
+              (--cases rigid_grasp,soft_grasp --records records_grasp_only.jsonl)
 
 Each object is picked --picks times per case from a seeded pose (position and yaw on the table): pick i of an
 object has the same pose in every case, so the cases compare paired. The order is pick-major (every object's
@@ -39,7 +45,7 @@ from defgg_ros.bringup.supervisor import BringupError
 from defgg_ros.cli_help import HelpFormatter
 from defgg_ros.constants import OBJECT_DENSITY_KG_M3, TRAINING_YOUNGS_MODULI_PA
 from defgg_ros.evaluation.cell_picks import PickSetup, run_pick
-from defgg_ros.evaluation.cell_report import CASES, RECORDS_NAME, write_report
+from defgg_ros.evaluation.cell_report import CASES, GRASP_ONLY_CASES, RECORDS_NAME, plain_case, write_report
 from defgg_ros.ros.cell_client import CellCallError
 from defgg_ros.ros.domain import ISOLATION_ENV, apply_domain_choice, default_domain_choice
 from defgg_ros.ros.share import share_path
@@ -49,11 +55,8 @@ RIGID_PA, SOFT_PA = max(TRAINING_YOUNGS_MODULI_PA), min(TRAINING_YOUNGS_MODULI_P
 # The fourth case (issue 49 item 4, beyond the paper): the executor squeezes the object first and tells the
 # segmentation node its estimate; then plan and pick. Run with --cases measured (a run of its own).
 MEASURED = "measured"
-# The paper's real-robot protocol closes the same gripper on every grasp: the stiffness input can only change
-# which grasp the network chooses. In our cell it also sets the closing force and speed (the labels' FOS(E)
-# rule), so a wrong input changes both. The grasp-only cases ("rigid_grasp", "soft_grasp") plan with the wrong
-# input but close as for the object's true modulus: the grasp channel alone. Run with --cases rigid_grasp,soft_grasp.
-GRASP_ONLY_SUFFIX = "_grasp"
+# The grasp-only cases (cell_report.GRASP_ONLY_CASES): plan with the wrong input, close as for the true modulus.
+# Run with --cases rigid_grasp,soft_grasp (a run of its own).
 MAX_ATTEMPTS = 2
 # The executor's words for "no joint states / an input silent" (wall clock): the simulator, not the grasp.
 CELL_FAILURE_PREFIXES = ("driver silent", "no joint states", "no external wrench")
@@ -99,8 +102,8 @@ OBJECTS = (
 
 def input_modulus_pa(case: str, obj: CellObject) -> float:
     """The modulus the segmentation node is told for `obj` in `case`."""
-    if case.endswith(GRASP_ONLY_SUFFIX) and case != GRASP_ONLY_SUFFIX:
-        return input_modulus_pa(case[:-len(GRASP_ONLY_SUFFIX)], obj)
+    if case in GRASP_ONLY_CASES:
+        return input_modulus_pa(plain_case(case), obj)
     if case == "correct":
         return obj.youngs_modulus_pa
     if case == "rigid":
@@ -110,9 +113,6 @@ def input_modulus_pa(case: str, obj: CellObject) -> float:
     if case == MEASURED:
         return 0.0       # nothing told: the segmentation node's default until the squeeze's estimate arrives
     raise ValueError(f"unknown case {case!r}; known: {', '.join((*CASES, MEASURED, *GRASP_ONLY_CASES))}")
-
-
-GRASP_ONLY_CASES = tuple(f"{c}{GRASP_ONLY_SUFFIX}" for c in ("rigid", "soft"))
 
 
 def grip_modulus_pa(case: str, obj: CellObject) -> float | None:

@@ -19,12 +19,38 @@ from defgg_ros.evaluation.paired import Paired, count_pairs, sign_test_p
 
 CASES = ("correct", "rigid", "soft")
 MEASURED = "measured"
+# The paper's real robot closes the same gripper on every grasp, so its stiffness input only changes which grasp
+# the network chooses. Our cell also closes with the labels' force and speed for the input modulus (FOS(E)), so a
+# wrong input changes both. A grasp-only case plans with the wrong input and closes as for the object's true
+# modulus: the grasp channel alone; "rigid" vs "rigid_grasp" is then the force channel alone (same plan input).
+GRASP_ONLY_SUFFIX = "_grasp"
+GRASP_ONLY_CASES = ("rigid_grasp", "soft_grasp")
 RECORDS_NAME = "records.jsonl"
 BOOTSTRAP_RESAMPLES = 2000
 BOOTSTRAP_SEED = 0
 FIGURE_NAME, REPORT_NAME = "per_object.png", "report.md"
 # Two plans chose the same grasp when their centres are this close and their angles this near (modulo pi).
 SAME_GRASP_POSITION_M, SAME_GRASP_ANGLE_RAD = 0.005, math.radians(10.0)
+
+
+def plain_case(case: str) -> str:
+    """The case a grasp-only case plans like ("rigid_grasp" -> "rigid"); any other case is its own."""
+    return case[:-len(GRASP_ONLY_SUFFIX)] if case in GRASP_ONLY_CASES else case
+
+
+def with_plain_substitutes(records) -> list:
+    """The records plus, once a grasp-only run exists, the plain picks that stand for grasp-only ones: where the
+    wrong input is the object's own modulus (rigid on a 2e9 Pa object, soft on a 2e4 Pa one) the grasp-only case
+    is the plain case (same plan, same grip) and was not run again."""
+    if not any(r.get("case") in GRASP_ONLY_CASES for r in records):
+        return list(records)
+    stand_ins = []
+    for r in outcomes(records).values():
+        case = f"{r['case']}{GRASP_ONLY_SUFFIX}"
+        if case in GRASP_ONLY_CASES and r.get("input_youngs_modulus_pa") == r.get("youngs_modulus_pa"):
+            stand_ins.append({**r, "case": case, "key": f"{r['object']}|{case}|{r['pick']}",
+                              "stands_in_for": r["key"]})
+    return list(records) + stand_ins
 
 
 def records_files(out: Path) -> list:
@@ -121,7 +147,8 @@ def per_object_figure(table: dict, objects, path: Path, cases=CASES, totals=None
     fig, ax = plt.subplots(figsize=(max(6.0, 0.62 * len(columns) * len(cases) / 1.5), 3.8))
     width = 0.8 / len(cases)
     labels = {"correct": "correct E", "rigid": "all assumed rigid", "soft": "all assumed soft",
-              MEASURED: "measured E (squeeze)"}
+              MEASURED: "measured E (squeeze)", "rigid_grasp": "rigid, gripped as true E",
+              "soft_grasp": "soft, gripped as true E"}
     for k, case in enumerate(cases):
         cells = [table[name].get(case, [0, 0]) for name in names] + [totals[case]]
         xs = [i + (k - (len(cases) - 1) / 2) * width for i in range(len(columns))]
@@ -142,10 +169,12 @@ def per_object_figure(table: dict, objects, path: Path, cases=CASES, totals=None
 
 
 def comparisons(cases) -> list:
-    """(A, B) pairs to compare: correct against every other input; measured against the two wrong ones."""
+    """(A, B) pairs to compare: correct against every other input; measured against the two wrong ones; a wrong
+    input against its grasp-only case (the same plan input, only the grip differs: the force channel)."""
     out = [("correct", c) for c in cases if c != "correct"]
     if MEASURED in cases:
         out += [(MEASURED, c) for c in ("rigid", "soft") if c in cases]
+    out += [(plain_case(c), c) for c in GRASP_ONLY_CASES if c in cases and plain_case(c) in cases]
     return out
 
 
@@ -210,11 +239,17 @@ def squeeze_rows(records, objects) -> list:
     return rows
 
 
+def present_cases(table: dict) -> list:
+    """The cases the success table holds, in the report's column order."""
+    return [c for c in (*CASES, MEASURED, *GRASP_ONLY_CASES) if any(c in v for v in table.values())]
+
+
 def report_markdown(records, objects, planned_picks: int | None = None) -> str:
     """The results: the per-object table (objects: the experiment's, with name, youngs_modulus_pa and soft) and
     the paired comparisons."""
+    records = with_plain_substitutes(records)
     table = success_table(records)
-    cases = [c for c in (*CASES, MEASURED) if any(c in v for v in table.values())]
+    cases = present_cases(table)
     done = len(outcomes(records))
     errors = sum(1 for r in records if r.get("cell_error"))
     planned = (planned_picks or max((r["pick"] + 1 for r in records), default=0)) * len(objects) * len(cases)
@@ -259,10 +294,11 @@ def report_markdown(records, objects, planned_picks: int | None = None) -> str:
 def write_report(out: Path, objects, planned_picks: int | None = None) -> str:
     """OUT/per_object.png and the results part of OUT/report.md (between the markers; the rest is kept)."""
     records = [r for path in records_files(out) for r in read_jsonl(path)]
-    table = success_table(records)
+    table = success_table(with_plain_substitutes(records))
     if table:
-        cases = [c for c in (*CASES, MEASURED) if any(c in v for v in table.values())]
-        per_object_figure(table, objects, Path(out) / FIGURE_NAME, cases, complete_totals(records, cases))
+        cases = present_cases(table)
+        per_object_figure(table, objects, Path(out) / FIGURE_NAME, cases,
+                          complete_totals(with_plain_substitutes(records), cases))
     body = report_markdown(records, objects, planned_picks)
     path = Path(out) / REPORT_NAME
     text = path.read_text(encoding="utf-8") if path.exists() else ""

@@ -42,6 +42,40 @@ def test_the_cases_tell_the_segmentation_node_the_true_a_rigid_or_a_soft_modulus
         ce.input_modulus_pa("medium", obj)
 
 
+def test_a_grasp_only_case_plans_with_the_wrong_input_and_grips_as_the_true_modulus():
+    ball, block = ce.CellObject("common_ball", "common", 2e5), ce.CellObject("egad_test_00_c1", "adversarial", 2e9)
+    assert [ce.input_modulus_pa(c, ball) for c in ce.GRASP_ONLY_CASES] == [2e9, 2e4]
+    assert [ce.grip_modulus_pa(c, ball) for c in ce.GRASP_ONLY_CASES] == [2e5, 2e5]
+    assert [ce.grip_modulus_pa(c, ball) for c in (*ce.CASES, ce.MEASURED)] == [None] * 4    # as planned
+    # rigid_grasp on a 2e9 Pa object is its rigid case (same plan, same grip): not run again
+    plan = ce.planned_picks([ball, block], ce.GRASP_ONLY_CASES, 2)
+    assert [(o.name, c) for o, c, i in plan if i == 0] == [
+        ("common_ball", "rigid_grasp"), ("common_ball", "soft_grasp"), ("egad_test_00_c1", "soft_grasp")]
+    assert len(ce.planned_picks(ce.OBJECTS, ce.GRASP_ONLY_CASES, 5)) == 95     # 9 not rigid + 10 not 2e4, x5
+
+
+def test_grip_as_gives_the_planned_grasp_the_true_modulus_and_the_labels_force_for_it():
+    from defgg_interfaces.msg import Grasp
+
+    from defgg_ros.evaluation.cell_picks import grip_as
+    from defgg_ros.grip_force import defgraspsim_finger_force_n
+    from defgg_ros.model.checkpoint import load_checkpoint
+    from defgg_ros.ros.share import share_path
+
+    model = share_path("models", "defgg_cnn.pt")
+    friction = load_checkpoint(model)["meta"]["label_grip_rule"]["friction"]
+    grasp = Grasp(youngs_modulus_pa=2e9, estimated_mass_kg=0.05, finger_force_n=0.68)   # planned as rigid
+    record = {}
+    grip_as(grasp, 2e4, model, record)
+    assert grasp.youngs_modulus_pa == 2e4        # the executor's closing speed follows it
+    assert grasp.finger_force_n == pytest.approx(defgraspsim_finger_force_n(2e4, 0.05, friction))
+    assert grasp.finger_force_n < 0.68 * 1.43 / 1.93 * 1.01      # FOS 1.43 at 2e4 Pa vs 1.93 at 2e9 Pa
+    assert record["grip"] == {"youngs_modulus_pa": 2e4, "finger_force_n": grasp.finger_force_n}
+    unknown_mass = Grasp(youngs_modulus_pa=2e9, estimated_mass_kg=0.0, finger_force_n=0.68)
+    grip_as(unknown_mass, 2e4, model, {})
+    assert unknown_mass.finger_force_n == 0.0     # no mass: the executor's own rule of the (true) modulus
+
+
 def test_poses_are_seeded_per_object_and_pick_and_stay_on_the_camera_centre():
     a = ce.pick_pose(0, "common_ball", 3)
     assert a == ce.pick_pose(0, "common_ball", 3)          # the same pose for every case: paired
@@ -160,6 +194,37 @@ def test_the_measured_case_is_compared_with_every_input_and_its_estimates_are_ta
     assert "| common_ball | 2e+05 | 3e+05 | 1.5 | 2/3 | 0/3 |" in body
 
 
+def test_grasp_only_picks_are_compared_with_correct_and_with_their_plain_case_and_stand_ins_fill_the_rest(
+        tmp_path):
+    from defgg_ros.atomic import append_jsonl
+
+    def rec(obj, e, case, i, ok, input_pa):
+        return pick(obj, case, i, ok, youngs_modulus_pa=e, input_youngs_modulus_pa=input_pa)
+
+    plain = [rec("common_sponge", 2e4, "correct", 0, False, 2e4), rec("common_sponge", 2e4, "rigid", 0, True, 2e9),
+             rec("common_sponge", 2e4, "soft", 0, False, 2e4),
+             rec("egad_test_00_c1", 2e9, "correct", 0, True, 2e9), rec("egad_test_00_c1", 2e9, "rigid", 0, True, 2e9),
+             rec("egad_test_00_c1", 2e9, "soft", 0, False, 2e4)]
+    assert cr.with_plain_substitutes(plain) == plain        # no grasp-only run: nothing stands in
+    grasp_only = [rec("common_sponge", 2e4, "rigid_grasp", 0, False, 2e9),
+                  rec("egad_test_00_c1", 2e9, "soft_grasp", 0, False, 2e4)]
+    filled = cr.with_plain_substitutes(plain + grasp_only)
+    stand_ins = {r["key"]: r["stands_in_for"] for r in filled if "stands_in_for" in r}
+    assert stand_ins == {"common_sponge|soft_grasp|0": "common_sponge|soft|0",
+                         "egad_test_00_c1|rigid_grasp|0": "egad_test_00_c1|rigid|0"}
+    assert cr.comparisons(["correct", "rigid", "soft", "rigid_grasp", "soft_grasp"]) == [
+        ("correct", "rigid"), ("correct", "soft"), ("correct", "rigid_grasp"), ("correct", "soft_grasp"),
+        ("rigid", "rigid_grasp"), ("soft", "soft_grasp")]
+    for r in plain:
+        append_jsonl(tmp_path / ce.RECORDS_NAME, r)
+    for r in grasp_only:
+        append_jsonl(tmp_path / "records_grasp_only.jsonl", r)
+    body = cr.write_report(tmp_path, ce.OBJECTS, planned_picks=1)
+    assert "| correct vs rigid_grasp | all | 2 | 2 | 0 / 0 | +0.0 |" in body       # the force was the difference
+    assert "| rigid vs rigid_grasp | all | 2 | 2 | 1 / 0 | +50.0 |" in body
+    assert "**10 of 70** planned (14 objects × 5 cases" in body
+
+
 def test_discordant_pairs_are_split_by_whether_the_plans_chose_the_same_grasp():
     def g(x, angle):
         return {"x_m": x, "y_m": 0.0, "angle_rad": angle}
@@ -178,6 +243,8 @@ def test_cli_refuses_unknown_objects_and_cases(capsys):
     assert ce.main(["run", "--out", "unused", "--objects", "cube"]) == 2
     assert "not objects of the experiment" in capsys.readouterr().err
     assert ce.main(["run", "--out", "unused", "--cases", "correct,medium"]) == 2
+    assert "unknown case" in capsys.readouterr().err
+    assert ce.main(["run", "--out", "unused", "--cases", "correct_grasp"]) == 2     # only the wrong inputs have one
     assert "unknown case" in capsys.readouterr().err
     assert ce.main(["run", "--out", "unused", "--records", "../elsewhere.jsonl"]) == 2
     assert "--records must be a file name" in capsys.readouterr().err
