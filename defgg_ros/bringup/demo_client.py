@@ -28,7 +28,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from defgg_ros.constants import GRIPPER_MAX_WIDTH_M
 from defgg_ros.ros import qos, topics
-from defgg_ros.ros.action import ActionClient, destroy_actions
+from defgg_ros.ros.action import ActionClient, ResultTimeout, destroy_actions, result_of_goal
 from defgg_ros.ros.cell_client import CellCallError, CellClient
 from defgg_ros.ros.conversions import stamp_to_ns
 from defgg_ros.ros.service import ServiceTimeout, call_idempotent
@@ -100,7 +100,10 @@ class DemoClient:
         self._wait(self.gripper_move_client.server_is_ready, timeout_s, "the gripper move action")
         handle = self._wait_future(self.gripper_move_client.send_goal_async(
             Move.Goal(width=GRIPPER_MAX_WIDTH_M, speed=0.1)), timeout_s, "the gripper goal response")
-        return self._wait_future(handle.get_result_async(), timeout_s, "the gripper result").result
+        try:
+            return result_of_goal(handle, timeout_s, "the gripper result", self._spin_until).result
+        except ResultTimeout as exc:
+            raise CellCallError(str(exc)) from None
 
     def _on_depth(self, msg):
         def put():

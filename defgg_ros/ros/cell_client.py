@@ -18,7 +18,7 @@ from defgg_interfaces.srv import Perceive, PlanGrasp, SetStiffness
 from franka_msgs.action import Grasp
 
 from defgg_ros.ros import topics
-from defgg_ros.ros.action import ActionClient
+from defgg_ros.ros.action import ActionClient, ResultTimeout, result_of_goal
 from defgg_ros.ros.service import ServiceTimeout, call_idempotent
 
 POLL_S = 0.05          # how often a wait without our own spinning re-checks a condition
@@ -142,10 +142,10 @@ class CellClient:
         if not handle.accepted:
             raise CellCallError("the executor rejected the PickAndPlace goal (busy?)")
         try:
-            result = self.result_of(handle.get_result_async(), timeout_s, "the PickAndPlace result").result
-        except CellCallError:
+            result = result_of_goal(handle, timeout_s, "the PickAndPlace result", self.wait_until).result
+        except (ResultTimeout, RuntimeError) as exc:
             handle.cancel_goal_async()
-            raise
+            raise CellCallError(str(exc)) from None
         if self.recorder is not None:
             self.recorder.record_pick_result(result)
         return result

@@ -6,6 +6,8 @@ queued thousands of times, a 100 Hz timer firing a few times a second, action re
 import threading
 from collections import Counter
 
+import pytest
+from conftest import _spin_while_not
 from franka_msgs.action import Move as GripperMove
 from rclpy.action import ActionServer
 from rclpy.callback_groups import ReentrantCallbackGroup
@@ -113,3 +115,45 @@ def test_destroyed_action_server_stops_being_advertised(executor, spin):
             assert client.server_is_ready()
             server.destroy()
             spin(executor, lambda: not client.server_is_ready(), 10.0, "the server destroyed by hand")
+
+
+class LosesFirstResultRequest(ActionServer):
+    """A real rclpy action server whose first result request goes unanswered: what a response dropped by
+    DDS looks like to the client (defgg_ros.ros.action.result_of_goal)."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.result_requests = 0
+
+    async def _execute_get_result_request(self, request_header_and_message):
+        self.result_requests += 1
+        if self.result_requests > 1:
+            await super()._execute_get_result_request(request_header_and_message)
+
+
+def test_a_lost_result_response_is_asked_for_again_and_arrives(executor, spin):
+    from defgg_ros.ros.action import ResultTimeout, result_of_goal
+
+    def on_move(goal_handle):
+        goal_handle.succeed()
+        return GripperMove.Result(success=True)
+
+    server_node = Node("forgetful_gripper", context=executor.context)
+    server = LosesFirstResultRequest(server_node, GripperMove, "gripper_move_lossy", on_move)
+    client_node = Node("lossy_client", context=executor.context)
+    client = ActionClient(client_node, GripperMove, "gripper_move_lossy")
+    executor.add_node(server_node)
+    executor.add_node(client_node)
+    spin(executor, client.server_is_ready, 10.0, "the action server")
+
+    def wait_until(predicate, timeout_s):
+        return _spin_while_not(executor, predicate, timeout_s)
+
+    handle = spin(executor, client.send_goal_async(GripperMove.Goal(width=0.04, speed=0.1)), 5.0, "the goal")
+    response = result_of_goal(handle, 10.0, "the result", wait_until, resend_every_s=0.5)
+    assert response.result.success and server.result_requests == 2
+    handle = spin(executor, client.send_goal_async(GripperMove.Goal(width=0.04, speed=0.1)), 5.0, "a second goal")
+    server.result_requests = -100     # every request unanswered now: a clear timeout, not a hang
+    with pytest.raises(ResultTimeout, match=r"waiting for the result \(\d+ requests\)"):
+        result_of_goal(handle, 1.5, "the result", wait_until, resend_every_s=0.5)
+
