@@ -221,6 +221,34 @@ def channel_rows(records, cases) -> list:
     return rows
 
 
+def repeat_pairs(records) -> list:
+    """Pairs of picks that ran the same input at the same pose: correct with rigid on a 2e9 Pa object, correct
+    with soft on a 2e4 Pa one (the paper's design has them too). What differs between the two is the cell's
+    run-to-run noise alone (wall-clock threads, a fresh cell each). Stand-ins (copies) are not repeats."""
+    by_key = {(r["object"], r["pick"], r["case"]): r for r in outcomes(records).values() if "stands_in_for" not in r}
+    pairs = []
+    for (name, pick, case), a in sorted(by_key.items()):
+        if case != "correct":
+            continue
+        for other in ("rigid", "soft"):
+            b = by_key.get((name, pick, other))
+            if b is not None and b.get("input_youngs_modulus_pa") == a.get("input_youngs_modulus_pa"):
+                pairs.append((a, b))
+    return pairs
+
+
+def repeat_line(records) -> str:
+    """One sentence: how often the same input at the same pose ended the same way."""
+    pairs = repeat_pairs(records)
+    if not pairs:
+        return ""
+    agree = sum(bool(a["success"]) == bool(b["success"]) for a, b in pairs)
+    same = sum(same_grasp(a, b) for a, b in pairs)
+    return (f"Run-to-run noise (the same input at the same pose, twice: correct and rigid on the 2e9 Pa objects, "
+            f"correct and soft on the 2e4 Pa ones): {agree} of {len(pairs)} pairs ended the same way "
+            f"({len(pairs) - agree} discordant); the two plans chose the same grasp in {same} of {len(pairs)}.")
+
+
 def squeeze_rows(records, objects) -> list:
     """The measured case's estimates per object: median estimate, its ratio to the true modulus, how many
     within a factor 3 (issue 49 item 4's target) or called rigid."""
@@ -282,6 +310,9 @@ def report_markdown(records, objects, planned_picks: int | None = None) -> str:
                   "others in the grasp too:", "",
               "| A vs B | pairs, same grasp | A only / B only | pairs, other grasp | A only / B only |",
               "|---|---|---|---|---|", *channel_rows(records, cases)]
+    repeat = repeat_line(records)
+    if repeat:
+        lines += ["", repeat]
     squeezed = squeeze_rows(records, objects)
     if squeezed:
         lines += ["", "The squeeze's estimates (measured case; a factor 3 of the true modulus is issue 49 item 4's "

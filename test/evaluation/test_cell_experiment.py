@@ -239,6 +239,21 @@ def test_discordant_pairs_are_split_by_whether_the_plans_chose_the_same_grasp():
     assert cr.channel_rows(records, ["correct", "soft"]) == ["| correct vs soft | 1 | 1 / 0 | 2 | 1 / 1 |"]
 
 
+def test_run_to_run_noise_counts_only_identical_inputs_run_twice():
+    def rec(obj, e, case, i, ok, input_pa, **extra):
+        return pick(obj, case, i, ok, youngs_modulus_pa=e, input_youngs_modulus_pa=input_pa,
+                    grasp={"x_m": 0.5, "y_m": 0.0, "angle_rad": 0.0}, **extra)
+
+    records = [rec("ring", 2e9, "correct", 0, True, 2e9), rec("ring", 2e9, "rigid", 0, False, 2e9),
+               rec("ring", 2e9, "soft", 0, False, 2e4),                              # another input
+               rec("sponge", 2e4, "correct", 0, True, 2e4), rec("sponge", 2e4, "soft", 0, True, 2e4),
+               rec("sponge", 2e4, "rigid", 0, True, 2e9)]
+    filled = cr.with_plain_substitutes(records + [rec("ring", 2e9, "soft_grasp", 0, True, 2e4)])
+    assert len(cr.repeat_pairs(filled)) == 2            # the rigid_grasp stand-in is a copy, not a repeat
+    assert "1 of 2 pairs ended the same way (1 discordant); the two plans chose the same grasp in 2 of 2" in \
+        cr.repeat_line(records)
+
+
 def test_cli_refuses_unknown_objects_and_cases(capsys):
     assert ce.main(["run", "--out", "unused", "--objects", "cube"]) == 2
     assert "not objects of the experiment" in capsys.readouterr().err
