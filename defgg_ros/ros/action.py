@@ -11,9 +11,10 @@ after 7.1.6). This subclass does the same, so every node and tool here is correc
 it installs and stays correct once they carry the fix.
 """
 import threading
-import time
 
 from rclpy.action import ActionClient as _RclpyActionClient
+
+from defgg_ros.ros.service import first_answer
 
 # How often a goal's result is asked for again while it has not come: a long goal (a pick on a loaded machine:
 # 10 min) outlives any discovery hiccup, so this only has to beat the server's result_timeout (rclpy: 900 s).
@@ -60,26 +61,9 @@ def result_of_goal(handle, timeout_s: float, what: str, wait_until, resend_every
     1,800 s. Asking again is safe: the server answers every request for a goal (at once if it is done) and keeps
     a finished goal's result for its result_timeout. `wait_until(predicate, timeout_s) -> bool` waits (and
     spins, for a caller that spins its own node)."""
-    if resend_every_s <= 0:
-        raise ValueError(f"resend_every_s must be > 0, got {resend_every_s}")
-    deadline = time.monotonic() + timeout_s
-    futures = []
-    try:
-        while True:
-            futures.append(handle.get_result_async())
-            remaining_s = max(deadline - time.monotonic(), 0.0)
-            if wait_until(lambda: any(f.done() for f in futures), min(resend_every_s, remaining_s)):
-                break
-            if time.monotonic() >= deadline:
-                raise ResultTimeout(f"timed out after {timeout_s:g} s waiting for {what} ({len(futures)} requests)")
-        done = next(f for f in futures if f.done())
-        if done.exception() is not None:
-            raise RuntimeError(f"{what}: {done.exception()!r}")
-        return done.result()
-    finally:
-        for future in futures:   # unanswered requests: drop them from the client's pending table
-            if not future.done():
-                future.cancel()
+    return first_answer(handle.get_result_async, timeout_s, what, resend_every_s, wait_until,
+                        lambda sends: ResultTimeout(f"timed out after {timeout_s:g} s waiting for {what} "
+                                                    f"({sends} requests)"))
 
 
 def destroy_actions(node) -> None:

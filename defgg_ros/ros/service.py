@@ -30,28 +30,42 @@ def call_idempotent(client, request, timeout_s: float, what: str, resend_every_s
     itself passes `wait_until(predicate, timeout_s) -> bool`, which spins until predicate() holds.
     Raises ServiceTimeout after `timeout_s`, RuntimeError with the server's exception if it failed.
     """
+    answered = threading.Event()
+
+    def send():
+        future = client.call_async(request)
+        future.add_done_callback(lambda _: answered.set())
+        return future
+
+    return first_answer(send, timeout_s, what, resend_every_s,
+                        wait_until or (lambda _predicate, wait_s: answered.wait(wait_s)),
+                        lambda sends: ServiceTimeout(f"{what}: no answer within {timeout_s:g} s ({sends} sends)"))
+
+
+def first_answer(send, timeout_s: float, what: str, resend_every_s: float, wait_until, timeout_error):
+    """The result of the first of the futures `send()` returns (called again every `resend_every_s`) to be done.
+
+    `wait_until(predicate, timeout_s) -> bool` waits (spinning, for a caller that spins its own node); at the
+    deadline raises `timeout_error(number of sends)`; RuntimeError with the server's exception if it failed.
+    Unanswered sends are cancelled (dropped from the client's pending table)."""
     if resend_every_s <= 0:
         raise ValueError(f"resend_every_s must be > 0, got {resend_every_s}")
-    answered = threading.Event()
     futures = []
-    wait_until = wait_until or (lambda _predicate, wait_s: answered.wait(wait_s))
     deadline = time.monotonic() + timeout_s
     try:
         while True:
-            future = client.call_async(request)
-            future.add_done_callback(lambda _: answered.set())
-            futures.append(future)
+            futures.append(send())
             remaining_s = max(deadline - time.monotonic(), 0.0)
             if wait_until(lambda: any(f.done() for f in futures), min(resend_every_s, remaining_s)):
                 break
             if time.monotonic() >= deadline:
-                raise ServiceTimeout(f"{what}: no answer within {timeout_s:g} s ({len(futures)} sends)")
+                raise timeout_error(len(futures))
         done = next(f for f in futures if f.done())
         if done.exception() is not None:
             raise RuntimeError(f"{what}: {done.exception()!r}")
         return done.result()
     finally:
-        for future in futures:  # unanswered sends: drop them from the client's pending table
+        for future in futures:
             if not future.done():
                 future.cancel()
 
