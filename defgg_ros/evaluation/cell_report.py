@@ -28,7 +28,7 @@ GRASP_ONLY_CASES = ("rigid_grasp", "soft_grasp")
 RECORDS_NAME = "records.jsonl"
 BOOTSTRAP_RESAMPLES = 2000
 BOOTSTRAP_SEED = 0
-FIGURE_NAME, REPORT_NAME = "per_object.png", "report.md"
+FIGURE_NAME, GRASP_FIGURE_NAME, REPORT_NAME = "per_object.png", "grasp_channel.png", "report.md"
 # Two plans chose the same grasp when their centres are this close and their angles this near (modulo pi).
 SAME_GRASP_POSITION_M, SAME_GRASP_ANGLE_RAD = 0.005, math.radians(10.0)
 
@@ -303,6 +303,10 @@ def report_markdown(records, objects, planned_picks: int | None = None) -> str:
                   "test (McNemar) on the discordant pairs):", "",
               "| A vs B | objects | n objects | pairs | A only / B only | margin A − B (pts) | 95 % CI | p |",
               "|---|---|---|---|---|---|---|---|", *_comparison_rows(records, objects, cases)]
+    if any(c in cases for c in GRASP_ONLY_CASES):
+        lines += ["", f"Figures: `{FIGURE_NAME}` (the paper's three inputs and the squeeze), `{GRASP_FIGURE_NAME}` "
+                      "(the paper's protocol, one grip: correct against the wrong inputs gripped as the true "
+                      "modulus)."]
     lines += ["", "The two channels of the stiffness input: the network's grasp and the closing force (the planner's "
                   "finger_force_n follows the modulus). Pairs whose plans chose the same grasp (centre within "
                   f"{SAME_GRASP_POSITION_M * 1e3:.0f} mm, angle within {math.degrees(SAME_GRASP_ANGLE_RAD):.0f}°) "
@@ -324,12 +328,14 @@ def report_markdown(records, objects, planned_picks: int | None = None) -> str:
 
 def write_report(out: Path, objects, planned_picks: int | None = None) -> str:
     """OUT/per_object.png and the results part of OUT/report.md (between the markers; the rest is kept)."""
-    records = [r for path in records_files(out) for r in read_jsonl(path)]
-    table = success_table(with_plain_substitutes(records))
-    if table:
-        cases = present_cases(table)
-        per_object_figure(table, objects, Path(out) / FIGURE_NAME, cases,
-                          complete_totals(with_plain_substitutes(records), cases))
+    records = with_plain_substitutes([r for path in records_files(out) for r in read_jsonl(path)])
+    table = success_table(records)
+    cases = present_cases(table)
+    # the paper's figure (its three inputs and the squeeze), and the paper's protocol (one grip) on its own
+    for name, shown in ((FIGURE_NAME, [c for c in cases if c not in GRASP_ONLY_CASES]),
+                        (GRASP_FIGURE_NAME, [c for c in ("correct", *GRASP_ONLY_CASES) if c in cases])):
+        if len(shown) > 1 or (name == FIGURE_NAME and shown):
+            per_object_figure(table, objects, Path(out) / name, shown, complete_totals(records, shown))
     body = report_markdown(records, objects, planned_picks)
     path = Path(out) / REPORT_NAME
     text = path.read_text(encoding="utf-8") if path.exists() else ""

@@ -174,6 +174,7 @@ def test_report_tables_figure_and_text_outside_the_markers_is_kept(tmp_path):
     assert "| correct vs rigid | all | 2 | 2 | 2 / 0 | +100.0 |" in body
     assert "| | **2 complete sets** (object and pose in every case) | | 100 % (2/2) | 0 % (0/2) | 50 % (1/2) |" in body
     assert (tmp_path / cr.FIGURE_NAME).stat().st_size > 1000
+    assert not (tmp_path / cr.GRASP_FIGURE_NAME).exists()      # no grasp-only run: no second figure
     cr.write_report(tmp_path, ce.OBJECTS, planned_picks=5)     # rewriting replaces the results, not appends them
     assert (tmp_path / cr.REPORT_NAME).read_text(encoding="utf-8").count("| correct vs rigid | all |") == 1
 
@@ -223,6 +224,7 @@ def test_grasp_only_picks_are_compared_with_correct_and_with_their_plain_case_an
     assert "| correct vs rigid_grasp | all | 2 | 2 | 0 / 0 | +0.0 |" in body       # the force was the difference
     assert "| rigid vs rigid_grasp | all | 2 | 2 | 1 / 0 | +50.0 |" in body
     assert "**10 of 70** planned (14 objects × 5 cases" in body
+    assert (tmp_path / cr.FIGURE_NAME).exists() and (tmp_path / cr.GRASP_FIGURE_NAME).stat().st_size > 1000
 
 
 def test_discordant_pairs_are_split_by_whether_the_plans_chose_the_same_grasp():
