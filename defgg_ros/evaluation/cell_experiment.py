@@ -22,8 +22,8 @@ pick 0 in every case, then pick 1, ...), so a run stopped early still holds comp
 
 Records: one JSON line per pick in OUT/records.jsonl (fsynced; a torn last line is skipped). A restart skips
 every pick that has an outcome; a pick whose cell failed (a node died, a call timed out) is recorded with
-`cell_error` and tried again, at most MAX_ATTEMPTS times. The report (OUT/report.md, OUT/per_object.png) is
-written by `report` (defgg_ros/evaluation/cell_report.py).
+`cell_error` and tried again, at most --max-attempts times (default 2). The report (OUT/report.md,
+OUT/per_object.png) is written by `report` (defgg_ros/evaluation/cell_report.py).
 
     defgg-cell-experiment run --out results/cell_experiment --picks 5
     defgg-cell-experiment report --out results/cell_experiment
@@ -160,15 +160,15 @@ def planned_picks(objects, cases, picks: int) -> list:
             if not same_as_plain_case(c, o)]
 
 
-def finished_keys(records) -> set:
-    """Keys of picks that have an outcome, or whose cell failed MAX_ATTEMPTS times."""
+def finished_keys(records, max_attempts: int = MAX_ATTEMPTS) -> set:
+    """Keys of picks that have an outcome, or whose cell failed max_attempts times."""
     done, errors = set(), {}
     for r in records:
         if r.get("cell_error"):
             errors[r["key"]] = errors.get(r["key"], 0) + 1
         else:
             done.add(r["key"])
-    return done | {k for k, n in errors.items() if n >= MAX_ATTEMPTS}
+    return done | {k for k, n in errors.items() if n >= max_attempts}
 
 
 # ---- the cell's objects ---------------------------------------------------------------------------------------
@@ -207,11 +207,11 @@ def scene_object(obj: CellObject, pose: dict, mesh_folder: Path) -> dict:
 
 # ---- the run ----------------------------------------------------------------------------------------------------
 def run(out: Path, work: Path, model: Path, picks: int, seed: int, objects, cases, pick_fn=None,
-        progress=True, records_name: str = RECORDS_NAME) -> int:
+        progress=True, records_name: str = RECORDS_NAME, max_attempts: int = MAX_ATTEMPTS) -> int:
     """Run every planned pick that has no outcome yet in OUT/records_name; returns how many picks ran now."""
     pick_fn = pick_fn or run_pick
     records_path = Path(out) / records_name
-    done = finished_keys(read_jsonl(records_path))
+    done = finished_keys(read_jsonl(records_path), max_attempts)
     plan = planned_picks(objects, cases, picks)
     todo = [(o, c, i) for o, c, i in plan if pick_key(o.name, c, i) not in done]
     ran = 0
@@ -288,6 +288,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--records", default=RECORDS_NAME, metavar="NAME",
                    help="records file in OUT (default: %(default)s; a second run beside a running one, e.g. the "
                         "measured case: records_measured.jsonl; the report reads every records*.jsonl)")
+    p.add_argument("--max-attempts", type=int, default=MAX_ATTEMPTS,
+                   help="tries of a pick whose cell failed (a node died, a call timed out, the simulator stalled) "
+                        "before it is given up; raise it to give given-up picks another try (default: %(default)s)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p = sub.add_parser("report", help="write OUT/report.md and OUT/per_object.png from the records",
                        formatter_class=HelpFormatter)
@@ -317,6 +320,8 @@ def main(argv=None) -> int:
         if args.command == "report":
             print(write_report(Path(args.out), OBJECTS, args.picks))
             return 0
+        if args.max_attempts < 1:
+            raise ValueError(f"--max-attempts must be >= 1, got {args.max_attempts}")
         if args.picks < 1:
             raise ValueError(f"--picks must be >= 1, got {args.picks}")
         objects, cases = _selected(args)
@@ -325,7 +330,7 @@ def main(argv=None) -> int:
 
         print(f"defgg-cell-experiment: {apply_domain_choice(args.ros_domain)}", flush=True)
         ran = run(Path(args.out), Path(args.work), Path(args.model), args.picks, args.seed, objects, cases,
-                  progress=not args.no_progress, records_name=args.records)
+                  progress=not args.no_progress, records_name=args.records, max_attempts=args.max_attempts)
         print(f"defgg-cell-experiment: {ran} picks run now; records in {Path(args.out) / args.records}")
         return 0
     except (ValueError, OSError) as exc:

@@ -58,9 +58,9 @@ def result_of_goal(handle, timeout_s: float, what: str, wait_until, resend_every
     A result request is a service call: its response can be lost like any other (defgg_ros.ros.service: Fast
     DDS drops a response it cannot deliver within 100 ms). The cell experiment saw it twice in ~330 picks on a
     loaded machine: the executor logged "pick-and-place done" (601 s, 77 s after the goal), the client had no
-    result at 1,800 s. Asking again is safe: the server answers every request for a goal (at once if it is done) and keeps
-    a finished goal's result for its result_timeout. `wait_until(predicate, timeout_s) -> bool` waits (and
-    spins, for a caller that spins its own node)."""
+    result at 1,800 s. Asking again is safe: the server answers every request for a goal (at once if it is
+    done) and keeps a finished goal's result for its result_timeout. `wait_until(predicate, timeout_s) -> bool`
+    waits (and spins, for a caller that spins its own node)."""
     return first_answer(handle.get_result_async, timeout_s, what, resend_every_s, wait_until,
                         lambda sends: ResultTimeout(f"timed out after {timeout_s:g} s waiting for {what} "
                                                     f"({sends} requests)"))

@@ -107,6 +107,7 @@ def test_resume_skips_outcomes_and_retries_a_failed_cell_at_most_twice():
     assert ce.pick_key("a", "correct", 0) in done
     assert ce.pick_key("a", "rigid", 0) not in done       # one failure: tried again
     assert ce.pick_key("a", "soft", 0) in done            # two: given up
+    assert ce.pick_key("a", "soft", 0) not in ce.finished_keys(records, max_attempts=3)   # --max-attempts 3: once more
     assert set(cr.outcomes(records)) == {ce.pick_key("a", "correct", 0)}
     assert ce.is_cell_failure("driver silent: no joint states for 2.0 s (watchdog 2.0 s)")
     assert not ce.is_cell_failure("the object slipped out of the fingers in transfer")
@@ -265,6 +266,8 @@ def test_cli_refuses_unknown_objects_and_cases(capsys):
     assert "unknown case" in capsys.readouterr().err
     assert ce.main(["run", "--out", "unused", "--records", "../elsewhere.jsonl"]) == 2
     assert "--records must be a file name" in capsys.readouterr().err
+    assert ce.main(["run", "--out", "unused", "--max-attempts", "0"]) == 2
+    assert "--max-attempts must be >= 1" in capsys.readouterr().err
 
 
 @pytest.mark.e2e
