@@ -78,6 +78,11 @@ class LabelGripRule:
             raise GripRuleError(f"the defgraspsim grip rule needs the object's mass, got {mass_kg!r}")
         return defgraspsim_finger_force_n(e, float(mass_kg), float(self.friction))
 
+    def grasp_finger_force_n(self, youngs_modulus_pa: float, mass_kg: float) -> float:
+        """The force a Grasp message carries (Grasp.finger_force_n): the labels' force where the rule needs a
+        mass and one is known; 0 otherwise (the legacy rule, or no mass: the executor's force of the modulus)."""
+        return self.finger_force_n(youngs_modulus_pa, mass_kg) if self.needs_mass and mass_kg > 0 else 0.0
+
     def to_meta(self) -> dict:
         return {"protocol": self.protocol, "friction": self.friction}
 

@@ -110,10 +110,7 @@ def grip_as(grasp, youngs_modulus_pa: float, model_path: Path, record: dict) -> 
     speed) and its force by the model's label rule on the plan's mass estimate (what the inference node
     computes for a grasp planned with that modulus: planning/grip_estimate.py)."""
     rule = LabelGripRule.from_meta(load_checkpoint(model_path).get("meta"))
-    if rule.needs_mass and grasp.estimated_mass_kg > 0:
-        grasp.finger_force_n = rule.finger_force_n(youngs_modulus_pa, grasp.estimated_mass_kg)
-    else:
-        grasp.finger_force_n = 0.0     # no mass or the legacy rule: the executor's force of the modulus
+    grasp.finger_force_n = rule.grasp_finger_force_n(youngs_modulus_pa, grasp.estimated_mass_kg)
     grasp.youngs_modulus_pa = float(youngs_modulus_pa)
     record["grip"] = {"youngs_modulus_pa": grasp.youngs_modulus_pa, "finger_force_n": grasp.finger_force_n}
 

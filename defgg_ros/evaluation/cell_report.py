@@ -328,14 +328,15 @@ def report_markdown(records, objects, planned_picks: int | None = None) -> str:
 
 def write_report(out: Path, objects, planned_picks: int | None = None) -> str:
     """OUT/per_object.png and the results part of OUT/report.md (between the markers; the rest is kept)."""
-    records = with_plain_substitutes([r for path in records_files(out) for r in read_jsonl(path)])
-    table = success_table(records)
+    records = [r for path in records_files(out) for r in read_jsonl(path)]
+    filled = with_plain_substitutes(records)      # report_markdown fills its own copy
+    table = success_table(filled)
     cases = present_cases(table)
     # the paper's figure (its three inputs and the squeeze), and the paper's protocol (one grip) on its own
     for name, shown in ((FIGURE_NAME, [c for c in cases if c not in GRASP_ONLY_CASES]),
                         (GRASP_FIGURE_NAME, [c for c in ("correct", *GRASP_ONLY_CASES) if c in cases])):
         if len(shown) > 1 or (name == FIGURE_NAME and shown):
-            per_object_figure(table, objects, Path(out) / name, shown, complete_totals(records, shown))
+            per_object_figure(table, objects, Path(out) / name, shown, complete_totals(filled, shown))
     body = report_markdown(records, objects, planned_picks)
     path = Path(out) / REPORT_NAME
     text = path.read_text(encoding="utf-8") if path.exists() else ""

@@ -48,5 +48,4 @@ def grip_estimate(network, label: int, rule: LabelGripRule,
         raise ValueError(f"object {label} has no cell in the height map")
     mass = _column_volume_m3(np.asarray(view.grid_height_m)[box][mine]) * float(density_kg_m3)
     softest = float(np.min(np.asarray(network.moduli)[box][mine]))
-    force = rule.finger_force_n(softest, mass) if rule.needs_mass and mass > 0 else 0.0
-    return GripEstimate(mass, softest, force)
+    return GripEstimate(mass, softest, rule.grasp_finger_force_n(softest, mass))

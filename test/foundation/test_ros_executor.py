@@ -156,4 +156,3 @@ def test_a_lost_result_response_is_asked_for_again_and_arrives(executor, spin):
     server.result_requests = -100     # every request unanswered now: a clear timeout, not a hang
     with pytest.raises(ResultTimeout, match=r"waiting for the result \(\d+ requests\)"):
         result_of_goal(handle, 1.5, "the result", wait_until, resend_every_s=0.5)
-
