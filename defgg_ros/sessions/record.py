@@ -106,6 +106,9 @@ def assign_scene_stiffness(recorder, client, scene_path, log=print) -> None:
 def drive(recorder, client, args, log=tqdm.write) -> None:
     """--plan/--pick: call the cell like a user would, on fresh frames, and record it."""
     picks = _pick_indices(args.pick, args.plan)
+    # The probe saw the servers, but these are the recorder's own, newer clients: on a loaded machine
+    # their discovery took longer than one call's 30 s (CI). Give them --wait-s like the probe's.
+    client.wait_for_servers(args.wait_s, pick=bool(picks))
     flush = 0
     if args.stiffness_from_scene:
         assign_scene_stiffness(recorder, client, args.scene, log)
