@@ -34,6 +34,9 @@ switching after the publisher showed lost the frames of the switch); a frame
 both readers deliver is passed on once (same header stamp and frame id). It
 re-checks once a second; on a change the new reader is created first and the
 old one is kept until the new one has matched every publisher.
+A reader that cannot match a publisher meanwhile is expected, so its
+incompatible-QoS event goes to the debug log instead of rclpy's "No messages
+will be received" warning (a silent camera still gets the warning below).
 
 The same subscription warns when no message arrived for `warn_after_s`
 (repeating at doubling intervals), naming the publishers it sees, so a
@@ -42,6 +45,7 @@ silent camera or a QoS mismatch shows in the log instead of nothing.
 import collections
 import time
 
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.qos import (
     DurabilityPolicy,
     HistoryPolicy,
@@ -148,6 +152,7 @@ class SensorSubscription:
         self.undecided = True            # no publisher seen yet: both readers run
         self.messages_received = 0
         self.duplicates_dropped = 0      # frames both readers delivered, passed on once
+        self.incompatible_events = 0     # a reader not matching a publisher (logged at debug: expected)
         self.mixed_publishers = False    # reliable and best-effort publishers at once (warned)
         self._update()
         self._timer = node.create_timer(RECHECK_PERIOD_S, self._on_timer, callback_group=callback_group)
@@ -170,11 +175,25 @@ class SensorSubscription:
         for reliability in readers_wanted - set(self._readers):
             self._readers[reliability] = self._node.create_subscription(
                 self._msg_type, self.topic, self._on_message, sensor_qos(reliability, self._depth),
-                callback_group=self._group)
+                callback_group=self._group,
+                event_callbacks=SubscriptionEventCallbacks(incompatible_qos=self._on_incompatible_qos))
         self._retire_readers(readers_wanted, len(offered))
         if wanted != self.reliability:
             self._report_change(offered, wanted)
         self.reliability, self.undecided = wanted, not offered
+
+    def _on_incompatible_qos(self, info) -> None:
+        """Replaces rclpy's default "offering incompatible QoS ... No messages will be received" warning.
+
+        While both readers run, one of them cannot match a camera by design, and a decided reader that a
+        new publisher does not match is replaced at the next re-check: the message would send users
+        looking for a fault that is not there. A camera that really delivers nothing still gets the
+        silence warning, naming its publishers.
+        """
+        self.incompatible_events += 1
+        self._node.get_logger().debug(
+            f"{self._resolved}: a reader of {len(self._readers)} does not match a publisher "
+            f"(policy {info.last_policy_kind}); expected while the reliability follows the publishers")
 
     def _retire_readers(self, readers_wanted: set, publishers: int) -> None:
         """Destroy the readers no longer wanted once every wanted one has matched all `publishers`: a frame
