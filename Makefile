@@ -10,8 +10,12 @@ bootstrap:
 demo: bootstrap
 	.venv/bin/defgg-demo
 
+# Two workers (pytest-xdist), a test file per worker at a time: each worker has its own ROS domain
+# (test/conftest.py), and the e2e cells leave a core mostly idle, so the suite takes ~2/3 of the serial
+# time on 2 cores. TEST_WORKERS=0 runs it in this process, serially.
+TEST_WORKERS ?= 2
 test: bootstrap
-	$(PY) -m pytest -q -p no:cacheprovider test
+	$(PY) -m pytest -q -p no:cacheprovider -n $(TEST_WORKERS) --dist loadfile test
 
 check: bootstrap
 	$(PY) -m pytest -q -p no:cacheprovider -m "not e2e and not slow" test
