@@ -18,4 +18,4 @@ test: bootstrap
 	$(PY) -m pytest -q -p no:cacheprovider -n $(TEST_WORKERS) --dist loadfile test
 
 check: bootstrap
-	$(PY) -m pytest -q -p no:cacheprovider -m "not e2e and not slow" test
+	$(PY) -m pytest -q -p no:cacheprovider -n $(TEST_WORKERS) --dist loadfile -m "not e2e and not slow" test
