@@ -43,7 +43,12 @@ from defgg_ros.constants import (  # noqa: E402
 )
 from defgg_ros.control.kinematics import PandaKinematics  # noqa: E402
 from defgg_ros.perception.tabletop import CELL_M, TabletopConfig, perceive  # noqa: E402
-from defgg_ros.planning.contact_radii import perceived_contact_radii_m, surface_pad_radius  # noqa: E402
+from defgg_ros.planning.contact_radii import (  # noqa: E402
+    PadContacts,
+    contact_radius_m,
+    perceived_pad_contacts,
+    surface_pad_contact,
+)
 from defgg_ros.sim import objects as sim_objects  # noqa: E402
 from defgg_ros.sim.cell.objects import centred_surface_mesh  # noqa: E402
 from defgg_ros.sim.cell.sim_cell import SimCell  # noqa: E402
@@ -116,35 +121,38 @@ def surface_x_along_closing(triangles, ys, zs):
     return np.where(inside, x, np.nan)
 
 
-def contact_radii_m(spec) -> tuple | None:
-    """The surface's radius of curvature where each pad touches it (None: flat faces under both pads).
+def surface_contacts(spec) -> PadContacts:
+    """The surface's radius of curvature (and line length, where it is straight one way) where each pad touches it
+    (empty: flat faces under both pads).
 
     From the true surface: rays along the closing axis over the pad's footprint (at half the height) find the
-    surface's reach; planning/contact_radii.surface_pad_radius fits its recession d = (y-y*)^2 / (2 R_h) +
-    (z-z*)^2 / (2 R_v); the contact's radius is sqrt(R_h R_v), each at most half the object's width. Pad on the
-    -x side (the -closing side) first, as Grasp.contact_radii_m."""
+    surface's reach; planning/contact_radii.surface_pad_contact fits its recession d = (y-y*)^2 / (2 R_h) +
+    (z-z*)^2 / (2 R_v); a point contact's radius is sqrt(R_h R_v), a line contact's the curved way's, each at most
+    half the object's width. Pad on the -x side (the -closing side) first, as Grasp.contact_radii_m."""
     if spec.shape == "box":
-        return None
+        return PadContacts()
     surface = centred_surface_mesh(spec)
     half_width = float(surface.bounds[1][0] - surface.bounds[0][0]) / 2
     ys, zs = np.meshgrid(np.linspace(-FINGER_PAD_WIDTH_M / 2, FINGER_PAD_WIDTH_M / 2, 9),
                          np.linspace(-FINGER_DEPTH_M / 2, FINGER_DEPTH_M / 2, 9))
     hits_x = surface_x_along_closing(surface.triangles, ys.ravel(), zs.ravel())
-    radii, flat = [], []
+    pads = []
     for side in (-1.0, 1.0):
         reach = np.max(side * hits_x, axis=1, initial=-np.inf, where=np.isfinite(hits_x))
-        radius, pad_flat = surface_pad_radius(ys, zs, np.where(np.isfinite(reach), reach, np.nan), half_width)
-        radii.append(radius)
-        flat.append(pad_flat)
-    return None if all(flat) else tuple(radii)
+        pads.append(surface_pad_contact(ys, zs, np.where(np.isfinite(reach), reach, np.nan), half_width))
+    if all(flat for _, _, flat in pads):
+        return PadContacts()
+    lines = tuple(line for _, line, _ in pads)
+    return PadContacts(tuple(r for r, _, _ in pads), lines if any(lines) else ())
 
 
-def perceived_radii_m(spec) -> tuple | None:
-    """The contact radii the cell perceives (None: flat faces, the flat law): the object rendered by the cell's own
-    camera (SimCell.render_depth, the scene's camera 0.40 m above the table), perceived as the segmentation node
-    does (perception/tabletop.perceive), and the jig's grasp (the object's position, closing along its yaw, the
+def perceived_contacts(spec) -> tuple[PadContacts, tuple]:
+    """The contacts the cell perceives (empty: flat faces, the flat law) and the point-law radii the executor used
+    before line contacts (sqrt(R_h R_v) at every pad): the object rendered by the cell's own camera
+    (SimCell.render_depth, the scene's camera 0.40 m above the table), perceived as the segmentation node does
+    (perception/tabletop.perceive), and the jig's grasp (the object's position, closing along its yaw, the
     fingertips at half its height less their offset below the TCP) given to planning/contact_radii: what the
-    planner puts on TabletopGrasp.contact_radii_m. Pad on the -closing side first."""
+    planner puts on TabletopGrasp. Pad on the -closing side first."""
     scene = load_scene(ROOT / "sim_bringup" / "scenes" / "soft_box.yaml")
     cell = SimCell(replace(scene, objects=[spec]))
     try:
@@ -163,9 +171,11 @@ def perceived_radii_m(spec) -> tuple | None:
     if label == 0:
         raise SystemExit(f"{spec.name}: perception found no object under its position")
     tip_m = face_m(spec)[1] / 2 - PANDA_FINGERTIP_BELOW_TCP_M
-    radii = perceived_contact_radii_m(view.grid_height_m, view.grid_labels, label, centre,
-                                      (math.cos(spec.yaw_rad), math.sin(spec.yaw_rad)), tip_m)
-    return tuple(radii) or None
+    details = {}
+    contacts = perceived_pad_contacts(view.grid_height_m, view.grid_labels, label, centre,
+                                      (math.cos(spec.yaw_rad), math.sin(spec.yaw_rad)), tip_m, details=details)
+    point_radii = tuple(contact_radius_m(r_h, r_v, details["half_width_m"]) for r_h, r_v, _ in details["pads"])
+    return contacts, (point_radii if contacts.radii_m else ())
 
 
 def squeeze_once(spec) -> list:
@@ -217,26 +227,36 @@ def calibration(path: Path) -> HandCalibration:
 
 
 # The estimates compared on the same readings: the old model (flat pads, nothing taken out), the hand's calibration
-# taken out with the flat law (what the executor did without contact radii), the new model (calibration and the
-# contact radii of the object's surface), and "perceived": the calibration and the contact radii the cell perceives
-# (what the executor now does: the grasp carries them).
-VARIANTS = ("old", "hand", "new", "perceived")
+# taken out with the flat law (what the executor did without contact radii), "point": the calibration and the
+# perceived radii with the point law at every pad (what the executor did before line contacts), "new": the
+# calibration and the contacts of the object's surface (line law where it is straight one way), and "perceived":
+# the calibration and the contacts the cell perceives (what the executor now does: the grasp carries them).
+VARIANTS = ("old", "hand", "point", "new", "perceived")
 
 
-def estimates_of(readings, spec, hand: HandCalibration, radii: dict) -> dict:
-    """Each variant's estimate of one squeeze (SqueezeError: the executor refuses such readings). radii: "surface"
-    and "perceived" contact radii (None: flat)."""
+def estimates_of(readings, spec, hand: HandCalibration, contacts: dict) -> dict:
+    """Each variant's estimate of one squeeze (SqueezeError: the executor refuses such readings). contacts:
+    "surface" and "perceived" PadContacts, "point": the perceived point-law radii."""
     face_w, face_h = face_m(spec)
     kw = {"width_resolution_m": WIDTH_RESOLUTION_M}
+
+    def with_contacts(pads: PadContacts):
+        return estimate_modulus(readings, face_w, face_h, hand=hand, contact_radii_m=pads.radii_m or None,
+                                contact_line_lengths_m=pads.line_lengths_m or None, **kw)
     return {"old": estimate_modulus(readings, face_w, face_h, hand=None, contact_law="flat", **kw),
             "hand": estimate_modulus(readings, face_w, face_h, hand=hand, contact_law="flat", **kw),
-            "new": estimate_modulus(readings, face_w, face_h, hand=hand, contact_radii_m=radii["surface"], **kw),
-            "perceived": estimate_modulus(readings, face_w, face_h, hand=hand, contact_radii_m=radii["perceived"],
-                                          **kw)}
+            "point": estimate_modulus(readings, face_w, face_h, hand=hand, contact_radii_m=contacts["point"] or None,
+                                      **kw),
+            "new": with_contacts(contacts["surface"]), "perceived": with_contacts(contacts["perceived"])}
 
 
-def radii_text(radii) -> str:
-    return "flat" if not radii else ", ".join(f"{r * 100:.1f}" for r in radii)
+def radii_text(pads: PadContacts | None) -> str:
+    """Per pad the radius (cm), "/L" and the line length (cm) for a line contact; "flat" without radii."""
+    if not pads or not pads.radii_m:
+        return "flat"
+    lines = pads.line_lengths_m or (0.0,) * len(pads.radii_m)
+    return ", ".join(f"{r * 100:.1f}" + (f"/L{length * 100:.1f}" if length > 0 else "")
+                     for r, length in zip(pads.radii_m, lines))
 
 
 def factor(estimates, modulus_pa) -> float:
@@ -298,7 +318,8 @@ def main(argv=None) -> int:
             radii = {}
             for r in range(args.repeats):
                 spec = scene_object(name, modulus, 0.3 * r)
-                radii = {"surface": contact_radii_m(spec), "perceived": perceived_radii_m(spec)}
+                perceived, point = perceived_contacts(spec)
+                radii = {"surface": surface_contacts(spec), "perceived": perceived, "point": point}
                 try:
                     for variant, estimate in estimates_of(cached_readings(args.readings, name, modulus, 0.3 * r),
                                                           spec, hand, radii).items():

@@ -17,7 +17,10 @@ reported, but does not choose: in the simulated cell flat boxes fitted n = 1.3-2
   hertz  (m = 2/3, F proportional to the compression^1.5): a curved surface against each flat pad (Hertz: a
          sphere of radius R_i on a plane, R_i the surface's radius at contact i, at most L/2), each contact
          approaching by d_i = (9 F^2 / (16 E*^2 R_i))^(1/3), E* = E / (1 - nu^2), so x = d(F) - d(F0) summed
-         over the two contacts.
+         over the two contacts;
+  hertz-line (nearly F proportional to the compression): a surface straight one way over a pad (a cylinder's
+         side) touches it along a line (`contact_line_lengths_m` > 0 at that pad): defgg_ros/hertz.py's line law,
+         E* fitted over log E* (it sits inside a log).
 
 Rigid. An object compliance (1/k less the hand's) within two standard deviations of the calibration's (and of the
 width reading's) noise of zero is "rigid": only a lower bound, the softest object that noise could hide, is
@@ -29,6 +32,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from defgg_ros import hertz
 from defgg_ros.constants import FINGER_DEPTH_M, FINGER_PAD_WIDTH_M
 
 # A lower bound above this counts as "rigid" for the grasp: the paper's soft classes end at 2e6 Pa, the next
@@ -89,7 +93,7 @@ class ModulusEstimate:
     stiffness_npm: float        # measured force-compression slope (hand included)
     lower_bound: bool           # the compression was within the width resolution / the calibration's noise
     rigid: bool                 # no compliance of its own that the hand can resolve (see the module doc)
-    contact_law: str = "flat"   # "flat" or "hertz": the law the estimate used
+    contact_law: str = "flat"   # "flat", "hertz" (point contacts) or "hertz-line" (a line contact among them)
     exponent: float = math.nan  # fitted n of F ~ compression^n (1 flat, 1.5 Hertz); nan: not fitted
 
     def describe(self) -> str:
@@ -186,17 +190,21 @@ ASSUMED_POISSON_RATIO = 0.3
 
 
 def hertz_modulus_pa(points, first_width_m: float, radii_m: tuple | None = None,
-                     poisson_ratio: float = ASSUMED_POISSON_RATIO) -> float:
+                     poisson_ratio: float = ASSUMED_POISSON_RATIO, line_lengths_m: tuple | None = None) -> float:
     """E from (force, compression) points of a body touching each flat pad on a curved surface (Hertz; module doc).
 
     radii_m: the surface's radius of curvature at each of the two contacts (a sphere's radius; for unequal principal
-    radii their geometric mean), each at most half the body's unloaded width; None: half that width at both."""
+    radii their geometric mean; for a line contact the curved direction's), each at most half the body's unloaded
+    width; None: half that width at both. line_lengths_m: per contact, > 0 for a line contact that long (the
+    surface straight one way over the pad), 0 for a point contact; None: both point contacts (closed form)."""
     c, _ = _power_fit(points, 2.0 / 3.0)   # x = C (F^(2/3) - F0^(2/3)), C = (9/(16 E*^2))^(1/3) sum(R_i^(-1/3))
     if c <= 0:
         return math.inf
     half_width_m = (first_width_m + c * points[0][0] ** (2.0 / 3.0)) / 2.0   # the first force's approach added
-    radii_m = radii_m or (half_width_m, half_width_m)
-    shape = sum(min(r, half_width_m) ** (-1.0 / 3.0) for r in radii_m)
+    radii_m = tuple(min(r, half_width_m) for r in (radii_m or (half_width_m, half_width_m)))
+    if line_lengths_m and any(length > 0 for length in line_lengths_m):
+        return hertz.fitted_e_star_pa(points, radii_m, line_lengths_m) * (1.0 - poisson_ratio ** 2)
+    shape = sum(r ** (-1.0 / 3.0) for r in radii_m)
     e_star = 0.75 * (shape / c) ** 1.5
     return e_star * (1.0 - poisson_ratio ** 2)
 
@@ -214,13 +222,17 @@ def _bound(e_pa: float, k: float, law: str = "flat", exponent: float = math.nan)
 
 def estimate_modulus(readings, face_width_m: float, face_height_m: float, hand: HandCalibration | None = None,
                      width_resolution_m: float = 1e-4, model_factor: float = MODEL_FACTOR,
-                     contact_law: str = "auto", contact_radii_m: tuple | None = None) -> ModulusEstimate:
+                     contact_law: str = "auto", contact_radii_m: tuple | None = None,
+                     contact_line_lengths_m: tuple | None = None) -> ModulusEstimate:
     """The object's Young's modulus from squeeze readings (see the module doc) with its one-sigma band.
 
     contact_radii_m: the object's radius of curvature where each pad touches it (from its perceived shape; None:
     flat faces under the pads). contact_law: "auto" (hertz when the contacts are curved, else flat), "flat" or
-    "hertz" (without radii: half the object's width). The curve's exponent is fitted and reported either way; it
-    does not choose the law (docs/squeeze.md: in the simulated cell flat boxes fit n = 1.3-2.5)."""
+    "hertz" (without radii: half the object's width). contact_line_lengths_m: per pad, > 0 where the surface is
+    straight one way and touches the pad along a line that long (m), 0 for a point contact; None or (): both point
+    contacts (the estimate's law is then "hertz-line" when any is a line). The curve's exponent is fitted and
+    reported either way; it does not choose the law (docs/squeeze.md: in the simulated cell flat boxes fit
+    n = 1.3-2.5)."""
     # A face extent may be math.inf (not known: the pad's spread alone is loaded); the resolution must be finite.
     for name, value in (("face_width_m", face_width_m), ("face_height_m", face_height_m),
                         ("width_resolution_m", width_resolution_m)):
@@ -228,6 +240,7 @@ def estimate_modulus(readings, face_width_m: float, face_height_m: float, hand: 
             raise SqueezeError(f"{name} must be > 0, got {value}")
     if contact_law not in ("auto", "flat", "hertz"):
         raise SqueezeError(f"contact_law must be auto, flat or hertz, got {contact_law!r}")
+    line_lengths_m = _checked_line_lengths(contact_line_lengths_m, contact_radii_m)
     readings = _checked(readings)
     k, span = squeeze_slope_npm(readings)
     width_m = readings[0].width_m
@@ -250,7 +263,10 @@ def estimate_modulus(readings, face_width_m: float, face_height_m: float, hand: 
     points = object_compression_m(readings, hand)
     exponent = fit_contact_exponent(points)
     law = contact_law if contact_law != "auto" else ("hertz" if contact_radii_m else "flat")
-    e = hertz_modulus_pa(points, width_m, contact_radii_m) if law == "hertz" else flat_modulus(object_c)
+    if law == "hertz" and line_lengths_m:
+        law = "hertz-line"
+    e = (hertz_modulus_pa(points, width_m, contact_radii_m, line_lengths_m=line_lengths_m) if law != "flat"
+         else flat_modulus(object_c))
     if not math.isfinite(e):
         return _bound(flat_modulus(noise_mpn), k, law, exponent)
     rel = width_resolution_m / span     # the compression's relative reading error
@@ -258,10 +274,23 @@ def estimate_modulus(readings, face_width_m: float, face_height_m: float, hand: 
     return ModulusEstimate(e, e / sigma, e * sigma, k, False, False, law, exponent)
 
 
+def _checked_line_lengths(line_lengths_m, radii_m) -> tuple:
+    """() (all point contacts) or the two per-pad line lengths, with a line among them; SqueezeError otherwise."""
+    lengths = tuple(float(v) for v in (line_lengths_m or ()))
+    if not lengths:
+        return ()
+    if len(lengths) != 2 or not all(math.isfinite(v) and v >= 0 for v in lengths):
+        raise SqueezeError(f"contact_line_lengths_m must be two lengths >= 0 m (0: a point contact), got {lengths}")
+    if not radii_m or len(radii_m) != 2:
+        raise SqueezeError("contact_line_lengths_m needs the two pads' contact_radii_m")
+    return lengths if any(v > 0 for v in lengths) else ()
+
+
 def calibration_sd_log(hand: HandCalibration | None, object_compliance_mpn: float, law: str) -> float:
     """The estimate's spread (log space, one sd) from the hand's calibration noise: the object's compliance is
     what is left after the hand's is taken out, so its relative error is s_hand / c_object, and E goes as
-    c_object^-1 (flat) or C^-3/2 (Hertz, C the fit's compliance scale). Near the rigid limit (c_object = 2 s_hand)
+    c_object^-1 (flat; a line contact nearly so, its log aside) or C^-3/2 (point Hertz, C the fit's compliance
+    scale). Near the rigid limit (c_object = 2 s_hand)
     this dominates the band: an object barely softer than the hand reads with a wide one."""
     if hand is None or hand.compliance_sd_mpn == 0.0:
         return 0.0

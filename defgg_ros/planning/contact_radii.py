@@ -4,7 +4,10 @@ The squeeze's Hertz law (defgg_ros/squeeze.py, docs/squeeze.md) needs, per pad, 
 stands for the object's surface at the contact: the geometric mean sqrt(R_h R_v) of the surface's two principal
 radii (R_h across the closing direction, R_v vertical), each at most half the body's width (a straight direction
 spreads the contact as far as the body lets it). A pad whose footprint the surface stays within FLAT_RECESSION_M
-of is on a flat face; both flat: no radii, the flat law.
+of is on a flat face; both flat: no radii, the flat law. A pad whose surface is straight one way (its sag that way
+within FLAT_RECESSION_M) and curved the other touches it along a line (a cylinder's side, a lying bone's shaft):
+its radius is then the curved direction's, and its line length how far the surface runs under the pad the straight
+way (`PadContacts.line_lengths_m`; the squeeze's line law, defgg_ros/hertz.py). Same threshold, no new one.
 
 Two sources of the surface, one convention:
 - `surface_pad_radius`: reach samples of the true surface over the pad's footprint (the squeeze bench ray-casts
@@ -28,6 +31,7 @@ Two sources of the surface, one convention:
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
@@ -63,17 +67,54 @@ def contact_radius_m(r_h_m: float, r_v_m: float, half_width_m: float) -> float:
     return float(math.sqrt(capped(r_h_m) * capped(r_v_m)))
 
 
+@dataclass(frozen=True)
+class PadContacts:
+    """Per pad, the pad on the -closing side first: the contact radius (m; () flat faces: the flat law) and the
+    line length (m; 0 a point contact; () when no pad is a line contact)."""
+    radii_m: tuple = ()
+    line_lengths_m: tuple = ()
+
+
+def pad_contact(r_h_m: float, r_v_m: float, sag_h_m: float, sag_v_m: float, half_width_m: float,
+                run_h_m: float, run_v_m: float) -> tuple[float, float]:
+    """(radius, line length) of one pad that is not flat: a point contact (the sphere of contact_radius_m, length
+    0) unless the surface is straight one way (its sag within FLAT_RECESSION_M) and curved the other: then the
+    curved way's radius (at most half the width) and the run of the surface under the pad the straight way."""
+    straight_h, straight_v = sag_h_m <= FLAT_RECESSION_M, sag_v_m <= FLAT_RECESSION_M
+    if straight_h == straight_v:
+        return contact_radius_m(r_h_m, r_v_m, half_width_m), 0.0
+    curved_r = r_v_m if straight_h else r_h_m
+    return contact_radius_m(curved_r, curved_r, half_width_m), (run_h_m if straight_h else run_v_m)
+
+
+def _run_m(coordinates_m: np.ndarray, present: np.ndarray, pad_extent_m: float) -> float:
+    """How far the surface runs under the pad along one way: the span of the samples that found it plus one
+    sample spacing (each sample stands for its spacing), at most the pad's extent."""
+    found = np.asarray(coordinates_m, float)[np.asarray(present, bool)]
+    if found.size == 0:
+        return 0.0
+    spacing = pad_extent_m / max(np.asarray(coordinates_m).size - 1, 1)
+    return float(min(found.max() - found.min() + spacing, pad_extent_m))
+
+
 def _radius_of_curvature(coefficient: float) -> float:
     """R of a recession d = coefficient * s^2 (coefficient = 1 / (2 R)); inf when it does not recede."""
     return 1.0 / (2.0 * coefficient) if coefficient > 0 else math.inf
 
 
 def surface_pad_radius(dy_m, dz_m, reach_m, half_width_m: float) -> tuple[float, bool]:
-    """(contact radius, flat) of one pad from reach samples of the true surface over its footprint.
+    """(contact radius, flat) of one pad from reach samples of the true surface (surface_pad_contact's)."""
+    radius, _, flat = surface_pad_contact(dy_m, dz_m, reach_m, half_width_m)
+    return radius, flat
+
+
+def surface_pad_contact(dy_m, dz_m, reach_m, half_width_m: float) -> tuple[float, float, bool]:
+    """(contact radius, line length, flat) of one pad from reach samples of the true surface over its footprint.
 
     dy_m, dz_m: the samples' offsets across the closing line and in height; reach_m: how far the surface reaches
     towards the pad at each (nan: the line missed the body). The fit of the module doc; flat when every sample
-    hit and all lie within FLAT_RECESSION_M of the most advanced one."""
+    hit and all lie within FLAT_RECESSION_M of the most advanced one; a line contact (pad_contact) when the
+    fitted sag over the hit samples is within it one way only."""
     dy_m, dz_m, reach_m = (np.asarray(a, float).ravel() for a in (dy_m, dz_m, reach_m))
     hit = np.isfinite(reach_m)
     best = int(np.argmax(np.where(hit, reach_m, -np.inf)))
@@ -81,7 +122,10 @@ def surface_pad_radius(dy_m, dz_m, reach_m, half_width_m: float) -> tuple[float,
     dy, dz = dy_m[hit] - dy_m[best], dz_m[hit] - dz_m[best]
     (a, b), *_ = np.linalg.lstsq(np.column_stack([dy ** 2, dz ** 2]), d, rcond=None)
     flat = bool(hit.all() and d.max() <= FLAT_RECESSION_M)
-    return contact_radius_m(_radius_of_curvature(a), _radius_of_curvature(b), half_width_m), flat
+    runs = [_run_m(np.unique(v), np.isin(np.unique(v), v[hit]), float(np.ptp(v))) for v in (dy_m, dz_m)]
+    radius, line_m = pad_contact(_radius_of_curvature(a), _radius_of_curvature(b), max(a, 0.0) * float(np.max(dy ** 2)),
+                                 max(b, 0.0) * float(np.max(dz ** 2)), half_width_m, *runs)
+    return radius, line_m, flat
 
 
 def _bilinear(values: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
@@ -148,18 +192,23 @@ def _vertical_radius(z_m: np.ndarray, reach_m: np.ndarray) -> tuple[float, float
     return _radius_of_curvature(float(a[best])), float(max(a[best] - SAG_SIGMAS * sd, 0.0) * (z_m[-1] - z[best]) ** 2)
 
 
-def perceived_contact_radii_m(grid_height_m: np.ndarray, grid_labels: np.ndarray, label: int, centre_rc,
-                              direction_rc, tip_height_m: float, extent_m: float | None = None,
-                              pad_width_m: float = FINGER_PAD_WIDTH_M, pad_length_m: float = FINGER_DEPTH_M,
-                              details: dict | None = None) -> tuple:
-    """Per pad, the pad on the -direction side first, the perceived contact radius (m); () when both pads are on
-    flat faces (the flat law) or the height map shows no outline there (module doc).
+def perceived_contact_radii_m(*args, **kwargs) -> tuple:
+    """perceived_pad_contacts(...).radii_m: per pad the perceived contact radius (m); (): flat faces."""
+    return perceived_pad_contacts(*args, **kwargs).radii_m
+
+
+def perceived_pad_contacts(grid_height_m: np.ndarray, grid_labels: np.ndarray, label: int, centre_rc,
+                           direction_rc, tip_height_m: float, extent_m: float | None = None,
+                           pad_width_m: float = FINGER_PAD_WIDTH_M, pad_length_m: float = FINGER_DEPTH_M,
+                           details: dict | None = None) -> PadContacts:
+    """Per pad, the pad on the -direction side first, the perceived contact radius and line length (PadContacts;
+    empty when both pads are on flat faces (the flat law) or the height map shows no outline there: module doc).
 
     grid_height_m, grid_labels: the view's height map (height above the table, object labels; CELL_M cells);
     label: the grasped object's; centre_rc: the grasp centre in cells (row, col; may be fractional); direction_rc:
     the closing direction in cells (unit, rows then columns); tip_height_m: the fingertips' height above the table
     (the pads reach pad_length_m up from there); extent_m: the object's extent along the closing line (None: the
-    outline is searched from the centre out). details: gets per pad (R_h, R_v, flat) when given."""
+    outline is searched from the centre out). details: gets per pad (R_h, R_v, flat) and half_width_m when given."""
     centre = np.asarray(centre_rc, float)
     along_dir = np.asarray(direction_rc, float)
     along_dir = along_dir / np.linalg.norm(along_dir)
@@ -174,21 +223,30 @@ def perceived_contact_radii_m(grid_height_m: np.ndarray, grid_labels: np.ndarray
     reaches = _pads_reach_m(mine, grid_height_m, centre, along_dir, across_dir, along, ys, zs)
     widest = [reach[:, 0] for reach in reaches]
     if not all(np.isfinite(w).any() for w in widest):
-        return ()
+        return PadContacts()
     half_width_m = float(sum(np.nanmax(w) for w in widest)) / 2
-    radii, flat = [], []
+    if details is not None:
+        details["half_width_m"] = half_width_m
+    radii, lines, flat = [], [], []
     for reach in reaches:
         r_h, recession_h = _quadratic_radius(ys, reach[:, 0], pad_width_m)
         if math.isnan(r_h):
-            return ()
+            return PadContacts()
         middle = slice(ACROSS_SAMPLES // 4, ACROSS_SAMPLES - ACROSS_SAMPLES // 4)   # the pad's middle half
-        r_v, recession_v = _vertical_radius(zs, _mean_over_finite(reach[middle]))
+        middle_reach = _mean_over_finite(reach[middle])
+        r_v, recession_v = _vertical_radius(zs, middle_reach)
         pad_flat = recession_h + recession_v <= FLAT_RECESSION_M
-        radii.append(contact_radius_m(r_h, r_v, half_width_m))
+        radius, line_m = pad_contact(r_h, r_v, recession_h, recession_v, half_width_m,
+                                     _run_m(ys, np.isfinite(reach[:, 0]), pad_width_m),
+                                     _run_m(zs, np.isfinite(middle_reach), pad_length_m))
+        radii.append(radius)
+        lines.append(line_m)
         flat.append(pad_flat)
         if details is not None:
             details.setdefault("pads", []).append((r_h, r_v, pad_flat))
-    return () if all(flat) else tuple(radii)
+    if all(flat):
+        return PadContacts()
+    return PadContacts(tuple(radii), tuple(lines) if any(v > 0 for v in lines) else ())
 
 
 def _pads_reach_m(mine, grid_height_m, centre, along_dir, across_dir, along_m, ys_m, zs_m) -> np.ndarray:
