@@ -13,8 +13,10 @@ from defgg_ros.perception import tabletop_scenes as ts
 from defgg_ros.perception.tabletop import perceive
 from defgg_ros.planning.contact_radii import (
     FLAT_RECESSION_M,
+    PadContacts,
     contact_radius_m,
-    perceived_contact_radii_m,
+    perceived_pad_contacts,
+    surface_pad_contact,
     surface_pad_radius,
 )
 from defgg_ros.planning.tabletop_grasps import plan_tabletop_grasps
@@ -32,13 +34,18 @@ RADIUS_FACTOR = 2.0
 def perceived(obj, height_m, direction_rc=(1.0, 0.0), seed=0, details=None):
     """Render `obj` under the cell's overhead camera (0.40 m) with the D435's noise, perceive it, and take the
     radii of a grasp at its centre closing along direction_rc at half its height (the executor's rule)."""
+    return perceived_contacts(obj, height_m, direction_rc, seed, details).radii_m
+
+
+def perceived_contacts(obj, height_m, direction_rc=(1.0, 0.0), seed=0, details=None) -> PadContacts:
+    """perceived's PadContacts (radii and line lengths)."""
     frame = ts.render(ts.overhead_single(obj, height_m=0.40), seed=seed)
     view = perceive(frame.depth_m, frame.camera_k, frame.base_T_camera)
     row, col = view.xy_to_cell(*CENTRE_XY_M)
     label = int(view.grid_labels[row, col])
     assert label > 0, f"{obj.name}: no object under the grasp centre"
-    return perceived_contact_radii_m(view.grid_height_m, view.grid_labels, label, (row, col), direction_rc,
-                                     height_m / 2 - PANDA_FINGERTIP_BELOW_TCP_M, details=details)
+    return perceived_pad_contacts(view.grid_height_m, view.grid_labels, label, (row, col), direction_rc,
+                                  height_m / 2 - PANDA_FINGERTIP_BELOW_TCP_M, details=details)
 
 
 @pytest.mark.parametrize("radius_m", [0.025, 0.03])
@@ -105,3 +112,37 @@ def test_a_contact_radius_is_capped_at_half_the_width():
     assert contact_radius_m(0.02, math.inf, 0.03) == pytest.approx(math.sqrt(0.02 * 0.03))
     assert contact_radius_m(0.5, 0.5, 0.03) == pytest.approx(0.03)
     assert contact_radius_m(0.01, 0.04, 0.05) == pytest.approx(0.02)
+
+
+def test_a_standing_cylinder_touches_each_pad_along_a_vertical_line():
+    """Straight up, curved across: a line contact at both pads, as long as the pad (18 mm: the cylinder is taller
+    than the pad reaches), its radius the cylinder's (the squeeze's line law: defgg_ros/hertz.py)."""
+    contacts = perceived_contacts(ts.Cylinder(CENTRE_XY_M, 0.02, 0.08), 0.08)
+    assert len(contacts.line_lengths_m) == 2, contacts
+    for r, length in zip(contacts.radii_m, contacts.line_lengths_m):
+        assert 0.015 <= length <= 0.018 + 1e-9 and 0.02 / RADIUS_FACTOR <= r <= 0.02 * RADIUS_FACTOR, contacts
+
+
+def test_a_lying_cylinder_touches_each_pad_along_a_horizontal_line():
+    """Straight across (the pad's 20 mm lie along the cylinder's axis), curved up: a line contact as wide as the pad,
+    its radius the cylinder's."""
+    contacts = perceived_contacts(ts.LyingCylinder(CENTRE_XY_M, 0.02, 0.12, yaw_rad=math.pi / 2), 0.04)
+    assert len(contacts.line_lengths_m) == 2, contacts
+    for r, length in zip(contacts.radii_m, contacts.line_lengths_m):
+        assert 0.018 <= length <= 0.020 + 1e-9 and 0.02 / 2 <= r <= 0.02 * RADIUS_FACTOR, contacts
+
+
+def test_a_sphere_and_a_box_have_no_line_contact():
+    sphere = perceived_contacts(ts.Sphere((*CENTRE_XY_M, 0.025), 0.025), 0.05)
+    assert len(sphere.radii_m) == 2 and sphere.line_lengths_m == (), sphere
+    assert perceived_contacts(ts.Box(CENTRE_XY_M, (0.05, 0.05, 0.05)), 0.05) == PadContacts()
+
+
+def test_the_surface_fit_finds_a_cylinders_line():
+    """surface_pad_contact on a vertical cylinder's side (reach independent of height): a line over the pad's
+    whole height, the radius the cylinder's; a sphere's cap: a point contact (length 0)."""
+    ys, zs = np.meshgrid(np.linspace(-0.01, 0.01, 9), np.linspace(-0.009, 0.009, 9))
+    radius, length, flat = surface_pad_contact(ys, zs, np.sqrt(0.02 ** 2 - ys ** 2), 0.02)
+    assert not flat and length == pytest.approx(0.018) and radius == pytest.approx(0.02, rel=0.1)  # a parabola's fit
+    radius, length, flat = surface_pad_contact(ys, zs, np.sqrt(0.03 ** 2 - ys ** 2 - zs ** 2), 0.03)
+    assert not flat and length == 0.0 and radius == pytest.approx(0.03, rel=0.05)
