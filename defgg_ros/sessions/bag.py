@@ -19,10 +19,12 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
 
+import numpy as np
 import yaml
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
 from rosbags.rosbag2 import Reader, Writer
 from rosbags.rosbag2.enums import CompressionFormat, CompressionMode, StoragePlugin
+from rosbags.serde import SerdeError
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from defgg_ros.atomic import write_text_atomic
@@ -55,21 +57,40 @@ class BagMessage:
 
 
 def deserialize_cdr(store, raw: bytes, msgtype: str):
-    """store.deserialize_cdr, but up to 7 bytes may follow the last field (rosbags allows 3). Fast CDR (what
-    rclpy and every rmw_fastrtps node serialise with) aligns an empty sequence's end to its element's size:
-    a Grasp whose last field, contact_radii_m (float64[]), is empty ends with 4 padding bytes after the
-    length, which rosbags refuses ("CDR message size mismatch")."""
+    """store.deserialize_cdr, but slack may follow the last field (rosbags allows 3 bytes): up to 7 bytes, and 4
+    more per empty sequence of 8-byte numbers in the message. rclpy's serialize_message and rmw_fastrtps size
+    the buffer by an estimate that aligns every sequence of 8-byte numbers to 8 after its length, also an empty
+    one, which the serializer itself does not pad (measured: a Grasp whose contact_radii_m and
+    contact_line_lengths_m, two float64[], are both empty ends 8 bytes short of its buffer; a PlanGrasp
+    response 8 per such grasp; the bytes read the same values as rclpy's). rosbags refuses any of that
+    ("CDR message size mismatch")."""
     if len(raw) < 4 or bytes(raw[:2]) not in (b"\x00\x00", b"\x00\x01"):
         raise SessionBagError(f"{msgtype}: not a CDR message (encapsulation {bytes(raw[:2]).hex()})")
     msgdef = store.get_msgdef(msgtype)
     read = msgdef.deserialize_cdr_le if raw[1] else msgdef.deserialize_cdr_be
     try:
         message, end = read(memoryview(raw)[4:], 0, msgdef.cls, store)
-    except (struct.error, UnicodeDecodeError, ValueError) as exc:
+    except (struct.error, UnicodeDecodeError, ValueError, SerdeError) as exc:   # SerdeError: e.g. a bad length
         raise SessionBagError(f"{msgtype}: cannot be decoded: {exc}") from exc
-    if len(raw) - 4 - end > 7:
-        raise SessionBagError(f"{msgtype}: {len(raw) - 4 - end} bytes after the message's last field")
+    slack = len(raw) - 4 - end
+    if slack > 7 and slack > 7 + 4 * empty_wide_sequences(message):
+        raise SessionBagError(f"{msgtype}: {slack} bytes after the message's last field")
     return message
+
+
+def empty_wide_sequences(message) -> int:
+    """How many empty sequences of 8-byte numbers (float64[], int64[], uint64[]) a decoded rosbags message holds,
+    in its nested messages too."""
+    count = 0
+    for name in getattr(message, "__dataclass_fields__", ()):
+        value = getattr(message, name)
+        if isinstance(value, np.ndarray):
+            count += int(value.size == 0 and value.dtype.itemsize == 8)
+        elif isinstance(value, list):
+            count += sum(empty_wide_sequences(item) for item in value)
+        else:
+            count += empty_wide_sequences(value)
+    return count
 
 
 @lru_cache(maxsize=64)

@@ -53,15 +53,17 @@ def test_a_goal_recorded_before_grasp_gained_fields_is_sent_as_todays_goal():
     assert goal.place_pose.pose.position.x == 0.3 and goal.place_pose.pose.orientation.x == 1.0
     assert g.estimated_mass_kg == 0.0 and g.finger_force_n == 0.0     # unknown then: the executor's own rule
     assert list(g.contact_radii_m) == []                                # unknown then: the squeeze's flat law
+    assert list(g.contact_line_lengths_m) == []                         # and no line contacts
 
 
 def test_a_message_of_the_installed_layout_round_trips():
     goal = PickAndPlace.Goal(plan_grasp=True)
     goal.grasp.finger_force_n, goal.grasp.width_m, goal.grasp.contact_radii_m = 0.7, 0.05, [0.02, 0.03]
+    goal.grasp.contact_line_lengths_m = [0.0, 0.018]
     raw = serialize_message(goal)
     current = "bool plan_grasp\ndefgg_interfaces/Grasp grasp\ngeometry_msgs/PoseStamped place_pose\n" + "=" * 80 + \
         "\nMSG: defgg_interfaces/Grasp\n" + OLD_GRASP + "float64 estimated_mass_kg\nfloat64 finger_force_n\n" + \
-        "float64[] contact_radii_m\n"
+        "float64[] contact_radii_m\nfloat64[] contact_line_lengths_m\n"
     for msgdef in ("", current):         # no definition recorded: the installed one
         back = live_message(BagMessage("/defgg/session/pick_goal", GOAL, 0, raw, msgdef), PickAndPlace.Goal)
         assert back == goal

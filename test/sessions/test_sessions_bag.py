@@ -11,6 +11,8 @@ from defgg_ros.sessions.bag import SessionBagError, SessionWriter, read_bag
 from defgg_ros.sessions.session import load_session
 from defgg_ros.sessions.session_topics import topics  # absolute names (bag channels)
 
+GRASP = "defgg_interfaces/msg/Grasp"
+
 
 def test_round_trip_is_mcap_with_zstd_chunks_and_metadata_twice(tmp_path):
     path = write_small_session(tmp_path / "s")
@@ -146,16 +148,76 @@ def test_committed_sessions_decode_with_an_independent_mcap_ros2_reader():
         assert decoded[st.PLAN_RESPONSE].grasps[0].width_m > 0
 
 
-def test_a_grasp_as_rclpy_serialises_it_decodes_with_or_without_contact_radii():
-    # Fast CDR pads an empty float64[] at a message's end to 8 bytes; rosbags' own reader refused that.
+def test_a_grasp_as_rclpy_serialises_it_decodes_with_or_without_contact_radii_and_line_lengths():
+    # Fast CDR sizes the buffer up to 4 bytes past each empty float64[] (8 for a Grasp with neither radii nor
+    # line lengths, 8 per such grasp in a PlanGrasp response); rosbags' own reader refused that.
     from defgg_interfaces.msg import Grasp
+    from defgg_interfaces.srv import PlanGrasp
     from rclpy.serialization import serialize_message
 
     from defgg_ros.sessions.bag import BagMessage
 
-    for radii in ([], [0.02, 0.03]):
-        raw = bytes(serialize_message(Grasp(finger_force_n=1.5, contact_radii_m=radii)))
-        decoded = BagMessage(topics.BEST_GRASP, "defgg_interfaces/msg/Grasp", 0, raw).decode()
+    for radii, lines in (([], []), ([0.02, 0.03], []), ([0.02, 0.03], [0.0, 0.018]), ([], [0.0, 0.018])):
+        raw = bytes(serialize_message(Grasp(finger_force_n=1.5, contact_radii_m=radii, contact_line_lengths_m=lines)))
+        decoded = BagMessage(topics.BEST_GRASP, GRASP, 0, raw).decode()
         assert decoded.finger_force_n == 1.5 and list(decoded.contact_radii_m) == radii
-    with pytest.raises(SessionBagError, match="bytes after"):
-        BagMessage(topics.BEST_GRASP, "defgg_interfaces/msg/Grasp", 0, raw + bytes(8)).decode()
+        assert list(decoded.contact_line_lengths_m) == lines
+    grasps = [Grasp(finger_force_n=float(i)) for i in range(3)]
+    raw = bytes(serialize_message(PlanGrasp.Response(success=True, grasps=grasps, inference_time_s=0.25)))
+    decoded = BagMessage(st.PLAN_RESPONSE, "defgg_interfaces/srv/PlanGrasp_Response", 0, raw).decode()
+    assert [g.finger_force_n for g in decoded.grasps] == [0.0, 1.0, 2.0] and decoded.inference_time_s == 0.25
+    for grasp in (Grasp(), Grasp(contact_radii_m=[0.02, 0.03], contact_line_lengths_m=[0.0, 0.018])):
+        with pytest.raises(SessionBagError, match="bytes after"):      # 8 bytes more than Fast CDR leaves
+            BagMessage(topics.BEST_GRASP, GRASP, 0, bytes(serialize_message(grasp)) + bytes(8)).decode()
+    with pytest.raises(SessionBagError, match="cannot be decoded"):   # a string without its terminator
+        BagMessage(topics.BEST_GRASP, GRASP, 0, b"\x00\x01\x00\x00" + bytes(400)).decode()
+
+
+# defgg_interfaces/Grasp as sessions recorded it before contact_line_lengths_m (until 2026-11-30).
+GRASP_BEFORE_LINE_LENGTHS = """std_msgs/Header header
+geometry_msgs/PoseStamped pose_base
+geometry_msgs/PoseStamped pose_camera
+float64 width_m
+float64 quality
+float64 angle_rad
+float64 center_u_px
+float64 center_v_px
+float64 width_px
+float64 youngs_modulus_pa
+int32 object_id
+float64 estimated_mass_kg
+float64 finger_force_n
+float64[] contact_radii_m
+"""
+
+
+def test_a_grasp_recorded_before_contact_line_lengths_reads_and_replays_as_point_contacts(tmp_path):
+    """The bag keeps the definition it recorded: a grasp of the old layout decodes with it (its radii kept) and
+    goes back into the graph as today's Grasp without line lengths (all point contacts); today's round-trips."""
+    from defgg_interfaces.msg import Grasp
+    from rclpy.serialization import serialize_message
+
+    from defgg_ros.sessions.bag import recorded_typestore
+    from defgg_ros.sessions.interfaces import session_typestore
+    from defgg_ros.sessions.live_message import live_message
+
+    today = Grasp(width_m=0.04, finger_force_n=1.5, contact_radii_m=[0.02, 0.03], contact_line_lengths_m=[0.0, 0.018])
+    fields = session_typestore().deserialize_cdr(bytes(serialize_message(today)), GRASP).__dict__
+    old_store = recorded_typestore(GRASP, GRASP_BEFORE_LINE_LENGTHS)
+    old_cls = old_store.types[GRASP]
+    old = old_cls(**{name: fields[name] for name in old_cls.__dataclass_fields__})
+    recorded = _recorded_grasp(tmp_path / "old", old_store.serialize_cdr(old, GRASP), GRASP_BEFORE_LINE_LENGTHS)
+    current = _recorded_grasp(tmp_path / "today", serialize_message(today), "")
+    assert "contact_line_lengths_m" not in recorded.msgdef and "contact_line_lengths_m" in current.msgdef
+    assert list(recorded.decode().contact_radii_m) == [0.02, 0.03]
+    replayed = live_message(recorded, Grasp)
+    assert (replayed.width_m, replayed.finger_force_n, list(replayed.contact_radii_m)) == (0.04, 1.5, [0.02, 0.03])
+    assert list(replayed.contact_line_lengths_m) == []
+    assert live_message(current, Grasp) == today
+
+
+def _recorded_grasp(path, raw, msgdef: str):
+    """A one-grasp session at `path` (recorded with `msgdef`; "": the installed definition), read back."""
+    writer = SessionWriter(path, metadata(), 0)
+    writer.write(topics.BEST_GRASP, bytes(raw), 1, msgdef=msgdef)
+    return next(m for m in read_bag(writer.close())[1] if m.topic == topics.BEST_GRASP)
