@@ -128,6 +128,9 @@ class GraspTarget:
     # Per pad (-closing side first) the object's contact radius, m (Grasp.contact_radii_m); (): flat or not known:
     # the squeeze's flat law.
     contact_radii_m: tuple = ()
+    # Per pad, in contact_radii_m's order: 0 a point contact, > 0 the length (m) of the line the pad touches where the
+    # surface is straight one way (Grasp.contact_line_lengths_m); (): all point contacts.
+    contact_line_lengths_m: tuple = ()
 
 
 @dataclass(frozen=True)

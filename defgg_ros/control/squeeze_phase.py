@@ -91,12 +91,14 @@ class SqueezePhase:
     def _estimate(self) -> ModulusEstimate:
         # The face's height: from the grasp's surface point down to the table; its extent across the closing axis
         # is not known here (inf: the pads' spread alone is loaded, docs/squeeze.md). The grasp's contact radii
-        # (perceived, planning/contact_radii.py): Hertz where the surface is curved; none: the flat law.
+        # (perceived, planning/contact_radii.py): Hertz where the surface is curved (the line-contact law where a
+        # pad touches along a line); none: the flat law.
         face_height_m = max(float(self._grasp.position_m[2]) - self._cfg.table_z_m, MIN_FACE_HEIGHT_M)
         try:
             return estimate_modulus(self.squeeze_readings, math.inf, face_height_m, hand=self._squeeze.hand,
                                     width_resolution_m=self._squeeze.width_resolution_m,
-                                    contact_radii_m=tuple(self._grasp.contact_radii_m) or None)
+                                    contact_radii_m=tuple(self._grasp.contact_radii_m) or None,
+                                    contact_line_lengths_m=tuple(self._grasp.contact_line_lengths_m) or None)
         except SqueezeError as error:
             raise SequenceFailure(f"squeeze: {error}") from error
 

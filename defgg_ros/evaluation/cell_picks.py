@@ -100,8 +100,10 @@ def _plan(client, record: dict):
     record["grasp"] = {"x_m": p.x, "y_m": p.y, "z_m": p.z, "angle_rad": grasp.angle_rad, "width_m": grasp.width_m,
                        "quality": grasp.quality, "youngs_modulus_pa": grasp.youngs_modulus_pa,
                        "finger_force_n": grasp.finger_force_n, "estimated_mass_kg": grasp.estimated_mass_kg,
-                       # the squeeze's law: Hertz on these radii, the flat law when empty (docs/squeeze.md)
-                       "contact_radii_m": [float(r) for r in grasp.contact_radii_m]}
+                       # the squeeze's law: Hertz on these radii, the flat law when empty, the line-contact law
+                       # where a line length is > 0 (docs/squeeze.md)
+                       "contact_radii_m": [float(r) for r in grasp.contact_radii_m],
+                       "contact_line_lengths_m": [float(v) for v in grasp.contact_line_lengths_m]}
     return grasp
 
 

@@ -88,8 +88,9 @@ def grasp_target(grasp, base_frame: str, default_modulus_pa: float) -> GraspTarg
     force = float(grasp.finger_force_n)
     if not math.isfinite(force) or force < 0.0:
         raise GoalError(f"grasp finger_force_n must be >= 0 N (0: the modulus rule), got {force}")
-    return GraspTarget(tuple(base_M_tcp[:3, 3]), yaw, float(grasp.width_m), float(modulus), force,
-                       contact_radii_m(grasp))
+    radii = contact_radii_m(grasp)
+    return GraspTarget(tuple(base_M_tcp[:3, 3]), yaw, float(grasp.width_m), float(modulus), force, radii,
+                       contact_line_lengths_m(grasp, radii))
 
 
 def contact_radii_m(grasp) -> tuple:
@@ -99,6 +100,19 @@ def contact_radii_m(grasp) -> tuple:
         raise GoalError(f"grasp contact_radii_m must be empty (flat or not known) or two radii > 0 m, one per pad, "
                         f"got {list(radii)}")
     return radii
+
+
+def contact_line_lengths_m(grasp, radii: tuple) -> tuple:
+    """Grasp.contact_line_lengths_m checked: () (all point contacts) or one length >= 0 m per pad (two; 0: a point
+    contact), and then two contact radii (the curved direction's); a grasp without the field: ()."""
+    lengths = tuple(float(v) for v in getattr(grasp, "contact_line_lengths_m", ()))
+    if lengths and (len(lengths) != 2 or not all(math.isfinite(v) and v >= 0.0 for v in lengths)):
+        raise GoalError("grasp contact_line_lengths_m must be empty (point contacts) or two lengths >= 0 m, one per "
+                        f"pad, got {list(lengths)}")
+    if lengths and len(radii) != 2:
+        raise GoalError(f"grasp contact_line_lengths_m {list(lengths)} needs two contact_radii_m (one per pad), "
+                        f"got {list(radii)}")
+    return lengths
 
 
 def place_target(pose_stamped, base_frame: str, default_position, default_yaw: float | None) -> PlaceTarget:

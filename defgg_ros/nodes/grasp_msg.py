@@ -1,6 +1,6 @@
 """A planned grasp as defgg_interfaces/Grasp (poses in the camera and the base frame, image projection, the
-object's estimated mass and finger force, the pads' contact radii) and as rviz finger markers: the inference
-node's outputs."""
+object's estimated mass and finger force, the pads' contact radii and line lengths) and as rviz finger markers:
+the inference node's outputs."""
 import numpy as np
 from defgg_interfaces.msg import Grasp
 from geometry_msgs.msg import PoseStamped
@@ -40,24 +40,29 @@ def grasp_msg(grasp, frame, network, grip_rule: LabelGripRule, density_kg_m3: fl
     msg.width_px = image["width_px"]
     msg.youngs_modulus_pa = float(grasp.youngs_modulus_pa)
     msg.object_id = int(grasp.object_id)
-    _contact_radii(msg, grasp, warn)
+    _pad_contacts(msg, grasp, warn)
     _grip_fields(msg, grasp, network, grip_rule, density_kg_m3, warn)
     return msg
 
 
-def _contact_radii(msg: Grasp, grasp, warn) -> None:
-    """Grasp.contact_radii_m (planning/contact_radii.py). A Grasp type without the field is an interface build older
-    than this source: said once, and the grasp goes without them (the executor's squeeze then uses the flat law)."""
-    global _STALE_INTERFACES_SAID
-    if hasattr(msg, "contact_radii_m"):
-        msg.contact_radii_m = [float(r) for r in grasp.contact_radii_m]
-    elif not _STALE_INTERFACES_SAID:
-        _STALE_INTERFACES_SAID = True
-        warn("the installed defgg_interfaces/Grasp has no contact_radii_m: its build is older than this source "
-             "(rebuild it: scripts/bootstrap.sh); grasps go without contact radii, the squeeze uses the flat law")
+# The pads' contacts a Grasp carries (planning/contact_radii.py via TabletopGrasp) and what the executor's squeeze
+# does without each (docs/squeeze.md).
+PAD_CONTACT_FIELDS = {"contact_radii_m": "the flat law", "contact_line_lengths_m": "point contacts only"}
 
 
-_STALE_INTERFACES_SAID = False
+def _pad_contacts(msg: Grasp, grasp, warn) -> None:
+    """Grasp.contact_radii_m and contact_line_lengths_m. A Grasp type without one is an interface build older than
+    this source: said once per field, and the grasps go without it."""
+    for name, without in PAD_CONTACT_FIELDS.items():
+        if hasattr(msg, name):
+            setattr(msg, name, [float(v) for v in getattr(grasp, name)])
+        elif name not in _STALE_FIELDS_SAID:
+            _STALE_FIELDS_SAID.add(name)
+            warn(f"the installed defgg_interfaces/Grasp has no {name}: its build is older than this source (rebuild "
+                 f"it: scripts/bootstrap.sh); grasps go without it, the squeeze uses {without}")
+
+
+_STALE_FIELDS_SAID = set()
 
 
 def _grip_fields(msg: Grasp, grasp, network, grip_rule: LabelGripRule, density_kg_m3: float, warn) -> None:

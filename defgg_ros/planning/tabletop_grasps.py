@@ -51,7 +51,7 @@ from defgg_ros.grasping.geometry import tcp_height_m
 from defgg_ros.grasping.postprocess import find_peaks, maps_from_network
 from defgg_ros.model.preprocess import network_input
 from defgg_ros.perception.tabletop import CELL_M, TabletopView, fill_holes, partly_seen_objects
-from defgg_ros.planning.contact_radii import perceived_contact_radii_m
+from defgg_ros.planning.contact_radii import PadContacts, perceived_pad_contacts
 
 # Free space the fingers need between the object and each pad while closing.
 CLEARANCE_M = 0.006
@@ -100,17 +100,31 @@ class TabletopGrasp:
     # The smoothed quality at the peak before its clip to [0, 1]: what grasps are ranked on (the clipped
     # quality ties at 1.0 wherever the network overshoots; docs/model.md "Post-processing").
     rank_quality: float = float("nan")
-    # contact_radii_m's value, or what makes it when first read (a search makes grasps at every peak it checks,
-    # ~1-3 ms each under load; only the grasps a request returns need their radii).
-    contact_radii_source: object = field(default=(), compare=False, repr=False)
+    # The pads' contacts (a PadContacts, or a tuple of radii: all point contacts), or what makes them when first
+    # read (a search makes grasps at every peak it checks, ~1-3 ms each under load; only the grasps a request
+    # returns need their contacts). Made once for both contact_radii_m and contact_line_lengths_m.
+    pad_contacts_source: object = field(default=PadContacts(), compare=False, repr=False)
 
     @functools.cached_property
+    def pad_contacts(self) -> PadContacts:
+        source = self.pad_contacts_source
+        value = source() if callable(source) else source
+        if isinstance(value, PadContacts):
+            return PadContacts(tuple(value.radii_m), tuple(value.line_lengths_m))
+        return PadContacts(radii_m=tuple(value))
+
+    @property
     def contact_radii_m(self) -> tuple:
         """Per pad, the pad on the -closing side first: the radius (m) of the sphere standing for the object's
-        surface where the pad touches it (planning/contact_radii.py, from the height map); (): flat faces, the
-        squeeze's flat law (docs/squeeze.md)."""
-        source = self.contact_radii_source
-        return tuple(source() if callable(source) else source)
+        surface where the pad touches it (at a line contact the curved direction's; planning/contact_radii.py,
+        from the height map); (): flat faces, the squeeze's flat law (docs/squeeze.md)."""
+        return self.pad_contacts.radii_m
+
+    @property
+    def contact_line_lengths_m(self) -> tuple:
+        """Per pad, in contact_radii_m's order: 0 a point contact, > 0 the length (m) of the line the pad touches
+        where the surface is straight one way; (): all point contacts (or flat faces)."""
+        return self.pad_contacts.line_lengths_m
 
 
 def virtual_depth(view: TabletopView) -> np.ndarray:
@@ -642,8 +656,8 @@ def _grasp(view, label, qualities, r, c, direction, width, extent_m, network_wid
                          extent_m=float(extent_m), network_width_m=float(network_width_m),
                          youngs_modulus_pa=float(modulus), cell_rc=(int(r), int(c)),
                          rank_quality=float(rank_quality),
-                         contact_radii_source=functools.partial(
-                             perceived_contact_radii_m, view.grid_height_m, view.grid_labels, label, (r, c),
+                         pad_contacts_source=functools.partial(
+                             perceived_pad_contacts, view.grid_height_m, view.grid_labels, label, (r, c),
                              tuple(direction), _tip_height_m(float(view.grid_height_m[r, c]), view.config), extent_m))
 
 

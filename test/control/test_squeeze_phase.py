@@ -86,6 +86,24 @@ def test_the_grasps_contact_radii_reach_the_estimate_hertz_where_curved(kin):
     assert estimates["flat"][0].youngs_modulus_pa == pytest.approx(expected_modulus_pa(), rel=0.02)
 
 
+def test_the_grasps_contact_line_lengths_reach_the_estimate_the_line_law_where_straight(kin):
+    """A grasp whose pads touch along lines (Grasp.contact_line_lengths_m, e.g. a standing cylinder's side) is read
+    with the line-contact law on its radii and lengths, not Hertz's point contact on the same radii."""
+    radii, lengths = (0.02, 0.02), (0.018, 0.018)
+    grasp = dataclasses.replace(GRASP, contact_radii_m=radii, contact_line_lengths_m=lengths)
+    sequence = PickPlaceSequence(kin, CONFIG, grasp, PLACE, SqueezeRequest(only=True, width_resolution_m=1e-5))
+    run(sequence, FakeRobot(kin, World(object_compliance_m_per_n=COMPLIANCE_M_PER_N)), max_s=120.0)
+    assert sequence.outcome.success, sequence.outcome.failure_reason
+    face_height_m = GRASP.position_m[2] - CONFIG.table_z_m
+    readings = sequence.squeeze_readings
+    line = estimate_modulus(readings, math.inf, face_height_m, width_resolution_m=1e-5, contact_radii_m=radii,
+                            contact_line_lengths_m=lengths)
+    point = estimate_modulus(readings, math.inf, face_height_m, width_resolution_m=1e-5, contact_radii_m=radii)
+    assert line.contact_law == sequence.squeeze_estimate.contact_law == "hertz-line" != point.contact_law
+    assert sequence.squeeze_estimate.youngs_modulus_pa == pytest.approx(line.youngs_modulus_pa, rel=1e-9)
+    assert line.youngs_modulus_pa != pytest.approx(point.youngs_modulus_pa, rel=0.05)
+
+
 def test_an_unresolved_compression_squeezes_firmer_and_reads_rigid(kin):
     sequence = PickPlaceSequence(kin, CONFIG, GRASP, PLACE, SqueezeRequest(only=True, width_resolution_m=1e-5))
     robot = FakeRobot(kin, World(object_compliance_m_per_n=0.0))

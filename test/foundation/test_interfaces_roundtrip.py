@@ -27,6 +27,7 @@ def _server_node(context):
             grasp.angle_rad = math.pi / 4
             grasp.center_u_px = float(request.depth.data[rank])
             grasp.contact_radii_m = [0.01 * (rank + 1), 0.02] if rank else []   # the first: flat (empty)
+            grasp.contact_line_lengths_m = [0.0, 0.018] if rank == 2 else []    # the last: a line at one pad
             response.grasps.append(grasp)
         return response
 
@@ -55,6 +56,7 @@ def test_plan_grasp_round_trip_between_two_nodes(rclpy_context, executor, spin, 
     assert [g.quality for g in response.grasps] == pytest.approx([1.0, 0.5, 1 / 3])
     assert [g.center_u_px for g in response.grasps] == [7.0, 0.0, 9.0]
     assert [list(g.contact_radii_m) for g in response.grasps] == [[], [0.02, 0.02], [0.03, 0.02]]
+    assert [list(g.contact_line_lengths_m) for g in response.grasps] == [[], [], [0.0, 0.018]]
 
     empty = call(executor, client, PlanGrasp.Request(), 10.0, "PlanGrasp response to empty request")
     assert not empty.success and "empty" in empty.message

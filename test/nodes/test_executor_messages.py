@@ -95,6 +95,33 @@ def test_bad_contact_radii_refuse_the_goal_saying_why(radii):
         grasp_target(msg, BASE, 2e6)
 
 
+def test_the_grasps_contact_line_lengths_reach_the_target():
+    """Grasp.contact_line_lengths_m (per pad: 0 a point contact, > 0 a line contact) becomes
+    GraspTarget.contact_line_lengths_m beside the radii; empty: () (all point contacts)."""
+    msg = grasp()
+    msg.contact_radii_m = [0.021, 0.034]
+    assert grasp_target(msg, BASE, 2e6).contact_line_lengths_m == ()
+    msg.contact_line_lengths_m = [0.0, 0.018]
+    target = grasp_target(msg, BASE, 2e6)
+    assert target.contact_line_lengths_m == pytest.approx((0.0, 0.018))
+    assert target.contact_radii_m == pytest.approx((0.021, 0.034))
+
+
+@pytest.mark.parametrize("radii, lengths, message", [
+    ([0.02, 0.03], [0.01], "contact_line_lengths_m must be empty .* or two lengths >= 0 m, one per pad, got .0.01.$"),
+    ([0.02, 0.03], [0.01, 0.02, 0.0], "two lengths >= 0 m, one per pad"),
+    ([0.02, 0.03], [0.01, -0.001], "two lengths >= 0 m, one per pad, got .0.01, -0.001."),
+    ([0.02, 0.03], [float("nan"), 0.01], "two lengths >= 0 m, one per pad"),
+    ([0.02, 0.03], [0.0, float("inf")], "two lengths >= 0 m, one per pad"),
+    ([], [0.0, 0.018], r"contact_line_lengths_m \[0.0, 0.018\] needs two contact_radii_m \(one per pad\), got \[\]"),
+])
+def test_bad_contact_line_lengths_refuse_the_goal_saying_why(radii, lengths, message):
+    msg = grasp()
+    msg.contact_radii_m, msg.contact_line_lengths_m = radii, lengths
+    with pytest.raises(GoalError, match=message):
+        grasp_target(msg, BASE, 2e6)
+
+
 @pytest.mark.parametrize("mutate, message", [
     (lambda g: setattr(g.pose_base.header, "frame_id", "camera_depth_optical_frame"), "expected 'fer_link0'"),
     (lambda g: setattr(g.pose_base.pose.orientation, "w", 7.0), "bad grasp pose"),

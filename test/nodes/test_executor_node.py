@@ -149,9 +149,12 @@ def test_bad_goals_are_aborted_with_a_reason_and_the_node_keeps_serving(executor
     nan_grasp.pose_base.pose.position.x = float("nan")
     bad_radii = grasp_msg()
     bad_radii.contact_radii_m = [0.02, float("nan")]
+    bad_lines = grasp_msg()
+    bad_lines.contact_radii_m, bad_lines.contact_line_lengths_m = [0.02, 0.03], [0.0, -0.01]
     cases = [
         (PickAndPlace.Goal(grasp=nan_grasp), "bad grasp pose"),
         (PickAndPlace.Goal(grasp=bad_radii), "contact_radii_m must be empty (flat or not known) or two radii > 0 m"),
+        (PickAndPlace.Goal(grasp=bad_lines), "contact_line_lengths_m must be empty (point contacts) or two lengths"),
         (PickAndPlace.Goal(grasp=grasp_msg(xyz=(1.3, 0.0, 0.05))), "grasp outside the workspace"),
         (PickAndPlace.Goal(grasp=grasp_msg(width_m=0.2)), "maximum opening"),
         (PickAndPlace.Goal(grasp=grasp_msg(finger_force_n=-1.0)), "finger_force_n"),

@@ -98,17 +98,20 @@ def test_a_request_with_its_depth_is_perceived_by_the_segmentation_node(cell, ex
     assert node.segmentation_node.diagnostics.values()["perceive service count"] >= 1
 
 
-def test_grasps_carry_the_pads_contact_radii_curved_on_the_cylinder_none_on_the_box(cell, executor, call):
-    """Grasp.contact_radii_m (planning/contact_radii.py via TabletopGrasp): the 2.5 cm cylinder's side two radii
-    (R_h its radius, R_v straight: capped at half its width), the box's faces none (the squeeze's flat law)."""
+def test_grasps_carry_the_pads_contacts_lines_on_the_standing_cylinder_none_on_the_box(cell, executor, call):
+    """Grasp.contact_radii_m and contact_line_lengths_m (planning/contact_radii.py via TabletopGrasp): the standing
+    2.5 cm cylinder's side touches each pad along a vertical line (radius: the curved way's, ~its own; length: the
+    pad's 18 mm, the cylinder stands above the pad's top), the box's faces nothing (the squeeze's flat law)."""
     _, _, client = cell
     response = plan(executor, call, client, image_request(top_k=2))
     assert response.success, response.message
-    radii = {int(TRUTH[int(round(g.center_v_px)), int(round(g.center_u_px))]): list(g.contact_radii_m)
-             for g in response.grasps}
-    assert set(radii) == {1, 2}, radii          # one grasp per object first
-    assert radii[1] == [], radii
-    assert len(radii[2]) == 2 and all(0.0125 <= r <= 0.05 for r in radii[2]), radii
+    contacts = {int(TRUTH[int(round(g.center_v_px)), int(round(g.center_u_px))]):
+                (list(g.contact_radii_m), list(g.contact_line_lengths_m)) for g in response.grasps}
+    assert set(contacts) == {1, 2}, contacts          # one grasp per object first
+    assert contacts[1] == ([], []), contacts
+    radii, lengths = contacts[2]
+    assert len(radii) == 2 and all(0.0125 <= r <= 0.05 for r in radii), contacts
+    assert len(lengths) == 2 and all(0.015 <= length <= 0.018 + 1e-9 for length in lengths), contacts
 
 
 def test_plan_grasp_on_a_perceive_answer_gives_the_same_grasps(cell, executor, call):

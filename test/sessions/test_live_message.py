@@ -4,25 +4,14 @@ and finger_force_n (sessions recorded until 2026-11-27)."""
 import pytest
 from defgg_interfaces.action import PickAndPlace
 from rclpy.serialization import deserialize_message, serialize_message
+from support.session_bag_helpers import GRASP_BEFORE_GRIP_FIELDS, GRASP_BEFORE_LINE_LENGTHS
 
 from defgg_ros.sessions.bag import BagMessage, recorded_typestore
 from defgg_ros.sessions.live_message import live_message
 
 GOAL = "defgg_interfaces/action/PickAndPlace_Goal"
-OLD_GRASP = """std_msgs/Header header
-geometry_msgs/PoseStamped pose_base
-geometry_msgs/PoseStamped pose_camera
-float64 width_m
-float64 quality
-float64 angle_rad
-float64 center_u_px
-float64 center_v_px
-float64 width_px
-float64 youngs_modulus_pa
-int32 object_id
-"""
 OLD_GOAL_DEF = ("bool plan_grasp\ndefgg_interfaces/Grasp grasp\ngeometry_msgs/PoseStamped place_pose\n"
-                + "=" * 80 + "\nMSG: defgg_interfaces/Grasp\n" + OLD_GRASP)
+                + "=" * 80 + "\nMSG: defgg_interfaces/Grasp\n" + GRASP_BEFORE_GRIP_FIELDS)
 
 
 def old_goal_raw() -> bytes:
@@ -62,8 +51,7 @@ def test_a_message_of_the_installed_layout_round_trips():
     goal.grasp.contact_line_lengths_m = [0.0, 0.018]
     raw = serialize_message(goal)
     current = "bool plan_grasp\ndefgg_interfaces/Grasp grasp\ngeometry_msgs/PoseStamped place_pose\n" + "=" * 80 + \
-        "\nMSG: defgg_interfaces/Grasp\n" + OLD_GRASP + "float64 estimated_mass_kg\nfloat64 finger_force_n\n" + \
-        "float64[] contact_radii_m\nfloat64[] contact_line_lengths_m\n"
+        "\nMSG: defgg_interfaces/Grasp\n" + GRASP_BEFORE_LINE_LENGTHS + "float64[] contact_line_lengths_m\n"
     for msgdef in ("", current):         # no definition recorded: the installed one
         back = live_message(BagMessage("/defgg/session/pick_goal", GOAL, 0, raw, msgdef), PickAndPlace.Goal)
         assert back == goal

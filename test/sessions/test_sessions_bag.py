@@ -4,7 +4,7 @@ from pathlib import Path
 
 import pytest
 import yaml
-from support.session_bag_helpers import metadata, write_small_session
+from support.session_bag_helpers import GRASP_BEFORE_LINE_LENGTHS, metadata, write_small_session
 
 from defgg_ros.sessions import session_topics as st
 from defgg_ros.sessions.bag import SessionBagError, SessionWriter, read_bag
@@ -171,24 +171,6 @@ def test_a_grasp_as_rclpy_serialises_it_decodes_with_or_without_contact_radii_an
             BagMessage(topics.BEST_GRASP, GRASP, 0, bytes(serialize_message(grasp)) + bytes(8)).decode()
     with pytest.raises(SessionBagError, match="cannot be decoded"):   # a string without its terminator
         BagMessage(topics.BEST_GRASP, GRASP, 0, b"\x00\x01\x00\x00" + bytes(400)).decode()
-
-
-# defgg_interfaces/Grasp as sessions recorded it before contact_line_lengths_m (until 2026-11-30).
-GRASP_BEFORE_LINE_LENGTHS = """std_msgs/Header header
-geometry_msgs/PoseStamped pose_base
-geometry_msgs/PoseStamped pose_camera
-float64 width_m
-float64 quality
-float64 angle_rad
-float64 center_u_px
-float64 center_v_px
-float64 width_px
-float64 youngs_modulus_pa
-int32 object_id
-float64 estimated_mass_kg
-float64 finger_force_n
-float64[] contact_radii_m
-"""
 
 
 def test_a_grasp_recorded_before_contact_line_lengths_reads_and_replays_as_point_contacts(tmp_path):

@@ -13,6 +13,24 @@ from defgg_ros.sessions.metadata import make_metadata
 from defgg_ros.sessions.session_topics import topics  # absolute names (bag channels)
 
 REPO = __import__("pathlib").Path(__file__).resolve().parents[2]
+# defgg_interfaces/Grasp as sessions recorded it: until 2026-11-27 (before estimated_mass_kg and finger_force_n),
+# and until 2026-11-30 (before contact_line_lengths_m).
+GRASP_BEFORE_GRIP_FIELDS = """std_msgs/Header header
+geometry_msgs/PoseStamped pose_base
+geometry_msgs/PoseStamped pose_camera
+float64 width_m
+float64 quality
+float64 angle_rad
+float64 center_u_px
+float64 center_v_px
+float64 width_px
+float64 youngs_modulus_pa
+int32 object_id
+"""
+GRASP_BEFORE_LINE_LENGTHS = GRASP_BEFORE_GRIP_FIELDS + """float64 estimated_mass_kg
+float64 finger_force_n
+float64[] contact_radii_m
+"""
 K = np.array([[385.0, 0, 31.5], [0, 385.0, 23.5], [0, 0, 1]])
 
 
