@@ -78,6 +78,11 @@ class CellObject:
     def soft(self) -> bool:
         return self.youngs_modulus_pa <= 2e5
 
+    @property
+    def mass_kg(self) -> float:
+        """The cell's mass of it: its library surface's volume at the trials' density (what the labels used)."""
+        return round(float(abs(_library_shape(self).surface().volume)) * OBJECT_DENSITY_KG_M3, 4)
+
 
 # The paper's mix: boxes, toys, balls, fruit-like and irregular shapes. The common can (6.5 cm) is left out:
 # wider than the gripper's opening minus the planner's clearance, it has no feasible grasp (measured: PlanGrasp
@@ -193,11 +198,9 @@ def mesh_file(obj: CellObject, folder: Path) -> Path:
 
 def scene_object(obj: CellObject, pose: dict, mesh_folder: Path) -> dict:
     """The scene file's entry for `obj` at `pose` (mass from its volume at the trials' density)."""
-    shape = _library_shape(obj)
-    surface = shape.surface()
-    mass_kg = round(float(abs(surface.volume)) * OBJECT_DENSITY_KG_M3, 4)
+    surface = _library_shape(obj).surface()
     entry = {"name": obj.name, "position_xy_m": [pose["x_m"], pose["y_m"]], "yaw_rad": pose["yaw_rad"],
-             "youngs_modulus_pa": float(obj.youngs_modulus_pa), "mass_kg": mass_kg}
+             "youngs_modulus_pa": float(obj.youngs_modulus_pa), "mass_kg": obj.mass_kg}
     if obj.cell_shape == "box":
         lo, hi = surface.bounds
         # 3 cm cells: the demo's sponge grid (a coarser one let the fingers sink through the body).

@@ -267,6 +267,22 @@ def squeeze_rows(records, objects) -> list:
     return rows
 
 
+def mass_rows(records, objects) -> list:
+    """Per object, the inference node's mass estimate (the height map's volume x density: what the labels' grip
+    force FOS(E) m g / mu / 2 is computed from) against the cell's true mass: median over every planned grasp."""
+    rows = []
+    for obj in objects:
+        true_kg = getattr(obj, "mass_kg", None)
+        estimates = sorted(r["grasp"]["estimated_mass_kg"] for r in records
+                           if r.get("object") == obj.name and (r.get("grasp") or {}).get("estimated_mass_kg"))
+        if not estimates or not true_kg:
+            continue
+        median = estimates[len(estimates) // 2]
+        rows.append(f"| {obj.name} | {true_kg * 1e3:.1f} | {median * 1e3:.1f} | {median / true_kg:.2f} | "
+                    f"{estimates[0] / true_kg:.2f} .. {estimates[-1] / true_kg:.2f} | {len(estimates)} |")
+    return rows
+
+
 def present_cases(table: dict) -> list:
     """The cases the success table holds, in the report's column order."""
     return [c for c in (*CASES, MEASURED, *GRASP_ONLY_CASES) if any(c in v for v in table.values())]
@@ -323,6 +339,12 @@ def report_markdown(records, objects, planned_picks: int | None = None) -> str:
                       "target, 2e9 Pa should read rigid):", "",
                   "| object | true E (Pa) | median estimate (Pa) | ratio | within ×3 | called rigid |",
                   "|---|---|---|---|---|---|", *squeezed]
+    masses = mass_rows(records, objects)
+    if masses:
+        lines += ["", "The grip force's mass (the inference node's estimate from the height map, every planned grasp) "
+                      "against the cell's true mass:", "",
+                  "| object | true mass (g) | median estimate (g) | ratio | ratio, min .. max | grasps |",
+                  "|---|---|---|---|---|---|", *masses]
     return "\n".join(lines) + "\n"
 
 

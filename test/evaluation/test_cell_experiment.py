@@ -312,3 +312,18 @@ def test_the_measured_case_squeezes_first_and_the_plan_carries_the_estimate(tmp_
     lengths = record["grasp"]["contact_line_lengths_m"]             # point contacts, or a line at a pad
     assert len(lengths) in (0, 2) and (not lengths or len(record["grasp"]["contact_radii_m"]) == 2), record["grasp"]
     assert "| egad_test_00_c1 | 2e+09 |" in cr.write_report(out, objects, planned_picks=1)
+
+
+def test_the_report_sets_the_grip_force_s_mass_estimate_against_the_true_mass(tmp_path):
+    """The labels' grip force is FOS(E) m g / mu / 2 with the inference node's mass: the report shows that estimate
+    against the cell's mass of each object (its surface's volume at the trials' density), so a slip can be told
+    from a too-low mass."""
+    from defgg_ros.atomic import append_jsonl
+
+    sponge = next(o for o in ce.OBJECTS if o.name == "common_sponge")
+    assert sponge.mass_kg == pytest.approx(0.162, abs=0.001)        # 9 x 6 x 3 cm of water
+    for index, estimate_kg in enumerate((0.150, 0.162, 0.200)):
+        append_jsonl(tmp_path / ce.RECORDS_NAME, pick("common_sponge", "correct", index, True,
+                                                      grasp={"estimated_mass_kg": estimate_kg}))
+    body = cr.write_report(tmp_path, ce.OBJECTS, planned_picks=3)
+    assert "| common_sponge | 162.0 | 162.0 | 1.00 | 0.93 .. 1.23 | 3 |" in body
