@@ -106,6 +106,14 @@ def face_m(spec) -> tuple[float, float]:
     return float(hi[1] - lo[1]), float(hi[2] - lo[2])
 
 
+def closing_extent_m(spec) -> float:
+    """The object's extent along the closing axis (its size along x before the yaw)."""
+    if spec.shape == "box":
+        return spec.size_m[0]
+    lo, hi = centred_surface_mesh(spec).bounds
+    return float(hi[0] - lo[0])
+
+
 def surface_x_along_closing(triangles, ys, zs):
     """x of every crossing of the lines (y, z) along the closing axis with the triangles: (points, triangles), nan
     where a line misses a triangle (barycentric test in the y-z plane)."""
@@ -146,6 +154,24 @@ def surface_contacts(spec) -> PadContacts:
     return PadContacts(tuple(r for r, _, _ in pads), lines if any(lines) else ())
 
 
+# How far from the object's position its label is looked for: a ring's position is its hole.
+LABEL_SEARCH_M = 0.03
+
+
+def object_label_near(grid_labels: np.ndarray, centre_rc) -> int:
+    """The object label at centre_rc, else the most frequent one within LABEL_SEARCH_M of it (0: none)."""
+    row, col = (int(round(v)) for v in centre_rc)
+    if grid_labels[row, col]:
+        return int(grid_labels[row, col])
+    reach = int(math.ceil(LABEL_SEARCH_M / CELL_M))
+    rows, cols = np.mgrid[-reach:reach + 1, -reach:reach + 1]
+    near = (rows ** 2 + cols ** 2) * CELL_M ** 2 <= LABEL_SEARCH_M ** 2
+    window = grid_labels[max(row - reach, 0):row + reach + 1, max(col - reach, 0):col + reach + 1]
+    mask = near[:window.shape[0], :window.shape[1]] if row >= reach and col >= reach else np.ones(window.shape, bool)
+    labels = window[mask & (window > 0)]
+    return int(np.bincount(labels).argmax()) if labels.size else 0
+
+
 def perceived_contacts(spec) -> tuple[PadContacts, tuple]:
     """The contacts the cell perceives (empty: flat faces, the flat law) and the point-law radii the executor used
     before line contacts (sqrt(R_h R_v) at every pad): the object rendered by the cell's own camera
@@ -166,14 +192,20 @@ def perceived_contacts(spec) -> tuple[PadContacts, tuple]:
     base_T_camera[:3, 3] = scene.base_xyz_camera_m
     view = perceive(depth_m, camera_k, base_T_camera, TabletopConfig())
     centre = ((position[0] - view.grid_origin_xy_m[0]) / CELL_M, (position[1] - view.grid_origin_xy_m[1]) / CELL_M)
-    row, col = (int(round(v)) for v in centre)
-    label = int(view.grid_labels[row, col])
+    label = object_label_near(view.grid_labels, centre)
     if label == 0:
-        raise SystemExit(f"{spec.name}: perception found no object under its position")
+        raise SystemExit(f"{spec.name}: perception found no object within {LABEL_SEARCH_M * 100:.0f} cm of its "
+                         "position")
     tip_m = face_m(spec)[1] / 2 - PANDA_FINGERTIP_BELOW_TCP_M
     details = {}
+    row, col = (int(round(v)) for v in centre)
+    # A grasp centred on a hole (a ring): the outline is searched from the extent's ends, as the planner does.
+    extent_m = None if view.grid_labels[row, col] == label else closing_extent_m(spec)
     contacts = perceived_pad_contacts(view.grid_height_m, view.grid_labels, label, centre,
-                                      (math.cos(spec.yaw_rad), math.sin(spec.yaw_rad)), tip_m, details=details)
+                                      (math.cos(spec.yaw_rad), math.sin(spec.yaw_rad)), tip_m, extent_m,
+                                      details=details)
+    if not details.get("pads"):
+        return contacts, ()
     point_radii = tuple(contact_radius_m(r_h, r_v, details["half_width_m"]) for r_h, r_v, _ in details["pads"])
     return contacts, (point_radii if contacts.radii_m else ())
 
