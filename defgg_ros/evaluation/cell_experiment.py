@@ -45,7 +45,15 @@ from defgg_ros.bringup.supervisor import BringupError
 from defgg_ros.cli_help import HelpFormatter
 from defgg_ros.constants import OBJECT_DENSITY_KG_M3, TRAINING_YOUNGS_MODULI_PA
 from defgg_ros.evaluation.cell_picks import PickSetup, run_pick
-from defgg_ros.evaluation.cell_report import CASES, GRASP_ONLY_CASES, RECORDS_NAME, plain_case, write_report
+from defgg_ros.evaluation.cell_report import (
+    CASES,
+    GRASP_ONLY_CASES,
+    RECORDS_NAME,
+    plain_case,
+    read_records,
+    rerun_lines,
+    write_report,
+)
 from defgg_ros.ros.cell_client import CellCallError
 from defgg_ros.ros.domain import ISOLATION_ENV, apply_domain_choice, default_domain_choice
 from defgg_ros.ros.share import share_path
@@ -300,6 +308,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="the run's folder")
     p.add_argument("--picks", type=int, default=None, help="picks planned per object and case (for the progress "
                                                              "line; default: the most recorded)")
+    p = sub.add_parser("compare", help="a rerun against an earlier run: the picks run in both, which ended the "
+                                       "same way and chose the same grasp", formatter_class=HelpFormatter)
+    p.add_argument("--out", required=True, help="the rerun's folder (its records*.jsonl)")
+    p.add_argument("--earlier", required=True, help="the earlier run's folder (e.g. results/cell_experiment)")
     return parser
 
 
@@ -322,6 +334,9 @@ def main(argv=None) -> int:
     try:
         if args.command == "report":
             print(write_report(Path(args.out), OBJECTS, args.picks))
+            return 0
+        if args.command == "compare":
+            print("\n".join(rerun_lines(*(read_records(Path(d)) for d in (args.earlier, args.out)))))
             return 0
         if args.max_attempts < 1:
             raise ValueError(f"--max-attempts must be >= 1, got {args.max_attempts}")

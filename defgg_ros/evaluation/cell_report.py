@@ -58,6 +58,14 @@ def records_files(out: Path) -> list:
     return sorted(Path(out).glob("records*.jsonl"))
 
 
+def read_records(out: Path) -> list:
+    """Every record of a run's folder (records*.jsonl); OSError when it has none."""
+    files = records_files(out)
+    if not files:
+        raise OSError(f"{out} holds no records*.jsonl")
+    return [r for path in files for r in read_jsonl(path)]
+
+
 def outcomes(records) -> dict:
     """key -> the pick's record with an outcome (the last one if a key was recorded twice)."""
     return {r["key"]: r for r in records if not r.get("cell_error")}
@@ -199,6 +207,26 @@ def same_grasp(a: dict, b: dict, position_m: float = SAME_GRASP_POSITION_M,
         return False
     d_angle = abs((ga["angle_rad"] - gb["angle_rad"] + math.pi / 2) % math.pi - math.pi / 2)
     return math.hypot(ga["x_m"] - gb["x_m"], ga["y_m"] - gb["y_m"]) <= position_m and d_angle <= angle_rad
+
+
+def rerun_lines(earlier, rerun) -> list:
+    """A rerun of picks against an earlier run (the same keys: object, case, pick at the same seeded pose): how
+    many ended the same way and chose the same grasp, and each pick that ended otherwise."""
+    before, after = outcomes(earlier), outcomes(rerun)
+    keys = sorted(set(before) & set(after))
+    if not keys:
+        return ["no pick has an outcome in both runs"]
+    same = [k for k in keys if bool(before[k]["success"]) == bool(after[k]["success"])]
+    grasp = sum(same_grasp(before[k], after[k]) for k in keys)
+    lines = [f"the same outcome in {len(same)} of {len(keys)} picks run in both; the same grasp in {grasp} of "
+             f"{len(keys)}"]
+    for k in keys:
+        if k not in same:
+            lines.append(f"  {k}: {'held' if before[k]['success'] else 'missed'} -> "
+                         f"{'held' if after[k]['success'] else 'missed'}"
+                         f"{' (the same grasp)' if same_grasp(before[k], after[k]) else ' (another grasp)'}"
+                         f"{': ' + after[k]['failure_reason'][:80] if after[k].get('failure_reason') else ''}")
+    return lines
 
 
 def channel_rows(records, cases) -> list:

@@ -327,3 +327,23 @@ def test_the_report_sets_the_grip_force_s_mass_estimate_against_the_true_mass(tm
                                                       grasp={"estimated_mass_kg": estimate_kg}))
     body = cr.write_report(tmp_path, ce.OBJECTS, planned_picks=3)
     assert "| common_sponge | 162.0 | 162.0 | 1.00 | 0.93 .. 1.23 | 3 |" in body
+
+
+def test_a_rerun_is_compared_pick_by_pick_with_the_earlier_run(tmp_path):
+    """`compare`: the picks with an outcome in both runs, how many ended the same way and chose the same grasp,
+    and each that ended otherwise; a failed cell (no outcome) is left out."""
+    from defgg_ros.atomic import append_jsonl
+
+    grasp = {"x_m": 0.5, "y_m": 0.0, "angle_rad": 0.1}
+    moved = {"x_m": 0.52, "y_m": 0.0, "angle_rad": 0.1}
+    for folder, rows in (("earlier", [(0, True, grasp), (1, True, grasp), (2, False, grasp)]),
+                         ("rerun", [(0, True, grasp), (1, False, moved), (2, False, grasp)])):
+        for index, ok, g in rows:
+            append_jsonl(tmp_path / folder / ce.RECORDS_NAME, pick("common_sponge", "correct", index, ok, grasp=g,
+                                                                   failure_reason="" if ok else "dropped"))
+    append_jsonl(tmp_path / "rerun" / ce.RECORDS_NAME, {"key": ce.pick_key("common_ball", "correct", 0),
+                                                        "cell_error": "x"})
+    lines = cr.rerun_lines(cr.read_records(tmp_path / "earlier"), cr.read_records(tmp_path / "rerun"))
+    assert lines[0] == "the same outcome in 2 of 3 picks run in both; the same grasp in 2 of 3"
+    assert lines[1:] == ["  common_sponge|correct|1: held -> missed (another grasp): dropped"]
+    assert ce.main(["compare", "--out", str(tmp_path / "rerun"), "--earlier", str(tmp_path / "nothing")]) == 2
