@@ -4,7 +4,7 @@ table does not place, on a cycle in the table itself, on an import cycle between
 and on a core package or a root module importing rclpy.
 
 The layers, bottom up: the root modules (constants, errors, rotations, atomic, cli_help, stiffness, grip_force,
-squeeze; every package may import them); the cores, no rclpy (grasping, control, perception, model, sim, data,
+hertz, squeeze; every package may import them); the cores, no rclpy (grasping, control, perception, model, sim, data,
 planning); offline above them (train, evaluation); the ROS side (ros: rclpy helpers and names; nodes: thin
 adapters; bringup: the process launcher; sessions: record/replay; demo). A package added to defgg_ros fails here
 until it has a row.
@@ -17,14 +17,14 @@ import pytest
 pytestmark = pytest.mark.unit
 
 PACKAGE_DIR = Path(__file__).resolve().parents[2] / "defgg_ros"
-ROOT_MODULES = {"constants", "errors", "rotations", "atomic", "cli_help", "stiffness", "grip_force", "squeeze"}
+ROOT_MODULES = {"constants", "errors", "rotations", "atomic", "cli_help", "stiffness", "grip_force", "hertz", "squeeze"}
 CORES = ("model", "grasping", "perception", "control", "sim", "data", "planning")
 ROS_MODULES = ("rclpy", "rosidl_runtime_py", "rosbag2_py")
 # Which package may import which (besides the root modules). Read a row as "<package> stands on these".
 MAY_IMPORT = {
     # root modules among themselves
     "__init__": set(), "constants": set(), "errors": set(), "rotations": set(), "atomic": set(), "cli_help": set(),
-    "stiffness": {"constants"}, "grip_force": {"constants"}, "squeeze": {"constants"},
+    "stiffness": {"constants"}, "grip_force": {"constants"}, "hertz": set(), "squeeze": {"constants", "hertz"},
     # cores
     "grasping": set(),
     "control": {"grasping"},
