@@ -361,19 +361,22 @@ def report_markdown(records, objects, planned_picks: int | None = None) -> str:
     repeat = repeat_line(records)
     if repeat:
         lines += ["", repeat]
-    squeezed = squeeze_rows(records, objects)
-    if squeezed:
-        lines += ["", "The squeeze's estimates (measured case; a factor 3 of the true modulus is issue 49 item 4's "
-                      "target, 2e9 Pa should read rigid):", "",
-                  "| object | true E (Pa) | median estimate (Pa) | ratio | within ×3 | called rigid |",
-                  "|---|---|---|---|---|---|", *squeezed]
-    masses = mass_rows(records, objects)
-    if masses:
-        lines += ["", "The grip force's mass (the inference node's estimate from the height map, every planned grasp) "
-                      "against the cell's true mass:", "",
-                  "| object | true mass (g) | median estimate (g) | ratio | ratio, min .. max | grasps |",
-                  "|---|---|---|---|---|---|", *masses]
+    lines += _table(squeeze_rows(records, objects),
+                    "The squeeze's estimates (measured case; a factor 3 of the true modulus is issue 49 item 4's "
+                    "target, 2e9 Pa should read rigid):",
+                    "| object | true E (Pa) | median estimate (Pa) | ratio | within ×3 | called rigid |")
+    lines += _table(mass_rows(records, objects),
+                    "The grip force's mass (the inference node's estimate from the height map, every planned grasp) "
+                    "against the cell's true mass:",
+                    "| object | true mass (g) | median estimate (g) | ratio | ratio, min .. max | grasps |")
     return "\n".join(lines) + "\n"
+
+
+def _table(rows: list, caption: str, header: str) -> list:
+    """A captioned markdown table after a blank line; nothing without rows."""
+    if not rows:
+        return []
+    return ["", caption, "", header, "|" + "---|" * header.count(" | ") + "---|", *rows]
 
 
 def write_report(out: Path, objects, planned_picks: int | None = None) -> str:
