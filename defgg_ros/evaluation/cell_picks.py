@@ -96,15 +96,20 @@ def _plan(client, record: dict):
         record["failure_reason"] = f"PlanGrasp: {response.message or 'no grasp'}"
         return None
     grasp = response.grasps[0]
-    p = grasp.pose_base.pose.position
-    record["grasp"] = {"x_m": p.x, "y_m": p.y, "z_m": p.z, "angle_rad": grasp.angle_rad, "width_m": grasp.width_m,
-                       "quality": grasp.quality, "youngs_modulus_pa": grasp.youngs_modulus_pa,
-                       "finger_force_n": grasp.finger_force_n, "estimated_mass_kg": grasp.estimated_mass_kg,
-                       # the squeeze's law: Hertz on these radii, the flat law when empty, the line-contact law
-                       # where a line length is > 0 (docs/squeeze.md)
-                       "contact_radii_m": [float(r) for r in grasp.contact_radii_m],
-                       "contact_line_lengths_m": [float(v) for v in grasp.contact_line_lengths_m]}
+    record["grasp"] = grasp_record(grasp)
     return grasp
+
+
+def grasp_record(grasp) -> dict:
+    """A Grasp message as the record keeps it (JSON)."""
+    p = grasp.pose_base.pose.position
+    return {"x_m": p.x, "y_m": p.y, "z_m": p.z, "angle_rad": grasp.angle_rad, "width_m": grasp.width_m,
+            "quality": grasp.quality, "youngs_modulus_pa": grasp.youngs_modulus_pa,
+            "finger_force_n": grasp.finger_force_n, "estimated_mass_kg": grasp.estimated_mass_kg,
+            # a squeeze on this grasp: Hertz on these radii, the flat law when empty, the line-contact law where
+            # a line length is > 0 (docs/squeeze.md)
+            "contact_radii_m": [float(r) for r in grasp.contact_radii_m],
+            "contact_line_lengths_m": [float(v) for v in grasp.contact_line_lengths_m]}
 
 
 def grip_as(grasp, youngs_modulus_pa: float, model_path: Path, record: dict) -> None:
@@ -162,7 +167,9 @@ def _measure(client, record: dict, timeout_s: float) -> None:
         "high_pa": _json_number(result.measured_modulus_high_pa),   # a rigid reading has no upper bound: inf
         "rigid": bool(result.measured_rigid), "sent_pa": result.stiffness_sent_pa,
         "update": result.stiffness_update, "forces_n": list(result.squeeze_forces_n),
-        "widths_m": list(result.squeeze_widths_m), "sim_duration_s": result.duration_s}
+        "widths_m": list(result.squeeze_widths_m), "sim_duration_s": result.duration_s,
+        # the executor plans its own grasp for the squeeze: its contacts say which law the estimate used
+        "grasp": grasp_record(result.grasp_used)}
 
 
 def run_pick(setup: PickSetup, scene_path: Path, model_path: Path, log, ready_timeout_s: float = 300.0,

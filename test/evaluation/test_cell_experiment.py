@@ -308,9 +308,10 @@ def test_the_measured_case_squeezes_first_and_the_plan_carries_the_estimate(tmp_
     assert squeeze["update"].startswith("sent") and squeeze["sent_pa"] > 0, squeeze
     assert record["perceived_moduli_pa"] == [pytest.approx(squeeze["sent_pa"])]
     assert record["grasp"]["youngs_modulus_pa"] == pytest.approx(squeeze["sent_pa"])
-    assert len(record["grasp"]["contact_radii_m"]) in (0, 2)       # which law the squeeze used is on record
-    lengths = record["grasp"]["contact_line_lengths_m"]             # point contacts, or a line at a pad
-    assert len(lengths) in (0, 2) and (not lengths or len(record["grasp"]["contact_radii_m"]) == 2), record["grasp"]
+    squeezed_on = squeeze["grasp"]          # the executor's own grasp for the squeeze: which law it used is on record
+    assert squeezed_on["width_m"] > 0 and len(squeezed_on["contact_radii_m"]) in (0, 2), squeezed_on
+    lengths = squeezed_on["contact_line_lengths_m"]                  # point contacts, or a line at a pad
+    assert len(lengths) in (0, 2) and (not lengths or len(squeezed_on["contact_radii_m"]) == 2), squeezed_on
     assert "| egad_test_00_c1 | 2e+09 |" in cr.write_report(out, objects, planned_picks=1)
 
 
