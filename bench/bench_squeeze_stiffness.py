@@ -357,7 +357,7 @@ def main(argv=None) -> int:
                                                           spec, hand, radii).items():
                         by_variant[variant].append(estimate)
                 except SqueezeError as error:   # the executor fails such a squeeze: a miss in the counts
-                    print(f"{name:16s} {modulus:8.0e} refused: {error}", flush=True)
+                    print(f"{name:16s} {modulus:8.2g} refused: {error}", flush=True)
             if modulus < 1e7:      # does the perceived estimate's one-sigma band hold the true modulus?
                 in_band += [e.low_pa <= modulus <= e.high_pa for e in by_variant["perceived"]]
                 log_errors += [math.log(e.youngs_modulus_pa / modulus) for e in by_variant["perceived"] if not e.rigid]
@@ -365,7 +365,7 @@ def main(argv=None) -> int:
             rows.append((name, modulus, factors))
             values = [e.youngs_modulus_pa for e in by_variant["perceived"]]
             spread = max(values) / min(values) if values and all(math.isfinite(v) for v in values) else math.nan
-            print(f"{name:16s} {modulus:8.0e} " + " ".join(f"{factor_text(f, modulus):>9s}" for f in factors) +
+            print(f"{name:16s} {modulus:8.2g} " + " ".join(f"{factor_text(f, modulus):>9s}" for f in factors) +
                   f"  {radii_text(radii.get('surface'))} | {radii_text(radii.get('perceived'))} {spread:7.2f}  "
                   f"{by_variant['perceived'][0].describe() if by_variant['perceived'] else ''}", flush=True)
     for line in summary(rows):
