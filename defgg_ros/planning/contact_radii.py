@@ -10,10 +10,10 @@ its radius is then the curved direction's, and its line length how far the surfa
 way (`PadContacts.line_lengths_m`; the squeeze's line law, defgg_ros/hertz.py). Same threshold, no new one.
 
 Two sources of the surface, one convention:
-- `surface_pad_radius`: reach samples of the true surface over the pad's footprint (the squeeze bench ray-casts
+- `surface_pad_contact`: reach samples of the true surface over the pad's footprint (the squeeze bench ray-casts
   the object's mesh along the closing axis): d(y, z) = (y - y*)^2 / (2 R_h) + (z - z*)^2 / (2 R_v) fitted by
   least squares about the most advanced sample (y*, z*); flat when every sample is within FLAT_RECESSION_M.
-- `perceived_contact_radii_m`: what the cell perceives, the height map of planning (perception/tabletop.py;
+- `perceived_pad_contacts`: what the cell perceives, the height map of planning (perception/tabletop.py;
   CELL_M ~1 mm cells). At a height z the object's cells standing at least z high are its outline there, seen
   from above; the pad's reach along the closing line is where that outline ends (the occupancy interpolated
   bilinearly between cell centres, its 0.5 crossing: to a fraction of a cell on a slanted or curved edge, to the
@@ -102,12 +102,6 @@ def _radius_of_curvature(coefficient: float) -> float:
     return 1.0 / (2.0 * coefficient) if coefficient > 0 else math.inf
 
 
-def surface_pad_radius(dy_m, dz_m, reach_m, half_width_m: float) -> tuple[float, bool]:
-    """(contact radius, flat) of one pad from reach samples of the true surface (surface_pad_contact's)."""
-    radius, _, flat = surface_pad_contact(dy_m, dz_m, reach_m, half_width_m)
-    return radius, flat
-
-
 def surface_pad_contact(dy_m, dz_m, reach_m, half_width_m: float) -> tuple[float, float, bool]:
     """(contact radius, line length, flat) of one pad from reach samples of the true surface over its footprint.
 
@@ -190,11 +184,6 @@ def _vertical_radius(z_m: np.ndarray, reach_m: np.ndarray) -> tuple[float, float
         return math.inf, 0.0
     sd = math.sqrt(residual[best] / max(z.size - 2, 1) / uu[best])
     return _radius_of_curvature(float(a[best])), float(max(a[best] - SAG_SIGMAS * sd, 0.0) * (z_m[-1] - z[best]) ** 2)
-
-
-def perceived_contact_radii_m(*args, **kwargs) -> tuple:
-    """perceived_pad_contacts(...).radii_m: per pad the perceived contact radius (m); (): flat faces."""
-    return perceived_pad_contacts(*args, **kwargs).radii_m
 
 
 def perceived_pad_contacts(grid_height_m: np.ndarray, grid_labels: np.ndarray, label: int, centre_rc,

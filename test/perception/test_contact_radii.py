@@ -17,7 +17,6 @@ from defgg_ros.planning.contact_radii import (
     contact_radius_m,
     perceived_pad_contacts,
     surface_pad_contact,
-    surface_pad_radius,
 )
 from defgg_ros.planning.tabletop_grasps import plan_tabletop_grasps
 
@@ -99,12 +98,13 @@ def test_the_planners_grasps_carry_the_radii_curved_and_flat():
 
 
 def test_the_surface_fit_of_the_bench():
-    """surface_pad_radius (the squeeze bench's ray-cast surface): a sphere's cap reads its radius, a plane flat."""
+    """surface_pad_contact (the squeeze bench's ray-cast surface): a sphere's cap reads its radius, a plane flat."""
     ys, zs = np.meshgrid(np.linspace(-0.01, 0.01, 9), np.linspace(-0.009, 0.009, 9))
     sphere_reach = np.sqrt(0.03 ** 2 - ys ** 2 - zs ** 2)
-    radius, flat = surface_pad_radius(ys, zs, sphere_reach, 0.03)
+    radius, _, flat = surface_pad_contact(ys, zs, sphere_reach, 0.03)
     assert not flat and radius == pytest.approx(0.03, rel=0.05)
-    radius, flat = surface_pad_radius(ys, zs, np.full(ys.shape, 0.02) + FLAT_RECESSION_M / 4 * (ys > 0), 0.025)
+    radius, _, flat = surface_pad_contact(ys, zs, np.full(ys.shape, 0.02) + FLAT_RECESSION_M / 4 * (ys > 0),
+                                          0.025)
     assert flat and radius == pytest.approx(0.025)
 
 
