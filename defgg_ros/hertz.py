@@ -63,11 +63,19 @@ def fitted_e_star_pa(points, radii_m, line_lengths_m) -> float:
     grid = [lo + (hi - lo) * i / n for i in range(n + 1)]
     best = min(range(n + 1), key=lambda i: _residual(points, grid[i], radii_m, line_lengths_m))
     a, b = grid[max(best - 1, 0)], grid[min(best + 1, n)]
+
+    def misfit(log_e_star):
+        return _residual(points, log_e_star, radii_m, line_lengths_m)
     ratio = (math.sqrt(5.0) - 1.0) / 2.0
-    for _ in range(GOLDEN_STEPS):
-        c, d = b - ratio * (b - a), a + ratio * (b - a)
-        if _residual(points, c, radii_m, line_lengths_m) <= _residual(points, d, radii_m, line_lengths_m):
-            b = d
+    c, d = b - ratio * (b - a), a + ratio * (b - a)
+    fc, fd = misfit(c), misfit(d)
+    for _ in range(GOLDEN_STEPS):    # each step keeps one of the two inner points: one new misfit per step
+        if fc <= fd:
+            b, d, fd = d, c, fc
+            c = b - ratio * (b - a)
+            fc = misfit(c)
         else:
-            a = c
+            a, c, fc = c, d, fd
+            d = a + ratio * (b - a)
+            fd = misfit(d)
     return math.exp((a + b) / 2.0)

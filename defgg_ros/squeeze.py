@@ -290,8 +290,8 @@ def calibration_sd_log(hand: HandCalibration | None, object_compliance_mpn: floa
     """The estimate's spread (log space, one sd) from the hand's calibration noise: the object's compliance is
     what is left after the hand's is taken out, so its relative error is s_hand / c_object, and E goes as
     c_object^-1 (flat; a line contact nearly so, its log aside) or C^-3/2 (point Hertz, C the fit's compliance
-    scale). Near the rigid limit (c_object = 2 s_hand)
-    this dominates the band: an object barely softer than the hand reads with a wide one."""
+    scale). Near the rigid limit (c_object = 2 s_hand) this dominates the band: an object barely softer than the
+    hand reads with a wide one."""
     if hand is None or hand.compliance_sd_mpn == 0.0:
         return 0.0
     return (1.5 if law == "hertz" else 1.0) * hand.compliance_sd_mpn / object_compliance_mpn

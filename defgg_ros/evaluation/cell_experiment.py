@@ -336,7 +336,11 @@ def main(argv=None) -> int:
             print(write_report(Path(args.out), OBJECTS, args.picks))
             return 0
         if args.command == "compare":
-            print("\n".join(rerun_lines(*(read_records(Path(d)) for d in (args.earlier, args.out)))))
+            runs = [read_records(Path(d)) for d in (args.earlier, args.out)]
+            for folder, records in zip((args.earlier, args.out), runs):
+                if not records:
+                    raise OSError(f"{folder} holds no records*.jsonl")
+            print("\n".join(rerun_lines(*runs)))
             return 0
         if args.max_attempts < 1:
             raise ValueError(f"--max-attempts must be >= 1, got {args.max_attempts}")

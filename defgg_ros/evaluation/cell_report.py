@@ -59,11 +59,8 @@ def records_files(out: Path) -> list:
 
 
 def read_records(out: Path) -> list:
-    """Every record of a run's folder (records*.jsonl); OSError when it has none."""
-    files = records_files(out)
-    if not files:
-        raise OSError(f"{out} holds no records*.jsonl")
-    return [r for path in files for r in read_jsonl(path)]
+    """Every record of a run's folder (records*.jsonl); [] when it has none."""
+    return [r for path in records_files(out) for r in read_jsonl(path)]
 
 
 def outcomes(records) -> dict:
@@ -381,7 +378,7 @@ def _table(rows: list, caption: str, header: str) -> list:
 
 def write_report(out: Path, objects, planned_picks: int | None = None) -> str:
     """OUT/per_object.png and the results part of OUT/report.md (between the markers; the rest is kept)."""
-    records = [r for path in records_files(out) for r in read_jsonl(path)]
+    records = read_records(out)
     filled = with_plain_substitutes(records)      # report_markdown fills its own copy
     table = success_table(filled)
     cases = present_cases(table)
