@@ -22,6 +22,12 @@ reported, but does not choose: in the simulated cell flat boxes fitted n = 1.3-2
          side) touches it along a line (`contact_line_lengths_m` > 0 at that pad): defgg_ros/hertz.py's line law,
          E* fitted over log E* (it sits inside a log).
 
+Settling. An elastic body's compression grows smoothly with the force: over the gentle forces no curve the fit
+allows (F ~ x^0.77 .. x^2.5) makes one interval's compliance (opening lost per newton) more than ~1.7x another's.
+A step SETTLE_STEP_RATIO times the other gentle intervals' (or the width resolution's) is the object turning or
+settling between the pads, not compression (docs/squeeze.md: rigid star prisms read 7e4-1.5e6 Pa from such a
+step): `without_settling_step` keeps the longer run of readings on one side of it, and the estimate says so.
+
 Rigid. An object compliance (1/k less the hand's) within two standard deviations of the calibration's (and of the
 width reading's) noise of zero is "rigid": only a lower bound, the softest object that noise could hide, is
 given. Without a calibration, a compression the width resolution cannot separate gives the lower bound, `rigid`
@@ -30,6 +36,7 @@ when it is above `RIGID_ABOVE_PA`.
 from __future__ import annotations
 
 import math
+import statistics
 from dataclasses import dataclass
 
 from defgg_ros import hertz
@@ -52,6 +59,10 @@ GENTLE_FORCES_N = (0.5, 1.0, 1.5, 2.0)
 FIRM_FORCES_N = (10.0, 20.0)
 # Resolved = the compression spans this many width resolutions (a <= 10 % reading error).
 RESOLVED_SPANS = 10.0
+# A gentle interval whose compliance is this many times the other gentle intervals' is a settling step (module
+# doc): elastic curves stay within ~1.7x; the stored squeezes' soft readings within 6.8x, the settling steps of
+# rigid bodies 25-196x (docs/squeeze.md, "Settling steps").
+SETTLE_STEP_RATIO = 10.0
 
 
 class SqueezeError(ValueError):
@@ -95,14 +106,17 @@ class ModulusEstimate:
     rigid: bool                 # no compliance of its own that the hand can resolve (see the module doc)
     contact_law: str = "flat"   # "flat", "hertz" (point contacts) or "hertz-line" (a line contact among them)
     exponent: float = math.nan  # fitted n of F ~ compression^n (1 flat, 1.5 Hertz); nan: not fitted
+    settling_step_m: float = 0.0  # a settling step taken out of the readings (module doc); 0.0: none
 
     def describe(self) -> str:
+        settled = f"; a {self.settling_step_m * 1e3:.2f} mm settling step left out" if self.settling_step_m else ""
         if self.rigid:
-            return f"rigid (E >= {self.low_pa:.1e} Pa; k {self.stiffness_npm:.0f} N/m)"
+            return f"rigid (E >= {self.low_pa:.1e} Pa; k {self.stiffness_npm:.0f} N/m{settled})"
         if self.lower_bound:
-            return f"E >= {self.youngs_modulus_pa:.1e} Pa (compression not resolved; k {self.stiffness_npm:.0f} N/m)"
+            return (f"E >= {self.youngs_modulus_pa:.1e} Pa (compression not resolved; k {self.stiffness_npm:.0f} "
+                    f"N/m{settled})")
         return (f"E ~ {self.youngs_modulus_pa:.1e} Pa ({self.low_pa:.1e} .. {self.high_pa:.1e}; "
-                f"k {self.stiffness_npm:.0f} N/m; {self.contact_law} contact, F ~ x^{self.exponent:.2f})")
+                f"k {self.stiffness_npm:.0f} N/m; {self.contact_law} contact, F ~ x^{self.exponent:.2f}{settled})")
 
 
 def loaded_area_m2(width_m: float, face_width_m: float, face_height_m: float,
@@ -209,15 +223,35 @@ def hertz_modulus_pa(points, first_width_m: float, radii_m: tuple | None = None,
     return e_star * (1.0 - poisson_ratio ** 2)
 
 
+def without_settling_step(readings, width_resolution_m: float) -> tuple[list, float]:
+    """The readings (sorted by force) with a settling step among the gentle forces taken out, and the step (m; 0.0:
+    none, the readings as given). The longer run of readings on one side of the step is kept (the later on a tie:
+    the object has settled)."""
+    readings = sorted(readings, key=lambda r: r.force_n)
+    gentle = [r for r in readings if r.force_n <= GENTLE_FORCES_N[-1]]
+    if len(gentle) < 4:    # a step needs two other intervals to stand out from
+        return readings, 0.0
+    compliance = [(a.width_m - b.width_m) / (b.force_n - a.force_n) for a, b in zip(gentle, gentle[1:])]
+    floor = width_resolution_m / min(b.force_n - a.force_n for a, b in zip(gentle, gentle[1:]))
+    for i, c in enumerate(compliance):
+        others = [abs(v) for v in compliance[:i] + compliance[i + 1:]]    # how much the opening moved, either way
+        if c > SETTLE_STEP_RATIO * max(statistics.median(others), floor):
+            before, after = readings[:i + 1], readings[i + 1:]
+            return (before if len(before) > len(after) else after), gentle[i].width_m - gentle[i + 1].width_m
+    return readings, 0.0
+
+
 def needs_firmer(readings, width_resolution_m: float) -> bool:
-    """True while the readings' compression is not resolved (RESOLVED_SPANS resolutions): squeeze harder."""
-    widths = [r.width_m for r in sorted(readings, key=lambda r: r.force_n)]
-    return widths[0] - widths[-1] < RESOLVED_SPANS * width_resolution_m
+    """True while the readings' compression (a settling step left out) is not resolved (RESOLVED_SPANS
+    resolutions): squeeze harder."""
+    readings, _ = without_settling_step(readings, width_resolution_m)
+    return readings[0].width_m - readings[-1].width_m < RESOLVED_SPANS * width_resolution_m
 
 
-def _bound(e_pa: float, k: float, law: str = "flat", exponent: float = math.nan) -> ModulusEstimate:
+def _bound(e_pa: float, k: float, law: str = "flat", exponent: float = math.nan,
+           settling_m: float = 0.0) -> ModulusEstimate:
     """A lower bound only; rigid when the bound is above RIGID_ABOVE_PA."""
-    return ModulusEstimate(e_pa, e_pa, math.inf, k, True, e_pa >= RIGID_ABOVE_PA, law, exponent)
+    return ModulusEstimate(e_pa, e_pa, math.inf, k, True, e_pa >= RIGID_ABOVE_PA, law, exponent, settling_m)
 
 
 def estimate_modulus(readings, face_width_m: float, face_height_m: float, hand: HandCalibration | None = None,
@@ -241,7 +275,7 @@ def estimate_modulus(readings, face_width_m: float, face_height_m: float, hand: 
     if contact_law not in ("auto", "flat", "hertz"):
         raise SqueezeError(f"contact_law must be auto, flat or hertz, got {contact_law!r}")
     line_lengths_m = _checked_line_lengths(contact_line_lengths_m, contact_radii_m)
-    readings = _checked(readings)
+    readings, settling_m = without_settling_step(_checked(readings), width_resolution_m)
     k, span = squeeze_slope_npm(readings)
     width_m = readings[0].width_m
     area = loaded_area_m2(width_m, face_width_m, face_height_m)
@@ -258,8 +292,8 @@ def estimate_modulus(readings, face_width_m: float, face_height_m: float, hand: 
     if span <= 2.0 * width_resolution_m or object_c <= noise_mpn:
         bound = flat_modulus(noise_mpn)   # the most compliant object the noise could hide
         if hand is not None:   # calibrated: within the hand's noise of zero is rigid ("at least bound")
-            return ModulusEstimate(bound, bound, math.inf, k, True, True)
-        return _bound(bound, k)
+            return ModulusEstimate(bound, bound, math.inf, k, True, True, settling_step_m=settling_m)
+        return _bound(bound, k, settling_m=settling_m)
     points = object_compression_m(readings, hand)
     exponent = fit_contact_exponent(points)
     law = contact_law if contact_law != "auto" else ("hertz" if contact_radii_m else "flat")
@@ -268,10 +302,10 @@ def estimate_modulus(readings, face_width_m: float, face_height_m: float, hand: 
     e = (hertz_modulus_pa(points, width_m, contact_radii_m, line_lengths_m=line_lengths_m) if law != "flat"
          else flat_modulus(object_c))
     if not math.isfinite(e):
-        return _bound(flat_modulus(noise_mpn), k, law, exponent)
+        return _bound(flat_modulus(noise_mpn), k, law, exponent, settling_m)
     rel = width_resolution_m / span     # the compression's relative reading error
     sigma = math.exp(math.hypot(math.log(model_factor), rel, calibration_sd_log(hand, object_c, law)))
-    return ModulusEstimate(e, e / sigma, e * sigma, k, False, False, law, exponent)
+    return ModulusEstimate(e, e / sigma, e * sigma, k, False, False, law, exponent, settling_m)
 
 
 def _checked_line_lengths(line_lengths_m, radii_m) -> tuple:
