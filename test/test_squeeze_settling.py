@@ -57,9 +57,10 @@ def test_an_elastic_compression_is_left_as_it_is(compliance_um_per_n):
 
 
 def test_a_step_must_stand_out_from_the_width_resolution_too():
-    """Fingers that do not move at the gentle forces (a ring held at the hand's full opening) and then close at a
-    firm force: the firm interval is not a gentle one, and the gentle ones' zero compliance is below the reading."""
-    ring = squeeze((0.08, 0.08, 0.08, 0.08, 0.0787), (*GENTLE_FORCES_N, 10.0))
+    """Fingers that do not move at the gentle forces and then close 33 mm at the firm 10 N (the stored squeeze of
+    common_ring at 3e4 Pa, held at the hand's full opening): the firm interval is not a gentle one, so its
+    compression stays in (4,088 um/N, far above any ratio of the gentle intervals' zero)."""
+    ring = squeeze((0.08, 0.08, 0.08, 0.08, 0.0472982), (*GENTLE_FORCES_N, 10.0))
     assert without_settling_step(ring, RESOLUTION_M) == (ring, 0.0)
     tiny = squeeze((0.05, 0.05, 0.05 - 10 * RESOLUTION_M, 0.05 - 10 * RESOLUTION_M))
     assert without_settling_step(tiny, 1e-4)[1] == 0.0       # 0.1 mm of step at a 0.1 mm resolution: not resolved
