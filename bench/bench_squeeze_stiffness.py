@@ -62,7 +62,9 @@ from defgg_ros.squeeze import (  # noqa: E402
     SqueezeReading,
     calibrate_hand,
     estimate_modulus,
+    gentle_step_ratios,
     needs_firmer,
+    without_settling_step,
 )
 
 WIDTH_RESOLUTION_M = 1e-5       # the simulated hand's opening is exact to well below this
@@ -326,6 +328,33 @@ def summary(rows) -> list:
     return lines
 
 
+def settling_lines(readings_path: Path, cell_records: list) -> list:
+    """The settling rule's evidence (squeeze.SETTLE_STEP_RATIO): over every stored squeeze, the largest gentle
+    interval's ratio (squeeze.gentle_step_ratios), soft (E < 1e7 Pa) and rigid apart; and which squeezes of the
+    cell's measured picks (records with "squeeze": forces_n, widths_m) have a step the rule leaves out."""
+    rows = [json.loads(line) for line in readings_path.read_text().splitlines() if line.strip()]
+    lines = []
+    for label, chosen in (("soft", [r for r in rows if r["modulus_pa"] < 1e7]),
+                          ("rigid", [r for r in rows if r["modulus_pa"] >= 1e7])):
+        ratios = sorted(((max(gentle_step_ratios([SqueezeReading(f, w) for f, w in zip(r["forces_n"], r["widths_m"])],
+                                                 WIDTH_RESOLUTION_M), default=0.0), r) for r in chosen),
+                        key=lambda item: -item[0])
+        lines.append(f"{label}: {len(chosen)} squeezes, the largest gentle-interval ratios: " + ", ".join(
+            f"{x:.1f} ({r['object']} {r['modulus_pa']:.2g} yaw {r['yaw_rad']})" for x, r in ratios[:5]))
+    for path in cell_records:
+        squeezes = [r for r in (json.loads(line) for line in Path(path).read_text().splitlines() if line.strip())
+                    if (r.get("squeeze") or {}).get("widths_m")]
+        stepped = []
+        for r in squeezes:
+            readings = [SqueezeReading(f, w) for f, w in zip(r["squeeze"]["forces_n"], r["squeeze"]["widths_m"])]
+            _, step_m = without_settling_step(readings, WIDTH_RESOLUTION_M)
+            if step_m:
+                stepped.append(f"{r['object']} pick {r['pick']}: {step_m * 1e3:.2f} mm")
+        lines.append(f"{path}: {len(stepped)} of {len(squeezes)} squeezes with a settling step"
+                     + (f" ({'; '.join(stepped)})" if stepped else ""))
+    return lines
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--repeats", type=int, default=1)
@@ -335,7 +364,13 @@ def main(argv=None) -> int:
                         help="squeeze readings cache (JSON lines, appended; the stored file: every reading "
                              "docs/squeeze.md quotes)")
     parser.add_argument("--calibrate", action="store_true", help="print the hand's calibration and stop")
+    parser.add_argument("--settling", nargs="*", metavar="CELL_RECORDS", default=None,
+                        help="print the settling rule's evidence over the stored squeezes (and the squeezes of the "
+                             "given cell records, e.g. results/cell_experiment/records_measured.jsonl) and stop")
     args = parser.parse_args(argv)
+    if args.settling is not None:
+        print("\n".join(settling_lines(args.readings, args.settling)))
+        return 0
     hand = calibration(args.readings)
     print(f"hand: {hand.describe()}", flush=True)
     if args.calibrate:

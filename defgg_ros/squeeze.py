@@ -223,21 +223,28 @@ def hertz_modulus_pa(points, first_width_m: float, radii_m: tuple | None = None,
     return e_star * (1.0 - poisson_ratio ** 2)
 
 
-def without_settling_step(readings, width_resolution_m: float) -> tuple[list, float]:
-    """The readings (sorted by force) with a settling step among the gentle forces taken out, and the step (m; 0.0:
-    none, the readings as given). The longer run of readings on one side of the step is kept (the later on a tie:
-    the object has settled)."""
-    readings = sorted(readings, key=lambda r: r.force_n)
-    gentle = [r for r in readings if r.force_n <= GENTLE_FORCES_N[-1]]
-    if len(gentle) < 4:    # a step needs two other intervals to stand out from
-        return readings, 0.0
+def gentle_step_ratios(readings, width_resolution_m: float) -> list:
+    """Per gentle interval (readings sorted by force): its compliance over the other gentle intervals' median (in
+    magnitude) or the width resolution's over the shortest interval, whichever is larger; [] with fewer than three
+    gentle intervals (a step needs two others to stand out from)."""
+    gentle = [r for r in sorted(readings, key=lambda r: r.force_n) if r.force_n <= GENTLE_FORCES_N[-1]]
+    if len(gentle) < 4:
+        return []
     compliance = [(a.width_m - b.width_m) / (b.force_n - a.force_n) for a, b in zip(gentle, gentle[1:])]
     floor = width_resolution_m / min(b.force_n - a.force_n for a, b in zip(gentle, gentle[1:]))
-    for i, c in enumerate(compliance):
-        others = [abs(v) for v in compliance[:i] + compliance[i + 1:]]    # how much the opening moved, either way
-        if c > SETTLE_STEP_RATIO * max(statistics.median(others), floor):
+    others = [[abs(v) for v in compliance[:i] + compliance[i + 1:]] for i in range(len(compliance))]
+    return [c / max(statistics.median(o), floor) for c, o in zip(compliance, others)]
+
+
+def without_settling_step(readings, width_resolution_m: float) -> tuple[list, float]:
+    """The readings (sorted by force) with a settling step among the gentle forces taken out (a gentle interval
+    whose `gentle_step_ratios` is above SETTLE_STEP_RATIO), and the step (m; 0.0: none, the readings as given). The
+    longer run of readings on one side of the step is kept (the later on a tie: the object has settled)."""
+    readings = sorted(readings, key=lambda r: r.force_n)
+    for i, ratio in enumerate(gentle_step_ratios(readings, width_resolution_m)):
+        if ratio > SETTLE_STEP_RATIO:
             before, after = readings[:i + 1], readings[i + 1:]
-            return (before if len(before) > len(after) else after), gentle[i].width_m - gentle[i + 1].width_m
+            return (before if len(before) > len(after) else after), readings[i].width_m - readings[i + 1].width_m
     return readings, 0.0
 
 
