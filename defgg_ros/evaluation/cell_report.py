@@ -31,6 +31,9 @@ BOOTSTRAP_SEED = 0
 FIGURE_NAME, GRASP_FIGURE_NAME, REPORT_NAME = "per_object.png", "grasp_channel.png", "report.md"
 # Two plans chose the same grasp when their centres are this close and their angles this near (modulo pi).
 SAME_GRASP_POSITION_M, SAME_GRASP_ANGLE_RAD = 0.005, math.radians(10.0)
+# The squeeze table pools the objects below this modulus (soft and 2e6 Pa: a number expected) apart from the
+# rigid ones (2e9 Pa: 'rigid' expected).
+RIGID_CLASS_PA = 1e9
 
 
 def plain_case(case: str) -> str:
@@ -274,21 +277,54 @@ def repeat_line(records) -> str:
             f"({len(pairs) - agree} discordant); the two plans chose the same grasp in {same} of {len(pairs)}.")
 
 
+def squeezed_with_line_law(squeeze: dict) -> bool:
+    """Whether the executor's squeeze could use the line-contact law (its grasp carried contact_line_lengths_m,
+    docs/squeeze.md): the first measured picks ran on a build with Hertz's point law at every curved pad."""
+    return "contact_line_lengths_m" in (squeeze.get("grasp") or {})
+
+
+def _squeezes(records, name: str) -> list:
+    """The object's successful squeezes (measured case, one per pick with an outcome)."""
+    return [r["squeeze"] for r in outcomes(records).values()
+            if r["object"] == name and r.get("squeeze") and r["squeeze"]["success"]]
+
+
+def _estimate_counts(found: list, true_pa: float) -> list:
+    """[within x3, called rigid, n] of a set of squeezes."""
+    within = sum(1 / 3 <= s["measured_youngs_modulus_pa"] / true_pa <= 3 and not s["rigid"] for s in found)
+    return [within, sum(bool(s["rigid"]) for s in found), len(found)]
+
+
+def _counts_cell(counts: list) -> str:
+    return " / ".join(map(str, counts)) if counts[2] else "-"
+
+
 def squeeze_rows(records, objects) -> list:
     """The measured case's estimates per object: median estimate, its ratio to the true modulus, how many
-    within a factor 3 (issue 49 item 4's target) or called rigid."""
-    rows = []
+    within a factor 3 (issue 49 item 4's target) or called rigid; then the same split by estimator (a build
+    before the line law: Hertz's point law at every curved pad; the line law where a pad meets a line: what the
+    executor does now), and those pooled over the soft objects and over the rigid ones."""
+    rows, pooled = [], {}
     for obj in objects:
-        found = [r["squeeze"] for r in outcomes(records).values()
-                 if r["object"] == obj.name and r.get("squeeze") and r["squeeze"]["success"]]
+        found = _squeezes(records, obj.name)
         if not found:
             continue
+        true_pa = obj.youngs_modulus_pa
         estimates = sorted(s["measured_youngs_modulus_pa"] for s in found)
         median = estimates[len(estimates) // 2]
-        within = sum(1 / 3 <= e / obj.youngs_modulus_pa <= 3 for e in estimates)
+        within = sum(1 / 3 <= e / true_pa <= 3 for e in estimates)
         rigid = sum(s["rigid"] for s in found)
-        rows.append(f"| {obj.name} | {obj.youngs_modulus_pa:.0e} | {median:.2g} | {median / obj.youngs_modulus_pa:.2g} "
-                    f"| {within}/{len(found)} | {rigid}/{len(found)} |")
+        by_law = []
+        for line_law in (False, True):
+            counts = _estimate_counts([s for s in found if squeezed_with_line_law(s) == line_law], true_pa)
+            key = (true_pa < RIGID_CLASS_PA, line_law)
+            pooled[key] = [a + b for a, b in zip(pooled.get(key, [0, 0, 0]), counts)]
+            by_law.append(_counts_cell(counts))
+        rows.append(f"| {obj.name} | {true_pa:.0e} | {median:.2g} | {median / true_pa:.2g} | {within}/{len(found)} "
+                    f"| {rigid}/{len(found)} | {by_law[0]} | {by_law[1]} |")
+    for kind, soft in (("soft and 2e6 Pa objects", True), ("rigid (2e9 Pa) objects", False)):
+        rows.append(f"| **{kind}** | | | | | | {_counts_cell(pooled.get((soft, False), [0, 0, 0]))} "
+                    f"| {_counts_cell(pooled.get((soft, True), [0, 0, 0]))} |")
     return rows
 
 
@@ -360,8 +396,11 @@ def report_markdown(records, objects, planned_picks: int | None = None) -> str:
         lines += ["", repeat]
     lines += _table(squeeze_rows(records, objects),
                     "The squeeze's estimates (measured case; a factor 3 of the true modulus is issue 49 item 4's "
-                    "target, 2e9 Pa should read rigid):",
-                    "| object | true E (Pa) | median estimate (Pa) | ratio | within ×3 | called rigid |")
+                    "target, 2e9 Pa should read rigid). The last two columns split the squeezes by estimator, both "
+                    "on the grasp's perceived contact radii: Hertz's point law at every curved pad (a build before "
+                    "the line law), or the line law where a pad meets a line (what the executor does now):",
+                    "| object | true E (Pa) | median estimate (Pa) | ratio | within ×3 | called rigid "
+                    "| point law: within ×3 / rigid / n | line law: within ×3 / rigid / n |")
     lines += _table(mass_rows(records, objects),
                     "The grip force's mass (the inference node's estimate from the height map, every planned grasp) "
                     "against the cell's true mass:",

@@ -196,6 +196,27 @@ def test_the_measured_case_is_compared_with_every_input_and_its_estimates_are_ta
     assert "| common_ball | 2e+05 | 3e+05 | 1.5 | 2/3 | 0/3 |" in body
 
 
+def test_the_squeeze_table_splits_the_estimates_by_law_and_pools_soft_and_rigid_objects(tmp_path):
+    """A squeeze whose grasp carried contact_line_lengths_m ran with the line law; one without, before it (the
+    point law): the two are counted apart, per object and pooled (soft against their own modulus, rigid by call)."""
+    from defgg_ros.atomic import append_jsonl
+
+    line_grasp = {"contact_radii_m": [0.02, 0.02], "contact_line_lengths_m": [0.0, 0.018]}
+    squeezes = [("common_ball", 0, 1e5, False, None), ("common_ball", 1, 9e5, False, line_grasp),
+                ("common_sponge", 0, 2.5e4, False, line_grasp), ("egad_test_00_c1", 0, 1.5e6, True, None),
+                ("egad_test_00_c1", 1, 4e5, False, line_grasp)]
+    for obj, i, estimate, rigid, grasp in squeezes:
+        squeeze = {"success": True, "measured_youngs_modulus_pa": estimate, "rigid": rigid,
+                   **({"grasp": grasp} if grasp else {})}
+        append_jsonl(tmp_path / "records_measured.jsonl", pick(obj, "measured", i, True, squeeze=squeeze))
+    body = cr.write_report(tmp_path, ce.OBJECTS, planned_picks=2)
+    assert "| common_ball | 2e+05 | 9e+05 | 4.5 | 1/2 | 0/2 | 1 / 0 / 1 | 0 / 0 / 1 |" in body
+    assert "| common_sponge | 2e+04 | 2.5e+04 | 1.2 | 1/1 | 0/1 | - | 1 / 0 / 1 |" in body
+    assert "| egad_test_00_c1 | 2e+09 | 1.5e+06 | 0.00075 | 0/2 | 1/2 | 0 / 1 / 1 | 0 / 0 / 1 |" in body
+    assert "| **soft and 2e6 Pa objects** | | | | | | 1 / 0 / 1 | 1 / 0 / 2 |" in body
+    assert "| **rigid (2e9 Pa) objects** | | | | | | 0 / 1 / 1 | 0 / 0 / 1 |" in body
+
+
 def test_grasp_only_picks_are_compared_with_correct_and_with_their_plain_case_and_stand_ins_fill_the_rest(
         tmp_path):
     from defgg_ros.atomic import append_jsonl
