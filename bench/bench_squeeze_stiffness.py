@@ -35,6 +35,7 @@ import trimesh
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from defgg_ros.atomic import atomic_path  # noqa: E402
 from defgg_ros.constants import (  # noqa: E402
     FINGER_DEPTH_M,
     FINGER_PAD_WIDTH_M,
@@ -49,9 +50,11 @@ from defgg_ros.planning.contact_radii import (  # noqa: E402
     perceived_pad_contacts,
     surface_pad_contact,
 )
+from defgg_ros.sim import meshes  # noqa: E402
 from defgg_ros.sim import objects as sim_objects  # noqa: E402
 from defgg_ros.sim.cell.objects import centred_surface_mesh  # noqa: E402
 from defgg_ros.sim.cell.sim_cell import SimCell  # noqa: E402
+from defgg_ros.sim.meshes import save_tet_mesh_file  # noqa: E402
 from defgg_ros.sim.scene_spec import load_scene  # noqa: E402
 from defgg_ros.squeeze import (  # noqa: E402
     FIRM_FORCES_N,
@@ -80,22 +83,41 @@ KIN = PandaKinematics()
 MESHES = Path("/tmp/bench_squeeze_meshes")
 
 
-def scene_object(name: str, modulus_pa: float, yaw_rad: float):
-    """The soft_box scene's object replaced by `name` (a box of BOXES or a library shape's surface)."""
+# Where a library shape's body comes from: "shipped", its shipped tet mesh as it is (the same body on every machine,
+# the labels' discretization; since 2026-11-30), or "fTetWild", its surface re-meshed by fTetWild on this machine
+# (not deterministic: the rows stored before 2026-11-30 were squeezed so, each on its own machine's mesh).
+MESH_SOURCES = ("shipped", "fTetWild")
+
+
+def _library_nodes(name: str):
+    """The shipped tet mesh's nodes and tets, turned across when longer than the hand opens (the toy bone)."""
+    tet = sim_objects.get_shape(name).union_tet
+    nodes = tet.nodes_m
+    extent = np.ptp(nodes, axis=0)
+    if extent[0] > 0.075 > extent[1]:   # closed across it
+        nodes = nodes @ trimesh.transformations.rotation_matrix(math.pi / 2, (0, 0, 1))[:3, :3].T
+    return nodes, tet.tets
+
+
+def scene_object(name: str, modulus_pa: float, yaw_rad: float, mesh_source: str = "shipped"):
+    """The soft_box scene's object replaced by `name` (a box of BOXES or a library shape: its shipped tet mesh, or
+    its surface for fTetWild)."""
     base = load_scene(ROOT / "sim_bringup" / "scenes" / "soft_box.yaml").objects[0]
     if name in BOXES:
         size_m, cell_m = BOXES[name]
         return replace(base, name=name, youngs_modulus_pa=modulus_pa, size_m=tuple(size_m), fem_cell_size_m=cell_m,
                        yaw_rad=yaw_rad, mass_kg=0.05)
-    surface = sim_objects.get_shape(name).surface()
-    extent = surface.bounds[1] - surface.bounds[0]
-    if extent[0] > 0.075 > extent[1]:   # longer than the hand opens (the toy bone): closed across it
-        surface.apply_transform(trimesh.transformations.rotation_matrix(math.pi / 2, (0, 0, 1)))
-    path = MESHES / f"{name}.obj"
+    nodes, tets = _library_nodes(name)
+    path = MESHES / (f"{name}.npz" if mesh_source == "shipped" else f"{name}.obj")
     if not path.exists():
         MESHES.mkdir(parents=True, exist_ok=True)
-        surface.export(path, file_type="obj")
-    mass_kg = round(float(abs(surface.volume)) * OBJECT_DENSITY_KG_M3, 4)
+        if mesh_source == "shipped":
+            save_tet_mesh_file(path, nodes, tets)
+        else:
+            surface = meshes.tet_mesh_of(nodes, tets, f"bench-{name}").surface()
+            with atomic_path(path) as tmp:
+                surface.export(tmp, file_type="obj")
+    mass_kg = round(float(abs(meshes.tet_volumes(nodes, tets).sum())) * OBJECT_DENSITY_KG_M3, 4)
     return replace(base, name=name, shape="mesh", mesh_path=str(path), size_m=(1.0, 1.0, 1.0), yaw_rad=yaw_rad,
                    youngs_modulus_pa=modulus_pa, mass_kg=mass_kg)
 
@@ -238,15 +260,23 @@ def squeeze_once(spec) -> list:
         cell.close()
 
 
-def cached_readings(path: Path, name: str, modulus_pa: float, yaw_rad: float) -> list:
-    """The readings of (name, modulus, yaw) from the file, else squeezed now and appended."""
+def row_mesh(row: dict) -> str:
+    """A stored row's mesh source: rows without one were squeezed before 2026-11-30 on fTetWild meshes."""
+    return row.get("mesh", "fTetWild")
+
+
+def cached_readings(path: Path, name: str, modulus_pa: float, yaw_rad: float, mesh_source: str = "shipped") -> list:
+    """The readings of (name, modulus, yaw) on that mesh source from the file, else squeezed now and appended. The
+    boxes (the cell's regular grid) are the same on every machine: any row serves."""
     key = {"object": name, "modulus_pa": modulus_pa, "yaw_rad": round(yaw_rad, 3)}
+    if name not in BOXES:
+        key["mesh"] = mesh_source
     if path.exists():
         for line in path.read_text().splitlines():
             row = json.loads(line)
-            if all(row.get(k) == v for k, v in key.items()):
+            if all((row_mesh(row) if k == "mesh" else row.get(k)) == v for k, v in key.items()):
                 return [SqueezeReading(f, w) for f, w in zip(row["forces_n"], row["widths_m"])]
-    readings = squeeze_once(scene_object(name, modulus_pa, yaw_rad))
+    readings = squeeze_once(scene_object(name, modulus_pa, yaw_rad, mesh_source))
     with open(path, "a") as out:
         out.write(json.dumps({**key, "forces_n": [r.force_n for r in readings],
                               "widths_m": [r.width_m for r in readings]}) + "\n")
@@ -363,6 +393,11 @@ def main(argv=None) -> int:
     parser.add_argument("--readings", type=Path, default=ROOT / "results" / "squeeze" / "readings.jsonl",
                         help="squeeze readings cache (JSON lines, appended; the stored file: every reading "
                              "docs/squeeze.md quotes)")
+    parser.add_argument("--meshes", choices=MESH_SOURCES, default="shipped",
+                        help="library shapes' bodies: their shipped tet meshes (the same on every machine) or "
+                             "fTetWild's mesh of their surface (the rows docs/squeeze.md's tables before "
+                             "2026-11-30 read: squeezed on their machine's meshes, which this machine does not have; "
+                             "the contacts are perceived on this machine's)")
     parser.add_argument("--calibrate", action="store_true", help="print the hand's calibration and stop")
     parser.add_argument("--settling", nargs="*", metavar="CELL_RECORDS", default=None,
                         help="print the settling rule's evidence over the stored squeezes (and the squeezes of the "
@@ -384,12 +419,12 @@ def main(argv=None) -> int:
             by_variant = {v: [] for v in VARIANTS}
             radii = {}
             for r in range(args.repeats):
-                spec = scene_object(name, modulus, 0.3 * r)
+                spec = scene_object(name, modulus, 0.3 * r, args.meshes)
                 perceived, point = perceived_contacts(spec)
                 radii = {"surface": surface_contacts(spec), "perceived": perceived, "point": point}
                 try:
-                    for variant, estimate in estimates_of(cached_readings(args.readings, name, modulus, 0.3 * r),
-                                                          spec, hand, radii).items():
+                    readings = cached_readings(args.readings, name, modulus, 0.3 * r, args.meshes)
+                    for variant, estimate in estimates_of(readings, spec, hand, radii).items():
                         by_variant[variant].append(estimate)
                 except SqueezeError as error:   # the executor fails such a squeeze: a miss in the counts
                     print(f"{name:16s} {modulus:8.2g} refused: {error}", flush=True)

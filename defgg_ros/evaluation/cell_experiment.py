@@ -40,7 +40,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from defgg_ros.atomic import append_jsonl, atomic_path, read_jsonl
+from defgg_ros.atomic import append_jsonl, read_jsonl
 from defgg_ros.bringup.supervisor import BringupError
 from defgg_ros.cli_help import HelpFormatter
 from defgg_ros.constants import OBJECT_DENSITY_KG_M3, TRAINING_YOUNGS_MODULI_PA
@@ -58,6 +58,7 @@ from defgg_ros.ros.cell_client import CellCallError
 from defgg_ros.ros.domain import ISOLATION_ENV, apply_domain_choice, default_domain_choice
 from defgg_ros.ros.share import share_path
 from defgg_ros.sim import objects as sim_objects
+from defgg_ros.sim.meshes import save_tet_mesh_file
 
 RIGID_PA, SOFT_PA = max(TRAINING_YOUNGS_MODULI_PA), min(TRAINING_YOUNGS_MODULI_PA)
 # The fourth case (issue 49 item 4, beyond the paper): the executor squeezes the object first and tells the
@@ -194,13 +195,13 @@ def _library_shape(obj: CellObject):
 
 
 def mesh_file(obj: CellObject, folder: Path) -> Path:
-    """The library object's surface (its shipped tet mesh's boundary, metres) as an .obj the scene names."""
-
-    path = Path(folder) / f"{obj.name}.obj"
+    """The library object's shipped tet mesh (metres) as the .npz the scene names: the cell simulates it as it is,
+    so every machine meets the discretization the labels were made with (an .obj surface was re-meshed by
+    fTetWild, which is not deterministic: each machine simulated its own bodies until 2026-11-30)."""
+    path = Path(folder) / f"{obj.name}.npz"
     if not path.exists():
-        surface = _library_shape(obj).surface()
-        with atomic_path(path) as tmp:
-            surface.export(tmp, file_type="obj")
+        tet = _library_shape(obj).union_tet
+        save_tet_mesh_file(path, tet.nodes_m, tet.tets)
     return path
 
 

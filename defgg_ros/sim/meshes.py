@@ -155,11 +155,15 @@ def _tetrahedralize(mesh: trimesh.Trimesh, max_nodes: int, variant: str) -> TetM
     if variant or not npz_path.exists():
         npz_path = folder / f"{digest}.npz"
         if not npz_path.exists():
-            nodes, tets = _run_ftetwild(mesh, max_nodes)
-            with atomic_path(npz_path) as tmp, open(tmp, "wb") as f:
-                np.savez_compressed(f, nodes_m=nodes, tets=tets)
+            save_tet_mesh_file(npz_path, *_run_ftetwild(mesh, max_nodes))
     with np.load(npz_path, allow_pickle=False) as z:
         nodes, tets = z["nodes_m"], z["tets"]
+    return tet_mesh_of(nodes, tets, digest)
+
+
+def tet_mesh_of(nodes: np.ndarray, tets: np.ndarray, digest: str) -> TetMesh:
+    """A TetMesh of these nodes and tets (digest: its name's stem), its VTK and OBJ written into the cache once."""
+    folder = cache_dir()
     # The VTK the soft body loads and the OBJ are named after the nodes they hold, not only the surface: two
     # processes meshing one new surface at once (fTetWild is not deterministic) each write the npz, and a VTK
     # written from the first beside the second's npz made resetMeshData fail on every later activation (75 vs 64
@@ -279,6 +283,37 @@ def _stdout_silenced():
     finally:
         os.dup2(saved, 1)
         os.close(saved)
+
+
+def load_tet_mesh_file(path, scale: float = 1.0) -> TetMesh:
+    """A tetrahedral mesh saved as .npz (nodes_m (N,3) metres, tets (M,4) node indices: the store's format), as
+    is: no fTetWild run, so every machine simulates this discretization (a library object's shipped mesh: the
+    one its grasp labels were made with). MeshError when unusable."""
+    path = Path(path)
+    if path.suffix.lower() != ".npz":
+        raise MeshError(f"{path}: a tet mesh file is .npz (nodes_m, tets)")
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            nodes, tets = np.asarray(z["nodes_m"], dtype=np.float64) * scale, np.asarray(z["tets"], dtype=np.int64)
+    except (OSError, KeyError, ValueError) as exc:
+        raise MeshError(f"{path}: cannot read a tet mesh (nodes_m, tets): {type(exc).__name__}: {exc}") from None
+    if nodes.ndim != 2 or nodes.shape[1] != 3 or tets.ndim != 2 or tets.shape[1] != 4 or len(tets) == 0:
+        raise MeshError(f"{path}: nodes_m must be (N, 3) and tets (M, 4), got {nodes.shape} and {tets.shape}")
+    if not np.all(np.isfinite(nodes)) or tets.min() < 0 or tets.max() >= len(nodes):
+        raise MeshError(f"{path}: non-finite nodes or tet indices outside the {len(nodes)} nodes")
+    if np.any(tet_volumes(nodes, tets) <= 0):
+        raise MeshError(f"{path}: tets must be positively oriented with volume > 0")
+    extent = np.ptp(nodes, axis=0).max()
+    if not 0.005 <= extent <= 0.5:
+        raise MeshError(f"{path}: extent {extent:.3f} m after scale {scale}; expected metres of a graspable object")
+    digest = hashlib.sha256(nodes.tobytes() + tets.tobytes()).hexdigest()[:20]
+    return tet_mesh_of(nodes, tets, f"file-{digest}")
+
+
+def save_tet_mesh_file(path, nodes_m: np.ndarray, tets: np.ndarray) -> None:
+    """Write nodes and tets as the .npz load_tet_mesh_file reads (atomically)."""
+    with atomic_path(path) as tmp, open(tmp, "wb") as f:
+        np.savez_compressed(f, nodes_m=np.asarray(nodes_m, dtype=np.float64), tets=np.asarray(tets, dtype=np.int64))
 
 
 def load_user_mesh(path, scale: float = 1.0) -> trimesh.Trimesh:

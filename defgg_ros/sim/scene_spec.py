@@ -21,6 +21,9 @@ from defgg_ros.constants import (
 )
 
 SHAPES = ("box", "cylinder", "mesh")
+# A mesh object's file: a closed surface (meshed by fTetWild, not deterministic) or a tet mesh (nodes_m, tets) used
+# as it is, e.g. a library object's shipped mesh (sim/cell/objects.cell_tet_mesh).
+MESH_SUFFIXES = (".obj", ".stl", ".npz")
 # Mass used when a scene does not give one: a light everyday object.
 DEFAULT_OBJECT_MASS_KG = 0.1
 # Soft boxes get a regular tet grid this coarse (see cell_grid_mesh: the FEM
@@ -138,6 +141,9 @@ def _parse_object(raw: dict, index: int, scene_dir: Path) -> SceneObject:
         mesh_path = str((scene_dir / str(raw.get("mesh", ""))).resolve())
         if not Path(mesh_path).is_file():
             raise SceneError(f"{what}: mesh file {raw.get('mesh')!r} not found next to the scene")
+        if Path(mesh_path).suffix.lower() not in MESH_SUFFIXES:
+            raise SceneError(f"{what}: mesh file {raw.get('mesh')!r} must be one of {MESH_SUFFIXES} (a surface, "
+                             "or a tet mesh .npz of nodes_m and tets simulated as it is)")
     part = None
     if raw.get("part") is not None:
         p = raw["part"]

@@ -65,11 +65,13 @@ def test_a_neighbour_where_the_opened_finger_comes_down_blocks_the_grasp_and_one
 
 def _ring_scene(tmp_path):
     from defgg_ros.sim import objects as sim_objects
+    from defgg_ros.sim.meshes import save_tet_mesh_file
     from defgg_ros.sim.scene_spec import load_scene
 
-    surface = sim_objects.get_shape("common_ring").surface()
-    mesh = tmp_path / "common_ring.obj"
-    surface.export(mesh, file_type="obj")
+    tet = sim_objects.get_shape("common_ring").union_tet      # as it is: the same body on every machine
+    surface = tet.surface()
+    mesh = tmp_path / "common_ring.npz"
+    save_tet_mesh_file(mesh, tet.nodes_m, tet.tets)
     ring = {"name": "common_ring", "position_xy_m": list(RING_XY_M), "yaw_rad": RING_YAW_RAD,
             "youngs_modulus_pa": 2e9, "mass_kg": 0.05, "shape": "mesh", "mesh": str(mesh), "size_m": [1.0, 1.0, 1.0]}
     path = tmp_path / "ring.yaml"

@@ -61,9 +61,31 @@ def _surface_mesh(spec: SceneObject):
         return shapes.box(*spec.size_m)
     if spec.shape == "cylinder":
         return shapes.cylinder(*spec.size_m)
+    if is_tet_mesh_file(spec):
+        return cell_tet_mesh(spec).surface()
     mesh = meshes.load_user_mesh(spec.mesh_path)
     mesh.apply_scale(spec.size_m)
     return mesh
+
+
+def is_tet_mesh_file(spec: SceneObject) -> bool:
+    """A mesh object given as a tet mesh (.npz: a library object's shipped mesh), simulated as it is."""
+    return spec.shape == "mesh" and spec.mesh_path.lower().endswith(".npz")
+
+
+def cell_tet_mesh(spec: SceneObject) -> meshes.TetMesh:
+    """The tet mesh the cell simulates a mesh object with, centred on its bounding box (metres): a .npz tet mesh
+    as it is (the same discretization on every machine: fTetWild is not deterministic, and a library object's
+    shipped mesh is the one its labels were made with), else fTetWild's mesh of the surface (.obj / .stl)."""
+    if not is_tet_mesh_file(spec):
+        return meshes.tetrahedralize(centred_surface_mesh(spec))
+    tet = meshes.load_tet_mesh_file(spec.mesh_path)
+    nodes = tet.nodes_m * np.asarray(spec.size_m, dtype=float)
+    lo, hi = nodes.min(axis=0), nodes.max(axis=0)
+    nodes = nodes - (lo + hi) / 2
+    if np.array_equal(nodes, tet.nodes_m):
+        return tet
+    return meshes.tet_mesh_of(nodes, tet.tets, tet.content_hash)
 
 
 def add_rigid_object(client: int, spec: SceneObject) -> int:
@@ -95,7 +117,7 @@ def _rigid_shapes(client, spec: SceneObject):
         radius, height = spec.size_m[0] / 2, spec.size_m[1]
         return (p.createCollisionShape(p.GEOM_CYLINDER, radius=radius, height=height, physicsClientId=client),
                 p.createVisualShape(p.GEOM_CYLINDER, radius=radius, length=height, physicsClientId=client))
-    tet = meshes.tetrahedralize(centred_surface_mesh(spec))
+    tet = cell_tet_mesh(spec)
     convex = meshes.convex_decomposition(tet)
     return (p.createCollisionShape(p.GEOM_MESH, fileName=str(convex), physicsClientId=client),
             p.createVisualShape(p.GEOM_MESH, fileName=str(tet.obj_path), physicsClientId=client))

@@ -52,7 +52,7 @@ def spawn_dormant(client: int, spec: SceneObject, scratch_dir: Path) -> SoftObje
     if spec.shape == "box":
         tet = cell_grid_mesh.box_tet_mesh(spec.size_m, spec.fem_cell_size_m, scratch_dir)
     else:
-        tet = meshes.tetrahedralize(cell_objects.centred_surface_mesh(spec))
+        tet = cell_objects.cell_tet_mesh(spec)
     lowest = tet.nodes_m[:, 2].min()
     offset = np.array([spec.position_xy_m[0], spec.position_xy_m[1], -lowest])
     obj = SoftObject(spec, tet, tet.nodes_m @ _rotation_z(spec.yaw_rad).T + offset)
