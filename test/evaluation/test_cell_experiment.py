@@ -369,3 +369,11 @@ def test_a_rerun_is_compared_pick_by_pick_with_the_earlier_run(tmp_path):
     assert lines[0] == "the same outcome in 2 of 3 picks run in both; the same grasp in 2 of 3"
     assert lines[1:] == ["  common_sponge|correct|1: held -> missed (another grasp): dropped"]
     assert ce.main(["compare", "--out", str(tmp_path / "rerun"), "--earlier", str(tmp_path / "nothing")]) == 2
+
+
+def test_a_run_without_squeezes_has_no_squeeze_table(tmp_path):
+    from defgg_ros.atomic import append_jsonl
+
+    append_jsonl(tmp_path / ce.RECORDS_NAME, pick("common_ball", "correct", 0, True))
+    assert cr.squeeze_rows(cr.read_records(tmp_path), ce.OBJECTS) == []
+    assert "The squeeze's estimates" not in cr.write_report(tmp_path, ce.OBJECTS, planned_picks=1)
