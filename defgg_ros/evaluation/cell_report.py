@@ -322,7 +322,9 @@ def squeeze_rows(records, objects) -> list:
             by_law.append(_counts_cell(counts))
         rows.append(f"| {obj.name} | {true_pa:.0e} | {median:.2g} | {median / true_pa:.2g} | {within}/{len(found)} "
                     f"| {rigid}/{len(found)} | {by_law[0]} | {by_law[1]} |")
-    for kind, soft in (("soft and 2e6 Pa objects", True), ("rigid (2e9 Pa) objects", False)) if rows else ():
+    if not rows:
+        return rows
+    for kind, soft in (("soft and 2e6 Pa objects", True), ("rigid (2e9 Pa) objects", False)):
         rows.append(f"| **{kind}** | | | | | | {_counts_cell(pooled.get((soft, False), [0, 0, 0]))} "
                     f"| {_counts_cell(pooled.get((soft, True), [0, 0, 0]))} |")
     return rows

@@ -285,16 +285,18 @@ def _stdout_silenced():
         os.close(saved)
 
 
-def load_tet_mesh_file(path, scale: float = 1.0) -> TetMesh:
+def load_tet_mesh_file(path, scale=1.0, centred: bool = False) -> TetMesh:
     """A tetrahedral mesh saved as .npz (nodes_m (N,3) metres, tets (M,4) node indices: the store's format), as
     is: no fTetWild run, so every machine simulates this discretization (a library object's shipped mesh: the
-    one its grasp labels were made with). MeshError when unusable."""
+    one its grasp labels were made with). scale: one factor or one per axis (> 0); centred: moved to centre its
+    bounding box on the origin. MeshError when unusable."""
     path = Path(path)
     if path.suffix.lower() != ".npz":
         raise MeshError(f"{path}: a tet mesh file is .npz (nodes_m, tets)")
     try:
         with np.load(path, allow_pickle=False) as z:
-            nodes, tets = np.asarray(z["nodes_m"], dtype=np.float64) * scale, np.asarray(z["tets"], dtype=np.int64)
+            nodes = np.asarray(z["nodes_m"], dtype=np.float64) * np.asarray(scale, dtype=np.float64)
+            tets = np.asarray(z["tets"], dtype=np.int64)
     except (OSError, KeyError, ValueError) as exc:
         raise MeshError(f"{path}: cannot read a tet mesh (nodes_m, tets): {type(exc).__name__}: {exc}") from None
     if nodes.ndim != 2 or nodes.shape[1] != 3 or tets.ndim != 2 or tets.shape[1] != 4 or len(tets) == 0:
@@ -306,6 +308,8 @@ def load_tet_mesh_file(path, scale: float = 1.0) -> TetMesh:
     extent = np.ptp(nodes, axis=0).max()
     if not 0.005 <= extent <= 0.5:
         raise MeshError(f"{path}: extent {extent:.3f} m after scale {scale}; expected metres of a graspable object")
+    if centred:
+        nodes = nodes - (nodes.min(axis=0) + nodes.max(axis=0)) / 2
     digest = hashlib.sha256(nodes.tobytes() + tets.tobytes()).hexdigest()[:20]
     return tet_mesh_of(nodes, tets, f"file-{digest}")
 

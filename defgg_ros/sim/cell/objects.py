@@ -79,13 +79,7 @@ def cell_tet_mesh(spec: SceneObject) -> meshes.TetMesh:
     shipped mesh is the one its labels were made with), else fTetWild's mesh of the surface (.obj / .stl)."""
     if not is_tet_mesh_file(spec):
         return meshes.tetrahedralize(centred_surface_mesh(spec))
-    tet = meshes.load_tet_mesh_file(spec.mesh_path)
-    nodes = tet.nodes_m * np.asarray(spec.size_m, dtype=float)
-    lo, hi = nodes.min(axis=0), nodes.max(axis=0)
-    nodes = nodes - (lo + hi) / 2
-    if np.array_equal(nodes, tet.nodes_m):
-        return tet
-    return meshes.tet_mesh_of(nodes, tet.tets, tet.content_hash)
+    return meshes.load_tet_mesh_file(spec.mesh_path, spec.size_m, centred=True)
 
 
 def add_rigid_object(client: int, spec: SceneObject) -> int:
