@@ -50,6 +50,8 @@ from defgg_ros.planning.contact_radii import (  # noqa: E402
     perceived_pad_contacts,
     surface_pad_contact,
 )
+from defgg_ros.planning.section_outline import SECTION_CELL_M, perceived_section  # noqa: E402
+from defgg_ros.section_model import SectionError, section_curve  # noqa: E402
 from defgg_ros.sim import meshes  # noqa: E402
 from defgg_ros.sim import objects as sim_objects  # noqa: E402
 from defgg_ros.sim.cell.objects import centred_surface_mesh  # noqa: E402
@@ -196,9 +198,10 @@ def object_label_near(grid_labels: np.ndarray, centre_rc) -> int:
     return int(np.bincount(labels).argmax()) if labels.size else 0
 
 
-def perceived_contacts(spec) -> tuple[PadContacts, tuple]:
-    """The contacts the cell perceives (empty: flat faces, the flat law) and the point-law radii the executor used
-    before line contacts (sqrt(R_h R_v) at every pad): the object rendered by the cell's own camera
+def perceived_contacts(spec) -> tuple[PadContacts, tuple, object]:
+    """The contacts the cell perceives (empty: flat faces, the flat law), the point-law radii the executor used
+    before line contacts (sqrt(R_h R_v) at every pad) and the section law's curve (None: no section under the
+    pads): the object rendered by the cell's own camera
     (SimCell.render_depth, the scene's camera 0.40 m above the table), perceived as the segmentation node does
     (perception/tabletop.perceive), and the jig's grasp (the object's position, closing along its yaw, the
     fingertips at half its height less their offset below the TCP) given to planning/contact_radii: what the
@@ -225,13 +228,18 @@ def perceived_contacts(spec) -> tuple[PadContacts, tuple]:
     row, col = (int(round(v)) for v in centre)
     # A grasp centred on a hole (a ring): the outline is searched from the extent's ends, as the planner does.
     extent_m = None if view.grid_labels[row, col] == label else closing_extent_m(spec)
-    contacts = perceived_pad_contacts(view.grid_height_m, view.grid_labels, label, centre,
-                                      (math.cos(spec.yaw_rad), math.sin(spec.yaw_rad)), tip_m, extent_m,
-                                      details=details)
+    direction = (math.cos(spec.yaw_rad), math.sin(spec.yaw_rad))
+    contacts = perceived_pad_contacts(view.grid_height_m, view.grid_labels, label, centre, direction, tip_m,
+                                      extent_m, details=details)
+    try:
+        curve = section_curve(*perceived_section(view.grid_height_m, view.grid_labels, label, centre, direction,
+                                                 tip_m), SECTION_CELL_M)
+    except SectionError:
+        curve = None
     if not details.get("pads"):
-        return contacts, ()
+        return contacts, (), curve
     point_radii = tuple(contact_radius_m(r_h, r_v, details["half_width_m"]) for r_h, r_v, _ in details["pads"])
-    return contacts, (point_radii if contacts.radii_m else ())
+    return contacts, (point_radii if contacts.radii_m else ()), curve
 
 
 def squeeze_once(spec) -> list:
@@ -294,8 +302,12 @@ def calibration(path: Path) -> HandCalibration:
 # taken out with the flat law (what the executor did without contact radii), "point": the calibration and the
 # perceived radii with the point law at every pad (what the executor did before line contacts), "new": the
 # calibration and the contacts of the object's surface (line law where it is straight one way), and "perceived":
-# the calibration and the contacts the cell perceives (what the executor now does: the grasp carries them).
-VARIANTS = ("old", "hand", "point", "new", "perceived")
+# the calibration and the contacts the cell perceives (what the executor now does: the grasp carries them),
+# "section": the calibration and the perceived section's plane-stress FEM (section_model.py; docs/squeeze.md)
+# where a pad is not on a flat face, the flat law where both are (the training boxes read 2-8x with the FEM: the
+# cell's boxes are FEM grids of 2-3 cm cells, stiffer than a continuum).
+VARIANTS = ("old", "hand", "point", "new", "perceived", "section")
+BANDED = ("perceived", "section")     # the variants whose one-sigma band and log error are printed
 
 
 def estimates_of(readings, spec, hand: HandCalibration, contacts: dict) -> dict:
@@ -311,7 +323,10 @@ def estimates_of(readings, spec, hand: HandCalibration, contacts: dict) -> dict:
             "hand": estimate_modulus(readings, face_w, face_h, hand=hand, contact_law="flat", **kw),
             "point": estimate_modulus(readings, face_w, face_h, hand=hand, contact_radii_m=contacts["point"] or None,
                                       **kw),
-            "new": with_contacts(contacts["surface"]), "perceived": with_contacts(contacts["perceived"])}
+            "new": with_contacts(contacts["surface"]), "perceived": with_contacts(contacts["perceived"]),
+            "section": (estimate_modulus(readings, face_w, face_h, hand=hand, section=contacts["section"], **kw)
+                        if contacts["section"] is not None and contacts["perceived"].radii_m
+                        else with_contacts(contacts["perceived"]))}
 
 
 def radii_text(pads: PadContacts | None) -> str:
@@ -413,24 +428,25 @@ def main(argv=None) -> int:
     names = [n for o in args.objects for n in {"tuning": TUNING, "held_out": HELD_OUT}.get(o, (o,))]
     print(f"{'object':16s} {'E true':>8s} " + " ".join(f"{v:>9s}" for v in VARIANTS) +
           "  radii (cm): surface | perceived  spread  perceived estimate")
-    rows, in_band, log_errors = [], [], []
+    rows, in_band, log_errors = [], {v: [] for v in BANDED}, {v: [] for v in BANDED}
     for name in names:
         for modulus in args.moduli:
             by_variant = {v: [] for v in VARIANTS}
             radii = {}
             for r in range(args.repeats):
                 spec = scene_object(name, modulus, 0.3 * r, args.meshes)
-                perceived, point = perceived_contacts(spec)
-                radii = {"surface": surface_contacts(spec), "perceived": perceived, "point": point}
+                perceived, point, section = perceived_contacts(spec)
+                radii = {"surface": surface_contacts(spec), "perceived": perceived, "point": point,
+                         "section": section}
                 try:
                     readings = cached_readings(args.readings, name, modulus, 0.3 * r, args.meshes)
                     for variant, estimate in estimates_of(readings, spec, hand, radii).items():
                         by_variant[variant].append(estimate)
                 except SqueezeError as error:   # the executor fails such a squeeze: a miss in the counts
                     print(f"{name:16s} {modulus:8.2g} refused: {error}", flush=True)
-            if modulus < 1e7:      # does the perceived estimate's one-sigma band hold the true modulus?
-                in_band += [e.low_pa <= modulus <= e.high_pa for e in by_variant["perceived"]]
-                log_errors += [math.log(e.youngs_modulus_pa / modulus) for e in by_variant["perceived"] if not e.rigid]
+            for v in BANDED if modulus < 1e7 else ():   # does the estimate's one-sigma band hold the modulus?
+                in_band[v] += [e.low_pa <= modulus <= e.high_pa for e in by_variant[v]]
+                log_errors[v] += [math.log(e.youngs_modulus_pa / modulus) for e in by_variant[v] if not e.rigid]
             factors = [factor(by_variant[v], modulus) for v in VARIANTS]
             rows.append((name, modulus, factors))
             values = [e.youngs_modulus_pa for e in by_variant["perceived"]]
@@ -440,12 +456,13 @@ def main(argv=None) -> int:
                   f"{by_variant['perceived'][0].describe() if by_variant['perceived'] else ''}", flush=True)
     for line in summary(rows):
         print(line)
-    print(f"perceived: the one-sigma band holds the true modulus in {sum(in_band)} of {len(in_band)} soft squeezes "
-          "(a band of one sd holds it in ~68 % when the model is right)")
-    if log_errors:      # what squeeze.MODEL_FACTOR stands for: the model's own error, one sd in log space
-        rms = math.sqrt(sum(x * x for x in log_errors) / len(log_errors))
-        print(f"perceived: rms of ln(estimate / true) over the {len(log_errors)} soft squeezes read as a number: "
-              f"{rms:.2f} (a factor {math.exp(rms):.2f}; squeeze.MODEL_FACTOR is {MODEL_FACTOR})")
+    for v in BANDED:
+        print(f"{v}: the one-sigma band holds the true modulus in {sum(in_band[v])} of {len(in_band[v])} soft "
+              "squeezes (a band of one sd holds it in ~68 % when the model is right)")
+        if log_errors[v]:      # what squeeze.MODEL_FACTOR stands for: the model's own error, one sd in log space
+            rms = math.sqrt(sum(x * x for x in log_errors[v]) / len(log_errors[v]))
+            print(f"{v}: rms of ln(estimate / true) over the {len(log_errors[v])} soft squeezes read as a number: "
+                  f"{rms:.2f} (a factor {math.exp(rms):.2f}; squeeze.MODEL_FACTOR is {MODEL_FACTOR})")
     return 0
 
 

@@ -20,7 +20,9 @@ reported, but does not choose: in the simulated cell flat boxes fitted n = 1.3-2
          over the two contacts;
   hertz-line (nearly F proportional to the compression): a surface straight one way over a pad (a cylinder's
          side) touches it along a line (`contact_line_lengths_m` > 0 at that pad): defgg_ros/hertz.py's line law,
-         E* fitted over log E* (it sits inside a log).
+         E* fitted over log E* (it sits inside a log);
+  section (given a `section` curve): the whole cross-section the pads load, a plane-stress FEM of the perceived
+         outline (defgg_ros/section_model.py): what yields behind the contact too (a star prism's arm); E fitted.
 
 Settling. An elastic body's compression grows smoothly with the force: over the gentle forces no curve the fit
 allows (F ~ x^0.77 .. x^2.5) makes one interval's compliance (opening lost per newton) more than ~1.7x another's.
@@ -39,7 +41,7 @@ import math
 import statistics
 from dataclasses import dataclass
 
-from defgg_ros import hertz
+from defgg_ros import hertz, section_model
 from defgg_ros.constants import FINGER_DEPTH_M, FINGER_PAD_WIDTH_M
 
 # A lower bound above this counts as "rigid" for the grasp: the paper's soft classes end at 2e6 Pa, the next
@@ -104,7 +106,7 @@ class ModulusEstimate:
     stiffness_npm: float        # measured force-compression slope (hand included)
     lower_bound: bool           # the compression was within the width resolution / the calibration's noise
     rigid: bool                 # no compliance of its own that the hand can resolve (see the module doc)
-    contact_law: str = "flat"   # "flat", "hertz" (point contacts) or "hertz-line" (a line contact among them)
+    contact_law: str = "flat"   # "flat", "hertz" (point contacts), "hertz-line" (a line among them) or "section"
     exponent: float = math.nan  # fitted n of F ~ compression^n (1 flat, 1.5 Hertz); nan: not fitted
     settling_step_m: float = 0.0  # a settling step taken out of the readings (module doc); 0.0: none
 
@@ -264,7 +266,8 @@ def _bound(e_pa: float, k: float, law: str = "flat", exponent: float = math.nan,
 def estimate_modulus(readings, face_width_m: float, face_height_m: float, hand: HandCalibration | None = None,
                      width_resolution_m: float = 1e-4, model_factor: float = MODEL_FACTOR,
                      contact_law: str = "auto", contact_radii_m: tuple | None = None,
-                     contact_line_lengths_m: tuple | None = None) -> ModulusEstimate:
+                     contact_line_lengths_m: tuple | None = None,
+                     section: section_model.SectionCurve | None = None) -> ModulusEstimate:
     """The object's Young's modulus from squeeze readings (see the module doc) with its one-sigma band.
 
     contact_radii_m: the object's radius of curvature where each pad touches it (from its perceived shape; None:
@@ -273,7 +276,8 @@ def estimate_modulus(readings, face_width_m: float, face_height_m: float, hand: 
     straight one way and touches the pad along a line that long (m), 0 for a point contact; None or (): both point
     contacts (the estimate's law is then "hertz-line" when any is a line). The curve's exponent is fitted and
     reported either way; it does not choose the law (docs/squeeze.md: in the simulated cell flat boxes fit
-    n = 1.3-2.5)."""
+    n = 1.3-2.5). section: the loaded cross-section's curve (section_model.section_curve, from the perceived
+    outline: planning/section_outline.py); given, it is the law ("section") whatever the radii say."""
     # A face extent may be math.inf (not known: the pad's spread alone is loaded); the resolution must be finite.
     for name, value in (("face_width_m", face_width_m), ("face_height_m", face_height_m),
                         ("width_resolution_m", width_resolution_m)):
@@ -306,8 +310,12 @@ def estimate_modulus(readings, face_width_m: float, face_height_m: float, hand: 
     law = contact_law if contact_law != "auto" else ("hertz" if contact_radii_m else "flat")
     if law == "hertz" and line_lengths_m:
         law = "hertz-line"
-    e = (hertz_modulus_pa(points, width_m, contact_radii_m, line_lengths_m=line_lengths_m) if law != "flat"
-         else flat_modulus(object_c))
+    if section is not None:
+        law = "section"
+        e = section_model.fit_modulus_pa(points, section)
+    else:
+        e = (hertz_modulus_pa(points, width_m, contact_radii_m, line_lengths_m=line_lengths_m) if law != "flat"
+             else flat_modulus(object_c))
     if not math.isfinite(e):
         return _bound(flat_modulus(noise_mpn), k, law, exponent, settling_m)
     rel = width_resolution_m / span     # the compression's relative reading error
