@@ -102,19 +102,39 @@ def section_curve(mask: np.ndarray, height_m: np.ndarray, cell_m: float, pad_wid
     thickness_m = np.minimum(height_m, spread_m[None, :])
     k, xy = _assembled(mask, thickness_m, cell_m)
     under = np.abs(xy[:, 1] - centre_y) <= pad_width_m / 2.0 + 1e-9
-    forces = [_pads_force(k, xy, under, x_lo, x_hi, u) for u in approaches_m]
-    return SectionCurve(tuple(float(u) for u in approaches_m), tuple(forces))
-
-
-def _pads_force(k: np.ndarray, xy: np.ndarray, under: np.ndarray, x_lo: float, x_hi: float, u: float) -> float:
-    """The pads' force (E = 1 Pa) at total approach u: each pad moved u/2 in, the nodes it touches held."""
+    # Only nodes a pad can reach may touch it: under it and within the largest approach (plus a cell) of its side.
+    reach_m = max(approaches_m) / 2.0 + cell_m
+    candidates = under & ((xy[:, 0] <= x_lo + reach_m) | (xy[:, 0] >= x_hi - reach_m))
+    s, xy_c = _condensed(k, candidates), xy[candidates]
     tol = 1e-9
-    left, right = under & (xy[:, 0] <= x_lo + tol), under & (xy[:, 0] >= x_hi - tol)
+    left, right = xy_c[:, 0] <= x_lo + tol, xy_c[:, 0] >= x_hi - tol
+    forces = []
+    for u in sorted(approaches_m):    # the contact grows with the approach: each starts from the last one's
+        force, left, right = _pads_force(s, xy_c, x_lo, x_hi, u, left, right)
+        forces.append(force)
+    return SectionCurve(tuple(float(u) for u in sorted(approaches_m)), tuple(forces))
+
+
+def _condensed(k: np.ndarray, candidates: np.ndarray) -> np.ndarray:
+    """The stiffness seen at the candidate nodes with every other node free and unloaded (a Schur complement):
+    one solve for the whole curve instead of one per approach and contact set."""
+    on = np.repeat(candidates, 2)
+    c, i = np.nonzero(on)[0], np.nonzero(~on)[0]
+    if i.size == 0:
+        return k
+    return k[np.ix_(c, c)] - k[np.ix_(c, i)] @ np.linalg.solve(k[np.ix_(i, i)], k[np.ix_(i, c)])
+
+
+def _pads_force(s: np.ndarray, xy: np.ndarray, x_lo: float, x_hi: float, u: float, left: np.ndarray,
+                right: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    """The pads' force (E = 1 Pa) at total approach u, each pad moved u/2 in, the nodes it touches held (starting
+    from the touching sets left, right; s, xy: the condensed stiffness and its nodes); and the sets found."""
+    tol = 1e-9
     for _ in range(MAX_ACTIVE_SET_ROUNDS):
-        disp, reaction = _solved(k, xy, left, right, x_lo + u / 2.0, x_hi - u / 2.0)
+        disp, reaction = _solved(s, xy, left, right, x_lo + u / 2.0, x_hi - u / 2.0)
         x_now = xy[:, 0] + disp[0::2]
-        grow_left = left | (under & (x_now < x_lo + u / 2.0 - tol))
-        grow_right = right | (under & (x_now > x_hi - u / 2.0 + tol))
+        grow_left = left | (x_now < x_lo + u / 2.0 - tol)
+        grow_right = right | (x_now > x_hi - u / 2.0 + tol)
         new_left = grow_left & ~(left & (reaction[0::2] < 0.0))       # a pad pulling on a node lets it go
         new_right = grow_right & ~(right & (reaction[0::2] > 0.0))
         if not new_left.any() or not new_right.any():
@@ -122,7 +142,7 @@ def _pads_force(k: np.ndarray, xy: np.ndarray, under: np.ndarray, x_lo: float, x
         if (new_left == left).all() and (new_right == right).all():
             break
         left, right = new_left, new_right
-    return float(reaction[0::2][left].sum())
+    return float(reaction[0::2][left].sum()), left, right
 
 
 def _solved(k, xy, left, right, left_x_m, right_x_m) -> tuple[np.ndarray, np.ndarray]:
@@ -135,13 +155,15 @@ def _solved(k, xy, left, right, left_x_m, right_x_m) -> tuple[np.ndarray, np.nda
         value[2 * nodes] = pad_x - xy[nodes, 0]
     free = ~held
     disp = value.copy()
-    disp[free] = np.linalg.solve(k[np.ix_(free, free)], -k[np.ix_(free, held)] @ value[held])
+    if free.any():
+        disp[free] = np.linalg.solve(k[np.ix_(free, free)], -k[np.ix_(free, held)] @ value[held])
     return disp, k @ disp
 
 
 def _approach_m(curve: SectionCurve, force_per_pa: np.ndarray) -> np.ndarray:
     """The approach at which the section carries these forces per unit modulus (nan beyond the curve)."""
-    return np.interp(force_per_pa, curve.force_per_pa, curve.approaches_m, left=0.0, right=np.nan)
+    carried = np.maximum.accumulate(np.asarray(curve.force_per_pa, float))    # interp needs it non-decreasing
+    return np.interp(force_per_pa, carried, curve.approaches_m, left=0.0, right=np.nan)
 
 
 def _misfit(points, curve: SectionCurve, log_e: float) -> float:

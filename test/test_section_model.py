@@ -55,7 +55,7 @@ def test_pointed_ends_yield_more_than_a_bar_and_stiffen_as_the_contact_grows():
 
 
 def test_the_fit_returns_the_modulus_the_readings_were_made_with_the_hand_taken_out():
-    curve = section_curve(*diamond(0.04, 0.03, 0.03, rows=17, cols=21), CELL,
+    curve = section_curve(*diamond(0.03, 0.02, 0.03, rows=11, cols=15), CELL,
                           approaches_m=tuple(np.geomspace(5e-5, 0.03, 12)))
     hand = HandCalibration(13509.0, 9.7e-6, "test")
     true_pa, forces = 7e4, (0.5, 1.0, 1.5, 2.0)
