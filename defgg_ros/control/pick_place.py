@@ -118,6 +118,7 @@ class PickPlaceSequence(SqueezePhase):
         config.validate()
         self._init_squeeze(squeeze)
         self._kin, self._cfg, self._grasp, self._place = kin, config, grasp, place
+        self._start_section_job()
         self._limits = arm_limits(kin.arm, config.limits_scale)   # the kinematics' arm model
         self._obs = _Observed()
         self._pending = _Pending()

@@ -131,6 +131,10 @@ class GraspTarget:
     # Per pad, in contact_radii_m's order: 0 a point contact, > 0 the length (m) of the line the pad touches where the
     # surface is straight one way (Grasp.contact_line_lengths_m); (): all point contacts.
     contact_line_lengths_m: tuple = ()
+    # The section the pads squeeze (Grasp.section_*): its cell (m) and the object's height on it (rows of m, the
+    # grasp line the middle row, 0: not the object); (): not perceived (the contact laws).
+    section_cell_m: float = 0.0
+    section_heights_m: tuple = ()
 
 
 @dataclass(frozen=True)

@@ -11,7 +11,11 @@ recovery runner that carries out the way back); no ROS, no clock of its own.
 """
 import dataclasses
 import math
+import threading
 
+import numpy as np
+
+from defgg_ros import section_model
 from defgg_ros.constants import TRAINING_YOUNGS_MODULI_PA
 from defgg_ros.control.gripper_rule import MISSED_WIDTH_M, GraspCommand, grasp_command
 from defgg_ros.control.sequence_types import GraspGripper, SequenceFailure
@@ -29,6 +33,35 @@ from defgg_ros.squeeze import (
 RIGID_PLANNING_MODULUS_PA = TRAINING_YOUNGS_MODULI_PA[-1]
 # The object's height is at least this for the loaded area (a grasp point on the table would give 0).
 MIN_FACE_HEIGHT_M = 0.005
+# The section law's model (section_model.py, ~0.3-3 s) runs from the goal's start, beside the motions; the estimate
+# waits for it at most this long (robot time) after the last reading, then goes without it (the contact laws).
+SECTION_WAIT_S = 5.0
+
+
+class SectionJob:
+    """The grasp's section curve computed on a thread of its own (numpy's solver releases the GIL), so the
+    control loop never stalls on it; `curve` is None until done, and stays None when the section is refused."""
+
+    def __init__(self, cell_m: float, heights_m: tuple):
+        self.curve: section_model.SectionCurve | None = None
+        self.error = ""
+        self._done = threading.Event()
+        threading.Thread(target=self._run, args=(cell_m, np.asarray(heights_m, float)), daemon=True).start()
+
+    def _run(self, cell_m: float, heights: np.ndarray) -> None:
+        try:
+            self.curve = section_model.section_curve(heights > 0.0, heights, cell_m)
+        except section_model.SectionError as error:
+            self.error = str(error)
+        finally:
+            self._done.set()
+
+    @property
+    def done(self) -> bool:
+        return self._done.is_set()
+
+    def wait(self, timeout_s: float) -> bool:
+        return self._done.wait(timeout_s)
 
 
 def planning_modulus_pa(estimate: ModulusEstimate) -> float:
@@ -49,6 +82,8 @@ class SqueezePhase:
         self._squeeze_force_n = math.nan
         self._squeeze_read_at_s: float | None = None   # robot time the running squeeze's opening is read at
         self._returning = False    # measure only: on the way back (a failure there is the goal's failure)
+        self._section_job: SectionJob | None = None
+        self._section_wait_from_s: float | None = None   # robot time the estimate began to wait for the section
 
     @property
     def squeeze_request(self):
@@ -58,9 +93,29 @@ class SqueezePhase:
     def squeeze_requested(self) -> bool:
         return self._squeeze is not None
 
+    def _start_section_job(self) -> None:
+        """With the goal: the section law's model runs while the arm goes down, where a pad is not on a flat face
+        (flat pads: the flat law; docs/squeeze.md)."""
+        grasp = self._grasp
+        if self._squeeze is not None and grasp is not None and grasp.section_heights_m and grasp.contact_radii_m:
+            self._section_job = SectionJob(grasp.section_cell_m, grasp.section_heights_m)
+
+    @property
+    def section_job(self) -> SectionJob | None:
+        return self._section_job
+
     def _begin_squeeze(self, sim_s: float) -> list:
         self._phase = "squeeze"
         return self._next_squeeze(sim_s)
+
+    def _section_pending(self, sim_s: float) -> bool:
+        """Whether the estimate still waits for the section's curve (at most SECTION_WAIT_S)."""
+        job = self._section_job
+        if job is None or job.done:
+            return False
+        if self._section_wait_from_s is None:
+            self._section_wait_from_s = sim_s
+        return sim_s - self._section_wait_from_s < SECTION_WAIT_S
 
     def _next_force_n(self) -> float | None:
         done = len(self.squeeze_readings)
@@ -79,6 +134,8 @@ class SqueezePhase:
             # width 0 with epsilons over the whole opening: the goal succeeds wherever the fingers stop
             command = GraspCommand(opened, 0.0, 0.0, opened, self._squeeze.speed_mps, force_n)
             return self._send_gripper(GraspGripper(command), sim_s)
+        if self._section_pending(sim_s):
+            return []      # _tick_squeeze comes back here once the curve is in
         self.squeeze_estimate = self._estimate()
         if self._squeeze.only:
             return self._begin_way_back(sim_s)
@@ -94,15 +151,20 @@ class SqueezePhase:
         # (perceived, planning/contact_radii.py): Hertz where the surface is curved (the line-contact law where a
         # pad touches along a line); none: the flat law.
         face_height_m = max(float(self._grasp.position_m[2]) - self._cfg.table_z_m, MIN_FACE_HEIGHT_M)
+        # The grasp's section (the section law) when its curve is in.
+        section = self._section_job.curve if self._section_job is not None else None
         try:
             return estimate_modulus(self.squeeze_readings, math.inf, face_height_m, hand=self._squeeze.hand,
                                     width_resolution_m=self._squeeze.width_resolution_m,
                                     contact_radii_m=tuple(self._grasp.contact_radii_m) or None,
-                                    contact_line_lengths_m=tuple(self._grasp.contact_line_lengths_m) or None)
+                                    contact_line_lengths_m=tuple(self._grasp.contact_line_lengths_m) or None,
+                                    section=section)
         except SqueezeError as error:
             raise SequenceFailure(f"squeeze: {error}") from error
 
     def _tick_squeeze(self, sim_s: float) -> list:
+        if self._section_wait_from_s is not None and len(self.squeeze_readings) and self._next_force_n() is None:
+            return self._next_squeeze(sim_s)      # every reading is in: waiting for the section's curve
         if self._squeeze_read_at_s is None:
             result = self._gripper_result(sim_s, f"the squeeze at {self._squeeze_force_n:g} N")
             if result is None:

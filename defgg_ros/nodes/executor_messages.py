@@ -89,8 +89,24 @@ def grasp_target(grasp, base_frame: str, default_modulus_pa: float) -> GraspTarg
     if not math.isfinite(force) or force < 0.0:
         raise GoalError(f"grasp finger_force_n must be >= 0 N (0: the modulus rule), got {force}")
     radii = contact_radii_m(grasp)
+    cell_m, heights = section_heights_m(grasp)
     return GraspTarget(tuple(base_M_tcp[:3, 3]), yaw, float(grasp.width_m), float(modulus), force, radii,
-                       contact_line_lengths_m(grasp, radii))
+                       contact_line_lengths_m(grasp, radii), cell_m, heights)
+
+
+def section_heights_m(grasp) -> tuple[float, tuple]:
+    """Grasp.section_* checked: (cell m, rows of heights m) or (0.0, ()) when empty or the field is missing."""
+    values = tuple(float(v) for v in getattr(grasp, "section_heights_m", ()))
+    if not values:
+        return 0.0, ()
+    cell_m, rows = float(grasp.section_cell_m), int(grasp.section_rows)
+    if not (math.isfinite(cell_m) and cell_m > 0.0) or rows <= 0 or len(values) % rows:
+        raise GoalError(f"grasp section: {len(values)} heights must fill section_rows ({rows}) rows of cells "
+                        f"section_cell_m ({cell_m}) > 0 m wide")
+    if not all(math.isfinite(v) and v >= 0.0 for v in values) or not any(values):
+        raise GoalError("grasp section_heights_m must be finite heights >= 0 m (0: not the object), some > 0")
+    width = len(values) // rows
+    return cell_m, tuple(values[i * width:(i + 1) * width] for i in range(rows))
 
 
 def contact_radii_m(grasp) -> tuple:

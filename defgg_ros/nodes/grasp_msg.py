@@ -11,6 +11,7 @@ from defgg_ros.grip_force import GripRuleError, LabelGripRule
 from defgg_ros.model.inference import CheckpointError
 from defgg_ros.perception.grasp_planning import finger_boxes_in_grasp
 from defgg_ros.planning.grip_estimate import grip_estimate
+from defgg_ros.planning.section_outline import SECTION_CELL_M
 from defgg_ros.planning.tabletop_grasps import base_T_grasp, image_projection
 from defgg_ros.ros.conversions import pose_from_transform, transform_from_pose
 
@@ -41,6 +42,7 @@ def grasp_msg(grasp, frame, network, grip_rule: LabelGripRule, density_kg_m3: fl
     msg.youngs_modulus_pa = float(grasp.youngs_modulus_pa)
     msg.object_id = int(grasp.object_id)
     _pad_contacts(msg, grasp, warn)
+    _section(msg, grasp, warn)
     _grip_fields(msg, grasp, network, grip_rule, density_kg_m3, warn)
     return msg
 
@@ -63,6 +65,23 @@ def _pad_contacts(msg: Grasp, grasp, warn) -> None:
 
 
 _STALE_FIELDS_SAID = set()
+
+
+def _section(msg: Grasp, grasp, warn) -> None:
+    """Grasp.section_cell_m, section_rows and section_heights_m (planning/section_outline.py via TabletopGrasp);
+    an older interface build: said once, the squeeze uses the contact laws."""
+    if not hasattr(msg, "section_heights_m"):
+        if "section_heights_m" not in _STALE_FIELDS_SAID:
+            _STALE_FIELDS_SAID.add("section_heights_m")
+            warn("the installed defgg_interfaces/Grasp has no section_heights_m: its build is older than this source "
+                 "(rebuild it: scripts/bootstrap.sh); the squeeze uses the contact laws")
+        return
+    heights = getattr(grasp, "section_heights_m", None)
+    if heights is None:
+        return
+    msg.section_cell_m = float(SECTION_CELL_M)
+    msg.section_rows = int(heights.shape[0])
+    msg.section_heights_m = np.asarray(heights, np.float32).ravel().tolist()
 
 
 def _grip_fields(msg: Grasp, grasp, network, grip_rule: LabelGripRule, density_kg_m3: float, warn) -> None:

@@ -52,6 +52,7 @@ from defgg_ros.grasping.postprocess import find_peaks, maps_from_network
 from defgg_ros.model.preprocess import network_input
 from defgg_ros.perception.tabletop import CELL_M, TabletopView, fill_holes, partly_seen_objects
 from defgg_ros.planning.contact_radii import PadContacts, perceived_pad_contacts
+from defgg_ros.planning.section_outline import SECTION_CELL_M, perceived_section
 
 # Free space the fingers need between the object and each pad while closing.
 CLEARANCE_M = 0.006
@@ -104,6 +105,9 @@ class TabletopGrasp:
     # read (a search makes grasps at every peak it checks, ~1-3 ms each under load; only the grasps a request
     # returns need their contacts). Made once for both contact_radii_m and contact_line_lengths_m.
     pad_contacts_source: object = field(default=PadContacts(), compare=False, repr=False)
+    # The section the pads squeeze ((mask, heights) on SECTION_CELL_M cells, planning/section_outline.py), or what
+    # makes it when first read (as the contacts: only the grasps a request returns); None: not perceived.
+    section_source: object = field(default=None, compare=False, repr=False)
 
     @functools.cached_property
     def pad_contacts(self) -> PadContacts:
@@ -112,6 +116,15 @@ class TabletopGrasp:
         if isinstance(value, PadContacts):
             return PadContacts(tuple(value.radii_m), tuple(value.line_lengths_m))
         return PadContacts(radii_m=tuple(value))
+
+    @functools.cached_property
+    def section_heights_m(self) -> np.ndarray | None:
+        """The object's height above the table (m) on the section's cells (rows across the closing direction, the
+        grasp line the middle row; columns along it; 0: not the object): the squeeze's section law. None: not
+        perceived or nothing of the object at the fingertips' height."""
+        source = self.section_source
+        mask, heights = source() if callable(source) else (source if source is not None else (None, None))
+        return None if mask is None or not mask.any() else np.where(mask, heights, 0.0).astype(np.float32)
 
     @property
     def contact_radii_m(self) -> tuple:
@@ -650,6 +663,7 @@ def _grasp(view, label, qualities, r, c, direction, width, extent_m, network_wid
     closing -= normal * (closing @ normal)
     closing /= np.linalg.norm(closing)
     quality, rank_quality = qualities
+    tip_m = _tip_height_m(float(view.grid_height_m[r, c]), view.config)
     return TabletopGrasp(object_id=int(label), quality=float(quality), position_base_m=(float(x), float(y), z),
                          closing_direction_base=tuple(closing.tolist()),
                          approach_direction_base=tuple((-normal).tolist()), width_m=float(width),
@@ -658,7 +672,10 @@ def _grasp(view, label, qualities, r, c, direction, width, extent_m, network_wid
                          rank_quality=float(rank_quality),
                          pad_contacts_source=functools.partial(
                              perceived_pad_contacts, view.grid_height_m, view.grid_labels, label, (r, c),
-                             tuple(direction), _tip_height_m(float(view.grid_height_m[r, c]), view.config), extent_m))
+                             tuple(direction), tip_m, extent_m),
+                         section_source=functools.partial(
+                             perceived_section, view.grid_height_m, view.grid_labels, label, (r, c),
+                             tuple(direction), tip_m, SECTION_CELL_M))
 
 
 def base_T_grasp(grasp: TabletopGrasp) -> np.ndarray:

@@ -17,6 +17,7 @@ from defgg_ros.control.kinematics import PandaKinematics
 from defgg_ros.control.observation import ObservationWatch
 from defgg_ros.control.pick_place import PickPlaceSequence
 from defgg_ros.control.sequence_types import GraspGripper, SendTrajectory, SqueezeRequest
+from defgg_ros.section_model import section_curve
 from defgg_ros.squeeze import FIRM_FORCES_N, GENTLE_FORCES_N, estimate_modulus, loaded_area_m2
 
 pytestmark = pytest.mark.unit
@@ -102,6 +103,49 @@ def test_the_grasps_contact_line_lengths_reach_the_estimate_the_line_law_where_s
     assert line.contact_law == sequence.squeeze_estimate.contact_law == "hertz-line" != point.contact_law
     assert sequence.squeeze_estimate.youngs_modulus_pa == pytest.approx(line.youngs_modulus_pa, rel=1e-9)
     assert line.youngs_modulus_pa != pytest.approx(point.youngs_modulus_pa, rel=0.05)
+
+
+def diamond_section(rows: int = 13, cols: int = 19, cell_m: float = 0.003, height_m: float = 0.03) -> tuple:
+    """A rhombus section (pointed at both pads, a star prism's arms end to end) as Grasp.section_heights_m rows."""
+    r = (np.arange(rows) + 0.5 - rows / 2) / (rows / 2)
+    c = (np.arange(cols) + 0.5 - cols / 2) / (cols / 2)
+    inside = np.abs(c)[None, :] + np.abs(r)[:, None] <= 1.0
+    return tuple(tuple(row) for row in np.where(inside, height_m, 0.0))
+
+
+def test_a_grasp_with_a_section_is_read_with_the_section_law_where_a_pad_is_not_flat(kin):
+    """The grasp's section (Grasp.section_*) is modelled beside the squeeze (section_model.py, on a thread) and the
+    estimate fits it; with flat pads (no contact radii) the flat law stays (docs/squeeze.md "The section law")."""
+    heights = diamond_section()
+    curved = dataclasses.replace(GRASP, contact_radii_m=(0.004, 0.004), contact_line_lengths_m=(0.018, 0.018),
+                                 section_cell_m=0.003, section_heights_m=heights)
+    flat = dataclasses.replace(curved, contact_radii_m=(), contact_line_lengths_m=())
+    laws = {}
+    for name, grasp in (("curved", curved), ("flat", flat)):
+        sequence = PickPlaceSequence(kin, CONFIG, grasp, PLACE, SqueezeRequest(only=True, width_resolution_m=1e-5))
+        if sequence.section_job is not None:    # the fake clock outruns the model's thread; a cell's descent does not
+            assert sequence.section_job.wait(30.0)
+        run(sequence, FakeRobot(kin, World(object_compliance_m_per_n=COMPLIANCE_M_PER_N)), max_s=120.0)
+        assert sequence.outcome.success, sequence.outcome.failure_reason
+        laws[name] = sequence.squeeze_estimate
+    face_height_m = GRASP.position_m[2] - CONFIG.table_z_m
+    heights_m = np.asarray(heights)
+    expected = estimate_modulus(sequence.squeeze_readings, math.inf, face_height_m, width_resolution_m=1e-5,
+                                section=section_curve(heights_m > 0, heights_m, 0.003))
+    assert laws["curved"].contact_law == "section"
+    assert laws["curved"].youngs_modulus_pa == pytest.approx(expected.youngs_modulus_pa, rel=1e-6)
+    assert laws["flat"].contact_law == "flat"
+
+
+def test_a_section_model_still_running_is_waited_for_a_while_then_the_contact_laws_read(kin):
+    """The estimate never waits on the section's thread longer than SECTION_WAIT_S of robot time: on the fake clock
+    (the control loop ticks far faster than the model solves) the squeeze ends with the contact law."""
+    grasp = dataclasses.replace(GRASP, contact_radii_m=(0.004, 0.004), contact_line_lengths_m=(0.018, 0.018),
+                                section_cell_m=0.003, section_heights_m=diamond_section(33, 29))
+    sequence = PickPlaceSequence(kin, CONFIG, grasp, PLACE, SqueezeRequest(only=True, width_resolution_m=1e-5))
+    run(sequence, FakeRobot(kin, World(object_compliance_m_per_n=COMPLIANCE_M_PER_N)), max_s=120.0)
+    assert sequence.outcome.success, sequence.outcome.failure_reason
+    assert sequence.squeeze_estimate.contact_law == "hertz-line"
 
 
 def test_an_unresolved_compression_squeezes_firmer_and_reads_rigid(kin):

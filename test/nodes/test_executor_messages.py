@@ -107,6 +107,33 @@ def test_the_grasps_contact_line_lengths_reach_the_target():
     assert target.contact_radii_m == pytest.approx((0.021, 0.034))
 
 
+def test_the_grasps_section_reaches_the_target_as_rows_of_heights():
+    """Grasp.section_* (the squeeze's section law) becomes GraspTarget.section_cell_m and section_heights_m, one
+    tuple per row; empty: not perceived."""
+    msg = grasp()
+    assert grasp_target(msg, BASE, 2e6).section_heights_m == ()
+    msg.section_cell_m, msg.section_rows, msg.section_heights_m = 0.003, 2, [0.0, 0.03, 0.03, 0.03, 0.03, 0.0]
+    target = grasp_target(msg, BASE, 2e6)
+    assert target.section_cell_m == 0.003
+    assert np.allclose(target.section_heights_m, [[0.0, 0.03, 0.03], [0.03, 0.03, 0.0]])
+
+
+@pytest.mark.parametrize("cell_m, rows, heights, message", [
+    (0.003, 4, [0.03] * 6, r"6 heights must fill section_rows \(4\) rows"),
+    (0.003, 0, [0.03] * 6, r"section_rows \(0\)"),
+    (0.0, 2, [0.03] * 6, r"section_cell_m \(0.0\) > 0 m wide"),
+    (float("nan"), 2, [0.03] * 6, "section_cell_m"),
+    (0.003, 2, [0.03, -0.01, 0.0, 0.0, 0.0, 0.0], "finite heights >= 0 m"),
+    (0.003, 2, [0.03, float("inf"), 0.0, 0.0, 0.0, 0.0], "finite heights >= 0 m"),
+    (0.003, 2, [0.0] * 6, "some > 0"),
+])
+def test_a_bad_section_refuses_the_goal_saying_why(cell_m, rows, heights, message):
+    msg = grasp()
+    msg.section_cell_m, msg.section_rows, msg.section_heights_m = cell_m, rows, heights
+    with pytest.raises(GoalError, match=message):
+        grasp_target(msg, BASE, 2e6)
+
+
 @pytest.mark.parametrize("radii, lengths, message", [
     ([0.02, 0.03], [0.01], "contact_line_lengths_m must be empty .* or two lengths >= 0 m, one per pad, got .0.01.$"),
     ([0.02, 0.03], [0.01, 0.02, 0.0], "two lengths >= 0 m, one per pad"),

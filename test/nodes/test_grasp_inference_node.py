@@ -112,6 +112,16 @@ def test_grasps_carry_the_pads_contacts_lines_on_the_standing_cylinder_none_on_t
     radii, lengths = contacts[2]
     assert len(radii) == 2 and all(0.0125 <= r <= 0.05 for r in radii), contacts
     assert len(lengths) == 2 and all(0.015 <= length <= 0.018 + 1e-9 for length in lengths), contacts
+    # The section the pads squeeze (the squeeze's section law): the object's outline at the pads' height in the
+    # grasp's frame; the cylinder (radius 2.5 cm, 4 cm high): a disc of ~19.6 cm^2 at its height
+    for g in response.grasps:
+        heights = np.reshape(g.section_heights_m, (g.section_rows, -1))
+        assert g.section_cell_m == pytest.approx(0.003) and heights[g.section_rows // 2].any()
+    cylinder = next(g for g in response.grasps
+                    if int(TRUTH[int(round(g.center_v_px)), int(round(g.center_u_px))]) == 2)
+    heights = np.asarray(cylinder.section_heights_m)
+    assert np.count_nonzero(heights) * 0.003 ** 2 == pytest.approx(math.pi * 0.025 ** 2, rel=0.2)
+    assert np.median(heights[heights > 0]) == pytest.approx(0.04, abs=0.003)
 
 
 def test_plan_grasp_on_a_perceive_answer_gives_the_same_grasps(cell, executor, call):

@@ -49,9 +49,11 @@ def test_a_message_of_the_installed_layout_round_trips():
     goal = PickAndPlace.Goal(plan_grasp=True)
     goal.grasp.finger_force_n, goal.grasp.width_m, goal.grasp.contact_radii_m = 0.7, 0.05, [0.02, 0.03]
     goal.grasp.contact_line_lengths_m = [0.0, 0.018]
+    goal.grasp.section_cell_m, goal.grasp.section_rows, goal.grasp.section_heights_m = 0.003, 2, [0.0, 0.03, 0.03, 0.0]
     raw = serialize_message(goal)
     current = "bool plan_grasp\ndefgg_interfaces/Grasp grasp\ngeometry_msgs/PoseStamped place_pose\n" + "=" * 80 + \
-        "\nMSG: defgg_interfaces/Grasp\n" + GRASP_BEFORE_LINE_LENGTHS + "float64[] contact_line_lengths_m\n"
+        "\nMSG: defgg_interfaces/Grasp\n" + GRASP_BEFORE_LINE_LENGTHS + "float64[] contact_line_lengths_m\n" + \
+        "float64 section_cell_m\nuint32 section_rows\nfloat32[] section_heights_m\n"
     for msgdef in ("", current):         # no definition recorded: the installed one
         back = live_message(BagMessage("/defgg/session/pick_goal", GOAL, 0, raw, msgdef), PickAndPlace.Goal)
         assert back == goal
