@@ -58,18 +58,26 @@ def _residual(points, log_e_star: float, radii_m, line_lengths_m) -> float:
 def fitted_e_star_pa(points, radii_m, line_lengths_m) -> float:
     """E* (Pa) whose summed contact approaches best fit (force, compression since the first force) points: a grid
     over log E* (GRID_PER_DECADE per decade over E_STAR_RANGE_PA), then golden-section steps around its best."""
-    lo, hi = (math.log(v) for v in E_STAR_RANGE_PA)
-    n = int(round((hi - lo) / math.log(10.0) * GRID_PER_DECADE))
-    grid = [lo + (hi - lo) * i / n for i in range(n + 1)]
-    best = min(range(n + 1), key=lambda i: _residual(points, grid[i], radii_m, line_lengths_m))
-    a, b = grid[max(best - 1, 0)], grid[min(best + 1, n)]
+    return log_grid_minimum(lambda log_e_star: _residual(points, log_e_star, radii_m, line_lengths_m),
+                            E_STAR_RANGE_PA, GRID_PER_DECADE, GOLDEN_STEPS)
 
-    def misfit(log_e_star):
-        return _residual(points, log_e_star, radii_m, line_lengths_m)
+
+def log_grid_minimum(misfit, range_pa: tuple, per_decade: int, golden_steps: int) -> float:
+    """The value (Pa) in range_pa whose log minimises misfit(log value): a grid of per_decade points per decade,
+    then golden-section steps between the best point's neighbours (one new misfit per step). inf when the misfit
+    is infinite everywhere on the grid (nothing fits)."""
+    lo, hi = (math.log(v) for v in range_pa)
+    n = int(round((hi - lo) / math.log(10.0) * per_decade))
+    grid = [lo + (hi - lo) * i / n for i in range(n + 1)]
+    misfits = [misfit(g) for g in grid]
+    best = min(range(n + 1), key=misfits.__getitem__)
+    if not math.isfinite(misfits[best]):
+        return math.inf
+    a, b = grid[max(best - 1, 0)], grid[min(best + 1, n)]
     ratio = (math.sqrt(5.0) - 1.0) / 2.0
     c, d = b - ratio * (b - a), a + ratio * (b - a)
     fc, fd = misfit(c), misfit(d)
-    for _ in range(GOLDEN_STEPS):    # each step keeps one of the two inner points: one new misfit per step
+    for _ in range(golden_steps):    # each step keeps one of the two inner points: one new misfit per step
         if fc <= fd:
             b, d, fd = d, c, fc
             c = b - ratio * (b - a)

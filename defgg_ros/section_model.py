@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from defgg_ros import hertz
 from defgg_ros.constants import FINGER_DEPTH_M, FINGER_PAD_WIDTH_M
 
 POISSON_RATIO = 0.3
@@ -177,19 +178,5 @@ def _misfit(points, curve: SectionCurve, log_e: float) -> float:
 def fit_modulus_pa(points, curve: SectionCurve) -> float:
     """E (Pa) whose approaches u(F / E) - u(F0 / E) best fit (force, compression since the first force) points;
     inf when even the stiffest E of FIT_RANGE_PA leaves the curve's range."""
-    lo, hi = (math.log(v) for v in FIT_RANGE_PA)
-    n = int(round((hi - lo) / math.log(10.0) * FIT_GRID_PER_DECADE))
-    grid = [lo + (hi - lo) * i / n for i in range(n + 1)]
-    misfits = [_misfit(points, curve, g) for g in grid]
-    best = int(np.argmin(misfits))
-    if not math.isfinite(misfits[best]):
-        return math.inf
-    a, b = grid[max(best - 1, 0)], grid[min(best + 1, n)]
-    ratio = (math.sqrt(5.0) - 1.0) / 2.0
-    for _ in range(FIT_GOLDEN_STEPS):
-        c, d = b - ratio * (b - a), a + ratio * (b - a)
-        if _misfit(points, curve, c) <= _misfit(points, curve, d):
-            b = d
-        else:
-            a = c
-    return math.exp((a + b) / 2.0)
+    return hertz.log_grid_minimum(lambda log_e: _misfit(points, curve, log_e), FIT_RANGE_PA, FIT_GRID_PER_DECADE,
+                                  FIT_GOLDEN_STEPS)

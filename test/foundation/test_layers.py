@@ -25,7 +25,7 @@ ROS_MODULES = ("rclpy", "rosidl_runtime_py", "rosbag2_py")
 MAY_IMPORT = {
     # root modules among themselves
     "__init__": set(), "constants": set(), "errors": set(), "rotations": set(), "atomic": set(), "cli_help": set(),
-    "stiffness": {"constants"}, "grip_force": {"constants"}, "hertz": set(), "section_model": {"constants"},
+    "stiffness": {"constants"}, "grip_force": {"constants"}, "hertz": set(), "section_model": {"constants", "hertz"},
     "squeeze": {"constants", "hertz", "section_model"},
     # cores
     "grasping": set(),
