@@ -104,6 +104,15 @@ class SqueezePhase:
     def section_job(self) -> SectionJob | None:
         return self._section_job
 
+    @property
+    def section_note(self) -> str:
+        """Why a grasp's section did not give the estimate ("" when it did or there was none)."""
+        job = self._section_job
+        if job is None or job.curve is not None:
+            return ""
+        reason = job.error or f"its model was still running {SECTION_WAIT_S:g} s after the last reading"
+        return f"the section law not used: {reason}"
+
     def _begin_squeeze(self, sim_s: float) -> list:
         self._phase = "squeeze"
         return self._next_squeeze(sim_s)

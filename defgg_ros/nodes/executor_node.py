@@ -262,7 +262,8 @@ class ExecutorNode(RobotInputs, ArmCommands, GraspPlanning, Node):
             result.stiffness_sent_pa = modulus_pa
             with self._lock:   # the next plan_grasp goal plans on a frame perceived with the measurement
                 self._watch.frames_from(self._clocks()[0])
-        self.get_logger().info(f"squeeze: {estimate.describe()}; {result.stiffness_update}")
+        note = f" ({sequence.section_note})" if sequence.section_note else ""
+        self.get_logger().info(f"squeeze: {estimate.describe()}{note}; {result.stiffness_update}")
 
     def _drive(self, goal_handle, sequence: PickPlaceSequence) -> None:
         """Run the control loop until the sequence finishes (a cancel request goes to the sequence)."""

@@ -120,21 +120,25 @@ def test_a_grasp_with_a_section_is_read_with_the_section_law_where_a_pad_is_not_
     curved = dataclasses.replace(GRASP, contact_radii_m=(0.004, 0.004), contact_line_lengths_m=(0.018, 0.018),
                                  section_cell_m=0.003, section_heights_m=heights)
     flat = dataclasses.replace(curved, contact_radii_m=(), contact_line_lengths_m=())
-    laws = {}
-    for name, grasp in (("curved", curved), ("flat", flat)):
+    off_pads = tuple(row if i < 3 else (0.0,) * len(row) for i, row in enumerate(heights))   # nothing under the pads
+    refused = dataclasses.replace(curved, section_heights_m=off_pads)
+    laws, notes = {}, {}
+    for name, grasp in (("refused", refused), ("flat", flat), ("curved", curved)):
         sequence = PickPlaceSequence(kin, CONFIG, grasp, PLACE, SqueezeRequest(only=True, width_resolution_m=1e-5))
         if sequence.section_job is not None:    # the fake clock outruns the model's thread; a cell's descent does not
             assert sequence.section_job.wait(30.0)
         run(sequence, FakeRobot(kin, World(object_compliance_m_per_n=COMPLIANCE_M_PER_N)), max_s=120.0)
         assert sequence.outcome.success, sequence.outcome.failure_reason
-        laws[name] = sequence.squeeze_estimate
+        laws[name], notes[name] = sequence.squeeze_estimate, sequence.section_note
     face_height_m = GRASP.position_m[2] - CONFIG.table_z_m
     heights_m = np.asarray(heights)
     expected = estimate_modulus(sequence.squeeze_readings, math.inf, face_height_m, width_resolution_m=1e-5,
                                 section=section_curve(heights_m > 0, heights_m, 0.003))
-    assert laws["curved"].contact_law == "section"
+    assert laws["curved"].contact_law == "section" and notes["curved"] == ""
     assert laws["curved"].youngs_modulus_pa == pytest.approx(expected.youngs_modulus_pa, rel=1e-6)
-    assert laws["flat"].contact_law == "flat"
+    assert laws["flat"].contact_law == "flat" and notes["flat"] == ""
+    assert laws["refused"].contact_law == "hertz-line"
+    assert notes["refused"] == "the section law not used: no section under the pads (the middle rows are empty)"
 
 
 def test_a_section_model_still_running_is_waited_for_a_while_then_the_contact_laws_read(kin):
@@ -146,6 +150,7 @@ def test_a_section_model_still_running_is_waited_for_a_while_then_the_contact_la
     run(sequence, FakeRobot(kin, World(object_compliance_m_per_n=COMPLIANCE_M_PER_N)), max_s=120.0)
     assert sequence.outcome.success, sequence.outcome.failure_reason
     assert sequence.squeeze_estimate.contact_law == "hertz-line"
+    assert sequence.section_note == "the section law not used: its model was still running 5 s after the last reading"
 
 
 def test_an_unresolved_compression_squeezes_firmer_and_reads_rigid(kin):
