@@ -14,8 +14,9 @@ choices were made on) and HELD_OUT (evaluation objects: common and EGAD-like, ne
 Every squeeze's readings are appended to --readings (JSON lines) and reused on a rerun: the estimate is pure
 arithmetic, so the old model (flat pads, nothing taken out), the hand's calibration with the flat law, the new
 (hand calibration, Hertz on the surface's contact radii) and "perceived" (Hertz on the radii the cell perceives
-from its own camera's depth: planning/contact_radii.py, what the executor gets on the grasp) are compared on the
-same readings. --calibrate squeezes the rigid calibration block and
+from its own camera's depth: planning/contact_radii.py, what the executor gets on the grasp) and "section" (the
+perceived section's plane-stress FEM where a pad is not flat: section_model.py, what the executor now does) are
+compared on the same readings. --calibrate squeezes the rigid calibration block and
 prints the hand's stiffness (squeeze.calibrate_hand), the value sim_bringup/config/sim_cell.yaml carries.
 """
 from __future__ import annotations
@@ -302,10 +303,11 @@ def calibration(path: Path) -> HandCalibration:
 # taken out with the flat law (what the executor did without contact radii), "point": the calibration and the
 # perceived radii with the point law at every pad (what the executor did before line contacts), "new": the
 # calibration and the contacts of the object's surface (line law where it is straight one way), and "perceived":
-# the calibration and the contacts the cell perceives (what the executor now does: the grasp carries them),
-# "section": the calibration and the perceived section's plane-stress FEM (section_model.py; docs/squeeze.md)
-# where a pad is not on a flat face, the flat law where both are (the training boxes read 2-8x with the FEM: the
-# cell's boxes are FEM grids of 2-3 cm cells, stiffer than a continuum).
+# the calibration and the contacts the cell perceives (the contact laws: what the executor does with a grasp
+# that has no section), "section": the calibration and the perceived section's plane-stress FEM (section_model.py;
+# docs/squeeze.md) where a pad is not on a flat face, the flat law where both are (the training boxes read 2-8x
+# with the FEM: the cell's boxes are FEM grids of 2-3 cm cells, stiffer than a continuum): what the executor does
+# since 2026-11-30 (the grasp carries its section).
 VARIANTS = ("old", "hand", "point", "new", "perceived", "section")
 BANDED = ("perceived", "section")     # the variants whose one-sigma band and log error are printed
 
