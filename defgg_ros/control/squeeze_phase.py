@@ -42,15 +42,16 @@ class SectionJob:
     """The grasp's section curve computed on a thread of its own (numpy's solver releases the GIL), so the
     control loop never stalls on it; `curve` is None until done, and stays None when the section is refused."""
 
-    def __init__(self, cell_m: float, heights_m: tuple):
+    def __init__(self, cell_m: float, heights_m: tuple, model=section_model.section_curve):
         self.curve: section_model.SectionCurve | None = None
         self.error = ""
         self._done = threading.Event()
+        self._model = model
         threading.Thread(target=self._run, args=(cell_m, np.asarray(heights_m, float)), daemon=True).start()
 
     def _run(self, cell_m: float, heights: np.ndarray) -> None:
         try:
-            self.curve = section_model.section_curve(heights > 0.0, heights, cell_m)
+            self.curve = self._model(heights > 0.0, heights, cell_m)
         except section_model.SectionError as error:
             self.error = str(error)
         finally:

@@ -6,6 +6,7 @@ the expected modulus is squeeze.estimate_modulus's model with k = 1 / c.
 """
 import dataclasses
 import math
+import threading
 
 import numpy as np
 import pytest
@@ -17,6 +18,7 @@ from defgg_ros.control.kinematics import PandaKinematics
 from defgg_ros.control.observation import ObservationWatch
 from defgg_ros.control.pick_place import PickPlaceSequence
 from defgg_ros.control.sequence_types import GraspGripper, SendTrajectory, SqueezeRequest
+from defgg_ros.control.squeeze_phase import SectionJob
 from defgg_ros.section_model import section_curve
 from defgg_ros.squeeze import FIRM_FORCES_N, GENTLE_FORCES_N, estimate_modulus, loaded_area_m2
 
@@ -142,12 +144,22 @@ def test_a_grasp_with_a_section_is_read_with_the_section_law_where_a_pad_is_not_
 
 
 def test_a_section_model_still_running_is_waited_for_a_while_then_the_contact_laws_read(kin):
-    """The estimate never waits on the section's thread longer than SECTION_WAIT_S of robot time: on the fake clock
-    (the control loop ticks far faster than the model solves) the squeeze ends with the contact law."""
+    """The estimate never waits on the section's thread longer than SECTION_WAIT_S of robot time: with the model
+    held until the squeeze is over, the squeeze ends with the contact law and says why."""
+    heights = diamond_section()
     grasp = dataclasses.replace(GRASP, contact_radii_m=(0.004, 0.004), contact_line_lengths_m=(0.018, 0.018),
-                                section_cell_m=0.003, section_heights_m=diamond_section(33, 29))
+                                section_cell_m=0.003, section_heights_m=heights)
     sequence = PickPlaceSequence(kin, CONFIG, grasp, PLACE, SqueezeRequest(only=True, width_resolution_m=1e-5))
-    run(sequence, FakeRobot(kin, World(object_compliance_m_per_n=COMPLIANCE_M_PER_N)), max_s=120.0)
+    released = threading.Event()
+
+    def held_model(mask, heights_m, cell_m):     # the real model, started only once the test lets it
+        released.wait(60.0)
+        return section_curve(mask, heights_m, cell_m)
+    sequence._section_job = SectionJob(0.003, heights, model=held_model)
+    try:
+        run(sequence, FakeRobot(kin, World(object_compliance_m_per_n=COMPLIANCE_M_PER_N)), max_s=120.0)
+    finally:
+        released.set()
     assert sequence.outcome.success, sequence.outcome.failure_reason
     assert sequence.squeeze_estimate.contact_law == "hertz-line"
     assert sequence.section_note == "the section law not used: its model was still running 5 s after the last reading"
