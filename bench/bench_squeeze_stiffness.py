@@ -312,9 +312,10 @@ VARIANTS = ("old", "hand", "point", "new", "perceived", "section")
 BANDED = ("perceived", "section")     # the variants whose one-sigma band and log error are printed
 
 
-def estimates_of(readings, spec, hand: HandCalibration, contacts: dict) -> dict:
+def estimates_of(readings, spec, hand: HandCalibration, contacts: dict, section_on_flat_pads: bool = False) -> dict:
     """Each variant's estimate of one squeeze (SqueezeError: the executor refuses such readings). contacts:
-    "surface" and "perceived" PadContacts, "point": the perceived point-law radii."""
+    "surface" and "perceived" PadContacts, "point": the perceived point-law radii, "section": the section's curve.
+    section_on_flat_pads: the section law on flat pads too (what chose the flat law there: docs/squeeze.md)."""
     face_w, face_h = face_m(spec)
     kw = {"width_resolution_m": WIDTH_RESOLUTION_M}
 
@@ -326,9 +327,10 @@ def estimates_of(readings, spec, hand: HandCalibration, contacts: dict) -> dict:
             "point": estimate_modulus(readings, face_w, face_h, hand=hand, contact_radii_m=contacts["point"] or None,
                                       **kw),
             "new": with_contacts(contacts["surface"]), "perceived": with_contacts(contacts["perceived"]),
-            "section": (estimate_modulus(readings, face_w, face_h, hand=hand, section=contacts["section"], **kw)
-                        if contacts["section"] is not None and contacts["perceived"].radii_m
-                        else with_contacts(contacts["perceived"]))}
+            "section": estimate_modulus(readings, face_w, face_h, hand=hand, section=contacts["section"],
+                                        contact_law="hertz" if section_on_flat_pads else "auto",
+                                        contact_radii_m=contacts["perceived"].radii_m or None,
+                                        contact_line_lengths_m=contacts["perceived"].line_lengths_m or None, **kw)}
 
 
 def radii_text(pads: PadContacts | None) -> str:
@@ -416,6 +418,9 @@ def main(argv=None) -> int:
                              "2026-11-30 read: squeezed on their machine's meshes, which this machine does not have; "
                              "the contacts are perceived on this machine's)")
     parser.add_argument("--calibrate", action="store_true", help="print the hand's calibration and stop")
+    parser.add_argument("--section-on-flat-pads", action="store_true",
+                        help="the section column uses the section law on flat pads too (the executor keeps the flat "
+                             "law there; this shows why)")
     parser.add_argument("--settling", nargs="*", metavar="CELL_RECORDS", default=None,
                         help="print the settling rule's evidence over the stored squeezes (and the squeezes of the "
                              "given cell records, e.g. results/cell_experiment/records_measured.jsonl) and stop")
@@ -442,7 +447,8 @@ def main(argv=None) -> int:
                          "section": section}
                 try:
                     readings = cached_readings(args.readings, name, modulus, 0.3 * r, args.meshes)
-                    for variant, estimate in estimates_of(readings, spec, hand, radii).items():
+                    estimates = estimates_of(readings, spec, hand, radii, args.section_on_flat_pads)
+                    for variant, estimate in estimates.items():
                         by_variant[variant].append(estimate)
                 except SqueezeError as error:   # the executor fails such a squeeze: a miss in the counts
                     print(f"{name:16s} {modulus:8.2g} refused: {error}", flush=True)

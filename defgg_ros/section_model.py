@@ -109,11 +109,12 @@ def section_curve(mask: np.ndarray, height_m: np.ndarray, cell_m: float, pad_wid
     s, xy_c = _condensed(k, candidates), xy[candidates]
     tol = 1e-9
     left, right = xy_c[:, 0] <= x_lo + tol, xy_c[:, 0] >= x_hi - tol
+    approaches_m = tuple(sorted(float(u) for u in approaches_m))
     forces = []
-    for u in sorted(approaches_m):    # the contact grows with the approach: each starts from the last one's
+    for u in approaches_m:    # the contact grows with the approach: each starts from the last one's
         force, left, right = _pads_force(s, xy_c, x_lo, x_hi, u, left, right)
         forces.append(force)
-    return SectionCurve(tuple(float(u) for u in sorted(approaches_m)), tuple(forces))
+    return SectionCurve(approaches_m, tuple(forces))
 
 
 def _condensed(k: np.ndarray, candidates: np.ndarray) -> np.ndarray:

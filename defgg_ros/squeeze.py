@@ -277,7 +277,8 @@ def estimate_modulus(readings, face_width_m: float, face_height_m: float, hand: 
     contacts (the estimate's law is then "hertz-line" when any is a line). The curve's exponent is fitted and
     reported either way; it does not choose the law (docs/squeeze.md: in the simulated cell flat boxes fit
     n = 1.3-2.5). section: the loaded cross-section's curve (section_model.section_curve, from the perceived
-    outline: planning/section_outline.py); given, it is the law ("section") whatever the radii say."""
+    outline: planning/section_outline.py); the law ("section") where a pad is not on a flat face (contact radii
+    given); flat pads keep the flat law (docs/squeeze.md "The section law")."""
     # A face extent may be math.inf (not known: the pad's spread alone is loaded); the resolution must be finite.
     for name, value in (("face_width_m", face_width_m), ("face_height_m", face_height_m),
                         ("width_resolution_m", width_resolution_m)):
@@ -310,7 +311,7 @@ def estimate_modulus(readings, face_width_m: float, face_height_m: float, hand: 
     law = contact_law if contact_law != "auto" else ("hertz" if contact_radii_m else "flat")
     if law == "hertz" and line_lengths_m:
         law = "hertz-line"
-    if section is not None:
+    if section is not None and law != "flat":
         law = "section"
         e = section_model.fit_modulus_pa(points, section)
     else:

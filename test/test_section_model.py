@@ -66,6 +66,9 @@ def test_the_fit_returns_the_modulus_the_readings_were_made_with_the_hand_taken_
     assert estimate.contact_law == "section"
     assert estimate.youngs_modulus_pa == pytest.approx(true_pa, rel=0.02)
     assert estimate.low_pa < true_pa < estimate.high_pa
+    # flat pads (no contact radii) keep the flat law, section or not: the executor's and the bench's one rule
+    flat = estimate_modulus(readings, 0.03, 0.03, hand=hand, width_resolution_m=1e-5, section=curve)
+    assert flat.contact_law == "flat"
 
 
 @pytest.mark.parametrize("mask, height, reason", [

@@ -95,8 +95,8 @@ class SqueezePhase:
         return self._squeeze is not None
 
     def _start_section_job(self) -> None:
-        """With the goal: the section law's model runs while the arm goes down, where a pad is not on a flat face
-        (flat pads: the flat law; docs/squeeze.md)."""
+        """With the goal: the section law's model runs while the arm goes down; not for flat pads, which keep the
+        flat law (squeeze.estimate_modulus)."""
         grasp = self._grasp
         if self._squeeze is not None and grasp is not None and grasp.section_heights_m and grasp.contact_radii_m:
             self._section_job = SectionJob(grasp.section_cell_m, grasp.section_heights_m)
@@ -173,7 +173,7 @@ class SqueezePhase:
             raise SequenceFailure(f"squeeze: {error}") from error
 
     def _tick_squeeze(self, sim_s: float) -> list:
-        if self._section_wait_from_s is not None and len(self.squeeze_readings) and self._next_force_n() is None:
+        if self._section_wait_from_s is not None:
             return self._next_squeeze(sim_s)      # every reading is in: waiting for the section's curve
         if self._squeeze_read_at_s is None:
             result = self._gripper_result(sim_s, f"the squeeze at {self._squeeze_force_n:g} N")

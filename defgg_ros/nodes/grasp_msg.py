@@ -56,28 +56,29 @@ def _pad_contacts(msg: Grasp, grasp, warn) -> None:
     """Grasp.contact_radii_m and contact_line_lengths_m. A Grasp type without one is an interface build older than
     this source: said once per field, and the grasps go without it."""
     for name, without in PAD_CONTACT_FIELDS.items():
-        if hasattr(msg, name):
+        if _installed_has(msg, name, without, warn):
             setattr(msg, name, [float(v) for v in getattr(grasp, name)])
-        elif name not in _STALE_FIELDS_SAID:
-            _STALE_FIELDS_SAID.add(name)
-            warn(f"the installed defgg_interfaces/Grasp has no {name}: its build is older than this source (rebuild "
-                 f"it: scripts/bootstrap.sh); grasps go without it, the squeeze uses {without}")
 
 
 _STALE_FIELDS_SAID = set()
 
 
+def _installed_has(msg: Grasp, name: str, without: str, warn) -> bool:
+    """Whether the installed Grasp type has the field; if not (a build older than this source), said once."""
+    if hasattr(msg, name):
+        return True
+    if name not in _STALE_FIELDS_SAID:
+        _STALE_FIELDS_SAID.add(name)
+        warn(f"the installed defgg_interfaces/Grasp has no {name}: its build is older than this source (rebuild "
+             f"it: scripts/bootstrap.sh); grasps go without it, the squeeze uses {without}")
+    return False
+
+
 def _section(msg: Grasp, grasp, warn) -> None:
     """Grasp.section_cell_m, section_rows and section_heights_m (planning/section_outline.py via TabletopGrasp);
     an older interface build: said once, the squeeze uses the contact laws."""
-    if not hasattr(msg, "section_heights_m"):
-        if "section_heights_m" not in _STALE_FIELDS_SAID:
-            _STALE_FIELDS_SAID.add("section_heights_m")
-            warn("the installed defgg_interfaces/Grasp has no section_heights_m: its build is older than this source "
-                 "(rebuild it: scripts/bootstrap.sh); the squeeze uses the contact laws")
-        return
     heights = getattr(grasp, "section_heights_m", None)
-    if heights is None:
+    if not _installed_has(msg, "section_heights_m", "the contact laws", warn) or heights is None:
         return
     msg.section_cell_m = float(SECTION_CELL_M)
     msg.section_rows = int(heights.shape[0])

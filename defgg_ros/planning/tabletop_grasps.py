@@ -122,9 +122,10 @@ class TabletopGrasp:
         """The object's height above the table (m) on the section's cells (rows across the closing direction, the
         grasp line the middle row; columns along it; 0: not the object): the squeeze's section law. None: not
         perceived or nothing of the object at the fingertips' height."""
-        source = self.section_source
-        mask, heights = source() if callable(source) else (source if source is not None else (None, None))
-        return None if mask is None or not mask.any() else np.where(mask, heights, 0.0).astype(np.float32)
+        if self.section_source is None:
+            return None
+        mask, heights = self.section_source() if callable(self.section_source) else self.section_source
+        return heights.astype(np.float32) if mask.any() else None
 
     @property
     def contact_radii_m(self) -> tuple:

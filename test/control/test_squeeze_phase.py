@@ -135,6 +135,8 @@ def test_a_grasp_with_a_section_is_read_with_the_section_law_where_a_pad_is_not_
     face_height_m = GRASP.position_m[2] - CONFIG.table_z_m
     heights_m = np.asarray(heights)
     expected = estimate_modulus(sequence.squeeze_readings, math.inf, face_height_m, width_resolution_m=1e-5,
+                                contact_radii_m=curved.contact_radii_m,
+                                contact_line_lengths_m=curved.contact_line_lengths_m,
                                 section=section_curve(heights_m > 0, heights_m, 0.003))
     assert laws["curved"].contact_law == "section" and notes["curved"] == ""
     assert laws["curved"].youngs_modulus_pa == pytest.approx(expected.youngs_modulus_pa, rel=1e-6)
