@@ -24,8 +24,10 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import statistics
 import sys
+import time
 from dataclasses import replace
 from pathlib import Path
 
@@ -84,6 +86,8 @@ CALIBRATION_BLOCK = "cube_5cm"      # a steel block's stand-in: the 5 cm cube as
 CALIBRATION_YAWS_RAD = (0.0, 0.3, 0.6, 0.9)
 KIN = PandaKinematics()
 MESHES = Path("/tmp/bench_squeeze_meshes")
+# Wall time of each section model (section_curve) this run, s: what the executor's squeeze waits on at most.
+SECTION_MODEL_S: list = []
 
 
 # Where a library shape's body comes from: "shipped", its shipped tet mesh as it is (the same body on every machine,
@@ -232,11 +236,13 @@ def perceived_contacts(spec) -> tuple[PadContacts, tuple, object]:
     direction = (math.cos(spec.yaw_rad), math.sin(spec.yaw_rad))
     contacts = perceived_pad_contacts(view.grid_height_m, view.grid_labels, label, centre, direction, tip_m,
                                       extent_m, details=details)
+    mask, heights = perceived_section(view.grid_height_m, view.grid_labels, label, centre, direction, tip_m)
+    started = time.perf_counter()
     try:
-        curve = section_curve(*perceived_section(view.grid_height_m, view.grid_labels, label, centre, direction,
-                                                 tip_m), SECTION_CELL_M)
+        curve = section_curve(mask, heights, SECTION_CELL_M)
     except SectionError:
         curve = None
+    SECTION_MODEL_S.append(time.perf_counter() - started)
     if not details.get("pads"):
         return contacts, (), curve
     point_radii = tuple(contact_radius_m(r_h, r_v, details["half_width_m"]) for r_h, r_v, _ in details["pads"])
@@ -464,6 +470,9 @@ def main(argv=None) -> int:
                   f"{by_variant['perceived'][0].describe() if by_variant['perceived'] else ''}", flush=True)
     for line in summary(rows):
         print(line)
+    if SECTION_MODEL_S:
+        print(f"section model: median {statistics.median(SECTION_MODEL_S):.2f} s, max {max(SECTION_MODEL_S):.2f} s "
+              f"over {len(SECTION_MODEL_S)} sections (load average {os.getloadavg()[0]:.1f})")
     for v in BANDED:
         print(f"{v}: the one-sigma band holds the true modulus in {sum(in_band[v])} of {len(in_band[v])} soft "
               "squeezes (a band of one sd holds it in ~68 % when the model is right)")

@@ -33,7 +33,8 @@ from defgg_ros.squeeze import (
 RIGID_PLANNING_MODULUS_PA = TRAINING_YOUNGS_MODULI_PA[-1]
 # The object's height is at least this for the loaded area (a grasp point on the table would give 0).
 MIN_FACE_HEIGHT_M = 0.005
-# The section law's model (section_model.py, ~0.3-3 s) runs from the goal's start, beside the motions; the estimate
+# The section law's model (section_model.py; 0.01-0.03 s on a quiet machine, bench_squeeze_stiffness.py prints it)
+# runs from the goal's start, beside the motions, so a loaded machine never stalls the control loop; the estimate
 # waits for it at most this long (robot time) after the last reading, then goes without it (the contact laws).
 SECTION_WAIT_S = 5.0
 
