@@ -106,9 +106,6 @@ def assign_scene_stiffness(recorder, client, scene_path, log=print) -> None:
 def drive(recorder, client, args, log=tqdm.write) -> None:
     """--plan/--pick: call the cell like a user would, on fresh frames, and record it."""
     picks = _pick_indices(args.pick, args.plan)
-    # The probe saw the servers, but these are the recorder's own, newer clients: on a loaded machine
-    # their discovery took longer than one call's 30 s (CI). Give them --wait-s like the probe's.
-    client.wait_for_servers(args.wait_s, pick=bool(picks))
     flush = 0
     if args.stiffness_from_scene:
         assign_scene_stiffness(recorder, client, args.scene, log)
@@ -153,8 +150,12 @@ def record(args, log=print) -> Path:
     try:
         probe = Node("defgg_session_probe", context=context)
         executor.add_node(probe)
-        if args.plan:  # driving: the cell must be up before its parameters can be read
-            CellClient(probe).wait_for_servers(args.wait_s, pick=bool(args.pick))
+        # Driving: the cell must be up before its parameters can be read. These clients, once they have
+        # seen the servers, make the calls: fresh clients on the recorder node, created while the camera's
+        # frames stream in, were twice not discovered within --wait-s on a loaded CI machine (30 s, then 60 s).
+        cell = CellClient(probe) if args.plan else None
+        if cell is not None:
+            cell.wait_for_servers(args.wait_s, pick=bool(args.pick))
         parameters = _cell_parameters(probe, args, log)
         model_path, use_stiffness = _model_path(args, parameters)
         tolerances = Tolerances(args.position_tol_mm, args.angle_tol_deg, args.width_tol_mm)
@@ -169,7 +170,8 @@ def record(args, log=print) -> Path:
         executor.add_node(recorder)
         try:
             if args.plan:
-                drive(recorder, CellClient(recorder, recorder), args)
+                cell.recorder = recorder  # every call goes into the bag from here on
+                drive(recorder, cell, args)
             else:
                 log(f"recording into {args.out} " + (f"for {args.duration_s:g} s" if args.duration_s
                                                      else "until Ctrl-C"))
