@@ -166,9 +166,10 @@ def _measure(client, record: dict, timeout_s: float) -> None:
         "low_pa": _json_number(result.measured_modulus_low_pa),
         "high_pa": _json_number(result.measured_modulus_high_pa),   # a rigid reading has no upper bound: inf
         "rigid": bool(result.measured_rigid), "sent_pa": result.stiffness_sent_pa,
+        "contact_law": result.measured_contact_law,      # flat, hertz, hertz-line or section (docs/squeeze.md)
         "update": result.stiffness_update, "forces_n": list(result.squeeze_forces_n),
         "widths_m": list(result.squeeze_widths_m), "sim_duration_s": result.duration_s,
-        # the executor plans its own grasp for the squeeze: its contacts say which law the estimate used
+        # the executor plans its own grasp for the squeeze (records before contact_law: its contacts said the law)
         "grasp": grasp_record(result.grasp_used)}
 
 

@@ -277,10 +277,23 @@ def repeat_line(records) -> str:
             f"({len(pairs) - agree} discordant); the two plans chose the same grasp in {same} of {len(pairs)}.")
 
 
-def squeezed_with_line_law(squeeze: dict) -> bool:
-    """Whether the executor's squeeze could use the line-contact law (its grasp carried contact_line_lengths_m,
-    docs/squeeze.md): the first measured picks ran on a build with Hertz's point law at every curved pad."""
-    return "contact_line_lengths_m" in (squeeze.get("grasp") or {})
+# The squeeze's laws in the report's column order (docs/squeeze.md), with the columns' names.
+SQUEEZE_LAWS = (("flat", "flat law"), ("hertz", "point law"), ("hertz-line", "line law"), ("section", "section law"))
+
+
+def squeeze_law(squeeze: dict) -> str:
+    """The law a squeeze's estimate used: recorded as contact_law since the result carries it; before, read off
+    the executor's grasp for the squeeze: no contact radii, the flat law; no line lengths on record (the first
+    builds, Hertz's point law at every curved pad), the point law; a line length > 0, the line law. Records made
+    between the section law and its recording (results/cell_measured_section) cannot tell it from the others."""
+    if squeeze.get("contact_law"):
+        return squeeze["contact_law"]
+    grasp = squeeze.get("grasp")
+    if grasp is None or "contact_line_lengths_m" not in grasp:
+        return "hertz"
+    if not grasp.get("contact_radii_m"):
+        return "flat"
+    return "hertz-line" if any(v > 0 for v in grasp["contact_line_lengths_m"]) else "hertz"
 
 
 def _squeezes(records, name: str) -> list:
@@ -301,9 +314,8 @@ def _counts_cell(counts: list) -> str:
 
 def squeeze_rows(records, objects) -> list:
     """The measured case's estimates per object: median estimate, its ratio to the true modulus, how many
-    within a factor 3 (issue 49 item 4's target) or called rigid; then the same split by estimator (a build
-    before the line law: Hertz's point law at every curved pad; the line law where a pad meets a line: what the
-    executor does now), and those pooled over the soft objects and over the rigid ones."""
+    within a factor 3 (issue 49 item 4's target) or called rigid; then the same split by the law each estimate
+    used (squeeze_law), and those pooled over the soft objects and over the rigid ones."""
     rows, pooled = [], {}
     for obj in objects:
         found = _squeezes(records, obj.name)
@@ -315,18 +327,18 @@ def squeeze_rows(records, objects) -> list:
         within = sum(1 / 3 <= e / true_pa <= 3 for e in estimates)
         rigid = sum(s["rigid"] for s in found)
         by_law = []
-        for line_law in (False, True):
-            counts = _estimate_counts([s for s in found if squeezed_with_line_law(s) == line_law], true_pa)
-            key = (true_pa < RIGID_CLASS_PA, line_law)
+        for law, _ in SQUEEZE_LAWS:
+            counts = _estimate_counts([s for s in found if squeeze_law(s) == law], true_pa)
+            key = (true_pa < RIGID_CLASS_PA, law)
             pooled[key] = [a + b for a, b in zip(pooled.get(key, [0, 0, 0]), counts)]
             by_law.append(_counts_cell(counts))
         rows.append(f"| {obj.name} | {true_pa:.0e} | {median:.2g} | {median / true_pa:.2g} | {within}/{len(found)} "
-                    f"| {rigid}/{len(found)} | {by_law[0]} | {by_law[1]} |")
+                    f"| {rigid}/{len(found)} | {' | '.join(by_law)} |")
     if not rows:
         return rows
     for kind, soft in (("soft and 2e6 Pa objects", True), ("rigid (2e9 Pa) objects", False)):
-        rows.append(f"| **{kind}** | | | | | | {_counts_cell(pooled.get((soft, False), [0, 0, 0]))} "
-                    f"| {_counts_cell(pooled.get((soft, True), [0, 0, 0]))} |")
+        cells = [_counts_cell(pooled.get((soft, law), [0, 0, 0])) for law, _ in SQUEEZE_LAWS]
+        rows.append(f"| **{kind}** | | | | | | {' | '.join(cells)} |")
     return rows
 
 
@@ -398,11 +410,11 @@ def report_markdown(records, objects, planned_picks: int | None = None) -> str:
         lines += ["", repeat]
     lines += _table(squeeze_rows(records, objects),
                     "The squeeze's estimates (measured case; a factor 3 of the true modulus is issue 49 item 4's "
-                    "target, 2e9 Pa should read rigid). The last two columns split the squeezes by estimator, both "
-                    "on the grasp's perceived contact radii: Hertz's point law at every curved pad (a build before "
-                    "the line law), or the line law where a pad meets a line (what the executor does now):",
-                    "| object | true E (Pa) | median estimate (Pa) | ratio | within ×3 | called rigid "
-                    "| point law: within ×3 / rigid / n | line law: within ×3 / rigid / n |")
+                    "target, 2e9 Pa should read rigid). The last four columns split the squeezes by the law the "
+                    "estimate used (docs/squeeze.md; within ×3 / called rigid / n): both pads on flat faces, point "
+                    "contacts (Hertz), a pad along a line, or the perceived section's model:",
+                    "| object | true E (Pa) | median estimate (Pa) | ratio | within ×3 | called rigid | "
+                    + " | ".join(name for _, name in SQUEEZE_LAWS) + " |")
     lines += _table(mass_rows(records, objects),
                     "The grip force's mass (the inference node's estimate from the height map, every planned grasp) "
                     "against the cell's true mass:",

@@ -188,6 +188,7 @@ def copy_squeeze(result, sequence):
         result.stiffness_update = "not measured: the goal ended before the squeeze was done"
         return None
     result.stiffness_measured, result.measured_rigid = True, estimate.rigid
+    result.measured_contact_law = estimate.contact_law
     result.measured_youngs_modulus_pa = estimate.youngs_modulus_pa
     result.stiffness_lower_bound = estimate.lower_bound
     result.measured_modulus_low_pa, result.measured_modulus_high_pa = estimate.low_pa, estimate.high_pa

@@ -10,6 +10,7 @@ import threading
 
 import numpy as np
 import pytest
+from defgg_interfaces.action import PickAndPlace
 from support.control_fake_robot import GRASP, PLACE, RECOVERING_CONFIG, FakeRobot, World, run
 
 from defgg_ros.constants import PANDA_READY_Q_RAD
@@ -19,6 +20,7 @@ from defgg_ros.control.observation import ObservationWatch
 from defgg_ros.control.pick_place import PickPlaceSequence
 from defgg_ros.control.sequence_types import GraspGripper, SendTrajectory, SqueezeRequest
 from defgg_ros.control.squeeze_phase import SectionJob
+from defgg_ros.nodes.executor_messages import copy_squeeze
 from defgg_ros.section_model import section_curve
 from defgg_ros.squeeze import FIRM_FORCES_N, GENTLE_FORCES_N, estimate_modulus, loaded_area_m2
 
@@ -132,6 +134,9 @@ def test_a_grasp_with_a_section_is_read_with_the_section_law_where_a_pad_is_not_
         run(sequence, FakeRobot(kin, World(object_compliance_m_per_n=COMPLIANCE_M_PER_N)), max_s=120.0)
         assert sequence.outcome.success, sequence.outcome.failure_reason
         laws[name], notes[name] = sequence.squeeze_estimate, sequence.section_note
+        result = PickAndPlace.Result()       # the action's result says which law the estimate used
+        copy_squeeze(result, sequence)
+        assert result.measured_contact_law == laws[name].contact_law, name
     face_height_m = GRASP.position_m[2] - CONFIG.table_z_m
     heights_m = np.asarray(heights)
     expected = estimate_modulus(sequence.squeeze_readings, math.inf, face_height_m, width_resolution_m=1e-5,

@@ -197,24 +197,30 @@ def test_the_measured_case_is_compared_with_every_input_and_its_estimates_are_ta
 
 
 def test_the_squeeze_table_splits_the_estimates_by_law_and_pools_soft_and_rigid_objects(tmp_path):
-    """A squeeze whose grasp carried contact_line_lengths_m ran with the line law; one without, before it (the
-    point law): the two are counted apart, per object and pooled (soft against their own modulus, rigid by call)."""
+    """Each squeeze is counted under the law its estimate used, per object and pooled (soft against their own
+    modulus, rigid by call): the law on record (contact_law), else read off the squeeze's grasp (no line lengths
+    on record: the point law of the first builds; a line length: the line law; no contact radii: the flat law)."""
     from defgg_ros.atomic import append_jsonl
 
     line_grasp = {"contact_radii_m": [0.02, 0.02], "contact_line_lengths_m": [0.0, 0.018]}
-    squeezes = [("common_ball", 0, 1e5, False, None), ("common_ball", 1, 9e5, False, line_grasp),
-                ("common_sponge", 0, 2.5e4, False, line_grasp), ("egad_test_00_c1", 0, 1.5e6, True, None),
-                ("egad_test_00_c1", 1, 4e5, False, line_grasp)]
-    for obj, i, estimate, rigid, grasp in squeezes:
-        squeeze = {"success": True, "measured_youngs_modulus_pa": estimate, "rigid": rigid,
-                   **({"grasp": grasp} if grasp else {})}
+    flat_grasp = {"contact_radii_m": [], "contact_line_lengths_m": []}
+    squeezes = [("common_ball", 0, 1e5, False, {}), ("common_ball", 1, 9e5, False, {"grasp": line_grasp}),
+                ("common_ball", 2, 2.2e5, False, {"grasp": line_grasp, "contact_law": "section"}),
+                ("common_sponge", 0, 2.5e4, False, {"grasp": line_grasp}),
+                ("common_sponge", 1, 5e3, False, {"grasp": flat_grasp}),
+                ("egad_test_00_c1", 0, 1.5e6, True, {}),
+                ("egad_test_00_c1", 1, 4e5, False, {"grasp": line_grasp})]
+    for obj, i, estimate, rigid, extra in squeezes:
+        squeeze = {"success": True, "measured_youngs_modulus_pa": estimate, "rigid": rigid, **extra}
         append_jsonl(tmp_path / "records_measured.jsonl", pick(obj, "measured", i, True, squeeze=squeeze))
-    body = cr.write_report(tmp_path, ce.OBJECTS, planned_picks=2)
-    assert "| common_ball | 2e+05 | 9e+05 | 4.5 | 1/2 | 0/2 | 1 / 0 / 1 | 0 / 0 / 1 |" in body
-    assert "| common_sponge | 2e+04 | 2.5e+04 | 1.2 | 1/1 | 0/1 | - | 1 / 0 / 1 |" in body
-    assert "| egad_test_00_c1 | 2e+09 | 1.5e+06 | 0.00075 | 0/2 | 1/2 | 0 / 1 / 1 | 0 / 0 / 1 |" in body
-    assert "| **soft and 2e6 Pa objects** | | | | | | 1 / 0 / 1 | 1 / 0 / 2 |" in body
-    assert "| **rigid (2e9 Pa) objects** | | | | | | 0 / 1 / 1 | 0 / 0 / 1 |" in body
+    body = cr.write_report(tmp_path, ce.OBJECTS, planned_picks=3)
+    assert ("| object | true E (Pa) | median estimate (Pa) | ratio | within ×3 | called rigid | flat law "
+            "| point law | line law | section law |\n|---|---|---|---|---|---|---|---|---|---|") in body
+    assert "| common_ball | 2e+05 | 2.2e+05 | 1.1 | 2/3 | 0/3 | - | 1 / 0 / 1 | 0 / 0 / 1 | 1 / 0 / 1 |" in body
+    assert "| common_sponge | 2e+04 | 2.5e+04 | 1.2 | 1/2 | 0/2 | 0 / 0 / 1 | - | 1 / 0 / 1 | - |" in body
+    assert "| egad_test_00_c1 | 2e+09 | 1.5e+06 | 0.00075 | 0/2 | 1/2 | - | 0 / 1 / 1 | 0 / 0 / 1 | - |" in body
+    assert "| **soft and 2e6 Pa objects** | | | | | | 0 / 0 / 1 | 1 / 0 / 1 | 1 / 0 / 2 | 1 / 0 / 1 |" in body
+    assert "| **rigid (2e9 Pa) objects** | | | | | | - | 0 / 1 / 1 | 0 / 0 / 1 | - |" in body
 
 
 def test_grasp_only_picks_are_compared_with_correct_and_with_their_plain_case_and_stand_ins_fill_the_rest(
@@ -329,7 +335,8 @@ def test_the_measured_case_squeezes_first_and_the_plan_carries_the_estimate(tmp_
     assert squeeze["update"].startswith("sent") and squeeze["sent_pa"] > 0, squeeze
     assert record["perceived_moduli_pa"] == [pytest.approx(squeeze["sent_pa"])]
     assert record["grasp"]["youngs_modulus_pa"] == pytest.approx(squeeze["sent_pa"])
-    squeezed_on = squeeze["grasp"]          # the executor's own grasp for the squeeze: which law it used is on record
+    assert squeeze["contact_law"] in ("flat", "hertz", "hertz-line", "section"), squeeze  # the law on record
+    squeezed_on = squeeze["grasp"]          # the executor's own grasp for the squeeze
     assert squeezed_on["width_m"] > 0 and len(squeezed_on["contact_radii_m"]) in (0, 2), squeezed_on
     lengths = squeezed_on["contact_line_lengths_m"]                  # point contacts, or a line at a pad
     assert len(lengths) in (0, 2) and (not lengths or len(squeezed_on["contact_radii_m"]) == 2), squeezed_on

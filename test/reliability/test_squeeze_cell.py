@@ -64,6 +64,7 @@ def test_measure_only_then_the_next_plan_uses_the_measured_modulus(tmp_path, exe
         assert result.success, (result.failure_reason, phases, log_tail)
         assert "squeeze" in phases and "transfer" not in phases and "place" not in phases, phases
         assert result.stiffness_measured and not result.measured_rigid
+        assert result.measured_contact_law == "flat"     # the pads on the block's faces (docs/squeeze.md)
         assert 1 / 3 <= result.measured_youngs_modulus_pa / TRUE_MODULUS_PA <= 3, result.measured_youngs_modulus_pa
         assert result.measured_modulus_low_pa < result.measured_youngs_modulus_pa < result.measured_modulus_high_pa
         assert result.arm_state == "observation_pose", (result.arm_state, result.recovery)
