@@ -311,9 +311,10 @@ def calibration(path: Path) -> HandCalibration:
 # calibration and the contacts of the object's surface (line law where it is straight one way), and "perceived":
 # the calibration and the contacts the cell perceives (the contact laws: what the executor does with a grasp
 # that has no section), "section": the calibration and the perceived section's plane-stress FEM (section_model.py;
-# docs/squeeze.md) where a pad is not on a flat face, the flat law where both are (the training boxes read 2-8x
-# with the FEM: the cell's boxes are FEM grids of 2-3 cm cells, stiffer than a continuum): what the executor does
-# since 2026-11-30 (the grasp carries its section).
+# docs/squeeze.md) where a pad touches along a line, the point law at two point contacts (the section law read the
+# training sphere and ellipsoid lower as E grew), the flat law where both pads are flat (the training boxes read
+# 2-8x with the FEM: the cell's boxes are FEM grids of 2-3 cm cells, stiffer than a continuum): what the executor
+# does (squeeze.estimate_modulus; the grasp carries its section since 2026-11-30).
 VARIANTS = ("old", "hand", "point", "new", "perceived", "section")
 BANDED = ("perceived", "section")     # the variants whose one-sigma band and log error are printed
 
@@ -334,7 +335,8 @@ def estimates_of(readings, spec, hand: HandCalibration, contacts: dict, section_
                                       **kw),
             "new": with_contacts(contacts["surface"]), "perceived": with_contacts(contacts["perceived"]),
             "section": estimate_modulus(readings, face_w, face_h, hand=hand, section=contacts["section"],
-                                        contact_law="hertz" if section_on_flat_pads else "auto",
+                                        contact_law="section" if section_on_flat_pads and contacts["section"]
+                                        and not contacts["perceived"].radii_m else "auto",
                                         contact_radii_m=contacts["perceived"].radii_m or None,
                                         contact_line_lengths_m=contacts["perceived"].line_lengths_m or None, **kw)}
 

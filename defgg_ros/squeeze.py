@@ -271,21 +271,25 @@ def estimate_modulus(readings, face_width_m: float, face_height_m: float, hand: 
     """The object's Young's modulus from squeeze readings (see the module doc) with its one-sigma band.
 
     contact_radii_m: the object's radius of curvature where each pad touches it (from its perceived shape; None:
-    flat faces under the pads). contact_law: "auto" (hertz when the contacts are curved, else flat), "flat" or
-    "hertz" (without radii: half the object's width). contact_line_lengths_m: per pad, > 0 where the surface is
+    flat faces under the pads). contact_law: "auto" (hertz when the contacts are curved, else flat), "flat",
+    "hertz" (without radii: half the object's width) or "section" (the section's model whatever the contacts: the
+    bench's --section-on-flat-pads). contact_line_lengths_m: per pad, > 0 where the surface is
     straight one way and touches the pad along a line that long (m), 0 for a point contact; None or (): both point
     contacts (the estimate's law is then "hertz-line" when any is a line). The curve's exponent is fitted and
     reported either way; it does not choose the law (docs/squeeze.md: in the simulated cell flat boxes fit
     n = 1.3-2.5). section: the loaded cross-section's curve (section_model.section_curve, from the perceived
-    outline: planning/section_outline.py); the law ("section") where a pad is not on a flat face (contact radii
-    given); flat pads keep the flat law (docs/squeeze.md "The section law")."""
+    outline: planning/section_outline.py); the law ("section") where a pad touches along a line
+    (section_law_applies); point contacts keep the point law, flat pads the flat law (docs/squeeze.md "The section
+    law")."""
     # A face extent may be math.inf (not known: the pad's spread alone is loaded); the resolution must be finite.
     for name, value in (("face_width_m", face_width_m), ("face_height_m", face_height_m),
                         ("width_resolution_m", width_resolution_m)):
         if not (value > 0 and (math.isfinite(value) or name != "width_resolution_m")):
             raise SqueezeError(f"{name} must be > 0, got {value}")
-    if contact_law not in ("auto", "flat", "hertz"):
-        raise SqueezeError(f"contact_law must be auto, flat or hertz, got {contact_law!r}")
+    if contact_law not in ("auto", "flat", "hertz", "section"):
+        raise SqueezeError(f"contact_law must be auto, flat, hertz or section, got {contact_law!r}")
+    if contact_law == "section" and section is None:
+        raise SqueezeError("contact_law section needs the section")
     line_lengths_m = _checked_line_lengths(contact_line_lengths_m, contact_radii_m)
     readings, settling_m = without_settling_step(_checked(readings), width_resolution_m)
     k, span = squeeze_slope_npm(readings)
@@ -311,8 +315,9 @@ def estimate_modulus(readings, face_width_m: float, face_height_m: float, hand: 
     law = contact_law if contact_law != "auto" else ("hertz" if contact_radii_m else "flat")
     if law == "hertz" and line_lengths_m:
         law = "hertz-line"
-    if section is not None and law != "flat":
+    if section is not None and law == "hertz-line":     # section_law_applies: a pad along a line
         law = "section"
+    if law == "section":
         e = section_model.fit_modulus_pa(points, section)
     else:
         e = (hertz_modulus_pa(points, width_m, contact_radii_m, line_lengths_m=line_lengths_m) if law != "flat"
@@ -322,6 +327,14 @@ def estimate_modulus(readings, face_width_m: float, face_height_m: float, hand: 
     rel = width_resolution_m / span     # the compression's relative reading error
     sigma = math.exp(math.hypot(math.log(model_factor), rel, calibration_sd_log(hand, object_c, law)))
     return ModulusEstimate(e, e / sigma, e * sigma, k, False, False, law, exponent, settling_m)
+
+
+def section_law_applies(contact_radii_m, contact_line_lengths_m) -> bool:
+    """Whether a squeeze with a section reads it with the section law: where a pad touches along a line (an edge,
+    a prism's side: what yields behind it, a star prism's arm, matters). Two point contacts keep Hertz's point law,
+    flat pads the flat law: on the training shapes the section law read round bodies lower as E grew (a sphere
+    0.98x at 2e4 Pa, 0.45x at 2e5), the point law did not (1.42x, 1.38x); docs/squeeze.md "The section law"."""
+    return bool(contact_radii_m) and any(v > 0 for v in (contact_line_lengths_m or ()))
 
 
 def _checked_line_lengths(line_lengths_m, radii_m) -> tuple:

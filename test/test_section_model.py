@@ -69,6 +69,13 @@ def test_the_fit_returns_the_modulus_the_readings_were_made_with_the_hand_taken_
     # flat pads (no contact radii) keep the flat law, section or not: the executor's and the bench's one rule
     flat = estimate_modulus(readings, 0.03, 0.03, hand=hand, width_resolution_m=1e-5, section=curve)
     assert flat.contact_law == "flat"
+    # two point contacts keep the point law (squeeze.section_law_applies: only a pad along a line reads the section)
+    points = estimate_modulus(readings, 0.03, 0.03, hand=hand, width_resolution_m=1e-5, section=curve,
+                              contact_radii_m=(0.004, 0.004), contact_line_lengths_m=(0.0, 0.0))
+    assert points.contact_law == "hertz"
+    one_line = estimate_modulus(readings, 0.03, 0.03, hand=hand, width_resolution_m=1e-5, section=curve,
+                                contact_radii_m=(0.004, 0.004), contact_line_lengths_m=(0.0, 0.018))
+    assert one_line.contact_law == "section"
 
 
 @pytest.mark.parametrize("mask, height, reason", [

@@ -27,6 +27,7 @@ from defgg_ros.squeeze import (
     SqueezeReading,
     estimate_modulus,
     needs_firmer,
+    section_law_applies,
 )
 
 # A rigid verdict is planned with the paper's rigid class (the network knows 2e4, 2e5, 2e6 and 2e9 Pa).
@@ -96,10 +97,11 @@ class SqueezePhase:
         return self._squeeze is not None
 
     def _start_section_job(self) -> None:
-        """With the goal: the section law's model runs while the arm goes down; not for flat pads, which keep the
-        flat law (squeeze.estimate_modulus)."""
+        """With the goal: the section law's model runs while the arm goes down; only where the estimate reads it (a
+        pad along a line: squeeze.section_law_applies; point contacts and flat pads keep their laws)."""
         grasp = self._grasp
-        if self._squeeze is not None and grasp is not None and grasp.section_heights_m and grasp.contact_radii_m:
+        if (self._squeeze is not None and grasp is not None and grasp.section_heights_m
+                and section_law_applies(grasp.contact_radii_m, grasp.contact_line_lengths_m)):
             self._section_job = SectionJob(grasp.section_cell_m, grasp.section_heights_m)
 
     @property
