@@ -312,9 +312,10 @@ def calibration(path: Path) -> HandCalibration:
 # the calibration and the contacts the cell perceives (the contact laws: what the executor does with a grasp
 # that has no section), "section": the calibration and the perceived section's plane-stress FEM (section_model.py;
 # docs/squeeze.md) where a pad touches along a line, the point law at two point contacts (the section law read the
-# training sphere and ellipsoid lower as E grew), the flat law where both pads are flat (the training boxes read
-# 2-8x with the FEM: the cell's boxes are FEM grids of 2-3 cm cells, stiffer than a continuum): what the executor
-# does (squeeze.estimate_modulus; the grasp carries its section since 2026-11-30).
+# training sphere and ellipsoid lower as E grew), the flat law where both pads are flat on a body that fills the
+# flat law's prism (the training boxes read 2-8x with the FEM: the cell's boxes are FEM grids of 2-3 cm cells,
+# stiffer than a continuum), the section law on flat pads otherwise (the training star prism egad_train_08_c5
+# met on faces): what the executor does (squeeze.estimate_modulus; the grasp carries its section since 2026-11-30).
 VARIANTS = ("old", "hand", "point", "new", "perceived", "section")
 BANDED = ("perceived", "section")     # the variants whose one-sigma band and log error are printed
 
@@ -348,6 +349,14 @@ def radii_text(pads: PadContacts | None) -> str:
     lines = pads.line_lengths_m or (0.0,) * len(pads.radii_m)
     return ", ".join(f"{r * 100:.1f}" + (f"/L{length * 100:.1f}" if length > 0 else "")
                      for r, length in zip(pads.radii_m, lines))
+
+
+def fill_text(contacts: dict) -> str:
+    """For flat pads, how much of the flat law's prism the section fills (below squeeze.FLAT_FILL_MIN: the section
+    law reads them)."""
+    section = contacts.get("section")
+    flat = not (contacts.get("perceived") and contacts["perceived"].radii_m)
+    return f" (fill {section.flat_fill:.2f})" if flat and section is not None else ""
 
 
 def factor(estimates, modulus_pa) -> float:
@@ -468,7 +477,8 @@ def main(argv=None) -> int:
             values = [e.youngs_modulus_pa for e in by_variant["perceived"]]
             spread = max(values) / min(values) if values and all(math.isfinite(v) for v in values) else math.nan
             print(f"{name:16s} {modulus:8.2g} " + " ".join(f"{factor_text(f, modulus):>9s}" for f in factors) +
-                  f"  {radii_text(radii.get('surface'))} | {radii_text(radii.get('perceived'))} {spread:7.2f}  "
+                  f"  {radii_text(radii.get('surface'))} | {radii_text(radii.get('perceived'))}{fill_text(radii)} "
+                  f"{spread:7.2f}  "
                   f"{by_variant['perceived'][0].describe() if by_variant['perceived'] else ''}", flush=True)
     for line in summary(rows):
         print(line)

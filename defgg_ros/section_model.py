@@ -43,9 +43,12 @@ class SectionError(ValueError):
 
 @dataclass(frozen=True)
 class SectionCurve:
-    """Force per unit modulus (N/Pa) at each total approach of the pads (m): force = E * force_per_pa."""
+    """Force per unit modulus (N/Pa) at each total approach of the pads (m): force = E * force_per_pa; and how much
+    of the flat law's loaded region the section fills (`flat_fill`, 0..1: a box 1, a star prism met on a face
+    less)."""
     approaches_m: tuple
     force_per_pa: tuple
+    flat_fill: float = 1.0
 
 
 def _element_stiffness(cell_m: float) -> np.ndarray:
@@ -99,7 +102,8 @@ def section_curve(mask: np.ndarray, height_m: np.ndarray, cell_m: float, pad_wid
         raise SectionError("no section under the pads (the middle rows are empty)")
     x_lo, x_hi = loaded_cols.min() * cell_m, (loaded_cols.max() + 1) * cell_m
     x_cells = (np.arange(mask.shape[1]) + 0.5) * cell_m
-    spread_m = pad_length_m + np.maximum(np.minimum(x_cells - x_lo, x_hi - x_cells), 0.0)
+    depth_m = np.maximum(np.minimum(x_cells - x_lo, x_hi - x_cells), 0.0)    # distance from the nearer pad
+    spread_m = pad_length_m + depth_m
     thickness_m = np.minimum(height_m, spread_m[None, :])
     k, xy = _assembled(mask, thickness_m, cell_m)
     under = np.abs(xy[:, 1] - centre_y) <= pad_width_m / 2.0 + 1e-9
@@ -114,7 +118,18 @@ def section_curve(mask: np.ndarray, height_m: np.ndarray, cell_m: float, pad_wid
     for u in approaches_m:    # the contact grows with the approach: each starts from the last one's
         force, left, right = _pads_force(s, xy_c, x_lo, x_hi, u, left, right)
         forces.append(force)
-    return SectionCurve(approaches_m, tuple(forces))
+    y_cells = (np.arange(mask.shape[0]) + 0.5) * cell_m
+    return SectionCurve(approaches_m, tuple(forces), flat_fill(mask, y_cells - centre_y, x_cells, x_lo, x_hi,
+                                                               pad_width_m + depth_m))
+
+
+def flat_fill(mask: np.ndarray, y_m: np.ndarray, x_m: np.ndarray, x_lo: float, x_hi: float, width_m: np.ndarray
+              ) -> float:
+    """The share of the flat law's loaded region that the section fills: between the pads, within the pad's width
+    spread by the 2:1 rule (`width_m` at each column) about the grasp line (squeeze.py's flat law assumes a body
+    there). y_m: the rows' offsets from the grasp line; x_m: the columns' positions."""
+    region = (np.abs(y_m)[:, None] <= width_m[None, :] / 2.0) & ((x_m >= x_lo) & (x_m <= x_hi))[None, :]
+    return float((mask & region).sum() / region.sum())
 
 
 def _condensed(k: np.ndarray, candidates: np.ndarray) -> np.ndarray:

@@ -53,6 +53,10 @@ RIGID_ABOVE_PA = 5e6
 # read as a number, 0.69 (bench/bench_squeeze_stiffness.py --objects tuning, 2026-11-29; it was 1.6, from the flat
 # law's boxes, before Hertz and the perceived radii).
 MODEL_FACTOR = 2.0
+# Flat pads read the section law when the perceived section fills less than this of the flat law's loaded region
+# (section_model.flat_fill): the training boxes fill 0.98-1.00 (the flat law reads them, the section law 2-8x
+# high), the training star prism egad_train_08_c5 met on faces 0.72-0.76 (flat law 0.16-0.18x); docs/squeeze.md.
+FLAT_FILL_MIN = 0.9
 
 
 # The squeeze's force schedule: gentle first (a 2e4 Pa foam compresses ~1 mm at 2 N), firmer only while the
@@ -278,9 +282,9 @@ def estimate_modulus(readings, face_width_m: float, face_height_m: float, hand: 
     contacts (the estimate's law is then "hertz-line" when any is a line). The curve's exponent is fitted and
     reported either way; it does not choose the law (docs/squeeze.md: in the simulated cell flat boxes fit
     n = 1.3-2.5). section: the loaded cross-section's curve (section_model.section_curve, from the perceived
-    outline: planning/section_outline.py); the law ("section") where a pad touches along a line
-    (section_law_applies); point contacts keep the point law, flat pads the flat law (docs/squeeze.md "The section
-    law")."""
+    outline: planning/section_outline.py); the law ("section") where a pad touches along a line and on flat pads
+    whose section does not fill the flat law's prism (section_may_apply); point contacts keep the point law, flat
+    pads on a box the flat law (docs/squeeze.md "The section law")."""
     # A face extent may be math.inf (not known: the pad's spread alone is loaded); the resolution must be finite.
     for name, value in (("face_width_m", face_width_m), ("face_height_m", face_height_m),
                         ("width_resolution_m", width_resolution_m)):
@@ -315,8 +319,9 @@ def estimate_modulus(readings, face_width_m: float, face_height_m: float, hand: 
     law = contact_law if contact_law != "auto" else ("hertz" if contact_radii_m else "flat")
     if law == "hertz" and line_lengths_m:
         law = "hertz-line"
-    if section is not None and law == "hertz-line":     # section_law_applies: a pad along a line
-        law = "section"
+    if section is not None and (law == "hertz-line" or (law == "flat" and contact_law == "auto"
+                                                          and section.flat_fill < FLAT_FILL_MIN)):
+        law = "section"     # a pad along a line, or flat pads on a body the flat law's prism does not describe
     if law == "section":
         e = section_model.fit_modulus_pa(points, section)
     else:
@@ -329,12 +334,13 @@ def estimate_modulus(readings, face_width_m: float, face_height_m: float, hand: 
     return ModulusEstimate(e, e / sigma, e * sigma, k, False, False, law, exponent, settling_m)
 
 
-def section_law_applies(contact_radii_m, contact_line_lengths_m) -> bool:
-    """Whether a squeeze with a section reads it with the section law: where a pad touches along a line (an edge,
-    a prism's side: what yields behind it, a star prism's arm, matters). Two point contacts keep Hertz's point law,
-    flat pads the flat law: on the training shapes the section law read round bodies lower as E grew (a sphere
-    0.98x at 2e4 Pa, 0.45x at 2e5), the point law did not (1.42x, 1.38x); docs/squeeze.md "The section law"."""
-    return bool(contact_radii_m) and any(v > 0 for v in (contact_line_lengths_m or ()))
+def section_may_apply(contact_radii_m, contact_line_lengths_m) -> bool:
+    """Whether a squeeze with a section may read it with the section law: where a pad touches along a line (an
+    edge, a prism's side: what yields behind it, a star prism's arm, matters), and on flat pads when the section
+    does not fill the flat law's prism (SectionCurve.flat_fill < FLAT_FILL_MIN). Two point contacts keep Hertz's
+    point law: on the training shapes the section law read round bodies lower as E grew (a sphere 0.98x at 2e4 Pa,
+    0.45x at 2e5), the point law did not (1.42x, 1.38x); docs/squeeze.md "The section law"."""
+    return not contact_radii_m or any(v > 0 for v in (contact_line_lengths_m or ()))
 
 
 def _checked_line_lengths(line_lengths_m, radii_m) -> tuple:

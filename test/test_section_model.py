@@ -7,7 +7,7 @@ import pytest
 from defgg_ros.perception.tabletop import CELL_M
 from defgg_ros.planning.section_outline import perceived_section
 from defgg_ros.section_model import SectionError, section_curve
-from defgg_ros.squeeze import HandCalibration, SqueezeReading, estimate_modulus
+from defgg_ros.squeeze import FLAT_FILL_MIN, HandCalibration, SqueezeReading, estimate_modulus
 
 pytestmark = pytest.mark.unit
 
@@ -66,10 +66,19 @@ def test_the_fit_returns_the_modulus_the_readings_were_made_with_the_hand_taken_
     assert estimate.contact_law == "section"
     assert estimate.youngs_modulus_pa == pytest.approx(true_pa, rel=0.02)
     assert estimate.low_pa < true_pa < estimate.high_pa
-    # flat pads (no contact radii) keep the flat law, section or not: the executor's and the bench's one rule
+    # flat pads (no contact radii) on a body that does not fill the flat law's prism (the rhombus) read the section;
+    # on one that does (a block as wide as the pads' spread), the flat law: the executor's and the bench's one rule
+    assert curve.flat_fill < FLAT_FILL_MIN
     flat = estimate_modulus(readings, 0.03, 0.03, hand=hand, width_resolution_m=1e-5, section=curve)
-    assert flat.contact_law == "flat"
-    # two point contacts keep the point law (squeeze.section_law_applies: only a pad along a line reads the section)
+    assert flat.contact_law == "section" and flat.youngs_modulus_pa == pytest.approx(estimate.youngs_modulus_pa)
+    block = section_curve(*bar(0.03, 0.06, 0.03, rows=41), CELL, approaches_m=curve.approaches_m)
+    assert block.flat_fill == pytest.approx(1.0)
+    box = estimate_modulus(readings, 0.03, 0.03, hand=hand, width_resolution_m=1e-5, section=block)
+    assert box.contact_law == "flat"
+    forced = estimate_modulus(readings, 0.03, 0.03, hand=hand, width_resolution_m=1e-5, section=block,
+                              contact_law="section")     # the bench's --section-on-flat-pads
+    assert forced.contact_law == "section"
+    # two point contacts keep the point law (squeeze.section_may_apply)
     points = estimate_modulus(readings, 0.03, 0.03, hand=hand, width_resolution_m=1e-5, section=curve,
                               contact_radii_m=(0.004, 0.004), contact_line_lengths_m=(0.0, 0.0))
     assert points.contact_law == "hertz"

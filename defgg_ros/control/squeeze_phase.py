@@ -27,7 +27,7 @@ from defgg_ros.squeeze import (
     SqueezeReading,
     estimate_modulus,
     needs_firmer,
-    section_law_applies,
+    section_may_apply,
 )
 
 # A rigid verdict is planned with the paper's rigid class (the network knows 2e4, 2e5, 2e6 and 2e9 Pa).
@@ -97,11 +97,11 @@ class SqueezePhase:
         return self._squeeze is not None
 
     def _start_section_job(self) -> None:
-        """With the goal: the section law's model runs while the arm goes down; only where the estimate reads it (a
-        pad along a line: squeeze.section_law_applies; point contacts and flat pads keep their laws)."""
+        """With the goal: the section law's model runs while the arm goes down; only where the estimate may read it
+        (a pad along a line, flat pads: squeeze.section_may_apply; two point contacts keep the point law)."""
         grasp = self._grasp
         if (self._squeeze is not None and grasp is not None and grasp.section_heights_m
-                and section_law_applies(grasp.contact_radii_m, grasp.contact_line_lengths_m)):
+                and section_may_apply(grasp.contact_radii_m, grasp.contact_line_lengths_m)):
             self._section_job = SectionJob(grasp.section_cell_m, grasp.section_heights_m)
 
     @property

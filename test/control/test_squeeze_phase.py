@@ -117,21 +117,24 @@ def diamond_section(rows: int = 13, cols: int = 19, cell_m: float = 0.003, heigh
     return tuple(tuple(row) for row in np.where(inside, height_m, 0.0))
 
 
-def test_a_grasp_with_a_section_is_read_with_the_section_law_where_a_pad_meets_a_line(kin):
+def test_a_grasp_with_a_section_is_read_with_the_section_law_at_lines_and_on_faces_of_no_box(kin):
     """The grasp's section (Grasp.section_*) is modelled beside the squeeze (section_model.py, on a thread) and the
-    estimate fits it where a pad touches along a line; with flat pads (no contact radii) the flat law stays, with two
-    point contacts the point law, and no model runs (docs/squeeze.md "The section law")."""
+    estimate fits it where a pad touches along a line, and with flat pads (no contact radii) where the section does
+    not fill the flat law's prism (a rhombus; a block keeps the flat law); with two point contacts the point law
+    stays and no model runs (docs/squeeze.md "The section law")."""
     heights = diamond_section()
     curved = dataclasses.replace(GRASP, contact_radii_m=(0.004, 0.004), contact_line_lengths_m=(0.018, 0.018),
                                  section_cell_m=0.003, section_heights_m=heights)
     flat = dataclasses.replace(curved, contact_radii_m=(), contact_line_lengths_m=())
+    block = dataclasses.replace(flat, section_heights_m=tuple((0.03,) * len(row) for row in heights))
     off_pads = tuple(row if i < 3 else (0.0,) * len(row) for i, row in enumerate(heights))   # nothing under the pads
     refused = dataclasses.replace(curved, section_heights_m=off_pads)
     points = dataclasses.replace(curved, contact_line_lengths_m=(0.0, 0.0))    # two point contacts: Hertz, no model
     laws, notes = {}, {}
-    for name, grasp in (("refused", refused), ("flat", flat), ("points", points), ("curved", curved)):
+    for name, grasp in (("refused", refused), ("flat", flat), ("block", block), ("points", points),
+                        ("curved", curved)):
         sequence = PickPlaceSequence(kin, CONFIG, grasp, PLACE, SqueezeRequest(only=True, width_resolution_m=1e-5))
-        assert (sequence.section_job is None) == (name in ("flat", "points")), name
+        assert (sequence.section_job is None) == (name == "points"), name
         if sequence.section_job is not None:    # the fake clock outruns the model's thread; a cell's descent does not
             assert sequence.section_job.wait(30.0)
         run(sequence, FakeRobot(kin, World(object_compliance_m_per_n=COMPLIANCE_M_PER_N)), max_s=120.0)
@@ -148,7 +151,9 @@ def test_a_grasp_with_a_section_is_read_with_the_section_law_where_a_pad_meets_a
                                 section=section_curve(heights_m > 0, heights_m, 0.003))
     assert laws["curved"].contact_law == "section" and notes["curved"] == ""
     assert laws["curved"].youngs_modulus_pa == pytest.approx(expected.youngs_modulus_pa, rel=1e-6)
-    assert laws["flat"].contact_law == "flat" and notes["flat"] == ""
+    assert laws["flat"].contact_law == "section" and notes["flat"] == ""
+    assert laws["flat"].youngs_modulus_pa == pytest.approx(expected.youngs_modulus_pa, rel=1e-6)
+    assert laws["block"].contact_law == "flat" and notes["block"] == ""
     assert laws["points"].contact_law == "hertz" and notes["points"] == ""
     assert laws["refused"].contact_law == "hertz-line"
     assert notes["refused"] == "the section law not used: no section under the pads (the middle rows are empty)"
