@@ -278,22 +278,31 @@ def repeat_line(records) -> str:
 
 
 # The squeeze's laws in the report's column order (docs/squeeze.md), with the columns' names.
-SQUEEZE_LAWS = (("flat", "flat law"), ("hertz", "point law"), ("hertz-line", "line law"), ("section", "section law"))
+SQUEEZE_LAWS = (("flat", "flat law"), ("hertz", "point law"), ("hertz-line", "line law"), ("section", "section law"),
+                ("unrecorded", "point or flat law, not recorded"))
 
 
 def squeeze_law(squeeze: dict) -> str:
     """The law a squeeze's estimate used: recorded as contact_law since the result carries it; before, read off
-    the executor's grasp for the squeeze: no contact radii, the flat law; no line lengths on record (the first
-    builds, Hertz's point law at every curved pad), the point law; a line length > 0, the line law. Records made
+    the executor's grasp for the squeeze: no contact radii, the flat law; no line lengths on record (a build with
+    Hertz's point law at every curved pad), the point law; a line length > 0, the line law. The first measured
+    picks kept no grasp: "unrecorded" (the point law at curved pads, the flat law at flat ones). Records made
     between the section law and its recording (results/cell_measured_section) cannot tell it from the others."""
     if squeeze.get("contact_law"):
         return squeeze["contact_law"]
     grasp = squeeze.get("grasp")
-    if grasp is None or "contact_line_lengths_m" not in grasp:
-        return "hertz"
+    if grasp is None:
+        return "unrecorded"
     if not grasp.get("contact_radii_m"):
         return "flat"
-    return "hertz-line" if any(v > 0 for v in grasp["contact_line_lengths_m"]) else "hertz"
+    return "hertz-line" if any(v > 0 for v in grasp.get("contact_line_lengths_m", ())) else "hertz"
+
+
+def squeeze_laws_present(records) -> list:
+    """The (law, column name) of SQUEEZE_LAWS that some successful squeeze of the records used, in that order."""
+    used = {squeeze_law(r["squeeze"]) for r in outcomes(records).values()
+            if r.get("squeeze") and r["squeeze"]["success"]}
+    return [(law, name) for law, name in SQUEEZE_LAWS if law in used]
 
 
 def _squeezes(records, name: str) -> list:
@@ -316,7 +325,7 @@ def squeeze_rows(records, objects) -> list:
     """The measured case's estimates per object: median estimate, its ratio to the true modulus, how many
     within a factor 3 (issue 49 item 4's target) or called rigid; then the same split by the law each estimate
     used (squeeze_law), and those pooled over the soft objects and over the rigid ones."""
-    rows, pooled = [], {}
+    rows, pooled, laws = [], {}, squeeze_laws_present(records)
     for obj in objects:
         found = _squeezes(records, obj.name)
         if not found:
@@ -327,7 +336,7 @@ def squeeze_rows(records, objects) -> list:
         within = sum(1 / 3 <= e / true_pa <= 3 for e in estimates)
         rigid = sum(s["rigid"] for s in found)
         by_law = []
-        for law, _ in SQUEEZE_LAWS:
+        for law, _ in laws:
             counts = _estimate_counts([s for s in found if squeeze_law(s) == law], true_pa)
             key = (true_pa < RIGID_CLASS_PA, law)
             pooled[key] = [a + b for a, b in zip(pooled.get(key, [0, 0, 0]), counts)]
@@ -337,7 +346,7 @@ def squeeze_rows(records, objects) -> list:
     if not rows:
         return rows
     for kind, soft in (("soft and 2e6 Pa objects", True), ("rigid (2e9 Pa) objects", False)):
-        cells = [_counts_cell(pooled.get((soft, law), [0, 0, 0])) for law, _ in SQUEEZE_LAWS]
+        cells = [_counts_cell(pooled.get((soft, law), [0, 0, 0])) for law, _ in laws]
         rows.append(f"| **{kind}** | | | | | | {' | '.join(cells)} |")
     return rows
 
@@ -410,11 +419,12 @@ def report_markdown(records, objects, planned_picks: int | None = None) -> str:
         lines += ["", repeat]
     lines += _table(squeeze_rows(records, objects),
                     "The squeeze's estimates (measured case; a factor 3 of the true modulus is issue 49 item 4's "
-                    "target, 2e9 Pa should read rigid). The last four columns split the squeezes by the law the "
-                    "estimate used (docs/squeeze.md; within ×3 / called rigid / n): both pads on flat faces, point "
-                    "contacts (Hertz), a pad along a line, or the perceived section's model:",
+                    "target, 2e9 Pa should read rigid). The columns after 'called rigid' split the squeezes by the law "
+                    "the estimate used (docs/squeeze.md; within ×3 / called rigid / n): both pads on flat faces "
+                    "(and every rigid verdict), point contacts (Hertz), a pad along a line, the perceived section's "
+                    "model, or not recorded (the first measured picks):",
                     "| object | true E (Pa) | median estimate (Pa) | ratio | within ×3 | called rigid | "
-                    + " | ".join(name for _, name in SQUEEZE_LAWS) + " |")
+                    + " | ".join(name for _, name in squeeze_laws_present(records)) + " |")
     lines += _table(mass_rows(records, objects),
                     "The grip force's mass (the inference node's estimate from the height map, every planned grasp) "
                     "against the cell's true mass:",

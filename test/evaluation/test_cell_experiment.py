@@ -198,8 +198,9 @@ def test_the_measured_case_is_compared_with_every_input_and_its_estimates_are_ta
 
 def test_the_squeeze_table_splits_the_estimates_by_law_and_pools_soft_and_rigid_objects(tmp_path):
     """Each squeeze is counted under the law its estimate used, per object and pooled (soft against their own
-    modulus, rigid by call): the law on record (contact_law), else read off the squeeze's grasp (no line lengths
-    on record: the point law of the first builds; a line length: the line law; no contact radii: the flat law)."""
+    modulus, rigid by call): the law on record (contact_law), else read off the squeeze's grasp (curved without line
+    lengths on record: the point law of an earlier build; a line length: the line law; no contact radii: the flat
+    law; no grasp on record: not recorded); only the laws some squeeze used get a column."""
     from defgg_ros.atomic import append_jsonl
 
     line_grasp = {"contact_radii_m": [0.02, 0.02], "contact_line_lengths_m": [0.0, 0.018]}
@@ -208,19 +209,22 @@ def test_the_squeeze_table_splits_the_estimates_by_law_and_pools_soft_and_rigid_
                 ("common_ball", 2, 2.2e5, False, {"grasp": line_grasp, "contact_law": "section"}),
                 ("common_sponge", 0, 2.5e4, False, {"grasp": line_grasp}),
                 ("common_sponge", 1, 5e3, False, {"grasp": flat_grasp}),
-                ("egad_test_00_c1", 0, 1.5e6, True, {}),
+                ("egad_test_00_c1", 0, 1.5e6, True, {"grasp": {"contact_radii_m": [0.02, 0.02]}}),
                 ("egad_test_00_c1", 1, 4e5, False, {"grasp": line_grasp})]
     for obj, i, estimate, rigid, extra in squeezes:
         squeeze = {"success": True, "measured_youngs_modulus_pa": estimate, "rigid": rigid, **extra}
         append_jsonl(tmp_path / "records_measured.jsonl", pick(obj, "measured", i, True, squeeze=squeeze))
     body = cr.write_report(tmp_path, ce.OBJECTS, planned_picks=3)
     assert ("| object | true E (Pa) | median estimate (Pa) | ratio | within ×3 | called rigid | flat law "
-            "| point law | line law | section law |\n|---|---|---|---|---|---|---|---|---|---|") in body
-    assert "| common_ball | 2e+05 | 2.2e+05 | 1.1 | 2/3 | 0/3 | - | 1 / 0 / 1 | 0 / 0 / 1 | 1 / 0 / 1 |" in body
-    assert "| common_sponge | 2e+04 | 2.5e+04 | 1.2 | 1/2 | 0/2 | 0 / 0 / 1 | - | 1 / 0 / 1 | - |" in body
-    assert "| egad_test_00_c1 | 2e+09 | 1.5e+06 | 0.00075 | 0/2 | 1/2 | - | 0 / 1 / 1 | 0 / 0 / 1 | - |" in body
-    assert "| **soft and 2e6 Pa objects** | | | | | | 0 / 0 / 1 | 1 / 0 / 1 | 1 / 0 / 2 | 1 / 0 / 1 |" in body
-    assert "| **rigid (2e9 Pa) objects** | | | | | | - | 0 / 1 / 1 | 0 / 0 / 1 | - |" in body
+            "| point law | line law | section law | point or flat law, not recorded |\n"
+            "|---|---|---|---|---|---|---|---|---|---|---|") in body
+    assert "| common_ball | 2e+05 | 2.2e+05 | 1.1 | 2/3 | 0/3 | - | - | 0 / 0 / 1 | 1 / 0 / 1 | 1 / 0 / 1 |" in body
+    assert "| common_sponge | 2e+04 | 2.5e+04 | 1.2 | 1/2 | 0/2 | 0 / 0 / 1 | - | 1 / 0 / 1 | - | - |" in body
+    assert "| egad_test_00_c1 | 2e+09 | 1.5e+06 | 0.00075 | 0/2 | 1/2 | - | 0 / 1 / 1 | 0 / 0 / 1 | - | - |" in body
+    assert "| **soft and 2e6 Pa objects** | | | | | | 0 / 0 / 1 | - | 1 / 0 / 2 | 1 / 0 / 1 | 1 / 0 / 1 |" in body
+    assert "| **rigid (2e9 Pa) objects** | | | | | | - | 0 / 1 / 1 | 0 / 0 / 1 | - | - |" in body
+    recorded_only = [r for r in cr.read_records(tmp_path) if r["squeeze"].get("contact_law")]
+    assert cr.squeeze_laws_present(recorded_only) == [("section", "section law")]
 
 
 def test_grasp_only_picks_are_compared_with_correct_and_with_their_plain_case_and_stand_ins_fill_the_rest(
