@@ -309,6 +309,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="the run's folder")
     p.add_argument("--picks", type=int, default=None, help="picks planned per object and case (for the progress "
                                                              "line; default: the most recorded)")
+    p.add_argument("--with", dest="with_dirs", nargs="+", default=[], metavar="DIR",
+                   help="other runs' folders whose records join OUT's (other cases at the same seeded poses, e.g. "
+                        "the three inputs beside a measured-case run), so the paired comparisons pair them; a pick "
+                        "recorded in two folders is refused")
     p = sub.add_parser("compare", help="a rerun against an earlier run: the picks run in both, which ended the "
                                        "same way and chose the same grasp", formatter_class=HelpFormatter)
     p.add_argument("--out", required=True, help="the rerun's folder (its records*.jsonl)")
@@ -334,7 +338,7 @@ def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     try:
         if args.command == "report":
-            print(write_report(Path(args.out), OBJECTS, args.picks))
+            print(write_report(Path(args.out), OBJECTS, args.picks, args.with_dirs))
             return 0
         if args.command == "compare":
             runs = [read_records(Path(d)) for d in (args.earlier, args.out)]

@@ -439,9 +439,28 @@ def _table(rows: list, caption: str, header: str) -> list:
     return ["", caption, "", header, "|" + "---|" * header.count(" | ") + "---|", *rows]
 
 
-def write_report(out: Path, objects, planned_picks: int | None = None) -> str:
-    """OUT/per_object.png and the results part of OUT/report.md (between the markers; the rest is kept)."""
+def joined_records(out: Path, with_dirs=()) -> list:
+    """OUT's records and those of other runs' folders (other cases at the same seeded poses, e.g. the three inputs
+    beside a measured-case run), so the paired comparisons see both; a pick recorded in two of them is refused."""
     records = read_records(out)
+    seen = {r["key"] for r in records}
+    for folder in with_dirs:
+        extra = read_records(Path(folder))
+        if not extra:
+            raise OSError(f"{folder} holds no records*.jsonl")
+        twice = sorted(seen & {r["key"] for r in extra})
+        if twice:
+            raise ValueError(f"{folder} records picks {out} (or an earlier folder) records too, e.g. {twice[0]}: "
+                             "join runs of other cases only")
+        seen |= {r["key"] for r in extra}
+        records += extra
+    return records
+
+
+def write_report(out: Path, objects, planned_picks: int | None = None, with_dirs=()) -> str:
+    """OUT/per_object.png and the results part of OUT/report.md (between the markers; the rest is kept); with_dirs:
+    other runs' folders whose records join OUT's (joined_records)."""
+    records = joined_records(out, with_dirs)
     filled = with_plain_substitutes(records)      # report_markdown fills its own copy
     table = success_table(filled)
     cases = present_cases(table)
@@ -451,6 +470,8 @@ def write_report(out: Path, objects, planned_picks: int | None = None) -> str:
         if len(shown) > 1 or (name == FIGURE_NAME and shown):
             per_object_figure(table, objects, Path(out) / name, shown, complete_totals(filled, shown))
     body = report_markdown(records, objects, planned_picks)
+    if with_dirs:
+        body = f"Joined with the records of {', '.join(map(str, with_dirs))} (the same seeded poses).\n" + body
     path = Path(out) / REPORT_NAME
     text = path.read_text(encoding="utf-8") if path.exists() else ""
     begin, end = "<!-- results: defgg-cell-experiment report -->", "<!-- end of results -->"

@@ -382,6 +382,26 @@ def test_a_rerun_is_compared_pick_by_pick_with_the_earlier_run(tmp_path):
     assert ce.main(["compare", "--out", str(tmp_path / "rerun"), "--earlier", str(tmp_path / "nothing")]) == 2
 
 
+def test_the_report_joins_another_run_s_cases_at_the_same_poses_and_refuses_a_pick_in_both(tmp_path, capsys):
+    """A measured-case run and the three inputs' run are separate folders: --with pairs them pick by pick."""
+    from defgg_ros.atomic import append_jsonl
+
+    measured, inputs = tmp_path / "measured", tmp_path / "inputs"
+    for i, ok in enumerate((True, True, False)):
+        append_jsonl(measured / "records_measured.jsonl", pick("common_ball", "measured", i, ok))
+        append_jsonl(inputs / ce.RECORDS_NAME, pick("common_ball", "correct", i, False))
+    alone = cr.write_report(measured, ce.OBJECTS, planned_picks=3)
+    assert "| correct vs measured | all | 0 | 0 |" in alone
+    joined = cr.write_report(measured, ce.OBJECTS, planned_picks=3, with_dirs=[inputs])
+    assert joined.startswith(f"Joined with the records of {inputs}")
+    assert "| correct vs measured | all | 1 | 3 | 0 / 2 |" in joined
+    append_jsonl(inputs / "records_b.jsonl", pick("common_ball", "measured", 0, True))
+    assert ce.main(["report", "--out", str(measured), "--with", str(inputs)]) == 2
+    assert "common_ball|measured|0" in capsys.readouterr().err
+    assert ce.main(["report", "--out", str(measured), "--with", str(tmp_path / "none")]) == 2
+    assert "holds no records" in capsys.readouterr().err
+
+
 def test_a_run_without_squeezes_has_no_squeeze_table(tmp_path):
     from defgg_ros.atomic import append_jsonl
 
