@@ -321,11 +321,12 @@ def _counts_cell(counts: list) -> str:
     return " / ".join(map(str, counts)) if counts[2] else "-"
 
 
-def squeeze_rows(records, objects) -> list:
+def squeeze_rows(records, objects, laws) -> list:
     """The measured case's estimates per object: median estimate, its ratio to the true modulus, how many
     within a factor 3 (issue 49 item 4's target) or called rigid; then the same split by the law each estimate
-    used (squeeze_law), and those pooled over the soft objects and over the rigid ones."""
-    rows, pooled, laws = [], {}, squeeze_laws_present(records)
+    used (squeeze_law; `laws`: the columns, squeeze_laws_present), and those pooled over the soft objects and
+    over the rigid ones."""
+    rows, pooled = [], {}
     for obj in objects:
         found = _squeezes(records, obj.name)
         if not found:
@@ -417,14 +418,15 @@ def report_markdown(records, objects, planned_picks: int | None = None) -> str:
     repeat = repeat_line(records)
     if repeat:
         lines += ["", repeat]
-    lines += _table(squeeze_rows(records, objects),
+    laws = squeeze_laws_present(records)
+    lines += _table(squeeze_rows(records, objects, laws),
                     "The squeeze's estimates (measured case; a factor 3 of the true modulus is issue 49 item 4's "
                     "target, 2e9 Pa should read rigid). The columns after 'called rigid' split the squeezes by the law "
                     "the estimate used (docs/squeeze.md; within ×3 / called rigid / n): both pads on flat faces "
                     "(and every rigid verdict), point contacts (Hertz), a pad along a line, the perceived section's "
                     "model, or not recorded (the first measured picks):",
                     "| object | true E (Pa) | median estimate (Pa) | ratio | within ×3 | called rigid | "
-                    + " | ".join(name for _, name in squeeze_laws_present(records)) + " |")
+                    + " | ".join(name for _, name in laws) + " |")
     lines += _table(mass_rows(records, objects),
                     "The grip force's mass (the inference node's estimate from the height map, every planned grasp) "
                     "against the cell's true mass:",

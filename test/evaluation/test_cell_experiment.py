@@ -406,5 +406,6 @@ def test_a_run_without_squeezes_has_no_squeeze_table(tmp_path):
     from defgg_ros.atomic import append_jsonl
 
     append_jsonl(tmp_path / ce.RECORDS_NAME, pick("common_ball", "correct", 0, True))
-    assert cr.squeeze_rows(cr.read_records(tmp_path), ce.OBJECTS) == []
+    records = cr.read_records(tmp_path)
+    assert cr.squeeze_rows(records, ce.OBJECTS, cr.squeeze_laws_present(records)) == []
     assert "The squeeze's estimates" not in cr.write_report(tmp_path, ce.OBJECTS, planned_picks=1)
