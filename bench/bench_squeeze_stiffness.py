@@ -1,7 +1,7 @@
 """Stiffness by squeezing in the simulated cell (issue 49 item 4): how close defgg_ros/squeeze.py's modulus
 estimate comes to the true Young's modulus of the cell's FEM objects, and how repeatable it is.
 
-  .venv/bin/python bench/bench_squeeze_stiffness.py [--repeats 1] [--moduli 2e4 2e5 2e6 2e9]
+  .venv/bin/python bench/bench_squeeze_stiffness.py [--repeats 1 | --yaws 0.3] [--moduli 2e4 2e5 2e6 2e9]
       [--objects tuning | held_out | NAME ...] [--readings FILE.jsonl] [--calibrate]
 
 Jig (not the executor's sequence): the arm is set at a top-down grasp at half the object's height, then the
@@ -423,7 +423,10 @@ def settling_lines(readings_path: Path, cell_records: list) -> list:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--repeats", type=int, default=1)
+    parser.add_argument("--repeats", type=int, default=1,
+                        help="squeezes per object and modulus, at yaw 0, 0.3, 0.6 rad ...")
+    parser.add_argument("--yaws", type=float, nargs="+", default=None, metavar="RAD",
+                        help="squeeze at these yaws instead (e.g. 0.3: where egad_train_08_c5 is perceived flat)")
     parser.add_argument("--moduli", type=float, nargs="+", default=[2e4, 2e5, 2e6, 2e9])
     parser.add_argument("--objects", nargs="+", default=["tuning"])
     parser.add_argument("--readings", type=Path, default=ROOT / "results" / "squeeze" / "readings.jsonl",
@@ -450,6 +453,7 @@ def main(argv=None) -> int:
     if args.calibrate:
         return 0
     names = [n for o in args.objects for n in {"tuning": TUNING, "held_out": HELD_OUT}.get(o, (o,))]
+    yaws = args.yaws if args.yaws is not None else [0.3 * r for r in range(args.repeats)]
     print(f"{'object':16s} {'E true':>8s} " + " ".join(f"{v:>9s}" for v in VARIANTS) +
           "  radii (cm): surface | perceived  spread  perceived estimate")
     rows, in_band, log_errors = [], {v: [] for v in BANDED}, {v: [] for v in BANDED}
@@ -457,13 +461,13 @@ def main(argv=None) -> int:
         for modulus in args.moduli:
             by_variant = {v: [] for v in VARIANTS}
             radii = {}
-            for r in range(args.repeats):
-                spec = scene_object(name, modulus, 0.3 * r, args.meshes)
+            for yaw in yaws:
+                spec = scene_object(name, modulus, yaw, args.meshes)
                 perceived, point, section = perceived_contacts(spec)
                 radii = {"surface": surface_contacts(spec), "perceived": perceived, "point": point,
                          "section": section}
                 try:
-                    readings = cached_readings(args.readings, name, modulus, 0.3 * r, args.meshes)
+                    readings = cached_readings(args.readings, name, modulus, yaw, args.meshes)
                     estimates = estimates_of(readings, spec, hand, radii, args.section_on_flat_pads)
                     for variant, estimate in estimates.items():
                         by_variant[variant].append(estimate)

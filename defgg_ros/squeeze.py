@@ -55,7 +55,7 @@ RIGID_ABOVE_PA = 5e6
 MODEL_FACTOR = 2.0
 # Flat pads read the section law when the perceived section fills less than this of the flat law's loaded region
 # (section_model.flat_fill): the training boxes fill 0.98-1.00 (the flat law reads them, the section law 2-8x
-# high), the training star prism egad_train_08_c5 met on faces 0.72-0.76 (flat law 0.16-0.18x); docs/squeeze.md.
+# high), the training star prism egad_train_08_c5 met on faces 0.74 (flat law 0.16-0.18x); docs/squeeze.md.
 FLAT_FILL_MIN = 0.9
 
 
