@@ -193,7 +193,7 @@ def test_the_measured_case_is_compared_with_every_input_and_its_estimates_are_ta
         append_jsonl(tmp_path / "records_measured.jsonl", pick("common_ball", "measured", i, True, squeeze=squeeze))
     body = cr.write_report(tmp_path, ce.OBJECTS, planned_picks=3)
     assert "| measured vs rigid | all | 1 | 3 | 3 / 0 | +100.0 |" in body
-    assert "| common_ball | 2e+05 | 3e+05 | 1.5 | 2/3 | 0/3 |" in body
+    assert "| common_ball | 2e+05 | 3e+05 | 1.5 | 9.00 | 2/3 | 0/3 |" in body
 
 
 def test_the_squeeze_table_splits_the_estimates_by_law_and_pools_soft_and_rigid_objects(tmp_path):
@@ -215,14 +215,17 @@ def test_the_squeeze_table_splits_the_estimates_by_law_and_pools_soft_and_rigid_
         squeeze = {"success": True, "measured_youngs_modulus_pa": estimate, "rigid": rigid, **extra}
         append_jsonl(tmp_path / "records_measured.jsonl", pick(obj, "measured", i, True, squeeze=squeeze))
     body = cr.write_report(tmp_path, ce.OBJECTS, planned_picks=3)
-    assert ("| object | true E (Pa) | median estimate (Pa) | ratio | within ×3 | called rigid | flat law "
+    assert ("| object | true E (Pa) | median estimate (Pa) | ratio | spread | within ×3 | called rigid | flat law "
             "| point law | line law | section law | point or flat law, not recorded |\n"
-            "|---|---|---|---|---|---|---|---|---|---|---|") in body
-    assert "| common_ball | 2e+05 | 2.2e+05 | 1.1 | 2/3 | 0/3 | - | - | 0 / 0 / 1 | 1 / 0 / 1 | 1 / 0 / 1 |" in body
-    assert "| common_sponge | 2e+04 | 2.5e+04 | 1.2 | 1/2 | 0/2 | 0 / 0 / 1 | - | 1 / 0 / 1 | - | - |" in body
-    assert "| egad_test_00_c1 | 2e+09 | 1.5e+06 | 0.00075 | 0/2 | 1/2 | - | 0 / 1 / 1 | 0 / 0 / 1 | - | - |" in body
-    assert "| **soft and 2e6 Pa objects** | | | | | | 0 / 0 / 1 | - | 1 / 0 / 2 | 1 / 0 / 1 | 1 / 0 / 1 |" in body
-    assert "| **rigid (2e9 Pa) objects** | | | | | | - | 0 / 1 / 1 | 0 / 0 / 1 | - | - |" in body
+            "|---|---|---|---|---|---|---|---|---|---|---|---|") in body
+    assert ("| common_ball | 2e+05 | 2.2e+05 | 1.1 | 9.00 | 2/3 | 0/3 | - | - | 0 / 0 / 1 | 1 / 0 / 1 "
+            "| 1 / 0 / 1 |") in body
+    assert "| common_sponge | 2e+04 | 2.5e+04 | 1.2 | 5.00 | 1/2 | 0/2 | 0 / 0 / 1 | - | 1 / 0 / 1 | - | - |" in body
+    assert ("| egad_test_00_c1 | 2e+09 | 1.5e+06 | 0.00075 | - | 0/2 | 1/2 | - | 0 / 1 / 1 | 0 / 0 / 1 | - "
+            "| - |") in body
+    assert ("| **soft and 2e6 Pa objects** | | | | 0 of 2 ≤ 1.2 | | | 0 / 0 / 1 | - | 1 / 0 / 2 | 1 / 0 / 1 "
+            "| 1 / 0 / 1 |") in body
+    assert "| **rigid (2e9 Pa) objects** | | | | - | | | - | 0 / 1 / 1 | 0 / 0 / 1 | - | - |" in body
     recorded_only = [r for r in cr.read_records(tmp_path) if r["squeeze"].get("contact_law")]
     assert cr.squeeze_laws_present(recorded_only) == [("section", "section law")]
 
