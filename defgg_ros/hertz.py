@@ -12,7 +12,8 @@ contact approaches by d(F), and the body's modulus is the E* whose summed approa
   (two equal contacts sum to the classical diametral compression of a cylinder between plates,
   2 P / (pi E*) (2 ln(4 R / b) - 1); Johnson, Contact Mechanics, 1985, section 5.6). The approach is nearly
   linear in F (the log grows slowly), where the point law goes as F^(2/3): a line contact read with the point
-  law comes out several times too stiff (docs/squeeze.md: 4-13x on the standing cylinder and the toy bone).
+  law comes out several times too stiff (docs/archive/squeeze_notes.md: 4-13x on the standing cylinder and
+  the toy bone).
 
 E* = E / (1 - nu^2). The line law has E* inside the log, so E* is found by a one-dimensional least squares over
 log E* (a grid, then a golden-section refinement), not in closed form.

@@ -3,7 +3,7 @@
 Pure numpy (no ROS, no simulator), beside squeeze.py which fits E with it (the "section" law, docs/squeeze.md
 "The section law"). Hertz's laws see only the surface where each pad touches; a slender part behind the contact
 (a star prism's arm, a cluster's lobe) yields too, bending and tapering, and the squeeze reads such objects 2-10x
-too soft (docs/squeeze.md, "Shipped meshes"). Here the whole section the pads load is elastic:
+too soft (docs/archive/squeeze_notes.md, "Shipped meshes"). Here the whole section the pads load is elastic:
 
 - the section: the object's outline at the pads' height, seen from above, on square cells of `cell_m`, rows across
   the closing axis and columns along it (planning/section_outline.py makes it from the height map);

@@ -27,8 +27,9 @@ reported, but does not choose: in the simulated cell flat boxes fitted n = 1.3-2
 Settling. An elastic body's compression grows smoothly with the force: over the gentle forces no curve the fit
 allows (F ~ x^0.77 .. x^2.5) makes one interval's compliance (opening lost per newton) more than ~1.7x another's.
 A step SETTLE_STEP_RATIO times the other gentle intervals' (or the width resolution's) is the object turning or
-settling between the pads, not compression (docs/squeeze.md: rigid star prisms read 7e4-1.5e6 Pa from such a
-step): `without_settling_step` keeps the longer run of readings on one side of it, and the estimate says so.
+settling between the pads, not compression (docs/archive/squeeze_notes.md: rigid star prisms read 7e4-1.5e6
+Pa from such a step): `without_settling_step` keeps the longer run of readings on one side of it, and the
+estimate says so.
 
 Rigid. An object compliance (1/k less the hand's) within two standard deviations of the calibration's (and of the
 width reading's) noise of zero is "rigid": only a lower bound, the softest object that noise could hide, is
