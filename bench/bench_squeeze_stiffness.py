@@ -421,6 +421,20 @@ def settling_lines(readings_path: Path, cell_records: list) -> list:
     return lines
 
 
+def what_if_hand(parser, args) -> HandCalibration:
+    """--what-if-hand: one compliance for every object (a real hand's; docs/squeeze.md "Limits"), on soft rows."""
+    compliance_um, sd_um = args.what_if_hand
+    if not (compliance_um > 0 and sd_um >= 0):
+        parser.error(f"--what-if-hand needs a compliance > 0 and a noise >= 0 um/N, got {compliance_um} {sd_um}")
+    rigid = [m for m in args.moduli if m >= 1e7]
+    if rigid or args.calibrate:
+        parser.error(f"--what-if-hand reads the FEM bodies' stored squeezes only (soft moduli < 1e7 Pa): the rigid "
+                     f"bodies' squeezes ({', '.join(f'{m:g}' for m in rigid) or '--calibrate'}) were made with the "
+                     "present pads' contact compliance; drop them")
+    return HandCalibration(1e6 / compliance_um, sd_um * 1e-6, f"what-if: {compliance_um:g} +- {sd_um:g} um/N for "
+                           "every object (--what-if-hand)")
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--repeats", type=int, default=1,
@@ -441,6 +455,11 @@ def main(argv=None) -> int:
     parser.add_argument("--section-on-flat-pads", action="store_true",
                         help="the section column uses the section law on flat pads too (the executor keeps the flat "
                              "law there; this shows why)")
+    parser.add_argument("--what-if-hand", type=float, nargs=2, default=None, metavar=("UM_PER_N", "SD_UM_PER_N"),
+                        help="estimate the stored FEM squeezes as if the hand's compliance were this, with this "
+                             "noise (um/N), for every object: e.g. 2.3 0.5, the simulated hand with stiff pad "
+                             "contacts (bench_pad_contact_stiffness.py; the FEM bodies' readings do not change with "
+                             "them). Soft moduli only: the rigid bodies' stored squeezes are the present pads'")
     parser.add_argument("--settling", nargs="*", metavar="CELL_RECORDS", default=None,
                         help="print the settling rule's evidence over the stored squeezes (and the squeezes of the "
                              "given cell records, e.g. results/cell_experiment/records_measured.jsonl) and stop")
@@ -449,6 +468,8 @@ def main(argv=None) -> int:
         print("\n".join(settling_lines(args.readings, args.settling)))
         return 0
     hand = calibration(args.readings)
+    if args.what_if_hand is not None:
+        hand = what_if_hand(parser, args)
     print(f"hand: {hand.describe()}", flush=True)
     if args.calibrate:
         return 0
