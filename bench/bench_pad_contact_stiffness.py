@@ -13,6 +13,9 @@ the 2e6 Pa rows are over-corrected. Three measurements of giving the Panda's pad
    by 1e-6: labels that differ from the stored ones.
 3. The held-out squeeze table (bench_squeeze_stiffness.py's stored FEM readings) estimated with the hand
    calibration the stiff pads give (the rigid block of 1., its compliance; the noise from four yaws).
+4. (--rigid-objects) The 14 evaluation objects as rigid bodies (2e9 Pa) squeezed with the stiff pads, estimated
+   with the stiff calibration of 1. as the executor does (the "section" column's law): are they still read rigid?
+   With --trials 0 and --rigid-objects, parts 2 and 3 are skipped (part 3 is --what-if-hand's table).
 Nothing here changes the shipped physics (docs/squeeze.md "The simulated cell's FEM contact").
 """
 from __future__ import annotations
@@ -106,11 +109,38 @@ def relabel(records: list, **dynamics) -> tuple[int, float]:
         trial_hand.create_hand = original
 
 
+EVALUATION_OBJECTS = (*squeeze_bench.HELD_OUT, "egad_test_10_c3", "egad_test_16_c5", "egad_test_17_c5",
+                      "egad_test_20_c6", "common_ring", "common_sponge")
+
+
+def rigid_verdicts(hand: HandCalibration, yaws=(0.0,)) -> tuple[int, int]:
+    """Part 4: each evaluation object as a rigid body squeezed by the (stiff-padded) cell, printed; (rigid, n)."""
+    rigid = total = 0
+    for name in EVALUATION_OBJECTS:
+        for yaw in yaws:
+            spec = squeeze_bench.scene_object(name, 2e9, yaw)
+            perceived, point, section = squeeze_bench.perceived_contacts(spec)
+            contacts = {"surface": squeeze_bench.surface_contacts(spec), "perceived": perceived, "point": point,
+                        "section": section}
+            readings = squeeze_bench.squeeze_once(spec)
+            try:
+                estimate = squeeze_bench.estimates_of(readings, spec, hand, contacts)["section"]
+                verdict = "rigid" if estimate.rigid else f"{estimate.youngs_modulus_pa:.2g} Pa"
+            except squeeze_bench.SqueezeError as error:
+                estimate, verdict = None, f"refused: {error}"
+            rigid += bool(estimate and estimate.rigid)
+            total += 1
+            print(f"   {name:16s} yaw {yaw:.1f}: {compliance_um_per_n(readings):7.1f} um/N -> {verdict}", flush=True)
+    return rigid, total
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], epilog=__doc__.split("\n\n", 1)[1],
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--stiffness-npm", type=float, default=1e6, help="the pads' contact stiffness, N/m")
     parser.add_argument("--trials", type=int, default=300, help="fem_v5 rigid trials re-run (0: skip part 2)")
+    parser.add_argument("--rigid-objects", action="store_true",
+                        help="part 4: the 14 evaluation objects as rigid bodies with the stiff pads (~2 min)")
     args = parser.parse_args(argv)
     default, stiff = squeezes(0.0), squeezes(args.stiffness_npm)
     print(f"1. squeezes, 0.5-2 N (then 10-20 N while unresolved); pads default | {args.stiffness_npm:.0e} N/m:")
@@ -128,6 +158,12 @@ def main(argv=None) -> int:
     rigid = [1e-6 * compliance_um_per_n(stiff[(2e9, yaw)]) for yaw in squeeze_bench.CALIBRATION_YAWS_RAD]
     hand = HandCalibration(1.0 / statistics.mean(rigid), statistics.stdev(rigid),
                            f"stiff pads {args.stiffness_npm:.0e} N/m, rigid cube_5cm at 4 yaws")
+    if args.rigid_objects:
+        print(f"4. the evaluation objects at 2e9 Pa (rigid bodies), stiff pads, {hand.describe()}:", flush=True)
+        rigid, total = rigid_verdicts(hand)
+        print(f"   read rigid: {rigid} of {total}", flush=True)
+        if not args.trials:
+            return 0
     print(f"3. the held-out FEM squeezes (stored readings) with {hand.describe()}:", flush=True)
     squeeze_bench.calibration = lambda path: hand
     return squeeze_bench.main(["--objects", "held_out", "--moduli", "2e4", "2e5", "2e6"])
