@@ -123,12 +123,9 @@ def rigid_verdicts(hand: HandCalibration, yaws=(0.0,)) -> tuple[int, int]:
     for name in EVALUATION_OBJECTS:
         for yaw in yaws:
             spec = squeeze_bench.scene_object(name, 2e9, yaw)
-            perceived, point, section = squeeze_bench.perceived_contacts(spec)
-            contacts = {"surface": squeeze_bench.surface_contacts(spec), "perceived": perceived, "point": point,
-                        "section": section}
             readings = squeeze_bench.squeeze_once(spec)
             try:
-                estimate = squeeze_bench.estimates_of(readings, spec, hand, contacts)["section"]
+                estimate = squeeze_bench.estimates_of(readings, spec, hand, squeeze_bench.contacts_of(spec))["section"]
                 verdict = "rigid" if estimate.rigid else f"{estimate.youngs_modulus_pa:.2g} Pa"
             except squeeze_bench.SqueezeError as error:
                 estimate, verdict = None, f"refused: {error}"

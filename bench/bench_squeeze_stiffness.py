@@ -320,6 +320,13 @@ VARIANTS = ("old", "hand", "point", "new", "perceived", "section")
 BANDED = ("perceived", "section")     # the variants whose one-sigma band and log error are printed
 
 
+def contacts_of(spec) -> dict:
+    """What estimates_of reads of an object: "surface" and "perceived" PadContacts, the perceived "point"-law radii
+    and the "section"'s curve (perceived_contacts)."""
+    perceived, point, section = perceived_contacts(spec)
+    return {"surface": surface_contacts(spec), "perceived": perceived, "point": point, "section": section}
+
+
 def estimates_of(readings, spec, hand: HandCalibration, contacts: dict, section_on_flat_pads: bool = False) -> dict:
     """Each variant's estimate of one squeeze (SqueezeError: the executor refuses such readings). contacts:
     "surface" and "perceived" PadContacts, "point": the perceived point-law radii, "section": the section's curve.
@@ -484,9 +491,7 @@ def main(argv=None) -> int:
             radii = {}
             for yaw in yaws:
                 spec = scene_object(name, modulus, yaw, args.meshes)
-                perceived, point, section = perceived_contacts(spec)
-                radii = {"surface": surface_contacts(spec), "perceived": perceived, "point": point,
-                         "section": section}
+                radii = contacts_of(spec)
                 try:
                     readings = cached_readings(args.readings, name, modulus, yaw, args.meshes)
                     estimates = estimates_of(readings, spec, hand, radii, args.section_on_flat_pads)
