@@ -342,8 +342,7 @@ def squeeze_rows(records, objects, laws) -> list:
         true_pa = obj.youngs_modulus_pa
         estimates = sorted(s["measured_youngs_modulus_pa"] for s in found)
         median = estimates[len(estimates) // 2]
-        within = sum(1 / 3 <= e / true_pa <= 3 for e in estimates)
-        rigid = sum(s["rigid"] for s in found)
+        within, rigid, _ = _estimate_counts(found, true_pa)
         spread = estimate_spread(found)
         if spread is not None:
             spreads[true_pa < RIGID_CLASS_PA].append(spread)

@@ -230,6 +230,18 @@ def test_the_squeeze_table_splits_the_estimates_by_law_and_pools_soft_and_rigid_
     assert cr.squeeze_laws_present(recorded_only) == [("section", "section law")]
 
 
+def test_a_rigid_verdict_is_not_counted_within_a_factor_3_even_when_its_lower_bound_is(tmp_path):
+    """A squeeze called rigid carries only a lower bound; the object's "within x3" must not count it even when that
+    bound lies within a factor 3 of the true modulus (the same rule as the per-law columns, _estimate_counts)."""
+    from defgg_ros.atomic import append_jsonl
+
+    for i, (estimate, rigid) in enumerate(((3e5, True), (2.5e5, False))):      # true 2e5
+        squeeze = {"success": True, "measured_youngs_modulus_pa": estimate, "rigid": rigid}
+        append_jsonl(tmp_path / "records_measured.jsonl", pick("common_ball", "measured", i, True, squeeze=squeeze))
+    body = cr.write_report(tmp_path, ce.OBJECTS, planned_picks=2)
+    assert "| common_ball | 2e+05 | 3e+05 | 1.5 | - | 1/2 | 1/2 |" in body
+
+
 def test_grasp_only_picks_are_compared_with_correct_and_with_their_plain_case_and_stand_ins_fill_the_rest(
         tmp_path):
     from defgg_ros.atomic import append_jsonl
