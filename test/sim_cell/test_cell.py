@@ -272,3 +272,44 @@ def test_a_scene_mesh_must_be_a_surface_or_a_tet_mesh_and_a_bad_tet_mesh_is_refu
     np.savez(tmp_path / "keys.npz", vertices=nodes)
     with pytest.raises(meshes.MeshError, match="cannot read a tet mesh"):
         meshes.load_tet_mesh_file(tmp_path / "keys.npz")
+
+
+def _grasp_and_read_opening_m(cell, force_n: float, speed_mps: float = 0.02) -> float:
+    cell.gripper_grasp(0.0, 0.08, 0.08, speed_mps, force_n)
+    outcomes = run_until(cell, lambda o: o, 5.0)
+    assert outcomes and outcomes[0][1].success, outcomes
+    cell.advance(0.5)
+    return cell.gripper_width_m()
+
+
+def test_a_grasp_presses_an_fem_body_with_its_force_not_with_its_closing_speed(soft_cell):
+    """franka_gripper's grasp holds its force. A speed-driven finger on an FEM body pressed with only ~2 N at the
+    0.02 m/s the squeeze closes with, whatever force was asked: the 5 cm foam block (2e5 Pa) stopped compressing
+    past 2 N (55.89 mm at 2, 3, 5, 10 and 20 N). Pressed with the force it compresses ~0.13 mm per N."""
+    box_xyz, _ = soft_cell.object_poses()[0]
+    soft_cell.command_trajectory([(2.0, top_down_ik(soft_cell, box_xyz + [0, 0, 0.15]), None, None),
+                                  (3.0, top_down_ik(soft_cell, box_xyz), None, None)])
+    soft_cell.advance(3.3)
+    at_n = {force: _grasp_and_read_opening_m(soft_cell, force) for force in (1.0, 2.0, 5.0, 10.0)}
+    per_n_gentle = (at_n[1.0] - at_n[2.0]) / 1.0
+    assert per_n_gentle > 0.04e-3, at_n                          # the body is soft: it gives under 1 -> 2 N
+    assert at_n[2.0] - at_n[5.0] > 0.5 * 3.0 * per_n_gentle, at_n   # and keeps giving past 2 N
+    assert at_n[5.0] - at_n[10.0] > 0.5 * 5.0 * per_n_gentle, at_n
+    for joint in soft_cell.finger_joints:                           # each finger presses with the grasp's force
+        assert p.getJointState(soft_cell.robot, joint, physicsClientId=soft_cell.client)[3] == pytest.approx(
+            -10.0, abs=0.5)
+
+
+def test_a_grasp_on_a_rigid_box_presses_each_pad_with_its_force(rigid_cell):
+    box_xyz, _ = rigid_cell.object_poses()[0]
+    yaw = rigid_cell.scene.objects[0].yaw_rad
+    rigid_cell.command_trajectory([(1.5, top_down_ik(rigid_cell, box_xyz + [0, 0, 0.15], yaw), None, None),
+                                   (2.5, top_down_ik(rigid_cell, box_xyz, yaw), None, None)])
+    rigid_cell.advance(2.8)
+    box = rigid_cell.object_ids[0]
+    for force in (5.0, 20.0):
+        _grasp_and_read_opening_m(rigid_cell, force)
+        pressed = [sum(c[9] for c in p.getContactPoints(rigid_cell.robot, box, joint, -1,
+                                                        physicsClientId=rigid_cell.client))
+                   for joint in rigid_cell.finger_joints]
+        assert sum(pressed) / 2 == pytest.approx(force, rel=0.1), pressed

@@ -6,7 +6,7 @@ fingers stop and succeeds when they stopped inside [width - epsilon_inner,
 width + epsilon_outer]. The machine reads the measured opening each sim step
 and says what the finger motors should do; it has no PyBullet in it.
 """
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from defgg_ros.constants import GRIPPER_MAX_FORCE_N, GRIPPER_MAX_WIDTH_M
 
@@ -25,6 +25,10 @@ MOVE_TOLERANCE_M = 0.002
 GRIPPER_MAX_SPEED_MPS = 0.1
 # Force pressing the fingers along for a `move` (franka_gripper uses its own).
 MOVE_FORCE_N = GRIPPER_MAX_FORCE_N
+# A grasp presses (MotorCommand.press) once its fingers close slower than CONTACT_SPEED_FRACTION of the commanded
+# speed over a CONTACT_WINDOW_S window: they are on the object. Until then the drive is speed-limited.
+CONTACT_WINDOW_S = 0.02
+CONTACT_SPEED_FRACTION = 0.5
 # A command that has not finished after this much sim time fails.
 GRIPPER_TIMEOUT_S = 5.0
 
@@ -45,6 +49,10 @@ class MotorCommand:
     finger_target_m: float     # per finger (opening / 2)
     finger_speed_mps: float    # per finger
     finger_force_n: float
+    # On the object: each finger pushes with finger_force_n (force control) while it closes no faster than
+    # finger_speed_mps. franka_gripper's grasp holds its force, not a speed; a speed-driven finger pressed an FEM
+    # body with only ~ its momentum per step (docs/real_cell.md, "Grasp force on FEM objects").
+    press: bool = False
 
 
 def _check(width_m, speed_mps, force_n=None):
@@ -67,6 +75,7 @@ class GripperController:
         self._last_moving_s = 0.0
         self._last_width_m = initial_width_m
         self._anchor_width_m = initial_width_m   # opening when the fingers last moved
+        self._window = (0.0, initial_width_m)    # (time, opening) the running contact window began at
 
     @property
     def motor(self) -> MotorCommand:
@@ -101,6 +110,21 @@ class GripperController:
         self._kind, self._goal = kind, goal
         self._started_s = self._last_moving_s = now_s
         self._anchor_width_m = self._last_width_m
+        self._window = (now_s, self._last_width_m)
+
+    def _check_contact(self, now_s: float, width_m: float) -> None:
+        """A grasp's fingers closing slower than CONTACT_SPEED_FRACTION of its speed over a window are on the
+        object: from then on they press with the grasp's force (MotorCommand.press)."""
+        if self._kind != "grasp" or self._motor.press:
+            return
+        start_s, start_width_m = self._window
+        elapsed_s = now_s - start_s
+        if elapsed_s < CONTACT_WINDOW_S:
+            return
+        opening_speed_mps = 2 * self._motor.finger_speed_mps
+        if start_width_m - width_m < CONTACT_SPEED_FRACTION * opening_speed_mps * elapsed_s:
+            self._motor = replace(self._motor, press=True)
+        self._window = (now_s, width_m)
 
     def update(self, now_s: float, width_m: float) -> GripperOutcome | None:
         """Feed the measured opening; returns the outcome when the command ends."""
@@ -109,6 +133,7 @@ class GripperController:
         self._last_width_m = width_m
         if self._kind is None:
             return None
+        self._check_contact(now_s, width_m)
         stalled = now_s - self._last_moving_s >= STALL_TIME_S
         timed_out = now_s - self._started_s >= GRIPPER_TIMEOUT_S
         outcome = self._move_outcome(width_m, stalled) if self._kind == "move" else \

@@ -7,6 +7,7 @@ plain rigid world with a larger step. Sim time advances only in `advance()`.
 
 Frames: the world origin is `panda_link0`; the table top is z = 0.
 """
+import collections
 import shutil
 import tempfile
 import time
@@ -41,6 +42,11 @@ ARM_MAX_TORQUE_NM = (87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0)
 ARM_POSITION_GAIN = 0.3
 ARM_VELOCITY_GAIN = 1.0
 FINGER_POSITION_GAIN = 0.2
+# A pressing finger that closed faster than this many times its speed over the last PRESS_SPEED_WINDOW_S has lost
+# the object: speed-limited again. From positions over a window: the deformable contact leaves a pressed finger's
+# joint velocity meaningless (-12 mm/s at rest) and its step-to-step position jitters by tens of um at 10 N.
+PRESS_SPEED_LIMIT_FACTOR = 2.0
+PRESS_SPEED_WINDOW_S = 0.01
 # Links whose contacts make up the external wrench: hand and both fingers.
 HAND_LINK_NAMES = ("panda_hand", "panda_leftfinger", "panda_rightfinger")
 TCP_LINK_NAME = "panda_grasptarget"
@@ -140,6 +146,7 @@ class SimCell:
         physics.set_friction(c, self.robot, self.finger_joints, cell_objects.MATERIAL.finger_friction)
         self.tracker = TrajectoryTracker(q0)
         self.gripper = GripperController(GRIPPER_MAX_WIDTH_M)
+        self._finger_history = collections.deque()    # (sim s, finger positions) over PRESS_SPEED_WINDOW_S
 
     def close(self):
         if self.client is not None and p.isConnected(self.client):
@@ -225,17 +232,36 @@ class SimCell:
                                     targetVelocities=qd_des, forces=ARM_MAX_TORQUE_NM,
                                     positionGains=[ARM_POSITION_GAIN] * 7, velocityGains=[ARM_VELOCITY_GAIN] * 7,
                                     physicsClientId=c)
-        motor = self.gripper.motor
-        for j in self.finger_joints:
-            p.setJointMotorControl2(self.robot, j, p.POSITION_CONTROL, targetPosition=motor.finger_target_m,
-                                    force=motor.finger_force_n, maxVelocity=motor.finger_speed_mps,
-                                    positionGain=FINGER_POSITION_GAIN, physicsClientId=c)
+        self._drive_fingers(self.gripper.motor)
         p.stepSimulation(physicsClientId=c)
         self.time_s += self.time_step_s
         outcome = self.gripper.update(self.time_s, self.gripper_width_m())
         if outcome is not None and self._pending_token is not None:
             self._outcomes.append((self._pending_token, outcome))
             self._pending_token = None
+
+    def _drive_fingers(self, motor) -> None:
+        """Speed-limited position drive; on the object (motor.press) a force of finger_force_n per finger while
+        the finger closes no faster than its speed. The deformable contact takes a speed-driven finger's momentum
+        each step, so such a drive pressed an FEM body with ~2 N at 0.02 m/s whatever force was asked (measured:
+        docs/real_cell.md, "Grasp force on FEM objects"); a rigid body got the force either way."""
+        c = self.client
+        q = [p.getJointState(self.robot, j, physicsClientId=c)[0] for j in self.finger_joints]
+        self._finger_history.append((self.time_s, q))
+        while self.time_s - self._finger_history[0][0] > PRESS_SPEED_WINDOW_S:
+            self._finger_history.popleft()
+        then_s, before = self._finger_history[0]
+        elapsed_s = max(self.time_s - then_s, self.time_step_s)
+        for j, now_m, before_m in zip(self.finger_joints, q, before):
+            closing_mps = (before_m - now_m) / elapsed_s
+            if motor.press and closing_mps <= PRESS_SPEED_LIMIT_FACTOR * motor.finger_speed_mps:
+                p.setJointMotorControl2(self.robot, j, p.VELOCITY_CONTROL, force=0.0, physicsClientId=c)
+                p.setJointMotorControl2(self.robot, j, p.TORQUE_CONTROL, force=-motor.finger_force_n,
+                                        physicsClientId=c)
+            else:
+                p.setJointMotorControl2(self.robot, j, p.POSITION_CONTROL, targetPosition=motor.finger_target_m,
+                                        force=motor.finger_force_n, maxVelocity=motor.finger_speed_mps,
+                                        positionGain=FINGER_POSITION_GAIN, physicsClientId=c)
 
     def moving(self, time_s: float | None = None) -> bool:
         """Is a trajectory or a gripper command running?"""
