@@ -71,3 +71,17 @@ def test_slow_squeezing_is_not_a_stop():
     ctrl.start_grasp(0.03, 0.005, 0.005, 0.05, 20.0, 0.0)
     squeeze = [0.05 - 0.004 * 0.0005 * i for i in range(1000)]    # 4 mm/s for 0.5 s
     assert _feed(ctrl, squeeze, dt=0.0005) is None
+
+
+def test_a_grasp_presses_once_its_fingers_slow_on_the_object_and_a_move_never_does():
+    """Force control begins where the opening closes slower than half the grasp's speed over a window (the fingers
+    met the object), and lasts until the next command; a move is a speed-driven position move throughout."""
+    ctrl = GripperController(0.08)
+    ctrl.start_grasp(0.0, 0.08, 0.08, 0.02, 10.0, 0.0)
+    closing = [0.08 - 0.02 * 0.001 * i for i in range(1, 200)]          # 0.2 s at the commanded speed
+    assert _feed(ctrl, closing, dt=0.001) is None and not ctrl.motor.press
+    _feed(ctrl, [closing[-1] - 1e-6 * i for i in range(1, 60)], t0=0.2, dt=0.001)    # on the object: ~1 mm/s
+    assert ctrl.motor.press and ctrl.motor.finger_force_n == 10.0
+    ctrl.start_move(0.08, 0.05, 1.0)
+    _feed(ctrl, [closing[-1]] * 100, t0=1.0, dt=0.001)                  # blocked, but a move does not press
+    assert not ctrl.motor.press

@@ -29,7 +29,7 @@ from defgg_ros.sim import physics
 from defgg_ros.sim.cell import objects as cell_objects
 from defgg_ros.sim.cell import soft as cell_soft
 from defgg_ros.sim.cell.camera import DepthCamera, DepthNoise, camera_matrix
-from defgg_ros.sim.cell.gripper import GripperController, GripperOutcome
+from defgg_ros.sim.cell.gripper import GRIPPER_MAX_SPEED_MPS, GripperController, GripperOutcome
 from defgg_ros.sim.cell.trajectory import TrajectoryTracker, make_waypoints
 from defgg_ros.sim.scene_spec import SceneSpec
 
@@ -42,10 +42,11 @@ ARM_MAX_TORQUE_NM = (87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0)
 ARM_POSITION_GAIN = 0.3
 ARM_VELOCITY_GAIN = 1.0
 FINGER_POSITION_GAIN = 0.2
-# A pressing finger that closed faster than this many times its speed over the last PRESS_SPEED_WINDOW_S has lost
-# the object: speed-limited again. From positions over a window: the deformable contact leaves a pressed finger's
-# joint velocity meaningless (-12 mm/s at rest) and its step-to-step position jitters by tens of um at 10 N.
-PRESS_SPEED_LIMIT_FACTOR = 2.0
+# A pressing finger that closed faster than the hand can (franka_gripper's top speed, per finger) over the last
+# PRESS_SPEED_WINDOW_S has lost the object: speed-limited again. From positions over a window: the deformable
+# contact leaves a pressed finger's joint velocity meaningless (-12 mm/s at rest) and its position jitters (at 10 N
+# on the 2e5 Pa block, 2x the 0.01 m/s squeeze speed over 10 ms was exceeded in half the steps).
+PRESS_SPEED_LIMIT_MPS = GRIPPER_MAX_SPEED_MPS / 2
 PRESS_SPEED_WINDOW_S = 0.01
 # Links whose contacts make up the external wrench: hand and both fingers.
 HAND_LINK_NAMES = ("panda_hand", "panda_leftfinger", "panda_rightfinger")
@@ -254,7 +255,7 @@ class SimCell:
         elapsed_s = max(self.time_s - then_s, self.time_step_s)
         for j, now_m, before_m in zip(self.finger_joints, q, before):
             closing_mps = (before_m - now_m) / elapsed_s
-            if motor.press and closing_mps <= PRESS_SPEED_LIMIT_FACTOR * motor.finger_speed_mps:
+            if motor.press and closing_mps <= PRESS_SPEED_LIMIT_MPS:
                 p.setJointMotorControl2(self.robot, j, p.VELOCITY_CONTROL, force=0.0, physicsClientId=c)
                 p.setJointMotorControl2(self.robot, j, p.TORQUE_CONTROL, force=-motor.finger_force_n,
                                         physicsClientId=c)

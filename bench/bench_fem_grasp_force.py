@@ -1,0 +1,148 @@
+"""The force a simulated grasp presses an FEM object with, against the force it was asked for (issue 49).
+
+  .venv/bin/python bench/bench_fem_grasp_force.py [--forces 1 2 5 10 20] [--trial-forces 0.5 1 2 4] [--no-trials]
+
+PyBullet's deformable contact takes the momentum of a finger driven at a speed (POSITION_ or VELOCITY_CONTROL with
+a force limit) each step, so such a finger presses an FEM body with about 2 m v / dt, whatever force it may use;
+a rigid body gets the force limit. franka_gripper's grasp holds its force (docs/real_cell.md, "Grasp force on FEM
+objects"). Two measurements:
+1. The simulated cell's hand (the squeeze bench's jig, the 5 cm cube at 2e5 Pa, closing at 0.02 m/s as the squeeze
+   and a soft pick do): the opening at each force, with the cell's drive (force
+   control once on the object) and with the speed-driven drive it had before 2026-11-30.
+2. The training trials' hand (defgg_ros/sim/hand.py: each finger a velocity drive at the protocol's close speed
+   with the force as its limit): fem_v5's box_flat trial at each FEM modulus, closed with each --trial-forces
+   force, the fingers' mean force after the close (the object sees the mean: the fingers are geared); then how many
+   of fem_v5's FEM trials asked for more than what that modulus's trial pressed with at the largest force.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tarfile
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pybullet as p
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "bench"))
+
+import bench_squeeze_stiffness as squeeze_bench  # noqa: E402
+
+from defgg_ros.data import datagen  # noqa: E402
+from defgg_ros.data.format import TrialRecord  # noqa: E402
+from defgg_ros.sim import trial as trial_mod  # noqa: E402
+from defgg_ros.sim.cell import gripper as cell_gripper  # noqa: E402
+
+LABELS = ROOT / "models" / "train_data_fem_v5.tar.gz"
+SQUEEZE_SPEED_MPS = 0.02
+TRIAL_OBJECT = "box_flat"
+
+
+def cell_squeeze(forces_n, pressing: bool) -> list:
+    """[(force, opening mm)] of the cell's hand on the 2e5 Pa cube, closing on it force by force (the fingers'
+    reported drive force is no measure: a pressed finger's drive switches while it jitters)."""
+    original = cell_gripper.GripperController._check_contact
+    if not pressing:
+        cell_gripper.GripperController._check_contact = lambda self, now_s, width_m: None
+    spec = squeeze_bench.scene_object("cube_5cm", 2e5, 0.0)
+    cell = squeeze_bench.SimCell(replace(squeeze_bench.load_scene(ROOT / "sim_bringup" / "scenes" / "soft_box.yaml"),
+                                         objects=[spec]))
+    try:
+        position, _ = cell.object_poses()[0]
+        ik, _ = squeeze_bench.KIN.top_down_ik((position[0], position[1], squeeze_bench.face_m(spec)[1] / 2), 0.0)
+        for joint, q in zip(cell.arm_joints, ik.q_rad):
+            p.resetJointState(cell.robot, joint, q, 0.0, physicsClientId=cell.client)
+        cell.tracker = type(cell.tracker)(np.asarray(ik.q_rad))
+        cell.advance(0.3)
+        rows = []
+        for force in forces_n:
+            cell.gripper_grasp(0.0, 0.08, 0.08, SQUEEZE_SPEED_MPS, force)
+            for _ in range(500):
+                if cell.advance(0.01):
+                    break
+            cell.advance(0.5)
+            rows.append((force, cell.gripper_width_m() * 1e3))
+        return rows
+    finally:
+        cell.close()
+        cell_gripper.GripperController._check_contact = original
+
+
+class _Measured(Exception):
+    pass
+
+
+def trial_pressed_n(record: dict, force_n: float) -> float:
+    """The trial hand's mean finger force after its close on `record`'s object with `force_n` asked."""
+    init, hold = trial_mod._Trial.__init__, trial_mod._Trial.hold_fingers_for_tests
+    found = []
+
+    def forced_init(self, *args, **kwargs):
+        init(self, *args, **kwargs)
+        self.force_n = force_n
+
+    def measure(self):
+        found.append(sum(self.hand.finger_forces_n()) / 2)
+        raise trial_mod._Abort("measured", "the bench stops here")
+    trial_mod._Trial.__init__, trial_mod._Trial.hold_fingers_for_tests = forced_init, measure
+    try:
+        datagen.run_trial_job(datagen.job_from_record(TrialRecord.from_json(record)))
+    finally:
+        trial_mod._Trial.__init__, trial_mod._Trial.hold_fingers_for_tests = init, hold
+    if not found:
+        raise RuntimeError(f"the trial of {record['object_name']} ended before its close")
+    return found[0]
+
+
+def fem_trials() -> list:
+    with tarfile.open(LABELS) as archive:
+        return [row for name in archive.getnames() if name.endswith(".jsonl")
+                for row in map(json.loads, archive.extractfile(name).read().decode().splitlines())
+                if row["youngs_modulus_pa"] < 1e7 and row["status"] == "ok"]
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], epilog=__doc__.split("\n\n", 1)[1],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--forces", type=float, nargs="+", default=[1.0, 2.0, 5.0, 10.0, 20.0],
+                        help="part 1: grasp forces, N (franka_gripper's grasp force)")
+    parser.add_argument("--trial-forces", type=float, nargs="+", default=[0.5, 1.0, 2.0, 4.0],
+                        help="part 2: forces the trial hand is asked for, N")
+    parser.add_argument("--no-trials", action="store_true", help="part 1 only")
+    args = parser.parse_args(argv)
+    if any(f <= 0 for f in args.forces + args.trial_forces):
+        parser.error("forces must be > 0 N")
+
+    print(f"1. The cell's hand on the 5 cm cube at 2e5 Pa, closing at {SQUEEZE_SPEED_MPS} m/s", flush=True)
+    pressed, driven = cell_squeeze(args.forces, True), cell_squeeze(args.forces, False)
+    print("   asked N | opening mm: pressing (the cell) | speed-driven (before 2026-11-30)")
+    for (force, w_new), (_, w_old) in zip(pressed, driven):
+        print(f"   {force:7.1f} | {w_new:8.3f} | {w_old:8.3f}")
+    if args.no_trials:
+        return 0
+
+    trials = fem_trials()
+    print(f"2. The trial hand (fem_v5's {TRIAL_OBJECT} trial at each modulus): mean finger force after the close",
+          flush=True)
+    ceilings = {}
+    for modulus in sorted({row["youngs_modulus_pa"] for row in trials}):
+        record = next(row for row in trials if row["object_name"] == TRIAL_OBJECT
+                      and row["youngs_modulus_pa"] == modulus)
+        found = [trial_pressed_n(record, force) for force in args.trial_forces]
+        ceilings[modulus] = found[-1]
+        print(f"   {modulus:.0e} Pa: " + ", ".join(f"{a:g} N -> {f:.2f} N" for a, f in zip(args.trial_forces, found)),
+              flush=True)
+    above = [row for row in trials if row["grasp_force_n"] > 1.05 * ceilings[row["youngs_modulus_pa"]]]
+    print(f"   fem_v5's FEM trials asking more than 1.05 x their modulus's pressed force at "
+          f"{args.trial_forces[-1]:g} N: {len(above)} of {len(trials)}; "
+          + ", ".join(f"{m:.0e} Pa {sum(r['youngs_modulus_pa'] == m for r in above)} of "
+                      f"{sum(r['youngs_modulus_pa'] == m for r in trials)}" for m in sorted(ceilings)))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
