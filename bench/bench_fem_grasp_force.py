@@ -20,11 +20,7 @@ import argparse
 import json
 import sys
 import tarfile
-from dataclasses import replace
 from pathlib import Path
-
-import numpy as np
-import pybullet as p
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -35,7 +31,6 @@ import bench_squeeze_stiffness as squeeze_bench  # noqa: E402
 from defgg_ros.data import datagen  # noqa: E402
 from defgg_ros.data.format import TrialRecord  # noqa: E402
 from defgg_ros.sim import trial as trial_mod  # noqa: E402
-from defgg_ros.sim.cell import gripper as cell_gripper  # noqa: E402
 
 LABELS = ROOT / "models" / "train_data_fem_v5.tar.gz"
 SQUEEZE_SPEED_MPS = 0.02
@@ -45,20 +40,13 @@ TRIAL_OBJECT = "box_flat"
 def cell_squeeze(forces_n, pressing: bool) -> list:
     """[(force, opening mm)] of the cell's hand on the 2e5 Pa cube, closing on it force by force (the fingers'
     reported drive force is no measure: a pressed finger's drive switches while it jitters)."""
-    original = cell_gripper.GripperController._check_contact
-    if not pressing:
-        cell_gripper.GripperController._check_contact = lambda self, now_s, width_m: None
-    spec = squeeze_bench.scene_object("cube_5cm", 2e5, 0.0)
-    cell = squeeze_bench.SimCell(replace(squeeze_bench.load_scene(ROOT / "sim_bringup" / "scenes" / "soft_box.yaml"),
-                                         objects=[spec]))
-    try:
-        position, _ = cell.object_poses()[0]
-        ik, _ = squeeze_bench.KIN.top_down_ik((position[0], position[1], squeeze_bench.face_m(spec)[1] / 2), 0.0)
-        for joint, q in zip(cell.arm_joints, ik.q_rad):
-            p.resetJointState(cell.robot, joint, q, 0.0, physicsClientId=cell.client)
-        cell.tracker = type(cell.tracker)(np.asarray(ik.q_rad))
-        cell.advance(0.3)
-        rows = []
+    with squeeze_bench.hand_drive("pressing" if pressing else "speed-driven"):
+        return _squeeze_cube(forces_n)
+
+
+def _squeeze_cube(forces_n) -> list:
+    rows = []
+    with squeeze_bench.jig(squeeze_bench.scene_object("cube_5cm", 2e5, 0.0)) as cell:
         for force in forces_n:
             cell.gripper_grasp(0.0, 0.08, 0.08, SQUEEZE_SPEED_MPS, force)
             for _ in range(500):
@@ -66,14 +54,7 @@ def cell_squeeze(forces_n, pressing: bool) -> list:
                     break
             cell.advance(0.5)
             rows.append((force, cell.gripper_width_m() * 1e3))
-        return rows
-    finally:
-        cell.close()
-        cell_gripper.GripperController._check_contact = original
-
-
-class _Measured(Exception):
-    pass
+    return rows
 
 
 def trial_pressed_n(record: dict, force_n: float) -> float:

@@ -11,9 +11,10 @@ the 2e6 Pa rows are over-corrected. Three measurements of giving the Panda's pad
 2. The labels: fem_v5's rigid (2e9 Pa) trials (models/train_data_fem_v5.tar.gz, a seeded sample) re-run with the
    trial hand's pads stiff, and, as the control for the trials' own sensitivity, with the pads' friction moved
    by 1e-6: labels that differ from the stored ones.
-3. The held-out squeeze table (bench_squeeze_stiffness.py's stored FEM readings) estimated with the hand
-   calibration the stiff pads give (the rigid block of 1., its compliance; the noise from four yaws). A row the
-   stored file lacks is squeezed with the stiff pads into a scratch copy; the stored readings are not written.
+3. The held-out squeeze table (bench_squeeze_stiffness.py's stored FEM readings: the speed-driven hand's, --hand)
+   estimated with the hand calibration the stiff pads give (the rigid block of 1., its compliance; the noise from
+   four yaws). A row the stored file lacks is squeezed with the stiff pads into a scratch copy; the stored
+   readings are not written.
 4. (--rigid-objects) The 14 evaluation objects as rigid bodies (2e9 Pa) squeezed with the stiff pads, estimated
    with the stiff calibration of 1. as the executor does (the "section" column's law): are they still read rigid?
    With --trials 0 and --rigid-objects, parts 2 and 3 are skipped (part 3 is --what-if-hand's table).
@@ -172,7 +173,7 @@ def main(argv=None) -> int:
         readings = Path(scratch) / "readings.jsonl"
         shutil.copy(STORED_READINGS, readings)
         return squeeze_bench.main(["--objects", "held_out", "--moduli", "2e4", "2e5", "2e6",
-                                   "--readings", str(readings)])
+                                   "--readings", str(readings), "--hand", "speed-driven"])
 
 
 if __name__ == "__main__":

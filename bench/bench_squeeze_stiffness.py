@@ -22,6 +22,7 @@ prints the hand's stiffness (squeeze.calibrate_hand), the value sim_bringup/conf
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
@@ -42,6 +43,7 @@ from defgg_ros.atomic import atomic_path  # noqa: E402
 from defgg_ros.constants import (  # noqa: E402
     FINGER_DEPTH_M,
     FINGER_PAD_WIDTH_M,
+    MAX_SOFT_BODY_YOUNGS_MODULUS_PA,
     OBJECT_DENSITY_KG_M3,
     PANDA_FINGERTIP_BELOW_TCP_M,
 )
@@ -57,6 +59,7 @@ from defgg_ros.planning.section_outline import SECTION_CELL_M, perceived_section
 from defgg_ros.section_model import SectionError, section_curve  # noqa: E402
 from defgg_ros.sim import meshes  # noqa: E402
 from defgg_ros.sim import objects as sim_objects  # noqa: E402
+from defgg_ros.sim.cell import gripper as cell_gripper  # noqa: E402
 from defgg_ros.sim.cell.objects import centred_surface_mesh  # noqa: E402
 from defgg_ros.sim.cell.sim_cell import SimCell  # noqa: E402
 from defgg_ros.sim.meshes import save_tet_mesh_file  # noqa: E402
@@ -86,6 +89,7 @@ CALIBRATION_BLOCK = "cube_5cm"      # a steel block's stand-in: the 5 cm cube as
 CALIBRATION_YAWS_RAD = (0.0, 0.3, 0.6, 0.9)
 KIN = PandaKinematics()
 MESHES = Path("/tmp/bench_squeeze_meshes")
+HAND_DRIVES = ("pressing", "speed-driven")
 # Wall time of each section model (section_curve) this run, s: what the executor's squeeze waits on at most.
 SECTION_MODEL_S: list = []
 
@@ -249,8 +253,9 @@ def perceived_contacts(spec) -> tuple[PadContacts, tuple, object]:
     return contacts, (point_radii if contacts.radii_m else ()), curve
 
 
-def squeeze_once(spec) -> list:
-    """The readings of one squeeze of `spec` (gentle forces, then firm ones while unresolved)."""
+@contextlib.contextmanager
+def jig(spec):
+    """The jig: a cell with `spec` alone, the arm set at a top-down grasp at half its height (closed after use)."""
     scene = load_scene(ROOT / "sim_bringup" / "scenes" / "soft_box.yaml")
     cell = SimCell(replace(scene, objects=[spec]))
     try:
@@ -260,6 +265,14 @@ def squeeze_once(spec) -> list:
             p.resetJointState(cell.robot, joint, q, 0.0, physicsClientId=cell.client)
         cell.tracker = type(cell.tracker)(np.asarray(ik.q_rad))
         cell.advance(0.3)
+        yield cell
+    finally:
+        cell.close()
+
+
+def squeeze_once(spec) -> list:
+    """The readings of one squeeze of `spec` (gentle forces, then firm ones while unresolved)."""
+    with jig(spec) as cell:
         readings = []
         for force in GENTLE_FORCES_N + FIRM_FORCES_N:
             if force in FIRM_FORCES_N and not needs_firmer(readings, WIDTH_RESOLUTION_M):
@@ -271,8 +284,6 @@ def squeeze_once(spec) -> list:
             cell.advance(0.2)
             readings.append(SqueezeReading(force, cell.gripper_width_m()))
         return readings
-    finally:
-        cell.close()
 
 
 def row_mesh(row: dict) -> str:
@@ -280,18 +291,43 @@ def row_mesh(row: dict) -> str:
     return row.get("mesh", "fTetWild")
 
 
-def cached_readings(path: Path, name: str, modulus_pa: float, yaw_rad: float, mesh_source: str = "shipped") -> list:
-    """The readings of (name, modulus, yaw) on that mesh source from the file, else squeezed now and appended. The
-    boxes (the cell's regular grid) are the same on every machine: any row serves."""
+def row_hand(row: dict) -> str:
+    """A stored FEM row's hand drive (HAND_DRIVES): rows without one were squeezed by the speed-driven hand."""
+    return row.get("hand", "speed-driven")
+
+
+@contextlib.contextmanager
+def hand_drive(drive: str):
+    """The simulated hand as `drive`: "pressing" (the cell's: force control on the object) or "speed-driven" (the
+    cell's before 2026-11-30: an FEM body was pressed with ~2 N at 0.02 m/s whatever the force; docs/real_cell.md,
+    "Grasp force on FEM objects"), for the squeezes made inside."""
+    original = cell_gripper.GripperController._check_contact
+    if drive == "speed-driven":
+        cell_gripper.GripperController._check_contact = lambda self, now_s, width_m: None
+    try:
+        yield
+    finally:
+        cell_gripper.GripperController._check_contact = original
+
+
+def cached_readings(path: Path, name: str, modulus_pa: float, yaw_rad: float, mesh_source: str = "shipped",
+                    drive: str = "pressing") -> list:
+    """The readings of (name, modulus, yaw) on that mesh source and, for an FEM body, that hand drive from the file,
+    else squeezed now and appended. The boxes (the cell's regular grid) are the same on every machine: any row
+    serves; a rigid body is pressed with the force by either drive: any row serves."""
     key = {"object": name, "modulus_pa": modulus_pa, "yaw_rad": round(yaw_rad, 3)}
     if name not in BOXES:
         key["mesh"] = mesh_source
+    if modulus_pa <= MAX_SOFT_BODY_YOUNGS_MODULUS_PA:     # an FEM body
+        key["hand"] = drive
+    read = {"mesh": row_mesh, "hand": row_hand}
     if path.exists():
         for line in path.read_text().splitlines():
             row = json.loads(line)
-            if all((row_mesh(row) if k == "mesh" else row.get(k)) == v for k, v in key.items()):
+            if all(read.get(k, lambda r, k=k: r.get(k))(row) == v for k, v in key.items()):
                 return [SqueezeReading(f, w) for f, w in zip(row["forces_n"], row["widths_m"])]
-    readings = squeeze_once(scene_object(name, modulus_pa, yaw_rad, mesh_source))
+    with hand_drive(drive):
+        readings = squeeze_once(scene_object(name, modulus_pa, yaw_rad, mesh_source))
     with open(path, "a") as out:
         out.write(json.dumps({**key, "forces_n": [r.force_n for r in readings],
                               "widths_m": [r.width_m for r in readings]}) + "\n")
@@ -458,6 +494,10 @@ def main(argv=None) -> int:
                              "fTetWild's mesh of their surface (the rows docs/squeeze.md's tables before "
                              "2026-11-30 read: squeezed on their machine's meshes, which this machine does not have; "
                              "the contacts are perceived on this machine's)")
+    parser.add_argument("--hand", choices=HAND_DRIVES, default="pressing",
+                        help="the simulated hand's drive for FEM bodies: pressing (the cell's since 2026-11-30: the "
+                             "grasp's force on the object) or speed-driven (before: ~2 N at the squeeze's speed "
+                             "whatever the force; the stored rows docs/squeeze.md's figures before that read)")
     parser.add_argument("--calibrate", action="store_true", help="print the hand's calibration and stop")
     parser.add_argument("--section-on-flat-pads", action="store_true",
                         help="the section column uses the section law on flat pads too (the executor keeps the flat "
@@ -493,7 +533,7 @@ def main(argv=None) -> int:
                 spec = scene_object(name, modulus, yaw, args.meshes)
                 radii = contacts_of(spec)
                 try:
-                    readings = cached_readings(args.readings, name, modulus, yaw, args.meshes)
+                    readings = cached_readings(args.readings, name, modulus, yaw, args.meshes, args.hand)
                     estimates = estimates_of(readings, spec, hand, radii, args.section_on_flat_pads)
                     for variant, estimate in estimates.items():
                         by_variant[variant].append(estimate)

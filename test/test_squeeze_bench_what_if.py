@@ -16,8 +16,8 @@ pytestmark = pytest.mark.sim     # renders one object for its perceived contacts
 
 def _bench(tmp_path, *args):
     readings = tmp_path / "readings.jsonl"
-    shutil.copy(STORED, readings)           # a stored row: nothing is squeezed, nothing appended
-    result = subprocess.run([sys.executable, str(BENCH), "--readings", str(readings), *args],
+    shutil.copy(STORED, readings)     # a stored row (the speed-driven hand's): nothing is squeezed or appended
+    result = subprocess.run([sys.executable, str(BENCH), "--readings", str(readings), "--hand", "speed-driven", *args],
                             capture_output=True, text=True, timeout=300)
     assert readings.read_text() == STORED.read_text()
     return result
