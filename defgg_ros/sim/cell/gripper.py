@@ -49,9 +49,10 @@ class MotorCommand:
     finger_target_m: float     # per finger (opening / 2)
     finger_speed_mps: float    # per finger
     finger_force_n: float
-    # On the object: each finger pushes with finger_force_n (force control) while it closes no faster than
-    # finger_speed_mps. franka_gripper's grasp holds its force, not a speed; a speed-driven finger pressed an FEM
-    # body with only ~ its momentum per step (docs/real_cell.md, "Grasp force on FEM objects").
+    # On the object: each finger pushes with finger_force_n (force control; the cell falls back to the speed
+    # drive while a finger closes faster than the hand can: the object is gone). franka_gripper's grasp holds its
+    # force, not a speed; a speed-driven finger pressed an FEM body with only ~ its momentum per step
+    # (docs/real_cell.md, "Grasp force on FEM objects").
     press: bool = False
 
 

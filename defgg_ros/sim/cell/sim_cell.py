@@ -243,9 +243,10 @@ class SimCell:
 
     def _drive_fingers(self, motor) -> None:
         """Speed-limited position drive; on the object (motor.press) a force of finger_force_n per finger while
-        the finger closes no faster than its speed. The deformable contact takes a speed-driven finger's momentum
-        each step, so such a drive pressed an FEM body with ~2 N at 0.02 m/s whatever force was asked (measured:
-        docs/real_cell.md, "Grasp force on FEM objects"); a rigid body got the force either way."""
+        the finger closes no faster than the hand can (PRESS_SPEED_LIMIT_MPS). The deformable contact takes a
+        speed-driven finger's momentum each step, so such a drive pressed an FEM body with ~2 N at 0.02 m/s whatever
+        force was asked (measured: docs/real_cell.md, "Grasp force on FEM objects"); a rigid body got the force
+        either way."""
         c = self.client
         q = [p.getJointState(self.robot, j, physicsClientId=c)[0] for j in self.finger_joints]
         self._finger_history.append((self.time_s, q))
