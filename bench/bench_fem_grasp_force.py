@@ -13,14 +13,23 @@ objects"). Two measurements:
    with the force as its limit): fem_v5's box_flat trial at each FEM modulus, closed with each --trial-forces
    force, the fingers' mean force after the close (the object sees the mean: the fingers are geared); then how many
    of fem_v5's FEM trials asked for more than what that modulus's trial pressed with at the largest force.
+3. (--relabel N) What a trial hand that presses as the cell's does would change: a seeded sample of N of those
+   trials, and N of the others (the control: they asked no more than the hand pressed), re-run with each finger
+   pushing with the trial's force once the fingers are on the object (the cell's rule: closing slower than half
+   the close speed over 20 ms; a speed drive again while a finger closes faster than that speed): labels that
+   differ from the stored ones. A bench-only hand: the trial hand itself is unchanged.
 """
 from __future__ import annotations
 
 import argparse
+import collections
 import json
+import random
 import sys
 import tarfile
 from pathlib import Path
+
+import pybullet as p
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -30,7 +39,10 @@ import bench_squeeze_stiffness as squeeze_bench  # noqa: E402
 
 from defgg_ros.data import datagen  # noqa: E402
 from defgg_ros.data.format import TrialRecord  # noqa: E402
+from defgg_ros.sim import hand as trial_hand  # noqa: E402
 from defgg_ros.sim import trial as trial_mod  # noqa: E402
+from defgg_ros.sim import world as trial_world  # noqa: E402
+from defgg_ros.sim.cell.gripper import CONTACT_SPEED_FRACTION, CONTACT_WINDOW_S  # noqa: E402
 
 LABELS = ROOT / "models" / "train_data_fem_v5.tar.gz"
 SQUEEZE_SPEED_MPS = 0.02
@@ -79,6 +91,85 @@ def trial_pressed_n(record: dict, force_n: float) -> float:
     return found[0]
 
 
+class PressingTrialHand:
+    """Part 3's trial hand: after Hand.close, each step (World.step) a finger on the object pushes with the close's
+    force (torque control) while it closes no faster than the close speed, else the close's speed drive; until the
+    fingers are locked or a new hand is made. Patches hand.Hand and world.World while in use."""
+
+    def __init__(self):
+        self.state = {}        # client -> the running close
+
+    def __enter__(self):
+        self.saved = (trial_hand.create_hand, trial_hand.Hand.close, trial_hand.Hand.lock_fingers,
+                      trial_world.World.step)
+        create, close, lock, _ = self.saved
+        state = self.state
+
+        def create_hand(client, *args, **kwargs):
+            state.pop(client, None)
+            return create(client, *args, **kwargs)
+
+        def hand_close(hand, force_n, speed_mps):
+            close(hand, force_n, speed_mps)
+            state[hand.client] = {"hand": hand, "force_n": force_n, "speed_mps": speed_mps, "t_s": 0.0,
+                                  "history": collections.deque(), "press": False}
+
+        def lock_fingers(hand):
+            state.pop(hand.client, None)
+            lock(hand)
+
+        def world_step(world, n: int = 1):
+            for _ in range(n):
+                close_state = state.get(world.client)
+                if close_state is not None:
+                    self._drive(close_state, world.time_step_s)
+                p.stepSimulation(physicsClientId=world.client)
+        trial_hand.create_hand, trial_hand.Hand.close, trial_hand.Hand.lock_fingers = create_hand, hand_close, \
+            lock_fingers
+        trial_world.World.step = world_step
+        return self
+
+    def __exit__(self, *exc):
+        trial_hand.create_hand, trial_hand.Hand.close, trial_hand.Hand.lock_fingers, trial_world.World.step = \
+            self.saved
+
+    @staticmethod
+    def _drive(close: dict, dt_s: float) -> None:
+        hand, client = close["hand"], close["hand"].client
+        q = [p.getJointState(hand.body_id, j, physicsClientId=client)[0] for j in hand.FINGER_LINKS]
+        close["t_s"] += dt_s
+        history = close["history"]
+        history.append((close["t_s"], q))
+        while close["t_s"] - history[0][0] > CONTACT_WINDOW_S:
+            history.popleft()
+        then_s, before = history[0]
+        elapsed_s = close["t_s"] - then_s
+        closing_mps = [(b - n) / elapsed_s if elapsed_s > 0 else 0.0 for b, n in zip(before, q)]
+        if not close["press"] and elapsed_s >= CONTACT_WINDOW_S * 0.99:
+            close["press"] = max(closing_mps) < CONTACT_SPEED_FRACTION * close["speed_mps"]
+        for j, speed in zip(hand.FINGER_LINKS, closing_mps):
+            if close["press"] and speed <= close["speed_mps"]:
+                p.setJointMotorControl2(hand.body_id, j, p.VELOCITY_CONTROL, force=0.0, physicsClientId=client)
+                p.setJointMotorControl2(hand.body_id, j, p.TORQUE_CONTROL, force=-close["force_n"],
+                                        physicsClientId=client)
+            else:
+                p.setJointMotorControl2(hand.body_id, j, p.VELOCITY_CONTROL, targetVelocity=-close["speed_mps"],
+                                        force=close["force_n"], physicsClientId=client)
+
+
+def relabel_with_pressing_hand(records: list) -> list:
+    """(stored label, new label, stored shake mean, new shake mean) of each record re-run with PressingTrialHand."""
+    out = []
+    with PressingTrialHand():
+        for stored in records:
+            new = datagen.run_trial_job(datagen.job_from_record(TrialRecord.from_json(stored)))
+            out.append((stored.get("label"), new.get("label"), stored.get("shake_mean_mps2"),
+                        new.get("shake_mean_mps2")))
+            print(f"   {stored['object_name']:18s} {stored['youngs_modulus_pa']:.0e} Pa "
+                  f"{stored['grasp_force_n']:.2f} N: label {stored.get('label')} -> {new.get('label')}", flush=True)
+    return out
+
+
 def fem_trials() -> list:
     with tarfile.open(LABELS) as archive:
         return [row for name in archive.getnames() if name.endswith(".jsonl")
@@ -94,6 +185,10 @@ def main(argv=None) -> int:
     parser.add_argument("--trial-forces", type=float, nargs="+", default=[0.5, 1.0, 2.0, 4.0],
                         help="part 2: forces the trial hand is asked for, N")
     parser.add_argument("--no-trials", action="store_true", help="part 1 only")
+    parser.add_argument("--relabel", type=int, default=0, metavar="N",
+                        help="part 3: re-run N of the trials that asked for more, and N of the others, with a "
+                             "pressing trial hand (~20-40 CPU s each)")
+    parser.add_argument("--seed", type=int, default=0, help="part 3's sample")
     args = parser.parse_args(argv)
     if any(f <= 0 for f in args.forces + args.trial_forces):
         parser.error("forces must be > 0 N")
@@ -122,6 +217,17 @@ def main(argv=None) -> int:
           f"{args.trial_forces[-1]:g} N: {len(above)} of {len(trials)}; "
           + ", ".join(f"{m:.0e} Pa {sum(r['youngs_modulus_pa'] == m for r in above)} of "
                       f"{sum(r['youngs_modulus_pa'] == m for r in trials)}" for m in sorted(ceilings)))
+    if args.relabel > 0:
+        below = [row for row in trials if row not in above]
+        rng = random.Random(args.seed)
+        for name, group in (("asked for more", above), ("control", below)):
+            sample = rng.sample(group, min(args.relabel, len(group)))
+            print(f"3. {len(sample)} trials that {name if name != 'control' else 'asked no more (control)'}, "
+                  "re-run with a pressing trial hand:", flush=True)
+            found = relabel_with_pressing_hand(sample)
+            differ = sum(a != b for a, b, _, _ in found)
+            print(f"   {name}: {differ} of {len(found)} labels differ "
+                  f"({sum(a is False and b is True for a, b, _, _ in found)} negative -> positive)", flush=True)
     return 0
 
 
