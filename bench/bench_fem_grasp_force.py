@@ -94,20 +94,24 @@ def trial_pressed_n(record: dict, force_n: float) -> float:
 class PressingTrialHand:
     """Part 3's trial hand: after Hand.close, each step (World.step) a finger on the object pushes with the close's
     force (torque control) while it closes no faster than the close speed, else the close's speed drive; until the
-    fingers are locked or a new hand is made. Patches hand.Hand and world.World while in use."""
+    fingers are locked or a new hand or world is made. Patches sim.hand and sim.world while in use."""
 
     def __init__(self):
         self.state = {}        # client -> the running close
 
     def __enter__(self):
         self.saved = (trial_hand.create_hand, trial_hand.Hand.close, trial_hand.Hand.lock_fingers,
-                      trial_world.World.step)
-        create, close, lock, _ = self.saved
+                      trial_world.World.step, trial_world.create_world)
+        create, close, lock, _, new_world = self.saved
         state = self.state
 
         def create_hand(client, *args, **kwargs):
             state.pop(client, None)
             return create(client, *args, **kwargs)
+
+        def create_world(client, *args, **kwargs):      # a new trial: the last trial's hand is gone
+            state.pop(client, None)
+            return new_world(client, *args, **kwargs)
 
         def hand_close(hand, force_n, speed_mps):
             close(hand, force_n, speed_mps)
@@ -126,12 +130,12 @@ class PressingTrialHand:
                 p.stepSimulation(physicsClientId=world.client)
         trial_hand.create_hand, trial_hand.Hand.close, trial_hand.Hand.lock_fingers = create_hand, hand_close, \
             lock_fingers
-        trial_world.World.step = world_step
+        trial_world.World.step, trial_world.create_world = world_step, create_world
         return self
 
     def __exit__(self, *exc):
-        trial_hand.create_hand, trial_hand.Hand.close, trial_hand.Hand.lock_fingers, trial_world.World.step = \
-            self.saved
+        (trial_hand.create_hand, trial_hand.Hand.close, trial_hand.Hand.lock_fingers, trial_world.World.step,
+         trial_world.create_world) = self.saved
 
     @staticmethod
     def _drive(close: dict, dt_s: float) -> None:
