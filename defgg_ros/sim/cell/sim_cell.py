@@ -48,6 +48,11 @@ FINGER_POSITION_GAIN = 0.2
 # on the 2e5 Pa block, 2x the 0.01 m/s squeeze speed over 10 ms was exceeded in half the steps).
 PRESS_SPEED_LIMIT_MPS = GRIPPER_MAX_SPEED_MPS / 2
 PRESS_SPEED_WINDOW_S = 0.01
+# Viscous damping of each finger joint (N s/m), as a force-controlled hand's drive has. Without it a pressed finger
+# rang on an FEM ball (the 2e5 Pa ball in the squeeze bench's jig, 2026-11-30): grasps took up to 3.8 s to stop, one
+# of 14 timed out (5 s), steps 0.59 / 0.93 / 0.33 mm; with it every grasp stopped in 0.19-0.23 s, steps 0.64 /
+# 0.64 / 0.64 mm. 30 is near critical for a finger (0.1 kg) on such a contact (~2 kN/m).
+FINGER_JOINT_DAMPING_NSPM = 30.0
 # Links whose contacts make up the external wrench: hand and both fingers.
 HAND_LINK_NAMES = ("panda_hand", "panda_leftfinger", "panda_rightfinger")
 TCP_LINK_NAME = "panda_grasptarget"
@@ -145,6 +150,8 @@ class SimCell:
         physics.couple_fingers(c, self.robot, self.finger_joints[0], self.finger_joints[1], max_force_n=200,
                                erp=0.1)
         physics.set_friction(c, self.robot, self.finger_joints, cell_objects.MATERIAL.finger_friction)
+        for j in self.finger_joints:
+            p.changeDynamics(self.robot, j, jointDamping=FINGER_JOINT_DAMPING_NSPM, physicsClientId=c)
         self.tracker = TrajectoryTracker(q0)
         self.gripper = GripperController(GRIPPER_MAX_WIDTH_M)
         self._finger_history = collections.deque()    # (sim s, finger positions) over PRESS_SPEED_WINDOW_S
