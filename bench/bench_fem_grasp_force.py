@@ -23,10 +23,8 @@ from __future__ import annotations
 
 import argparse
 import collections
-import json
 import random
 import sys
-import tarfile
 from pathlib import Path
 
 import pybullet as p
@@ -35,6 +33,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
+import bench_pad_contact_stiffness as pad_bench  # noqa: E402
 import bench_squeeze_stiffness as squeeze_bench  # noqa: E402
 
 from defgg_ros.data import datagen  # noqa: E402
@@ -44,7 +43,6 @@ from defgg_ros.sim import trial as trial_mod  # noqa: E402
 from defgg_ros.sim import world as trial_world  # noqa: E402
 from defgg_ros.sim.cell.gripper import CONTACT_SPEED_FRACTION, CONTACT_WINDOW_S  # noqa: E402
 
-LABELS = ROOT / "models" / "train_data_fem_v5.tar.gz"
 SQUEEZE_SPEED_MPS = 0.02
 TRIAL_OBJECT = "box_flat"
 
@@ -162,23 +160,21 @@ class PressingTrialHand:
 
 
 def relabel_with_pressing_hand(records: list) -> list:
-    """(stored label, new label, stored shake mean, new shake mean) of each record re-run with PressingTrialHand."""
+    """(stored label, new label) of each record re-run with PressingTrialHand."""
     out = []
     with PressingTrialHand():
         for stored in records:
             new = datagen.run_trial_job(datagen.job_from_record(TrialRecord.from_json(stored)))
-            out.append((stored.get("label"), new.get("label"), stored.get("shake_mean_mps2"),
-                        new.get("shake_mean_mps2")))
+            out.append((stored.get("label"), new.get("label")))
             print(f"   {stored['object_name']:18s} {stored['youngs_modulus_pa']:.0e} Pa "
                   f"{stored['grasp_force_n']:.2f} N: label {stored.get('label')} -> {new.get('label')}", flush=True)
     return out
 
 
 def fem_trials() -> list:
-    with tarfile.open(LABELS) as archive:
-        return [row for name in archive.getnames() if name.endswith(".jsonl")
-                for row in map(json.loads, archive.extractfile(name).read().decode().splitlines())
-                if row["youngs_modulus_pa"] < 1e7 and row["status"] == "ok"]
+    """fem_v5's simulated (status ok) FEM trials."""
+    return [row for row in pad_bench.stored_trials()
+            if row["youngs_modulus_pa"] < 1e7 and row["status"] == "ok"]
 
 
 def main(argv=None) -> int:
@@ -229,9 +225,9 @@ def main(argv=None) -> int:
             print(f"3. {len(sample)} trials that {name if name != 'control' else 'asked no more (control)'}, "
                   "re-run with a pressing trial hand:", flush=True)
             found = relabel_with_pressing_hand(sample)
-            differ = sum(a != b for a, b, _, _ in found)
+            differ = sum(a != b for a, b in found)
             print(f"   {name}: {differ} of {len(found)} labels differ "
-                  f"({sum(a is False and b is True for a, b, _, _ in found)} negative -> positive)", flush=True)
+                  f"({sum(a is False and b is True for a, b in found)} negative -> positive)", flush=True)
     return 0
 
 

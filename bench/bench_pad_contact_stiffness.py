@@ -79,14 +79,21 @@ def squeezes(stiffness_npm: float) -> dict:
     return out
 
 
-def rigid_trials(n: int) -> list:
-    """A seeded sample of fem_v5's stored 2e9 Pa trial records."""
+def stored_trials(file_part: str = "") -> list:
+    """fem_v5's stored trial records (models/train_data_fem_v5.tar.gz), from the trial files whose name holds
+    `file_part` (e.g. "__E2e+09": the rigid ones), in the archive's order."""
     records = []
     with tarfile.open(LABELS) as tar:
         for member in tar.getmembers():
-            if member.name.startswith("train_data/trials/") and "__E2e+09" in member.name:
+            if member.name.startswith("train_data/trials/") and file_part in member.name:
                 text = io.TextIOWrapper(tar.extractfile(member), encoding="utf-8").read()
                 records += [json.loads(line) for line in text.splitlines() if line.strip()]
+    return records
+
+
+def rigid_trials(n: int) -> list:
+    """A seeded sample of fem_v5's stored 2e9 Pa trial records."""
+    records = stored_trials("__E2e+09")
     records.sort(key=lambda r: r["trial_id"] if "trial_id" in r else (r["scene_id"], r["candidate_index"]))
     random.Random(0).shuffle(records)
     return records[:n]

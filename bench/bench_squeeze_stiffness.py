@@ -320,11 +320,11 @@ def cached_readings(path: Path, name: str, modulus_pa: float, yaw_rad: float, me
         key["mesh"] = mesh_source
     if modulus_pa <= MAX_SOFT_BODY_YOUNGS_MODULUS_PA:     # an FEM body
         key["hand"] = drive
-    read = {"mesh": row_mesh, "hand": row_hand}
+    defaulted = {"mesh": row_mesh, "hand": row_hand}     # fields older rows lack
     if path.exists():
         for line in path.read_text().splitlines():
             row = json.loads(line)
-            if all(read.get(k, lambda r, k=k: r.get(k))(row) == v for k, v in key.items()):
+            if all((defaulted[k](row) if k in defaulted else row.get(k)) == v for k, v in key.items()):
                 return [SqueezeReading(f, w) for f, w in zip(row["forces_n"], row["widths_m"])]
     with hand_drive(drive):
         readings = squeeze_once(scene_object(name, modulus_pa, yaw_rad, mesh_source))
