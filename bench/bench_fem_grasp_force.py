@@ -42,6 +42,7 @@ from defgg_ros.sim import hand as trial_hand  # noqa: E402
 from defgg_ros.sim import trial as trial_mod  # noqa: E402
 from defgg_ros.sim import world as trial_world  # noqa: E402
 from defgg_ros.sim.cell.gripper import CONTACT_SPEED_FRACTION, CONTACT_WINDOW_S  # noqa: E402
+from defgg_ros.sim.cell.sim_cell import FINGER_JOINT_DAMPING_NSPM  # noqa: E402
 
 SQUEEZE_SPEED_MPS = 0.02
 TRIAL_OBJECT = "box_flat"
@@ -87,6 +88,25 @@ def trial_pressed_n(record: dict, force_n: float) -> float:
     if not found:
         raise RuntimeError(f"the trial of {record['object_name']} ended before its close")
     return found[0]
+
+
+def ball_squeezes(damping_nspm: float, yaw_rad: float) -> tuple[list, list]:
+    """--ringing: the 2e5 Pa ball in the jig, the pressing hand with this finger damping: each grasp's time to stop
+    (s; None: timed out) and the 0.5 N steps (mm)."""
+    stops, openings = [], []
+    with squeeze_bench.jig(squeeze_bench.scene_object("common_ball", 2e5, yaw_rad)) as cell:
+        for joint in cell.finger_joints:
+            p.changeDynamics(cell.robot, joint, jointDamping=damping_nspm, physicsClientId=cell.client)
+        for force in (0.5, 1.0, 1.5, 2.0):
+            cell.gripper_grasp(0.0, 0.08, 0.08, SQUEEZE_SPEED_MPS, force)
+            start_s, outcome = cell.time_s, []
+            for _ in range(600):
+                outcome = cell.advance(0.01)
+                if outcome:
+                    break
+            stops.append(round(cell.time_s - start_s, 2) if outcome and outcome[0][1].success else None)
+            openings.append(cell.gripper_width_m() * 1e3)
+    return stops, [round(a - b, 2) for a, b in zip(openings, openings[1:])]
 
 
 class PressingTrialHand:
@@ -185,6 +205,9 @@ def main(argv=None) -> int:
     parser.add_argument("--trial-forces", type=float, nargs="+", default=[0.5, 1.0, 2.0, 4.0],
                         help="part 2: forces the trial hand is asked for, N")
     parser.add_argument("--no-trials", action="store_true", help="part 1 only")
+    parser.add_argument("--ringing", action="store_true",
+                        help="also: the FEM ball squeezed by the pressing hand with and without the fingers' damping "
+                             "(sim_cell.FINGER_JOINT_DAMPING_NSPM): time to stop and steps")
     parser.add_argument("--relabel", type=int, default=0, metavar="N",
                         help="part 3: re-run N of the trials that asked for more, and N of the others, with a "
                              "pressing trial hand (~20-40 CPU s each)")
@@ -198,6 +221,12 @@ def main(argv=None) -> int:
     print("   asked N | opening mm: pressing (the cell) | speed-driven (before 2026-11-30)")
     for (force, w_new), (_, w_old) in zip(pressed, driven):
         print(f"   {force:7.1f} | {w_new:8.3f} | {w_old:8.3f}")
+    if args.ringing:
+        for damping in (FINGER_JOINT_DAMPING_NSPM, 0.0):
+            for yaw in (0.0, 2.0):
+                stops, steps = ball_squeezes(damping, yaw)
+                print(f"   the ball, yaw {yaw}, finger damping {damping:g} N s/m: grasps stopped after {stops} s "
+                      f"(None: timed out), steps {steps} mm", flush=True)
     if args.no_trials:
         return 0
 
