@@ -48,6 +48,8 @@ Signal report (do the labels carry "stiffness changes which grasp is good"?):
   defgg-datagen signal datasets/fem_v4 [--json out.json] [--md out.md] [--png out.png]
 Seal a finished dataset (compress its trial files; the fingerprint stays):
   defgg-datagen seal datasets/fem_v4
+Re-run a dataset's trials under a changed setting (e.g. the hand pressing as the cell's; relabel --help):
+  defgg-datagen relabel datasets/fem_v5 --out datasets/fem_v5_press --settings '{"finger_drive": "press"}'
 """
 
 
@@ -56,7 +58,9 @@ def build_parser() -> argparse.ArgumentParser:
                                  usage="%(prog)s --out DIR [options]   (generate or resume a dataset)\n"
                                        "       %(prog)s signal FOLDER [--json F] [--md F] [--png F]   "
                                        "(its signal report; signal --help)\n"
-                                       "       %(prog)s seal FOLDER   (compress a finished dataset)")
+                                       "       %(prog)s seal FOLDER   (compress a finished dataset)\n"
+                                       "       %(prog)s relabel SOURCE --out DIR --settings JSON   "
+                                       "(re-run stored trials; relabel --help)")
     ap.add_argument("--out", type=Path, required=True, help="dataset folder (created or resumed)")
     ap.add_argument("--object-set", default="train", choices=("train", "common", "adversarial"),
                     help="object library set (default: train; the others are held out for evaluation)")
@@ -163,8 +167,61 @@ def signal_main(argv) -> int:
     return 0
 
 
+def build_relabel_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(
+        prog="defgg-datagen relabel", formatter_class=HelpFormatter,
+        description="Re-run a dataset's stored trials (same objects, poses, grasps and seeds) under changed trial "
+                    "settings; new records go to OUT/trials under the source's file names, what changed to "
+                    "OUT/relabel.md. The trials asking the largest grip force run first. Resumable: rerun the same "
+                    "command.",
+        epilog="Example (the hand pressing with its force, as the cell's; docs/dataset.md 'Finger drive'):\n"
+               "  defgg-datagen relabel datasets/fem_v5 --out datasets/fem_v5_press "
+               "--settings '{\"finger_drive\": \"press\"}' --workers 2")
+    ap.add_argument("source", type=Path, help="the dataset whose trials are re-run (read only)")
+    ap.add_argument("--out", type=Path, required=True, help="folder of the new records (created or resumed)")
+    ap.add_argument("--settings", required=True,
+                    help='JSON TrialSettings overrides, e.g. \'{"finger_drive": "press"}\'')
+    ap.add_argument("--max-youngs-modulus-pa", type=float, default=1e7,
+                    help="only trials on objects at most this stiff (default 1e7: the FEM bodies, not the 2e9 Pa "
+                         "rigid stand-ins)")
+    ap.add_argument("--min-grasp-force-n", type=float, default=0.0,
+                    help="only trials that asked at least this force a finger (N)")
+    ap.add_argument("--limit", type=int, default=None, help="re-run at most this many of the pending trials")
+    ap.add_argument("--workers", type=int, default=1, help="parallel worker processes")
+    ap.add_argument("--no-progress", action="store_true", help="no progress bar (a line per 10 %% instead)")
+    return ap
+
+
+def relabel_main(argv) -> int:
+    from defgg_ros.data.relabel import RelabelSpec, run
+
+    args = build_relabel_parser().parse_args(argv)
+    try:
+        settings = json.loads(args.settings)
+        if not isinstance(settings, dict) or not settings:
+            raise TypeError("--settings must be a non-empty JSON object (what to change)")
+        TrialSettings().with_fields(**settings)
+    except (json.JSONDecodeError, TypeError, ValueError) as exc:
+        print(f"defgg-datagen relabel: bad --settings: {exc}", file=sys.stderr)
+        return 2
+    if args.workers < 1 or (args.limit is not None and args.limit < 0):
+        print("defgg-datagen relabel: --workers must be >= 1 and --limit >= 0", file=sys.stderr)
+        return 2
+    spec = RelabelSpec(args.source, args.out, settings, args.max_youngs_modulus_pa, args.min_grasp_force_n)
+    try:
+        counts = run(spec, workers=args.workers, limit=args.limit, progress=not args.no_progress)
+    except (DatasetError, OSError) as exc:
+        print(f"defgg-datagen relabel: error: {exc}", file=sys.stderr)
+        return 2
+    print(json.dumps(counts))
+    print((args.out / "relabel.md").read_text(encoding="utf-8"), end="")
+    return 0
+
+
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["relabel"]:
+        return relabel_main(argv[1:])
     if argv[:1] == ["signal"]:
         return signal_main(argv[1:])
     if argv[:1] == ["seal"]:

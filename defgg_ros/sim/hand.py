@@ -14,7 +14,7 @@ non-backdrivable hand.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import pybullet as p
@@ -28,6 +28,7 @@ from defgg_ros.constants import (
     PANDA_HAND_PALM_SIZE_M,
 )
 from defgg_ros.sim import physics
+from defgg_ros.sim.finger_press import PressingClose
 from defgg_ros.sim.physics import DEFAULT_FRICTION
 
 PALM_MASS_KG = 0.5
@@ -40,6 +41,13 @@ GEAR_FORCE_N = 500.0
 # position drive (gear released) kept ~60 %. Measured again by bench/bench_finger_lock.py.
 LOCK_FORCE_N = 500.0
 LOCK_POSITION_GAIN = 1.0
+
+
+def speed_drive_ceiling_n(time_step_s: float, close_speed_mps: float) -> float:
+    """The most a speed-driven finger (close(press=False)) presses an FEM body with, whatever force it is given: the
+    deformable contact takes about its momentum every step (measured 0.88-1.03 N at 0.1 m/s and 0.5 ms steps, ~2 N at
+    0.25 ms: bench/bench_fem_grasp_force.py part 2)."""
+    return FINGER_MASS_KG * close_speed_mps / time_step_s
 
 
 def finger_box_centre_z_m() -> float:
@@ -80,6 +88,9 @@ class Hand:
     body_id: int
     constraint_id: int
     gear_id: int
+    # The running pressing close (close(press=True)) until the fingers are locked; None: speed-driven.
+    pressing: PressingClose | None = field(default=None, repr=False)
+    clock_s: float = 0.0          # sim time the pressing close has been fed (drive())
 
     FINGER_LINKS = (0, 1)
 
@@ -91,18 +102,46 @@ class Hand:
         for j in self.FINGER_LINKS:
             p.resetJointState(self.body_id, j, opening_m / 2, 0.0, physicsClientId=self.client)
 
-    def close(self, force_n: float, speed_mps: float) -> None:
-        """Each finger pushes towards the TCP at `speed_mps` with at most `force_n` (force-limited close)."""
+    def close(self, force_n: float, speed_mps: float, press: bool = False) -> None:
+        """Each finger closes towards the TCP at `speed_mps` with at most `force_n`. press=False: a speed drive
+        (the labels of fem_v1-v5; on an FEM body it pushes with only ~2 m v / dt, ~1 N here). press=True: the
+        cell's rule (sim.finger_press): once on the object each finger pushes with `force_n`; drive() before
+        every physics step applies it."""
+        self._force_n, self._speed_mps = force_n, speed_mps
+        self.pressing = PressingClose(speed_mps, speed_mps) if press else None
+        self.clock_s, self._pushing = 0.0, [False] * len(self.FINGER_LINKS)
         for j in self.FINGER_LINKS:
-            p.setJointMotorControl2(self.body_id, j, p.VELOCITY_CONTROL, targetVelocity=-speed_mps,
-                                    force=force_n, physicsClientId=self.client)
+            self._speed_drive(j)
+
+    def _speed_drive(self, joint: int) -> None:
+        p.setJointMotorControl2(self.body_id, joint, p.VELOCITY_CONTROL, targetVelocity=-self._speed_mps,
+                                force=self._force_n, physicsClientId=self.client)
+
+    def drive(self, step_s: float) -> None:
+        """A pressing close's drive for the next step (nothing for a speed drive or locked fingers)."""
+        if self.pressing is None:
+            return
+        q = [p.getJointState(self.body_id, j, physicsClientId=self.client)[0] for j in self.FINGER_LINKS]
+        self._pushing = self.pressing.update(self.clock_s, q, step_s)
+        for j, push in zip(self.FINGER_LINKS, self._pushing):
+            if push:
+                p.setJointMotorControl2(self.body_id, j, p.VELOCITY_CONTROL, force=0.0, physicsClientId=self.client)
+                p.setJointMotorControl2(self.body_id, j, p.TORQUE_CONTROL, force=-self._force_n,
+                                        physicsClientId=self.client)
+            else:
+                self._speed_drive(j)
+        self.clock_s += step_s
 
     def finger_forces_n(self) -> list:
-        """Force each finger's motor applies now (N, positive = closing)."""
-        return [-p.getJointState(self.body_id, j, physicsClientId=self.client)[3] for j in self.FINGER_LINKS]
+        """Force each finger's motor applies now (N, positive = closing); a pushing finger's is the force it was
+        given (PyBullet reports no torque-controlled motor's force)."""
+        pushing = self._pushing if self.pressing is not None else [False] * len(self.FINGER_LINKS)
+        return [self._force_n if push else -p.getJointState(self.body_id, j, physicsClientId=self.client)[3]
+                for j, push in zip(self.FINGER_LINKS, pushing)]
 
     def lock_fingers(self) -> None:
         """Lock both fingers where they are: gear released, each on a stiff position drive."""
+        self.pressing = None
         if self.gear_id is not None:
             p.removeConstraint(self.gear_id, physicsClientId=self.client)
             self.gear_id = None
@@ -143,6 +182,8 @@ class Hand:
 
     def restore_state(self, state: dict) -> None:
         self.reset_pose(state["pose"])
+        if self.pressing is not None:
+            self.pressing.restart_window()
         for j, q in zip(self.FINGER_LINKS, state["q"]):
             p.resetJointState(self.body_id, j, q, 0.0, physicsClientId=self.client)
 

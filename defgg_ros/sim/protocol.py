@@ -9,9 +9,15 @@ FOS * m * g / mu with FOS = 1 + log10(E) / 10, the table moved away for the pick
 (finger_hold), lost as soon as either finger has no contact. Both label a grasp positive when the held shake
 acceleration averaged over 16 directions (each ramped to 50 m/s^2) reaches 25 m/s^2; a failed lift is negative.
 
+Both close the hand with a speed drive (finger_drive "speed": fem_v1-v5's labels), which presses an FEM body with
+~1 N whatever force it is given; finger_drive "press" closes as the cell's hand and franka_gripper do
+(sim/finger_press.py: on the object each finger pushes with the force).
+
 Stored form: records, headers and checkpoints keep a protocol as the flat setting
 {"protocol", "object_friction", "poisson_ratio", "finger_hold", "grip_force_friction"} (None: the named
-protocol's own); from_setting / to_setting convert (a setting without a name is legacy: it predates the field).
+protocol's own), plus "finger_drive" when it is not "speed" (so the stored form, and the keys made from it, of
+everything run before the field stay as they were); from_setting / to_setting convert (a setting without a name
+is legacy: it predates the field).
 No PyBullet here.
 """
 from __future__ import annotations
@@ -26,6 +32,7 @@ from defgg_ros.sim.material import MATERIALS, Material
 
 LEGACY, DEFGRASPSIM = "legacy", "defgraspsim"
 FINGER_HOLDS = ("force", "lock")
+FINGER_DRIVES = ("speed", "press")      # module docstring; "speed" is what every setting without the field ran
 GRIP_FORCE_RULES = ("per_decade", "weight_over_friction")   # legacy's 2 N + 0.5 N/decade; FOS*m*g/mu
 LOSS_RULES = ("both_fingers_or_20mm", "either_finger")
 PICKUPS = ("lift", "table_away")
@@ -33,8 +40,10 @@ LOSS_DISTANCE_M = 0.02          # both_fingers_or_20mm: the object moved this fa
 LABEL_RULE = (f"positive when the held shake acceleration averaged over {SHAKE_DIRECTIONS} directions (each ramped "
               f"to {SHAKE_ACCEL_LIMIT_MPS2:g} m/s^2) reaches {SHAKE_POSITIVE_THRESHOLD_MPS2:g} m/s^2; a failed lift is "
               "negative")
-# The fields of the stored form, in the order records have always listed them.
+# The fields of the stored form, in the order records have always listed them; OPTIONAL_SETTING_FIELDS appear only
+# when they differ from the value they had before they existed.
 SETTING_FIELDS = ("protocol", "object_friction", "poisson_ratio", "finger_hold", "grip_force_friction")
+OPTIONAL_SETTING_FIELDS = {"finger_drive": "speed"}
 
 
 @dataclass(frozen=True)
@@ -53,6 +62,7 @@ class TrialProtocol:
     # weight_over_friction: the mu the rule divides by; None: the contact's effective friction (DefGraspSim's
     # rule: mu * F = FOS * m * g). A value above the contact's squeezes as if it were grippier (pilot b).
     grip_force_friction: float | None = None
+    finger_drive: str = "speed"   # FINGER_DRIVES (module docstring)
     label_rule: str = LABEL_RULE
 
     def __post_init__(self):
@@ -60,6 +70,8 @@ class TrialProtocol:
             raise ValueError(f"unknown trial protocol {self.name!r}; known: {', '.join(PROTOCOLS_BY_NAME_ORDER)}")
         if self.finger_hold not in FINGER_HOLDS:
             raise ValueError(f"finger_hold must be one of {', '.join(FINGER_HOLDS)}, got {self.finger_hold!r}")
+        if self.finger_drive not in FINGER_DRIVES:
+            raise ValueError(f"finger_drive must be one of {', '.join(FINGER_DRIVES)}, got {self.finger_drive!r}")
         if self.grip_force_friction is not None and not 0.0 < self.grip_force_friction <= 2.0:
             raise ValueError(f"grip_force_friction must be in (0, 2], got {self.grip_force_friction}")
         for value, known in ((self.pickup, PICKUPS), (self.grip_force_rule, GRIP_FORCE_RULES),
@@ -111,10 +123,13 @@ class TrialProtocol:
                "finger_hold": self.finger_hold, "grip_force_friction": self.grip_force_friction}
         differs = {"object_friction": own["object_friction"] != base.material.object_friction,
                    "poisson_ratio": own["poisson_ratio"] != base.material.poisson_ratio}
-        return {"protocol": self.name,
-                "object_friction": own["object_friction"] if differs["object_friction"] else None,
-                "poisson_ratio": own["poisson_ratio"] if differs["poisson_ratio"] else None,
-                "finger_hold": own["finger_hold"], "grip_force_friction": own["grip_force_friction"]}
+        stored = {"protocol": self.name,
+                  "object_friction": own["object_friction"] if differs["object_friction"] else None,
+                  "poisson_ratio": own["poisson_ratio"] if differs["poisson_ratio"] else None,
+                  "finger_hold": own["finger_hold"], "grip_force_friction": own["grip_force_friction"]}
+        if self.finger_drive != OPTIONAL_SETTING_FIELDS["finger_drive"]:
+            stored["finger_drive"] = self.finger_drive
+        return stored
 
     @classmethod
     def from_setting(cls, setting: dict) -> TrialProtocol:
@@ -130,7 +145,8 @@ class TrialProtocol:
         if setting.get("poisson_ratio") is not None:
             material = replace(material, poisson_ratio=float(setting["poisson_ratio"]))
         return replace(protocol, material=material, finger_hold=setting.get("finger_hold") or protocol.finger_hold,
-                       grip_force_friction=setting.get("grip_force_friction"))
+                       grip_force_friction=setting.get("grip_force_friction"),
+                       finger_drive=setting.get("finger_drive") or OPTIONAL_SETTING_FIELDS["finger_drive"])
 
     def summary(self) -> str:
         """One line naming the protocol's rules, friction and material (dataset cards, evaluation reports)."""
@@ -144,6 +160,8 @@ class TrialProtocol:
             rule = (f"**defgraspsim** (zero gravity after settling, grip force FOS*m*g/mu{force_mu} split over the "
                     f"fingers, table moved away for the pickup, fingers {hold}, lost when either finger has no "
                     "contact)")
+        if self.finger_drive == "press":
+            rule += " with the pressing hand (each finger pushes with its force on the object, as the cell's)"
         else:
             rule = ("**legacy** (gravity on, 2 N + 0.5 N per decade a finger, fingers force-held, lost when both "
                     "fingers let go or the centroid moved 20 mm)")

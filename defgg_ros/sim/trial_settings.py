@@ -7,7 +7,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, replace
 
 from defgg_ros.constants import SHAKE_ACCEL_LIMIT_MPS2, SHAKE_DIRECTIONS
-from defgg_ros.sim.protocol import DEFAULT_PROTOCOL, SETTING_FIELDS, TrialProtocol
+from defgg_ros.sim.protocol import DEFAULT_PROTOCOL, OPTIONAL_SETTING_FIELDS, SETTING_FIELDS, TrialProtocol
 
 # Confident stop (the surrogate): after k >= CONFIDENT_MIN_DIRECTIONS directions, stop when the
 # measured mean is CONFIDENT_MARGIN_MPS2 / sqrt(k) from the threshold (k=3: >= 36.5 or <= 13.5;
@@ -94,23 +94,24 @@ class TrialSettings:
     def with_fields(self, **flat) -> TrialSettings:
         """These settings with fields changed by their stored names (RECORD_FIELDS); ValueError names an unknown
         one. The protocol's fields (protocol.SETTING_FIELDS) change the protocol."""
-        unknown = sorted(set(flat) - set(RECORD_FIELDS))
+        known = RECORD_FIELDS + tuple(OPTIONAL_SETTING_FIELDS)
+        unknown = sorted(set(flat) - set(known))
         if unknown:
-            raise ValueError(f"unknown trial settings {unknown}; known: {', '.join(RECORD_FIELDS)}")
+            raise ValueError(f"unknown trial settings {unknown}; known: {', '.join(known)}")
         groups = {}
         for group, cls in _GROUPS.items():
             changed = {k: v for k, v in flat.items() if k in cls.__dataclass_fields__}
             groups[group] = replace(getattr(self, group), **changed)
         protocol = self.protocol
-        if any(k in flat for k in SETTING_FIELDS):
+        if any(k in flat for k in SETTING_FIELDS + tuple(OPTIONAL_SETTING_FIELDS)):
             protocol = TrialProtocol.from_setting({**self.protocol.to_setting(), **flat})
         return replace(self, protocol=protocol, **groups)
 
     def to_record(self) -> dict:
-        """The stored form (RECORD_FIELDS)."""
+        """The stored form (RECORD_FIELDS, then the optional fields that differ from their old value)."""
         flat = {**asdict(self.motion), **asdict(self.generator), **asdict(self.evaluation),
                 **self.protocol.to_setting()}
-        return {k: flat[k] for k in RECORD_FIELDS}
+        return {k: flat[k] for k in RECORD_FIELDS + tuple(OPTIONAL_SETTING_FIELDS) if k in flat}
 
     @classmethod
     def from_record(cls, recorded: dict) -> TrialSettings:

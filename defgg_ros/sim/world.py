@@ -1,6 +1,7 @@
 """The grasp trials' world: a deformable world of the physics core (physics.py) with a table."""
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import pybullet as p
@@ -18,9 +19,13 @@ class World:
     table_id: int
     time_step_s: float
     table_top_z_m: float = 0.0
+    # Called with the step length before every physics step (a pressing hand's drive: hand.Hand.drive).
+    before_step: Callable[[float], None] | None = None
 
     def step(self, n: int = 1) -> None:
         for _ in range(n):
+            if self.before_step is not None:
+                self.before_step(self.time_step_s)
             p.stepSimulation(physicsClientId=self.client)
 
     def set_gravity(self, gravity_mps2) -> None:

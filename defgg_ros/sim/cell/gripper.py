@@ -9,6 +9,7 @@ and says what the finger motors should do; it has no PyBullet in it.
 from dataclasses import dataclass, replace
 
 from defgg_ros.constants import GRIPPER_MAX_FORCE_N, GRIPPER_MAX_WIDTH_M
+from defgg_ros.sim.finger_press import CONTACT_WINDOW_S, on_object
 
 # The fingers count as stopped when the opening changes slower than this...
 STALL_SPEED_MPS = 0.002
@@ -25,10 +26,8 @@ MOVE_TOLERANCE_M = 0.002
 GRIPPER_MAX_SPEED_MPS = 0.1
 # Force pressing the fingers along for a `move` (franka_gripper uses its own).
 MOVE_FORCE_N = GRIPPER_MAX_FORCE_N
-# A grasp presses (MotorCommand.press) once its fingers close slower than CONTACT_SPEED_FRACTION of the commanded
-# speed over a CONTACT_WINDOW_S window: they are on the object. Until then the drive is speed-limited.
-CONTACT_WINDOW_S = 0.02
-CONTACT_SPEED_FRACTION = 0.5
+# A grasp presses (MotorCommand.press) once its fingers are on the object (sim.finger_press.on_object, the trial
+# hand's rule too). Until then the drive is speed-limited.
 # A command that has not finished after this much sim time fails.
 GRIPPER_TIMEOUT_S = 5.0
 
@@ -114,16 +113,15 @@ class GripperController:
         self._window = (now_s, self._last_width_m)
 
     def _check_contact(self, now_s: float, width_m: float) -> None:
-        """A grasp's fingers closing slower than CONTACT_SPEED_FRACTION of its speed over a window are on the
-        object: from then on they press with the grasp's force (MotorCommand.press)."""
+        """A grasp's fingers on the object (finger_press.on_object, over CONTACT_WINDOW_S windows) press with the
+        grasp's force from then on (MotorCommand.press)."""
         if self._kind != "grasp" or self._motor.press:
             return
         start_s, start_width_m = self._window
         elapsed_s = now_s - start_s
         if elapsed_s < CONTACT_WINDOW_S:
             return
-        opening_speed_mps = 2 * self._motor.finger_speed_mps
-        if start_width_m - width_m < CONTACT_SPEED_FRACTION * opening_speed_mps * elapsed_s:
+        if on_object(start_width_m - width_m, self._motor.finger_speed_mps, elapsed_s):
             self._motor = replace(self._motor, press=True)
         self._window = (now_s, width_m)
 

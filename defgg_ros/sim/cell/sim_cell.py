@@ -7,7 +7,6 @@ plain rigid world with a larger step. Sim time advances only in `advance()`.
 
 Frames: the world origin is `panda_link0`; the table top is z = 0.
 """
-import collections
 import shutil
 import tempfile
 import time
@@ -31,6 +30,7 @@ from defgg_ros.sim.cell import soft as cell_soft
 from defgg_ros.sim.cell.camera import DepthCamera, DepthNoise, camera_matrix
 from defgg_ros.sim.cell.gripper import GRIPPER_MAX_SPEED_MPS, GripperController, GripperOutcome
 from defgg_ros.sim.cell.trajectory import TrajectoryTracker, make_waypoints
+from defgg_ros.sim.finger_press import FingerSpeeds, finger_pushes
 from defgg_ros.sim.scene_spec import SceneSpec
 
 # Rigid-only scenes: 1 ms keeps 70 N finger contacts calm and runs faster than real time.
@@ -43,15 +43,14 @@ ARM_POSITION_GAIN = 0.3
 ARM_VELOCITY_GAIN = 1.0
 FINGER_POSITION_GAIN = 0.2
 # A pressing finger that closed faster than the hand can (franka_gripper's top speed, per finger) over the last
-# PRESS_SPEED_WINDOW_S has lost the object: speed-limited again. From positions over a window: the deformable
-# contact leaves a pressed finger's joint velocity meaningless (-12 mm/s at rest) and its position jitters (at 10 N
-# on the 2e5 Pa block, 2x the 0.01 m/s squeeze speed over 10 ms was exceeded in half the steps).
+# finger_press.PRESS_SPEED_WINDOW_S has lost the object: speed-limited again (finger_press.finger_pushes). From
+# positions over a window: the deformable contact leaves a pressed finger's joint velocity meaningless and its
+# position jitters.
 PRESS_SPEED_LIMIT_MPS = GRIPPER_MAX_SPEED_MPS / 2
-PRESS_SPEED_WINDOW_S = 0.01
 # Viscous damping of each finger joint (N s/m), as a force-controlled hand's drive has. Without it a pressed finger
-# rang on an FEM ball (the 2e5 Pa ball in the squeeze bench's jig, 2026-11-30): grasps took up to 3.8 s to stop, one
-# of 14 timed out (5 s), steps 0.59 / 0.93 / 0.33 mm; with it every grasp stopped in 0.19-0.23 s, steps 0.64 /
-# 0.64 / 0.64 mm. 30 is near critical for a finger (0.1 kg) on such a contact (~2 kN/m).
+# rang on the 2e5 Pa FEM ball: grasps took up to 3.58 s to stop and 2 of 6 at 1.5-2 N timed out (5 s); with it they
+# stopped in 0.19-0.22 s, steps 0.58-0.64 mm (bench/bench_fem_grasp_force.py --forces 1 --no-trials --ringing).
+# 30 is near critical for a finger (0.1 kg) on such a contact (~2 kN/m).
 FINGER_JOINT_DAMPING_NSPM = 30.0
 # Links whose contacts make up the external wrench: hand and both fingers.
 HAND_LINK_NAMES = ("panda_hand", "panda_leftfinger", "panda_rightfinger")
@@ -154,7 +153,7 @@ class SimCell:
             p.changeDynamics(self.robot, j, jointDamping=FINGER_JOINT_DAMPING_NSPM, physicsClientId=c)
         self.tracker = TrajectoryTracker(q0)
         self.gripper = GripperController(GRIPPER_MAX_WIDTH_M)
-        self._finger_history = collections.deque()    # (sim s, finger positions) over PRESS_SPEED_WINDOW_S
+        self._finger_speeds = FingerSpeeds()
 
     def close(self):
         if self.client is not None and p.isConnected(self.client):
@@ -256,14 +255,9 @@ class SimCell:
         either way."""
         c = self.client
         q = [p.getJointState(self.robot, j, physicsClientId=c)[0] for j in self.finger_joints]
-        self._finger_history.append((self.time_s, q))
-        while self.time_s - self._finger_history[0][0] > PRESS_SPEED_WINDOW_S:
-            self._finger_history.popleft()
-        then_s, before = self._finger_history[0]
-        elapsed_s = max(self.time_s - then_s, self.time_step_s)
-        for j, now_m, before_m in zip(self.finger_joints, q, before):
-            closing_mps = (before_m - now_m) / elapsed_s
-            if motor.press and closing_mps <= PRESS_SPEED_LIMIT_MPS:
+        closing_mps = self._finger_speeds.update(self.time_s, q, self.time_step_s)
+        for j, speed_mps in zip(self.finger_joints, closing_mps):
+            if finger_pushes(motor.press, speed_mps, PRESS_SPEED_LIMIT_MPS):
                 p.setJointMotorControl2(self.robot, j, p.VELOCITY_CONTROL, force=0.0, physicsClientId=c)
                 p.setJointMotorControl2(self.robot, j, p.TORQUE_CONTROL, force=-motor.finger_force_n,
                                         physicsClientId=c)
