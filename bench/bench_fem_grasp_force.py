@@ -13,16 +13,14 @@ objects"). Two measurements:
    with the force as its limit): fem_v5's box_flat trial at each FEM modulus, closed with each --trial-forces
    force, the fingers' mean force after the close (the object sees the mean: the fingers are geared); then how many
    of fem_v5's FEM trials asked for more than what that modulus's trial pressed with at the largest force.
-3. (--relabel N) What a trial hand that presses as the cell's does would change: a seeded sample of N of those
-   trials, and N of the others (the control: they asked no more than the hand pressed), re-run with each finger
-   pushing with the trial's force once the fingers are on the object (the cell's rule: closing slower than half
-   the close speed over 20 ms; a speed drive again while a finger closes faster than that speed): labels that
-   differ from the stored ones. A bench-only hand: the trial hand itself is unchanged.
+3. (--relabel N) What the pressing trial hand (the protocol's finger_drive "press": the cell's rule,
+   sim/finger_press.py) changes: a seeded sample of N of those trials, and N of the others (the control: they
+   asked no more than the hand pressed), re-run with it: labels that differ from the stored ones. The whole
+   dataset: `defgg-datagen relabel` (datasets/fem_v5_press).
 """
 from __future__ import annotations
 
 import argparse
-import collections
 import random
 import sys
 from pathlib import Path
@@ -38,10 +36,8 @@ import bench_squeeze_stiffness as squeeze_bench  # noqa: E402
 
 from defgg_ros.data import datagen  # noqa: E402
 from defgg_ros.data.format import TrialRecord  # noqa: E402
-from defgg_ros.sim import hand as trial_hand  # noqa: E402
+from defgg_ros.data.relabel import relabel_job  # noqa: E402
 from defgg_ros.sim import trial as trial_mod  # noqa: E402
-from defgg_ros.sim import world as trial_world  # noqa: E402
-from defgg_ros.sim.cell.gripper import CONTACT_SPEED_FRACTION, CONTACT_WINDOW_S  # noqa: E402
 from defgg_ros.sim.cell.sim_cell import FINGER_JOINT_DAMPING_NSPM  # noqa: E402
 
 SQUEEZE_SPEED_MPS = 0.02
@@ -109,85 +105,14 @@ def ball_squeezes(damping_nspm: float, yaw_rad: float) -> tuple[list, list]:
     return stops, [round(a - b, 2) for a, b in zip(openings, openings[1:])]
 
 
-class PressingTrialHand:
-    """Part 3's trial hand: after Hand.close, each step (World.step) a finger on the object pushes with the close's
-    force (torque control) while it closes no faster than the close speed, else the close's speed drive; until the
-    fingers are locked or a new hand or world is made. Patches sim.hand and sim.world while in use."""
-
-    def __init__(self):
-        self.state = {}        # client -> the running close
-
-    def __enter__(self):
-        self.saved = (trial_hand.create_hand, trial_hand.Hand.close, trial_hand.Hand.lock_fingers,
-                      trial_world.World.step, trial_world.create_world)
-        create, close, lock, _, new_world = self.saved
-        state = self.state
-
-        def create_hand(client, *args, **kwargs):
-            state.pop(client, None)
-            return create(client, *args, **kwargs)
-
-        def create_world(client, *args, **kwargs):      # a new trial: the last trial's hand is gone
-            state.pop(client, None)
-            return new_world(client, *args, **kwargs)
-
-        def hand_close(hand, force_n, speed_mps):
-            close(hand, force_n, speed_mps)
-            state[hand.client] = {"hand": hand, "force_n": force_n, "speed_mps": speed_mps, "t_s": 0.0,
-                                  "history": collections.deque(), "press": False}
-
-        def lock_fingers(hand):
-            state.pop(hand.client, None)
-            lock(hand)
-
-        def world_step(world, n: int = 1):
-            for _ in range(n):
-                close_state = state.get(world.client)
-                if close_state is not None:
-                    self._drive(close_state, world.time_step_s)
-                p.stepSimulation(physicsClientId=world.client)
-        trial_hand.create_hand, trial_hand.Hand.close, trial_hand.Hand.lock_fingers = create_hand, hand_close, \
-            lock_fingers
-        trial_world.World.step, trial_world.create_world = world_step, create_world
-        return self
-
-    def __exit__(self, *exc):
-        (trial_hand.create_hand, trial_hand.Hand.close, trial_hand.Hand.lock_fingers, trial_world.World.step,
-         trial_world.create_world) = self.saved
-
-    @staticmethod
-    def _drive(close: dict, dt_s: float) -> None:
-        hand, client = close["hand"], close["hand"].client
-        q = [p.getJointState(hand.body_id, j, physicsClientId=client)[0] for j in hand.FINGER_LINKS]
-        close["t_s"] += dt_s
-        history = close["history"]
-        history.append((close["t_s"], q))
-        while close["t_s"] - history[0][0] > CONTACT_WINDOW_S:
-            history.popleft()
-        then_s, before = history[0]
-        elapsed_s = close["t_s"] - then_s
-        closing_mps = [(b - n) / elapsed_s if elapsed_s > 0 else 0.0 for b, n in zip(before, q)]
-        if not close["press"] and elapsed_s >= CONTACT_WINDOW_S * 0.99:
-            close["press"] = max(closing_mps) < CONTACT_SPEED_FRACTION * close["speed_mps"]
-        for j, speed in zip(hand.FINGER_LINKS, closing_mps):
-            if close["press"] and speed <= close["speed_mps"]:
-                p.setJointMotorControl2(hand.body_id, j, p.VELOCITY_CONTROL, force=0.0, physicsClientId=client)
-                p.setJointMotorControl2(hand.body_id, j, p.TORQUE_CONTROL, force=-close["force_n"],
-                                        physicsClientId=client)
-            else:
-                p.setJointMotorControl2(hand.body_id, j, p.VELOCITY_CONTROL, targetVelocity=-close["speed_mps"],
-                                        force=close["force_n"], physicsClientId=client)
-
-
 def relabel_with_pressing_hand(records: list) -> list:
-    """(stored label, new label) of each record re-run with PressingTrialHand."""
+    """(stored label, new label) of each record re-run with the pressing trial hand (finger_drive "press")."""
     out = []
-    with PressingTrialHand():
-        for stored in records:
-            new = datagen.run_trial_job(datagen.job_from_record(TrialRecord.from_json(stored)))
-            out.append((stored.get("label"), new.get("label")))
-            print(f"   {stored['object_name']:18s} {stored['youngs_modulus_pa']:.0e} Pa "
-                  f"{stored['grasp_force_n']:.2f} N: label {stored.get('label')} -> {new.get('label')}", flush=True)
+    for stored in records:
+        new = datagen.run_trial_job(relabel_job(stored, {"finger_drive": "press"}))
+        out.append((stored.get("label"), new.get("label")))
+        print(f"   {stored['object_name']:18s} {stored['youngs_modulus_pa']:.0e} Pa "
+              f"{stored['grasp_force_n']:.2f} N: label {stored.get('label')} -> {new.get('label')}", flush=True)
     return out
 
 

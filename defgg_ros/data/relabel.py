@@ -145,7 +145,8 @@ def render_report(spec: RelabelSpec, by_file: dict) -> str:
     planned = len(selected(spec, by_file))
     lines = [f"# Relabel of {spec.source}", "",
              f"Settings changed: `{spec.settings}`; trials at E <= {spec.max_youngs_modulus_pa:g} Pa asking >= "
-             f"{spec.min_grasp_force_n:g} N a finger, the largest force first. Re-run: **{len(pairs)} of {planned}**.",
+             f"{spec.min_grasp_force_n:g} N a finger, the most over the speed drive's ceiling first. "
+             f"Re-run: **{len(pairs)} of {planned}**.",
              "", "Asked / ceiling: the force asked a finger over what the speed-driven hand pressed an FEM body "
                  "with at most (sim.hand.speed_drive_ceiling_n).", "",
              "| E (Pa) | asked / ceiling | re-run | negative -> positive | positive -> negative | "

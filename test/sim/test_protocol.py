@@ -70,3 +70,17 @@ def test_one_resolver_the_datasets_setting_then_the_request_then_the_folders_the
     assert resolve_protocol("legacy", {"protocol": "defgraspsim"}).name == LEGACY
     assert resolve_protocol(None, {"lift_time_s": 0.6}).name == LEGACY            # a record without a protocol
     assert resolve_protocol() == PROTOCOLS[DEFGRASPSIM]
+
+
+def test_the_finger_drive_is_stored_only_when_it_is_not_the_speed_drive_every_older_setting_ran():
+    stored = generator_header("fem_v5")["trial_settings"]
+    speed = TrialSettings.from_record(stored)
+    assert speed.protocol.finger_drive == "speed" and "finger_drive" not in speed.to_record()
+    press = speed.with_fields(finger_drive="press")
+    assert press.to_record() == {**speed.to_record(), "finger_drive": "press"}
+    assert TrialSettings.from_record(press.to_record()) == press
+    assert "pressing hand" in press.protocol.summary() and "pressing" not in speed.protocol.summary()
+    from defgg_ros.sim.trial_settings import comparable_protocol
+    assert comparable_protocol(press.to_record()) != comparable_protocol(speed.to_record())
+    with pytest.raises(ValueError, match="finger_drive must be one of speed, press"):
+        speed.with_fields(finger_drive="torque")

@@ -1,0 +1,71 @@
+"""defgg-datagen relabel (data/relabel.py): stored trials re-run under a changed setting, written under the
+source's file names, resumable, refused when the folder relabels with other settings. On rigid (2e9 Pa) trials of
+fem_v5 here: 0.1 CPU s each."""
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+
+from defgg_ros.atomic import read_jsonl
+from defgg_ros.data.datagen_cli import main
+from defgg_ros.data.format import DatasetError
+from defgg_ros.data.relabel import RelabelSpec, over_ceiling, run
+from defgg_ros.sim.trial_settings import TrialSettings
+
+pytestmark = pytest.mark.unit
+
+FEM_V5 = Path(__file__).resolve().parents[2] / "datasets" / "fem_v5"
+SCENE = "ycb_can__E2e+09"
+
+
+@pytest.fixture
+def source(tmp_path) -> Path:
+    """fem_v5 cut down to one rigid scene (its header, scene and trials)."""
+    root = tmp_path / "source"
+    (root / "scenes").mkdir(parents=True)
+    (root / "trials").mkdir()
+    shutil.copy(FEM_V5 / "dataset.json", root)
+    shutil.copy(FEM_V5 / "scenes" / f"{SCENE}.npz", root / "scenes")
+    shutil.copy(FEM_V5 / "trials" / f"{SCENE}.jsonl", root / "trials")
+    return root
+
+
+def test_relabel_reruns_with_the_setting_changed_and_resumes(source, tmp_path, capsys):
+    out = tmp_path / "press"
+    argv = ["relabel", str(source), "--out", str(out), "--settings", '{"finger_drive": "press"}',
+            "--max-youngs-modulus-pa", "3e9", "--limit", "2", "--no-progress"]
+    assert main(argv) == 0
+    new = read_jsonl(out / "trials" / f"{SCENE}.jsonl")
+    stored = {r["trial_id"]: r for r in read_jsonl(source / "trials" / f"{SCENE}.jsonl")}
+    assert len(new) == 2 and all(r["trial_id"] in stored for r in new)
+    for r in new:
+        was = TrialSettings.from_record(stored[r["trial_id"]]["sim"]["settings"])
+        assert r["sim"]["settings"] == was.with_fields(finger_drive="press").to_record()
+        assert r["position_m"] == stored[r["trial_id"]]["position_m"]        # the same grasp
+    assert "Re-run: **2 of 36**" in (out / "relabel.md").read_text()
+    capsys.readouterr()
+    assert main(argv) == 0                                                  # resumed: two more, none twice
+    assert len({r["trial_id"] for r in read_jsonl(out / "trials" / f"{SCENE}.jsonl")}) == 4
+    counts = next(line for line in capsys.readouterr().out.splitlines() if line.startswith('{"pending"'))
+    assert json.loads(counts) == {"pending": 2, "done": 2, "errors": 0}
+
+
+def test_a_folder_relabelling_with_other_settings_is_refused(source, tmp_path):
+    out = tmp_path / "press"
+    run(RelabelSpec(source, out, {"finger_drive": "press"}, 3e9), limit=0, progress=False)
+    with pytest.raises(DatasetError, match="relabels with other settings"):
+        run(RelabelSpec(source, out, {"finger_drive": "speed"}, 3e9), limit=0, progress=False)
+
+
+def test_bad_settings_are_a_clear_error(source, tmp_path, capsys):
+    assert main(["relabel", str(source), "--out", str(tmp_path / "x"), "--settings", '{"finger_drive": 1}']) == 2
+    assert "bad --settings" in capsys.readouterr().err
+    assert not (tmp_path / "x").exists()
+
+
+def test_the_trials_most_over_the_speed_drives_ceiling_come_first():
+    # 2 N asked at 0.5 ms steps (ceiling 1 N) is further over it than 3 N at 0.25 ms (2 N).
+    soft = {"grasp_force_n": 2.0, "youngs_modulus_pa": 2e4, "sim": {}}
+    stiff = {"grasp_force_n": 3.0, "youngs_modulus_pa": 2e6, "sim": {}}
+    assert over_ceiling(soft) == pytest.approx(2.0) and over_ceiling(stiff) == pytest.approx(1.5)
