@@ -50,6 +50,7 @@ Seal a finished dataset (compress its trial files; the fingerprint stays):
   defgg-datagen seal datasets/fem_v4
 Re-run a dataset's trials under a changed setting (e.g. the hand pressing as the cell's; relabel --help):
   defgg-datagen relabel datasets/fem_v5 --out datasets/fem_v5_press --settings '{"finger_drive": "press"}'
+  defgg-datagen merge datasets/fem_v5 datasets/fem_v5_press --out datasets/fem_v5p
 """
 
 
@@ -60,7 +61,9 @@ def build_parser() -> argparse.ArgumentParser:
                                        "(its signal report; signal --help)\n"
                                        "       %(prog)s seal FOLDER   (compress a finished dataset)\n"
                                        "       %(prog)s relabel SOURCE --out DIR --settings JSON   "
-                                       "(re-run stored trials; relabel --help)")
+                                       "(re-run stored trials; relabel --help)\n"
+                                       "       %(prog)s merge SOURCE RELABELLED --out DIR   "
+                                       "(a dataset with the re-run trials in; merge --help)")
     ap.add_argument("--out", type=Path, required=True, help="dataset folder (created or resumed)")
     ap.add_argument("--object-set", default="train", choices=("train", "common", "adversarial"),
                     help="object library set (default: train; the others are held out for evaluation)")
@@ -218,10 +221,33 @@ def relabel_main(argv) -> int:
     return 0
 
 
+def merge_main(argv) -> int:
+    from defgg_ros.data.relabel import merge
+
+    ap = argparse.ArgumentParser(
+        prog="defgg-datagen merge", formatter_class=HelpFormatter,
+        description="Write a whole dataset: SOURCE with every trial RELABELLED re-ran (defgg-datagen relabel) "
+                    "replaced by its new record; its header's trial settings are the relabel's, and its 'relabel' "
+                    "section counts the trials that kept their source record (every record carries its settings).")
+    ap.add_argument("source", type=Path, help="the dataset the relabel read")
+    ap.add_argument("relabelled", type=Path, help="the relabel's --out folder")
+    ap.add_argument("--out", type=Path, required=True, help="the new dataset folder (must not exist)")
+    args = ap.parse_args(argv)
+    try:
+        counts = merge(args.source, args.relabelled, args.out)
+    except (DatasetError, OSError, KeyError) as exc:
+        print(f"defgg-datagen merge: error: {exc}", file=sys.stderr)
+        return 2
+    print(json.dumps({**counts, "fingerprint": dataset_fingerprint(args.out)}))
+    return 0
+
+
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     if argv[:1] == ["relabel"]:
         return relabel_main(argv[1:])
+    if argv[:1] == ["merge"]:
+        return merge_main(argv[1:])
     if argv[:1] == ["signal"]:
         return signal_main(argv[1:])
     if argv[:1] == ["seal"]:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import multiprocessing as mp
+import shutil
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -166,3 +167,36 @@ def render_report(spec: RelabelSpec, by_file: dict) -> str:
                  f"{sum(a is True and b is False for a, b in both)} | "
                  f"{sum(a is True for a, _ in both)} -> {sum(b is True for _, b in both)} |")
     return "\n".join(lines) + "\n"
+
+
+def merge(source: Path, relabelled: Path, out: Path) -> dict:
+    """A whole dataset at `out`: `source`'s scenes, candidates and trials, each trial `relabelled` re-ran replaced
+    by its new record; the header's trial settings are the relabel's and its "relabel" section says how many
+    trials kept their source record (each record carries the settings it ran with). Written to a temporary
+    folder and renamed: nothing half-written at `out`."""
+    out = Path(out)
+    if out.exists():
+        raise DatasetError(f"{out} exists; merge writes a new dataset")
+    relabel_header = json.loads((Path(relabelled) / HEADER_FILE).read_text(encoding="utf-8"))
+    if relabel_header["source_fingerprint"] != dataset_fingerprint(source):
+        raise DatasetError(f"{relabelled} relabelled another version of {source} (fingerprint differs)")
+    new = {r["trial_id"]: r for f in sorted((Path(relabelled) / "trials").glob("*.jsonl")) for r in read_jsonl(f)}
+    header = json.loads((Path(source) / "dataset.json").read_text(encoding="utf-8"))
+    settings = TrialSettings.from_record(header["generator"]["trial_settings"])
+    header["generator"]["trial_settings"] = settings.with_fields(**relabel_header["settings"]).to_record()
+    tmp = out.with_name(out.name + ".partial")
+    shutil.rmtree(tmp, ignore_errors=True)
+    for folder in ("scenes", "candidates"):
+        if (Path(source) / folder).is_dir():
+            shutil.copytree(Path(source) / folder, tmp / folder)
+    (tmp / "trials").mkdir(parents=True)
+    counts = {"relabelled": 0, "kept": 0}
+    for name, records in source_trials(source).items():
+        merged = [new.get(r["trial_id"], r) for r in records]
+        counts["relabelled"] += sum(r["trial_id"] in new for r in records)
+        counts["kept"] += sum(r["trial_id"] not in new for r in records)
+        write_text_atomic(tmp / "trials" / name, "".join(json.dumps(r, sort_keys=True) + "\n" for r in merged))
+    header["relabel"] = {**relabel_header, "from": str(relabelled), **counts}
+    write_json_atomic(tmp / "dataset.json", header)
+    tmp.rename(out)
+    return counts

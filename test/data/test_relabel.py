@@ -69,3 +69,17 @@ def test_the_trials_most_over_the_speed_drives_ceiling_come_first():
     soft = {"grasp_force_n": 2.0, "youngs_modulus_pa": 2e4, "sim": {}}
     stiff = {"grasp_force_n": 3.0, "youngs_modulus_pa": 2e6, "sim": {}}
     assert over_ceiling(soft) == pytest.approx(2.0) and over_ceiling(stiff) == pytest.approx(1.5)
+
+
+def test_merge_writes_the_source_with_the_relabelled_trials_in(source, tmp_path):
+    relabelled, merged = tmp_path / "press", tmp_path / "merged"
+    run(RelabelSpec(source, relabelled, {"finger_drive": "press"}, 3e9), limit=3, progress=False)
+    assert main(["merge", str(source), str(relabelled), "--out", str(merged)]) == 0
+    header = json.loads((merged / "dataset.json").read_text())
+    assert header["generator"]["trial_settings"]["finger_drive"] == "press"
+    assert (header["relabel"]["relabelled"], header["relabel"]["kept"]) == (3, 33)
+    records = read_jsonl(merged / "trials" / f"{SCENE}.jsonl")
+    pressed = [r for r in records if r["sim"]["settings"].get("finger_drive") == "press"]
+    assert len(records) == 36 and len(pressed) == 3
+    assert (merged / "scenes" / f"{SCENE}.npz").exists()
+    assert main(["merge", str(source), str(relabelled), "--out", str(merged)]) == 2      # never over a dataset
