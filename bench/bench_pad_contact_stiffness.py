@@ -43,6 +43,7 @@ import bench_squeeze_stiffness as squeeze_bench  # noqa: E402
 
 from defgg_ros.data import datagen  # noqa: E402
 from defgg_ros.data.format import TrialRecord  # noqa: E402
+from defgg_ros.evaluation import cell_experiment  # noqa: E402
 from defgg_ros.sim import hand as trial_hand  # noqa: E402
 from defgg_ros.squeeze import HandCalibration, squeeze_slope_npm  # noqa: E402
 
@@ -121,8 +122,7 @@ def relabel(records: list, **dynamics) -> tuple[int, float]:
         trial_hand.create_hand = original
 
 
-EVALUATION_OBJECTS = (*squeeze_bench.HELD_OUT, "egad_test_10_c3", "egad_test_16_c5", "egad_test_17_c5",
-                      "egad_test_20_c6", "common_ring", "common_sponge")
+EVALUATION_OBJECTS = tuple(obj.name for obj in cell_experiment.OBJECTS)     # the cell experiment's 14
 
 
 def rigid_verdicts(hand: HandCalibration, yaws=(0.0,)) -> tuple[int, int]:
