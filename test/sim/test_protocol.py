@@ -84,3 +84,12 @@ def test_the_finger_drive_is_stored_only_when_it_is_not_the_speed_drive_every_ol
     assert comparable_protocol(press.to_record()) != comparable_protocol(speed.to_record())
     with pytest.raises(ValueError, match="finger_drive must be one of speed, press"):
         speed.with_fields(finger_drive="torque")
+
+
+def test_an_evaluation_from_a_pressed_dataset_presses_too():
+    """defgg-eval run --protocol-from DATASET reads the header's trial settings: the drive comes along."""
+    from defgg_ros.evaluation.runner import eval_trial_settings
+
+    pressed = TrialSettings.fast().with_fields(finger_drive="press").to_record()
+    assert eval_trial_settings(resolve_protocol(dataset_setting=pressed)).protocol.finger_drive == "press"
+    assert eval_trial_settings(resolve_protocol()).protocol.finger_drive == "speed"
