@@ -175,8 +175,8 @@ def build_relabel_parser() -> argparse.ArgumentParser:
         prog="defgg-datagen relabel", formatter_class=HelpFormatter,
         description="Re-run a dataset's stored trials (same objects, poses, grasps and seeds) under changed trial "
                     "settings; new records go to OUT/trials under the source's file names, what changed to "
-                    "OUT/relabel.md. The trials asking the largest grip force run first. Resumable: rerun the same "
-                    "command.",
+                    "OUT/relabel.md. The trials most over the speed drive's ceiling run first. Resumable: rerun "
+                    "the same command.",
         epilog="Example (the hand pressing with its force, as the cell's; docs/dataset.md 'Finger drive'):\n"
                "  defgg-datagen relabel datasets/fem_v5 --out datasets/fem_v5_press "
                "--settings '{\"finger_drive\": \"press\"}' --workers 2")
