@@ -2,9 +2,9 @@
 
 franka_gripper's grasp closes at its speed and then holds its force on the object (docs/franka_contract.md). A
 speed-driven PyBullet finger does not: the deformable contact takes its momentum every step, so it pressed an FEM
-body with ~2 m v / dt whatever force it was given (docs/real_cell.md, "Grasp force on FEM objects"). So a grasp is
-speed-limited until it is on the object, then each finger pushes with the force (torque control), and goes back
-to the speed drive while it closes faster than the hand can (the object is gone).
+body with about that momentum per step whatever force it was given (docs/real_cell.md, "Grasp force on FEM
+objects"). So a grasp is speed-limited until it is on the object, then each finger pushes with the force (torque
+control), and goes back to the speed drive while it closes faster than the hand can (the object is gone).
 """
 from __future__ import annotations
 

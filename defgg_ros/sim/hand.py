@@ -104,7 +104,7 @@ class Hand:
 
     def close(self, force_n: float, speed_mps: float, press: bool = False) -> None:
         """Each finger closes towards the TCP at `speed_mps` with at most `force_n`. press=False: a speed drive
-        (the labels of fem_v1-v5; on an FEM body it pushes with only ~2 m v / dt, ~1 N here). press=True: the
+        (the labels of fem_v1-v5; on an FEM body it pushes with only ~m v / dt, speed_drive_ceiling_n). press=True: the
         cell's rule (sim.finger_press): once on the object each finger pushes with `force_n`; drive() before
         every physics step applies it."""
         self._force_n, self._speed_mps = force_n, speed_mps
