@@ -160,11 +160,11 @@ class TrialProtocol:
             rule = (f"**defgraspsim** (zero gravity after settling, grip force FOS*m*g/mu{force_mu} split over the "
                     f"fingers, table moved away for the pickup, fingers {hold}, lost when either finger has no "
                     "contact)")
-        if self.finger_drive == "press":
-            rule += " with the pressing hand (each finger pushes with its force on the object, as the cell's)"
         else:
             rule = ("**legacy** (gravity on, 2 N + 0.5 N per decade a finger, fingers force-held, lost when both "
                     "fingers let go or the centroid moved 20 mm)")
+        if self.finger_drive == "press":
+            rule += " with the pressing hand (each finger pushes with its force on the object, as the cell's)"
         return f"{rule}, effective friction {self.material.effective_friction:.2f}, Neo-Hookean FEM, {nu_text}"
 
 

@@ -79,7 +79,9 @@ def test_the_finger_drive_is_stored_only_when_it_is_not_the_speed_drive_every_ol
     press = speed.with_fields(finger_drive="press")
     assert press.to_record() == {**speed.to_record(), "finger_drive": "press"}
     assert TrialSettings.from_record(press.to_record()) == press
-    assert "pressing hand" in press.protocol.summary() and "pressing" not in speed.protocol.summary()
+    assert press.protocol.summary().startswith("**defgraspsim**") and "pressing hand" in press.protocol.summary()
+    assert speed.protocol.summary().startswith("**defgraspsim**") and "pressing" not in speed.protocol.summary()
+    assert PROTOCOLS[LEGACY].summary().startswith("**legacy**")
     from defgg_ros.sim.trial_settings import comparable_protocol
     assert comparable_protocol(press.to_record()) != comparable_protocol(speed.to_record())
     with pytest.raises(ValueError, match="finger_drive must be one of speed, press"):
