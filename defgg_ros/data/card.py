@@ -110,6 +110,7 @@ def render_card(root, grasps_per_scene: int | None = None, records_by_scene: dic
               f"- {RIGID_NOTE}",
               f"- {MESH_NOTE}",
               f"- {_protocol_line(gen)}",
+              *_relabel_lines(header.get("relabel")),
               f"- Generator settings: `{json.dumps(gen, sort_keys=True)}`",
               f"- {_last_column_note(gen)}", ""]
     return "\n".join(lines)
@@ -154,6 +155,17 @@ def _force_line(gen: dict) -> str:
                 f"{GRIPPER_MAX_FORCE_N:g} N a finger; m the object's mass, mu the rule's friction "
                 "(defgg_ros/grip_force.py).")
     return "Grasp force per finger: 2 N at E = 2e4 Pa plus 0.5 N per decade of E (defgg_ros/grip_force.py)."
+
+
+def _relabel_lines(relabel: dict | None) -> list[str]:
+    """A merged dataset (defgg-datagen merge): how many trials the relabel re-ran and how many kept their source's
+    record (each record carries the settings it ran with)."""
+    if not relabel:
+        return []
+    return [f"- Relabelled (defgg-datagen relabel and merge): {relabel['relabelled']} trials of {relabel['source']} "
+            f"re-run with `{json.dumps(relabel['settings'], sort_keys=True)}` (from {relabel['from']}, the trials "
+            f"most over the speed drive's ceiling first); {relabel['kept']} kept their source record and settings "
+            "(docs/dataset.md, 'Finger drive')."]
 
 
 def _protocol_line(gen: dict) -> str:

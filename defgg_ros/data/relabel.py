@@ -19,6 +19,7 @@ from pathlib import Path
 from tqdm import tqdm
 
 from defgg_ros.atomic import append_jsonl, read_jsonl, write_json_atomic, write_text_atomic
+from defgg_ros.data.card import write_card
 from defgg_ros.data.datagen import job_from_record, run_trial_job_guarded
 from defgg_ros.data.format import TRIAL_ERRORS_FILE, DatasetError, TrialRecord, dataset_fingerprint
 from defgg_ros.sim.hand import speed_drive_ceiling_n
@@ -198,5 +199,6 @@ def merge(source: Path, relabelled: Path, out: Path) -> dict:
         write_text_atomic(tmp / "trials" / name, "".join(json.dumps(r, sort_keys=True) + "\n" for r in merged))
     header["relabel"] = {**relabel_header, "from": str(relabelled), **counts}
     write_json_atomic(tmp / "dataset.json", header)
+    write_card(tmp)
     tmp.rename(out)
     return counts

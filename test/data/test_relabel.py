@@ -82,4 +82,5 @@ def test_merge_writes_the_source_with_the_relabelled_trials_in(source, tmp_path)
     pressed = [r for r in records if r["sim"]["settings"].get("finger_drive") == "press"]
     assert len(records) == 36 and len(pressed) == 3
     assert (merged / "scenes" / f"{SCENE}.npz").exists()
+    assert "Relabelled (defgg-datagen relabel and merge): 3 trials" in (merged / "card.md").read_text()
     assert main(["merge", str(source), str(relabelled), "--out", str(merged)]) == 2      # never over a dataset
