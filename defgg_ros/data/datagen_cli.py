@@ -190,6 +190,9 @@ def build_relabel_parser() -> argparse.ArgumentParser:
     ap.add_argument("--min-grasp-force-n", type=float, default=0.0,
                     help="only trials that asked at least this force a finger (N)")
     ap.add_argument("--limit", type=int, default=None, help="re-run at most this many of the pending trials")
+    ap.add_argument("--sample-seed", type=int, default=None, metavar="SEED",
+                    help="take the pending trials in a random order seeded so (with --limit: a sample of what is "
+                         "left, e.g. beside the ordered run, to see how far down the changes go)")
     ap.add_argument("--workers", type=int, default=1, help="parallel worker processes")
     ap.add_argument("--no-progress", action="store_true", help="no progress bar (a line per 10 %% instead)")
     return ap
@@ -212,7 +215,8 @@ def relabel_main(argv) -> int:
         return 2
     spec = RelabelSpec(args.source, args.out, settings, args.max_youngs_modulus_pa, args.min_grasp_force_n)
     try:
-        counts = run(spec, workers=args.workers, limit=args.limit, progress=not args.no_progress)
+        counts = run(spec, workers=args.workers, limit=args.limit, progress=not args.no_progress,
+                     sample_seed=args.sample_seed)
     except (DatasetError, OSError) as exc:
         print(f"defgg-datagen relabel: error: {exc}", file=sys.stderr)
         return 2

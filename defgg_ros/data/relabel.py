@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import multiprocessing as mp
+import random
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
@@ -93,14 +94,19 @@ def check_or_write_header(spec: RelabelSpec) -> None:
     write_json_atomic(path, header)
 
 
-def run(spec: RelabelSpec, workers: int = 1, limit: int | None = None, progress: bool = True) -> dict:
-    """Re-run the selected trials not yet in OUT; returns counts."""
+def run(spec: RelabelSpec, workers: int = 1, limit: int | None = None, progress: bool = True,
+        sample_seed: int | None = None) -> dict:
+    """Re-run the selected trials not yet in OUT; returns counts. sample_seed: in a seeded random order instead
+    (with `limit`, a sample of what is left: how the labels change over the whole range, before the ordered run
+    gets there; its records are the same trials' and the ordered run skips them)."""
     TrialSettings().with_fields(**spec.settings)          # a bad setting is refused before anything runs
     by_file = source_trials(spec.source)
     spec.out.mkdir(parents=True, exist_ok=True)
     check_or_write_header(spec)
     have = done_ids(spec.out)
     pending = [(name, r) for name, r in selected(spec, by_file) if r["trial_id"] not in have]
+    if sample_seed is not None:
+        random.Random(sample_seed).shuffle(pending)
     pending = pending[:limit] if limit is not None else pending
     file_of = {r["trial_id"]: name for name, r in pending}
     jobs = [relabel_job(r, spec.settings) for _, r in pending]

@@ -84,3 +84,14 @@ def test_merge_writes_the_source_with_the_relabelled_trials_in(source, tmp_path)
     assert (merged / "scenes" / f"{SCENE}.npz").exists()
     assert "Relabelled (defgg-datagen relabel and merge): 3 trials" in (merged / "card.md").read_text()
     assert main(["merge", str(source), str(relabelled), "--out", str(merged)]) == 2      # never over a dataset
+
+
+def test_a_seeded_sample_takes_other_trials_than_the_ordered_run_and_is_reproducible(source, tmp_path):
+    def sampled(out, seed):
+        run(RelabelSpec(source, out, {"finger_drive": "press"}, 3e9), limit=3, progress=False, sample_seed=seed)
+        return [r["trial_id"] for r in read_jsonl(out / "trials" / f"{SCENE}.jsonl")]
+
+    first, again, ordered = sampled(tmp_path / "a", 1), sampled(tmp_path / "b", 1), tmp_path / "c"
+    run(RelabelSpec(source, ordered, {"finger_drive": "press"}, 3e9), limit=3, progress=False)
+    assert sorted(first) == sorted(again)
+    assert sorted(first) != sorted(r["trial_id"] for r in read_jsonl(ordered / "trials" / f"{SCENE}.jsonl"))
