@@ -23,6 +23,10 @@ from defgg_ros.sim.protocol import resolve_protocol
 from defgg_ros.sim.trial_settings import TrialSettings
 from defgg_ros.stiffness import InvalidYoungsModulus, check_youngs_modulus
 
+# The trial hand of a new dataset: it presses with the grip force as the cell's hand and franka_gripper do (fem_v1-v5
+# ran the speed drive, which pressed FEM bodies with ~1 N whatever was asked; docs/dataset.md, "Finger drive").
+NEW_DATASET_FINGER_DRIVE = "press"
+
 DESCRIPTION = """\
 Generate grasp trials: per object x Young's modulus, render depth/stiffness/mask,
 sample ~200 antipodal top-down candidates (collision-filtered, keep up to
@@ -42,7 +46,9 @@ A sealed dataset (trials/*.jsonl.gz: fem_v1-v4) is finished and never resumed: w
 
 Trial protocol (--protocol): defgraspsim (default for a new dataset; the paper's labels: zero gravity,
 grip force FOS*m*g/mu, fingers held with F/2 each after the pickup, lost when either finger lets go) or
-legacy (fem_v1-v4). A resumed dataset keeps its own. docs/dataset.md, "Trial protocols".
+legacy (fem_v1-v4). A resumed dataset keeps its own. docs/dataset.md, "Trial protocols". A new dataset's
+hand presses with the grip force as the cell's does (finger_drive "press"; fem_v1-v5 ran the speed drive:
+--settings '{"finger_drive": "speed"}' makes such labels).
 
 Signal report (do the labels carry "stiffness changes which grasp is good"?):
   defgg-datagen signal datasets/fem_v4 [--json out.json] [--md out.md] [--png out.png]
@@ -264,6 +270,8 @@ def main(argv=None) -> int:
         stored = recorded_generator(args.out)       # a resumed dataset keeps its protocol
         recorded = None if stored is None else recorded_trial_settings(stored).to_record()
         settings.setdefault("protocol", resolve_protocol(args.protocol, recorded=recorded).name)
+        if stored is None:      # a new dataset's hand presses as the cell's; a resumed one keeps its own drive
+            settings.setdefault("finger_drive", NEW_DATASET_FINGER_DRIVE)
         TrialSettings().with_fields(**settings)  # validate names and values now, not in a worker
     except (json.JSONDecodeError, TypeError, ValueError) as exc:
         print(f"defgg-datagen: bad --settings: {exc}", file=sys.stderr)

@@ -264,3 +264,23 @@ def test_a_widened_candidate_runs_and_replays_with_its_opening():
     plain = dict(record, sim={k: v for k, v in record["sim"].items() if k != "finger_opening_m"})
     assert "opening_m" not in datagen.job_from_record(TrialRecord.from_json(plain))["grasp"]
     assert "opening_m" not in datagen.grasp_fields(WorldGrasp((0.0, 0.0, 0.025), 0.0, 0.032))
+
+
+def test_a_new_dataset_presses_and_a_resumed_one_keeps_its_drive(tmp_path):
+    """finger_drive: a new dataset's trial hand presses as the cell's; one made before the field keeps the speed
+    drive when resumed (its header has no finger_drive: the speed drive every older trial ran)."""
+    from defgg_ros.data import datagen_cli
+    from defgg_ros.data.format import check_header
+
+    def argv(out, grasps, settings):
+        return ["--out", str(out), "--objects", "cube", "--moduli", "2e9", "--grasps-per-scene", str(grasps),
+                "--no-progress", "--settings", json.dumps(settings)]
+
+    new, old = tmp_path / "new", tmp_path / "old"
+    assert datagen_cli.main(argv(new, 1, QUICK)) == 0
+    assert check_header(new)["generator"]["trial_settings"]["finger_drive"] == "press"
+    assert datagen_cli.main(argv(old, 1, {**QUICK, "finger_drive": "speed"})) == 0
+    assert "finger_drive" not in check_header(old)["generator"]["trial_settings"]
+    assert datagen_cli.main(argv(old, 2, QUICK)) == 0                    # resumed: one more trial, the speed drive
+    assert len(_trial_ids(old)) == 2
+    assert all("finger_drive" not in r["sim"]["settings"] for r in read_jsonl(old / "trials" / "cube__E2e+09.jsonl"))
