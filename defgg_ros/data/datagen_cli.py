@@ -270,8 +270,9 @@ def main(argv=None) -> int:
         stored = recorded_generator(args.out)       # a resumed dataset keeps its protocol
         recorded = None if stored is None else recorded_trial_settings(stored).to_record()
         settings.setdefault("protocol", resolve_protocol(args.protocol, recorded=recorded).name)
-        if stored is None:      # a new dataset's hand presses as the cell's; a resumed one keeps its own drive
-            settings.setdefault("finger_drive", NEW_DATASET_FINGER_DRIVE)
+        # a new dataset's hand presses as the cell's; a resumed one keeps its own drive (none recorded: speed)
+        settings.setdefault("finger_drive", NEW_DATASET_FINGER_DRIVE if stored is None
+                            else recorded_trial_settings(stored).protocol.finger_drive)
         TrialSettings().with_fields(**settings)  # validate names and values now, not in a worker
     except (json.JSONDecodeError, TypeError, ValueError) as exc:
         print(f"defgg-datagen: bad --settings: {exc}", file=sys.stderr)

@@ -279,6 +279,9 @@ def test_a_new_dataset_presses_and_a_resumed_one_keeps_its_drive(tmp_path):
     new, old = tmp_path / "new", tmp_path / "old"
     assert datagen_cli.main(argv(new, 1, QUICK)) == 0
     assert check_header(new)["generator"]["trial_settings"]["finger_drive"] == "press"
+    assert datagen_cli.main(argv(new, 2, QUICK)) == 0                    # resumed: one more trial, pressing
+    assert [r["sim"]["settings"]["finger_drive"] for r in read_jsonl(new / "trials" / "cube__E2e+09.jsonl")] == \
+        ["press", "press"]
     assert datagen_cli.main(argv(old, 1, {**QUICK, "finger_drive": "speed"})) == 0
     assert "finger_drive" not in check_header(old)["generator"]["trial_settings"]
     assert datagen_cli.main(argv(old, 2, QUICK)) == 0                    # resumed: one more trial, the speed drive
