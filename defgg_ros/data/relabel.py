@@ -23,6 +23,7 @@ from defgg_ros.atomic import append_jsonl, read_jsonl, write_json_atomic, write_
 from defgg_ros.data.card import write_card
 from defgg_ros.data.datagen import job_from_record, run_trial_job_guarded
 from defgg_ros.data.format import TRIAL_ERRORS_FILE, DatasetError, TrialRecord, dataset_fingerprint
+from defgg_ros.data.signal import render_markdown, signal_report
 from defgg_ros.sim.hand import speed_drive_ceiling_n
 from defgg_ros.sim.physics import time_step_for
 from defgg_ros.sim.trial_settings import TrialSettings
@@ -173,7 +174,17 @@ def render_report(spec: RelabelSpec, by_file: dict) -> str:
     lines.append(f"| all | | {len(both)} | {sum(a is False and b is True for a, b in both)} | "
                  f"{sum(a is True and b is False for a, b in both)} | "
                  f"{sum(a is True for a, _ in both)} -> {sum(b is True for _, b in both)} |")
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines) + "\n" + _merged_signal(by_file, pairs)
+
+
+def _merged_signal(by_file: dict, pairs: list) -> str:
+    """The signal report of the source with the re-run records in (what `defgg-datagen merge` would hold)."""
+    if not pairs:
+        return ""
+    new = {n["trial_id"]: n for _, n in pairs}
+    merged = [new.get(r["trial_id"], r) for records in by_file.values() for r in records]
+    title = f"Signal report of the source with these {len(new)} records in (`defgg-datagen merge`, then `signal`)"
+    return "\n" + render_markdown(signal_report(merged), title)
 
 
 def merge(source: Path, relabelled: Path, out: Path) -> dict:

@@ -43,7 +43,8 @@ def test_relabel_reruns_with_the_setting_changed_and_resumes(source, tmp_path, c
         was = TrialSettings.from_record(stored[r["trial_id"]]["sim"]["settings"])
         assert r["sim"]["settings"] == was.with_fields(finger_drive="press").to_record()
         assert r["position_m"] == stored[r["trial_id"]]["position_m"]        # the same grasp
-    assert "Re-run: **2 of 36**" in (out / "relabel.md").read_text()
+    report = (out / "relabel.md").read_text()
+    assert "Re-run: **2 of 36**" in report and "Signal report of the source with these 2 records in" in report
     capsys.readouterr()
     assert main(argv) == 0                                                  # resumed: two more, none twice
     assert len({r["trial_id"] for r in read_jsonl(out / "trials" / f"{SCENE}.jsonl")}) == 4
