@@ -196,6 +196,9 @@ def build_relabel_parser() -> argparse.ArgumentParser:
     ap.add_argument("--min-grasp-force-n", type=float, default=0.0,
                     help="only trials that asked at least this force a finger (N)")
     ap.add_argument("--limit", type=int, default=None, help="re-run at most this many of the pending trials")
+    ap.add_argument("--negatives-only", action="store_true",
+                    help="only trials whose stored label is negative (when the change only adds force, a held "
+                         "grasp stays held: relabel.md counts positive -> negative among the positives re-run)")
     ap.add_argument("--sample-seed", type=int, default=None, metavar="SEED",
                     help="take the pending trials in a random order seeded so (with --limit: a sample of what is "
                          "left, e.g. beside the ordered run, to see how far down the changes go)")
@@ -222,7 +225,7 @@ def relabel_main(argv) -> int:
     spec = RelabelSpec(args.source, args.out, settings, args.max_youngs_modulus_pa, args.min_grasp_force_n)
     try:
         counts = run(spec, workers=args.workers, limit=args.limit, progress=not args.no_progress,
-                     sample_seed=args.sample_seed)
+                     sample_seed=args.sample_seed, negatives_only=args.negatives_only)
     except (DatasetError, OSError) as exc:
         print(f"defgg-datagen relabel: error: {exc}", file=sys.stderr)
         return 2

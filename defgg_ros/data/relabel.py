@@ -96,16 +96,19 @@ def check_or_write_header(spec: RelabelSpec) -> None:
 
 
 def run(spec: RelabelSpec, workers: int = 1, limit: int | None = None, progress: bool = True,
-        sample_seed: int | None = None) -> dict:
+        sample_seed: int | None = None, negatives_only: bool = False) -> dict:
     """Re-run the selected trials not yet in OUT; returns counts. sample_seed: in a seeded random order instead
     (with `limit`, a sample of what is left: how the labels change over the whole range, before the ordered run
-    gets there; its records are the same trials' and the ordered run skips them)."""
+    gets there; its records are the same trials' and the ordered run skips them). negatives_only: only trials
+    whose stored label is negative (a change that only adds force cannot drop a held grasp; measured, not assumed:
+    relabel.md counts positive -> negative among the positives re-run)."""
     TrialSettings().with_fields(**spec.settings)          # a bad setting is refused before anything runs
     by_file = source_trials(spec.source)
     spec.out.mkdir(parents=True, exist_ok=True)
     check_or_write_header(spec)
     have = done_ids(spec.out)
-    pending = [(name, r) for name, r in selected(spec, by_file) if r["trial_id"] not in have]
+    pending = [(name, r) for name, r in selected(spec, by_file) if r["trial_id"] not in have
+               and not (negatives_only and _label(r) is not False)]
     if sample_seed is not None:
         random.Random(sample_seed).shuffle(pending)
     pending = pending[:limit] if limit is not None else pending

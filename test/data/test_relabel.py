@@ -96,3 +96,14 @@ def test_a_seeded_sample_takes_other_trials_than_the_ordered_run_and_is_reproduc
     run(RelabelSpec(source, ordered, {"finger_drive": "press"}, 3e9), limit=3, progress=False)
     assert sorted(first) == sorted(again)
     assert sorted(first) != sorted(r["trial_id"] for r in read_jsonl(ordered / "trials" / f"{SCENE}.jsonl"))
+
+
+def test_negatives_only_reruns_only_the_trials_stored_negative(source, tmp_path):
+    path = source / "trials" / f"{SCENE}.jsonl"
+    records = read_jsonl(path)
+    records[5] = {**records[5], "shake_accels_mps2": [0.0] * len(records[5]["shake_accels_mps2"])}   # now negative
+    path.write_text("".join(json.dumps(r) + "\n" for r in records))
+    out = tmp_path / "neg"
+    counts = run(RelabelSpec(source, out, {"finger_drive": "press"}, 3e9), progress=False, negatives_only=True)
+    assert counts["done"] == 1
+    assert [r["trial_id"] for r in read_jsonl(out / "trials" / f"{SCENE}.jsonl")] == [records[5]["trial_id"]]
