@@ -10,6 +10,8 @@ trial that raised goes to OUT/trial_errors.jsonl and is retried by the next run.
 """
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import json
 import multiprocessing as mp
 import random
@@ -29,6 +31,7 @@ from defgg_ros.sim.physics import time_step_for
 from defgg_ros.sim.trial_settings import TrialSettings
 
 HEADER_FILE = "relabel.json"
+LOCK_FILE = ".relabel.lock"     # held while a run writes: two runs into one folder would re-run each other's trials
 REPORT_FILE = "relabel.md"
 RELABELLED_STATUSES = ("ok", "lift_failed")     # the trials with a label; an exploded or timed-out one has none
 # Bands of asked force / the speed drive's ceiling (report).
@@ -115,7 +118,8 @@ def run(spec: RelabelSpec, workers: int = 1, limit: int | None = None, progress:
     file_of = {r["trial_id"]: name for name, r in pending}
     jobs = [relabel_job(r, spec.settings) for _, r in pending]
     counts = {"pending": len(jobs), "done": 0, "errors": 0}
-    with tqdm(total=len(jobs), desc="relabel", unit="trial", disable=not progress, smoothing=0.05) as bar:
+    writer = _only_writer(spec.out) if jobs else contextlib.nullcontext()
+    with writer, tqdm(total=len(jobs), desc="relabel", unit="trial", disable=not progress, smoothing=0.05) as bar:
         for result in _results(jobs, workers):
             if "error" in result:
                 append_jsonl(spec.out / TRIAL_ERRORS_FILE, result)
@@ -129,6 +133,17 @@ def run(spec: RelabelSpec, workers: int = 1, limit: int | None = None, progress:
                 print(f"defgg-datagen relabel: {counts['done']} of {len(jobs)} trials", flush=True)
     write_text_atomic(spec.out / REPORT_FILE, render_report(spec, by_file))
     return counts
+
+
+@contextlib.contextmanager
+def _only_writer(out: Path):
+    """Hold OUT's lock for the run; DatasetError when another relabel holds it."""
+    with open(Path(out) / LOCK_FILE, "w") as lock:
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise DatasetError(f"another defgg-datagen relabel is writing {out}; let it finish or stop it") from None
+        yield
 
 
 def _results(jobs: list, workers: int):

@@ -107,3 +107,19 @@ def test_negatives_only_reruns_only_the_trials_stored_negative(source, tmp_path)
     counts = run(RelabelSpec(source, out, {"finger_drive": "press"}, 3e9), progress=False, negatives_only=True)
     assert counts["done"] == 1
     assert [r["trial_id"] for r in read_jsonl(out / "trials" / f"{SCENE}.jsonl")] == [records[5]["trial_id"]]
+
+
+def test_a_second_run_into_a_folder_being_written_is_refused(source, tmp_path):
+    import fcntl
+
+    from defgg_ros.data.relabel import LOCK_FILE
+
+    out = tmp_path / "press"
+    spec = RelabelSpec(source, out, {"finger_drive": "press"}, 3e9)
+    run(spec, limit=0, progress=False)                       # nothing to run: no lock needed
+    with open(out / LOCK_FILE, "w") as held:                 # as a running relabel holds it
+        fcntl.flock(held, fcntl.LOCK_EX)
+        with pytest.raises(DatasetError, match="another defgg-datagen relabel is writing"):
+            run(spec, limit=1, progress=False)
+        assert run(spec, limit=0, progress=False)["pending"] == 0     # the report still writes
+    assert run(spec, limit=1, progress=False)["done"] == 1
