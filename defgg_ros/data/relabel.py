@@ -68,11 +68,15 @@ def over_ceiling(record: dict) -> float:
     return record["grasp_force_n"] / speed_drive_ceiling_n(step_s, settings.motion.close_speed_mps)
 
 
+def eligible(spec: RelabelSpec, record: dict) -> bool:
+    """Does the spec re-run this stored trial?"""
+    return (record["status"] in RELABELLED_STATUSES and record["youngs_modulus_pa"] <= spec.max_youngs_modulus_pa
+            and record["grasp_force_n"] >= spec.min_grasp_force_n)
+
+
 def selected(spec: RelabelSpec, by_file: dict) -> list:
     """(file name, record) of the trials to re-run, the most over the ceiling first."""
-    chosen = [(name, r) for name, records in by_file.items() for r in records
-              if r["status"] in RELABELLED_STATUSES and r["youngs_modulus_pa"] <= spec.max_youngs_modulus_pa
-              and r["grasp_force_n"] >= spec.min_grasp_force_n]
+    chosen = [(name, r) for name, records in by_file.items() for r in records if eligible(spec, r)]
     return sorted(chosen, key=lambda item: (-over_ceiling(item[1]), item[1]["trial_id"]))
 
 
@@ -82,8 +86,13 @@ def relabel_job(record: dict, overrides: dict) -> dict:
     return job
 
 
+def relabelled_records(out: Path) -> list:
+    """Every complete record a relabel folder holds (its trials/*.jsonl)."""
+    return [r for f in sorted((Path(out) / "trials").glob("*.jsonl")) for r in read_jsonl(f)]
+
+
 def done_ids(out: Path) -> set:
-    return {r["trial_id"] for f in sorted((Path(out) / "trials").glob("*.jsonl")) for r in read_jsonl(f)}
+    return {r["trial_id"] for r in relabelled_records(out)}
 
 
 def check_or_write_header(spec: RelabelSpec) -> None:
@@ -158,8 +167,7 @@ def _results(jobs: list, workers: int):
 def label_changes(by_file: dict, out: Path) -> list:
     """(stored record, new record) of every trial OUT has re-run."""
     stored = {r["trial_id"]: r for records in by_file.values() for r in records}
-    new = [r for f in sorted((Path(out) / "trials").glob("*.jsonl")) for r in read_jsonl(f)]
-    return [(stored[r["trial_id"]], r) for r in new if r["trial_id"] in stored]
+    return [(stored[r["trial_id"]], r) for r in relabelled_records(out) if r["trial_id"] in stored]
 
 
 def _label(record: dict):
@@ -169,7 +177,7 @@ def _label(record: dict):
 def render_report(spec: RelabelSpec, by_file: dict) -> str:
     """Labels that changed, per modulus and per band of asked force."""
     pairs = label_changes(by_file, spec.out)
-    planned = len(selected(spec, by_file))
+    planned = sum(eligible(spec, r) for records in by_file.values() for r in records)
     lines = [f"# Relabel of {spec.source}", "",
              f"Settings changed: `{spec.settings}`; trials at E <= {spec.max_youngs_modulus_pa:g} Pa asking >= "
              f"{spec.min_grasp_force_n:g} N a finger, the most over the speed drive's ceiling first. "
@@ -178,21 +186,23 @@ def render_report(spec: RelabelSpec, by_file: dict) -> str:
                  "with at most (sim.hand.speed_drive_ceiling_n).", "",
              "| E (Pa) | asked / ceiling | re-run | negative -> positive | positive -> negative | "
              "positive before -> after |", "|---|---|---|---|---|---|"]
-    moduli = sorted({old["youngs_modulus_pa"] for old, _ in pairs})
-    for modulus in moduli:
+    # (modulus, asked / ceiling, stored label, new label) of each re-run trial
+    rows = [(o["youngs_modulus_pa"], over_ceiling(o), _label(o), _label(n)) for o, n in pairs]
+    for modulus in sorted({row[0] for row in rows}):
         for low, high in zip(CEILING_BANDS, CEILING_BANDS[1:]):
-            band = [(_label(o), _label(n)) for o, n in pairs
-                    if o["youngs_modulus_pa"] == modulus and low <= over_ceiling(o) < high]
+            band = [(a, b) for e, ratio, a, b in rows if e == modulus and low <= ratio < high]
             if band:
-                lines.append(f"| {modulus:.0e} | {low:g}-{high:g} | {len(band)} | "
-                             f"{sum(a is False and b is True for a, b in band)} | "
-                             f"{sum(a is True and b is False for a, b in band)} | "
-                             f"{sum(a is True for a, _ in band)} -> {sum(b is True for _, b in band)} |")
-    both = [(_label(o), _label(n)) for o, n in pairs]
-    lines.append(f"| all | | {len(both)} | {sum(a is False and b is True for a, b in both)} | "
-                 f"{sum(a is True and b is False for a, b in both)} | "
-                 f"{sum(a is True for a, _ in both)} -> {sum(b is True for _, b in both)} |")
+                lines.append(f"| {modulus:.0e} | {low:g}-{high:g} | {_change_cells(band)} |")
+    lines.append(f"| all | | {_change_cells([(a, b) for _, _, a, b in rows])} |")
     return "\n".join(lines) + "\n" + _merged_signal(by_file, pairs)
+
+
+def _change_cells(labels: list) -> str:
+    """The report's cells of (stored, new) label pairs: re-run | negative -> positive | positive -> negative |
+    positives before -> after."""
+    return (f"{len(labels)} | {sum(a is False and b is True for a, b in labels)} | "
+            f"{sum(a is True and b is False for a, b in labels)} | "
+            f"{sum(a is True for a, _ in labels)} -> {sum(b is True for _, b in labels)}")
 
 
 def _merged_signal(by_file: dict, pairs: list) -> str:
@@ -216,7 +226,7 @@ def merge(source: Path, relabelled: Path, out: Path) -> dict:
     relabel_header = json.loads((Path(relabelled) / HEADER_FILE).read_text(encoding="utf-8"))
     if relabel_header["source_fingerprint"] != dataset_fingerprint(source):
         raise DatasetError(f"{relabelled} relabelled another version of {source} (fingerprint differs)")
-    new = {r["trial_id"]: r for f in sorted((Path(relabelled) / "trials").glob("*.jsonl")) for r in read_jsonl(f)}
+    new = {r["trial_id"]: r for r in relabelled_records(relabelled)}
     header = json.loads((Path(source) / "dataset.json").read_text(encoding="utf-8"))
     settings = TrialSettings.from_record(header["generator"]["trial_settings"])
     header["generator"]["trial_settings"] = settings.with_fields(**relabel_header["settings"]).to_record()
