@@ -176,8 +176,10 @@ class _Trial:
         opening = self.grasp.finger_opening_m()
         self.tcp = world_T_hand(self.grasp.position_m, self.grasp.yaw_rad)
         self.hand = hand_mod.create_hand(self.client, self.tcp, opening, friction=self.material.finger_friction)
-        self.hand.close(self.force_n, m.close_speed_mps, press=self.protocol.finger_drive == "press")
-        self.world.before_step = self.hand.drive
+        press = self.protocol.finger_drive == "press"
+        self.hand.close(self.force_n, m.close_speed_mps, press=press)
+        if press:                  # the speed drive needs nothing per step: no call on its hot path
+            self.world.before_step = self.hand.drive
         self.step(self.seconds(opening / 2 / m.close_speed_mps + m.close_settle_s))
         if self.hand.finger_opening_m() < 1e-3:
             raise _Abort(STATUS_LIFT_FAILED, "fingers closed on nothing")

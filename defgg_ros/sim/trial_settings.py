@@ -71,6 +71,8 @@ RECORD_FIELDS = (
     "stop_direction_when_lost", "stop_when_label_decided", "confident_stop", "confident_min_directions",
     "confident_margin_mps2", "max_cpu_s", "shake_limit_mps2", "shake_fail_below_mps2", "shake_stop_when_decided",
     "twist_fail_below_radps2", "time_step_s", "shake_directions") + SETTING_FIELDS
+# Every name the stored form may hold: RECORD_FIELDS, then the protocol's optional ones (only when they differ).
+STORED_FIELDS = RECORD_FIELDS + tuple(OPTIONAL_SETTING_FIELDS)
 # A stored settings dict made before a field existed ran with these values (CHANGELOG.md, "Trial settings
 # history"); from_record fills them in, so an old dataset or evaluation folder loads, compares and resumes.
 PRE_FIELD_VALUES = {"confident_min_directions": 4, "confident_margin_mps2": 40.0, "twist_oscillation_radps": None,
@@ -94,16 +96,15 @@ class TrialSettings:
     def with_fields(self, **flat) -> TrialSettings:
         """These settings with fields changed by their stored names (RECORD_FIELDS); ValueError names an unknown
         one. The protocol's fields (protocol.SETTING_FIELDS) change the protocol."""
-        known = RECORD_FIELDS + tuple(OPTIONAL_SETTING_FIELDS)
-        unknown = sorted(set(flat) - set(known))
+        unknown = sorted(set(flat) - set(STORED_FIELDS))
         if unknown:
-            raise ValueError(f"unknown trial settings {unknown}; known: {', '.join(known)}")
+            raise ValueError(f"unknown trial settings {unknown}; known: {', '.join(STORED_FIELDS)}")
         groups = {}
         for group, cls in _GROUPS.items():
             changed = {k: v for k, v in flat.items() if k in cls.__dataclass_fields__}
             groups[group] = replace(getattr(self, group), **changed)
         protocol = self.protocol
-        if any(k in flat for k in SETTING_FIELDS + tuple(OPTIONAL_SETTING_FIELDS)):
+        if any(k in flat for k in (*SETTING_FIELDS, *OPTIONAL_SETTING_FIELDS)):
             protocol = TrialProtocol.from_setting({**self.protocol.to_setting(), **flat})
         return replace(self, protocol=protocol, **groups)
 
@@ -111,7 +112,7 @@ class TrialSettings:
         """The stored form (RECORD_FIELDS, then the optional fields that differ from their old value)."""
         flat = {**asdict(self.motion), **asdict(self.generator), **asdict(self.evaluation),
                 **self.protocol.to_setting()}
-        return {k: flat[k] for k in RECORD_FIELDS + tuple(OPTIONAL_SETTING_FIELDS) if k in flat}
+        return {k: flat[k] for k in STORED_FIELDS if k in flat}
 
     @classmethod
     def from_record(cls, recorded: dict) -> TrialSettings:
