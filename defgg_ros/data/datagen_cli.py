@@ -60,6 +60,14 @@ Re-run a dataset's trials under a changed setting (e.g. the hand pressing as the
 """
 
 
+def settings_overrides(text: str) -> dict:
+    """--settings: a JSON object of TrialSettings overrides (json.JSONDecodeError, TypeError on bad input)."""
+    settings = json.loads(text)
+    if not isinstance(settings, dict):
+        raise TypeError("--settings must be a JSON object")
+    return settings
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="defgg-datagen", description=DESCRIPTION, formatter_class=HelpFormatter,
                                  usage="%(prog)s --out DIR [options]   (generate or resume a dataset)\n"
@@ -212,8 +220,8 @@ def relabel_main(argv) -> int:
 
     args = build_relabel_parser().parse_args(argv)
     try:
-        settings = json.loads(args.settings)
-        if not isinstance(settings, dict) or not settings:
+        settings = settings_overrides(args.settings)
+        if not settings:
             raise TypeError("--settings must be a non-empty JSON object (what to change)")
         TrialSettings().with_fields(**settings)
     except (json.JSONDecodeError, TypeError, ValueError) as exc:
@@ -267,9 +275,7 @@ def main(argv=None) -> int:
         return seal_main(argv[1:])
     args = build_parser().parse_args(argv)
     try:
-        settings = json.loads(args.settings)
-        if not isinstance(settings, dict):
-            raise TypeError("--settings must be a JSON object")
+        settings = settings_overrides(args.settings)
         stored = recorded_generator(args.out)       # a resumed dataset keeps its protocol
         recorded = None if stored is None else recorded_trial_settings(stored).to_record()
         settings.setdefault("protocol", resolve_protocol(args.protocol, recorded=recorded).name)
