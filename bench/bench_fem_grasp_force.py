@@ -1,6 +1,7 @@
 """The force a simulated grasp presses an FEM object with, against the force it was asked for (issue 49).
 
   .venv/bin/python bench/bench_fem_grasp_force.py [--forces 1 2 5 10 20] [--trial-forces 0.5 1 2 4] [--no-trials]
+      [--drive-speeds 0.005 0.02 0.06]
 
 PyBullet's deformable contact takes the momentum of a finger driven at a speed (POSITION_ or VELOCITY_CONTROL with
 a force limit) each step, so such a finger presses an FEM body with about 2 m v / dt, whatever force it may use;
@@ -8,7 +9,9 @@ a rigid body gets the force limit. franka_gripper's grasp holds its force (docs/
 objects"). Two measurements:
 1. The simulated cell's hand (the squeeze bench's jig, the 5 cm cube at 2e5 Pa, closing at 0.02 m/s as the squeeze
    and a soft pick do): the opening at each force, with the cell's drive (force
-   control once on the object) and with the speed-driven drive it had before 2026-11-30.
+   control once on the object) and with the speed-driven drive it had before 2026-11-30. With --drive-speeds:
+   the speed-driven hand closing at each speed with the largest force asked, and the force the pressing hand
+   needs for the same opening (interpolated on the pressing column): what the old drive really pressed with.
 2. The training trials' hand (defgg_ros/sim/hand.py: each finger a velocity drive at the protocol's close speed
    with the force as its limit): fem_v5's box_flat trial at each FEM modulus, closed with each --trial-forces
    force, the fingers' mean force after the close (the object sees the mean: the fingers are geared); then how many
@@ -51,17 +54,32 @@ def cell_squeeze(forces_n, pressing: bool) -> list:
         return _squeeze_cube(forces_n)
 
 
-def _squeeze_cube(forces_n) -> list:
+def _squeeze_cube(forces_n, speed_mps: float = SQUEEZE_SPEED_MPS) -> list:
     rows = []
     with squeeze_bench.jig(squeeze_bench.scene_object("cube_5cm", 2e5, 0.0)) as cell:
         for force in forces_n:
-            cell.gripper_grasp(0.0, 0.08, 0.08, SQUEEZE_SPEED_MPS, force)
+            cell.gripper_grasp(0.0, 0.08, 0.08, speed_mps, force)
             for _ in range(500):
                 if cell.advance(0.01):
                     break
             cell.advance(0.5)
             rows.append((force, cell.gripper_width_m() * 1e3))
     return rows
+
+
+def speed_driven_opening_mm(speed_mps: float, force_n: float) -> float:
+    """The speed-driven hand's opening on the 2e5 Pa cube after one grasp at this speed and force."""
+    with squeeze_bench.hand_drive("speed-driven"):
+        return _squeeze_cube([force_n], speed_mps)[0][1]
+
+
+def equivalent_force_n(opening_mm: float, pressed: list) -> float | None:
+    """The force the pressing hand needs for this opening, linear between the rows of `pressed` ([(N, mm)], the
+    opening falling with the force); None outside them."""
+    for (f0, w0), (f1, w1) in zip(pressed, pressed[1:]):
+        if min(w0, w1) <= opening_mm <= max(w0, w1) and w0 != w1:
+            return f0 + (f1 - f0) * (w0 - opening_mm) / (w0 - w1)
+    return None
 
 
 def trial_pressed_n(record: dict, force_n: float) -> float:
@@ -130,6 +148,9 @@ def main(argv=None) -> int:
     parser.add_argument("--trial-forces", type=float, nargs="+", default=[0.5, 1.0, 2.0, 4.0],
                         help="part 2: forces the trial hand is asked for, N")
     parser.add_argument("--no-trials", action="store_true", help="part 1 only")
+    parser.add_argument("--drive-speeds", type=float, nargs="+", default=[], metavar="M_PER_S",
+                        help="part 1: also the speed-driven hand at these closing speeds (m/s; the squeeze and a "
+                             "soft pick 0.02, a rigid pick 0.05-0.06), with the largest --forces asked")
     parser.add_argument("--ringing", action="store_true",
                         help="also: the FEM ball squeezed by the pressing hand with and without the fingers' damping "
                              "(sim_cell.FINGER_JOINT_DAMPING_NSPM): time to stop and steps")
@@ -140,12 +161,21 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     if any(f <= 0 for f in args.forces + args.trial_forces):
         parser.error("forces must be > 0 N")
+    if any(not 0 < v <= 0.1 for v in args.drive_speeds):
+        parser.error("--drive-speeds must be in (0, 0.1] m/s (the hand's opening speed)")
+    args.forces = sorted(args.forces)
 
     print(f"1. The cell's hand on the 5 cm cube at 2e5 Pa, closing at {SQUEEZE_SPEED_MPS} m/s", flush=True)
     pressed, driven = cell_squeeze(args.forces, True), cell_squeeze(args.forces, False)
     print("   asked N | opening mm: pressing (the cell) | speed-driven (before 2026-11-30)")
     for (force, w_new), (_, w_old) in zip(pressed, driven):
-        print(f"   {force:7.1f} | {w_new:8.3f} | {w_old:8.3f}")
+        print(f"   {force:7.2f} | {w_new:8.3f} | {w_old:8.3f}")
+    for speed in args.drive_speeds:
+        opening = speed_driven_opening_mm(speed, args.forces[-1])
+        found = equivalent_force_n(opening, pressed)
+        said = f"{found:.1f} N" if found is not None else f"outside {args.forces[0]:g}-{args.forces[-1]:g} N"
+        print(f"   speed-driven at {speed:g} m/s, {args.forces[-1]:g} N asked: {opening:.3f} mm, as the pressing "
+              f"hand at {said}", flush=True)
     if args.ringing:
         for damping in (FINGER_JOINT_DAMPING_NSPM, 0.0):
             for yaw in (0.0, 2.0):
