@@ -128,8 +128,9 @@ def _add_others(sub):
     p.add_argument("--docs", metavar="FILE", help="also write the Markdown report (e.g. docs/results.md)")
     p.add_argument("--notes", metavar="FILE", help="hand-written analysis to include in the report verbatim")
     p.add_argument("--data", metavar="DIR", help="training dataset: add label diagnostics (OUT/diagnostics.json)")
-    p.add_argument("--seeds", nargs="+", metavar="SEED=OUT", default=None,
-                   help="with --docs: add the seed study's table over these folders (as `defgg-eval seeds --run`)")
+    p.add_argument("--seeds", nargs="+", action="append", metavar="SEED=OUT", default=None,
+                   help="with --docs: add the seed study's table over these folders (as `defgg-eval seeds --run`); "
+                        "give --seeds again for another study (another dataset's pair), one table each")
     p.add_argument("--cell", metavar="DIR", default=None,
                    help="with --docs: add the cell experiment's report from DIR/report.md (defgg-cell-experiment)")
 
@@ -403,9 +404,9 @@ def cmd_report(args) -> int:
     summary = report_mod.write_outputs(args.out)
     write_diagnostics(args.out, args.data)
     if args.docs:
-        seed_runs = parse_pairs(args.seeds, "--seeds", "SEED=OUT") if args.seeds else None
-        seeds_md = seed_table(seed_runs, ("common", "adversarial")) if seed_runs else None
-        docs.write_results_doc(args.out, args.docs, args.notes, seeds_md, seed_runs, args.cell)
+        studies = [parse_pairs(group, "--seeds", "SEED=OUT") for group in args.seeds or []]
+        tables = [seed_table(runs, ("common", "adversarial")) for runs in studies]
+        docs.write_results_doc(args.out, args.docs, args.notes, list(zip(studies, tables)), args.cell)
     print(json.dumps({"records": summary["records"], "targets": summary["targets"]}, indent=1))
     return 0
 

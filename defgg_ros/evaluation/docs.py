@@ -97,16 +97,31 @@ def distinct_commands(commands) -> list:
     return list(dict.fromkeys(re.sub(r"\s--workers[ =]\d+", "", c) for c in commands if "--plan-only" not in c))
 
 
-def _seeds_lines(seeds_md: str | None, seed_runs: dict | None) -> list:
-    if not seeds_md:
+def _study_title(seed_runs: dict) -> str:
+    """What sets one seed study apart: the trial hand its folders ran and the training data of its weights."""
+    manifest = report_mod.read_manifest(Path(next(iter(seed_runs.values()))))
+    drive = (manifest.get("trial_settings") or {}).get("finger_drive", "speed")
+    hand = "pressing trial hand" if drive == "press" else "speed-driven trial hand"
+    prints = sorted({m.get("data_fingerprint", "?") for m in manifest.get("models", {}).values()})
+    return f"The {hand}; training data fingerprint {', '.join(prints)}"
+
+
+def _seeds_lines(studies: list) -> list:
+    """The seed studies' section: [(seed_runs, table_md)], one table per study (a title each when several)."""
+    if not studies:
         return []
-    runs = " ".join(f"{seed}={out}" for seed, out in (seed_runs or {}).items())
-    return ["## Seeds: how much of the margin is the training seed?", "",
-            "Each seed's pair (same data, schedule and validation objects; epochs chosen on validation) evaluated "
-            "under the same protocol; the paired margin (points, with stiffness minus depth only) per seed, the mean "
-            "over seeds with a 95 % bootstrap interval over objects, the sign test pooled over seeds "
-            f"(`defgg-eval seeds --run {runs}`). The shipped pair is seed 0. A seed whose folder holds fewer "
-            "trials than the shipped one's is a partial result.", "", seeds_md.strip(), ""]
+    lines = ["## Seeds: how much of the margin is the training seed?", "",
+             "Each seed's pair (same data, schedule and validation objects; epochs chosen on validation) evaluated "
+             "under the same protocol; the paired margin (points, with stiffness minus depth only) per seed, the mean "
+             "over seeds with a 95 % bootstrap interval over objects, the sign test pooled over seeds. The shipped "
+             "pair is the seed its model card names. A seed whose folder holds fewer trials than the others' is a "
+             "partial result.", ""]
+    for seed_runs, table_md in studies:
+        runs = " ".join(f"{seed}={out}" for seed, out in seed_runs.items())
+        if len(studies) > 1:
+            lines += [f"### {_study_title(seed_runs)}", ""]
+        lines += [f"`defgg-eval seeds --run {runs}`", "", table_md.strip(), ""]
+    return lines
 
 
 def _cell_lines(cell_dir, doc_path) -> list:
@@ -121,7 +136,8 @@ def _cell_lines(cell_dir, doc_path) -> list:
     return ["## The paper's real-robot experiment in the simulated cell", "", body, ""]
 
 
-def results_markdown(out_dir, doc_path, notes_path=None, seeds_md=None, seed_runs=None, cell_dir=None) -> str:
+def results_markdown(out_dir, doc_path, notes_path=None, seed_studies=(), cell_dir=None) -> str:
+    """The Markdown report; seed_studies: [(seed_runs, table_md)], one per --seeds."""
     out_dir = Path(out_dir)
     manifest = report_mod.read_manifest(out_dir)
     summary = json.loads((out_dir / report_mod.SUMMARY_FILE).read_text())
@@ -130,7 +146,7 @@ def results_markdown(out_dir, doc_path, notes_path=None, seeds_md=None, seed_run
     labels = _label_diagnostics(out_dir)
     command = (f"defgg-eval report --out {out_dir} --docs {doc_path}" + _data_flag(labels)
                + (f" --notes {notes_path}" if notes_path else "")
-               + (" --seeds " + " ".join(f"{k}={v}" for k, v in seed_runs.items()) if seed_runs else "")
+               + "".join(" --seeds " + " ".join(f"{k}={v}" for k, v in runs.items()) for runs, _ in seed_studies)
                + (f" --cell {cell_dir}" if cell_dir is not None else ""))
     lines = [
         "# Results: the paper's experiments in our FEM simulator", "",
@@ -171,7 +187,7 @@ def results_markdown(out_dir, doc_path, notes_path=None, seeds_md=None, seed_run
         if by_rank:
             lines += [by_rank, ""]
     lines += ["## Targets of the issue (shake task, all stiffnesses)", ""] + _targets_md(summary["targets"]) + [""]
-    lines += _seeds_lines(seeds_md, seed_runs) + _cell_lines(cell_dir, doc_path)
+    lines += _seeds_lines(list(seed_studies)) + _cell_lines(cell_dir, doc_path)
     lines += _carry_lines(labels)
     pairs_md = _read(tdir / "paired.md")
     if pairs_md:
@@ -217,6 +233,6 @@ def results_markdown(out_dir, doc_path, notes_path=None, seeds_md=None, seed_run
     return "\n".join(lines) + "\n"
 
 
-def write_results_doc(out_dir, doc_path, notes_path=None, seeds_md=None, seed_runs=None, cell_dir=None) -> Path:
-    write_text_atomic(doc_path, results_markdown(out_dir, doc_path, notes_path, seeds_md, seed_runs, cell_dir))
+def write_results_doc(out_dir, doc_path, notes_path=None, seed_studies=(), cell_dir=None) -> Path:
+    write_text_atomic(doc_path, results_markdown(out_dir, doc_path, notes_path, seed_studies, cell_dir))
     return Path(doc_path)

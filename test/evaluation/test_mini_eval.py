@@ -96,6 +96,12 @@ def test_outputs_have_the_papers_table_structure(mini_run, tmp_path):
     assert "## Seeds: how much of the margin is the training seed?" in text and "mean of 2 seeds" in text
     assert "## The paper's real-robot experiment in the simulated cell" in text and "| object | correct |" in text
     assert "![per object](cell/per_object.png)" in text and f"--seeds 0={out} 1={out} --cell {cell}" in text
+    # a second study (another dataset's pair): one table each, each under the title of its trial hand
+    assert cli.main(["report", "--out", str(out), "--docs", str(doc), "--seeds", f"0={out}", f"1={out}",
+                     "--seeds", f"0={out}"]) == 0
+    text = doc.read_text()
+    assert text.count("### The speed-driven trial hand; training data fingerprint") == 2
+    assert "mean of 2 seeds" in text and f"--seeds 0={out} 1={out} --seeds 0={out}" in text
 
 
 def test_rerun_skips_finished_trials(mini_run, capsys):
