@@ -50,28 +50,54 @@ class FingerSpeeds:
         return [(b - q) / elapsed_s for b, q in zip(before, positions_m)]
 
 
+class ContactWindow:
+    """Is a closing grasp on the object (on_object)? Checked at the end of each window of CONTACT_WINDOW_S of sim
+    time; once on, it stays on. `tolerance_s`: how much short of a full window still counts as one (a clock
+    summed step by step, as the trial hand's, lands a hair short of 20 ms; the cell's clock is exact: 0)."""
+
+    def __init__(self, finger_speed_mps: float, tolerance_s: float = 0.0):
+        self.finger_speed_mps, self.tolerance_s = finger_speed_mps, tolerance_s
+        self.on = False
+        self._start = None                        # (sim s, opening) the running window began at
+
+    def start(self, now_s: float, opening_m: float) -> None:
+        self._start = (now_s, opening_m)
+
+    def restart(self) -> None:
+        """The next update begins a new window (the fingers were reset); on stays on."""
+        self._start = None
+
+    def update(self, now_s: float, opening_m: float) -> bool:
+        if self.on:
+            return True
+        if self._start is None:
+            self.start(now_s, opening_m)
+        start_s, start_m = self._start
+        if now_s - start_s >= CONTACT_WINDOW_S - self.tolerance_s:
+            self.on = on_object(start_m - opening_m, self.finger_speed_mps, now_s - start_s)
+            self._start = (now_s, opening_m)
+        return self.on
+
+
 class PressingClose:
     """One grasp's pressing close, fed each step: which fingers push with the force."""
 
     def __init__(self, finger_speed_mps: float, speed_limit_mps: float):
         self.finger_speed_mps, self.speed_limit_mps = finger_speed_mps, speed_limit_mps
-        self.pressing = False
+        self.contact = ContactWindow(finger_speed_mps, tolerance_s=1e-9)
         self.speeds = FingerSpeeds()
-        self._window = None                       # (sim s, opening) the running contact window began at
+
+    @property
+    def pressing(self) -> bool:
+        return self.contact.on
 
     def update(self, now_s: float, finger_positions_m, step_s: float) -> list:
         """Finger positions (m, each from the TCP) after the last step -> per finger: push with the force?"""
-        opening_m = sum(finger_positions_m)
-        if self._window is None:
-            self._window = (now_s, opening_m)
-        start_s, start_m = self._window
-        if not self.pressing and now_s - start_s >= CONTACT_WINDOW_S - 1e-9:
-            self.pressing = on_object(start_m - opening_m, self.finger_speed_mps, now_s - start_s)
-            self._window = (now_s, opening_m)
+        pressing = self.contact.update(now_s, sum(finger_positions_m))
         speeds = self.speeds.update(now_s, finger_positions_m, step_s)
-        return [finger_pushes(self.pressing, v, self.speed_limit_mps) for v in speeds]
+        return [finger_pushes(pressing, v, self.speed_limit_mps) for v in speeds]
 
     def restart_window(self) -> None:
         """The fingers were reset (a saved state restored): speeds start again; a press stays a press."""
         self.speeds.clear()
-        self._window = None
+        self.contact.restart()

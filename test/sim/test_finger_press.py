@@ -4,6 +4,7 @@ import pytest
 
 from defgg_ros.sim.finger_press import (
     CONTACT_WINDOW_S,
+    ContactWindow,
     FingerSpeeds,
     PressingClose,
     finger_pushes,
@@ -52,3 +53,38 @@ def test_a_pressing_close_is_speed_limited_until_blocked_then_pushes():
     assert all(all(m) for m in modes[-50:]) and close.pressing
     close.restart_window()
     assert close.pressing                                # a restored state keeps the press
+
+
+def blocked_window_latches_at(window: ContactWindow, step_s: float, steps: int) -> int | None:
+    """The step (1-based) at which a grasp blocked from the start is found on the object, the clock summed."""
+    clock_s = 0.0
+    window.start(clock_s, 0.05)
+    for k in range(1, steps + 1):
+        clock_s += step_s
+        if window.update(clock_s, 0.05):
+            return k
+    return None
+
+
+def test_one_contact_window_for_both_hands_and_what_its_tolerance_is_for():
+    # 200 steps of 0.1 ms summed land a hair short of 20 ms: the trial hand's tolerance counts that as the window,
+    # the cell's exact clock needs none and takes the next step.
+    assert blocked_window_latches_at(ContactWindow(0.01, tolerance_s=1e-9), 1e-4, 400) == 200
+    assert blocked_window_latches_at(ContactWindow(0.01), 1e-4, 400) == 201
+    assert PressingClose(0.01, 0.01).contact.tolerance_s == 1e-9
+    window = ContactWindow(0.01)
+    window.start(0.0, 0.05)
+    assert not window.update(CONTACT_WINDOW_S, 0.05 - 0.0005)   # closed at the commanded speed: not on it yet
+    assert window.update(2 * CONTACT_WINDOW_S, 0.05 - 0.0005)   # then stopped for a window: on it, and it stays
+    assert window.update(3 * CONTACT_WINDOW_S, 0.0)
+
+
+def test_the_cells_hand_uses_the_same_contact_window():
+    from defgg_ros.sim.cell.gripper import GripperController
+    gripper = GripperController(0.08)
+    gripper.start_grasp(0.05, 0.005, 0.005, 0.02, 5.0, now_s=0.0)
+    assert isinstance(gripper._contact, ContactWindow) and gripper._contact.finger_speed_mps == 0.01
+    gripper.update(CONTACT_WINDOW_S - 1e-12, 0.08)     # the cell's clock is exact: short of the window is short
+    assert not gripper.motor.press
+    gripper.update(CONTACT_WINDOW_S, 0.08)
+    assert gripper.motor.press

@@ -115,11 +115,13 @@ def test_records_without_a_protocol_compare_as_legacy():
 
 @pytest.mark.parametrize("dataset, trial_id", [
     ("fem_v4", "pyramid__E2e+04__g037"), ("fem_v4", "egad_train_06_c4__E2e+09__g000"),
-    ("fem_v4", "ycb_banana__E2e+04__g014"), ("fem_v5", "cube__E2e+09__g000"), ("fem_v5", "capsule__E2e+09__g010")])
+    ("fem_v4", "ycb_banana__E2e+04__g014"), ("fem_v5", "cube__E2e+09__g000"), ("fem_v5", "capsule__E2e+09__g010"),
+    ("fem_v5p", "ycb_banana__E2e+04__g005")])
 def test_stored_trials_of_both_protocols_replay_exactly(dataset, trial_id):
     """A soft positive, rigid trials and a lift failure of datasets/fem_v4 (legacy protocol, its records predate
-    the protocol fields) and rigid trials of fem_v5 (defgraspsim), rerun from their records: every field the
-    record stores comes out the same but the CPU time."""
+    the protocol fields), rigid trials of fem_v5 (defgraspsim) and a soft trial of fem_v5p pressed by the trial
+    hand (a negative of fem_v5 that holds pressing), rerun from their records: every field the record stores comes
+    out the same but the CPU time."""
     from pathlib import Path
 
     from defgg_ros.data.datagen import job_from_record, run_trial_job

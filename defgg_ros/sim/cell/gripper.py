@@ -9,7 +9,7 @@ and says what the finger motors should do; it has no PyBullet in it.
 from dataclasses import dataclass, replace
 
 from defgg_ros.constants import GRIPPER_MAX_FORCE_N, GRIPPER_MAX_WIDTH_M
-from defgg_ros.sim.finger_press import CONTACT_WINDOW_S, on_object
+from defgg_ros.sim.finger_press import ContactWindow
 
 # The fingers count as stopped when the opening changes slower than this...
 STALL_SPEED_MPS = 0.002
@@ -75,7 +75,7 @@ class GripperController:
         self._last_moving_s = 0.0
         self._last_width_m = initial_width_m
         self._anchor_width_m = initial_width_m   # opening when the fingers last moved
-        self._window = (0.0, initial_width_m)    # (time, opening) the running contact window began at
+        self._contact = ContactWindow(self._motor.finger_speed_mps)   # a grasp's: on the object yet?
 
     @property
     def motor(self) -> MotorCommand:
@@ -98,6 +98,8 @@ class GripperController:
         self._begin("grasp", (width_m, eps_inner_m, eps_outer_m), now_s)
         # Drive towards closed; the force limit is what holds the object.
         self._motor = MotorCommand(0.0, speed_mps / 2, force_n)
+        self._contact = ContactWindow(speed_mps / 2)
+        self._contact.start(now_s, self._last_width_m)
 
     def preempt(self) -> GripperOutcome | None:
         """Abort the active command (a new goal replaced it)."""
@@ -110,20 +112,12 @@ class GripperController:
         self._kind, self._goal = kind, goal
         self._started_s = self._last_moving_s = now_s
         self._anchor_width_m = self._last_width_m
-        self._window = (now_s, self._last_width_m)
 
     def _check_contact(self, now_s: float, width_m: float) -> None:
-        """A grasp's fingers on the object (finger_press.on_object, over CONTACT_WINDOW_S windows) press with the
-        grasp's force from then on (MotorCommand.press)."""
-        if self._kind != "grasp" or self._motor.press:
-            return
-        start_s, start_width_m = self._window
-        elapsed_s = now_s - start_s
-        if elapsed_s < CONTACT_WINDOW_S:
-            return
-        if on_object(start_width_m - width_m, self._motor.finger_speed_mps, elapsed_s):
+        """A grasp's fingers on the object (finger_press.ContactWindow) press with the grasp's force from then on
+        (MotorCommand.press)."""
+        if self._kind == "grasp" and not self._motor.press and self._contact.update(now_s, width_m):
             self._motor = replace(self._motor, press=True)
-        self._window = (now_s, width_m)
 
     def update(self, now_s: float, width_m: float) -> GripperOutcome | None:
         """Feed the measured opening; returns the outcome when the command ends."""
