@@ -44,6 +44,8 @@ from defgg_ros.sim import world
 from defgg_ros.sim.protocol import TrialProtocol, resolve_protocol
 from defgg_ros.sim.trial_settings import TrialSettings, protocol_differences
 
+SEEDS_FIGURE = "seeds.png"    # the report's figure of the seed studies, in its evaluation folder
+
 # Imported inside the commands that need them: the modules that load torch (model.*, evaluation.cards and
 # .snapshot, data.dataset: ~1.3 CPU-s over this module's own imports, 2026-11-29), so `defgg-eval --help` and
 # the commands that never load a model start without it.
@@ -202,6 +204,8 @@ def _add_others(sub):
     p.add_argument("--sets", nargs="+", default=["common", "adversarial"], help="default: %(default)s")
     p.add_argument("--task", default="shake", choices=TASKS)
     p.add_argument("--out", default=None, metavar="FILE", help="also write the Markdown table here")
+    p.add_argument("--png", default=None, metavar="FILE",
+                   help="also draw it: each seed's margin, the mean and its interval, per object set")
 
     p = sub.add_parser("card", help="(re)write models/<name>.md from its provenance, weights and evaluation")
     p.add_argument("--name", required=True, nargs="+")
@@ -405,8 +409,14 @@ def cmd_report(args) -> int:
     write_diagnostics(args.out, args.data)
     if args.docs:
         studies = [parse_pairs(group, "--seeds", "SEED=OUT") for group in args.seeds or []]
-        tables = [seed_table(runs, ("common", "adversarial")) for runs in studies]
-        docs.write_results_doc(args.out, args.docs, args.notes, list(zip(studies, tables)), args.cell)
+        summaries = [seed_summaries(runs, ("common", "adversarial")) for runs in studies]
+        figure = None
+        if studies:
+            from defgg_ros.evaluation.figures import seeds_figure  # matplotlib: only when drawn
+            figure = Path(args.out) / SEEDS_FIGURE
+            seeds_figure([(docs.study_label(runs), s) for runs, s in zip(studies, summaries)], figure)
+        tables = [seeds_markdown(s) for s in summaries]
+        docs.write_results_doc(args.out, args.docs, args.notes, list(zip(studies, tables)), args.cell, figure)
     print(json.dumps({"records": summary["records"], "targets": summary["targets"]}, indent=1))
     return 0
 
@@ -517,18 +527,23 @@ def cmd_card(args) -> int:
     return 0
 
 
-def seed_table(seed_runs: dict, sets, task: str = "shake") -> str:
-    """The seed study's Markdown table over {seed: evaluation folder}, each folder read once."""
+def seed_summaries(seed_runs: dict, sets, task: str = "shake") -> list:
+    """The seed study over {seed: evaluation folder}, a summary per object set, each folder read once."""
     runs = {seed: read_results(results_path(out)) for seed, out in seed_runs.items()}
-    return seeds_markdown([summarise(runs, s, task) for s in sets])
+    return [summarise(runs, s, task) for s in sets]
 
 
 def cmd_seeds(args) -> int:
 
-    table = seed_table(parse_pairs(args.run, "--run", "SEED=OUT"), args.sets, args.task)
+    seed_runs = parse_pairs(args.run, "--run", "SEED=OUT")
+    summaries = seed_summaries(seed_runs, args.sets, args.task)
+    table = seeds_markdown(summaries)
     print(table, end="")
     if args.out:
         write_text_atomic(args.out, table)
+    if args.png:
+        from defgg_ros.evaluation.figures import seeds_figure  # matplotlib: only when drawn
+        seeds_figure([(docs.study_label(seed_runs), summaries)], args.png)
     return 0
 
 

@@ -97,17 +97,25 @@ def distinct_commands(commands) -> list:
     return list(dict.fromkeys(re.sub(r"\s--workers[ =]\d+", "", c) for c in commands if "--plan-only" not in c))
 
 
-def _study_title(seed_runs: dict) -> str:
-    """What sets one seed study apart: the trial hand its folders ran and the training data of its weights."""
+def study_label(seed_runs: dict) -> str:
+    """A seed study's short name: the dataset its evaluation took the trial protocol from, and the trial hand."""
     manifest = report_mod.read_manifest(Path(next(iter(seed_runs.values()))))
+    found = re.search(r"--protocol-from[ =](\S+)", manifest.get("command", ""))
     drive = (manifest.get("trial_settings") or {}).get("finger_drive", "speed")
-    hand = "pressing trial hand" if drive == "press" else "speed-driven trial hand"
+    hand = "pressing" if drive == "press" else "speed-driven"
+    return f"{Path(found.group(1)).name}, {hand}" if found else hand
+
+
+def _study_title(seed_runs: dict) -> str:
+    """What sets one seed study apart: its protocol's dataset, the trial hand and its weights' training data."""
+    manifest = report_mod.read_manifest(Path(next(iter(seed_runs.values()))))
     prints = sorted({m.get("data_fingerprint", "?") for m in manifest.get("models", {}).values()})
-    return f"The {hand}; training data fingerprint {', '.join(prints)}"
+    return f"{study_label(seed_runs)} trial hand; training data fingerprint {', '.join(prints)}"
 
 
-def _seeds_lines(studies: list) -> list:
-    """The seed studies' section: [(seed_runs, table_md)], one table per study (a title each when several)."""
+def _seeds_lines(studies: list, figure=None, doc_path=None) -> list:
+    """The seed studies' section: [(seed_runs, table_md)], one table per study (a title each when several), and
+    the figure of them all (figures.seeds_figure) when given."""
     if not studies:
         return []
     lines = ["## Seeds: how much of the margin is the training seed?", "",
@@ -116,6 +124,8 @@ def _seeds_lines(studies: list) -> list:
              "over seeds with a 95 % bootstrap interval over objects, the sign test pooled over seeds. The shipped "
              "pair is the seed its model card names. A seed whose folder holds fewer trials than the others' is a "
              "partial result.", ""]
+    if figure is not None and Path(figure).exists():
+        lines += [f"![seed studies]({_rel(Path(figure), doc_path)})", ""]
     for seed_runs, table_md in studies:
         runs = " ".join(f"{seed}={out}" for seed, out in seed_runs.items())
         if len(studies) > 1:
@@ -136,8 +146,8 @@ def _cell_lines(cell_dir, doc_path) -> list:
     return ["## The paper's real-robot experiment in the simulated cell", "", body, ""]
 
 
-def results_markdown(out_dir, doc_path, notes_path=None, seed_studies=(), cell_dir=None) -> str:
-    """The Markdown report; seed_studies: [(seed_runs, table_md)], one per --seeds."""
+def results_markdown(out_dir, doc_path, notes_path=None, seed_studies=(), cell_dir=None, seeds_figure=None) -> str:
+    """The Markdown report; seed_studies: [(seed_runs, table_md)], one per --seeds; seeds_figure: their PNG."""
     out_dir = Path(out_dir)
     manifest = report_mod.read_manifest(out_dir)
     summary = json.loads((out_dir / report_mod.SUMMARY_FILE).read_text())
@@ -187,7 +197,7 @@ def results_markdown(out_dir, doc_path, notes_path=None, seed_studies=(), cell_d
         if by_rank:
             lines += [by_rank, ""]
     lines += ["## Targets of the issue (shake task, all stiffnesses)", ""] + _targets_md(summary["targets"]) + [""]
-    lines += _seeds_lines(list(seed_studies)) + _cell_lines(cell_dir, doc_path)
+    lines += _seeds_lines(list(seed_studies), seeds_figure, doc_path) + _cell_lines(cell_dir, doc_path)
     lines += _carry_lines(labels)
     pairs_md = _read(tdir / "paired.md")
     if pairs_md:
@@ -233,6 +243,6 @@ def results_markdown(out_dir, doc_path, notes_path=None, seed_studies=(), cell_d
     return "\n".join(lines) + "\n"
 
 
-def write_results_doc(out_dir, doc_path, notes_path=None, seed_studies=(), cell_dir=None) -> Path:
-    write_text_atomic(doc_path, results_markdown(out_dir, doc_path, notes_path, seed_studies, cell_dir))
+def write_results_doc(out_dir, doc_path, notes_path=None, seed_studies=(), cell_dir=None, seeds_figure=None) -> Path:
+    write_text_atomic(doc_path, results_markdown(out_dir, doc_path, notes_path, seed_studies, cell_dir, seeds_figure))
     return Path(doc_path)

@@ -100,8 +100,11 @@ def test_outputs_have_the_papers_table_structure(mini_run, tmp_path):
     assert cli.main(["report", "--out", str(out), "--docs", str(doc), "--seeds", f"0={out}", f"1={out}",
                      "--seeds", f"0={out}"]) == 0
     text = doc.read_text()
-    assert text.count("### The speed-driven trial hand; training data fingerprint") == 2
+    assert text.count("### speed-driven trial hand; training data fingerprint") == 2
     assert "mean of 2 seeds" in text and f"--seeds 0={out} 1={out} --seeds 0={out}" in text
+    assert (out / "seeds.png").stat().st_size > 0 and "![seed studies](" in text   # the studies at a glance
+    assert cli.main(["seeds", "--run", f"0={out}", "--png", str(tmp_path / "seeds.png")]) == 0
+    assert (tmp_path / "seeds.png").read_bytes()[:4] == b"\x89PNG"
 
 
 def test_rerun_skips_finished_trials(mini_run, capsys):
