@@ -18,9 +18,9 @@
 # Another dataset's pair (the same study on other labels): TAG names the frozen archive
 # models/train_data_<TAG>.tar.gz (made by defgg-eval freeze), PROTOCOL_FROM the dataset whose trial
 # protocol the evaluation runs (its labels' own), and the outputs go to results/seeds_<TAG>/ and
-# results/sim_<TAG>_s<seed>/. The pressing hand's labels (issue 49):
+# results/sim_<TAG>_s<seed>/. The pressing hand's labels (issue 49; 3 seeds x 1,230 trials, so 369 is 10 %):
 #
-#   TAG=fem_v5p PROTOCOL_FROM=datasets/fem_v5p SEEDS="0 1 2" WORKERS=2 COMMIT_EVERY_TRIALS=246 \
+#   TAG=fem_v5p PROTOCOL_FROM=datasets/fem_v5p SEEDS="0 1 2" WORKERS=2 COMMIT_EVERY_TRIALS=369 \
 #       setsid nohup results/run_seed_study.sh > results/seeds_fem_v5p.log 2>&1 &
 set -uo pipefail
 cd "$(dirname "$0")/.."
@@ -34,9 +34,9 @@ TAG=${TAG:-fem_v5}
 PROTOCOL_FROM=${PROTOCOL_FROM:-datasets/fem_v5}
 FROZEN=${FROZEN:-runs/frozen_$TAG}
 if [ "$TAG" = fem_v5 ]; then   # the first study's folders keep their names
-  WEIGHTS=results/seeds; OUT_PREFIX=results/sim_v5_s
+  WEIGHTS=results/seeds; OUT_PREFIX=results/sim_v5_s; RUNS=runs/seeds
 else
-  WEIGHTS=results/seeds_$TAG; OUT_PREFIX=results/sim_${TAG}_s
+  WEIGHTS=results/seeds_$TAG; OUT_PREFIX=results/sim_${TAG}_s; RUNS=runs/seeds_$TAG
 fi
 [ -d "$PROTOCOL_FROM" ] || { echo "no dataset $PROTOCOL_FROM (PROTOCOL_FROM)" >&2; exit 2; }
 PY=${PY:-.venv/bin/python}
@@ -48,11 +48,10 @@ for seed in $SEEDS; do stored "$seed" || NEED_DATA=1; done
   || { mkdir -p "$FROZEN" && tar xzf "models/train_data_$TAG.tar.gz" -C "$FROZEN"; } || exit 1
 
 train() {   # model seed [flags]: one resumable run, one torch thread (skipped once its weights are stored)
-  local model=$1 seed=$2 run=runs/seeds_$TAG/${1}_s${2}
-  [ "$TAG" = fem_v5 ] && run=runs/seeds/${1}_s${2}
+  local model=$1 seed=$2 run=$RUNS/${1}_s${2}
   shift 2
   [ -f "$WEIGHTS/weights_s$seed/$model.pt" ] && [ ! -d "$run" ] && return 0
-  mkdir -p "$(dirname "$run")"
+  mkdir -p "$RUNS"
   $PY -m defgg_ros.train.cli --data "$FROZEN/train_data" --epochs "$EPOCHS" --samples-per-scene 8 \
     --seed "$seed" --split-seed 0 --threads 1 --no-progress --out "$run" --resume "$@" > "$run.log" 2>&1 \
     || { echo "training $model seed $seed failed: $run.log" >&2; return 1; }

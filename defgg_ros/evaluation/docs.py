@@ -97,20 +97,27 @@ def distinct_commands(commands) -> list:
     return list(dict.fromkeys(re.sub(r"\s--workers[ =]\d+", "", c) for c in commands if "--plan-only" not in c))
 
 
-def study_label(seed_runs: dict) -> str:
-    """A seed study's short name: the dataset its evaluation took the trial protocol from, and the trial hand."""
-    manifest = report_mod.read_manifest(Path(next(iter(seed_runs.values()))))
+def _first_manifest(seed_runs: dict) -> dict:
+    return report_mod.read_manifest(Path(next(iter(seed_runs.values()))))
+
+
+def _label(manifest: dict) -> str:
     found = re.search(r"--protocol-from[ =](\S+)", manifest.get("command", ""))
     drive = (manifest.get("trial_settings") or {}).get("finger_drive", "speed")
     hand = "pressing" if drive == "press" else "speed-driven"
     return f"{Path(found.group(1)).name}, {hand}" if found else hand
 
 
+def study_label(seed_runs: dict) -> str:
+    """A seed study's short name: the dataset its evaluation took the trial protocol from, and the trial hand."""
+    return _label(_first_manifest(seed_runs))
+
+
 def _study_title(seed_runs: dict) -> str:
     """What sets one seed study apart: its protocol's dataset, the trial hand and its weights' training data."""
-    manifest = report_mod.read_manifest(Path(next(iter(seed_runs.values()))))
+    manifest = _first_manifest(seed_runs)
     prints = sorted({m.get("data_fingerprint", "?") for m in manifest.get("models", {}).values()})
-    return f"{study_label(seed_runs)} trial hand; training data fingerprint {', '.join(prints)}"
+    return f"{_label(manifest)} trial hand; training data fingerprint {', '.join(prints)}"
 
 
 def _seeds_lines(studies: list, figure=None, doc_path=None) -> list:

@@ -83,9 +83,13 @@ class PressingClose:
     """One grasp's pressing close, fed each step: which fingers push with the force."""
 
     def __init__(self, finger_speed_mps: float, speed_limit_mps: float):
-        self.finger_speed_mps, self.speed_limit_mps = finger_speed_mps, speed_limit_mps
+        self.speed_limit_mps = speed_limit_mps
         self.contact = ContactWindow(finger_speed_mps, tolerance_s=1e-9)
         self.speeds = FingerSpeeds()
+
+    @property
+    def finger_speed_mps(self) -> float:
+        return self.contact.finger_speed_mps
 
     @property
     def pressing(self) -> bool:

@@ -75,7 +75,7 @@ class GripperController:
         self._last_moving_s = 0.0
         self._last_width_m = initial_width_m
         self._anchor_width_m = initial_width_m   # opening when the fingers last moved
-        self._contact = ContactWindow(self._motor.finger_speed_mps)   # a grasp's: on the object yet?
+        self._contact: ContactWindow | None = None   # the running grasp's: on the object yet? (start_grasp)
 
     @property
     def motor(self) -> MotorCommand:
