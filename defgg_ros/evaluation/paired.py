@@ -44,6 +44,14 @@ class Paired:
         return self.a_only + self.b_only
 
     @property
+    def a_held_pct(self) -> float | None:
+        return None if not self.pairs else 100.0 * (self.both + self.a_only) / self.pairs
+
+    @property
+    def b_held_pct(self) -> float | None:
+        return None if not self.pairs else 100.0 * (self.both + self.b_only) / self.pairs
+
+    @property
     def margin_pts(self) -> float | None:
         return None if not self.pairs else 100.0 * (self.a_only - self.b_only) / self.pairs
 

@@ -102,21 +102,28 @@ def summarise(seed_records: dict, object_set: str, task: str = "shake", model_a:
     return SeedSummary(object_set, rows, mean, interval, pooled, len(objects), None if keep is None else len(keep))
 
 
+def _held(c: Paired) -> str:
+    """Success rates of the two models over the same pairs (the target's "common >= 75 %" reads here)."""
+    return f"{c.a_held_pct:.1f} % / {c.b_held_pct:.1f} %" if c.pairs else ""
+
+
 def seeds_markdown(summaries) -> str:
     """One table: a row per seed and object set, then the mean, its interval and the pooled test."""
-    lines = ["| object set | seed | pairs | with stiffness only | depth only only | margin (pts) | sign test p |",
-             "|---|---|---|---|---|---|---|"]
+    lines = ["| object set | seed | pairs | held: with stiffness / depth only | with stiffness only | depth only only "
+             "| margin (pts) | sign test p |",
+             "|---|---|---|---|---|---|---|---|"]
     for s in summaries:
         for row in s.rows:
             c = row.counts
             margin = "" if c.margin_pts is None else f"{c.margin_pts:+.1f}"
-            lines.append(f"| {s.object_set} | {row.seed} | {c.pairs} | {c.a_only} | {c.b_only} | {margin} | "
-                         f"{c.p_value:.3g} |" if c.pairs else f"| {s.object_set} | {row.seed} | 0 | | | | |")
+            lines.append(f"| {s.object_set} | {row.seed} | {c.pairs} | {_held(c)} | {c.a_only} | {c.b_only} | "
+                         f"{margin} | {c.p_value:.3g} |" if c.pairs
+                         else f"| {s.object_set} | {row.seed} | 0 | | | | | |")
         mean = "" if s.mean_margin_pts is None else f"{s.mean_margin_pts:+.1f}"
         interval = "" if s.interval_pts is None else f" (95 % over {s.objects} objects: {s.interval_pts[0]:+.1f} … " \
                                                        f"{s.interval_pts[1]:+.1f})"
-        lines.append(f"| {s.object_set} | **mean of {len(s.rows)} seeds** | {s.pooled.pairs} | {s.pooled.a_only} | "
-                     f"{s.pooled.b_only} | {mean}{interval} | {s.pooled_p:.3g} (pooled) |")
+        lines.append(f"| {s.object_set} | **mean of {len(s.rows)} seeds** | {s.pooled.pairs} | {_held(s.pooled)} | "
+                     f"{s.pooled.a_only} | {s.pooled.b_only} | {mean}{interval} | {s.pooled_p:.3g} (pooled) |")
     notes = [f"{s.object_set}: every seed on the same {s.matched_views} views (object, E, rank) that each seed with "
              "trials has" for s in summaries if s.matched_views is not None]
     return "\n".join(lines) + "\n" + ("\n" + "; ".join(notes) + ".\n" if notes else "")

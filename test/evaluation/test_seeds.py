@@ -54,7 +54,8 @@ def test_the_cli_reads_each_seed_s_folder_and_writes_the_table(tmp_path, capsys)
     out = tmp_path / "seeds.md"
     assert main(["seeds", "--run", *folders, "--sets", "common", "--out", str(out)]) == 0
     table = capsys.readouterr().out
-    assert "| common | 0 | 4 | 2 | 0 | +50.0 |" in table and "mean of 2 seeds" in table
+    assert "| common | 0 | 4 | 75.0 % / 25.0 % | 2 | 0 | +50.0 |" in table             # held 3 / 1 of 4 views
+    assert "| common | **mean of 2 seeds** | 8 | 62.5 % / 25.0 % | 3 | 0 |" in table   # pooled: 5 / 2 of 8
     assert out.read_text() == table
     assert main(["seeds", "--run", "nonsense"]) == 2
 
