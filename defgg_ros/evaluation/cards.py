@@ -117,7 +117,7 @@ def _pct(x) -> str:
 
 
 def render_card(name: str, models_dir, eval_summary: dict | None = None, eval_dir: str = "",
-                seeds_dir=None) -> str:
+                seeds_dir=None, seed_table: str | None = None) -> str:
     models_dir = Path(models_dir)
     prov_path = models_dir / f"{name}{PROVENANCE_SUFFIX}"
     if not prov_path.is_file():
@@ -148,7 +148,7 @@ def render_card(name: str, models_dir, eval_summary: dict | None = None, eval_di
     lines += _validation_section(prov)
     lines += _eval_section(name, eval_summary, eval_dir, payload["weights_sha256"][:16])
     if seeds_dir is not None:
-        lines += _seeds_section(name, prov, Path(seeds_dir))
+        lines += _seeds_section(name, prov, Path(seeds_dir), seed_table)
     return "\n".join(lines) + "\n"
 
 
@@ -258,9 +258,10 @@ def _seed_metrics(name: str, seeds_dir: Path) -> list:
     return rows
 
 
-def _seeds_section(name: str, prov: dict, seeds_dir: Path) -> list:
+def _seeds_section(name: str, prov: dict, seeds_dir: Path, seed_table: str | None = None) -> list:
     """The other training seeds (same data, schedule and split): what each gave on validation, and which was
-    shipped. The shipped seed is chosen on validation only; the evaluation of every seed is docs/results.md's."""
+    shipped (chosen on validation only); seed_table: what each seed's pair gave in the simulator
+    (`defgg-eval seeds`' table), else a pointer to docs/results.md."""
     rows = _seed_metrics(name, seeds_dir)
     if not rows:
         return []
@@ -272,14 +273,18 @@ def _seeds_section(name: str, prov: dict, seeds_dir: Path) -> list:
              f"| {seed} (shipped) | {prov['best_epoch']} | {_pct(prov['val_best'].get('val_accuracy'))} | "
              f"{_pct((prov.get('test') or {}).get('accuracy'))} |"]
     lines += [f"| {s} | {epoch} | {_pct(val)} | {_pct(test)} |" for s, epoch, val, test in rows]
-    return lines + ["", "What each seed's pair gives in the simulator: docs/results.md, \"Seeds\".", ""]
+    if seed_table is None:
+        return lines + ["", "What each seed's pair gives in the simulator: docs/results.md, \"Seeds\".", ""]
+    return lines + ["", "What each seed's pair gave in the simulator (`defgg-eval seeds`: the paired margin of the "
+                    "stiffness-aware model over the depth-only one, shake; docs/results.md, \"Seeds\"):", "",
+                    seed_table.rstrip("\n"), ""]
 
 
-def write_card(name: str, models_dir, eval_dir=None, seeds_dir=None) -> Path:
+def write_card(name: str, models_dir, eval_dir=None, seeds_dir=None, seed_table: str | None = None) -> Path:
     summary = None
     if eval_dir is not None and (Path(eval_dir) / "summary.json").is_file():
         summary = json.loads((Path(eval_dir) / "summary.json").read_text())
     path = Path(models_dir) / f"{name}.md"
-    write_text_atomic(path, render_card(name, models_dir, summary, str(eval_dir or ""), seeds_dir))
+    write_text_atomic(path, render_card(name, models_dir, summary, str(eval_dir or ""), seeds_dir, seed_table))
     path.chmod(0o644)
     return path

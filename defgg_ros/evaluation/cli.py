@@ -212,6 +212,9 @@ def _add_others(sub):
     p.add_argument("--eval", default=None, metavar="OUT", help="evaluation folder whose summary.json to include")
     p.add_argument("--seeds", default=None, metavar="DIR",
                    help="the seed study's weights folder (results/seeds): list what the other seeds gave")
+    p.add_argument("--seed-runs", nargs="+", default=None, metavar="SEED=OUT",
+                   help="with --seeds: each seed's evaluation folder (as `defgg-eval seeds --run`), so the card "
+                        "also shows each seed's margin in the simulator")
     p.add_argument("--models-dir", default="models")
 
 
@@ -522,8 +525,14 @@ def cmd_ceiling(args, argv) -> int:
 def cmd_card(args) -> int:
     from defgg_ros.evaluation import cards
 
+    seed_table = None
+    if args.seed_runs:
+        if args.seeds is None:
+            raise ValueError("--seed-runs needs --seeds (the seed study's weights folder)")
+        runs = parse_pairs(args.seed_runs, "--seed-runs", "SEED=OUT")
+        seed_table = seeds_markdown(seed_summaries(runs, ("common", "adversarial")))
     for name in args.name:
-        print(cards.write_card(name, args.models_dir, args.eval, args.seeds))
+        print(cards.write_card(name, args.models_dir, args.eval, args.seeds, seed_table))
     return 0
 
 

@@ -122,3 +122,35 @@ def test_card_lists_the_other_training_seeds_and_which_was_shipped(trained, tmp_
     assert "| 1 | 1 | 75.0 % |" in card and "| 2 | 1 | 81.2 % |" in card
     assert cli.main(["card", "--name", "m", "--models-dir", str(models)]) == 0
     assert "## Training seeds" not in (models / "m.md").read_text()
+
+
+def test_card_shows_what_each_seed_gave_in_the_simulator(trained, tmp_path):
+    """`card --seeds DIR --seed-runs SEED=OUT ...`: the card carries each seed's paired margin from its evaluation
+    folder (issue 49 item 1: "say in the cards what the other seeds gave"); --seed-runs alone is refused."""
+    def seed_records(wins: int):   # 4 views of one object: the stiffness-aware model holds `wins` + view 3
+        return [{"model": model, "object": "a", "object_set": "common", "youngs_modulus_pa": 2e4, "rank": view,
+                 "task": "shake", "experiment": "main", "input_error_pct": 0.0, "status": "ok",
+                 "success": view == 3 or (model == "defgg_cnn" and view < wins)}
+                for view in range(4) for model in ("defgg_cnn", "ggcnn_depth_only")]
+
+    root, data, run, command = trained
+    models = tmp_path / "models"
+    assert cli.main(["ship", "--run", str(run), "--name", "m", "--command", command, "--wall-s", "1",
+                     "--models-dir", str(models)]) == 0
+    seeds = tmp_path / "seeds"
+    (seeds / "weights_s1").mkdir(parents=True)
+    (seeds / "weights_s1" / "m.metrics.json").write_text((run / "metrics.json").read_text())
+    folders = []
+    for seed, wins in (("0", 2), ("1", 0)):
+        folder = tmp_path / f"sim_s{seed}"
+        folder.mkdir()
+        (folder / "trials.jsonl").write_text("".join(
+            json.dumps({**rec, "key": f"{seed}|{i}"}) + "\n" for i, rec in enumerate(seed_records(wins))))
+        folders.append(f"{seed}={folder}")
+    assert cli.main(["card", "--name", "m", "--models-dir", str(models), "--seeds", str(seeds),
+                     "--seed-runs", *folders]) == 0
+    card = (models / "m.md").read_text()
+    assert "What each seed's pair gave in the simulator" in card
+    assert "| common | 0 | 4 | 75.0 % / 25.0 % | 2 | 0 | +50.0 |" in card and "| common | 1 | 4 |" in card
+    assert "mean of 2 seeds" in card
+    assert cli.main(["card", "--name", "m", "--models-dir", str(models), "--seed-runs", *folders]) == 2
