@@ -140,8 +140,8 @@ def _checked(readings) -> list:
     for r in readings:
         if not (math.isfinite(r.force_n) and math.isfinite(r.width_m)) or r.force_n <= 0 or r.width_m <= 0:
             raise SqueezeError(f"reading {r} is not a positive, finite force and width")
-    if readings[-1].force_n - readings[0].force_n <= 0:
-        raise SqueezeError("the readings' forces must differ")
+    if any(b.force_n <= a.force_n for a, b in zip(readings, readings[1:])):
+        raise SqueezeError(f"the readings' forces must differ, got {[r.force_n for r in readings]} N")
     if readings[0].width_m - readings[-1].width_m < -1e-9:   # the strongest squeeze left the fingers wider
         raise SqueezeError(f"the opening grew with the force ({[round(r.width_m * 1e3, 3) for r in readings]} mm): "
                            "the object moved or the fingers slipped; squeeze again")
@@ -164,6 +164,8 @@ def squeeze_slope_npm(readings) -> tuple[float, float]:
 def calibrate_hand(squeezes, source: str) -> HandCalibration:
     """The hand's stiffness from squeezes (lists of readings) of a rigid block: mean compliance and its spread."""
     compliances = []
+    if not squeezes:
+        raise SqueezeError("a calibration needs one squeeze of the rigid block at least")
     for readings in squeezes:
         k, _ = squeeze_slope_npm(readings)
         if not (math.isfinite(k) and k > 0):
@@ -295,9 +297,15 @@ def estimate_modulus(readings, face_width_m: float, face_height_m: float, hand: 
         raise SqueezeError(f"contact_law must be auto, flat, hertz or section, got {contact_law!r}")
     if contact_law == "section" and section is None:
         raise SqueezeError("contact_law section needs the section")
+    if contact_radii_m and (len(contact_radii_m) != 2
+                            or not all(r > 0 and math.isfinite(r) for r in contact_radii_m)):
+        raise SqueezeError(f"contact_radii_m must be the two pads' radii > 0 m, got {contact_radii_m}")
     line_lengths_m = _checked_line_lengths(contact_line_lengths_m, contact_radii_m)
     readings, settling_m = without_settling_step(_checked(readings), width_resolution_m)
     k, span = squeeze_slope_npm(readings)
+    if not k > 0 and span > 2.0 * width_resolution_m:   # resolved, but the opening did not close with the force
+        raise SqueezeError(f"the opening did not close with the force ({[round(r.width_m * 1e3, 3) for r in readings]}"
+                           " mm): the object moved or the fingers slipped; squeeze again")
     width_m = readings[0].width_m
     area = loaded_area_m2(width_m, face_width_m, face_height_m)
     force_span = readings[-1].force_n - readings[0].force_n

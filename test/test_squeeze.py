@@ -109,6 +109,15 @@ def test_the_calibration_is_the_mean_compliance_of_its_squeezes_and_their_spread
     assert "steel block" in hand.describe()
     with pytest.raises(SqueezeError, match="noise"):
         HandCalibration(1e4, -1.0)
+    with pytest.raises(SqueezeError, match="one squeeze"):
+        calibrate_hand([], "nothing squeezed")
+
+
+@pytest.mark.parametrize("radii", [(0.0, 0.02), (-0.01, 0.02), (0.02,), (math.inf, 0.02)])
+def test_contact_radii_that_are_not_two_positive_lengths_are_refused(radii):
+    """A radius of 0 divided by zero, a negative one gave a complex modulus (then TypeError)."""
+    with pytest.raises(SqueezeError, match="contact_radii_m"):
+        estimate_modulus(sphere_readings(2e5, 0.06), 0.06, 0.06, contact_radii_m=radii)
 
 
 @pytest.mark.parametrize("make, exponent", [
@@ -168,6 +177,9 @@ def test_the_loaded_area_spreads_from_the_pad_and_stops_at_the_face():
     ([SqueezeReading(1.0, 0.05), SqueezeReading(2.0, float("nan"))], "finite"),
     ([SqueezeReading(1.0, 0.05), SqueezeReading(2.0, 0.0502)], "grew with the force"),
     ([SqueezeReading(1.0, 0.05), SqueezeReading(2.0, 0.049)], "contact_law"),
+    ([SqueezeReading(f, 0.05 - 1e-4 * i) for i, f in enumerate((0.5, 1.0, 1.0, 1.5, 2.0))], "must differ"),
+    # widths 50.0 / 49.7 / 49.9 / 50.0 mm: the slope is negative; it read 0 Pa (flat) or 8.9e8 Pa (hertz)
+    ([SqueezeReading(f, w) for f, w in zip((0.5, 1.0, 1.5, 2.0), (0.05, 0.0497, 0.0499, 0.05))], "did not close"),
 ])
 def test_unusable_readings_are_refused_with_the_reason(readings, says):
     with pytest.raises(SqueezeError, match=says):

@@ -14,6 +14,9 @@ import collections
 # CONTACT_WINDOW_S (sim time).
 CONTACT_WINDOW_S = 0.02
 CONTACT_SPEED_FRACTION = 0.5
+# Both hands' clocks are sums of their time steps, which land a hair short of a whole window (200 steps of 0.1 ms:
+# 19.999999999999 ms): this much short still counts as one.
+CLOCK_TOLERANCE_S = 1e-9
 # A pressing finger's closing speed is measured over this window of positions: the deformable contact jitters a
 # single step's speed.
 PRESS_SPEED_WINDOW_S = 0.01
@@ -52,11 +55,10 @@ class FingerSpeeds:
 
 class ContactWindow:
     """Is a closing grasp on the object (on_object)? Checked at the end of each window of CONTACT_WINDOW_S of sim
-    time; once on, it stays on. `tolerance_s`: how much short of a full window still counts as one (a clock
-    summed step by step, as the trial hand's, lands a hair short of 20 ms; the cell's clock is exact: 0)."""
+    time (CLOCK_TOLERANCE_S short still counts); once on, it stays on."""
 
-    def __init__(self, finger_speed_mps: float, tolerance_s: float = 0.0):
-        self.finger_speed_mps, self.tolerance_s = finger_speed_mps, tolerance_s
+    def __init__(self, finger_speed_mps: float):
+        self.finger_speed_mps = finger_speed_mps
         self.on = False
         self._start = None                        # (sim s, opening) the running window began at
 
@@ -73,7 +75,7 @@ class ContactWindow:
         if self._start is None:
             self.start(now_s, opening_m)
         start_s, start_m = self._start
-        if now_s - start_s >= CONTACT_WINDOW_S - self.tolerance_s:
+        if now_s - start_s >= CONTACT_WINDOW_S - CLOCK_TOLERANCE_S:
             self.on = on_object(start_m - opening_m, self.finger_speed_mps, now_s - start_s)
             self._start = (now_s, opening_m)
         return self.on
@@ -84,7 +86,7 @@ class PressingClose:
 
     def __init__(self, finger_speed_mps: float, speed_limit_mps: float):
         self.speed_limit_mps = speed_limit_mps
-        self.contact = ContactWindow(finger_speed_mps, tolerance_s=1e-9)
+        self.contact = ContactWindow(finger_speed_mps)
         self.speeds = FingerSpeeds()
 
     @property

@@ -67,11 +67,8 @@ def blocked_window_latches_at(window: ContactWindow, step_s: float, steps: int) 
 
 
 def test_one_contact_window_for_both_hands_and_what_its_tolerance_is_for():
-    # 200 steps of 0.1 ms summed land a hair short of 20 ms: the trial hand's tolerance counts that as the window,
-    # the cell's exact clock needs none and takes the next step.
-    assert blocked_window_latches_at(ContactWindow(0.01, tolerance_s=1e-9), 1e-4, 400) == 200
-    assert blocked_window_latches_at(ContactWindow(0.01), 1e-4, 400) == 201
-    assert PressingClose(0.01, 0.01).contact.tolerance_s == 1e-9
+    # 200 steps of 0.1 ms summed land a hair short of 20 ms: the clock's tolerance counts that as the window.
+    assert blocked_window_latches_at(ContactWindow(0.01), 1e-4, 400) == 200
     window = ContactWindow(0.01)
     window.start(0.0, 0.05)
     assert not window.update(CONTACT_WINDOW_S, 0.05 - 0.0005)   # closed at the commanded speed: not on it yet
@@ -79,12 +76,24 @@ def test_one_contact_window_for_both_hands_and_what_its_tolerance_is_for():
     assert window.update(3 * CONTACT_WINDOW_S, 0.0)
 
 
-def test_the_cells_hand_uses_the_same_contact_window():
+@pytest.mark.parametrize("step_s", [1e-3, 5e-4, 2.5e-4])
+def test_the_cells_hand_uses_the_same_contact_window(step_s):
+    """The cell's clock is summed step by step too (SimCell._step): a grasp blocked from its start presses after
+    one window's steps wherever on that clock it starts (without the tolerance about half the starts took one
+    step more)."""
     from defgg_ros.sim.cell.gripper import GripperController
-    gripper = GripperController(0.08)
-    gripper.start_grasp(0.05, 0.005, 0.005, 0.02, 5.0, now_s=0.0)
-    assert isinstance(gripper._contact, ContactWindow) and gripper._contact.finger_speed_mps == 0.01
-    gripper.update(CONTACT_WINDOW_S - 1e-12, 0.08)     # the cell's clock is exact: short of the window is short
-    assert not gripper.motor.press
-    gripper.update(CONTACT_WINDOW_S, 0.08)
-    assert gripper.motor.press
+    window_steps = round(CONTACT_WINDOW_S / step_s)
+    clock_s, latched_after = 0.0, set()
+    for _ in range(60):                       # grasps starting at 60 successive steps of one clock
+        clock_s += step_s
+        gripper = GripperController(0.08)
+        gripper.start_grasp(0.05, 0.005, 0.005, 0.02, 5.0, now_s=clock_s)
+        assert isinstance(gripper._contact, ContactWindow) and gripper._contact.finger_speed_mps == 0.01
+        now_s = clock_s
+        for k in range(1, 2 * window_steps):
+            now_s += step_s
+            gripper.update(now_s, 0.08)
+            if gripper.motor.press:
+                latched_after.add(k)
+                break
+    assert latched_after == {window_steps}

@@ -101,13 +101,6 @@ class GripperController:
         self._contact = ContactWindow(speed_mps / 2)
         self._contact.start(now_s, self._last_width_m)
 
-    def preempt(self) -> GripperOutcome | None:
-        """Abort the active command (a new goal replaced it)."""
-        if self._kind is None:
-            return None
-        self._kind = None
-        return GripperOutcome(False, self._last_width_m, "preempted by a newer gripper command")
-
     def _begin(self, kind, goal, now_s):
         self._kind, self._goal = kind, goal
         self._started_s = self._last_moving_s = now_s
