@@ -48,12 +48,13 @@ def with_plain_substitutes(records) -> list:
     is the plain case (same plan, same grip) and was not run again."""
     if not any(r.get("case") in GRASP_ONLY_CASES for r in records):
         return list(records)
-    stand_ins = []
-    for r in outcomes(records).values():
+    stand_ins, recorded = [], outcomes(records)
+    for r in recorded.values():
         case = f"{r['case']}{GRASP_ONLY_SUFFIX}"
-        if case in GRASP_ONLY_CASES and r.get("input_youngs_modulus_pa") == r.get("youngs_modulus_pa"):
-            stand_ins.append({**r, "case": case, "key": f"{r['object']}|{case}|{r['pick']}",
-                              "stands_in_for": r["key"]})
+        key = f"{r['object']}|{case}|{r['pick']}"
+        if (case in GRASP_ONLY_CASES and r.get("input_youngs_modulus_pa") == r.get("youngs_modulus_pa")
+                and key not in recorded):   # a pick that ran is never replaced by a copy
+            stand_ins.append({**r, "case": case, "key": key, "stands_in_for": r["key"]})
     return list(records) + stand_ins
 
 
@@ -92,13 +93,24 @@ def complete_totals(records, cases) -> tuple:
     return {c: [sum(s[c] for s in complete), len(complete)] for c in cases}, len(complete)
 
 
+def case_pairs(records, case_a: str, case_b: str) -> list:
+    """[(a record, b record)] of the picks (object, pick) both cases have an outcome for, in key order. A pick is
+    not paired with its own stand-in (with_plain_substitutes): a wrong input against its grasp-only case where the
+    wrong input is the object's own modulus is one pick, not two, and would count as a pair that cannot differ."""
+    by_key = {(r["object"], r["pick"], r["case"]): r for r in outcomes(records).values()}
+    pairs = []
+    for (name, pick, case), a in sorted(by_key.items(), key=lambda item: item[0]):
+        b = by_key.get((name, pick, case_b))
+        if case == case_a and b is not None and b.get("stands_in_for") != a["key"]:
+            pairs.append((a, b))
+    return pairs
+
+
 def paired_by_object(records, case_a: str, case_b: str) -> dict:
-    """object -> [(a succeeded, b succeeded)] over the picks both cases have an outcome for."""
-    by_key = {(r["object"], r["pick"], r["case"]): bool(r["success"]) for r in outcomes(records).values()}
+    """object -> [(a succeeded, b succeeded)] over case_pairs."""
     out = {}
-    for (name, pick, case), a in sorted(by_key.items()):
-        if case == case_a and (name, pick, case_b) in by_key:
-            out.setdefault(name, []).append((a, by_key[(name, pick, case_b)]))
+    for a, b in case_pairs(records, case_a, case_b):
+        out.setdefault(a["object"], []).append((bool(a["success"]), bool(b["success"])))
     return out
 
 
@@ -233,14 +245,10 @@ def rerun_lines(earlier, rerun) -> list:
 def channel_rows(records, cases) -> list:
     """Through which channel an input changed the outcome: of the discordant pairs, how many had the same grasp
     (then only the closing force, finger_force_n from the modulus, or chance differed) and how many another."""
-    by_key = {(r["object"], r["pick"], r["case"]): r for r in outcomes(records).values()}
     rows = []
     for case_a, case_b in comparisons(cases):
         counts = {"same": [0, 0, 0], "other": [0, 0, 0]}     # [pairs, a only, b only]
-        for (name, pick, case), a in by_key.items():
-            b = by_key.get((name, pick, case_b))
-            if case != case_a or b is None:
-                continue
+        for a, b in case_pairs(records, case_a, case_b):
             c = counts["same" if same_grasp(a, b) else "other"]
             c[0] += 1
             c[1] += bool(a["success"]) and not b["success"]

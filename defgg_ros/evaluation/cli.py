@@ -538,7 +538,7 @@ def cmd_card(args) -> int:
 
 def seed_summaries(seed_runs: dict, sets, task: str = "shake") -> list:
     """The seed study over {seed: evaluation folder}, a summary per object set, each folder read once."""
-    runs = {seed: read_results(results_path(out)) for seed, out in seed_runs.items()}
+    runs = {seed: report_mod.current_records(out) for seed, out in seed_runs.items()}
     return [summarise(runs, s, task) for s in sets]
 
 

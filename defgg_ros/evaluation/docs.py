@@ -130,7 +130,9 @@ def _seeds_lines(studies: list, figure=None, doc_path=None) -> list:
              "under the same protocol; the paired margin (points, with stiffness minus depth only) per seed, the mean "
              "over seeds with a 95 % bootstrap interval over objects, the sign test pooled over seeds. The shipped "
              "pair is the seed its model card names. A seed whose folder holds fewer trials than the others' is a "
-             "partial result.", ""]
+             "partial result. The interval resamples objects with the seeds held fixed, so the spread between seeds "
+             "is not in it (the per-seed rows show it); the pooled test counts every seed's pairs as independent "
+             "although the seeds share their views.", ""]
     if figure is not None and Path(figure).exists():
         lines += [f"![seed studies]({_rel(Path(figure), doc_path)})", ""]
     for seed_runs, table_md in studies:

@@ -45,6 +45,15 @@ def _models(manifest) -> tuple:
     return names, shas, labels
 
 
+def current_records(out_dir) -> list:
+    """A results folder's trial records of the weights its run.json names (a retrained model's older trials stay in
+    the file); every record when the folder has no run.json."""
+    records = read_results(results_path(out_dir))
+    if not (Path(out_dir) / MANIFEST_FILE).is_file():
+        return records
+    return tables.current(records, _models(read_manifest(out_dir))[1])
+
+
 def _moduli(manifest) -> list:
     moduli = sorted({e for objs in manifest["objects"].values() for o in objs for e in o["moduli_pa"]})
     return moduli or list(TRAINING_YOUNGS_MODULI_PA)

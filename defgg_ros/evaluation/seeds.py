@@ -5,6 +5,8 @@ in its own folder; within a folder the two models' trials pair up by (object, E,
 and object set this reports the paired margin (points) and its sign test; over the seeds, the mean margin with a
 95 % bootstrap interval over **objects** (an object's trials are not independent draws: they share its shape, so
 objects are what the interval resamples), and the sign test on the discordant pairs pooled over the seeds.
+The interval holds the seeds fixed (the spread between seeds is in the per-seed rows, not in it), and the pooled
+test counts each seed's pairs as independent although every seed is evaluated on the same views.
 
 While the seeds' evaluations run, they cover different views: every seed is then compared on the views
 (object, E, rank) that every seed with trials has (`matched`), so a partial seed is not set against the
@@ -122,7 +124,8 @@ def seeds_markdown(summaries) -> str:
         mean = "" if s.mean_margin_pts is None else f"{s.mean_margin_pts:+.1f}"
         interval = "" if s.interval_pts is None else f" (95 % over {s.objects} objects: {s.interval_pts[0]:+.1f} … " \
                                                        f"{s.interval_pts[1]:+.1f})"
-        lines.append(f"| {s.object_set} | **mean of {len(s.rows)} seeds** | {s.pooled.pairs} | {_held(s.pooled)} | "
+        seeds = sum(1 for row in s.rows if row.counts.pairs)     # the mean is over the seeds with pairs
+        lines.append(f"| {s.object_set} | **mean of {seeds} seeds** | {s.pooled.pairs} | {_held(s.pooled)} | "
                      f"{s.pooled.a_only} | {s.pooled.b_only} | {mean}{interval} | {s.pooled_p:.3g} (pooled) |")
     notes = [f"{s.object_set}: every seed on the same {s.matched_views} views (object, E, rank) that each seed with "
              "trials has" for s in summaries if s.matched_views is not None]

@@ -269,7 +269,13 @@ def test_grasp_only_picks_are_compared_with_correct_and_with_their_plain_case_an
         append_jsonl(tmp_path / "records_grasp_only.jsonl", r)
     body = cr.write_report(tmp_path, ce.OBJECTS, planned_picks=1)
     assert "| correct vs rigid_grasp | all | 2 | 2 | 0 / 0 | +0.0 |" in body       # the force was the difference
-    assert "| rigid vs rigid_grasp | all | 2 | 2 | 1 / 0 | +50.0 |" in body
+    # egad_test_00_c1's rigid_grasp is its rigid pick's stand-in: one pick, not a pair (it could never differ)
+    assert "| rigid vs rigid_grasp | all | 1 | 1 | 1 / 0 | +100.0 |" in body
+    assert [(a["key"], b["key"]) for a, b in cr.case_pairs(filled, "rigid", "rigid_grasp")] == [
+        ("common_sponge|rigid|0", "common_sponge|rigid_grasp|0")]
+    ran = rec("egad_test_00_c1", 2e9, "rigid_grasp", 0, False, 2e9)      # a pick that ran is not replaced by a copy
+    assert [r for r in cr.with_plain_substitutes(plain + grasp_only + [ran])
+            if r["key"] == "egad_test_00_c1|rigid_grasp|0"] == [ran]
     assert "**10 of 70** planned (14 objects × 5 cases" in body
     assert (tmp_path / cr.FIGURE_NAME).exists() and (tmp_path / cr.GRASP_FIGURE_NAME).stat().st_size > 1000
 

@@ -5,7 +5,7 @@ import json
 import pytest
 
 from defgg_ros.evaluation.cli import main
-from defgg_ros.evaluation.seeds import summarise
+from defgg_ros.evaluation.seeds import seeds_markdown, summarise
 
 pytestmark = pytest.mark.unit
 
@@ -75,3 +75,18 @@ def test_a_partial_seed_is_compared_on_the_views_every_seed_has():
 def test_a_seed_without_trials_does_not_empty_the_comparison():
     s = summarise({"0": seed_records({"a": 2}), "1": []}, "common", resamples=50)
     assert [r.counts.pairs for r in s.rows] == [4, 0] and s.matched_views == 4
+    assert "| common | **mean of 1 seeds** | 4 |" in seeds_markdown([s])     # the mean is over seed 0 alone
+
+
+def test_only_the_trials_of_the_weights_a_folder_s_run_json_names_are_read(tmp_path, capsys):
+    """A retrained model's older trials stay in trials.jsonl; the seed study reads the current weights' only (as
+    the report's tables do), else an old trial of a view would stand in for the new one."""
+    shas = {"defgg_cnn": "new", "ggcnn_depth_only": "base"}
+    records = [{**r, "model_sha": shas[r["model"]]} for r in seed_records({"a": 2})]
+    stale = [{**r, "model_sha": "old", "success": False} for r in records if r["model"] == "defgg_cnn"]
+    (tmp_path / "trials.jsonl").write_text("".join(json.dumps({**r, "key": f"{i}"}) + "\n"
+                                                   for i, r in enumerate(records + stale)))
+    (tmp_path / "run.json").write_text(json.dumps({"models": {
+        name: {"sha": sha, "uses_stiffness": name == "defgg_cnn"} for name, sha in shas.items()}}))
+    assert main(["seeds", "--run", f"0={tmp_path}", "--sets", "common"]) == 0
+    assert "| common | 0 | 4 | 75.0 % / 25.0 % | 2 | 0 | +50.0 |" in capsys.readouterr().out
