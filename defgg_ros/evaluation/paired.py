@@ -164,7 +164,9 @@ def _fmt_p(p) -> str:
 
 def paired_markdown(rows, label_a: str, label_b: str) -> str:
     lines = [f"**Paired comparison**: A = {label_a}, B = {label_b}; trials paired by object, modulus and rank; "
-             "margin = A − B in points (Wald 95 % interval); p = exact two-sided sign test on the discordant "
+             "margin = A − B in points (Wald 95 % interval, pairs taken as independent: an object's views share its "
+             "shape, so it is narrower than the bootstrap over objects of the seed table; read p); p = exact "
+             "two-sided sign test on the discordant "
              f"pairs; \"margin needed\" = the smallest margin that would reach p < {ALPHA:g} with this many "
              "discordant pairs (\"none\": no split of so few can)", "",
              "| task | object set | grasps | pairs | both held | only A | only B | neither | margin (pts) | "
