@@ -36,21 +36,6 @@ OPEN_WIDTH_M, OPEN_SPEED_MPS, REST_S = 0.08, 0.05, 0.3
 CELL_FEM_OBJECTS = tuple(f"{o.name}={o.youngs_modulus_pa:g}" for o in OBJECTS if o.youngs_modulus_pa < 1e7)
 
 
-def squeeze_sequence(cell) -> list:
-    """One squeeze: the gentle forces, then the firm ones while the compression is unresolved."""
-    readings = []
-    for force in jigs.GENTLE_FORCES_N + jigs.FIRM_FORCES_N:
-        if force in jigs.FIRM_FORCES_N and not jigs.needs_firmer(readings, jigs.WIDTH_RESOLUTION_M):
-            break
-        cell.gripper_grasp(0.0, 0.08, 0.08, 0.02, force)
-        for _ in range(500):
-            if cell.advance(0.01):
-                break
-        cell.advance(0.2)
-        readings.append(SqueezeReading(force, cell.gripper_width_m()))
-    return readings
-
-
 def squeezed_in_place(spec, times: int) -> list:
     """`times` squeezes of one object in one jig, the hand opened between them."""
     out = []
@@ -62,7 +47,7 @@ def squeezed_in_place(spec, times: int) -> list:
                     if cell.advance(0.01):
                         break
                 cell.advance(REST_S)
-            out.append(squeeze_sequence(cell))
+            out.append(jigs.squeeze_sequence(cell))
     return out
 
 

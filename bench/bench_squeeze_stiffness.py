@@ -270,20 +270,25 @@ def jig(spec):
         cell.close()
 
 
+def squeeze_sequence(cell) -> list:
+    """The readings of one squeeze in a jig's cell (gentle forces, then firm ones while unresolved)."""
+    readings = []
+    for force in GENTLE_FORCES_N + FIRM_FORCES_N:
+        if force in FIRM_FORCES_N and not needs_firmer(readings, WIDTH_RESOLUTION_M):
+            break   # resolved at gentle forces: no need to squeeze harder
+        cell.gripper_grasp(0.0, 0.08, 0.08, 0.02, force)
+        for _ in range(500):
+            if cell.advance(0.01):
+                break
+        cell.advance(0.2)
+        readings.append(SqueezeReading(force, cell.gripper_width_m()))
+    return readings
+
+
 def squeeze_once(spec) -> list:
-    """The readings of one squeeze of `spec` (gentle forces, then firm ones while unresolved)."""
+    """The readings of one squeeze of `spec` in a fresh jig."""
     with jig(spec) as cell:
-        readings = []
-        for force in GENTLE_FORCES_N + FIRM_FORCES_N:
-            if force in FIRM_FORCES_N and not needs_firmer(readings, WIDTH_RESOLUTION_M):
-                break   # resolved at gentle forces: no need to squeeze harder
-            cell.gripper_grasp(0.0, 0.08, 0.08, 0.02, force)
-            for _ in range(500):
-                if cell.advance(0.01):
-                    break
-            cell.advance(0.2)
-            readings.append(SqueezeReading(force, cell.gripper_width_m()))
-        return readings
+        return squeeze_sequence(cell)
 
 
 def row_mesh(row: dict) -> str:
