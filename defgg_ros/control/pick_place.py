@@ -151,8 +151,12 @@ class PickPlaceSequence(SqueezePhase):
         self._obs.state_wall_s = wall_s
         self._obs.own_stall_s = 0.0
 
-    def on_force(self, force_xyz_n) -> None:
+    def on_force(self, force_xyz_n, wall_s: float | None = None) -> None:
+        """The external force; wall_s (monotonic) when it arrived: then the watchdog also fails a run whose
+        wrench went quiet (the contact guards would read its last value for ever)."""
         self._obs.force_n = np.asarray(force_xyz_n, dtype=float)
+        if wall_s is not None:
+            self._obs.force_wall_s, self._obs.own_stall_force_s = wall_s, 0.0
 
     def on_gripper_result(self, success: bool, width_m: float, error: str = "") -> None:
         if self._pending.gripper:
@@ -182,6 +186,13 @@ class PickPlaceSequence(SqueezePhase):
     def start(self, sim_s: float, wall_s: float) -> list:
         self._start_s = sim_s
         return self._guarded(self._start, sim_s, wall_s)
+
+    def cancel_unstarted(self, sim_s: float) -> None:
+        """End as canceled without moving anything: the cancel came before start()."""
+        self._start_s = sim_s
+        self.outcome.canceled = True
+        self.outcome.failure_reason = "canceled before the arm moved"
+        self._finish(sim_s, self._rest_state() if self._obs.state is not None else "unknown")
 
     def tick(self, sim_s: float, wall_s: float) -> list:
         if self.finished:
@@ -221,6 +232,7 @@ class PickPlaceSequence(SqueezePhase):
     def _guarded(self, handler, sim_s: float, wall_s: float) -> list:
         try:
             self._watchdog(wall_s)
+            self._check_wrench(wall_s)
             return handler(sim_s)
         except _DriverSilent as silent:
             return self._fail(str(silent), sim_s, wait_for_stop=False)
@@ -231,6 +243,7 @@ class PickPlaceSequence(SqueezePhase):
         obs = self._obs
         if obs.last_tick_wall_s is not None and wall_s - obs.last_tick_wall_s > OWN_STALL_S:
             obs.own_stall_s += wall_s - obs.last_tick_wall_s
+            obs.own_stall_force_s += wall_s - obs.last_tick_wall_s
         obs.last_tick_wall_s = wall_s
         age = wall_s - obs.state_wall_s - obs.own_stall_s
         if self._obs.state is None:
@@ -239,8 +252,23 @@ class PickPlaceSequence(SqueezePhase):
             raise _DriverSilent(f"driver silent: no joint states for {age:.1f} s "
                                 f"(watchdog {self._cfg.watchdog_timeout_s:.1f} s)")
 
+    def _check_wrench(self, wall_s: float) -> None:
+        """SequenceFailure when the wrench is older than the watchdog (after _watchdog: its stall counted). Not
+        while a failure's stop runs: that needs joint states only; a recovery after it is refused here too."""
+        obs = self._obs
+        if obs.force_wall_s is None:
+            return
+        force_age = wall_s - obs.force_wall_s - obs.own_stall_force_s
+        if force_age > self._cfg.watchdog_timeout_s:   # joint states still come: stop and wait for rest
+            raise SequenceFailure(f"no external wrench for {force_age:.1f} s (watchdog "
+                                  f"{self._cfg.watchdog_timeout_s:.1f} s): the contact guards would be blind")
+
     # --- planning before the arm moves --------------------------------------
     def _start(self, sim_s: float) -> list:
+        speed = self._max_speed_radps()      # every motion is planned from rest (inf: not known yet, let pass)
+        if math.isfinite(speed) and speed >= self._cfg.still_speed_radps:
+            raise SequenceFailure(f"the arm is moving ({speed:.3f} rad/s, still below "
+                                  f"{self._cfg.still_speed_radps:g}): wait until it is at rest")
         self._phase = "pre_grasp"
         self._plan = self._checked_plan(self._obs.state.q_rad) or self._make_plan(self._obs.state.q_rad)
         commands = [MoveGripper(self._plan.gripper.pre_open_width_m, OPENING_SPEED_MPS)]
@@ -557,9 +585,9 @@ class PickPlaceSequence(SqueezePhase):
             return []
         self.outcome.held_after_transfer = True
         self._phase = "place"
-        if not self._place.lower_to_contact:
-            return self._line_to(self._plan.place_M[:3, 3], self._cfg.line_speed_mps, sim_s)
         self._obs.force_bias_n = self._obs.force_n.copy()   # the held object's weight is not contact
+        if not self._place.lower_to_contact:   # a goal's own pose: lowered to it, but never pressed into anything
+            return self._line_to(self._plan.place_M[:3, 3], self._cfg.line_speed_mps, sim_s)
         return self._line_to(self._release_point(self._plan.place_M[:3, 3]), self._cfg.place_lowering_speed_mps,
                              sim_s)
 
@@ -588,7 +616,7 @@ class PickPlaceSequence(SqueezePhase):
         return self._tcp_z_m() - hang_m < self._cfg.table_z_m + TOUCHDOWN_MARGIN_M
 
     def _tick_place(self, sim_s: float) -> list:
-        if not self._placed_open_sent and self._place.lower_to_contact and self._touched():
+        if not self._placed_open_sent and self._touched():
             self.place_contact_z_m = self._tcp_z_m()   # the object stands on something: release it here
             return self._stop_motion(sim_s)
         if not self._placed_open_sent:

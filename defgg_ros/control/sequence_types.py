@@ -267,3 +267,5 @@ class _Observed:
     last_tick_wall_s: float | None = None
     force_n: np.ndarray = field(default_factory=lambda: np.zeros(3))
     force_bias_n: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    force_wall_s: float | None = None   # when the last wrench arrived (None: not told, no age kept)
+    own_stall_force_s: float = 0.0      # the owner's own stall since that wrench

@@ -118,7 +118,7 @@ class RobotInputs:
             self._wrench_watch.heard()
             self._last_force, self._last_force_wall_s = force, time.monotonic()
             if self._sequence is not None:
-                self._sequence.on_force(force)
+                self._sequence.on_force(force, self._last_force_wall_s)
 
     def _check_inputs(self, p: dict) -> None:
         """GoalError unless joint states and an external wrench arrived within watchdog_timeout_s, saying which

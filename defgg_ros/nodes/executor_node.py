@@ -272,7 +272,10 @@ class ExecutorNode(RobotInputs, ArmCommands, GraspPlanning, Node):
             self._sequence = sequence
             if self._last_state is not None:
                 sequence.on_joint_state(*self._last_state)
-            sequence.on_force(self._last_force)
+            sequence.on_force(self._last_force, self._last_force_wall_s)
+            if goal_handle.is_cancel_requested:   # canceled while the goal was planned: nothing moves
+                sequence.cancel_unstarted(self._clocks()[0])
+                return
             self._carry_out(sequence, sequence.start(*self._clocks()))
         cancel_sent = False
         robot_s = self._clocks()[0]
@@ -281,6 +284,8 @@ class ExecutorNode(RobotInputs, ArmCommands, GraspPlanning, Node):
                 raise GoalError("executor is shutting down")
             robot_s = self._check_clock(robot_s)
             with self._lock:
+                if self._shutdown.is_set():   # the exit's hold went out while this waited for the lock
+                    raise GoalError("executor is shutting down")
                 if goal_handle.is_cancel_requested and not cancel_sent:
                     cancel_sent = True
                     self._carry_out(sequence, sequence.cancel(*self._clocks()))

@@ -9,6 +9,7 @@ from support.control_fake_robot import FakeRobot, World, run
 from defgg_ros.control.kinematics import PandaKinematics
 from defgg_ros.control.pick_place import PickPlaceSequence
 from defgg_ros.control.sequence_types import (
+    ArmState,
     CancelGripper,
     GraspGripper,
     GraspTarget,
@@ -219,6 +220,38 @@ def test_driver_silent_aborts_within_the_watchdog_time(kin):
     assert "driver silent" in out.failure_reason
     assert out.phase_reached == "lift"
     assert robot.sim_s - silent_since <= CONFIG.watchdog_timeout_s + 0.05
+
+
+@pytest.mark.parametrize("phase", ["pre_grasp", "descend", "transfer"])
+def test_a_wrench_that_goes_quiet_stops_the_run_within_the_watchdog_time(kin, phase):
+    """Joint states go on, the wrench stops: every contact guard would read its last value for ever (the descent
+    and a place ran to their planned end, blind). The run stops once the wrench is older than the watchdog."""
+    sequence, robot = make(kin), FakeRobot(kin, World())
+    run(sequence, robot, until=lambda r, s: s.phase == phase)
+    quiet_since = robot.sim_s
+    robot.world.wrench_silent = True
+    while "no external wrench" not in sequence.outcome.failure_reason and not sequence.finished:
+        robot.step(sequence)
+    assert robot.sim_s - quiet_since <= CONFIG.watchdog_timeout_s + 0.05
+    run_until_finished(sequence, robot)             # the stop waits for rest (joint states still come)
+    out = sequence.outcome
+    assert "no external wrench" in out.failure_reason and not out.success and out.arm_state == "at_rest"
+
+
+def test_a_goal_is_refused_while_the_arm_still_moves_and_a_cancel_before_the_start_moves_nothing(kin):
+    """Every motion is planned from rest: a goal after a result that left the arm moving would start its first
+    trajectory behind the arm. A cancel that came while the goal was planned ends it without a command."""
+    sequence, robot = make(kin), FakeRobot(kin, World())
+    robot.qd[1] = 0.2
+    sequence.on_joint_state(ArmState(robot.q.copy(), robot.qd.copy(), robot.width_m), 0.0)
+    sequence.on_force([0.0, 0.0, 0.0], 0.0)
+    assert not any(isinstance(c, SendTrajectory) for c in sequence.start(0.0, 0.0))
+    assert "the arm is moving" in sequence.outcome.failure_reason
+    canceled = make(kin)
+    canceled.on_joint_state(ArmState(robot.q.copy(), np.zeros(7), robot.width_m), 0.0)
+    canceled.cancel_unstarted(0.0)
+    out = canceled.outcome
+    assert canceled.finished and out.canceled and not out.success and out.arm_state in ("at_rest", "observation_pose")
 
 
 def test_a_stall_of_the_owner_itself_is_not_a_silent_driver(kin):

@@ -72,6 +72,20 @@ def test_a_goals_place_pose_is_still_released_where_it_says(kin):
     assert sequence.outcome.success and tcp == pytest.approx(place.position_m, abs=3e-3)
 
 
+def test_a_goals_place_pose_is_guarded_too_it_stops_and_releases_on_contact(kin):
+    """A goal's own pose too low (the object meets the surface 3 cm above it): the lowering stops on the force
+    and releases there (it pushed on to the pose: 100 N against the 10 N threshold in the fake cell)."""
+    place = PlaceTarget(position_m=(0.35, -0.45, 0.06))
+    robot = FakeRobot(kin, World(object_width_m=0.045))
+    sequence = PickPlaceSequence(kin, CONFIG, GRASP, place)
+    run(sequence, robot, until=lambda r, s: s.phase == "place")
+    robot.world.contact_height_m = 0.09
+    (tcp, _), = _releases(kin, robot, sequence)
+    assert sequence.outcome.success, sequence.outcome.failure_reason
+    assert sequence.place_contact_z_m == pytest.approx(0.09, abs=0.005)
+    assert 0.09 - 0.01 < tcp[2] < 0.09                      # stopped near the touch (0.1 m/s), not pressed to 6 cm
+
+
 @pytest.mark.parametrize("drop_xy", [(0.40, 0.0), None], ids=["drop_zone", "no_drop_zone"])
 def test_a_recovery_holding_the_object_puts_it_down_in_the_drop_zone(kin, drop_xy):
     config = SequenceConfig(watchdog_timeout_s=0.5, observation_q_rad=tuple(PANDA_READY_Q_RAD),

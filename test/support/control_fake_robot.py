@@ -27,6 +27,7 @@ class World:
     object_width_m: float | None = 0.05     # None: nothing between the fingers
     contact_height_m: float = -1.0           # TCP z below which the hand touches something
     silent: bool = False                     # driver stops publishing joint states
+    wrench_silent: bool = False              # the external wrench stops (joint states go on)
     slip_at_phase: str | None = None         # object falls out when this phase starts
     slip_closing_mps: float = 0.0            # after the slip the fingers close at this rate (0: at once, to 0)
     gripper_report_delay_s: float = 0.0      # fingers report this long after they stopped (a slow squeeze)
@@ -94,7 +95,8 @@ class FakeRobot:
             self.width_m = 0.0 if rate <= 0 else max(0.0, self.width_m - rate * TICK_S)
         tcp_z = self.kin.fk(self.q)[2, 3]
         depth = max(0.0, self.world.contact_height_m - tcp_z)
-        sequence.on_force([0.0, 0.0, CONTACT_STIFFNESS_N_PER_M * depth])
+        if not self.world.wrench_silent:
+            sequence.on_force([0.0, 0.0, CONTACT_STIFFNESS_N_PER_M * depth], self.wall_s)
         if not self.world.silent:
             sequence.on_joint_state(ArmState(self.q.copy(), self.qd.copy(), self.width_m), self.wall_s)
         self.apply(sequence.tick(self.sim_s, self.wall_s), sequence)
@@ -107,6 +109,8 @@ class FakeRobot:
 def run(sequence: PickPlaceSequence, robot: FakeRobot, max_s: float = 60.0, until=None):
     """Start the sequence and step until it finishes (or `until(robot, sequence)` is true)."""
     sequence.on_joint_state(ArmState(robot.q.copy(), robot.qd.copy(), robot.width_m), robot.sim_s)
+    if not robot.world.wrench_silent:   # the executor starts a goal only with a wrench in (and tells its age)
+        sequence.on_force([0.0, 0.0, 0.0], robot.wall_s)
     robot.apply(sequence.start(robot.sim_s, robot.sim_s), sequence)
     while not sequence.finished and robot.sim_s < max_s:
         if until is not None and until(robot, sequence):
