@@ -282,7 +282,7 @@ class CameraPose:
         if source == "tf" and self._check_agreement:
             self._check(pose, base_frame, camera_frame)
         if source == "parameter" and self._table_poses is not None and depth_m is not None:
-            pose, estimated = self._table_poses.pose_for(depth_m, camera_k, pose)
+            pose, estimated = self._table_poses.pose_for(depth_m, camera_k, pose, table_config)
             source = "table" if estimated else source
         if source != self._source:
             self._source = source

@@ -100,3 +100,24 @@ def test_a_placeholder_pose_is_not_published_but_a_table_frame_is(inference_serv
     spin(executor, lambda: "defgg_table_estimate" in listener.tree.frames(), 10.0, "the table frame on TF")
     assert listener.tree.root_of("defgg_table_estimate")[0] == "camera_depth_optical_frame"
     assert "panda_link0" not in listener.tree.frames()
+
+
+def test_the_table_frame_uses_the_nodes_own_table_height_and_workspace(executor):
+    """The table-frame fallback puts the table at the node's table_z_m and the view's centre at its workspace
+    box's centre (it used PoseFromTable's defaults: table at z 0, centre (0.535, 0.0), whatever the node's
+    TabletopConfig said, so a cell with its table at 0.75 m found no table in that frame)."""
+    from defgg_ros.perception import tabletop_scenes as ts
+    from defgg_ros.perception.table_pose import PoseFromTable
+    from defgg_ros.perception.tabletop import TabletopConfig, WorkspaceBox, perceive
+    from defgg_ros.ros.tf import CameraPose
+
+    frame = ts.render(ts.cluttered_table(640, 480), seed=4)
+    node = Node("table_frame_probe", context=executor.context)
+    executor.add_node(node)
+    placeholder = np.array([[1.0, 0, 0, 0.5], [0, -1.0, 0, 0.0], [0, 0, -1.0, 0.4], [0, 0, 0, 1.0]])
+    poses = CameraPose(node, placeholder, table_poses=PoseFromTable(recheck_s=0.0), fallback_is_placeholder=True)
+    config = TabletopConfig(table_z_m=0.75, workspace=WorkspaceBox(x_m=(0.30, 0.50), y_m=(0.10, 0.40)))
+    pose, source = poses.resolve("panda_link0", "camera_depth_optical_frame", frame.depth_m, frame.camera_k, config)
+    assert source == "table"
+    view = perceive(frame.depth_m, frame.camera_k, pose, config)
+    assert abs(view.table_z_at(0.40, 0.25) - 0.75) < 0.005
