@@ -85,7 +85,6 @@ class RobotSelfFilter:
         path = Path(urdf_path) if urdf_path else panda_urdf_path()
         self.margin_m = float(margin_m)
         self.model = pin.buildModelFromUrdf(str(path))
-        self.data = self.model.createData()
         meshes = _link_meshes(path)
         self.links = [(self.model.getFrameId(name), vertices) for name, vertices in meshes.items()
                       if self.model.existFrame(name)]
@@ -105,12 +104,15 @@ class RobotSelfFilter:
         return q
 
     def link_points_base(self, positions_by_name: dict) -> list:
-        """[(vertices N x 3 in the base frame)] per link at these joint positions."""
+        """[(vertices N x 3 in the base frame)] per link at these joint positions. Thread-safe: a node's stream
+        and its Perceive service mask frames at once, and pinocchio's Data is scratch space (a shared one gave
+        one call the other's link poses: 5 in 600)."""
         q = self.q_from_names(positions_by_name)
-        pin.framesForwardKinematics(self.model, self.data, q)
+        data = self.model.createData()
+        pin.framesForwardKinematics(self.model, data, q)
         out = []
         for frame_id, vertices in self.links:
-            placement = self.data.oMf[frame_id]
+            placement = data.oMf[frame_id]
             out.append(vertices @ placement.rotation.T + placement.translation)
         return out
 

@@ -79,6 +79,30 @@ def test_joint_names_with_another_prefix_place_the_same_links():
         np.testing.assert_allclose(a, b)
 
 
+def test_two_threads_masking_at_once_each_get_their_own_arm():
+    """The node's stream and its Perceive service mask frames at once: each call's link poses are its own joint
+    positions' (a shared pinocchio Data gave one call the other's: 5 in 600)."""
+    import threading
+
+    robot = RobotSelfFilter()
+    poses = [dict(zip(PANDA_JOINT_NAMES, q)) for q in ([0.3, -0.2, 0.1, -2.0, 0.0, 1.8, 0.7],
+                                                        [-0.6, 0.4, -0.3, -1.2, 0.5, 2.4, -0.4])]
+    expected = [robot.link_points_base(p) for p in poses]
+    wrong = []
+
+    def hammer(i):
+        for _ in range(1500):
+            got = robot.link_points_base(poses[i])
+            wrong.extend(i for a, b in zip(got, expected[i]) if not np.allclose(a, b))
+
+    threads = [threading.Thread(target=hammer, args=(i,)) for i in (0, 1)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert not wrong
+
+
 def test_the_node_filters_the_arm_from_joint_states(arm_in_view, executor, inference_service, call, spin):
     scene, frame, joints = arm_in_view
     xyz, quat = transform_to_xyz_quaternion(frame.base_T_camera)
