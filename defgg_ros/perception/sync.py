@@ -12,6 +12,9 @@ from collections import OrderedDict
 # (tens of ms; under load a few hundred): 20 depth frames (0.67 s at 30 Hz, ~37 MB at 1280x720) keep the
 # depth of every frame it perceives. A perception slower than that misses the freshness target anyway.
 DEFAULT_CACHE_SIZE = 20
+# A stamp this far behind the last emitted set is a clock that started again (a bag played with --loop, a
+# restarted simulator's /clock, a camera driver's restart), not a late frame: start matching afresh.
+CLOCK_RESTART_NS = 2_000_000_000
 
 
 class StampSynchronizer:
@@ -37,8 +40,10 @@ class StampSynchronizer:
             raise KeyError(f"unknown stream {stream!r}; known: {self._streams}")
         stamp_ns = int(stamp_ns)
         if self._last_emitted_ns is not None and stamp_ns <= self._last_emitted_ns:
-            self.dropped += 1  # late arrival of a frame already emitted or superseded
-            return None
+            if self._last_emitted_ns - stamp_ns < CLOCK_RESTART_NS:
+                self.dropped += 1  # late arrival of a frame already emitted or superseded
+                return None
+            self.restart()
         cache = self._caches[stream]
         cache[stamp_ns] = item
         cache.move_to_end(stamp_ns)
@@ -58,6 +63,13 @@ class StampSynchronizer:
                     self.dropped += 1
         self._last_emitted_ns = stamp_ns
         return matched
+
+    def restart(self) -> None:
+        """Forget every cached item and the last emitted stamp (the clock started again)."""
+        self.dropped += sum(len(c) for c in self._caches.values())
+        for cache in self._caches.values():
+            cache.clear()
+        self._last_emitted_ns = None
 
     def pending(self, stream: str) -> int:
         return len(self._caches[stream])

@@ -23,6 +23,23 @@ def test_out_of_order_and_interleaved_frames():
     assert sync.add("stiffness", 3, "s3") == {"depth": "d3", "stiffness": "s3"}
 
 
+def test_a_clock_that_starts_again_is_matched_afresh():
+    """A bag played with --loop, a restarted simulator: stamps go back by more than CLOCK_RESTART_NS. Matching
+    starts again (it stopped for good: every later frame was 'older than the last emitted set'); a frame only
+    late (within it) is still dropped."""
+    from defgg_ros.perception.sync import CLOCK_RESTART_NS
+
+    sync = StampSynchronizer(("depth", "stiffness"))
+    later = 100 * CLOCK_RESTART_NS
+    sync.add("depth", later, "d")
+    assert sync.add("stiffness", later, "s") == {"depth": "d", "stiffness": "s"}
+    assert sync.add("depth", later - CLOCK_RESTART_NS // 2, "late") is None and sync.dropped == 1
+    assert sync.add("depth", 1, "d1") is None
+    assert sync.add("stiffness", 1, "s1") == {"depth": "d1", "stiffness": "s1"}
+    assert sync.add("depth", 2, "d2") is None and sync.add("stiffness", 2, "s2") == {"depth": "d2",
+                                                                                      "stiffness": "s2"}
+
+
 def test_cache_is_bounded():
     sync = StampSynchronizer(("depth", "stiffness"), cache_size=3)
     for stamp in range(10):
