@@ -23,7 +23,9 @@ Rules (docs/perception.md, "Latency"):
   With `latest(wait_s=...)` (bounded latency under load) the call waits at most wait_s for the stages to
   finish the newest frame and otherwise answers from the newest prepared one (it prepares nothing itself
   once a frame was prepared): an answer then never waits longer than wait_s, and its frame is as fresh as
-  the stages keep up.
+  the stages keep up. Unless that frame is more than max_age_s + STALE_FALLBACK_S old (the stream paused, as
+  a simulated camera does while the arm moves, then sent a new frame): the newest frame is then answered
+  from as without wait_s.
 - A frame whose preparation raised ValueError (in any stage) is a prepared frame too: requests get its error.
 - max_busy_fraction f < 1: after each frame a stage thread rests busy_s * (1/f - 1) (wall clock) before it takes
   the next, so it keeps at most the fraction f of a core and frames arriving meanwhile are dropped (newest wins).
@@ -65,6 +67,10 @@ MAX_REST_S = 1.0
 # last frame's time alone, one slow frame (a 80 ms frame where 43 ms is usual) made a 110 ms rest: the answers'
 # frame age p99 followed those gaps (bench_fresh_answers, 2026-11-29).
 BUSY_AVERAGE_WEIGHT = 0.2
+# latest(wait_s=...) answers from an older prepared frame only while it is at most this much older than max_age_s:
+# past it, the stream paused (a 2.5 s old pre-pick scene was answered after the pause), and the newest is worth
+# its wait.
+STALE_FALLBACK_S = 1.0
 
 
 class WorkerClosed(RuntimeError):
@@ -182,7 +188,10 @@ class LatestFrameWorker:
                 self._cond.wait_for(lambda: self._closed or self._done.seq >= newest, wait_s)
                 if self._closed:
                     raise WorkerClosed("the perception worker is closed")
-                return self._done
+                if (self._done.seq >= newest
+                        or self._clock() - self._done.submitted_s <= self.max_age_s + STALE_FALLBACK_S):
+                    return self._done
+                # The newest prepared frame is from before a pause of the stream: the newest one (below).
             waiting = [index for index, item in enumerate(self._inbox) if item is not None and item.seq == newest]
             if waiting:
                 first = waiting[0]

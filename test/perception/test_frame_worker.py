@@ -152,6 +152,29 @@ def test_a_bounded_wait_answers_from_the_newest_prepared_frame_when_the_latest_i
     assert worker.latest(wait_s=0.05).frame == "c" and prepare.threads["c"] is worker._thread
 
 
+def test_a_bounded_wait_does_not_answer_from_a_frame_from_before_a_pause_of_the_stream(make):
+    """The camera paused (the simulated one does while the arm moves), then one new frame came: a request with
+    wait_s waits for that frame, not the pre-pause one (it answered the 2.5 s old scene from before the pick)."""
+    from defgg_ros.perception.frame_worker import STALE_FALLBACK_S
+
+    clock = Clock()
+    prepare = Prepare(hold=("after pause",))
+    worker = make(prepare, clock=clock)
+    worker.submit("before pause")
+    prepared_frames(worker, 1)
+    clock.now += 0.1 + STALE_FALLBACK_S + 1.4
+    worker.submit("after pause")
+    wait(prepare.event(prepare.started, "after pause"), "the new frame to start")
+    answer = {}
+    request = threading.Thread(target=lambda: answer.update(done=worker.latest(wait_s=0.05)))
+    request.start()
+    request.join(0.5)
+    assert request.is_alive()                       # waiting for the new frame, not answering the old one
+    prepare.release["after pause"].set()
+    request.join(GUARD_S)
+    assert answer["done"].frame == "after pause"
+
+
 def test_max_age_zero_always_answers_from_the_latest_frame(make):
     prepare = Prepare(hold=("b",))
     worker = make(prepare, max_age_s=0.0)
