@@ -65,17 +65,50 @@ def write_json_atomic(path, obj, secret: bool = False) -> None:
 
 
 def append_jsonl(path, record: dict) -> None:
-    """Append one JSON record as a line and fsync it.
+    """Append one JSON record as a line and fsync it (one writer per file).
 
-    A crash can leave at most a truncated last line, which read_jsonl skips.
+    A crash can leave at most a truncated last line, which read_jsonl skips and the next append truncates first:
+    appended to, it would glue the next record on and leave a corrupt line in the middle of the file.
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     line = json.dumps(record, sort_keys=True, allow_nan=False) + "\n"
+    repair_torn_tail(path)
     with open(path, "a", encoding="utf-8") as f:
         f.write(line)
         f.flush()
         os.fsync(f.fileno())
+
+
+def repair_torn_tail(path) -> int:
+    """Drop an incomplete last line (no trailing newline). Returns the bytes removed."""
+    path = Path(path)
+    if not path.exists() or path.stat().st_size == 0:
+        return 0
+    with open(path, "rb+") as f:
+        f.seek(0, os.SEEK_END)
+        size = f.tell()
+        f.seek(size - 1)
+        if f.read(1) == b"\n":
+            return 0
+        # Walk back to the last newline; everything after it is the torn record.
+        pos = size - 1
+        chunk = 4096
+        while pos > 0:
+            start = max(0, pos - chunk)
+            f.seek(start)
+            data = f.read(pos - start)
+            idx = data.rfind(b"\n")
+            if idx >= 0:
+                keep = start + idx + 1
+                break
+            pos = start
+        else:
+            keep = 0
+        f.truncate(keep)
+        f.flush()
+        os.fsync(f.fileno())
+        return size - keep
 
 
 def read_jsonl(path) -> list:

@@ -244,7 +244,11 @@ def read_scene_meta(path) -> dict:
 
 def read_trials(root, scene_id: str) -> list:
     path = trials_path(root, scene_id)
-    return trials_of(path, read_jsonl(path))
+    try:
+        records = read_jsonl(path)
+    except ValueError as exc:      # a corrupt line inside the file: a clear error, not a traceback
+        raise DatasetError(str(exc)) from None
+    return trials_of(path, records)
 
 
 def trials_of(path, records) -> list:

@@ -2,17 +2,16 @@
 
 Why JSON lines: each finished trial is one fsync'd append
 (``defgg_ros.atomic.append_jsonl``), so a SIGKILL loses at most the trials in
-flight. A kill during the append can leave a torn last line; ``ResultStore``
+flight. A kill during the append can leave a torn last line; ``append_jsonl``
 truncates it before appending again (otherwise the next record would be glued
 to it and the file would become unreadable). Only the parent process writes,
 and it skips keys that are already present, so a rerun duplicates nothing.
 """
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
-from defgg_ros.atomic import append_jsonl, read_jsonl
+from defgg_ros.atomic import append_jsonl, read_jsonl, repair_torn_tail
 
 RESULTS_FILE = "trials.jsonl"
 RECORD_VERSION = 1
@@ -20,37 +19,6 @@ RECORD_VERSION = 1
 
 class ResultsError(RuntimeError):
     """A results file that cannot be trusted (corrupt line, duplicate key, wrong version)."""
-
-
-def repair_torn_tail(path) -> int:
-    """Drop an incomplete last line (no trailing newline). Returns the bytes removed."""
-    path = Path(path)
-    if not path.exists() or path.stat().st_size == 0:
-        return 0
-    with open(path, "rb+") as f:
-        f.seek(0, os.SEEK_END)
-        size = f.tell()
-        f.seek(size - 1)
-        if f.read(1) == b"\n":
-            return 0
-        # Walk back to the last newline; everything after it is the torn record.
-        pos = size - 1
-        chunk = 4096
-        while pos > 0:
-            start = max(0, pos - chunk)
-            f.seek(start)
-            data = f.read(pos - start)
-            idx = data.rfind(b"\n")
-            if idx >= 0:
-                keep = start + idx + 1
-                break
-            pos = start
-        else:
-            keep = 0
-        f.truncate(keep)
-        f.flush()
-        os.fsync(f.fileno())
-        return size - keep
 
 
 def results_path(out_dir) -> Path:

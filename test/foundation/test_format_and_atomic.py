@@ -80,6 +80,19 @@ def test_torn_last_jsonl_line_is_skipped_but_corruption_inside_raises(tmp_path):
         read_jsonl(path)
 
 
+def test_an_append_after_a_torn_line_drops_it_first_and_the_file_stays_readable(tmp_path):
+    """A generator or relabel run resumed after a crash mid-append: the next record was glued onto the torn line
+    (lost) and a second made it a corrupt line inside the file ("corrupt record on line 3": the scene unreadable
+    for training, cards and fingerprints)."""
+    path = tmp_path / "t.jsonl"
+    append_jsonl(path, {"a": 1})
+    with open(path, "a") as f:
+        f.write('{"a": 2, "b"')  # crash mid-write
+    append_jsonl(path, {"a": 3})
+    append_jsonl(path, {"a": 4})
+    assert read_jsonl(path) == [{"a": 1}, {"a": 3}, {"a": 4}]
+
+
 def test_atomic_path_leaves_nothing_on_failure(tmp_path):
     target = tmp_path / "out.json"
     write_json_atomic(target, {"v": 1})
