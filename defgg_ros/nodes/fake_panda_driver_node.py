@@ -441,10 +441,7 @@ class FakePandaDriver(Node):
                          velocity=joints.velocities[:7].tolist(), effort=joints.efforts[:7].tolist())
         self.pub_arm_joints.publish(arm)
         self.pub_measured.publish(arm)
-        wrench = WrenchStamped(header=header)
-        wrench.wrench.force.x, wrench.wrench.force.y, wrench.wrench.force.z = (float(v) for v in force)
-        wrench.wrench.torque.x, wrench.wrench.torque.y, wrench.wrench.torque.z = (float(v) for v in torque)
-        self.pub_wrench.publish(wrench)
+        self.pub_wrench.publish(franka_wrench_msg(header, force, torque))
         pose = PoseStamped(header=header)
         pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = (float(v) for v in tcp[0])
         o = pose.pose.orientation
@@ -537,6 +534,18 @@ class _Schedule:
             next_s = self._next_s[name] + self._period_s[name]
             self._next_s[name] = next_s if next_s > now_s else now_s + self._period_s[name]
         return names
+
+
+def franka_wrench_msg(header, force_on_hand_n, torque_on_hand_nm) -> WrenchStamped:
+    """The cell's contact wrench on the hand as franka_robot_state_broadcaster publishes O_F_ext_hat_K: the wrench
+    the robot applies to the environment (libfranka: "forces applied by the robot to the environment are
+    positive"), the negative of the contacts' on the hand. Pressing on the table reads Fz < 0, a held object's
+    weight Fz > 0 (docs/franka_contract.md)."""
+    wrench = WrenchStamped(header=header)
+    f, t = wrench.wrench.force, wrench.wrench.torque
+    f.x, f.y, f.z = (-float(v) for v in force_on_hand_n)
+    t.x, t.y, t.z = (-float(v) for v in torque_on_hand_nm)
+    return wrench
 
 
 def main(args=None):

@@ -344,3 +344,18 @@ def test_a_robot_type_franka_ros2_does_not_have_is_refused_naming_the_choices(rc
         FakePandaDriver(context=rclpy_context, parameter_overrides=[Parameter("robot_type", value="panda")])
     with pytest.raises(ValueError, match="franka_ros2 on Jazzy names the Panda 'fer'"):
         topics.robot_names("panda")
+
+
+def test_the_wrench_is_published_as_the_robot_applies_it_to_the_environment():
+    """libfranka's O_F_ext_hat_K (what franka_robot_state_broadcaster publishes): forces the robot applies to the
+    environment are positive. The cell's contacts push the hand up when it presses on the table (+z on the hand):
+    the topic must read Fz < 0 there, as the real arm does (it read +z: a client's signed threshold passed in
+    simulation and failed on the real cell)."""
+    from std_msgs.msg import Header
+
+    from defgg_ros.nodes.fake_panda_driver_node import franka_wrench_msg
+
+    msg = franka_wrench_msg(Header(frame_id="fer_link0"), np.array([0.5, 0.0, 8.0]), np.array([0.0, 0.1, 0.0]))
+    force, torque = msg.wrench.force, msg.wrench.torque
+    assert (force.x, force.y, force.z) == (-0.5, 0.0, -8.0) and (torque.x, torque.y, torque.z) == (0.0, -0.1, 0.0)
+    assert msg.header.frame_id == "fer_link0"
