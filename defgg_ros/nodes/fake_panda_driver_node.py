@@ -333,8 +333,9 @@ class FakePandaDriver(Node):
             return result
         while not waiter[0].wait(0.05):
             if goal_handle.is_cancel_requested or not self._running:
-                with self._lock:  # stop where the fingers are
-                    self.cell.gripper_move(min(self.cell.gripper_width_m(), GRIPPER_MAX_WIDTH_M), 0.1)
+                with self._lock:  # franka_gripper's cancel: Gripper::stop, the grasp's force let go
+                    self.cell.gripper_stop()
+                    self._waiters.pop(token, None)
                 result.success, result.error = False, "canceled"
                 goal_handle.canceled()
                 return result

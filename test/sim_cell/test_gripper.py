@@ -85,3 +85,16 @@ def test_a_grasp_presses_once_its_fingers_slow_on_the_object_and_a_move_never_do
     ctrl.start_move(0.08, 0.05, 1.0)
     _feed(ctrl, [closing[-1]] * 100, t0=1.0, dt=0.001)                  # blocked, but a move does not press
     assert not ctrl.motor.press
+
+
+def test_a_stop_ends_the_command_and_lets_go_of_the_force():
+    """franka_gripper's cancel calls Gripper::stop: the grasp ends and no force is held (the simulated hand held
+    the width with the move's 70 N, so a canceled grasp kept its object in simulation and not on a real hand)."""
+    ctrl = GripperController(0.08)
+    ctrl.start_grasp(0.0, 0.08, 0.08, 0.02, 10.0, 0.0)
+    _feed(ctrl, [0.05] * 60, dt=0.001)                                   # blocked on the object: pressing
+    assert ctrl.motor.press and ctrl.busy
+    ctrl.stop()
+    assert not ctrl.busy and not ctrl.motor.press and ctrl.motor.finger_force_n == 0.0
+    assert ctrl.motor.finger_target_m == pytest.approx(0.025)            # where the fingers are
+    assert _feed(ctrl, [0.05] * 30, t0=1.0) is None                      # nothing to report any more

@@ -101,6 +101,13 @@ class GripperController:
         self._contact = ContactWindow(speed_mps / 2)
         self._contact.start(now_s, self._last_width_m)
 
+    def stop(self) -> None:
+        """franka_gripper's cancel (Gripper::stop): the running command ends and the fingers hold no force (a
+        grasp lets go of its object); they stay where they are unless something pushes them."""
+        self._kind = None
+        self._contact = None
+        self._motor = MotorCommand(self._last_width_m / 2, GRIPPER_MAX_SPEED_MPS / 2, 0.0)
+
     def _begin(self, kind, goal, now_s):
         self._kind, self._goal = kind, goal
         self._started_s = self._last_moving_s = now_s

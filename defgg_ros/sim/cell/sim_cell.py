@@ -204,6 +204,12 @@ class SimCell:
         """Start a move; returns a token whose outcome `advance` reports later."""
         return self._start_gripper(lambda: self.gripper.start_move(width_m, speed_mps, self.time_s))
 
+    def gripper_stop(self) -> None:
+        """Cancel the running gripper command as franka_gripper does: stopped, no force held."""
+        if self.gripper.busy:
+            self._pending_token = None
+        self.gripper.stop()
+
     def gripper_grasp(self, width_m, eps_inner_m, eps_outer_m, speed_mps, force_n) -> int:
         return self._start_gripper(lambda: self.gripper.start_grasp(
             width_m, eps_inner_m, eps_outer_m, speed_mps, force_n, self.time_s))
