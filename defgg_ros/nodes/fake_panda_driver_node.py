@@ -55,6 +55,7 @@ OBJECT_POSES_TOPIC = topics.FAKE_OBJECT_POSES
 CAPTURE_SERVICE = topics.FAKE_CAPTURE_SERVICE
 HOMING_SPEED_MPS = 0.1        # franka_gripper's default speed
 FEEDBACK_PERIOD_S = 0.1       # FollowJointTrajectory feedback while a goal runs (wall clock)
+FLOAT32_EPSILON = 1.1920929e-07   # the controller's "zero" velocity at a trajectory's end (float's epsilon)
 # On SIGINT/SIGTERM (stop_for_exit) the driver holds its own arm and keeps stepping and publishing until every arm
 # joint has been slower than EXIT_STILL_RADPS for EXIT_REST_S (wall clock), at most EXIT_STOP_TIMEOUT_S: under
 # `ros2 launch` every process gets the signal at once, and the executor's own stop needs joint states to confirm.
@@ -201,6 +202,9 @@ class FakePandaDriver(Node):
 
     # ---- commands (ROS threads) ------------------------------------------
     def _on_trajectory(self, msg: JointTrajectory):
+        if not msg.points:   # the joint_trajectory_controller drops it ("Empty trajectory received"): no stop
+            self.get_logger().error("rejected joint trajectory: Empty trajectory received (it does not stop the arm)")
+            return
         try:
             points = self._trajectory_points(msg)
             with self._lock:
@@ -287,6 +291,11 @@ class FakePandaDriver(Node):
         def pick(values):
             return [values[i] for i in order] if len(values) == len(names) else None
 
+        # allow_nonzero_velocity_at_trajectory_end: false (the controller's default): the last point must be still.
+        moving = [n for n, v in zip(names, msg.points[-1].velocities) if abs(v) > FLOAT32_EPSILON]
+        if moving:
+            raise TrajectoryError(f"velocity of the last trajectory point is not zero for {moving} (the "
+                                  "joint_trajectory_controller rejects such a trajectory)")
         return [(pt.time_from_start.sec + pt.time_from_start.nanosec * 1e-9, pick(pt.positions),
                  pick(pt.velocities), pick(pt.accelerations)) for pt in msg.points]
 

@@ -179,7 +179,10 @@ def test_follow_joint_trajectory_action(driver, client, executor, spin):
          "the arm at the goal")
     for bad in (JointTrajectory(joint_names=[f"fr3_joint{i}" for i in range(1, 8)],     # another arm's joints
                                 points=[JointTrajectoryPoint(positions=[0.0] * 7, time_from_start=Duration(sec=1))]),
-                JointTrajectory(joint_names=list(ARM_JOINTS))):                  # no points
+                JointTrajectory(joint_names=list(ARM_JOINTS)),                   # no points
+                JointTrajectory(joint_names=list(ARM_JOINTS), points=[             # still moving at its end
+                    JointTrajectoryPoint(positions=goal_q.tolist(), velocities=[0.0, 0.1, 0.0, 0.0, 0.0, 0.0, 0.0],
+                                         time_from_start=Duration(sec=1))])):
         handle = spin(executor, arm.send_goal_async(FollowJointTrajectory.Goal(trajectory=bad)), TIMEOUT_S,
                       "the goal response")
         assert not handle.accepted
@@ -253,6 +256,28 @@ def test_camera_scene_and_object_poses(driver, client, executor, spin):
     assert [o["name"] for o in described["objects"]] == ["wooden_block"]
     assert described["objects_simulated_as"] == ["rigid"]
     assert poses[-1].poses[0].position.x == pytest.approx(0.5, abs=0.005)
+
+
+def test_an_empty_trajectory_on_the_topic_does_not_stop_the_arm(driver, client, executor, spin):
+    """The joint_trajectory_controller drops an empty JointTrajectory ("Empty trajectory received"): a client
+    that "stops" the arm so stops nothing on the real arm (the driver held the arm on it)."""
+    from builtin_interfaces.msg import Duration
+    from sensor_msgs.msg import JointState
+    from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+    from defgg_ros.ros import qos
+
+    joints = _latest(client, JointState, topics.JOINT_STATES, qos.STATE)
+    pub = client.create_publisher(JointTrajectory, topics.JOINT_TRAJECTORY, qos.COMMAND)
+    spin(executor, lambda: joints and pub.get_subscription_count() > 0, TIMEOUT_S, "driver subscribed")
+    goal = np.array(joints[-1].position[:7]) + 0.2
+    pub.publish(JointTrajectory(joint_names=list(ARM_JOINTS), points=[
+        JointTrajectoryPoint(positions=goal.tolist(), time_from_start=Duration(sec=2))]))
+    count = len(joints)
+    spin(executor, lambda: len(joints) > count + 10, TIMEOUT_S, "the arm under way")
+    pub.publish(JointTrajectory(joint_names=list(ARM_JOINTS)))
+    spin(executor, lambda: np.abs(np.array(joints[-1].position[:7]) - goal).max() < 0.01, TIMEOUT_S,
+         "the arm at the goal after the empty trajectory")
 
 
 def test_malformed_trajectory_is_rejected_and_the_driver_keeps_serving(driver, client, executor, spin):
