@@ -518,8 +518,12 @@ class PickPlaceSequence(SqueezePhase):
         if width > opened - NOT_CLOSED_TOLERANCE_M:
             raise SequenceFailure(f"the fingers did not close: they stopped at {width * 1000:.1f} mm, where they "
                                   f"opened to ({opened * 1000:.1f} mm); a finger is on the object, not beside it")
-        if not success:
-            raise SequenceFailure(f"gripper grasp failed: {error or 'no reason given'}")
+        if not success:   # franka_gripper says why only when libfranka threw: a grasp outside its band says nothing
+            g = self._plan.gripper
+            raise SequenceFailure(f"gripper grasp failed: the fingers stopped at {width * 1000:.1f} mm, the grasp "
+                                  f"accepts {(g.width_m - g.epsilon_inner_m) * 1000:.1f}-"
+                                  f"{(g.width_m + g.epsilon_outer_m) * 1000:.1f} mm"
+                                  + (f" ({error})" if error else ""))
         self._phase = "lift"
         return self._line_up(self._cfg.lift_height_m, sim_s)
 

@@ -350,7 +350,10 @@ class FakePandaDriver(Node):
                 return result
             goal_handle.publish_feedback(action_type.Feedback(current_width=self.cell.gripper_width_m()))
         outcome = waiter[1]
-        result.success, result.error = outcome.success, outcome.error
+        # franka_gripper: a grasp outside its band is grasp() returning false, an abort with no error text.
+        result.success, result.error = outcome.success, "" if outcome.outside_band else outcome.error
+        if outcome.outside_band:
+            self.get_logger().info(f"grasp failed: {outcome.error}")
         if outcome.success:
             goal_handle.succeed()
         else:

@@ -254,6 +254,18 @@ def test_a_goal_is_refused_while_the_arm_still_moves_and_a_cancel_before_the_sta
     assert canceled.finished and out.canceled and not out.success and out.arm_state in ("at_rest", "observation_pose")
 
 
+def test_a_grasp_outside_its_band_says_where_the_fingers_stopped_without_the_grippers_words(kin):
+    """franka_gripper aborts a grasp that stopped outside [width - eps_inner, width + eps_outer] with no error text
+    (libfranka's grasp() returned false): the failure names the width and the band itself ("no reason given")."""
+    sequence, robot = make(kin), FakeRobot(kin, World())
+    run(sequence, robot, until=lambda r, s: s.phase == "close" and r.gripper is not None)
+    robot.gripper = None
+    sequence.on_gripper_result(False, 0.03, "")
+    run_until_finished(sequence, robot)
+    reason = sequence.outcome.failure_reason
+    assert "the fingers stopped at 30.0 mm, the grasp accepts" in reason and "no reason" not in reason
+
+
 def test_a_stall_of_the_owner_itself_is_not_a_silent_driver(kin):
     """The whole cell suspended for 60 s (SIGSTOP of every process): the executor's first tick after the pause
     comes before the driver's first joint state after it; the pick goes on (it aborted "driver silent: no joint

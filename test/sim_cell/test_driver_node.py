@@ -144,7 +144,7 @@ def test_gripper_actions(driver, client, executor, spin):
     # Nothing between the fingers: a grasp for a 5 cm object closes fully and fails.
     result = run(grasp, Grasp.Goal(width=0.05, epsilon=GraspEpsilon(inner=0.005, outer=0.005), speed=0.1,
                                    force=20.0))
-    assert not result.success and "outside" in result.error
+    assert not result.success and result.error == ""      # libfranka's grasp() returned false: no error text
     result = run(move, Move.Goal(width=0.2, speed=0.1))
     assert not result.success and "width" in result.error
     result = run(homing, Homing.Goal())

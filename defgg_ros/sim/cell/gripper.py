@@ -41,6 +41,9 @@ class GripperOutcome:
     success: bool
     width_m: float
     error: str = ""
+    # A grasp that stopped outside its epsilon band: libfranka's grasp() returns false, no exception, so
+    # franka_gripper's result carries no error text (the driver sends none; `error` is for the cell's own log).
+    outside_band: bool = False
 
 
 @dataclass(frozen=True)
@@ -153,4 +156,5 @@ class GripperController:
         if target - eps_in <= width_m <= target + eps_out:
             return GripperOutcome(True, width_m)
         return GripperOutcome(False, width_m, f"fingers stopped at {width_m * 1000:.1f} mm, outside "
-                                              f"[{(target - eps_in) * 1000:.1f}, {(target + eps_out) * 1000:.1f}] mm")
+                                              f"[{(target - eps_in) * 1000:.1f}, {(target + eps_out) * 1000:.1f}] mm",
+                              outside_band=True)
