@@ -1,4 +1,5 @@
 """Write files so that a crash never leaves a half-written one behind."""
+import fcntl
 import gzip
 import json
 import os
@@ -141,3 +142,15 @@ def compress_jsonl(path) -> Path:
         gz.write(data)
     path.unlink()
     return out
+
+
+@contextmanager
+def only_writer(lock_path, busy_error: Exception):
+    """Hold an exclusive lock on lock_path while a run writes a folder; raise busy_error when another process holds
+    it (two runs appending to the same files would write each trial twice)."""
+    with open(lock_path, "w") as lock:
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise busy_error from None
+        yield

@@ -24,7 +24,7 @@ import numpy as np
 import pybullet as p
 from tqdm import tqdm
 
-from defgg_ros.atomic import append_jsonl, write_json_atomic
+from defgg_ros.atomic import append_jsonl, only_writer, write_json_atomic
 from defgg_ros.constants import GRASP_CANDIDATES_PER_OBJECT, TRAINING_YOUNGS_MODULI_PA
 from defgg_ros.data.card import write_card
 from defgg_ros.data.format import TRIAL_ERRORS_FILE as ERRORS_FILE
@@ -43,6 +43,7 @@ from defgg_ros.sim.sampler import SAMPLER_VERSION, grasp_rect, sample_grasps
 from defgg_ros.sim.trial import TrialSettings, WorldGrasp, run_grasp_trial
 from defgg_ros.sim.trial_settings import comparable_protocol
 
+LOCK_FILE = ".datagen.lock"     # held while a run writes: two runs into one folder would write each trial twice
 CANDIDATE_FILE_VERSION = 1
 # The coarse FEM mesh measured against the shipped one (up to 220 nodes):
 # 6-12x cheaper soft trials, but 5 of 27 soft labels flipped (bench/README.md,
@@ -344,6 +345,10 @@ def check_resumable(cfg: DatagenConfig) -> None:
     if height != cfg.grasp_height:
         raise DatasetError(f"{cfg.out} was generated with --grasp-height {height}; resume it with the same rule "
                            f"(got {cfg.grasp_height}) or write a new dataset")
+    for key, flag in (("seed", "--seed"), ("n_candidates", "--candidates"), ("object_set", "--object-set")):
+        if key in stored and stored[key] != getattr(cfg, key):   # the pending candidates would come from another
+            raise DatasetError(f"{cfg.out} was generated with {flag} {stored[key]}; resume it with the same "
+                               f"value (got {getattr(cfg, key)}) or write a new dataset")
     protocol = comparable_protocol(recorded_trial_settings(stored).to_record())
     current = comparable_protocol(effective_trial_settings(cfg.settings))
     if protocol != current:
@@ -353,8 +358,15 @@ def check_resumable(cfg: DatagenConfig) -> None:
 
 
 def generate(cfg: DatagenConfig, progress_bar=True) -> dict:
-    """Plan + execute; returns counts. Safe to rerun: finished trials are skipped."""
+    """Plan + execute; returns counts. Safe to rerun: finished trials are skipped. One run per folder at a time."""
     selected_shapes(cfg)           # a bad object name is refused before anything is written
+    Path(cfg.out).mkdir(parents=True, exist_ok=True)
+    busy = DatasetError(f"another defgg-datagen run is writing {cfg.out}; let it finish or stop it")
+    with only_writer(Path(cfg.out) / LOCK_FILE, busy):
+        return _generate(cfg, progress_bar)
+
+
+def _generate(cfg: DatagenConfig, progress_bar: bool) -> dict:
     writer = DatasetWriter(cfg.out, cfg.header())
     check_resumable(cfg)
     t_plan = tqdm(desc="planning (objects)", unit="obj", disable=not progress_bar)

@@ -11,7 +11,6 @@ trial that raised goes to OUT/trial_errors.jsonl and is retried by the next run.
 from __future__ import annotations
 
 import contextlib
-import fcntl
 import json
 import multiprocessing as mp
 import random
@@ -21,7 +20,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from defgg_ros.atomic import append_jsonl, read_jsonl, write_json_atomic, write_text_atomic
+from defgg_ros.atomic import append_jsonl, only_writer, read_jsonl, write_json_atomic, write_text_atomic
 from defgg_ros.data.card import write_card
 from defgg_ros.data.datagen import job_from_record, run_trial_job_guarded
 from defgg_ros.data.format import TRIAL_ERRORS_FILE, DatasetError, TrialRecord, dataset_fingerprint
@@ -127,7 +126,8 @@ def run(spec: RelabelSpec, workers: int = 1, limit: int | None = None, progress:
     file_of = {r["trial_id"]: name for name, r in pending}
     jobs = [relabel_job(r, spec.settings) for _, r in pending]
     counts = {"pending": len(jobs), "done": 0, "errors": 0}
-    writer = _only_writer(spec.out) if jobs else contextlib.nullcontext()
+    busy = DatasetError(f"another defgg-datagen relabel is writing {spec.out}; let it finish or stop it")
+    writer = only_writer(Path(spec.out) / LOCK_FILE, busy) if jobs else contextlib.nullcontext()
     with writer, tqdm(total=len(jobs), desc="relabel", unit="trial", disable=not progress, smoothing=0.05) as bar:
         for result in _results(jobs, workers):
             if "error" in result:
@@ -142,17 +142,6 @@ def run(spec: RelabelSpec, workers: int = 1, limit: int | None = None, progress:
                 print(f"defgg-datagen relabel: {counts['done']} of {len(jobs)} trials", flush=True)
     write_text_atomic(spec.out / REPORT_FILE, render_report(spec, by_file))
     return counts
-
-
-@contextlib.contextmanager
-def _only_writer(out: Path):
-    """Hold OUT's lock for the run; DatasetError when another relabel holds it."""
-    with open(Path(out) / LOCK_FILE, "w") as lock:
-        try:
-            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            raise DatasetError(f"another defgg-datagen relabel is writing {out}; let it finish or stop it") from None
-        yield
 
 
 def _results(jobs: list, workers: int):

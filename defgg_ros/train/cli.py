@@ -108,7 +108,10 @@ def config_from_args(args) -> TrainConfig:
 
 
 def main(argv=None) -> int:
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.threads < 1:
+        parser.error(f"--threads must be >= 1, got {args.threads}")
     torch.set_num_threads(args.threads)
     try:
         metrics = train(config_from_args(args), args.data, args.out, resume=args.resume, workers=args.workers,

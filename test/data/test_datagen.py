@@ -146,6 +146,25 @@ def test_a_new_dataset_samples_at_the_executor_height_and_a_resumed_one_keeps_it
     assert datagen.resolve_grasp_height(executor, None) == "executor"
 
 
+def test_a_resume_keeps_the_seed_and_candidates_and_one_run_writes_a_folder_at_a_time(tmp_path):
+    """Another --seed or --candidates resampled the pending candidates while the header kept the old ones (the
+    dataset no longer reproduced from it); two runs into one folder appended every pending trial twice."""
+    from defgg_ros.atomic import only_writer
+    from defgg_ros.data.format import DatasetError
+
+    out = tmp_path / "d"
+    DatasetWriter(out, datagen.DatagenConfig(out=out, seed=0).header())
+    for cfg, says in ((datagen.DatagenConfig(out=out, seed=1), "--seed 0"),
+                      (datagen.DatagenConfig(out=out, n_candidates=50), "--candidates"),
+                      (datagen.DatagenConfig(out=out, object_set="common"), "--object-set train")):
+        with pytest.raises(DatasetError, match=says):
+            datagen.check_resumable(cfg)
+    datagen.check_resumable(datagen.DatagenConfig(out=out, seed=0))
+    with only_writer(out / datagen.LOCK_FILE, RuntimeError("held")):       # a run writing the folder
+        with pytest.raises(DatasetError, match="another defgg-datagen run is writing"):
+            datagen.generate(datagen.DatagenConfig(out=out, objects=("cube",), moduli_pa=(2e9,)), progress_bar=False)
+
+
 KNOBS_BEFORE_THEY_WERE_RECORDED = {"confident_min_directions": 4, "confident_margin_mps2": 40.0}
 
 

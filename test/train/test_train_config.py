@@ -97,3 +97,11 @@ def test_a_fixed_split_keeps_its_validation_objects_whatever_the_data_adds():
             fixed_split(names, val, test)
     with pytest.raises(ValueError, match="test_objects need val_objects"):
         TrainConfig(test_objects=("cone",))
+
+
+def test_zero_threads_is_a_usage_error_not_a_traceback(capsys):
+    from defgg_ros.train.cli import main
+
+    with pytest.raises(SystemExit) as exit_info:
+        main(["--data", "d", "--out", "o", "--threads", "0"])
+    assert exit_info.value.code == 2 and "--threads must be >= 1, got 0" in capsys.readouterr().err
