@@ -10,6 +10,7 @@ evaluation folder's summary.json.
 from __future__ import annotations
 
 import json
+import pickle
 import shutil
 import subprocess
 import tarfile
@@ -61,8 +62,12 @@ def training_provenance(run_dir, command: str, wall_s: float, commit: str) -> di
     try:
         metrics = json.loads((run_dir / "metrics.json").read_text())
         state = torch.load(run_dir / "state.pt", map_location="cpu", weights_only=True)
-    except (OSError, ValueError, RuntimeError) as exc:
+    except (OSError, ValueError, RuntimeError, pickle.UnpicklingError) as exc:
         raise CardError(f"{run_dir}: not a finished defgg-train run ({exc})") from None
+    fingerprint = metrics["data"]["fingerprint"]
+    if state.get("data_fingerprint", fingerprint) != fingerprint:   # a new run began over an old one's files
+        raise CardError(f"{run_dir}: state.pt is of data {state['data_fingerprint']}, metrics.json of {fingerprint}: "
+                        "files of two runs; train into a fresh folder")
     best_epoch = metrics.get("best_epoch")
     best = next((h for h in metrics["history"] if h["epoch"] == best_epoch), metrics["history"][-1])
     data_root = metrics["data"]["root"]
@@ -85,7 +90,10 @@ def ship_model(run_dir, name: str, models_dir, provenance: dict, checkpoint: str
     if checkpoint not in CHECKPOINTS:
         raise CardError(f"checkpoint must be one of {sorted(CHECKPOINTS)}, got {checkpoint!r}")
     src = Path(run_dir) / CHECKPOINTS[checkpoint]
-    load_checkpoint(src)   # refuses a corrupt or foreign file before it is shipped
+    trained_on = load_checkpoint(src)["data_fingerprint"]   # refuses a corrupt or foreign file before it is shipped
+    if "data_fingerprint" in provenance and trained_on != provenance["data_fingerprint"]:
+        raise CardError(f"{src} was trained on data {trained_on}, the run's metrics.json says "
+                        f"{provenance['data_fingerprint']}: files of two runs; train into a fresh folder")
     dst = Path(models_dir) / f"{name}.pt"
     with atomic_path(dst) as tmp:
         shutil.copyfile(src, tmp)

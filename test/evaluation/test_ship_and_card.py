@@ -154,3 +154,20 @@ def test_card_shows_what_each_seed_gave_in_the_simulator(trained, tmp_path):
     assert "| common | 0 | 4 | 75.0 % / 25.0 % | 2 | 0 | +50.0 |" in card and "| common | 1 | 4 |" in card
     assert "mean of 2 seeds" in card
     assert cli.main(["card", "--name", "m", "--models-dir", str(models), "--seed-runs", *folders]) == 2
+
+
+def test_shipping_refuses_files_of_two_runs(trained, tmp_path, capsys):
+    """A fresh run into a used folder, killed before its first epoch ended, leaves the old best.pt and metrics.json
+    beside its new state.pt: shipping them paired the old weights with the new run's manifest (wrong card)."""
+    import shutil
+
+    root, data, run, command = trained
+    mixed = tmp_path / "mixed"
+    shutil.copytree(run, mixed)
+    metrics = json.loads((mixed / "metrics.json").read_text())
+    metrics["data"]["fingerprint"] = "0123456789abcdef"
+    (mixed / "metrics.json").write_text(json.dumps(metrics))
+    assert cli.main(["ship", "--run", str(mixed), "--name", "m", "--command", command, "--wall-s", "1",
+                     "--models-dir", str(tmp_path / "models")]) == 2
+    assert "files of two runs" in capsys.readouterr().err
+    assert not (tmp_path / "models" / "m.pt").exists()
