@@ -158,6 +158,10 @@ class Trainer:
         return state
 
     def _restore(self, state: dict) -> None:
+        started_with = state.get("world", 1)      # states before 2026-12-01: one process
+        if started_with != self.world:   # another shard layout and global batch: items twice or never, silently
+            raise TrainingError(f"{self.out}: the run was started with {started_with} process(es), this is "
+                                f"{self.world}; resume it with the same number (torchrun --nproc_per_node)")
         self.model.load_state_dict(state["model"])
         self.optimizer.load_state_dict(state["optimizer"])
         self.epoch, self.batch, self.global_step = state["epoch"], state["batch"], state["global_step"]
@@ -170,6 +174,7 @@ class Trainer:
                  "manifest": self.manifest, "data_fingerprint": self.fingerprint,
                  "object_split": self.object_split, "epoch": self.epoch, "batch": self.batch,
                  "global_step": self.global_step, "history": self.history, "running": self.running,
+                 "world": self.world,
                  "model": self.model.state_dict(), "optimizer": self.optimizer.state_dict()}
         with atomic_path(self.out / STATE_FILE) as tmp:
             torch.save(state, tmp)

@@ -52,3 +52,16 @@ def test_resume_refuses_changed_hyper_parameters(tiny_dataset, tmp_path, capsys)
     assert main(["--data", str(tiny_dataset), "--out", str(run), *ARGS, "--max-steps", "1"]) == 0
     assert main(["--data", str(tiny_dataset), "--out", str(run), "--resume", *ARGS, "--lr", "0.1"]) == 2
     assert "learning_rate" in capsys.readouterr().err
+
+
+def test_resume_refuses_another_number_of_processes(tiny_dataset, tmp_path, capsys):
+    """A run started under torchrun with 2 processes and resumed with 1 (or the other way) trained on another shard
+    layout and global batch from the stored batch index: some items twice, others never, without a word."""
+    run = tmp_path / "run"
+    assert main(["--data", str(tiny_dataset), "--out", str(run), *ARGS, "--max-steps", "1"]) == 0
+    state = torch.load(run / "state.pt", weights_only=True)
+    assert state["world"] == 1
+    state["world"] = 2                                   # as a 2-process run stores it
+    torch.save(state, run / "state.pt")
+    assert main(["--data", str(tiny_dataset), "--out", str(run), "--resume", *ARGS]) == 2
+    assert "started with 2 process(es), this is 1" in capsys.readouterr().err
