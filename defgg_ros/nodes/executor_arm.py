@@ -74,9 +74,12 @@ class ArmCommands:
                 epsilon = GraspEpsilon(inner=c.epsilon_inner_m, outer=c.epsilon_outer_m)
                 goal = Grasp.Goal(width=c.width_m, epsilon=epsilon, speed=c.speed_mps, force=c.force_n)
                 self._send_gripper(sequence, self._grasp_client, goal)
-            elif isinstance(command, CancelGripper) and self._gripper_goal is not None:
-                self._gripper_goal.cancel_goal_async()
-                self._gripper_goal = None
+            elif isinstance(command, CancelGripper):
+                # The newest goal may not be accepted yet (its handle is not in _gripper_goal): on_goal cancels it.
+                self._gripper_canceled_serial = self._gripper_serial
+                if self._gripper_goal is not None:
+                    self._gripper_goal.cancel_goal_async()
+                    self._gripper_goal = None
 
     def _send_arm(self, trajectory) -> None:
         """Send a trajectory as a FollowJointTrajectory goal (lock held); it replaces the running one.
@@ -170,7 +173,10 @@ class ArmCommands:
                         sequence.on_gripper_result(False, float("nan"), "gripper goal rejected")
                 return
             with self._lock:
-                self._gripper_goal = handle
+                if serial == self._gripper_canceled_serial:   # canceled before it was accepted: cancel it now
+                    handle.cancel_goal_async()
+                else:
+                    self._gripper_goal = handle
             handle.get_result_async().add_done_callback(on_result)
 
         client.send_goal_async(goal, feedback_callback=on_feedback).add_done_callback(on_goal)

@@ -85,6 +85,7 @@ class ExecutorNode(RobotInputs, ArmCommands, GraspPlanning, Node):
         self._sequence: PickPlaceSequence | None = None
         self._gripper_goal = None
         self._gripper_serial = 0     # the newest gripper goal sent; only its result counts
+        self._gripper_canceled_serial = 0   # the newest goal a CancelGripper was for (canceled once accepted)
         self._last_state: tuple[ArmState, float] | None = None
         self._velocity_estimate = PositionVelocityEstimator()   # for drivers without velocities
         self._last_force = np.zeros(3)
