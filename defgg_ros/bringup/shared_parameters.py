@@ -25,12 +25,25 @@ from defgg_ros.ros.topics import robot_names
 CELL_PARAMETERS = ("robot_type", "base_frame", "table_z_m", "grasp_height_rule", "grasp_depth_below_surface_m")
 
 
+# A node's section in a parameter file: keyed /**/<node> in the shipped files, so it holds in any namespace
+# (real_cell.launch.py's namespace:=, -r __ns:=); a plain <node> key holds only for /<node>.
+NODE_KEYS = ("{node}", "/{node}", "/**/{node}")
+
+
+def node_sections(raw: dict) -> dict:
+    """{node name: its ros__parameters} of a loaded parameter file, whichever key form names the node."""
+    out = {}
+    for key, section in (raw or {}).items():
+        if key != "/**" and isinstance(section, dict) and "ros__parameters" in section:
+            out[key.removeprefix("/**/").removeprefix("/")] = section["ros__parameters"] or {}
+    return out
+
+
 def _file_section(path: str, node: str) -> dict:
     raw = yaml.safe_load(Path(path).read_text(encoding="utf-8")) or {}
-    params = {}
-    for key in ("/**", node, f"/{node}"):   # ROS 2 parameter files: wildcard first, then the node's own
-        section = raw.get(key) or {}
-        params.update(section.get("ros__parameters") or {})
+    params = dict((raw.get("/**") or {}).get("ros__parameters") or {})   # the wildcard first, then the node's own
+    for key in NODE_KEYS:
+        params.update((raw.get(key.format(node=node)) or {}).get("ros__parameters") or {})
     return params
 
 

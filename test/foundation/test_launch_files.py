@@ -64,7 +64,7 @@ def evaluate(recorder, file_name: str, arguments: dict):
 def file_parameters(path: str, node: str) -> dict:
     raw = yaml.safe_load(Path(path).read_text(encoding="utf-8")) or {}
     params = {}
-    for key in ("/**", node, f"/{node}"):
+    for key in ("/**", node, f"/{node}", f"/**/{node}"):
         params.update((raw.get(key) or {}).get("ros__parameters") or {})
     return params
 

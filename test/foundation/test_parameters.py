@@ -6,6 +6,7 @@ from pathlib import Path
 import pytest
 import yaml
 
+from defgg_ros.bringup.shared_parameters import node_sections
 from defgg_ros.ros import topics
 from defgg_ros.ros.parameters import ParameterError, ParameterSpec, at_default, check_value, defaults, load_schema
 
@@ -33,7 +34,8 @@ def test_every_schema_loads_with_typed_described_defaults(node):
 @pytest.mark.parametrize("node", NODES)
 def test_shipped_configs_hold_only_valid_overrides(node):
     raw = yaml.safe_load((ROOT / "sim_bringup" / "config" / f"{node}.yaml").read_text())
-    overrides = raw[node]["ros__parameters"] or {}
+    assert list(raw) == [f"/**/{node}"], "keyed for any namespace (real_cell.launch.py namespace:=)"
+    overrides = node_sections(raw)[node]
     specs = load_schema(node)
     assert set(overrides) <= set(specs)
     for name, value in overrides.items():
@@ -45,9 +47,11 @@ def test_shipped_configs_hold_only_valid_overrides(node):
 @pytest.mark.parametrize("path", sorted((ROOT / "sim_bringup" / "config" / "real_cell").glob("*.yaml")),
                          ids=lambda p: p.name)
 def test_robot_files_hold_only_valid_overrides(path):
-    for node, section in yaml.safe_load(path.read_text()).items():
+    raw = yaml.safe_load(path.read_text())
+    assert all(key.startswith("/**/") for key in raw), "keyed for any namespace (real_cell.launch.py namespace:=)"
+    for node, section in node_sections(raw).items():
         specs = load_schema(node)
-        for name, value in ((section or {}).get("ros__parameters") or {}).items():
+        for name, value in section.items():
             assert name in specs, f"{path.name}: {node} has no parameter {name}"
             assert not at_default(specs, name, value), f"{path.name}: {node}.{name} repeats the schema default"
             assert check_value(specs[name], value) is None

@@ -7,7 +7,7 @@ import pytest
 import yaml
 
 from defgg_ros.bringup.node_set import load_node_set
-from defgg_ros.bringup.shared_parameters import effective_parameters
+from defgg_ros.bringup.shared_parameters import effective_parameters, node_sections
 from defgg_ros.ros import topics
 from defgg_ros.ros.parameters import check_value, load_schema
 
@@ -25,10 +25,10 @@ def test_real_cell_sets_load_and_override_known_parameters_within_bounds(set_nam
     assert {n.name for n in node_set.nodes} == {"segmentation_node", "grasp_inference_node", "executor_node"}
     for entry in node_set.nodes:
         assert str(robot_file) in entry.params_files, entry.name
-    overrides = yaml.safe_load(robot_file.read_text())
+    overrides = node_sections(yaml.safe_load(robot_file.read_text()))
     for node, section in overrides.items():
         schema = load_schema(node)
-        for name, value in (section["ros__parameters"] or {}).items():
+        for name, value in section.items():
             assert name in schema, f"{robot_file.name}: {node} has no parameter {name}"
             assert check_value(schema[name], value) is None, check_value(schema[name], value)
     # what the nodes start with (schema defaults, then the node's file, then the robot file)

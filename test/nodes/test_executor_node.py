@@ -179,7 +179,7 @@ def test_shipped_overrides_name_known_parameters_and_load(rclpy_context):
     import yaml
 
     path = Path(__file__).resolve().parents[2] / "sim_bringup" / "config" / "executor_node.yaml"
-    overrides = yaml.safe_load(path.read_text())["executor_node"]["ros__parameters"] or {}
+    overrides = yaml.safe_load(path.read_text())["/**/executor_node"]["ros__parameters"] or {}
     assert set(overrides) <= set(PARAMETERS)
     node = ExecutorNode(context=rclpy_context, cli_args=["--ros-args", "--params-file", str(path)])
     try:
