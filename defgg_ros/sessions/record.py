@@ -181,6 +181,7 @@ def record(args, log=print) -> Path:
         path = recorder.finish()
         writer = None
         log(f"wrote {path}: " + ", ".join(f"{t} x{n}" for t, n in sorted(recorder.counts.items())))
+        check_complete(path, recorder.errors)
         return path
     finally:
         if writer is not None:
@@ -188,6 +189,18 @@ def record(args, log=print) -> Path:
         executor.shutdown()
         spin_thread.join(timeout=10.0)  # before the context goes, or rcl aborts at exit
         context.try_shutdown()
+
+
+class IncompleteRecording(ValueError):
+    """The bag was written, but something the cell used did not reach it (the session cannot replay it)."""
+
+
+def check_complete(path, errors: list) -> None:
+    """IncompleteRecording naming what is missing (a frame the cell used: its replay would compare the cell's
+    answer against another frame's), so defgg-record exits 2 instead of 0."""
+    if errors:
+        shown = "; ".join(errors[:3]) + (f"; ... ({len(errors)} in all)" if len(errors) > 3 else "")
+        raise IncompleteRecording(f"{path} is incomplete: {shown}; record it again")
 
 
 def _late_parameters(probe, recorder, meta) -> None:

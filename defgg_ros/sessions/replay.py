@@ -192,6 +192,9 @@ class ReplayRun:
                          f"{tolerances.angle_deg:g} deg, {tolerances.width_mm:g} mm)", rows))
         if args.update:
             return EXIT_OK, f"{path.name}: expectations re-recorded into {path}"
+        if not rows:   # nothing recorded to compare with: a pass here would check nothing
+            return EXIT_ERROR, (f"{path.name}: nothing to compare (no frame with a recorded grasp, no plan or pick "
+                                "call): record the session again with the cell running")
         message = regression_message(path.name, rows, model.change_from(meta), str(path))
         return (EXIT_REGRESSION, message) if message else (EXIT_OK, f"{path.name}: all {len(rows)} item(s) match")
 

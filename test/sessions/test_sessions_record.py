@@ -112,3 +112,14 @@ def test_options_out_of_range_are_refused_before_anything_connects(tmp_path, cap
     err = capsys.readouterr().err
     assert err.startswith(f"defgg-record: error: {says}"), err
     assert not (tmp_path / "bag").exists()
+
+
+def test_a_recording_missing_a_frame_the_cell_used_is_an_error():
+    """The recorder noted a frame the cell planned on that never reached it; defgg-record said nothing about it
+    and exited 0, and the session's replay then compared the cell's answer against another frame."""
+    from defgg_ros.sessions.record import IncompleteRecording, check_complete
+
+    check_complete("s.bag", [])
+    missing = [f"frame @{i}.000s was used by the cell but never reached the recorder" for i in range(5)]
+    with pytest.raises(IncompleteRecording, match=r"s.bag is incomplete: frame @0.000s .*\(5 in all\)"):
+        check_complete("s.bag", missing)
