@@ -211,6 +211,10 @@ def main(argv=None) -> int:
         print(f"defgg-bringup: WARNING: {EXECUTOR} exited {codes[EXECUTOR]}: it may not have stopped the arm "
               "(its last lines above); check the arm", file=sys.stderr, flush=True)
         code = code or 1
+    if codes.get("recorder", 0) != 0:   # --record: the session is missing or incomplete (its lines above)
+        print(f"defgg-bringup: WARNING: the recorder exited {codes['recorder']}: the session is not complete "
+              "(its last lines above)", file=sys.stderr, flush=True)
+        code = code or 1
     return code
 
 
