@@ -1,8 +1,9 @@
 """Post-processing constants in one place (grasp maps -> ranked grasps).
 
-Defaults follow GG-CNN's post-processing (sigma 2 px on Q and angle, 1 px on
-width; peaks at least 10 px apart on a 300 px map) and are the values used in
-training-time validation and at inference, so both score the same grasps.
+GG-CNN's filters (sigma 2 px on Q and angle, 1 px on width) with our own peak rules: peaks at least 10 px
+apart on a 300 px map (GG-CNN: 20), no Q threshold (GG-CNN: 0.2, no grasp below it) and no border exclusion, so
+the network's best pixel is always returned with its quality. The values used in training-time validation and at
+inference, so both score the same grasps (a little more leniently than GG-CNN's own detection would).
 """
 from __future__ import annotations
 

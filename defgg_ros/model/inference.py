@@ -47,7 +47,9 @@ class GraspCandidate:
     center_v_px: float
     angle_rad: float            # from image u towards v, in [-pi/2, pi/2]
     width_px: float             # finger opening in pixels
-    width_m: float              # finger opening in metres at the grasp depth
+    width_m: float              # opening in metres at the surface depth (depth_m); the labels' width_px is at the
+    # TCP's depth (the grasp point's half height), where it is up to ~7 % wider: a metric grasp takes
+    # evaluation.planning.plan_world_grasp (and the cell the planner's geometric width)
     quality: float              # in [0, 1]
     depth_m: float              # (inpainted) depth at the grasp centre
     position_camera_m: tuple    # (x, y, z) in the camera optical frame
