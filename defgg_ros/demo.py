@@ -312,7 +312,7 @@ def run_demo(args, out_dir: Path, log) -> int:
         bringup.start()
         print(f"defgg-demo: starting the simulated cell ({Path(args.scene).name}); node logs in {log.name}")
         print(f"defgg-demo: cell ready in {bringup.wait_ready(args.ready_timeout):.1f} s")
-        client = DemoClient()
+        client = DemoClient(check_alive=lambda: _raise_if_dead(bringup))
         run = DemoRun(client, args.model, bringup, args.pick_timeout, executor_params(node_set))
         names = [o["name"] for o in run.scene["objects"]]
         wanted = args.objects.split(",") if args.objects else names
@@ -323,9 +323,7 @@ def run_demo(args, out_dir: Path, log) -> int:
         remaining = set(names)
         with tqdm([names.index(n) for n in wanted], desc="picking", unit="object") as progress:
             for index in progress:
-                dead = bringup.failed_node()
-                if dead is not None:
-                    raise BringupError(dead.describe())
+                _raise_if_dead(bringup)
                 rows.append(run.pick(index, remaining, progress))
                 if rows[-1].in_bin:
                     remaining.discard(names[index])
@@ -365,6 +363,12 @@ def _check_inputs(args) -> str | None:
     if unknown:
         return f"--objects {unknown} not in the scene (it has {', '.join(names)})"
     return None
+
+
+def _raise_if_dead(bringup) -> None:
+    dead = bringup.failed_node()
+    if dead is not None:
+        raise BringupError(dead.describe())
 
 
 def _explain_dead_node(bringup) -> None:

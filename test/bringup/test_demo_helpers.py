@@ -200,3 +200,24 @@ def test_demo_help_names_the_exit_codes(capsys):
         parse_args(["--help"])
     out = capsys.readouterr().out
     assert "--strict" in out and "exit 3" in out and "Exit codes" in out
+
+
+def test_a_node_that_dies_during_a_call_ends_the_wait_at_once():
+    """The demo checked for dead nodes only between picks: an executor dying mid-pick left it waiting out the
+    whole --pick-timeout (900 s) before it said which node had died."""
+    import time
+
+    from defgg_ros.bringup.demo_client import DemoClient
+    from defgg_ros.bringup.supervisor import BringupError
+
+    def dead():
+        raise BringupError("executor_node exited with code -9")
+
+    client = DemoClient(check_alive=dead)
+    try:
+        started = time.monotonic()
+        with pytest.raises(BringupError, match="executor_node exited"):
+            client._spin_until(lambda: False, 900.0)
+        assert time.monotonic() - started < 5.0
+    finally:
+        client.close()
