@@ -12,6 +12,7 @@ shell's ROS_DOMAIN_ID and discovery: the real cell, whose drivers run apart);
 cell warns when it finds the simulated driver).
 Pure: no rclpy.
 """
+import json
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -116,10 +117,14 @@ def load_node_set(set_name_or_path: str) -> NodeSet:
 
 
 def _ros_value(value) -> str:
+    """A `-p name:=value` value as rcl reads it (YAML). Strings quoted: an empty one, one with ': ' or '#', or
+    one that reads as a number would not parse, or parse as another type, and the node died at start-up."""
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, (list, tuple)):
         return "[" + ", ".join(_ros_value(v) for v in value) + "]"
+    if isinstance(value, str):
+        return json.dumps(value)
     return str(value)
 
 

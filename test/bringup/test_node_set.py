@@ -21,8 +21,27 @@ def test_command_passes_params_files_sim_time_and_overrides():
     assert cmd[0] == sys.executable and "--ros-args" in cmd
     assert cmd[cmd.index("--params-file") + 1].endswith("fake_panda_driver.yaml")
     params = [cmd[i + 1] for i, a in enumerate(cmd) if a == "-p"]
-    assert "use_sim_time:=true" in params and "scene_file:=x.yaml" in params and "gui:=false" in params
+    assert "use_sim_time:=true" in params and 'scene_file:="x.yaml"' in params and "gui:=false" in params
     assert "place_position_m:=[0.1, 0.2]" in params
+
+
+@pytest.mark.ros
+def test_string_overrides_reach_a_real_node_as_the_strings_they_are(rclpy_context):
+    """`-p base_frame:=` (empty), a value with ': ' or one that reads as a number: rcl refused to parse the first two
+    ("Couldn't parse parameter override rule", the node died at start-up) and typed the third an integer."""
+    from rclpy.node import Node
+
+    entry = load_node_set("sim_cell").nodes[0]
+    values = {"empty": "", "colon": "fer_link0: left", "digits": "42", "hash": "a # b", "names": ["x", "1"]}
+    cmd = node_command(entry, False, values)
+    args = cmd[cmd.index("--ros-args"):]
+    args = [a for i, a in enumerate(args) if not (a == "--params-file" or (i and args[i - 1] == "--params-file"))]
+    node = Node("override_probe", context=rclpy_context, cli_args=args,
+                automatically_declare_parameters_from_overrides=True)
+    try:
+        assert {name: node.get_parameter(name).value for name in values} == values
+    finally:
+        node.destroy_node()
 
 
 @pytest.mark.parametrize("body, words", [
