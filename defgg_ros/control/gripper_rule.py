@@ -44,6 +44,10 @@ OPENING_SPEED_MPS = 0.08
 PRE_GRASP_EXTRA_OPENING_M = 0.01
 # Fingers closed to less than this = nothing between them (missed/dropped).
 MISSED_WIDTH_M = 0.004
+# A grasp that ends this close to the opening it started from never closed: a finger rests on the object (the
+# grasp centre is off the object). Without this the gripper reported success and the pick failed later as a
+# "slip", and a squeeze read the resting finger as a rigid object.
+NOT_CLOSED_TOLERANCE_M = 0.003
 
 
 class GripperRuleError(ValueError):

@@ -33,7 +33,7 @@ import math
 
 import numpy as np
 
-from defgg_ros.control.gripper_rule import MISSED_WIDTH_M, OPENING_SPEED_MPS, grasp_command
+from defgg_ros.control.gripper_rule import MISSED_WIDTH_M, NOT_CLOSED_TOLERANCE_M, OPENING_SPEED_MPS, grasp_command
 from defgg_ros.control.kinematics import (
     MIN_TCP_HEIGHT_ABOVE_TABLE_M,
     KinematicsError,
@@ -84,10 +84,6 @@ STOP_TIMEOUT_S = SequenceConfig.stop_timeout_s
 # floor; 5 mm until 2026-11-28, the fingertips 2 mm into the table); further below is a bad grasp.
 GRASP_MIN_HEIGHT_ABOVE_TABLE_M = MIN_TCP_HEIGHT_ABOVE_TABLE_M
 GRASP_BELOW_TABLE_TOLERANCE_M = 0.02
-# A grasp that ends this close to the opening it started from never closed:
-# a finger rests on the object (the grasp centre is off the object). Without
-# this the gripper reported success and the pick failed later as a "slip".
-NOT_CLOSED_TOLERANCE_M = 0.003
 # A held object's fingers may creep (a soft object relaxing); opening further than this means it is gone.
 OPENED_WIDTH_TOLERANCE_M = 0.010
 # plan_failure's plan is reused by start() when the arm is still where it was checked (an arm at rest reads

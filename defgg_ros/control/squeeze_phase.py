@@ -17,7 +17,7 @@ import numpy as np
 
 from defgg_ros import section_model
 from defgg_ros.constants import TRAINING_YOUNGS_MODULI_PA
-from defgg_ros.control.gripper_rule import MISSED_WIDTH_M, GraspCommand, grasp_command
+from defgg_ros.control.gripper_rule import MISSED_WIDTH_M, NOT_CLOSED_TOLERANCE_M, GraspCommand, grasp_command
 from defgg_ros.control.sequence_types import GraspGripper, SequenceFailure
 from defgg_ros.squeeze import (
     FIRM_FORCES_N,
@@ -38,6 +38,9 @@ MIN_FACE_HEIGHT_M = 0.005
 # runs from the goal's start, beside the motions, so a loaded machine never stalls the control loop; the estimate
 # waits for it at most this long (robot time) after the last reading, then goes without it (the contact laws).
 SECTION_WAIT_S = 5.0
+# The opening read after a squeeze settled may creep below what the gripper reported (a soft body relaxing), but
+# not below this fraction of it: less is the object sliding out of the hand (it read 1.4e4 Pa for a rigid block).
+SETTLED_WIDTH_FRACTION = 0.75
 
 
 class SectionJob:
@@ -84,6 +87,7 @@ class SqueezePhase:
         self.squeeze_estimate: ModulusEstimate | None = None
         self._squeeze_force_n = math.nan
         self._squeeze_read_at_s: float | None = None   # robot time the running squeeze's opening is read at
+        self._squeeze_reported_m = math.nan             # the opening the gripper reported for it
         self._returning = False    # measure only: on the way back (a failure there is the goal's failure)
         self._section_job: SectionJob | None = None
         self._section_wait_from_s: float | None = None   # robot time the estimate began to wait for the section
@@ -188,12 +192,22 @@ class SqueezePhase:
                                       "between them (squeeze)")
             if not success:
                 raise SequenceFailure(f"squeeze at {self._squeeze_force_n:g} N failed: {error or 'no reason given'}")
+            opened = self._plan.gripper.pre_open_width_m
+            if width_m > opened - NOT_CLOSED_TOLERANCE_M:   # read as a rigid object, sent as 2e9 Pa
+                raise SequenceFailure(f"the fingers did not close (squeeze): they stopped at {width_m * 1000:.1f} mm, "
+                                      f"where they opened to ({opened * 1000:.1f} mm); a finger is on the object")
+            self._squeeze_reported_m = width_m
             self._squeeze_read_at_s = sim_s + self._squeeze.settle_s
             return []
         if sim_s < self._squeeze_read_at_s:
             return []
         self._squeeze_read_at_s = None
-        self.squeeze_readings.append(SqueezeReading(self._squeeze_force_n, self._obs.state.gripper_width_m))
+        reading_m = self._obs.state.gripper_width_m
+        if reading_m < max(MISSED_WIDTH_M, SETTLED_WIDTH_FRACTION * self._squeeze_reported_m):
+            raise SequenceFailure(f"the object moved in the squeeze at {self._squeeze_force_n:g} N: the opening went "
+                                  f"from {self._squeeze_reported_m * 1000:.1f} to {reading_m * 1000:.1f} mm while it "
+                                  "settled; squeeze again")
+        self.squeeze_readings.append(SqueezeReading(self._squeeze_force_n, reading_m))
         return self._next_squeeze(sim_s)
 
     # --- measure only: back up ---------------------------------------------------------------------------

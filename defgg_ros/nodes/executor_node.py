@@ -256,6 +256,10 @@ class ExecutorNode(RobotInputs, ArmCommands, GraspPlanning, Node):
         estimate = copy_squeeze(result, sequence)
         if estimate is None:
             return
+        if sequence.outcome.held_after_lift:   # entries are by image region: it would stay where the object was
+            result.stiffness_update = "not sent: the object was picked up from where it was measured"
+            self.get_logger().info(f"squeeze: {estimate.describe()}; {result.stiffness_update}")
+            return
         modulus_pa = planning_modulus_pa(estimate)
         result.stiffness_update = self._stiffness.tell(result.grasp_used, modulus_pa,
                                                        float(self._params()["stiffness_update_timeout_s"]))

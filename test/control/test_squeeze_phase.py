@@ -213,3 +213,24 @@ def test_frames_perceived_before_a_measurement_reached_perception_do_not_count()
     assert not watch.frame_is_clear(10.5) and watch.frame_is_clear(11.2)
     watch.frames_from(5.0)           # never back
     assert not watch.frame_is_clear(10.5)
+
+
+def test_a_finger_resting_on_the_object_is_no_measurement_and_neither_is_an_object_that_slid_out(kin):
+    """Fingers that stayed at their opening (a finger on top of the object) read as a rigid object and 2e9 Pa
+    went to perception; an object sliding out while a squeeze settled read 1.4e4 Pa for a rigid block. Both fail
+    the measurement ("squeeze again"), nothing is estimated."""
+    opened = grasp_command(2e9, GRASP.width_m).pre_open_width_m
+    sequence = PickPlaceSequence(kin, CONFIG, GRASP, PLACE, SqueezeRequest(only=True, width_resolution_m=1e-5))
+    robot = FakeRobot(kin, World(object_width_m=opened))          # the fingers stop where they opened to
+    run(sequence, robot, max_s=120.0)
+    assert "the fingers did not close (squeeze)" in sequence.outcome.failure_reason
+    assert sequence.squeeze_estimate is None and not sequence.outcome.success
+
+    sequence = PickPlaceSequence(kin, CONFIG, GRASP, PLACE, SqueezeRequest(only=True, width_resolution_m=1e-5))
+    robot = FakeRobot(kin, World(object_compliance_m_per_n=COMPLIANCE_M_PER_N))
+    run(sequence, robot, max_s=120.0, until=lambda r, s: s._squeeze_read_at_s is not None)
+    robot.width_m = 0.018                                        # slid out while the squeeze settles
+    while not sequence.finished and robot.sim_s < 120.0:
+        robot.step(sequence)
+    assert "the object moved in the squeeze" in sequence.outcome.failure_reason
+    assert sequence.squeeze_estimate is None
