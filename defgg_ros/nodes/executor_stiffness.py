@@ -43,12 +43,15 @@ class StiffnessUpdater:
         self._client = node.create_client(SetStiffness, service, callback_group=callback_group)
         self._lock = threading.Lock()
         self._in_force: StiffnessAssignment | None = None
+        self._heard = threading.Event()
+        self._topic = assignments_topic
         node.create_subscription(StiffnessAssignment, assignments_topic, self._on_assignments, qos.LATCHED,
                                  callback_group=callback_group)
 
     def _on_assignments(self, msg: StiffnessAssignment) -> None:
         with self._lock:
             self._in_force = msg
+        self._heard.set()
 
     def tell(self, grasp, modulus_pa: float, timeout_s: float) -> str:
         """Send the measured modulus for the object at the grasp; what happened, for a person (never raises)."""
@@ -57,6 +60,11 @@ class StiffnessUpdater:
             return "not sent: the grasp has no image position (give a planned grasp to address its object)"
         if not self._client.wait_for_service(timeout_sec=timeout_s):
             return f"not sent: {self._client.srv_name} is not available"
+        # The segmentation node latches its set from start-up: not heard within the timeout means another topic or
+        # no node, and a set sent blind would replace every entry in force (configured and measured).
+        if not self._heard.wait(timeout_s):
+            return (f"not sent: nothing heard on {self._topic}, so the entries in force are unknown and sending would "
+                    "replace them all (check stiffness_assignments_topic)")
         u, v = float(grasp.center_u_px), float(grasp.center_v_px)
         with self._lock:
             in_force = self._in_force
@@ -71,5 +79,4 @@ class StiffnessUpdater:
             return f"not sent: {error}"
         if not response.success:
             return f"refused by the segmentation node: {response.message}"
-        note = "" if in_force is not None else " (no assignments heard before: earlier entries may be gone)"
-        return f"sent {modulus_pa:.3g} Pa for the object in image region {list(roi)}: {response.message}{note}"
+        return f"sent {modulus_pa:.3g} Pa for the object in image region {list(roi)}: {response.message}"

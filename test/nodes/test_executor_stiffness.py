@@ -69,3 +69,26 @@ def test_no_service_or_no_image_position_is_said_not_raised(executor, spin):
     executor.add_node(node)
     assert updater.tell(_grasp(0, 0), 1e5, 0.5).startswith("not sent: the grasp has no image position")
     assert "is not available" in updater.tell(_grasp(), 1e5, 0.5)
+
+
+def test_nothing_is_sent_while_the_entries_in_force_are_unknown(executor, spin):
+    """A service but no latched set heard (another assignments topic, a start-up race): the request would have
+    replaced every configured and measured entry with the one measurement."""
+    server = Node("stand_in_segmentation_quiet", context=executor.context)
+    requests = []
+
+    def on_set(request, response):
+        requests.append(list(request.objects))
+        response.success, response.message = True, "ok"
+        return response
+
+    server.create_service(SetStiffness, "/test_squeeze/quiet_set", on_set)
+    node = Node("squeeze_teller_unheard", context=executor.context)
+    updater = StiffnessUpdater(node, "/test_squeeze/quiet_set", "/test_squeeze/unheard", ReentrantCallbackGroup())
+    executor.add_node(server)
+    executor.add_node(node)
+    said = []
+    worker = threading.Thread(target=lambda: said.append(updater.tell(_grasp(), 1.5e5, 1.0)))
+    worker.start()
+    spin(executor, lambda: bool(said), 30.0, "the answer")
+    assert said[0].startswith("not sent: nothing heard on /test_squeeze/unheard") and not requests
