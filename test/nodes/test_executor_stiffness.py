@@ -22,6 +22,17 @@ def _grasp(u=320.0, v=240.0, width_px=60.0):
     return Grasp(center_u_px=u, center_v_px=v, width_px=width_px)
 
 
+def _teller(executor, name: str, service: str, assignments: str, on_set) -> StiffnessUpdater:
+    """A stand-in segmentation node serving `service` with on_set, and an updater on its own node, both spun."""
+    server = Node(f"stand_in_for_{name}", context=executor.context)
+    server.create_service(SetStiffness, service, on_set)
+    node = Node(name, context=executor.context)
+    updater = StiffnessUpdater(node, service, assignments, ReentrantCallbackGroup())
+    executor.add_node(server)
+    executor.add_node(node)
+    return updater
+
+
 def test_the_roi_is_a_square_around_the_grasp_pixel_as_wide_as_its_opening():
     assert measured_roi(_grasp(320, 240, 60)) == (290, 210, 60, 60)
     assert measured_roi(_grasp(5, 5, 2)) == (0, 0, MIN_ROI_PX, MIN_ROI_PX)   # at least MIN_ROI_PX, inside the image
@@ -74,7 +85,6 @@ def test_no_service_or_no_image_position_is_said_not_raised(executor, spin):
 def test_nothing_is_sent_while_the_entries_in_force_are_unknown(executor, spin):
     """A service but no latched set heard (another assignments topic, a start-up race): the request would have
     replaced every configured and measured entry with the one measurement."""
-    server = Node("stand_in_segmentation_quiet", context=executor.context)
     requests = []
 
     def on_set(request, response):
@@ -82,11 +92,7 @@ def test_nothing_is_sent_while_the_entries_in_force_are_unknown(executor, spin):
         response.success, response.message = True, "ok"
         return response
 
-    server.create_service(SetStiffness, "/test_squeeze/quiet_set", on_set)
-    node = Node("squeeze_teller_unheard", context=executor.context)
-    updater = StiffnessUpdater(node, "/test_squeeze/quiet_set", "/test_squeeze/unheard", ReentrantCallbackGroup())
-    executor.add_node(server)
-    executor.add_node(node)
+    updater = _teller(executor, "squeeze_teller_unheard", "/test_squeeze/quiet_set", "/test_squeeze/unheard", on_set)
     said = []
     worker = threading.Thread(target=lambda: said.append(updater.tell(_grasp(), 1.5e5, 1.0)))
     worker.start()
