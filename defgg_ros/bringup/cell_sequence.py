@@ -41,7 +41,7 @@ class CellSequenceDriver:
                 g = command.command
                 self.cell.gripper_grasp(g.width_m, g.epsilon_inner_m, g.epsilon_outer_m, g.speed_mps, g.force_n)
             elif isinstance(command, CancelGripper):
-                self.cell.gripper_move(self.cell.gripper_width_m(), 0.1)
+                self.cell.gripper_stop()   # franka_gripper's cancel: stopped, no force held
 
     def feed(self, outcomes) -> None:
         joints = self.cell.joint_state()

@@ -129,6 +129,7 @@ class PickPlaceSequence(SqueezePhase):
         self._guarded_lowering = False           # a recovery's lowering runs: stop on contact
         self._stopping = False
         self._cancel_after_stop = False   # canceled while a failure's stop ran: no recovery after it
+        self._wrench_lost = False         # the wrench went quiet: no recovery (its guarded lowering would be blind)
         self._stop_began_s = 0.0
         self._still_since_s: float | None = None
         self._rest_confirmed_s: float | None = None   # when _arrived last found the arm at rest
@@ -256,15 +257,18 @@ class PickPlaceSequence(SqueezePhase):
             return
         force_age = wall_s - obs.force_wall_s - obs.own_stall_force_s
         if force_age > self._cfg.watchdog_timeout_s:   # joint states still come: stop and wait for rest
+            self._wrench_lost = True
             raise SequenceFailure(f"no external wrench for {force_age:.1f} s (watchdog "
                                   f"{self._cfg.watchdog_timeout_s:.1f} s): the contact guards would be blind")
 
     # --- planning before the arm moves --------------------------------------
     def _start(self, sim_s: float) -> list:
         speed = self._max_speed_radps()      # every motion is planned from rest (inf: not known yet, let pass)
-        if math.isfinite(speed) and speed >= self._cfg.still_speed_radps:
-            raise SequenceFailure(f"the arm is moving ({speed:.3f} rad/s, still below "
-                                  f"{self._cfg.still_speed_radps:g}): wait until it is at rest")
+        if math.isfinite(speed) and speed >= self._cfg.still_speed_radps:   # refused: nothing sent, no recovery
+            self.outcome.failure_reason = (f"the arm is moving ({speed:.3f} rad/s, still below "
+                                           f"{self._cfg.still_speed_radps:g}): wait until it is at rest")
+            self._finish(sim_s, "moving")
+            return []
         self._phase = "pre_grasp"
         self._plan = self._checked_plan(self._obs.state.q_rad) or self._make_plan(self._obs.state.q_rad)
         commands = [MoveGripper(self._plan.gripper.pre_open_width_m, OPENING_SPEED_MPS)]
@@ -674,7 +678,8 @@ class PickPlaceSequence(SqueezePhase):
 
     def _needs_recovery(self) -> bool:
         return (not self._recovering and not self.outcome.success and self._cfg.observation_q_rad is not None
-                and self._obs.state is not None and not self._at_observation() and not self._cancel_after_stop)
+                and self._obs.state is not None and not self._at_observation() and not self._cancel_after_stop
+                and not self._wrench_lost)
 
     def _tick_stopping(self, sim_s: float, wall_s: float) -> list:
         try:

@@ -175,7 +175,7 @@ class ArmCommands:
             with self._lock:
                 if serial == self._gripper_canceled_serial:   # canceled before it was accepted: cancel it now
                     handle.cancel_goal_async()
-                else:
+                elif serial == self._gripper_serial:           # an older goal accepted late is not the one to cancel
                     self._gripper_goal = handle
             handle.get_result_async().add_done_callback(on_result)
 

@@ -173,8 +173,10 @@ class LatestFrameWorker:
     def latest(self, timeout_s: float = 30.0, wait_s: float | None = None) -> WorkerResult | None:
         """The prepared frame to answer a request from (module docstring); None when nothing was submitted.
         wait_s (bounded latency): when a prepared frame exists but is not fresh enough, wait at most wait_s for
-        the stages to finish the newest frame (never preparing it in the request), then answer from the
-        newest prepared frame. Raises TimeoutError when the worker does not finish the frame within timeout_s,
+        the stages to finish the newest frame, then answer from the newest prepared frame; unless that frame is
+        over max_age_s + STALE_FALLBACK_S old (a pause of the stream, or stages that far behind): then as
+        without wait_s (the newest frame, prepared in the request if no stage is on it). Raises TimeoutError
+        when the worker does not finish the frame within timeout_s,
         WorkerClosed."""
         now = self._clock()
         with self._cond:

@@ -158,8 +158,8 @@ class Trainer:
         return state
 
     def _restore(self, state: dict) -> None:
-        started_with = state.get("world", 1)      # states before 2026-12-01: one process
-        if started_with != self.world:   # another shard layout and global batch: items twice or never, silently
+        started_with = state.get("world")         # None: a state before 2026-12-01 (not recorded: not checked)
+        if started_with is not None and started_with != self.world:   # another shard layout and global batch
             raise TrainingError(f"{self.out}: the run was started with {started_with} process(es), this is "
                                 f"{self.world}; resume it with the same number (torchrun --nproc_per_node)")
         self.model.load_state_dict(state["model"])

@@ -4,7 +4,7 @@ import math
 
 import numpy as np
 import pytest
-from support.control_fake_robot import FakeRobot, World, run
+from support.control_fake_robot import RECOVERING_CONFIG, FakeRobot, World, run
 
 from defgg_ros.control.kinematics import PandaKinematics
 from defgg_ros.control.pick_place import PickPlaceSequence
@@ -226,7 +226,8 @@ def test_driver_silent_aborts_within_the_watchdog_time(kin):
 def test_a_wrench_that_goes_quiet_stops_the_run_within_the_watchdog_time(kin, phase):
     """Joint states go on, the wrench stops: every contact guard would read its last value for ever (the descent
     and a place ran to their planned end, blind). The run stops once the wrench is older than the watchdog."""
-    sequence, robot = make(kin), FakeRobot(kin, World())
+    # with an observation pose: the stop must not lead into a recovery (whose guarded lowering is blind too)
+    sequence, robot = make(kin, config=RECOVERING_CONFIG), FakeRobot(kin, World())
     run(sequence, robot, until=lambda r, s: s.phase == phase)
     quiet_since = robot.sim_s
     robot.world.wrench_silent = True
@@ -236,6 +237,7 @@ def test_a_wrench_that_goes_quiet_stops_the_run_within_the_watchdog_time(kin, ph
     run_until_finished(sequence, robot)             # the stop waits for rest (joint states still come)
     out = sequence.outcome
     assert "no external wrench" in out.failure_reason and not out.success and out.arm_state == "at_rest"
+    assert out.recovery == "" and sequence.finished
 
 
 def test_a_goal_is_refused_while_the_arm_still_moves_and_a_cancel_before_the_start_moves_nothing(kin):
@@ -245,8 +247,9 @@ def test_a_goal_is_refused_while_the_arm_still_moves_and_a_cancel_before_the_sta
     robot.qd[1] = 0.2
     sequence.on_joint_state(ArmState(robot.q.copy(), robot.qd.copy(), robot.width_m), 0.0)
     sequence.on_force([0.0, 0.0, 0.0], 0.0)
-    assert not any(isinstance(c, SendTrajectory) for c in sequence.start(0.0, 0.0))
-    assert "the arm is moving" in sequence.outcome.failure_reason
+    assert sequence.start(0.0, 0.0) == []                   # nothing sent, no recovery either
+    assert "the arm is moving" in sequence.outcome.failure_reason and sequence.finished
+    assert sequence.outcome.arm_state == "moving"
     canceled = make(kin)
     canceled.on_joint_state(ArmState(robot.q.copy(), np.zeros(7), robot.width_m), 0.0)
     canceled.cancel_unstarted(0.0)

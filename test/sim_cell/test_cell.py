@@ -346,3 +346,14 @@ def test_a_pressed_finger_settles_on_an_fem_ball_and_the_squeeze_steps_are_even(
         assert steps.min() > 0 and np.all(np.diff(steps) <= 0) and steps.max() / steps.min() < 2.0, steps
     finally:
         cell.close()
+
+
+def test_a_stop_ends_the_running_gripper_command_with_an_outcome_and_no_force(rigid_cell):
+    """franka_gripper's cancel stops the hand: the command it stops ends (failed, "stopped"), whichever goal started
+    it, and the fingers hold no force (a stop that dropped the command's outcome left its goal waiting for ever)."""
+    token = rigid_cell.gripper_grasp(0.0, 0.005, 0.005, 0.05, 20.0)   # closing on nothing
+    rigid_cell.advance(0.05)
+    rigid_cell.gripper_stop()
+    outcomes = rigid_cell.advance(0.05)
+    assert [(t, o.success, o.error) for t, o in outcomes] == [(token, False, "stopped")]
+    assert not rigid_cell.gripper.busy and rigid_cell.gripper.motor.finger_force_n == 0.0

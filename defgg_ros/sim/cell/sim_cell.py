@@ -205,8 +205,11 @@ class SimCell:
         return self._start_gripper(lambda: self.gripper.start_move(width_m, speed_mps, self.time_s))
 
     def gripper_stop(self) -> None:
-        """Cancel the running gripper command as franka_gripper does: stopped, no force held."""
-        if self.gripper.busy:
+        """Cancel the running gripper command as franka_gripper does: stopped, no force held. The command it stops
+        ends failed ("stopped"), whichever goal started it (a stop also ends a goal that preempted the canceled one,
+        as on the real hand)."""
+        if self.gripper.busy and self._pending_token is not None:
+            self._outcomes.append((self._pending_token, GripperOutcome(False, self.gripper_width_m(), "stopped")))
             self._pending_token = None
         self.gripper.stop()
 
