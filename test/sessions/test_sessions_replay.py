@@ -133,3 +133,17 @@ def test_options_out_of_range_are_an_error_not_a_regression(tmp_path, capsys, ar
 
     assert replay.main([str(tmp_path), *argv]) == replay.EXIT_ERROR
     assert capsys.readouterr().err.startswith(f"defgg-replay: error: {says}")
+
+
+def test_a_session_with_nothing_to_compare_is_an_error_not_a_pass(tmp_path):
+    """Recorded while the cell planned nothing (inference down): no frame has a grasp, no plan or pick call. It
+    replayed as "all 0 item(s) match", exit 0, checking nothing."""
+    meta, messages = read_bag(SESSIONS / "soft_objects")
+    writer = SessionWriter(tmp_path / "passive", meta, messages[0].log_time_ns)
+    dropped = {topics.BEST_GRASP, "/defgg/session/plan_grasp_request", "/defgg/session/plan_grasp_response"}
+    for m in messages[1:]:
+        if m.topic not in dropped:
+            writer.write(m.topic, m.raw, m.log_time_ns, m.msgtype, m.msgdef)
+    session = writer.close()
+    code, text = run_replay(session)
+    assert code == 2 and "nothing to compare" in text, text
