@@ -8,7 +8,9 @@ import threading
 import time
 
 from defgg_interfaces.msg import Grasp, StiffnessAssignment
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
+from rclpy.qos import ReliabilityPolicy
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import CameraInfo, Image, JointState
 from std_msgs.msg import String
@@ -50,6 +52,15 @@ class SessionRecorder(Node):
         # no subscription can lose one, and the recorded stamps are kept.
         for msg_type, topic, profile in stamped if live else ():
             self.create_subscription(msg_type, topic, self._stamped_callback(topic), profile, raw=True)
+            # And a reliable reader beside it: a best-effort one loses whole frames of a reliable 1280x720
+            # camera (3-11 of 30 arrived, ros/qos.py), a reliable one asks for the lost fragments; it does not
+            # match a best-effort camera (its incompatible-QoS event is expected, logged at debug). A frame both
+            # deliver is written once (the selector drops a (topic, stamp) already written or waiting).
+            self.create_subscription(msg_type, topic, self._stamped_callback(topic),
+                                     qos.sensor_qos(ReliabilityPolicy.RELIABLE), raw=True,
+                                     event_callbacks=SubscriptionEventCallbacks(
+                                         incompatible_qos=lambda info, t=topic: self.get_logger().debug(
+                                             f"{t}: the reliable reader does not match a best-effort camera")))
         if live:
             self.create_subscription(Grasp, topics.BEST_GRASP, self._on_best_grasp, qos.STATE, raw=True)
         self.create_subscription(JointState, topics.JOINT_STATES, self._on_joint_state, qos.SENSOR_DATA, raw=True)
