@@ -133,13 +133,14 @@ class SensorSubscription:
     `warn_after_s` <= 0 turns the silence warning off; `depth` is the reader's keep-last history.
     The node's clock is not used for the warning: a stopped sim clock must not hide a silent camera,
     so it runs on the wall clock. `reliability` is the reader's the publishers decided; while no publisher
-    is on the graph (`undecided`) a best-effort and a reliable reader both run.
+    is on the graph (`undecided`) a best-effort and a reliable reader both run. `raw`: the callback gets the
+    serialized bytes (a recorder); a frame both readers deliver is then passed on twice, for the caller to drop.
     """
 
     def __init__(self, node, msg_type, topic: str, callback, warn_after_s: float = DEFAULT_WARN_AFTER_S,
-                 callback_group=None, depth: int = SENSOR_DEPTH):
+                 callback_group=None, depth: int = SENSOR_DEPTH, raw: bool = False):
         self._node, self._msg_type, self._callback, self._group = node, msg_type, callback, callback_group
-        self._depth = int(depth)
+        self._depth, self._raw = int(depth), raw
         self.topic = topic
         self._resolved = node.resolve_topic_name(topic)
         self._warn_after_s = float(warn_after_s)
@@ -175,7 +176,7 @@ class SensorSubscription:
         for reliability in readers_wanted - set(self._readers):
             self._readers[reliability] = self._node.create_subscription(
                 self._msg_type, self.topic, self._on_message, sensor_qos(reliability, self._depth),
-                callback_group=self._group,
+                callback_group=self._group, raw=self._raw,
                 event_callbacks=SubscriptionEventCallbacks(incompatible_qos=self._on_incompatible_qos))
         self._retire_readers(readers_wanted, len(offered))
         if wanted != self.reliability:

@@ -8,9 +8,7 @@ import threading
 import time
 
 from defgg_interfaces.msg import Grasp, StiffnessAssignment
-from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
-from rclpy.qos import ReliabilityPolicy
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import CameraInfo, Image, JointState
 from std_msgs.msg import String
@@ -44,23 +42,17 @@ class SessionRecorder(Node):
         self.grasp_count = 0
         self._grasp_seen = threading.Condition()
         self._last_feedback = ("", 0)
-        stamped = [(Image, topics.DEPTH_IMAGE, qos.SENSOR_DATA),
-                   (CameraInfo, topics.DEPTH_CAMERA_INFO, qos.SENSOR_DATA)]
+        stamped = [(Image, topics.DEPTH_IMAGE), (CameraInfo, topics.DEPTH_CAMERA_INFO)]
         if record_color:
-            stamped.append((Image, topics.COLOR_IMAGE, qos.SENSOR_DATA))
+            stamped.append((Image, topics.COLOR_IMAGE))
         # A replay writes the frames it sends and the grasps it gets itself (write_frame, write_grasp):
         # no subscription can lose one, and the recorded stamps are kept.
-        for msg_type, topic, profile in stamped if live else ():
-            self.create_subscription(msg_type, topic, self._stamped_callback(topic), profile, raw=True)
-            # And a reliable reader beside it: a best-effort one loses whole frames of a reliable 1280x720
-            # camera (3-11 of 30 arrived, ros/qos.py), a reliable one asks for the lost fragments; it does not
-            # match a best-effort camera (its incompatible-QoS event is expected, logged at debug). A frame both
-            # deliver is written once (the selector drops a (topic, stamp) already written or waiting).
-            self.create_subscription(msg_type, topic, self._stamped_callback(topic),
-                                     qos.sensor_qos(ReliabilityPolicy.RELIABLE), raw=True,
-                                     event_callbacks=SubscriptionEventCallbacks(
-                                         incompatible_qos=lambda info, t=topic: self.get_logger().debug(
-                                             f"{t}: the reliable reader does not match a best-effort camera")))
+        # The camera as the perception nodes read it (qos.SensorSubscription: reliable when the camera is; a
+        # best-effort reader lost whole frames of a reliable 1280x720 camera, 3-11 of 30). A frame both of its
+        # readers deliver while it is undecided is written once (the selector drops a (topic, stamp) it has).
+        self._camera_readers = [qos.SensorSubscription(self, msg_type, topic, self._stamped_callback(topic),
+                                                       warn_after_s=0.0, raw=True)
+                                for msg_type, topic in (stamped if live else ())]
         if live:
             self.create_subscription(Grasp, topics.BEST_GRASP, self._on_best_grasp, qos.STATE, raw=True)
         self.create_subscription(JointState, topics.JOINT_STATES, self._on_joint_state, qos.SENSOR_DATA, raw=True)
