@@ -514,10 +514,7 @@ class PickPlaceSequence(SqueezePhase):
         self.outcome.gripper_force_n = self._plan.gripper.force_n
         if width < MISSED_WIDTH_M:
             raise SequenceFailure(f"missed: the fingers closed to {width * 1000:.1f} mm with nothing between them")
-        opened = self._plan.gripper.pre_open_width_m
-        if width > opened - NOT_CLOSED_TOLERANCE_M:
-            raise SequenceFailure(f"the fingers did not close: they stopped at {width * 1000:.1f} mm, where they "
-                                  f"opened to ({opened * 1000:.1f} mm); a finger is on the object, not beside it")
+        self._check_closed(width)
         if not success:   # franka_gripper says why only when libfranka threw: a grasp outside its band says nothing
             g = self._plan.gripper
             raise SequenceFailure(f"gripper grasp failed: the fingers stopped at {width * 1000:.1f} mm, the grasp "
@@ -526,6 +523,14 @@ class PickPlaceSequence(SqueezePhase):
                                   + (f" ({error})" if error else ""))
         self._phase = "lift"
         return self._line_up(self._cfg.lift_height_m, sim_s)
+
+    def _check_closed(self, width_m: float, where: str = "") -> None:
+        """SequenceFailure when the fingers stopped where they opened to: a finger rests on the object (a squeeze
+        would read it rigid, a pick fail later as a slip)."""
+        opened = self._plan.gripper.pre_open_width_m
+        if width_m > opened - NOT_CLOSED_TOLERANCE_M:
+            raise SequenceFailure(f"the fingers did not close{where}: they stopped at {width_m * 1000:.1f} mm, where "
+                                  f"they opened to ({opened * 1000:.1f} mm); a finger is on the object, not beside it")
 
     def _tick_lift(self, sim_s: float) -> list:
         self._check_held()

@@ -17,7 +17,7 @@ import numpy as np
 
 from defgg_ros import section_model
 from defgg_ros.constants import TRAINING_YOUNGS_MODULI_PA
-from defgg_ros.control.gripper_rule import MISSED_WIDTH_M, NOT_CLOSED_TOLERANCE_M, GraspCommand, grasp_command
+from defgg_ros.control.gripper_rule import MISSED_WIDTH_M, GraspCommand, grasp_command
 from defgg_ros.control.sequence_types import GraspGripper, SequenceFailure
 from defgg_ros.squeeze import (
     FIRM_FORCES_N,
@@ -192,10 +192,7 @@ class SqueezePhase:
                                       "between them (squeeze)")
             if not success:
                 raise SequenceFailure(f"squeeze at {self._squeeze_force_n:g} N failed: {error or 'no reason given'}")
-            opened = self._plan.gripper.pre_open_width_m
-            if width_m > opened - NOT_CLOSED_TOLERANCE_M:   # read as a rigid object, sent as 2e9 Pa
-                raise SequenceFailure(f"the fingers did not close (squeeze): they stopped at {width_m * 1000:.1f} mm, "
-                                      f"where they opened to ({opened * 1000:.1f} mm); a finger is on the object")
+            self._check_closed(width_m, " (squeeze)")   # else read as a rigid object, sent as 2e9 Pa
             self._squeeze_reported_m = width_m
             self._squeeze_read_at_s = sim_s + self._squeeze.settle_s
             return []

@@ -209,7 +209,7 @@ class SimCell:
         ends failed ("stopped"), whichever goal started it (a stop also ends a goal that preempted the canceled one,
         as on the real hand)."""
         if self.gripper.busy and self._pending_token is not None:
-            self._outcomes.append((self._pending_token, GripperOutcome(False, self.gripper_width_m(), "stopped")))
+            self._end_gripper_command(self._pending_token, "stopped")
             self._pending_token = None
         self.gripper.stop()
 
@@ -220,13 +220,15 @@ class SimCell:
     def _start_gripper(self, start) -> int:
         previous = self._pending_token if self.gripper.busy else None
         start()  # raises GripperCommandError before anything changes
-        if previous is not None:
-            # A new command replaces the running one, as on the real hand.
-            self._outcomes.append((previous, GripperOutcome(False, self.gripper_width_m(),
-                                                            "preempted by a newer gripper command")))
+        if previous is not None:   # a new command replaces the running one, as on the real hand
+            self._end_gripper_command(previous, "preempted by a newer gripper command")
         self._gripper_token += 1
         self._pending_token = self._gripper_token
         return self._gripper_token
+
+    def _end_gripper_command(self, token: int, why: str) -> None:
+        """The command of `token` ends failed, reported by the next advance()."""
+        self._outcomes.append((token, GripperOutcome(False, self.gripper_width_m(), why)))
 
     # ---- simulation -------------------------------------------------------
     def advance(self, duration_s: float) -> list:
