@@ -183,14 +183,17 @@ class Trainer:
     def run(self) -> dict:
         self.out.mkdir(parents=True, exist_ok=True)
         while self.epoch < self.config.epochs and not self._step_limit_reached():
-            self._train_epoch()
-            self._end_epoch()
+            if self._train_epoch():
+                self._end_epoch()
+            else:   # --max-steps stopped it mid-epoch: a resume goes on with the epoch's next batch
+                self._end_partial_epoch()
         return self._finish()
 
     def _step_limit_reached(self) -> bool:
         return self.config.max_steps is not None and self.global_step >= self.config.max_steps
 
-    def _train_epoch(self) -> None:
+    def _train_epoch(self) -> bool:
+        """Train on the epoch's remaining batches; False when the step limit stopped it before the last."""
         c = self.config
         self.train_set.set_epoch(self.epoch)
         batches = epoch_batches(len(self.train_set), c.batch_size, c.seed, self.epoch, self.rank, self.world)
@@ -217,6 +220,7 @@ class Trainer:
             if self._step_limit_reached():
                 break
         bar.close()
+        return self.batch >= len(batches)
 
     def _reduced_running(self) -> dict:
         if self.world == 1:
@@ -230,10 +234,19 @@ class Trainer:
         running = self._reduced_running()
         self.epoch, self.batch = self.epoch + 1, 0
         self.running = {"loss_sum": 0.0, "images": 0, "seconds": 0.0}
+        self._record_validation(running, self.epoch)
+
+    def _end_partial_epoch(self) -> None:
+        """Validate and write the outputs of a run stopped mid-epoch, keeping epoch, batch and the running
+        sums, so that a resume finishes the same epoch (its record then replaces this partial one)."""
+        self._record_validation(self._reduced_running(), self.epoch + 1, partial=True)
+
+    def _record_validation(self, running: dict, epoch: int, partial: bool = False) -> None:
+        self.history = [h for h in self.history if not (h.get("partial") and h["epoch"] == epoch)]
         if self.rank == 0:
             val = rectangle_accuracy(self.model, self.val_set.samples, self.config.uses_stiffness)
             self.history.append({
-                "epoch": self.epoch, "step": self.global_step,
+                "epoch": epoch, "step": self.global_step, **({"partial": True} if partial else {}),
                 "train_loss": running["loss_sum"] / max(running["images"], 1), "train_images": running["images"],
                 "train_images_per_s": running["images"] / max(running["seconds"], 1e-9),
                 "val_loss": dataset_loss(self.model, self.val_set, positive_weight=self.config.positive_weight),
@@ -242,7 +255,7 @@ class Trainer:
             self._write_epoch_outputs()
             if not self.show_progress:   # a log (nohup, models/retrain_pair.sh) still shows how far the run is
                 h = self.history[-1]
-                print(f"defgg-train: epoch {h['epoch']}/{self.config.epochs}: train loss {h['train_loss']:.4f}, "
+                print(f"defgg-train: epoch {h['epoch']}/{self.config.epochs}{' (stopped in it)' if partial else ''}: train loss {h['train_loss']:.4f}, "
                       f"val loss {h['val_loss']:.4f}, val accuracy {h['val_accuracy']:.2f}, "
                       f"{h['train_images_per_s']:.1f} images/s", flush=True)
         self._save_state()
@@ -256,11 +269,15 @@ class Trainer:
                 "n_trials": int(sum(self.manifest.values())), "label_grip_rule": self.label_grip_rule,
                 "trial_protocol": self.trial_protocol}
 
+    def _best_record(self) -> dict:
+        """The best validation over whole epochs; a partial epoch's (a --max-steps stop) only while there is none."""
+        whole = [h for h in self.history if not h.get("partial")] or self.history
+        return max(whole, key=lambda h: (h["val_accuracy"], -h["val_loss"]))
+
     def _write_epoch_outputs(self) -> None:
         record = self.history[-1]
         save_checkpoint(self.out / MODEL_FILE, self.model, self.fingerprint, self._checkpoint_meta(record))
-        best = max(self.history, key=lambda h: (h["val_accuracy"], -h["val_loss"]))
-        if best is record:
+        if self._best_record() is record:
             save_checkpoint(self.out / BEST_FILE, self.model, self.fingerprint, self._checkpoint_meta(record))
         plot_curves(self.history, self.out / CURVES_FILE)
         self._write_metrics()
@@ -282,7 +299,7 @@ class Trainer:
         if self.rank != 0 or not self.history:
             return {}
         best_model = network_from_checkpoint(load_checkpoint(self.out / BEST_FILE))
-        best_epoch = max(self.history, key=lambda h: (h["val_accuracy"], -h["val_loss"]))["epoch"]
+        best_epoch = self._best_record()["epoch"]
         test = rectangle_accuracy(best_model, self.test_set.samples, self.config.uses_stiffness) \
             if self.test_set.samples else None
         response = stiffness_response(best_model, self.val_set.samples, TRAINING_YOUNGS_MODULI_PA)

@@ -65,3 +65,24 @@ def test_resume_refuses_another_number_of_processes(tiny_dataset, tmp_path, caps
     torch.save(state, run / "state.pt")
     assert main(["--data", str(tiny_dataset), "--out", str(run), "--resume", *ARGS]) == 2
     assert "started with 2 process(es), this is 1" in capsys.readouterr().err
+
+
+def test_a_step_limit_mid_epoch_resumes_within_that_epoch(tiny_dataset, tmp_path):
+    """--max-steps stopping inside an epoch used to close the epoch: the resume started the next one, and the
+    rest of the stopped epoch's batches were never trained on."""
+    torch.set_num_threads(1)
+    assert main(["--data", str(tiny_dataset), "--out", str(tmp_path / "straight"), *ARGS]) == 0
+    run = tmp_path / "stepped"
+    assert main(["--data", str(tiny_dataset), "--out", str(run), *ARGS, "--max-steps", "1"]) == 0
+    state = torch.load(run / "state.pt", weights_only=True)
+    assert (state["epoch"], state["batch"]) == (0, 1), "the tiny dataset's epoch must have more than one batch"
+    stopped = json.loads((run / "metrics.json").read_text())["history"]
+    assert [(h["epoch"], h.get("partial")) for h in stopped] == [(1, True)]
+    assert (run / "best.pt").stat().st_size > 0          # a smoke run still leaves a model
+
+    assert main(["--data", str(tiny_dataset), "--out", str(run), "--resume", *ARGS]) == 0
+    assert _weights(run) == _weights(tmp_path / "straight")
+    history = json.loads((run / "metrics.json").read_text())["history"]
+    assert [(h["epoch"], h.get("partial")) for h in history] == [(1, None), (2, None), (3, None)]
+    straight = json.loads((tmp_path / "straight" / "metrics.json").read_text())["history"]
+    assert [h["train_images"] for h in history] == [h["train_images"] for h in straight]
