@@ -255,9 +255,10 @@ class Trainer:
             self._write_epoch_outputs()
             if not self.show_progress:   # a log (nohup, models/retrain_pair.sh) still shows how far the run is
                 h = self.history[-1]
-                print(f"defgg-train: epoch {h['epoch']}/{self.config.epochs}{' (stopped in it)' if partial else ''}: train loss {h['train_loss']:.4f}, "
-                      f"val loss {h['val_loss']:.4f}, val accuracy {h['val_accuracy']:.2f}, "
-                      f"{h['train_images_per_s']:.1f} images/s", flush=True)
+                stopped = " (stopped in it)" if partial else ""
+                print(f"defgg-train: epoch {h['epoch']}/{self.config.epochs}{stopped}: "
+                      f"train loss {h['train_loss']:.4f}, val loss {h['val_loss']:.4f}, "
+                      f"val accuracy {h['val_accuracy']:.2f}, {h['train_images_per_s']:.1f} images/s", flush=True)
         self._save_state()
         if self.world > 1:
             dist.barrier()

@@ -106,3 +106,35 @@ def test_measure_only_then_the_next_plan_uses_the_measured_modulus(tmp_path, exe
         assert pick.grasp_used.youngs_modulus_pa == pytest.approx(result.stiffness_sent_pa, rel=1e-3)
         assert pick.success, (pick.failure_reason, log_path.read_text()[-3000:])
         assert bringup.failed_node() is None
+
+
+def test_measure_then_pick_reports_the_estimate_and_sends_nothing_for_the_object_it_carried_away(
+        tmp_path, executor, spin):
+    """measure_stiffness: squeeze, then the pick goes on. The measurement is in the result, but the segmentation
+    node is not told: its entries address an image region, and the object has left it for the bin."""
+    log_path = tmp_path / "cell.log"
+    overrides = {"fake_panda_driver": {"scene_file": str(SCENES / "soft_box.yaml")}}
+    with open(log_path, "w") as log, Bringup(load_node_set("sim_cell"), overrides, out=log) as bringup:
+        bringup.wait_ready(180.0)
+        probe = Node("squeeze_pick_probe", context=executor.context)
+        perceived = []
+        probe.create_subscription(PerceivedObjects, "/defgg/perceived_objects", perceived.append, 1)
+        client = ActionClient(probe, PickAndPlace, topics.PICK_AND_PLACE_ACTION)
+        executor.add_node(probe)
+        spin(executor, client.server_is_ready, 60.0, "the pick-and-place action server")
+        feedback = []
+        handle = spin(executor, client.send_goal_async(PickAndPlace.Goal(plan_grasp=True, measure_stiffness=True),
+                                                       feedback_callback=lambda f: feedback.append(f.feedback)),
+                      30.0, "the goal response")
+        assert handle.accepted
+        result = spin(executor, handle.get_result_async(), GOAL_TIMEOUT_S, "the pick").result
+        phases = list(dict.fromkeys(f.phase for f in feedback))
+        assert result.success, (result.failure_reason, phases, log_path.read_text()[-4000:])
+        assert phases.index("squeeze") < phases.index("transfer"), phases
+        assert result.stiffness_measured and result.held_after_lift
+        assert 1 / 3 <= result.measured_youngs_modulus_pa / TRUE_MODULUS_PA <= 3, result.measured_youngs_modulus_pa
+        assert result.stiffness_update.startswith("not sent: the object was picked up"), result.stiffness_update
+        assert result.stiffness_sent_pa == 0.0
+        spin(executor, _grows(perceived), 60.0, "a frame perceived after the pick")
+        assert not any(o.stiffness.name.startswith("measured") for o in perceived[-1].objects)
+        assert bringup.failed_node() is None
