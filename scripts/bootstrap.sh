@@ -43,8 +43,19 @@ build_interfaces() {
     -DCMAKE_PREFIX_PATH="$venv" -DCMAKE_INSTALL_PREFIX="$venv" \
     -DPython3_EXECUTABLE="$venv/bin/python" -DBUILD_TESTING=OFF > "$build.log" 2>&1 \
     || { tail -30 "$build.log"; exit 1; }
-  AMENT_PREFIX_PATH="$venv" make -C "$build" -j2 install >> "$build.log" 2>&1 \
+  AMENT_PREFIX_PATH="$venv" make -C "$build" -j2 >> "$build.log" 2>&1 || { tail -30 "$build.log"; exit 1; }
+  # Installed through a staging folder, each file renamed over the old one: `make install` rewrites a file in
+  # place (same inode), which can crash a running process that has the old shared library mapped; a renamed-over
+  # file leaves it the old inode.
+  local stage="$build/stage"
+  AMENT_PREFIX_PATH="$venv" make -C "$build" install DESTDIR="$stage" >> "$build.log" 2>&1 \
     || { tail -30 "$build.log"; exit 1; }
+  (cd "$stage$venv" && find . \( -type f -o -type l \) -print) | while IFS= read -r file; do
+    mkdir -p "$(dirname "$venv/$file")"
+    cp -P --preserve=mode,timestamps "$stage$venv/$file" "$venv/$file.new.$$"
+    mv -f "$venv/$file.new.$$" "$venv/$file"
+  done
+  rm -rf "$stage"
 }
 
 msg_stamp=$(cd "$root" && stamp_of msg_defs/CMakeLists.txt msg_defs/package.xml msg_defs/*/*)
@@ -59,7 +70,8 @@ fi
 vendor_stamp=$(cd "$root" && stamp_of vendor_interfaces/*/CMakeLists.txt vendor_interfaces/*/package.xml \
   vendor_interfaces/*/*/*)
 if ! fresh vendor_interfaces "$vendor_stamp" \
-    || ! "$venv/bin/python" -c "import franka_msgs.action, control_msgs.action, tf2_msgs.msg" 2>/dev/null; then
+    || ! "$venv/bin/python" -c "from franka_msgs.action import Grasp; from control_msgs.action import \
+FollowJointTrajectory, GripperCommand; from tf2_msgs.msg import TFMessage" 2>/dev/null; then
   for package in tf2_msgs control_msgs franka_msgs; do
     build_interfaces "vendor_interfaces/$package"
   done

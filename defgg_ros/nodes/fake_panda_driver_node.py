@@ -5,11 +5,14 @@ a real cell started with franka_bringup's franka.launch.py (load_gripper:=true) 
 JointTrajectoryController would, QoS and rates included (docs/franka_contract.md), plus
 realsense2_camera's depth + camera_info: the merged `joint_states` (joint_state_publisher, 30 Hz),
 `franka/joint_states` (joint_state_broadcaster, arm only), `franka_gripper/joint_states` (fingers only,
-depth 1) and franka_gripper's franka_msgs/action/{Grasp, Move, Homing}, franka_robot_state_broadcaster's
+depth 1) and franka_gripper's franka_msgs/action/{Grasp, Move, Homing}, its `gripper_action` (GripperCommand) and
+`stop` (fake_gripper_interfaces.py), franka_robot_state_broadcaster's
 convenience topics (external wrench, current pose, measured joint states; best effort, depth 1), the
 arm's `<robot_type>_arm_controller` (control_msgs/action/FollowJointTrajectory and its JointTrajectory
-topic), and the camera's pose as a calibrated cell publishes it (base -> camera optical frame on
-/tf_static); plus sim time on /clock and ground truth (fake_panda/object_poses, fake_panda/scene).
+topic, with the controller's tolerances and ends of a goal: fake_arm_controller.py), and the static frames of a
+calibrated cell on /tf_static (the calibration base -> camera_link, then realsense2_camera's camera_link ->
+camera_depth_frame -> camera_depth_optical_frame, and robot_state_publisher's franka_description root `base` ->
+base); plus sim time on /clock and ground truth (fake_panda/object_poses, fake_panda/scene).
 Names follow robot_type (fer = the Panda, or fr3; the simulated arm is a Panda either way);
 joint_state_fingers reproduces the MoveIt launch's merged joint states.
 
@@ -23,9 +26,9 @@ import json
 import threading
 import time
 
-from control_msgs.action import FollowJointTrajectory
+import numpy as np
 from franka_msgs.action import Grasp, Homing, Move
-from geometry_msgs.msg import Pose, PoseArray, PoseStamped, TransformStamped, WrenchStamped
+from geometry_msgs.msg import Pose, PoseArray, PoseStamped, WrenchStamped
 from rclpy._rclpy_pybind11 import RCLError
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
@@ -35,27 +38,27 @@ from sensor_msgs.msg import CameraInfo, Image, JointState
 from std_msgs.msg import Header, String
 from std_srvs.srv import Trigger
 from tf2_msgs.msg import TFMessage
-from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from defgg_ros.constants import CAMERA_HEIGHT_PX, CAMERA_WIDTH_PX, GRIPPER_MAX_WIDTH_M
+from defgg_ros.nodes.fake_arm_controller import FakeArmController
+from defgg_ros.nodes.fake_gripper_interfaces import serve_gripper_interfaces
 from defgg_ros.nodes.node_main import run_node
-from defgg_ros.ros import qos, topics
+from defgg_ros.ros import qos, realsense_frames, topics
 from defgg_ros.ros.action import destroy_actions
 from defgg_ros.ros.conversions import depth_metres_to_msg, make_camera_info, numpy_to_image, seconds_to_stamp
 from defgg_ros.ros.parameters import declare_parameters, load_schema
 from defgg_ros.ros.share import demo_scene_file
+from defgg_ros.ros.tf import transform_msg
+from defgg_ros.rotations import quaternion_xyzw_to_matrix
 from defgg_ros.sim.cell.camera import DepthNoise
 from defgg_ros.sim.cell.gripper import GripperCommandError
 from defgg_ros.sim.cell.sim_cell import CellSettings, SimCell
-from defgg_ros.sim.cell.trajectory import TrajectoryError
 from defgg_ros.sim.scene_spec import SceneError, load_scene, scene_warnings
 
 SCENE_TOPIC = topics.FAKE_SCENE
 OBJECT_POSES_TOPIC = topics.FAKE_OBJECT_POSES
 CAPTURE_SERVICE = topics.FAKE_CAPTURE_SERVICE
 HOMING_SPEED_MPS = 0.1        # franka_gripper's default speed
-FEEDBACK_PERIOD_S = 0.1       # FollowJointTrajectory feedback while a goal runs (wall clock)
-FLOAT32_EPSILON = 1.1920929e-07   # the controller's "zero" velocity at a trajectory's end (float's epsilon)
 # On SIGINT/SIGTERM (stop_for_exit) the driver holds its own arm and keeps stepping and publishing until every arm
 # joint has been slower than EXIT_STILL_RADPS for EXIT_REST_S (wall clock), at most EXIT_STOP_TIMEOUT_S: under
 # `ros2 launch` every process gets the signal at once, and the executor's own stop needs joint states to confirm.
@@ -66,9 +69,6 @@ EXIT_STOP_TIMEOUT_S = 3.0
 # subscribers still match, and reliable ones (the cell's nodes pick reliable
 # for a reliable publisher, qos.SensorSubscription) get lost fragments repaired.
 IMAGE_QOS = qos.IMAGE_PUBLISH
-# A trajectory stamp further than this from sim time is a wall-clock stamp
-# from a node without use_sim_time: start it now instead of never/at once.
-MAX_STAMP_OFFSET_S = 1.0
 
 
 # Names, types, defaults and bounds: defgg_ros/ros/params/fake_panda_driver.yaml.
@@ -126,12 +126,13 @@ class FakePandaDriver(Node):
         self._lock = threading.Lock()
         self._waiters = {}           # gripper token -> [threading.Event, GripperOutcome | None]
         self._advanced = threading.Condition()  # notified after every control period of the sim thread
-        self._arm_goal_serial = 0    # the newest FollowJointTrajectory goal; older ones are replaced
         names = topics.robot_names(self.cfg["robot_type"])  # ValueError on an unknown robot_type
         self._arm_joints, self._finger_joints = names["joints"], names["fingers"]
         for key, name in (("base_frame", "base_frame"), ("arm_trajectory_action", "trajectory_action"),
                           ("joint_trajectory_topic", "trajectory_topic")):
             self.cfg[key] = self.cfg[key] or names[name]   # '' = the robot type's name
+        # realsense2_camera's frames, named from camera_name as it names them (ValueError on '')
+        self._camera_frames = realsense_frames.frame_ids(self.cfg["camera_name"])
         self._capture_requested = False
         self._gripper_fingers_m = None     # each finger's position in the gripper's last joint state
         self._reported_off_table = set()   # object names already reported as off the table
@@ -167,11 +168,7 @@ class FakePandaDriver(Node):
         self.pub_scene = self.create_publisher(String, SCENE_TOPIC, qos.LATCHED)
         self.pub_scene.publish(String(data=json.dumps(self._scene_description())))
         # The arm's joint_trajectory_controller: the action (what the executor uses) and its topic.
-        self.create_subscription(JointTrajectory, cfg["joint_trajectory_topic"], self._on_trajectory, qos.COMMAND,
-                                 callback_group=group)
-        ActionServer(self, FollowJointTrajectory, cfg["arm_trajectory_action"], execute_callback=self._execute_arm,
-                     callback_group=group, goal_callback=self._on_arm_goal,
-                     cancel_callback=lambda _goal: CancelResponse.ACCEPT)
+        self.arm = FakeArmController(self, self._arm_joints, group)
         self.create_service(Trigger, CAPTURE_SERVICE, self._on_capture, callback_group=group)
         for action_type, name, execute in ((Move, cfg["gripper_move_action"], self._execute_move),
                                            (Grasp, cfg["gripper_grasp_action"], self._execute_grasp),
@@ -179,19 +176,25 @@ class FakePandaDriver(Node):
             ActionServer(self, action_type, name, execute_callback=execute, callback_group=group,
                          goal_callback=lambda _goal: GoalResponse.ACCEPT,
                          cancel_callback=lambda _goal: CancelResponse.ACCEPT)
-        # The camera's extrinsic as a calibrated cell publishes it (a static transform, latched).
+        serve_gripper_interfaces(self, group)  # franka_gripper's gripper_action (GripperCommand) and stop
+        # The static frames of a calibrated cell (latched): the calibration, realsense2_camera's own, and
+        # robot_state_publisher's fixed joint from franka_description's root link to the base.
         self.pub_tf_static = self.create_publisher(TFMessage, topics.TF_STATIC, qos.LATCHED)
-        self.pub_tf_static.publish(TFMessage(transforms=[self._camera_transform()]))
+        self.pub_tf_static.publish(TFMessage(transforms=self._static_transforms()))
 
-    def _camera_transform(self) -> TransformStamped:
-        """base_frame -> camera_frame from the scene's camera pose (stamp 0: valid at all times)."""
-        t = TransformStamped()
-        t.header.frame_id, t.child_frame_id = self.cfg["base_frame"], self.cfg["camera_frame"]
-        xyz, quat = self.cell.scene.base_xyz_camera_m, self.cell.scene.base_quat_camera_xyzw
-        t.transform.translation.x, t.transform.translation.y, t.transform.translation.z = (float(v) for v in xyz)
-        r = t.transform.rotation
-        r.x, r.y, r.z, r.w = (float(v) for v in quat)
-        return t
+    def _static_transforms(self) -> list:
+        """/tf_static (stamp 0: valid at all times): base_frame -> <camera_name>_link (the hand-eye calibration, from
+        the scene's camera pose) -> <camera_name>_depth_frame -> <camera_name>_depth_optical_frame (and the colour
+        pair with publish_color) as realsense2_camera publishes them (ros/realsense_frames.py), and `base` ->
+        base_frame (robot_state_publisher: franka_description's root link, the frame of current_pose and the wrench)."""
+        base_T_optical = np.eye(4)
+        base_T_optical[:3, :3] = quaternion_xyzw_to_matrix(self.cell.scene.base_quat_camera_xyzw)
+        base_T_optical[:3, 3] = self.cell.scene.base_xyz_camera_m
+        tree = realsense_frames.calibrated_camera_tree(self.cfg["base_frame"], base_T_optical, self.cfg["camera_name"],
+                                                       with_color=bool(self.cfg["publish_color"]))
+        if self.cfg["base_frame"] != topics.FRANKA_STATE_FRAME:
+            tree.append((topics.FRANKA_STATE_FRAME, self.cfg["base_frame"], np.eye(4)))
+        return [transform_msg(parent, child, matrix) for parent, child, matrix in tree]
 
     def _scene_description(self) -> dict:
         scene = self.cell.scene.to_json_dict()
@@ -201,115 +204,6 @@ class FakePandaDriver(Node):
         return scene
 
     # ---- commands (ROS threads) ------------------------------------------
-    def _on_trajectory(self, msg: JointTrajectory):
-        if not msg.points:   # the joint_trajectory_controller drops it ("Empty trajectory received"): no stop
-            self.get_logger().error("rejected joint trajectory: Empty trajectory received (it does not stop the arm)")
-            return
-        try:
-            points = self._trajectory_points(msg)
-            with self._lock:
-                self.cell.command_trajectory(points, self._start_time_s(msg.header.stamp))
-        except (TrajectoryError, ValueError) as exc:
-            self.get_logger().error(f"rejected joint trajectory: {exc}")
-
-    def _on_arm_goal(self, goal) -> GoalResponse:
-        """Reject what the joint_trajectory_controller rejects: no points, unknown or missing joints."""
-        try:
-            if not goal.trajectory.points:
-                raise TrajectoryError("the trajectory has no points")
-            self._trajectory_points(goal.trajectory)
-        except (TrajectoryError, ValueError) as exc:
-            self.get_logger().error(f"rejected FollowJointTrajectory goal: {exc}")
-            return GoalResponse.REJECT
-        return GoalResponse.ACCEPT
-
-    def _execute_arm(self, goal_handle):
-        """Follow the goal's trajectory in sim time; a newer goal replaces it, a cancel holds the arm."""
-        request, result = goal_handle.request, FollowJointTrajectory.Result()
-        try:
-            points = self._trajectory_points(request.trajectory)
-            with self._lock:
-                start_s = self._start_time_s(request.trajectory.header.stamp)
-                self.cell.command_trajectory(points, start_s)
-                self._arm_goal_serial += 1
-                serial = self._arm_goal_serial
-        except (TrajectoryError, ValueError) as exc:
-            result.error_code, result.error_string = FollowJointTrajectory.Result.INVALID_GOAL, str(exc)
-            goal_handle.abort()
-            return result
-        tolerance = request.goal_time_tolerance
-        end_s = start_s + points[-1][0] + tolerance.sec + tolerance.nanosec * 1e-9
-        next_feedback = 0.0
-        while self.cell.time_s < end_s:
-            if serial != self._arm_goal_serial:
-                result.error_code = FollowJointTrajectory.Result.INVALID_GOAL
-                result.error_string = "replaced by a newer trajectory goal"
-                goal_handle.abort()
-                return result
-            if goal_handle.is_cancel_requested or not self._running:
-                with self._lock:
-                    if serial == self._arm_goal_serial:
-                        self.cell.command_trajectory([])  # hold where the arm is, like the controller
-                goal_handle.canceled()
-                return result
-            if time.monotonic() >= next_feedback:
-                next_feedback = time.monotonic() + FEEDBACK_PERIOD_S
-                goal_handle.publish_feedback(self._arm_feedback())
-            with self._advanced:
-                self._advanced.wait(0.05)  # until the sim thread has advanced a control period
-        result.error_code = FollowJointTrajectory.Result.SUCCESSFUL
-        goal_handle.succeed()
-        return result
-
-    def _arm_feedback(self):
-        with self._lock:
-            now_s = self.cell.time_s
-            joints = self.cell.joint_state()
-            q_des, qd_des = self.cell.tracker.sample(now_s)
-        feedback = FollowJointTrajectory.Feedback(header=self._stamp(now_s, self.cfg["base_frame"]),
-                                                  joint_names=list(self._arm_joints))
-        q, qd = joints.positions[:7], joints.velocities[:7]
-        feedback.actual = JointTrajectoryPoint(positions=q.tolist(), velocities=qd.tolist())
-        feedback.desired = JointTrajectoryPoint(positions=[float(v) for v in q_des],
-                                                velocities=[float(v) for v in qd_des])
-        feedback.error = JointTrajectoryPoint(positions=[float(d - a) for d, a in zip(q_des, q)],
-                                              velocities=[float(d - a) for d, a in zip(qd_des, qd)])
-        return feedback
-
-    def _trajectory_points(self, msg: JointTrajectory) -> list:
-        """(t, q, qd, qdd) in the simulated arm's joint order; JointTrajectory joint names in any order."""
-        if not msg.points:
-            return []
-        names = list(msg.joint_names)
-        unknown = [n for n in names if n not in self._arm_joints]
-        missing = [n for n in self._arm_joints if n not in names]
-        if missing or unknown:
-            raise TrajectoryError(f"joint_names lack {missing} / have unknown {unknown} (got {names}; "
-                                  f"this arm is robot_type {self.cfg['robot_type']}: {list(self._arm_joints)})")
-        order = [names.index(n) for n in self._arm_joints]
-
-        def pick(values):
-            return [values[i] for i in order] if len(values) == len(names) else None
-
-        # allow_nonzero_velocity_at_trajectory_end: false (the controller's default): the last point must be still.
-        moving = [n for n, v in zip(names, msg.points[-1].velocities) if abs(v) > FLOAT32_EPSILON]
-        if moving:
-            raise TrajectoryError(f"velocity of the last trajectory point is not zero for {moving} (the "
-                                  "joint_trajectory_controller rejects such a trajectory)")
-        return [(pt.time_from_start.sec + pt.time_from_start.nanosec * 1e-9, pick(pt.positions),
-                 pick(pt.velocities), pick(pt.accelerations)) for pt in msg.points]
-
-    def _start_time_s(self, stamp) -> float:
-        stamp_s = stamp.sec + stamp.nanosec * 1e-9
-        if stamp_s == 0.0:
-            return self.cell.time_s
-        if abs(stamp_s - self.cell.time_s) > MAX_STAMP_OFFSET_S:
-            self.get_logger().warning(
-                f"trajectory stamp {stamp_s:.3f} s is far from sim time {self.cell.time_s:.3f} s "
-                "(is the sender running with use_sim_time?): starting it now", throttle_duration_sec=5.0)
-            return self.cell.time_s
-        return stamp_s
-
     def _on_capture(self, _request, response):
         self._capture_requested = True
         response.success, response.message = True, "a depth frame will be rendered in the next control period"
@@ -375,8 +269,9 @@ class FakePandaDriver(Node):
             with self._lock:
                 outcomes = self.cell.advance(period_s)
                 now_s = self.cell.time_s
+                self.arm.control_period(now_s)   # the trajectory controller's checks of this period
                 joints, (force, torque) = self.cell.joint_state(), self.cell.external_wrench()
-                tcp = self.cell.tcp_pose()
+                tcp = self.cell.hand_tcp_pose()   # current_pose: libfranka's O_T_EE, the Franka Hand's TCP
                 periodic = now_s >= next_depth_s and (self.cfg["render_while_moving"] or not self.cell.moving(now_s))
                 render = periodic or self._capture_requested
                 frame = self.cell.render_depth(self.cfg["publish_color"]) if render else None
@@ -446,14 +341,18 @@ class FakePandaDriver(Node):
 
     def _publish_state(self, now_s, joints, force, torque, tcp, due):
         """What franka_ros2 publishes in one control period: the broadcasters every period, /clock, the merged
-        joint states and the gripper's at their own rates (`due`: the names of those whose turn it is)."""
-        header = self._stamp(now_s, self.cfg["base_frame"])
+        joint states and the gripper's at their own rates (`due`: the names of those whose turn it is). Frame ids as
+        franka_ros2 stamps them (docs/franka_contract.md, "Frames"): the robot state broadcaster's the URDF's root link
+        `base`, joint_state_broadcaster's `base_link`, joint_state_publisher's and franka_gripper's none."""
+        header = self._stamp(now_s, topics.FRANKA_STATE_FRAME)
         if "clock" in due:
             self.pub_clock.publish(Clock(clock=header.stamp))
-        arm = JointState(header=header, name=list(self._arm_joints), position=joints.positions[:7].tolist(),
-                         velocity=joints.velocities[:7].tolist(), effort=joints.efforts[:7].tolist())
+        arm = JointState(header=self._stamp(now_s, topics.JOINT_STATE_BROADCASTER_FRAME), name=list(self._arm_joints),
+                         position=joints.positions[:7].tolist(), velocity=joints.velocities[:7].tolist(),
+                         effort=joints.efforts[:7].tolist())
         self.pub_arm_joints.publish(arm)
-        self.pub_measured.publish(arm)
+        self.pub_measured.publish(JointState(header=header, name=arm.name, position=arm.position,
+                                             velocity=arm.velocity, effort=arm.effort))
         self.pub_wrench.publish(franka_wrench_msg(header, force, torque))
         pose = PoseStamped(header=header)
         pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = (float(v) for v in tcp[0])
@@ -468,25 +367,29 @@ class FakePandaDriver(Node):
                 header=self._stamp(now_s, ""), name=list(self._finger_joints), position=[half_m, half_m],
                 velocity=[0.0, 0.0], effort=[0.0, 0.0]))
         if "joints" in due:
-            self.pub_joints.publish(self._merged_joint_state(header, arm))
+            self.pub_joints.publish(self._merged_joint_state(self._stamp(now_s, ""), arm))
 
     def _merged_joint_state(self, header, arm: JointState) -> JointState:
         """joint_state_publisher's merge: the arm's latest state plus the fingers as joint_state_fingers says
-        (from_gripper: the gripper's last message; urdf_default: 0.0, the URDF default nobody updates)."""
+        (from_gripper: the gripper's last message; urdf_default: 0.0, the URDF default nobody updates), stamped
+        `header` (joint_state_publisher sets only the stamp: frame_id '')."""
         mode = self.cfg["joint_state_fingers"]
         if mode == "none" or (mode == "from_gripper" and self._gripper_fingers_m is None):
-            return arm
+            return JointState(header=header, name=arm.name, position=arm.position, velocity=arm.velocity,
+                              effort=arm.effort)
         finger_m = self._gripper_fingers_m if mode == "from_gripper" else 0.0
         return JointState(header=header, name=[*arm.name, *self._finger_joints],
                           position=[*arm.position, finger_m, finger_m], velocity=[*arm.velocity, 0.0, 0.0],
                           effort=[*arm.effort, 0.0, 0.0])
 
     def _publish_frame(self, now_s, depth_m, _object_mask, rgb):
-        header = self._stamp(now_s, self.cfg["camera_frame"])
+        # realsense2_camera stamps each stream's image and camera_info with that stream's optical frame
+        header = self._stamp(now_s, self._camera_frames["depth_optical"])
         self.pub_depth.publish(depth_metres_to_msg(depth_m, "16UC1", header))
         self.pub_info.publish(make_camera_info(self.cell.camera_k, CAMERA_WIDTH_PX, CAMERA_HEIGHT_PX, header))
         if rgb is not None:
-            self.pub_color.publish(numpy_to_image(rgb, "rgb8", header))
+            color_header = self._stamp(now_s, self._camera_frames["color_optical"])
+            self.pub_color.publish(numpy_to_image(rgb, "rgb8", color_header))
 
     def _publish_poses(self, now_s, poses):
         msg = PoseArray(header=self._stamp(now_s, self.cfg["base_frame"]))
@@ -510,8 +413,7 @@ class FakePandaDriver(Node):
         (spin_once serves the executor's cancel and hold goals meanwhile) until the arm has been at rest for
         EXIT_REST_S. '' when it was, else why not (the process then exits 1)."""
         with self._lock:
-            self._arm_goal_serial += 1     # a running trajectory goal ends, as replaced
-            self.cell.command_trajectory([])
+            self.arm.hold_for_exit()     # a running trajectory goal ends, as preempted
         started, still_since, speed = time.monotonic(), None, float("inf")
         while time.monotonic() - started < EXIT_STOP_TIMEOUT_S and self._thread.is_alive():
             spin_once(0.01)

@@ -31,6 +31,8 @@ JOINT_TRAJECTORY = "fer_arm_controller/joint_trajectory"     # trajectory_msgs/J
 GRIPPER_MOVE_ACTION = "franka_gripper/move"                  # franka_msgs/action/Move
 GRIPPER_GRASP_ACTION = "franka_gripper/grasp"                # franka_msgs/action/Grasp
 GRIPPER_HOMING_ACTION = "franka_gripper/homing"              # franka_msgs/action/Homing
+GRIPPER_COMMAND_ACTION = "franka_gripper/gripper_action"     # control_msgs/action/GripperCommand (MoveIt's)
+GRIPPER_STOP_SERVICE = "franka_gripper/stop"                 # std_srvs/srv/Trigger: Gripper::stop()
 # franka_robot_state_broadcaster's convenience topics: best effort, depth 1 (franka_ros2 >= 3.3.0)
 EXTERNAL_WRENCH = "franka_robot_state_broadcaster/external_wrench_in_base_frame"  # geometry_msgs/WrenchStamped
 CURRENT_POSE = "franka_robot_state_broadcaster/current_pose"                       # geometry_msgs/PoseStamped
@@ -68,7 +70,13 @@ TF_STATIC = "/tf_static"                                     # tf2_msgs/TFMessag
 
 # Frames
 BASE_FRAME = "fer_link0"                                     # robot_names()["base_frame"]
-CAMERA_OPTICAL_FRAME = "camera_depth_optical_frame"
+CAMERA_OPTICAL_FRAME = "camera_depth_optical_frame"          # <camera_name>_depth_optical_frame (realsense_frames.py)
+# The frame ids franka_ros2 stamps its state with (docs/franka_contract.md, "Frames"): franka_robot_state_broadcaster's
+# topics carry the URDF's root link, franka_description's `base` (connected_to's default), fixed to
+# <robot_type>_link0 with the identity; joint_state_broadcaster its frame_id parameter's default; joint_state_publisher
+# and franka_gripper set none ("").
+FRANKA_STATE_FRAME = "base"
+JOINT_STATE_BROADCASTER_FRAME = "base_link"
 GRASP_FRAME = "defgg_grasp"                                  # the planned grasp (TCP pose), child of the base
 
 

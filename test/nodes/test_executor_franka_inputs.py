@@ -53,7 +53,7 @@ def test_a_best_effort_wrench_as_franka_publishes_it_reaches_the_executor(execut
 
     def wrench():
         msg = WrenchStamped()
-        msg.header.frame_id, msg.wrench.force.z = NAMES["base_frame"], 3.5
+        msg.header.frame_id, msg.wrench.force.z = topics.FRANKA_STATE_FRAME, 3.5   # the URDF root, as franka's
         return msg
 
     _publish_periodically(franka, WrenchStamped, topics.EXTERNAL_WRENCH, qos.FRANKA_CONVENIENCE, wrench)

@@ -62,7 +62,7 @@ def test_joint_states_clock_and_wrench_flow(driver, client, executor, spin):
     assert np.all(np.diff(stamps) > 0)
     # joint_state_publisher's 30 Hz of sim time (on the 1 ms control grid); the reader keeps the newest only
     assert np.min(np.diff(stamps)) == pytest.approx(1 / 30, abs=1.1e-3)
-    assert wrenches[-1].header.frame_id == topics.BASE_FRAME
+    assert wrenches[-1].header.frame_id == topics.FRANKA_STATE_FRAME   # franka_robot_state_broadcaster: URDF root
 
 
 def test_a_reliable_reader_gets_no_wrench_and_a_best_effort_one_does(driver, client, executor, spin):
@@ -200,6 +200,7 @@ def test_fr3_robot_type_names_the_joints_and_the_camera_pose_is_on_tf_static(exe
     from defgg_ros.nodes.fake_panda_driver_node import FakePandaDriver
     from defgg_ros.ros import qos
     from defgg_ros.ros.action import ActionClient
+    from defgg_ros.ros.tf import TransformTree, quaternion_from_matrix
     from defgg_ros.sim.scene_spec import load_scene
 
     names = topics.robot_names("fr3")
@@ -221,13 +222,16 @@ def test_fr3_robot_type_names_the_joints_and_the_camera_pose_is_on_tf_static(exe
         assert handle.accepted
         spin(executor, lambda: np.abs(np.array(joints[-1].position[:7]) - goal_q).max() < 0.01, TIMEOUT_S,
              "the fr3-named goal executed")
-        (t,) = static[-1].transforms
+        # the calibration under the fr3's base, realsense2_camera's frames below it (test_driver_frames.py)
+        tree = TransformTree()
+        tree.add_message(static[-1], static=True)
+        assert tree.root_of("camera_link")[0] == "base" and ("fr3_link0", "camera_link") in {
+            (t.header.frame_id, t.child_frame_id) for t in static[-1].transforms}
         scene = load_scene(SCENES / "rigid_box.yaml")
-        assert (t.header.frame_id, t.child_frame_id) == ("fr3_link0", topics.CAMERA_OPTICAL_FRAME)
-        xyz = (t.transform.translation.x, t.transform.translation.y, t.transform.translation.z)
-        np.testing.assert_allclose(xyz, scene.base_xyz_camera_m, atol=1e-9)
-        r = t.transform.rotation
-        np.testing.assert_allclose((r.x, r.y, r.z, r.w), scene.base_quat_camera_xyzw, atol=1e-9)
+        base_T_camera = tree.lookup("fr3_link0", topics.CAMERA_OPTICAL_FRAME)
+        np.testing.assert_allclose(base_T_camera[:3, 3], scene.base_xyz_camera_m, atol=1e-9)
+        np.testing.assert_allclose(quaternion_from_matrix(base_T_camera[:3, :3]), scene.base_quat_camera_xyzw,
+                                   atol=1e-9)
     finally:
         node.shutdown()
 

@@ -116,8 +116,10 @@ def test_every_franka_topic_has_the_contracts_qos_names_and_rate(executor, spin,
         assert tuple(fingers.name) == names["fingers"] and fingers.position[0] == fingers.position[1] > 0.03
         merged = seen[topics.JOINT_STATES][-1]
         assert tuple(merged.name) == names["joints"] + names["fingers"]
-        assert seen[topics.EXTERNAL_WRENCH][-1].header.frame_id == names["base_frame"]
-        assert seen[topics.CURRENT_POSE][-1].header.frame_id == names["base_frame"]
+        # franka_robot_state_broadcaster stamps the URDF's root link, `base` (= base_frame): docs' "Frames"
+        assert seen[topics.EXTERNAL_WRENCH][-1].header.frame_id == topics.FRANKA_STATE_FRAME
+        assert seen[topics.CURRENT_POSE][-1].header.frame_id == topics.FRANKA_STATE_FRAME
+        assert arm.header.frame_id == topics.JOINT_STATE_BROADCASTER_FRAME and merged.header.frame_id == ""
         actions = {name for name, _ in get_action_server_names_and_types_by_node(client, "fake_panda_driver", "/")}
         assert {"/" + names["trajectory_action"], "/franka_gripper/move", "/franka_gripper/grasp",
                 "/franka_gripper/homing"} <= actions

@@ -74,3 +74,27 @@ def test_empty_trajectory_holds_the_current_position():
 def test_malformed_points_raise(points, words):
     with pytest.raises(TrajectoryError, match=words):
         make_waypoints(points, 7)
+
+
+def test_a_new_trajectory_blends_from_the_measured_position_and_velocity():
+    """joint_trajectory_controller (interpolate_from_desired_state false): the segment to a first point still ahead
+    starts at the state measured on receipt, its velocity included (it started from rest before 2026-12-02)."""
+    z = np.zeros(7)
+    v = np.full(7, 0.8)
+    tracker = TrajectoryTracker(Q0)
+    tracker.replace(make_waypoints([(0.5, Q1, z, z)], 7), 10.0, Q0, v)
+    q, qd = tracker.sample(10.0)
+    np.testing.assert_allclose(q, Q0)
+    np.testing.assert_allclose(qd, v)
+    q, qd = tracker.sample(10.001)
+    np.testing.assert_allclose(qd, v, atol=0.01)          # continuous: no step to rest
+    assert tracker.end_time_s() == pytest.approx(10.5)
+    # a stamp ahead of receipt: the blend runs from the receipt (now) to the first point
+    tracker.replace(make_waypoints([(0.0, Q1, z, z), (1.0, Q1 + 0.1, z, z)], 7), 11.0, Q0, v, now_s=10.8)
+    q, qd = tracker.sample(10.8)
+    np.testing.assert_allclose(q, Q0)
+    np.testing.assert_allclose(qd, v)
+    np.testing.assert_allclose(tracker.sample(11.0)[0], Q1)
+    # positions only: the controller interpolates linearly, the measured velocity is not used
+    tracker.replace(make_waypoints([(0.5, Q1, None, None)], 7), 0.0, Q0, v)
+    np.testing.assert_allclose(tracker.sample(0.25)[1], (Q1 - Q0) / 0.5)

@@ -142,7 +142,7 @@ class InTestDriver(Node):
         state.effort = [0.0] * 9
         self.joint_pub.publish(state)
         wrench = WrenchStamped()
-        wrench.header.stamp, wrench.header.frame_id = stamp, topics.BASE_FRAME
+        wrench.header.stamp, wrench.header.frame_id = stamp, topics.FRANKA_STATE_FRAME   # the broadcaster's `base`
         wrench.wrench.force.z = CONTACT_STIFFNESS_N_PER_M * max(0.0, self.contact_height_m - self.kin.fk(self.q)[2, 3])
         self.wrench_pub.publish(wrench)
 

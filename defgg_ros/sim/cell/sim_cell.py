@@ -23,6 +23,7 @@ from defgg_ros.constants import (
     PANDA_FINGER_JOINT_NAMES,
     PANDA_JOINT_NAMES,
     PANDA_READY_Q_RAD,
+    PANDA_TCP_OFFSET_M,
 )
 from defgg_ros.sim import physics
 from defgg_ros.sim.cell import objects as cell_objects
@@ -54,7 +55,10 @@ PRESS_SPEED_LIMIT_MPS = GRIPPER_MAX_SPEED_MPS / 2
 FINGER_JOINT_DAMPING_NSPM = 30.0
 # Links whose contacts make up the external wrench: hand and both fingers.
 HAND_LINK_NAMES = ("panda_hand", "panda_leftfinger", "panda_rightfinger")
-TCP_LINK_NAME = "panda_grasptarget"
+TCP_LINK_NAME = "panda_grasptarget"   # pybullet_data's panda.urdf: 0.105 m along panda_hand's z
+# franka_description's <robot_type>_hand_tcp (franka_hand.xacro: tcp_xyz 0 0 0.1034 from the hand, the hand at
+# -45 deg about link8's z): libfranka's EE with the Franka Hand, current_pose and the wrench's reference point K.
+HAND_LINK_NAME = "panda_hand"
 # Objects settle this long on the table before the cell starts.
 SETTLE_TIME_S = 0.3
 # How often (sim time) soft objects are woken up / put to sleep.
@@ -138,6 +142,7 @@ class SimCell:
         self.finger_joints = [by_name[n] for n in PANDA_FINGER_JOINT_NAMES]
         self.hand_links = [link_by_name[n] for n in HAND_LINK_NAMES]
         self.tcp_link = link_by_name[TCP_LINK_NAME]
+        self.hand_link = link_by_name[HAND_LINK_NAME]
 
     def _set_initial_state(self):
         c = self.client
@@ -194,11 +199,14 @@ class SimCell:
         """Replace the active trajectory; points: (t_s, q, qd|None, qdd|None), panda_joint1..7 order.
 
         Times count from start_time_s (sim time; default now). Raises
-        TrajectoryError on malformed points (the current motion goes on).
+        TrajectoryError on malformed points (the current motion goes on). A trajectory whose first point is still
+        ahead blends into it from the measured position and velocity now, as the joint_trajectory_controller does.
         """
         waypoints = make_waypoints(points, len(self.arm_joints))
         start_s = self.time_s if start_time_s is None else float(start_time_s)
-        self.tracker.replace(waypoints, start_s, self.arm_positions())
+        states = p.getJointStates(self.robot, self.arm_joints, physicsClientId=self.client)
+        self.tracker.replace(waypoints, start_s, np.array([s[0] for s in states]), np.array([s[1] for s in states]),
+                             now_s=self.time_s)
 
     def gripper_move(self, width_m: float, speed_mps: float) -> int:
         """Start a move; returns a token whose outcome `advance` reports later."""
@@ -309,10 +317,19 @@ class SimCell:
                                physicsClientId=self.client)
         return np.array(state[4]), np.array(state[5])
 
+    def hand_tcp_pose(self):
+        """(position xyz, quaternion xyzw) of franka_description's hand TCP in the base frame: PANDA_TCP_OFFSET_M
+        (0.1034 m) along the hand's z, the hand's orientation (franka_robot_state_broadcaster's current_pose)."""
+        state = p.getLinkState(self.robot, self.hand_link, computeForwardKinematics=True,
+                               physicsClientId=self.client)
+        rotation = np.array(p.getMatrixFromQuaternion(state[5])).reshape(3, 3)
+        return np.array(state[4]) + rotation[:, 2] * PANDA_TCP_OFFSET_M, np.array(state[5])
+
     def external_wrench(self):
-        """(force N, torque N*m about the TCP), both in the base frame: contacts acting on hand + fingers."""
+        """(force N, torque N*m about the hand TCP), both in the base frame: contacts acting on hand + fingers
+        (libfranka's O_F_ext_hat_K: K, the stiffness frame, is the EE frame, the hand TCP, unless set otherwise)."""
         force, torque = np.zeros(3), np.zeros(3)
-        tcp, _ = self.tcp_pose()
+        tcp, _ = self.hand_tcp_pose()
         active = [o.body for o in self._soft.values() if o.active]
         for point, f in cell_objects.hand_contact_forces(self.client, self.robot, self.hand_links, active):
             force += f

@@ -3,9 +3,12 @@
 A trajectory is a list of waypoints (time from start, positions[, velocities
 [, accelerations]]). Between waypoints it is interpolated: linear when only
 positions are given, cubic Hermite with velocities, quintic with velocities
-and accelerations. When the first waypoint lies after the start time the
-segment from the state at the start is interpolated too. After the last
-waypoint the last position is held. Pure numpy; no rclpy, no PyBullet.
+and accelerations. When the first waypoint lies after the time the trajectory
+is received, the segment from the measured state then (position and velocity,
+acceleration 0: interpolate_from_desired_state false, the controller's
+default; ros2_controllers jazzy, joint_trajectory_controller.cpp `update` and
+trajectory.cpp `set_point_before_trajectory_msg`) is interpolated too. After
+the last waypoint the last position is held. Pure numpy; no rclpy, no PyBullet.
 """
 from dataclasses import dataclass
 
@@ -105,21 +108,32 @@ class TrajectoryTracker:
         self._hold_q = np.asarray(q, dtype=float).copy()
         self._points = []
 
-    def replace(self, waypoints: list, start_time_s: float, current_q) -> None:
-        """Follow a new trajectory from start_time_s; an empty one holds current_q."""
+    def replace(self, waypoints: list, start_time_s: float, current_q, current_qd=None,
+                now_s: float | None = None) -> None:
+        """Follow a new trajectory from start_time_s, received at now_s (default: start_time_s) with the arm
+        measured at (current_q, current_qd; None = at rest); an empty one holds current_q.
+
+        Like joint_trajectory_controller: when the first waypoint is still ahead at now_s, the trajectory blends
+        into it from the measured position and velocity at now_s, with the first waypoint's kind of interpolation
+        (linear without its velocities: the measured velocity is then unused)."""
         if not waypoints:
             self.hold(current_q)
             return
+        now_s = float(start_time_s if now_s is None else now_s)
         first = waypoints[0]
-        if first.time_from_start_s > 0:
-            # Like joint_trajectory_controller: blend from where the arm is now.
-            start = Waypoint(0.0, np.asarray(current_q, dtype=float).copy(),
-                             np.zeros(self._n) if first.velocities is not None else None,
+        if now_s < start_time_s + first.time_from_start_s:
+            qd = np.zeros(self._n) if current_qd is None else np.asarray(current_qd, dtype=float).copy()
+            start = Waypoint(now_s - float(start_time_s), np.asarray(current_q, dtype=float).copy(),
+                             qd if first.velocities is not None else None,
                              np.zeros(self._n) if first.accelerations is not None else None)
             waypoints = [start] + list(waypoints)
         self._points = list(waypoints)
         self._start_s = float(start_time_s)
         self._hold_q = self._points[-1].positions.copy()
+
+    def end_time_s(self) -> float | None:
+        """Sim time of the last waypoint; None while holding."""
+        return self._start_s + self._points[-1].time_from_start_s if self._points else None
 
     def is_active(self, time_s: float) -> bool:
         return bool(self._points) and time_s - self._start_s < self._points[-1].time_from_start_s
@@ -131,7 +145,8 @@ class TrajectoryTracker:
         t = time_s - self._start_s
         pts = self._points
         if t <= pts[0].time_from_start_s:
-            return pts[0].positions.copy(), np.zeros(self._n)
+            first = pts[0]
+            return first.positions.copy(), np.zeros(self._n) if first.velocities is None else first.velocities.copy()
         if t >= pts[-1].time_from_start_s:
             return pts[-1].positions.copy(), np.zeros(self._n)
         times = np.array([p.time_from_start_s for p in pts])

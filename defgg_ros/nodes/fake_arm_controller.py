@@ -1,0 +1,230 @@
+"""The simulated driver's arm controller: ros2_controllers' joint_trajectory_controller as franka_ros2 runs it.
+
+Its JointTrajectory topic and FollowJointTrajectory action (docs/franka_contract.md, "The arm's trajectory
+controller"): a trajectory is validated as the controller validates it, starts at its stamp (0: on receipt) and
+blends from the measured position and velocity (sim/cell/trajectory.py); every control period of the sim thread the
+running one is checked against the active tolerances (sim/cell/tolerances.py). A goal succeeds once, after the end
+time, every joint is inside its goal tolerance (velocity below `stopped_velocity_tolerance`), and aborts with
+PATH_TOLERANCE_VIOLATED / GOAL_TOLERANCE_VIOLATED (the arm then holds where it is); a newer goal preempts it
+(INVALID_GOAL), a cancel holds the arm. A goal's tolerances stay active for later topic trajectories, as on the
+controller.
+
+Threads: ROS callbacks start trajectories and wait for their verdicts; `control_period` runs in the sim thread with
+the driver's lock held. Nothing here reads the ROS clock: sim time is the cell's.
+"""
+import time
+
+from control_msgs.action import FollowJointTrajectory
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from std_msgs.msg import Header
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+from defgg_ros.ros import qos
+from defgg_ros.ros.conversions import seconds_to_stamp
+from defgg_ros.sim.cell.tolerances import (
+    FLOAT32_EPSILON,
+    GOAL_VIOLATED,
+    PATH_VIOLATED,
+    SUCCEEDED,
+    TrajectoryMonitor,
+    default_tolerances,
+    goal_tolerances,
+)
+from defgg_ros.sim.cell.trajectory import TrajectoryError
+
+FEEDBACK_PERIOD_S = 0.1       # FollowJointTrajectory feedback while a goal runs (wall clock)
+# A trajectory stamp further than this from sim time is a wall-clock stamp
+# from a node without use_sim_time: start it now instead of never/at once.
+MAX_STAMP_OFFSET_S = 1.0
+PREEMPTED_TEXT = "Current goal preempted by new incoming action."   # the controller's preempt_active_goal
+RESULT_CODES = {SUCCEEDED: FollowJointTrajectory.Result.SUCCESSFUL,
+                PATH_VIOLATED: FollowJointTrajectory.Result.PATH_TOLERANCE_VIOLATED,
+                GOAL_VIOLATED: FollowJointTrajectory.Result.GOAL_TOLERANCE_VIOLATED}
+
+
+def _seconds(duration) -> float:
+    return duration.sec + duration.nanosec * 1e-9
+
+
+def _joint_tolerances(msgs) -> list:
+    return [(m.name, m.position, m.velocity, m.acceleration) for m in msgs]
+
+
+class FakeArmController:
+    """`<robot_type>_arm_controller` of the simulated driver (which owns the lock, the cell and the sim thread)."""
+
+    def __init__(self, driver, joint_names, callback_group):
+        self._driver, self._joints = driver, tuple(joint_names)
+        self._lock, self._cell, cfg = driver._lock, driver.cell, driver.cfg
+        self._logger = driver.get_logger()
+        self.defaults = default_tolerances(len(self._joints), cfg["arm_path_tolerance_rad"],
+                                           cfg["arm_goal_tolerance_rad"], cfg["arm_stopped_velocity_tolerance_radps"],
+                                           cfg["arm_goal_time_s"])
+        self._active = self.defaults      # the last goal's tolerances (the controller keeps them for the topic too)
+        self._monitor = TrajectoryMonitor(self._joints)
+        self._goal_id = 0                 # id of the newest goal
+        self._running_goal = None         # id of the goal the running trajectory answers; None: no goal
+        self._verdicts = {}               # goal id -> Verdict, set by the sim thread
+        driver.create_subscription(JointTrajectory, cfg["joint_trajectory_topic"], self._on_trajectory, qos.COMMAND,
+                                   callback_group=callback_group)
+        ActionServer(driver, FollowJointTrajectory, cfg["arm_trajectory_action"], execute_callback=self._execute,
+                     callback_group=callback_group, goal_callback=self._on_goal,
+                     cancel_callback=lambda _goal: CancelResponse.ACCEPT)
+
+    # ---- the sim thread (lock held) ------------------------------------------
+    def control_period(self, now_s: float) -> None:
+        """The controller's checks of this period: a verdict ends the running goal; a violation holds the arm."""
+        if not self._monitor.running:
+            return
+        joints = self._cell.joint_state()
+        q_desired, qd_desired = self._cell.tracker.sample(now_s)
+        n = len(self._joints)
+        verdict = self._monitor.check(now_s, joints.positions[:n], joints.velocities[:n], q_desired, qd_desired)
+        if verdict is None:
+            return
+        if verdict.outcome != SUCCEEDED:   # the controller holds the position it measures now
+            self._hold()
+            self._logger.warning(f"{verdict.text}: {verdict.details}; holding position")
+        if self._running_goal is not None:
+            self._verdicts[self._running_goal] = verdict
+            self._running_goal = None
+            self._monitor.hold()
+
+    def hold_for_exit(self) -> None:
+        """Hold the arm where it is (lock held); a running goal ends, as preempted."""
+        self._running_goal = None
+        self._hold()
+
+    def _hold(self) -> None:
+        self._cell.command_trajectory([])
+        self._monitor.hold()
+
+    # ---- commands (ROS threads) ------------------------------------------
+    def _start(self, points, stamp, tolerances, goal_id=None) -> None:
+        """Replace the running trajectory (lock held); raises TrajectoryError/ValueError on a malformed one."""
+        start_s = self._start_time_s(stamp)
+        self._cell.command_trajectory(points, start_s)
+        if goal_id is not None:
+            self._active, self._running_goal = tolerances, goal_id
+        self._monitor.start(self._cell.tracker.end_time_s(), self._active)
+
+    def _on_trajectory(self, msg: JointTrajectory):
+        if not msg.points:   # the joint_trajectory_controller drops it ("Empty trajectory received"): no stop
+            self._logger.error("rejected joint trajectory: Empty trajectory received (it does not stop the arm)")
+            return
+        try:
+            points = self._trajectory_points(msg)
+            with self._lock:
+                self._start(points, msg.header.stamp, None)
+        except (TrajectoryError, ValueError) as exc:
+            self._logger.error(f"rejected joint trajectory: {exc}")
+
+    def _on_goal(self, goal) -> GoalResponse:
+        """Reject what the joint_trajectory_controller rejects: no points, unknown or missing joints."""
+        try:
+            if not goal.trajectory.points:
+                raise TrajectoryError("the trajectory has no points")
+            self._trajectory_points(goal.trajectory)
+        except (TrajectoryError, ValueError) as exc:
+            self._logger.error(f"rejected FollowJointTrajectory goal: {exc}")
+            return GoalResponse.REJECT
+        return GoalResponse.ACCEPT
+
+    def _execute(self, goal_handle):
+        """Follow the goal's trajectory in sim time until the sim thread's verdict; a newer goal preempts it, a
+        cancel holds the arm."""
+        request, result = goal_handle.request, FollowJointTrajectory.Result()
+        tolerances, why = goal_tolerances(self.defaults, self._joints, _joint_tolerances(request.path_tolerance),
+                                          _joint_tolerances(request.goal_tolerance),
+                                          _seconds(request.goal_time_tolerance))
+        if why:
+            self._logger.error(why)
+        try:
+            points = self._trajectory_points(request.trajectory)
+            with self._lock:
+                self._goal_id += 1
+                goal_id = self._goal_id
+                self._start(points, request.trajectory.header.stamp, tolerances, goal_id)
+        except (TrajectoryError, ValueError) as exc:
+            result.error_code, result.error_string = FollowJointTrajectory.Result.INVALID_GOAL, str(exc)
+            goal_handle.abort()
+            return result
+        next_feedback = 0.0
+        while True:
+            with self._lock:
+                verdict = self._verdicts.pop(goal_id, None)
+                running = self._running_goal == goal_id
+            if verdict is not None:
+                result.error_code, result.error_string = RESULT_CODES[verdict.outcome], verdict.text
+                if verdict.outcome == SUCCEEDED:
+                    goal_handle.succeed()
+                else:
+                    goal_handle.abort()
+                return result
+            if not running:
+                result.error_code, result.error_string = FollowJointTrajectory.Result.INVALID_GOAL, PREEMPTED_TEXT
+                goal_handle.abort()
+                return result
+            if goal_handle.is_cancel_requested or not self._driver._running:
+                with self._lock:
+                    if self._running_goal == goal_id:
+                        self._running_goal = None
+                        self._hold()   # hold where the arm is, like the controller
+                goal_handle.canceled()
+                return result
+            if time.monotonic() >= next_feedback:
+                next_feedback = time.monotonic() + FEEDBACK_PERIOD_S
+                goal_handle.publish_feedback(self._feedback())
+            with self._driver._advanced:
+                self._driver._advanced.wait(0.05)  # until the sim thread has advanced a control period
+
+    def _feedback(self):
+        with self._lock:
+            now_s = self._cell.time_s
+            joints = self._cell.joint_state()
+            q_des, qd_des = self._cell.tracker.sample(now_s)
+        n = len(self._joints)
+        header = Header()
+        header.stamp = seconds_to_stamp(now_s)   # the controller sets the stamp only
+        feedback = FollowJointTrajectory.Feedback(header=header, joint_names=list(self._joints))
+        q, qd = joints.positions[:n], joints.velocities[:n]
+        feedback.actual = JointTrajectoryPoint(positions=q.tolist(), velocities=qd.tolist())
+        feedback.desired = JointTrajectoryPoint(positions=[float(v) for v in q_des],
+                                                velocities=[float(v) for v in qd_des])
+        feedback.error = JointTrajectoryPoint(positions=[float(d - a) for d, a in zip(q_des, q)],
+                                              velocities=[float(d - a) for d, a in zip(qd_des, qd)])
+        return feedback
+
+    def _trajectory_points(self, msg: JointTrajectory) -> list:
+        """(t, q, qd, qdd) in the simulated arm's joint order; JointTrajectory joint names in any order."""
+        if not msg.points:
+            return []
+        names = list(msg.joint_names)
+        unknown = [n for n in names if n not in self._joints]
+        missing = [n for n in self._joints if n not in names]
+        if missing or unknown:
+            raise TrajectoryError(f"joint_names lack {missing} / have unknown {unknown} (got {names}; this arm is "
+                                  f"robot_type {self._driver.cfg['robot_type']}: {list(self._joints)})")
+        order = [names.index(n) for n in self._joints]
+
+        def pick(values):
+            return [values[i] for i in order] if len(values) == len(names) else None
+
+        # allow_nonzero_velocity_at_trajectory_end: false (the controller's default): the last point must be still.
+        moving = [n for n, v in zip(names, msg.points[-1].velocities) if abs(v) > FLOAT32_EPSILON]
+        if moving:
+            raise TrajectoryError(f"velocity of the last trajectory point is not zero for {moving} (the "
+                                  "joint_trajectory_controller rejects such a trajectory)")
+        return [(_seconds(pt.time_from_start), pick(pt.positions), pick(pt.velocities), pick(pt.accelerations))
+                for pt in msg.points]
+
+    def _start_time_s(self, stamp) -> float:
+        stamp_s = stamp.sec + stamp.nanosec * 1e-9
+        if stamp_s == 0.0:
+            return self._cell.time_s
+        if abs(stamp_s - self._cell.time_s) > MAX_STAMP_OFFSET_S:
+            self._logger.warning(
+                f"trajectory stamp {stamp_s:.3f} s is far from sim time {self._cell.time_s:.3f} s "
+                "(is the sender running with use_sim_time?): starting it now", throttle_duration_sec=5.0)
+            return self._cell.time_s
+        return stamp_s
