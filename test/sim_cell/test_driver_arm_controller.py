@@ -93,7 +93,7 @@ def _action(client, executor, spin):
 def test_a_goal_succeeds_only_once_the_arm_has_stopped_after_the_end_time(executor, rclpy_context, client, spin):
     """A positions-only trajectory ends at full speed (the controller interpolates linearly): at its end time the
     arm still moves at ~1 rad/s and stops some tens of ms later. The goal's success comes only then (every joint
-    below stopped_velocity_tolerance, 0.01 rad/s); the driver reported it at the end time before 2026-12-02.
+    below stopped_velocity_tolerance, 0.01 rad/s); the driver reported it at the end time before 2026-12-01.
     The driver runs at a tenth of real time, so the result's delivery (ms of wall time) is a fraction of a ms
     of sim time."""
     from control_msgs.action import FollowJointTrajectory
@@ -122,7 +122,7 @@ def test_a_goal_tolerance_that_cannot_be_met_aborts_with_goal_tolerance_violated
                                                                                  spin):
     """Joint 7 sent beyond its limit stops there (as at an obstacle): 0.23 rad outside a goal_tolerance of 0.01 rad
     it cannot meet, so goal_time_tolerance (0.3 s) after the end time the goal aborts with GOAL_TOLERANCE_VIOLATED
-    (-5) and the controller's text, and the arm holds where it is (it reported success before 2026-12-02)."""
+    (-5) and the controller's text, and the arm holds where it is (it reported success before 2026-12-01)."""
     from control_msgs.action import FollowJointTrajectory
     from control_msgs.msg import JointTolerance
 
@@ -153,7 +153,7 @@ def test_a_path_tolerance_violation_aborts_with_path_tolerance_violated_and_hold
                                                                                   spin):
     """Joint 1 commanded from rest straight to 2 rad/s (positions only) lags ~11 mrad behind for the first tens of
     ms: a path_tolerance of 5 mrad aborts the goal with PATH_TOLERANCE_VIOLATED (-4) and the arm holds where it
-    is, far short of the goal (it went on to the goal and succeeded before 2026-12-02)."""
+    is, far short of the goal (it went on to the goal and succeeded before 2026-12-01)."""
     from control_msgs.action import FollowJointTrajectory
     from control_msgs.msg import JointTolerance
 
@@ -179,7 +179,7 @@ def test_a_path_tolerance_violation_aborts_with_path_tolerance_violated_and_hold
 
 def test_a_replacing_goal_starts_from_the_measured_velocity(executor, rclpy_context, client, spin):
     """A goal sent while joint 1 moves at ~1.9 rad/s, its first point 0.3 s ahead: the controller blends into it
-    from the measured position and velocity, so the arm carries on at its speed. Before 2026-12-02 the driver
+    from the measured position and velocity, so the arm carries on at its speed. Before 2026-12-01 the driver
     blended from rest: the arm braked to ~0 within tens of ms and then sped up again."""
     from control_msgs.action import FollowJointTrajectory
     from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy

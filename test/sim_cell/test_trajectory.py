@@ -78,7 +78,7 @@ def test_malformed_points_raise(points, words):
 
 def test_a_new_trajectory_blends_from_the_measured_position_and_velocity():
     """joint_trajectory_controller (interpolate_from_desired_state false): the segment to a first point still ahead
-    starts at the state measured on receipt, its velocity included (it started from rest before 2026-12-02)."""
+    starts at the state measured on receipt, its velocity included (it started from rest before 2026-12-01)."""
     z = np.zeros(7)
     v = np.full(7, 0.8)
     tracker = TrajectoryTracker(Q0)
