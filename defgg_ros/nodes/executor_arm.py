@@ -1,7 +1,7 @@
 """The executor node's commands to the arm and the hand, and its stop before the process exits.
 
 FollowJointTrajectory goals to the arm's joint_trajectory_controller, franka_msgs Move/Grasp goals to
-franka_gripper (docs/real_cell.md); a hold (cancel, then a one-point trajectory at the measured position) on every
+franka_gripper (docs/real_cell.md); a hold (cancel, then a one-point trajectory to rest) on every
 way out (docs/reliability.md). Only the newest goal of each kind answers the sequence.
 """
 import time
@@ -13,6 +13,8 @@ from franka_msgs.msg import GraspEpsilon
 from defgg_ros.control.observation import RestWatch
 from defgg_ros.control.pick_place import PickPlaceSequence
 from defgg_ros.control.sequence_types import CancelGripper, GraspGripper, MoveGripper, SendTrajectory
+from defgg_ros.control.stopping import stopping_hold
+from defgg_ros.control.trajectories import arm_limits
 from defgg_ros.nodes.executor_messages import hold_trajectory_msg, trajectory_to_msg
 from defgg_ros.ros.action import ActionClient
 
@@ -23,10 +25,10 @@ class ArmCommands:
 
     def stop_for_exit(self, spin_once) -> str:
         """Before the process tears anything down (run_node calls this on SIGINT/SIGTERM or a callback's
-        exception): end the control loop, cancel the trajectory goal and command a hold at the measured
-        position, then keep spinning (spin_once(timeout_s)) until joint states confirm the arm at rest and the
-        running goal is answered. Returns '' when the arm is confirmed at rest (or this node never moved it),
-        else why not (the process then exits 1)."""
+        exception): end the control loop, cancel the trajectory goal and command a hold that decelerates the
+        arm to rest ahead of it (_hold_arm), then keep spinning (spin_once(timeout_s)) until joint states
+        confirm the arm at rest and the running goal is answered. Returns '' when the arm is confirmed at rest
+        (or this node never moved it), else why not (the process then exits 1)."""
         p = self._params()
         timeout_s, hold_s = float(p["exit_stop_timeout_s"]), float(p["rest_hold_s"])
         started = time.monotonic()
@@ -128,11 +130,11 @@ class ArmCommands:
     def _hold_arm(self) -> None:
         """Stop the arm where it is (lock held): cancel the running goal (joint_trajectory_controller then holds its
         current state) and, as a second command that does not depend on the cancel being answered, send a one-point
-        trajectory at the measured position (an empty trajectory is refused by the controller). Only when this node
-        has a goal that may still move the arm; a failed send is logged, never raised: the caller is on its way out.
-        Tried and dropped (2026-11-29, simulated arm, transfer): the hold sent before the cancel, at the measured
-        position carried on for the state's age (or further, to a 0.1 s deceleration's end): the simulated
-        controller starts a new trajectory from rest, and the arm then moved at 3.5-4.2 rad/s after the signal."""
+        trajectory to rest (an empty trajectory is refused by the controller). The point lies ahead of the moving
+        arm, where a smooth deceleration from its measured velocity ends (control/stopping.py): the controller
+        blends into it from its measured state, so the arm slows down and never turns back (a point at the last
+        measured position pulled it back by its velocity x the state's age and the blend). Only when this node has a
+        goal that may still move the arm; a failed send is logged, never raised: the caller is on its way out."""
         moving = self._arm_may_move()
         self._arm_goal_serial += 1
         self._held_serial = self._arm_goal_serial
@@ -141,7 +143,11 @@ class ArmCommands:
                 self._arm_goal.cancel_goal_async()
                 self._arm_goal = None
             if moving and self._last_state is not None:
-                hold = hold_trajectory_msg(self._last_state[0].q_rad, self._params()["base_frame"], self._arm_joints)
+                state, received_s = self._last_state
+                limits = arm_limits(self._kin.arm, 1.0)
+                q_hold, blend_s = stopping_hold(state.q_rad, state.qd_radps, time.monotonic() - received_s,
+                                                limits.qdd_max_radps2, limits.q_min_rad, limits.q_max_rad)
+                hold = hold_trajectory_msg(q_hold, self._params()["base_frame"], self._arm_joints, blend_s)
                 self._arm_client.send_goal_async(FollowJointTrajectory.Goal(trajectory=hold))
         except Exception as error:  # noqa: BLE001 - rclpy raises RCLError/InvalidHandle once torn down
             self.get_logger().error(f"could not command the arm to stop: {error!r}")

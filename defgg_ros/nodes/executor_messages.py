@@ -13,6 +13,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from defgg_ros.constants import ARM_MODELS
 from defgg_ros.control.poses import PoseError, top_down_yaw
 from defgg_ros.control.sequence_types import ArmState, GraspTarget, PlaceTarget
+from defgg_ros.control.stopping import HOLD_BLEND_S
 from defgg_ros.ros import topics
 from defgg_ros.ros.conversions import ConversionError, transform_from_pose
 
@@ -43,14 +44,11 @@ def trajectory_to_msg(trajectory, frame_id: str, joint_names=DEFAULT_NAMES["join
     return msg
 
 
-# A hold trajectory reaches the measured position this long after it is received: the controller blends into it
-# from its current state, so the arm is brought to rest within this time without a step in the command (s).
-HOLD_BLEND_S = 0.1
-
-
-def hold_trajectory_msg(q_rad, frame_id: str, joint_names=DEFAULT_NAMES["joints"]) -> JointTrajectory:
-    """One point at q_rad, zero velocity, HOLD_BLEND_S after receipt: 'stay here' for a joint_trajectory_controller."""
-    sec, nanosec = divmod(int(round(HOLD_BLEND_S * 1e9)), 1_000_000_000)
+def hold_trajectory_msg(q_rad, frame_id: str, joint_names=DEFAULT_NAMES["joints"],
+                        duration_s: float = HOLD_BLEND_S) -> JointTrajectory:
+    """One point at q_rad, zero velocity and acceleration, duration_s after receipt: 'come to rest there' for a
+    joint_trajectory_controller, which blends into it from its measured state (control/stopping.py says where)."""
+    sec, nanosec = divmod(int(round(duration_s * 1e9)), 1_000_000_000)
     msg = JointTrajectory()
     msg.header.frame_id = frame_id
     msg.joint_names = list(joint_names)

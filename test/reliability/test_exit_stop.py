@@ -38,6 +38,8 @@ REST_SPEED_RADPS = 0.01      # the issue's bound
 REST_WITHIN_S = 0.5          # after the signal, sim clock
 WATCH_AFTER_S = 1.5          # joint states watched this long after the signal (sim clock)
 KIN = PandaKinematics()
+MOVING_RADPS = 0.02          # a joint this fast at the signal has a direction to keep
+TURN_BACK_TOLERANCE_RAD = 5e-4
 
 
 def _cell_set(tmp_path):
@@ -107,19 +109,34 @@ def test_the_arm_is_at_rest_within_half_a_second_of_stopping_the_executor(phase,
             spin(executor, lambda: _stamp_s(joints[-1]) > signal_s + WATCH_AFTER_S, 60.0, "joint states after it")
         executor.remove_node(probe)
     after = [(_stamp_s(j) - signal_s, float(np.max(np.abs(_arm(j)[1])))) for j in joints if _stamp_s(j) > signal_s]
+    turned_back_rad = _turned_back_rad([j for j in joints if _stamp_s(j) >= signal_s])
     late = [speed for t, speed in after if t >= REST_WITHIN_S]
     if how == "bringup_stop" and not late:   # the driver stopped within 0.5 s: its last joint states count
         late = [speed for t, speed in after if t >= after[-1][0] - 0.1]
     moving_until = max((t for t, speed in after if speed > REST_SPEED_RADPS), default=0.0)
     print(f"{phase}/{how}: executor exit {executor_code}; joint speed above {REST_SPEED_RADPS} rad/s until "
           f"{moving_until:.3f} s after the signal (sim); max {max(late, default=float('nan')):.4f} rad/s from "
-          f"{REST_WITHIN_S} s on over {after[-1][0]:.2f} s of joint states")
+          f"{REST_WITHIN_S} s on over {after[-1][0]:.2f} s of joint states; turned back "
+          f"{turned_back_rad * 1e3:.2f} mrad")
     tail = log_path.read_text()[-3000:]
     assert late, ("no joint states 0.5 s after the signal", tail)
     assert max(late) <= REST_SPEED_RADPS, (f"arm still moving {REST_WITHIN_S} s after {how}: {max(late):.3f} rad/s",
                                           tail)
     assert executor_code == 0, (f"the executor exited {executor_code}", tail)
     assert "the arm is at rest" in log_path.read_text(), tail
+    assert turned_back_rad <= TURN_BACK_TOLERANCE_RAD, f"the stop turned a joint back {turned_back_rad * 1e3:.2f} mrad"
+
+
+def _turned_back_rad(states) -> float:
+    """How far the stop moved any joint back against its motion at the signal (rad): for each joint moving then,
+    the way from its furthest point after the signal to where it came to rest. A hold at a stale position pulls
+    the arm back to where it was when that state was measured."""
+    q_at_signal, qd_at_signal = _arm(states[0])
+    moving = np.abs(qd_at_signal) > MOVING_RADPS
+    if not np.any(moving):
+        return 0.0
+    progress = np.array([np.sign(qd_at_signal) * (_arm(j)[0] - q_at_signal) for j in states])[:, moving]
+    return float(np.max(progress.max(axis=0) - progress[-1]))
 
 
 def _in_thread(function):
