@@ -25,7 +25,7 @@ from tqdm import tqdm
 
 from defgg_ros.cli_help import HelpFormatter
 from defgg_ros.ros.cell_client import CellCallError, CellClient
-from defgg_ros.ros.domain import SAFE_DOMAIN_RANGE, pick_private_domain
+from defgg_ros.ros.domain import PRIVATE_DOMAIN_RANGE, SAFE_DOMAIN_RANGE, pick_private_domain
 from defgg_ros.ros.executor import ThreadedExecutor
 from defgg_ros.ros.transport import use_large_message_transport
 from defgg_ros.sessions import metadata as md
@@ -225,8 +225,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--pick-timeout-s", type=float, default=300.0, help="how long a pick may take (s)")
     parser.add_argument("--domain-id", type=int,
                         help="ROS_DOMAIN_ID of the replay's private graph (default: a random one in "
-                             f"{SAFE_DOMAIN_RANGE[0]}..{SAFE_DOMAIN_RANGE[1]} where no other node answers "
-                             f"discovery within {DOMAIN_LISTEN_S:g} s)")
+                             f"{PRIVATE_DOMAIN_RANGE[0]}..{PRIVATE_DOMAIN_RANGE[1]}, not the caller's, where no "
+                             f"other node answers discovery within {DOMAIN_LISTEN_S:g} s)")
     parser.add_argument("--run-dir", help="folder for the nodes' logs (default: a new temporary folder)")
     return parser
 

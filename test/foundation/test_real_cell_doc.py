@@ -38,7 +38,8 @@ FRANKA_LAUNCH_ARGUMENTS = {"robot_type", "arm_prefix", "namespace", "robot_ip", 
 MOVEIT_LAUNCH_ARGUMENTS = {"robot_ip", "namespace", "load_gripper", "ee_id", "use_fake_hardware",
                            "fake_sensor_commands", "db"}          # franka_fr3_moveit_config/launch/moveit.launch.py
 RS_LAUNCH_ARGUMENTS = {"camera_name", "camera_namespace", "depth_module.depth_profile", "pointcloud.enable",
-                       "align_depth.enable", "enable_color", "enable_depth"}   # realsense2_camera rs_launch.py (part)
+                       "align_depth.enable", "enable_color", "enable_depth", "publish_tf",
+                       "tf_publish_rate"}                       # realsense2_camera rs_launch.py (part)
 SPAWNER_VALUE_OPTIONS = {"-c", "--controller-manager", "--controller-manager-timeout", "-p", "--param-file",
                          "--switch-timeout", "--service-call-timeout"}       # controller_manager/spawner.py
 SPAWNER_FLAGS = {"--inactive", "--load-only", "-u", "--unload-on-kill", "--activate-as-group"}
