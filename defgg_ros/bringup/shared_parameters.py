@@ -18,11 +18,13 @@ from defgg_ros.ros.topics import robot_names
 
 # One cell, one value: names declared by more than one node that describe the same physical thing.
 # (Topic and action names are left out: a deployment may remap one node's on purpose.)
-# The perception parameters (workspace box, camera pose, object heights) are the segmentation node's alone since
-# it is the only perceiver (the inference node reads them from its PerceivedObjects).
+# The perception parameters (camera pose, object heights) are the segmentation node's alone since it is the only
+# perceiver (the inference node reads them from its PerceivedObjects); the workspace box is also the executor's
+# (its recovery drop point lies in it), and a box that differs would drop objects where perception ignores them.
 # The grasp height rule is the executor's, and the grasp search must put the fingertips where the executor takes
 # them: the inference node declares the same two names.
-CELL_PARAMETERS = ("robot_type", "base_frame", "table_z_m", "grasp_height_rule", "grasp_depth_below_surface_m")
+CELL_PARAMETERS = ("robot_type", "base_frame", "table_z_m", "grasp_height_rule", "grasp_depth_below_surface_m",
+                   "workspace_box_m")
 
 
 # A node's section in a parameter file: keyed /**/<node> in the shipped files, so it holds in any namespace

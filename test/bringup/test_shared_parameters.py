@@ -41,6 +41,15 @@ def test_a_grasp_height_rule_set_for_the_executor_alone_is_refused():
     assert "executor_node='below_surface'" in str(err.value) and "grasp_inference_node=" in str(err.value)
 
 
+def test_a_workspace_box_set_for_one_node_alone_is_refused():
+    """The executor's recovery drops a held object inside its box; a box perception does not share would leave it
+    where no grasp is planned."""
+    overrides = _overrides("real_cell", ["-p", "segmentation_node:workspace_box_m:=[0.3, 0.8, -0.3, 0.3]"])
+    with pytest.raises(NodeSetError, match="workspace_box_m") as err:
+        check_cell_parameters_agree(load_node_set("real_cell"), overrides)
+    assert "executor_node=" in str(err.value) and "segmentation_node=" in str(err.value)
+
+
 def _fr3_rehearsal_argv():
     text = DOCS.read_text()
     block = re.search(r"```bash\n(defgg-bringup --ros-domain 42 -p fake_panda_driver:robot_type:=fr3.*?)```", text,
