@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import json
 import shutil
-import subprocess
 import tarfile
 from collections import defaultdict
 from pathlib import Path
@@ -29,16 +28,6 @@ PROVENANCE_SUFFIX = ".train.json"
 
 class CardError(RuntimeError):
     """A training run or model file that cannot be shipped or described."""
-
-
-def git_commit(repo_dir=".") -> str:
-    try:
-        out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=repo_dir, capture_output=True, text=True, check=True)
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "defgg_ros"], cwd=repo_dir,
-                               capture_output=True, text=True, check=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
-    return out.stdout.strip() + (" (+ uncommitted changes in defgg_ros/)" if dirty else "")
 
 
 def trial_counts(data_root, manifest: dict) -> dict:

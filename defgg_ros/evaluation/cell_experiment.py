@@ -54,6 +54,7 @@ from defgg_ros.evaluation.cell_report import (
     rerun_lines,
     write_report,
 )
+from defgg_ros.provenance import file_sha256, git_commit
 from defgg_ros.ros.cell_client import CellCallError
 from defgg_ros.ros.domain import ISOLATION_ENV, apply_domain_choice, default_domain_choice
 from defgg_ros.ros.share import share_path
@@ -217,6 +218,14 @@ def scene_object(obj: CellObject, pose: dict, mesh_folder: Path) -> dict:
     return {**entry, "shape": "mesh", "mesh": str(mesh_file(obj, mesh_folder).resolve()), "size_m": [1.0, 1.0, 1.0]}
 
 
+def identities(scene: dict, model: Path) -> dict:
+    """What a pick ran on, so that pairs across runs can be checked to compare the same thing: the code's commit,
+    the weights' and the object body's file hashes (a box on the FEM grid: its size and cell, in the record)."""
+    body = scene.get("mesh")
+    return {"commit": git_commit(), "model_sha256": file_sha256(model),
+            "mesh_sha256": file_sha256(body) if body else None}
+
+
 # ---- the run ----------------------------------------------------------------------------------------------------
 def run(out: Path, work: Path, model: Path, picks: int, seed: int, objects, cases, pick_fn=None,
         progress=True, records_name: str = RECORDS_NAME, max_attempts: int = MAX_ATTEMPTS) -> int:
@@ -238,8 +247,9 @@ def run(out: Path, work: Path, model: Path, picks: int, seed: int, objects, case
                       "input_youngs_modulus_pa": input_modulus_pa(case, obj), "pose": pose,
                       "grip_youngs_modulus_pa": grip_modulus_pa(case, obj),
                       "model": str(model), "started_unix_s": round(time.time(), 1)}
-            setup = PickSetup(scene_object(obj, pose, Path(work) / "meshes"), record["input_youngs_modulus_pa"],
-                              measure_first=case == MEASURED,
+            scene = scene_object(obj, pose, Path(work) / "meshes")
+            record.update(identities(scene, model))   # pairs compare the same body, weights and code
+            setup = PickSetup(scene, record["input_youngs_modulus_pa"], measure_first=case == MEASURED,
                               grip_youngs_modulus_pa=record["grip_youngs_modulus_pa"])
             record.update(_attempt(pick_fn, setup, Path(work), key, model))
             append_jsonl(records_path, record)

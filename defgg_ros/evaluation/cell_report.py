@@ -3,9 +3,11 @@ and the paired comparison of the correct input against each wrong one.
 
 Pairs: pick i of an object meets the same pose under every case, so "correct" and "rigid" (or "soft") pair up by
 (object, pick). Only the discordant pairs (one case picked it, the other not) say which input is better; the
-exact sign test on them is McNemar's exact test. The margin's 95 % interval is a bootstrap over **objects**
-(an object's picks share its shape: they are not independent draws), resampling objects with replacement and
-pooling their pairs.
+exact sign test on them is McNemar's exact test, which takes the picks as independent. An object's picks share
+its shape, so objects are the independent units: p (objects) is the exact sign-flip test of each object's net
+(A only - B only), and the margin's 95 % interval a bootstrap over objects, resampling objects with replacement
+and pooling their pairs. With fewer than MIN_OBJECTS_WITH_A_DIFFERENCE objects where the inputs differed at all,
+the bootstrap can only replay those few objects' margins (one object's 1 vs 1 gave [+0.0, +0.0]): no interval.
 """
 from __future__ import annotations
 
@@ -15,7 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from defgg_ros.atomic import read_jsonl, write_text_atomic
-from defgg_ros.evaluation.paired import Paired, count_pairs, sign_test_p
+from defgg_ros.evaluation.paired import Paired, count_pairs, sign_flip_p, sign_test_p
 
 CASES = ("correct", "rigid", "soft")
 MEASURED = "measured"
@@ -101,9 +103,15 @@ def case_pairs(records, case_a: str, case_b: str) -> list:
     pairs = []
     for (name, pick, case), a in sorted(by_key.items(), key=lambda item: item[0]):
         b = by_key.get((name, pick, case_b))
-        if case == case_a and b is not None and b.get("stands_in_for") != a["key"]:
+        if case == case_a and b is not None and b.get("stands_in_for") != a["key"] and same_body_and_weights(a, b):
             pairs.append((a, b))
     return pairs
+
+
+def same_body_and_weights(a: dict, b: dict) -> bool:
+    """False when both picks record the object body's or the weights' hash and they differ (records before
+    2026-12-01 carry none: their pairs are taken as they are; cell_experiment.md says what that cost)."""
+    return all(a.get(f) is None or b.get(f) is None or a[f] == b[f] for f in ("mesh_sha256", "model_sha256"))
 
 
 def paired_by_object(records, case_a: str, case_b: str) -> dict:
@@ -114,10 +122,21 @@ def paired_by_object(records, case_a: str, case_b: str) -> dict:
     return out
 
 
+MIN_OBJECTS_WITH_A_DIFFERENCE = 5
+
+
+def object_nets(by_object: dict) -> tuple:
+    """Per object (sorted by name): picks only A held minus picks only B held."""
+    return tuple(sum(a and not b for a, b in pairs) - sum(b and not a for a, b in pairs)
+                 for _, pairs in sorted(by_object.items()))
+
+
 def bootstrap_margin_ci(by_object: dict, resamples: int = BOOTSTRAP_RESAMPLES, seed: int = BOOTSTRAP_SEED):
-    """95 % percentile interval (points) of the pooled paired margin, resampling objects; None without pairs."""
+    """95 % percentile interval (points) of the pooled paired margin, resampling objects; None without pairs or
+    with fewer than MIN_OBJECTS_WITH_A_DIFFERENCE objects that have a discordant pair."""
     names = sorted(n for n, pairs in by_object.items() if pairs)
-    if not names:
+    differing = sum(1 for n in names if any(a != b for a, b in by_object[n]))
+    if not names or differing < MIN_OBJECTS_WITH_A_DIFFERENCE:
         return None
     rng = random.Random(seed)
     margins = []
@@ -135,17 +154,23 @@ class Comparison:
     counts: Paired
     interval_pts: tuple | None
     objects: int
+    nets: tuple = ()            # per object: A only - B only
 
     @property
     def p_value(self) -> float:
         return sign_test_p(self.counts.a_only, self.counts.b_only)
+
+    @property
+    def object_p_value(self) -> float:
+        return sign_flip_p(self.nets)
 
 
 def compare(records, case_a: str, case_b: str, only=None) -> Comparison:
     """case_a vs case_b over every object (or the names in `only`)."""
     by_object = {n: p for n, p in paired_by_object(records, case_a, case_b).items() if only is None or n in only}
     pairs = [p for ps in by_object.values() for p in ps]
-    return Comparison(case_a, case_b, count_pairs(pairs), bootstrap_margin_ci(by_object), len(by_object))
+    return Comparison(case_a, case_b, count_pairs(pairs), bootstrap_margin_ci(by_object), len(by_object),
+                      object_nets(by_object))
 
 
 def _pct(cell) -> str:
@@ -208,7 +233,8 @@ def _comparison_rows(records, objects, cases) -> list:
             c = compare(records, case_a, case_b, only)
             margin = "–" if c.counts.margin_pts is None else f"{c.counts.margin_pts:+.1f}"
             rows.append(f"| {case_a} vs {case_b} | {scope} | {c.objects} | {c.counts.pairs} | {c.counts.a_only} / "
-                        f"{c.counts.b_only} | {margin} | {_ci(c.interval_pts)} | {c.p_value:.3g} |")
+                        f"{c.counts.b_only} | {margin} | {_ci(c.interval_pts)} | {c.object_p_value:.3g} | "
+                        f"{c.p_value:.3g} |")
     return rows
 
 
@@ -401,11 +427,14 @@ def report_markdown(records, objects, planned_picks: int | None = None) -> str:
     table = success_table(records)
     cases = present_cases(table)
     done = len(outcomes(records))
+    stand_ins = sum(1 for r in outcomes(records).values() if "stands_in_for" in r)
     errors = sum(1 for r in records if r.get("cell_error"))
     planned = (planned_picks or max((r["pick"] + 1 for r in records), default=0)) * len(objects) * len(cases)
-    walls = sorted(r["wall_s"] for r in outcomes(records).values() if r.get("wall_s"))
+    walls = sorted(r["wall_s"] for r in outcomes(records).values() if r.get("wall_s") and "stands_in_for" not in r)
+    copies = (f", {stand_ins} of them a plain pick standing in for its grasp-only case (the same plan and grip: "
+              f"not run again), so {done - stand_ins} picks ran") if stand_ins else ""
     lines = [f"Picks with an outcome: **{done} of {planned}** planned ({len(objects)} objects × {len(cases)} "
-             f"cases × {planned_picks or '?'} picks); cell failures recorded (retried): {errors}.",
+             f"cases × {planned_picks or '?'} picks{copies}); cell failures recorded (retried): {errors}.",
              f"Wall time per pick (bring-up, plan, pick, settle, tear-down): median "
              f"{walls[len(walls) // 2]:.0f} s, max {walls[-1]:.0f} s." if walls else "", "",
              "| # | object | E (Pa) | " + " | ".join(cases) + " |",
@@ -421,10 +450,13 @@ def report_markdown(records, objects, planned_picks: int | None = None) -> str:
     lines.append(f"| | **{sets} complete sets** (object and pose in every case) | | "
                  + " | ".join(_pct(complete[c]) for c in cases) + " |")
     lines += ["", "Paired comparison (pairs = the same object at the same pose; margin = success rate with input A "
-                  "minus with input B, points; 95 % bootstrap interval over objects; exact sign "
-                  "test (McNemar) on the discordant pairs):", "",
-              "| A vs B | objects | n objects | pairs | A only / B only | margin A − B (pts) | 95 % CI | p |",
-              "|---|---|---|---|---|---|---|---|", *_comparison_rows(records, objects, cases)]
+                  "minus with input B, points; 95 % bootstrap interval over objects, – with fewer than "
+                  f"{MIN_OBJECTS_WITH_A_DIFFERENCE} objects where the inputs differed; p (objects) = exact sign-flip "
+                  "test of each object's net, objects the independent units; p (picks) = exact sign test (McNemar) "
+                  "on the discordant pairs as if the picks were independent):", "",
+              "| A vs B | objects | n objects | pairs | A only / B only | margin A − B (pts) | 95 % CI | p (objects) "
+              "| p (picks) |",
+              "|---|---|---|---|---|---|---|---|---|", *_comparison_rows(records, objects, cases)]
     if any(c in cases for c in GRASP_ONLY_CASES):
         lines += ["", f"Figures: `{FIGURE_NAME}` (the paper's three inputs and the squeeze), `{GRASP_FIGURE_NAME}` "
                       "(the paper's protocol, one grip: correct against the wrong inputs gripped as the true "

@@ -27,7 +27,7 @@ import sys
 import tarfile
 from pathlib import Path
 
-from defgg_ros.atomic import read_jsonl, write_json_atomic, write_text_atomic
+from defgg_ros.atomic import only_writer, read_jsonl, write_json_atomic, write_text_atomic
 from defgg_ros.cli_help import HelpFormatter, use_for
 from defgg_ros.constants import EVAL_GRASPS_PER_OBJECT, GRASP_HEIGHT_RULES, TRAINING_YOUNGS_MODULI_PA
 from defgg_ros.data.format import DatasetError, check_header
@@ -40,6 +40,7 @@ from defgg_ros.evaluation.runner import PLANS_FILE, eval_trial_settings
 from defgg_ros.evaluation.seeds import seeds_markdown, summarise
 from defgg_ros.evaluation.store import ResultsError, read_results, results_path
 from defgg_ros.evaluation.tasks import TASKS
+from defgg_ros.provenance import git_commit
 from defgg_ros.sim import world
 from defgg_ros.sim.protocol import TrialProtocol, resolve_protocol
 from defgg_ros.sim.trial_settings import TrialSettings, protocol_differences
@@ -198,7 +199,7 @@ def _add_others(sub):
     p.add_argument("--summary-only", action="store_true", help="only rewrite OUT/ceiling.md")
 
     p = sub.add_parser("seeds", help="the seed study: each seed's paired margin, the mean with a bootstrap "
-                                     "interval over objects, the pooled sign test")
+                                     "interval over objects, the pooled tests (over objects; over pairs)")
     p.add_argument("--run", required=True, nargs="+", metavar="SEED=OUT",
                    help="a seed's evaluation folder, e.g. 0=results/sim_v5 1=results/sim_v5_s1")
     p.add_argument("--sets", nargs="+", default=["common", "adversarial"], help="default: %(default)s")
@@ -279,8 +280,6 @@ def build_views(args, predictors, objects) -> list:
 
 
 def write_manifest(out_dir, args, model_paths, predictors, objects, argv, settings: TrialSettings) -> None:
-    from defgg_ros.evaluation.cards import git_commit
-
     by_set = {}
     for o in objects:
         by_set.setdefault(o.set_name, []).append({"name": o.name, "moduli_pa": list(o.moduli_pa),
@@ -371,12 +370,24 @@ def check_run_counts(args) -> None:
             raise ValueError(f"{flag} must be >= {least}, got {value}")
 
 
-def cmd_run(args, argv) -> int:
+EVAL_LOCK_FILE = ".eval.lock"
 
+
+def cmd_run(args, argv) -> int:
     check_run_counts(args)
     model_paths = parse_pairs(args.model or DEFAULT_MODELS)
     predictors = load_predictors(model_paths)
     objects = eval_objects(args)
+    Path(args.out).mkdir(parents=True, exist_ok=True)
+    # One writer per folder: two runs (a restart while the first still runs, a --plan-only beside a run) would
+    # append each trial twice and cut the other's unfinished last line.
+    busy = ResultsError(f"{args.out} is being written by another defgg-eval run (it holds "
+                        f"{Path(args.out) / EVAL_LOCK_FILE}): wait for it to finish or stop it, then run this again")
+    with only_writer(Path(args.out) / EVAL_LOCK_FILE, busy):
+        return _run_locked(args, argv, model_paths, predictors, objects)
+
+
+def _run_locked(args, argv, model_paths, predictors, objects) -> int:
     protocol = protocol_of_run(args.out, args.protocol, from_dataset=args.protocol_from)
     settings = runner.quick_trial_settings(protocol) if args.quick else runner.eval_trial_settings(protocol)
     check_same_protocol(args.out, settings, args.tasks)
@@ -469,7 +480,7 @@ def cmd_strategy(args) -> int:
 def cmd_ship(args) -> int:
     from defgg_ros.evaluation import cards
 
-    prov = cards.training_provenance(args.run, args.train_command, args.wall_s, args.commit or cards.git_commit())
+    prov = cards.training_provenance(args.run, args.train_command, args.wall_s, args.commit or git_commit())
     prov.update(data_source=args.data_source, data_archive=args.data_archive, note=args.note)
     print(cards.ship_model(args.run, args.name, args.models_dir, prov, args.checkpoint))
     return 0

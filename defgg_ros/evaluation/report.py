@@ -142,7 +142,9 @@ def _write_paired(records, manifest, labels, tdir) -> list:
     write_text_atomic(tdir / "paired.md", paired.paired_markdown(rows, labels[stiff[0]], labels[base[0]]))
     write_text_atomic(tdir / "paired.csv", paired.paired_csv(rows, stiff[0], base[0]))
     return [{"task": t, "set": s, "grasps": scope, "pairs": p.pairs, "a_only": p.a_only, "b_only": p.b_only,
-             "margin_pts": p.margin_pts, "p_sign_test": p.p_value} for t, s, scope, p in rows]
+             "margin_pts": p.margin_pts, "p_sign_test": p.p_value, "objects": len(p.objects),
+             "p_objects": p.object_p_value, "interval_objects_pts": p.object_interval_pts()}
+            for t, s, scope, p in rows]
 
 
 def _write_sensitivity(records, manifest, models, labels, tdir) -> dict:
@@ -194,11 +196,12 @@ def targets(summary: dict, manifest: dict) -> list:
         if s == "common":
             item["required_success_pct"] = TARGET_COMMON_SUCCESS_PCT
             item["success_met"] = a["success_pct"] >= TARGET_COMMON_SUCCESS_PCT
-        else:   # ahead, and separable from chance: paired sign test over the five best grasps
+        else:   # ahead, and separable from chance over the five best grasps, objects the independent units
             p = next((r for r in summary.get("paired", []) if r["task"] == "shake" and r["set"] == s
                       and r["grasps"] == paired.ALL_RANKS), None)
             item["p_sign_test"] = None if p is None else p["p_sign_test"]
-            item["sign_test_met"] = p is not None and p["p_sign_test"] is not None and \
-                p["a_only"] > p["b_only"] and p["p_sign_test"] < TARGET_SIGN_TEST_P
+            item["p_objects"] = None if p is None else p.get("p_objects")
+            item["sign_test_met"] = p is not None and item["p_objects"] is not None and \
+                p["a_only"] > p["b_only"] and item["p_objects"] < TARGET_SIGN_TEST_P
         out.append(item)
     return out

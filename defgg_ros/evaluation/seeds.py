@@ -4,9 +4,11 @@ Each seed's pair (the stiffness-aware model and the depth-only one, same data, s
 in its own folder; within a folder the two models' trials pair up by (object, E, rank) as in `paired`. Per seed
 and object set this reports the paired margin (points) and its sign test; over the seeds, the mean margin with a
 95 % bootstrap interval over **objects** (an object's trials are not independent draws: they share its shape, so
-objects are what the interval resamples), and the sign test on the discordant pairs pooled over the seeds.
-The interval holds the seeds fixed (the spread between seeds is in the per-seed rows, not in it), and the pooled
-test counts each seed's pairs as independent although every seed is evaluated on the same views.
+objects are what the interval resamples), and two tests pooled over the seeds: the exact sign-flip test over
+objects of each object's net (only A - only B, summed over the seeds; objects the independent units, as in
+`paired`), and the sign test on the discordant pairs, which counts every pair as independent although a view's
+ranks share an object and every seed is evaluated on the same views (it is smaller than it should be). The
+interval holds the seeds fixed (the spread between seeds is in the per-seed rows, not in it).
 
 While the seeds' evaluations run, they cover different views: every seed is then compared on the views
 (object, E, rank) that every seed with trials has (`matched`), so a partial seed is not set against the
@@ -14,10 +16,9 @@ shipped seed's five ranks (a rank-1 grasp succeeds more often than a rank-5 one)
 """
 from __future__ import annotations
 
-import random
 from dataclasses import dataclass
 
-from defgg_ros.evaluation.paired import Paired, count_pairs, sign_test_p
+from defgg_ros.evaluation.paired import Paired, bootstrap_interval, count_pairs, sign_flip_p, sign_test_p
 from defgg_ros.evaluation.tables import is_graded, is_main_correct_input
 
 BOOTSTRAP_RESAMPLES = 2000
@@ -39,10 +40,15 @@ class SeedSummary:
     pooled: Paired              # discordant pairs summed over the seeds
     objects: int
     matched_views: int | None = None   # compared on this many views that every seed with trials has
+    object_nets: tuple = ()            # per object: only A - only B summed over the seeds
 
     @property
     def pooled_p(self) -> float:
         return sign_test_p(self.pooled.a_only, self.pooled.b_only)
+
+    @property
+    def pooled_object_p(self) -> float:
+        return sign_flip_p(self.object_nets)
 
 
 def view_outcomes(records, task: str, object_set: str, model_a: str, model_b: str) -> dict:
@@ -94,14 +100,13 @@ def summarise(seed_records: dict, object_set: str, task: str = "shake", model_a:
     objects = sorted(set().union(*per_seed.values())) if per_seed else []
     pooled = Paired(*(sum(getattr(r.counts, f) for r in rows) for f in ("both", "a_only", "b_only", "neither")))
     mean = _mean_margin(list(per_seed.values()), objects)
-    interval = None
-    if objects and resamples > 0:
-        rng = random.Random(BOOTSTRAP_SEED)
-        draws = sorted(m for m in (_mean_margin(list(per_seed.values()), rng.choices(objects, k=len(objects)))
-                                   for _ in range(resamples)) if m is not None)
-        if draws:
-            interval = (draws[int(0.025 * (len(draws) - 1))], draws[int(round(0.975 * (len(draws) - 1)))])
-    return SeedSummary(object_set, rows, mean, interval, pooled, len(objects), None if keep is None else len(keep))
+    interval = bootstrap_interval(objects, lambda drawn: _mean_margin(list(per_seed.values()), drawn), resamples,
+                                  BOOTSTRAP_SEED)
+    nets = tuple(sum(a and not b for by_object in per_seed.values() for a, b in by_object.get(o, []))
+                 - sum(b and not a for by_object in per_seed.values() for a, b in by_object.get(o, []))
+                 for o in objects)
+    return SeedSummary(object_set, rows, mean, interval, pooled, len(objects), None if keep is None else len(keep),
+                       nets)
 
 
 def _held(c: Paired) -> str:
@@ -126,7 +131,8 @@ def seeds_markdown(summaries) -> str:
                                                        f"{s.interval_pts[1]:+.1f})"
         seeds = sum(1 for row in s.rows if row.counts.pairs)     # the mean is over the seeds with pairs
         lines.append(f"| {s.object_set} | **mean of {seeds} seeds** | {s.pooled.pairs} | {_held(s.pooled)} | "
-                     f"{s.pooled.a_only} | {s.pooled.b_only} | {mean}{interval} | {s.pooled_p:.3g} (pooled) |")
+                     f"{s.pooled.a_only} | {s.pooled.b_only} | {mean}{interval} | objects {s.pooled_object_p:.3g}; "
+                     f"pairs {s.pooled_p:.3g} (pooled) |")
     notes = [f"{s.object_set}: every seed on the same {s.matched_views} views (object, E, rank) that each seed with "
              "trials has" for s in summaries if s.matched_views is not None]
     return "\n".join(lines) + "\n" + ("\n" + "; ".join(notes) + ".\n" if notes else "")

@@ -5,13 +5,13 @@ path) so a replay rebuilds the recorded scene even after the file changed.
 No rclpy here.
 """
 import datetime
-import hashlib
 import subprocess
 import sys
 from dataclasses import asdict
 from importlib import metadata as importlib_metadata
 from pathlib import Path
 
+from defgg_ros.provenance import file_sha256
 from defgg_ros.ros.share import SOURCE_ROOT
 from defgg_ros.sessions.compare import Tolerances
 from defgg_ros.sessions.session import FORMAT
@@ -19,14 +19,6 @@ from defgg_ros.sessions.session import FORMAT
 
 class MetadataError(ValueError):
     """Session metadata that is missing a field the replay needs."""
-
-
-def file_sha256(path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def software_version() -> dict:

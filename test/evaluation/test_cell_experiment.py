@@ -134,16 +134,27 @@ def test_sign_test_and_paired_margin_over_picks():
     assert (c.counts.a_only, c.counts.b_only, c.counts.both, c.counts.pairs) == (5, 1, 3, 12)
     assert c.counts.margin_pts == pytest.approx(100 * 4 / 12)
     assert c.p_value == pytest.approx(2 * (1 + 6) / 2**6)     # exact two-sided: 0.21875
-    lo, hi = c.interval_pts
-    assert lo <= c.counts.margin_pts <= hi and lo >= 100 * 1 / 4 - 1e-9 and hi <= 50.0 + 1e-9
+    # objects' nets +2, +1, +1: |sum| 4 only when all three signs agree, 2 of the 8 patterns
+    assert c.nets == (2, 1, 1) and c.object_p_value == pytest.approx(0.25)
+    assert c.interval_pts is None          # 3 objects where the inputs differed: too few for a bootstrap
+
+
+def test_the_bootstrap_needs_enough_objects_where_the_inputs_differed():
+    """One object's 1 vs 1 gave [+0.0, +0.0]: the bootstrap can only replay the few objects' margins."""
+    one = {"only": [(True, False), (False, True)], "same": [(True, True)] * 4}
+    assert cr.bootstrap_margin_ci(one) is None
+    five = {n: [(True, False), (True, True)] for n in "abcde"}
+    lo, hi = cr.bootstrap_margin_ci(five)
+    assert lo == pytest.approx(50.0) == hi      # every object the same margin: nothing to resample
 
 
 def test_the_bootstrap_resamples_objects_not_picks():
     # One object decides everything: resampling objects must give an interval that reaches 0 (the draws without
     # it), which resampling the 20 pairs independently would not.
-    by_object = {"big": [(True, False)] * 10, "a": [(True, True)] * 5, "b": [(False, False)] * 5}
+    by_object = {"big": [(True, False)] * 10, **{n: [(False, True), (True, True)] for n in "abcd"}}
     lo, hi = cr.bootstrap_margin_ci(by_object)
-    assert lo == pytest.approx(0.0) and hi >= 80.0     # pooled margin 50 points; 0 when "big" is not drawn
+    # pooled margin (10 - 4) / 18 = +33 points; without "big" every draw is -50, with it mostly far above
+    assert lo == pytest.approx(-50.0) and hi >= 60.0
     assert cr.bootstrap_margin_ci({}) is None
 
 
@@ -430,3 +441,29 @@ def test_a_run_without_squeezes_has_no_squeeze_table(tmp_path):
     records = cr.read_records(tmp_path)
     assert cr.squeeze_rows(records, ce.OBJECTS, cr.squeeze_laws_present(records)) == []
     assert "The squeeze's estimates" not in cr.write_report(tmp_path, ce.OBJECTS, planned_picks=1)
+
+
+def test_a_pick_records_the_code_weights_and_body_it_ran_on(tmp_path):
+    """Pairs across runs compared different bodies (each machine meshed the objects itself) and nothing on record
+    said so: each pick now carries the commit and the weights' and body's hashes."""
+    from defgg_ros.provenance import file_sha256
+
+    model, mesh = tmp_path / "m.pt", tmp_path / "body.npz"
+    model.write_bytes(b"weights")
+    mesh.write_bytes(b"tets")
+    ids = ce.identities({"shape": "mesh", "mesh": str(mesh)}, model)
+    assert ids["model_sha256"] == file_sha256(model) and ids["mesh_sha256"] == file_sha256(mesh)
+    assert ids["commit"]
+    assert ce.identities({"shape": "box", "size_m": [0.05] * 3}, model)["mesh_sha256"] is None
+
+
+def test_picks_on_other_bodies_or_weights_are_not_paired():
+    same = [dict(pick("a", "correct", 0, True), mesh_sha256="M", model_sha256="W"),
+            dict(pick("a", "rigid", 0, False), mesh_sha256="M", model_sha256="W")]
+    other_body = [same[0], dict(same[1], mesh_sha256="N")]
+    other_weights = [same[0], dict(same[1], model_sha256="V")]
+    unrecorded = [pick("a", "correct", 0, True), pick("a", "rigid", 0, False)]
+    assert cr.compare(same, "correct", "rigid").counts.pairs == 1
+    assert cr.compare(other_body, "correct", "rigid").counts.pairs == 0
+    assert cr.compare(other_weights, "correct", "rigid").counts.pairs == 0
+    assert cr.compare(unrecorded, "correct", "rigid").counts.pairs == 1

@@ -140,3 +140,20 @@ def test_the_stored_settings_of_a_shipped_evaluation_are_read_back_and_resume_it
     if folder == "sim_v5":
         assert first["trial_settings"] == settings.to_record()
     assert task_protocol(first["trial_settings"], first["task"]) == task_protocol(settings.to_record(), first["task"])
+
+
+def test_a_second_run_into_a_folder_being_written_is_refused_and_writes_nothing(tmp_path, capsys):
+    """Two runs appending to one folder (a restart while the first still runs, a --plan-only beside a run) wrote
+    each trial twice and cut the other's unfinished last line; the folder then could not be resumed."""
+    from defgg_ros.atomic import only_writer
+
+    out = tmp_path / "out"
+    out.mkdir()
+    argv = ["run", "--out", str(out), "--sets", "common", "--only", "common_sponge", "--moduli", "2e9", "--grasps",
+            "1", "--experiments", "main", "--quick", "--no-progress", "--plan-only"]
+    with only_writer(out / ".eval.lock", RuntimeError("held by the first run")):
+        assert cli.main(argv) == 2
+        assert "is being written by another defgg-eval run" in capsys.readouterr().err
+        assert sorted(p.name for p in out.iterdir()) == [".eval.lock"]
+    assert cli.main(argv) == 0          # the first run gone: the folder is free again
+    assert (out / "run.json").exists()

@@ -74,7 +74,9 @@ def test_report_writes_the_paired_table_and_the_results_doc_shows_it(tmp_path):
     assert (best["pairs"], best["a_only"], best["b_only"]) == (4, 3, 0)
     assert best["p_sign_test"] == pytest.approx(0.25)
     csv_text = (tmp_path / "tables" / "paired.csv").read_text()
-    assert csv_text.splitlines()[1].startswith("shake,common,best grasp,stiff,base,4,1,3,0,0,75.00")
+    # 4 pairs on 2 objects: a's net +1 (2e4 and 2e9: 1 vs 0 and a draw), b's +2; the objects' test 2 of 4 sign flips
+    assert csv_text.splitlines()[1].startswith("shake,common,best grasp,stiff,base,4,2,1,3,0,0,75.00,50.00,100.00,"
+                                               "0.5000,0.2500")
     doc = results_markdown(tmp_path, tmp_path / "results.md")
     assert "## Are the two models separable on these trials?" in doc and "| shake | common | best grasp | 4 |" in doc
     notes = tmp_path / "notes.md"
@@ -153,23 +155,46 @@ def test_pending_budget_costs_each_task_and_modulus_from_the_folders_own_simulat
     assert budget_lines(budget)[-1] == "estimated: ~0.1 CPU-h plus 1 cell(s) without a cost"
 
 
-def test_the_adversarial_target_needs_the_paired_sign_test_over_the_five_best_grasps(tmp_path):
-    write_json_atomic(tmp_path / "run.json", {
+def _adversarial_run(out, objects):
+    write_json_atomic(out / "run.json", {
         "command": "defgg-eval run", "commit": "c", "seed": 0, "grasps_per_object": 3, "tasks": ["shake"],
         "experiments": ["main"], "models": {"stiff": {"sha": "S", "uses_stiffness": True, "path": "p"},
                                             "base": {"sha": "B", "uses_stiffness": False, "path": "q"}},
-        "objects": {"adversarial": [{"name": n, "moduli_pa": [2e4]} for n in ("a", "b")]}})
-    store, i = ResultStore(tmp_path), 0
-    for obj in ("a", "b"):
-        for rank in range(3):          # the stiffness-aware grasp holds, the baseline's does not: 6 of 6
+        "objects": {"adversarial": [{"name": n, "moduli_pa": [2e4]} for n in objects]}})
+    store, i = ResultStore(out), 0
+    for obj in objects:
+        for rank in range(3):          # the stiffness-aware grasp holds, the baseline's does not
             store.append(_trial(i, "stiff", "S", obj, 2e4, rank, True, object_set="adversarial"))
             store.append(_trial(i + 1, "base", "B", obj, 2e4, rank, False, object_set="adversarial"))
             i += 2
-    (target,) = report.write_outputs(tmp_path)["targets"]
-    assert target["set"] == "adversarial" and target["p_sign_test"] == pytest.approx(2 / 2**6)
-    assert target["sign_test_met"] and target["margin_met"]
-    doc = results_markdown(tmp_path, tmp_path / "results.md")
-    assert "paired sign test p < 0.05 over the five best grasps (p = 0.0312) | met" in doc
+    (target,) = report.write_outputs(out)["targets"]
+    return target
+
+
+def test_the_adversarial_target_needs_the_objects_sign_flip_test_over_the_five_best_grasps(tmp_path):
+    """Six pairs all one way look significant as independent pairs (p 2/2^6), but they are the three ranks of two
+    objects: only 2 of 4 sign patterns of the objects are that extreme (p 0.5), and the target is not met. Six
+    objects all one way reach p 2/2^6 over objects."""
+    two = _adversarial_run(tmp_path / "two", ("a", "b"))
+    assert two["set"] == "adversarial" and two["p_sign_test"] == pytest.approx(2 / 2**6)
+    assert two["p_objects"] == pytest.approx(0.5)
+    assert two["margin_met"] and not two["sign_test_met"]
+    doc = results_markdown(tmp_path / "two", tmp_path / "two" / "results.md")
+    assert "objects the independent units (objects p = 0.5; as independent pairs 0.0312) | NOT met" in doc
+    six = _adversarial_run(tmp_path / "six", tuple("abcdef"))
+    assert six["p_objects"] == pytest.approx(2 / 2**6) and six["sign_test_met"]
+
+
+def test_the_objects_sign_flip_test_is_exact_and_the_interval_resamples_objects():
+    assert paired.sign_flip_p([]) == 1.0 and paired.sign_flip_p([0, 0]) == 1.0
+    assert paired.sign_flip_p([3, 1, 2]) == pytest.approx(1 / 4)     # |sum| 6: only all + or all -
+    # nets 2, 1, -1: sums over the 8 sign patterns +-2+-1+-1 -> 4, 2, 2, 0, 0, -2, -2, -4; |s| >= 2 in 6 of 8
+    assert paired.sign_flip_p([2, 1, -1]) == pytest.approx(6 / 8)
+    p = paired.Paired(both=0, a_only=4, b_only=0, neither=4,
+                      objects=(("a", 4, 0, 4), ("b", 0, 0, 4)))
+    low, high = p.object_interval_pts()
+    assert (low, high) == (0.0, 100.0)     # drawing a twice or b twice: the only spread is which object
+    assert paired.Paired(1, 0, 0, 0, objects=(("a", 0, 0, 1),)).object_interval_pts() is None
 
 
 def test_every_direction_column_only_where_graded_trials_carry_it(tmp_path):

@@ -32,6 +32,9 @@ def test_margins_per_seed_their_mean_and_the_pooled_test():
     assert s.mean_margin_pts == pytest.approx(25.0) and s.objects == 2
     assert (s.pooled.a_only, s.pooled.b_only, s.pooled.pairs) == (4, 0, 16)
     assert s.pooled_p == pytest.approx(0.125)
+    # Over objects: a's net +3 over the seeds, b's +1: of the 4 sign patterns, |sum| >= 4 only for ++ and --
+    assert s.object_nets == (3, 1) and s.pooled_object_p == pytest.approx(0.5)
+    assert "objects 0.5; pairs 0.125 (pooled)" in seeds_markdown([s])
     # Resampling objects: {a, a} gives 25 + 50 / 2 ... the interval spans what the objects allow, not more.
     assert 0.0 <= s.interval_pts[0] <= 25.0 <= s.interval_pts[1] <= 50.0
 

@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 from support.replay_process import run_replay
 
+from defgg_ros.provenance import file_sha256
 from defgg_ros.ros.transport import FASTDDS_PROFILE, FASTDDS_PROFILE_VARIABLE
 from defgg_ros.sessions import session_topics as st
 from defgg_ros.sessions.bag import SessionWriter, read_bag
 from defgg_ros.sessions.interfaces import session_typestore
-from defgg_ros.sessions.metadata import file_sha256
 from defgg_ros.sessions.session import load_session
 from defgg_ros.sessions.session_topics import topics  # absolute names (bag channels)
 
