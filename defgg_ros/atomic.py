@@ -126,7 +126,9 @@ def read_jsonl(path) -> list:
         try:
             records.append(json.loads(line))
         except json.JSONDecodeError:
-            if i >= len(lines) - 2:  # torn final line from a crash mid-write
+            # A crash mid-write leaves the last line without its newline (append_jsonl writes the line and its
+            # newline in one write): skipped. A complete line that does not parse is corruption, wherever it is.
+            if i == len(lines) - 1:
                 continue
             raise ValueError(f"{path}: corrupt record on line {i + 1}") from None
     return records

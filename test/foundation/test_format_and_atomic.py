@@ -78,6 +78,9 @@ def test_torn_last_jsonl_line_is_skipped_but_corruption_inside_raises(tmp_path):
     path.write_text('{"a": 1}\n{broken\n{"a": 3}\n')
     with pytest.raises(ValueError, match="line 2"):
         read_jsonl(path)
+    path.write_text('{"a": 1}\n{broken}\n')   # complete (its newline written): corruption, not a crash mid-write
+    with pytest.raises(ValueError, match="line 2"):
+        read_jsonl(path)
 
 
 def test_an_append_after_a_torn_line_drops_it_first_and_the_file_stays_readable(tmp_path):
