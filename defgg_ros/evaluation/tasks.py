@@ -32,7 +32,9 @@ from defgg_ros.data.format import STATUS_LIFT_FAILED, STATUS_OK
 TASKS = ("shake", "twist")
 # "every": held at the limit in every direction/axis; "mean": the shake label's rule (mean held >= 25 m/s^2).
 SUCCESS_RULES = ("every", "mean")
-STATUS_NO_GRASP = "no_grasp"   # the model proposed fewer grasps than asked: a failed grasp, never simulated
+# The model proposed fewer grasps than asked: never simulated; the tables count it apart (tables.Cell: no grasp to
+# try), the paired tests leave the rank out.
+STATUS_NO_GRASP = "no_grasp"
 LIMIT_TOLERANCE = HELD_LIMIT_TOLERANCE
 
 
