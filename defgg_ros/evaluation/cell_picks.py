@@ -196,6 +196,8 @@ def run_pick(setup: PickSetup, scene_path: Path, model_path: Path, log, ready_ti
             record["start_position_m"] = [round(float(c), 4) for c in client.object_positions()[0]]
             if setup.measure_first:
                 _measure(client, record, pick_timeout_s)
+                # the squeeze may move the object: the pick's pose is where it lies now, not the pose it shares
+                record["squeeze"]["position_after_m"] = [round(float(c), 4) for c in client.object_positions()[0]]
             else:
                 client.set_stiffness([], default_youngs_modulus_pa=setup.input_youngs_modulus_pa)
             grasp = _plan(client, record)

@@ -368,6 +368,8 @@ def test_the_measured_case_squeezes_first_and_the_plan_carries_the_estimate(tmp_
     assert not record.get("cell_error"), record
     squeeze = record["squeeze"]
     assert squeeze["success"], squeeze
+    moved_m = [a - b for a, b in zip(squeeze["position_after_m"], record["start_position_m"])]
+    assert len(moved_m) == 3 and max(abs(c) for c in moved_m) < 0.05, moved_m   # where the pick then met it
     assert squeeze["update"].startswith("sent") and squeeze["sent_pa"] > 0, squeeze
     assert record["perceived_moduli_pa"] == [pytest.approx(squeeze["sent_pa"])]
     assert record["grasp"]["youngs_modulus_pa"] == pytest.approx(squeeze["sent_pa"])
