@@ -8,6 +8,8 @@ and says it was sent to the segmentation node. The next PlanGrasp's grasp on tha
 measured modulus (the segmentation node's default, 2e6 Pa, before): what the network is given is the measurement;
 and a plan_grasp pick right after plans with it too (a frame perceived before the update does not count).
 """
+import contextlib
+
 import pytest
 from defgg_interfaces.action import PickAndPlace
 from defgg_interfaces.msg import PerceivedObjects
@@ -34,20 +36,28 @@ def _grows(items):
     return lambda: len(items) > count
 
 
-def test_measure_only_then_the_next_plan_uses_the_measured_modulus(tmp_path, executor, spin):
-    log_path = tmp_path / "cell.log"
+@contextlib.contextmanager
+def _soft_box_cell(log_path, executor, spin, probe_name: str):
+    """The whole cell on soft_box.yaml, a probe node hearing PerceivedObjects and holding the action client:
+    (bringup, probe, perceived messages, client)."""
     overrides = {"fake_panda_driver": {"scene_file": str(SCENES / "soft_box.yaml")}}
     with open(log_path, "w") as log, Bringup(load_node_set("sim_cell"), overrides, out=log) as bringup:
         bringup.wait_ready(180.0)
-        probe = Node("squeeze_cell_probe", context=executor.context)
-        poses = []
-        probe.create_subscription(PoseArray, topics.FAKE_OBJECT_POSES, poses.append, qos.STATE)
+        probe = Node(probe_name, context=executor.context)
         perceived = []
         probe.create_subscription(PerceivedObjects, "/defgg/perceived_objects", perceived.append, 1)
         client = ActionClient(probe, PickAndPlace, topics.PICK_AND_PLACE_ACTION)
-        planner = probe.create_client(PlanGrasp, "/defgg/plan_grasp")
         executor.add_node(probe)
         spin(executor, client.server_is_ready, 60.0, "the pick-and-place action server")
+        yield bringup, probe, perceived, client
+
+
+def test_measure_only_then_the_next_plan_uses_the_measured_modulus(tmp_path, executor, spin):
+    log_path = tmp_path / "cell.log"
+    with _soft_box_cell(log_path, executor, spin, "squeeze_cell_probe") as (bringup, probe, perceived, client):
+        poses = []
+        probe.create_subscription(PoseArray, topics.FAKE_OBJECT_POSES, poses.append, qos.STATE)
+        planner = probe.create_client(PlanGrasp, "/defgg/plan_grasp")
         spin(executor, lambda: len(poses) > 0, 60.0, "object poses")
         block_before = poses[-1].poses[0].position
         feedback = []
@@ -113,15 +123,7 @@ def test_measure_then_pick_reports_the_estimate_and_sends_nothing_for_the_object
     """measure_stiffness: squeeze, then the pick goes on. The measurement is in the result, but the segmentation
     node is not told: its entries address an image region, and the object has left it for the bin."""
     log_path = tmp_path / "cell.log"
-    overrides = {"fake_panda_driver": {"scene_file": str(SCENES / "soft_box.yaml")}}
-    with open(log_path, "w") as log, Bringup(load_node_set("sim_cell"), overrides, out=log) as bringup:
-        bringup.wait_ready(180.0)
-        probe = Node("squeeze_pick_probe", context=executor.context)
-        perceived = []
-        probe.create_subscription(PerceivedObjects, "/defgg/perceived_objects", perceived.append, 1)
-        client = ActionClient(probe, PickAndPlace, topics.PICK_AND_PLACE_ACTION)
-        executor.add_node(probe)
-        spin(executor, client.server_is_ready, 60.0, "the pick-and-place action server")
+    with _soft_box_cell(log_path, executor, spin, "squeeze_pick_probe") as (bringup, _probe, perceived, client):
         feedback = []
         handle = spin(executor, client.send_goal_async(PickAndPlace.Goal(plan_grasp=True, measure_stiffness=True),
                                                        feedback_callback=lambda f: feedback.append(f.feedback)),
