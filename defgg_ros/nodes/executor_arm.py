@@ -128,29 +128,61 @@ class ArmCommands:
         return self._sequence is not None or self._arm_goal is not None or self._arm_goals_unanswered > 0
 
     def _hold_arm(self) -> None:
-        """Stop the arm where it is (lock held): cancel the running goal (joint_trajectory_controller then holds its
-        current state) and, as a second command that does not depend on the cancel being answered, send a one-point
-        trajectory to rest (an empty trajectory is refused by the controller). The point lies ahead of the moving
-        arm, where a smooth deceleration from its measured velocity ends (control/stopping.py): the controller
-        blends into it from its measured state, so the arm slows down and never turns back (a point at the last
-        measured position pulled it back by its velocity x the state's age and the blend). Only when this node has a
-        goal that may still move the arm; a failed send is logged, never raised: the caller is on its way out."""
+        """Stop the arm where it is (lock held), only when this node has a goal that may still move it: a one-point
+        trajectory to rest (control/stopping.py: ahead of the moving arm, where a smooth deceleration from its
+        velocity ends) preempts the running goal, and the controller blends into it from the measured state, so
+        the arm slows down and never turns back. No cancel beside it: a cancel makes the controller hold the
+        measured position at once (set_hold_position) and the hold would then set the arm moving again (stop, then
+        go); the cancel is the fallback when no hold can be made or the controller does not accept it. A failed
+        send is logged, never raised: the caller is on its way out."""
         moving = self._arm_may_move()
         self._arm_goal_serial += 1
         self._held_serial = self._arm_goal_serial
+        running, self._arm_goal = self._arm_goal, None
         try:
-            if self._arm_goal is not None:
-                self._arm_goal.cancel_goal_async()
-                self._arm_goal = None
-            if moving and self._last_state is not None:
-                state, received_s = self._last_state
-                limits = arm_limits(self._kin.arm, 1.0)
-                q_hold, blend_s = stopping_hold(state.q_rad, state.qd_radps, time.monotonic() - received_s,
-                                                limits.qdd_max_radps2, limits.q_min_rad, limits.q_max_rad)
-                hold = hold_trajectory_msg(q_hold, self._params()["base_frame"], self._arm_joints, blend_s)
-                self._arm_client.send_goal_async(FollowJointTrajectory.Goal(trajectory=hold))
+            hold = self._stopping_hold() if moving else None
+            if hold is None:
+                self._cancel_arm_goal(running)
+                return
+            future = self._arm_client.send_goal_async(FollowJointTrajectory.Goal(trajectory=hold))
+            future.add_done_callback(lambda answer: self._on_hold_answer(answer, running))
         except Exception as error:  # noqa: BLE001 - rclpy raises RCLError/InvalidHandle once torn down
             self.get_logger().error(f"could not command the arm to stop: {error!r}")
+            self._cancel_arm_goal(running)
+
+    def _stopping_hold(self):
+        """The hold trajectory from the last joint state (None without one, or without finite positions)."""
+        if self._last_state is None:
+            return None
+        state, received_s = self._last_state
+        limits = arm_limits(self._kin.arm, 1.0)
+        try:
+            q_hold, blend_s = stopping_hold(state.q_rad, state.qd_radps, time.monotonic() - received_s,
+                                            limits.qdd_max_radps2, limits.q_min_rad, limits.q_max_rad,
+                                            self._last_acceleration)
+        except ValueError as error:
+            self.get_logger().error(f"no hold trajectory: {error}")
+            return None
+        return hold_trajectory_msg(q_hold, self._params()["base_frame"], self._arm_joints, blend_s)
+
+    def _on_hold_answer(self, future, running) -> None:
+        """A hold the controller refused (or could not be asked): cancel the goal it was to preempt instead."""
+        try:
+            accepted = future.result().accepted
+        except Exception as error:  # noqa: BLE001 - any failure of the request means no hold
+            accepted = False
+            self.get_logger().error(f"the hold trajectory was not delivered: {error!r}")
+        if not accepted:
+            self.get_logger().error("the controller refused the hold trajectory: canceling the running goal")
+            self._cancel_arm_goal(running)
+
+    def _cancel_arm_goal(self, handle) -> None:
+        if handle is None:
+            return
+        try:
+            handle.cancel_goal_async()
+        except Exception as error:  # noqa: BLE001 - rclpy raises RCLError/InvalidHandle once torn down
+            self.get_logger().error(f"could not cancel the arm's goal: {error!r}")
 
     def _send_gripper(self, sequence: PickPlaceSequence, client: ActionClient, goal):
         # Only the newest gripper goal answers the sequence: the result of one canceled or preempted before (a

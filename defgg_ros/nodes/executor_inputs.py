@@ -94,6 +94,7 @@ class RobotInputs:
                 qd = self._velocity_estimate.update(state.q_rad, stamp_ns * 1e-9)
                 state = dataclasses.replace(state, qd_radps=qd)
             self._last_state = (state, time.monotonic())
+            self._last_acceleration = self._acceleration_estimate.update(state.qd_radps, stamp_ns * 1e-9)
             self._watch.update(state.q_rad, stamp_ns * 1e-9)
             if self._sequence is not None:
                 self._sequence.on_joint_state(state, self._last_state[1])

@@ -88,6 +88,9 @@ class ExecutorNode(RobotInputs, ArmCommands, GraspPlanning, Node):
         self._gripper_canceled_serial = 0   # the newest goal a CancelGripper was for (canceled once accepted)
         self._last_state: tuple[ArmState, float] | None = None
         self._velocity_estimate = PositionVelocityEstimator()   # for drivers without velocities
+        # the arm's acceleration (the same difference, of the velocities): a stop carries the last state on with it
+        self._acceleration_estimate = PositionVelocityEstimator()
+        self._last_acceleration = None
         self._last_force = np.zeros(3)
         self._last_force_wall_s = None   # when the last external wrench arrived (monotonic)
         names = topics.robot_names(p["robot_type"])

@@ -30,13 +30,14 @@ from defgg_ros.sim.cell.tolerances import (
     default_tolerances,
     goal_tolerances,
 )
-from defgg_ros.sim.cell.trajectory import TrajectoryError
+from defgg_ros.sim.cell.trajectory import TrajectoryError, make_waypoints
 
 FEEDBACK_PERIOD_S = 0.1       # FollowJointTrajectory feedback while a goal runs (wall clock)
 # A trajectory stamp further than this from sim time is a wall-clock stamp
 # from a node without use_sim_time: start it now instead of never/at once.
 MAX_STAMP_OFFSET_S = 1.0
 PREEMPTED_TEXT = "Current goal preempted by new incoming action."   # the controller's preempt_active_goal
+SHUTTING_DOWN_TEXT = "the simulated controller is shutting down"
 RESULT_CODES = {SUCCEEDED: FollowJointTrajectory.Result.SUCCESSFUL,
                 PATH_VIOLATED: FollowJointTrajectory.Result.PATH_TOLERANCE_VIOLATED,
                 GOAL_VIOLATED: FollowJointTrajectory.Result.GOAL_TOLERANCE_VIOLATED}
@@ -48,6 +49,7 @@ def _seconds(duration) -> float:
 
 def _joint_tolerances(msgs) -> list:
     return [(m.name, m.position, m.velocity, m.acceleration) for m in msgs]
+
 
 
 class FakeArmController:
@@ -120,11 +122,12 @@ class FakeArmController:
             self._logger.error(f"rejected joint trajectory: {exc}")
 
     def _on_goal(self, goal) -> GoalResponse:
-        """Reject what the joint_trajectory_controller rejects: no points, unknown or missing joints."""
+        """Reject what the joint_trajectory_controller rejects (validate_trajectory_msg): no points, unknown or
+        missing joints, times not strictly increasing, sizes that do not match."""
         try:
             if not goal.trajectory.points:
                 raise TrajectoryError("the trajectory has no points")
-            self._trajectory_points(goal.trajectory)
+            make_waypoints(self._trajectory_points(goal.trajectory), len(self._joints))
         except (TrajectoryError, ValueError) as exc:
             self._logger.error(f"rejected FollowJointTrajectory goal: {exc}")
             return GoalResponse.REJECT
@@ -142,6 +145,8 @@ class FakeArmController:
         try:
             points = self._trajectory_points(request.trajectory)
             with self._lock:
+                if not self._driver._running:   # accepted as the driver shut down: its simulation is gone
+                    raise ValueError(SHUTTING_DOWN_TEXT)
                 self._goal_id += 1
                 goal_id = self._goal_id
                 self._start(points, request.trajectory.header.stamp, tolerances, goal_id)
@@ -169,8 +174,14 @@ class FakeArmController:
                 with self._lock:
                     if self._running_goal == goal_id:
                         self._running_goal = None
-                        self._hold()   # hold where the arm is, like the controller
-                goal_handle.canceled()
+                        if self._driver._running:   # shutting down: the simulation is (being) closed
+                            self._hold()   # hold where the arm is, like the controller
+                if goal_handle.is_cancel_requested:
+                    goal_handle.canceled()
+                else:   # the driver shutting down: a goal can only be canceled on request
+                    result.error_code = FollowJointTrajectory.Result.INVALID_GOAL
+                    result.error_string = SHUTTING_DOWN_TEXT
+                    goal_handle.abort()
                 return result
             if time.monotonic() >= next_feedback:
                 next_feedback = time.monotonic() + FEEDBACK_PERIOD_S

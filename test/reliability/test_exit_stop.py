@@ -40,6 +40,7 @@ WATCH_AFTER_S = 1.5          # joint states watched this long after the signal (
 KIN = PandaKinematics()
 MOVING_RADPS = 0.02          # a joint this fast at the signal has a direction to keep
 TURN_BACK_TOLERANCE_RAD = 5e-4
+SPEED_UP_TOLERANCE_RADPS = 0.02
 
 
 def _cell_set(tmp_path):
@@ -110,6 +111,7 @@ def test_the_arm_is_at_rest_within_half_a_second_of_stopping_the_executor(phase,
         executor.remove_node(probe)
     after = [(_stamp_s(j) - signal_s, float(np.max(np.abs(_arm(j)[1])))) for j in joints if _stamp_s(j) > signal_s]
     turned_back_rad = _turned_back_rad([j for j in joints if _stamp_s(j) >= signal_s])
+    sped_up_radps = _sped_up_again_radps([j for j in joints if _stamp_s(j) >= signal_s])
     late = [speed for t, speed in after if t >= REST_WITHIN_S]
     if how == "bringup_stop" and not late:   # the driver stopped within 0.5 s: its last joint states count
         late = [speed for t, speed in after if t >= after[-1][0] - 0.1]
@@ -117,7 +119,7 @@ def test_the_arm_is_at_rest_within_half_a_second_of_stopping_the_executor(phase,
     print(f"{phase}/{how}: executor exit {executor_code}; joint speed above {REST_SPEED_RADPS} rad/s until "
           f"{moving_until:.3f} s after the signal (sim); max {max(late, default=float('nan')):.4f} rad/s from "
           f"{REST_WITHIN_S} s on over {after[-1][0]:.2f} s of joint states; turned back "
-          f"{turned_back_rad * 1e3:.2f} mrad")
+          f"{turned_back_rad * 1e3:.2f} mrad, sped up again by {sped_up_radps:.3f} rad/s")
     tail = log_path.read_text()[-3000:]
     assert late, ("no joint states 0.5 s after the signal", tail)
     assert max(late) <= REST_SPEED_RADPS, (f"arm still moving {REST_WITHIN_S} s after {how}: {max(late):.3f} rad/s",
@@ -125,6 +127,18 @@ def test_the_arm_is_at_rest_within_half_a_second_of_stopping_the_executor(phase,
     assert executor_code == 0, (f"the executor exited {executor_code}", tail)
     assert "the arm is at rest" in log_path.read_text(), tail
     assert turned_back_rad <= TURN_BACK_TOLERANCE_RAD, f"the stop turned a joint back {turned_back_rad * 1e3:.2f} mrad"
+    assert sped_up_radps <= SPEED_UP_TOLERANCE_RADPS, f"the stop braked, then sped up again by {sped_up_radps} rad/s"
+
+
+def _sped_up_again_radps(states) -> float:
+    """How much any joint moving at the signal sped up again after it had slowed (rad/s): a cancel makes the
+    controller hold at once, and a hold trajectory arriving after it sets the arm moving again (stop, then go)."""
+    _, qd_at_signal = _arm(states[0])
+    moving = np.abs(qd_at_signal) > MOVING_RADPS
+    if not np.any(moving):
+        return 0.0
+    speed = np.array([np.sign(qd_at_signal) * _arm(j)[1] for j in states])[:, moving]
+    return float(np.max(speed - np.minimum.accumulate(speed, axis=0)))
 
 
 def _turned_back_rad(states) -> float:

@@ -217,3 +217,33 @@ def test_a_replacing_goal_starts_from_the_measured_velocity(executor, rclpy_cont
         assert preempted.error_string == "Current goal preempted by new incoming action."
     finally:
         driver.shutdown()
+
+
+def test_a_goal_whose_times_do_not_increase_is_rejected_not_accepted_then_aborted(executor, rclpy_context, client,
+                                                                                   spin):
+    """joint_trajectory_controller's validate_trajectory_msg refuses it at the goal request ("not strictly
+    increasing"); ours accepted it and aborted it when it started."""
+    driver = _driver(executor, rclpy_context, 0.0)
+    arm = _action(client, executor, spin)
+    _, q, _ = _arm(driver)
+    goal = _goal([(0.5, q), (0.5, q)])
+    handle = spin(executor, arm.send_goal_async(goal), TIMEOUT_S, "the goal response")
+    assert not handle.accepted
+    driver.destroy_node()
+
+
+def test_a_goal_running_when_the_driver_shuts_down_is_aborted_saying_so(executor, rclpy_context, client, spin):
+    """A goal can be ended canceled only after a cancel request; the shutdown ended it canceled anyway, which rclpy
+    refuses ("invalid transition from state EXECUTING with event CANCELED") with an error in the log."""
+    from action_msgs.msg import GoalStatus
+
+    driver = _driver(executor, rclpy_context, 0.1)
+    arm = _action(client, executor, spin)
+    _, q0, _ = _arm(driver)
+    feedback = []
+    handle, future = _run(executor, spin, arm, _goal([(5.0, q0 + 0.3)]), feedback=feedback.append)
+    spin(executor, lambda: feedback, TIMEOUT_S, "the goal running (its feedback)")
+    driver.shutdown()
+    response = spin(executor, future, TIMEOUT_S, "the goal's result")
+    assert response.status == GoalStatus.STATUS_ABORTED
+    assert response.result.error_string == "the simulated controller is shutting down"

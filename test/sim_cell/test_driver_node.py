@@ -375,6 +375,16 @@ def test_a_robot_type_franka_ros2_does_not_have_is_refused_naming_the_choices(rc
         topics.robot_names("panda")
 
 
+@pytest.mark.parametrize("name", ["gripper_stop_service", "gripper_command_action", "depth_topic"])
+def test_an_empty_interface_name_is_refused_in_one_line(rclpy_context, name):
+    """An empty service name raised rclpy's InvalidServiceNameException (not a ValueError): a traceback and exit 1
+    instead of the one-line refusal every other bad parameter gets."""
+    from defgg_ros.nodes.fake_panda_driver_node import FakePandaDriver
+
+    with pytest.raises(ValueError, match=rf"{name} = .. must be not empty"):
+        FakePandaDriver(context=rclpy_context, parameter_overrides=[Parameter(name, value="")])
+
+
 def test_the_wrench_is_published_as_the_robot_applies_it_to_the_environment():
     """libfranka's O_F_ext_hat_K (what franka_robot_state_broadcaster publishes): forces the robot applies to the
     environment are positive. The cell's contacts push the hand up when it presses on the table (+z on the hand):
