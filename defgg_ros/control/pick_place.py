@@ -99,6 +99,11 @@ TOUCHDOWN_MARGIN_M = 0.02
 # A gap between two ticks longer than this is the owner's own stall, not silence of the driver (the owner ticks
 # every control period, 10 ms): a cell whose processes were all suspended for a minute (SIGSTOP) aborted its
 # pick as "driver silent" on resume, before the first joint state after the pause could arrive (2026-11-29).
+# A stop starts this far ahead along the commanded motion, stamped to start then (_stop_motion): longer than a
+# goal's usual latency to the controller (under load in the simulated cell up to ~0.13 s of robot time).
+STOP_LEAD_S = 0.15
+# An arm further than this from the commanded path (a contact holds it) does not follow it: stop from where it is.
+FOLLOWING_TOLERANCE_RAD = 0.02
 OWN_STALL_S = 0.5
 
 
@@ -359,12 +364,13 @@ class PickPlaceSequence(SqueezePhase):
             raise SequenceFailure(f"{failure}: its straight {line} cannot be made: {error}") from error
 
     # --- motions ------------------------------------------------------------
-    def _send(self, trajectory, sim_s: float, guarded_stop: bool = False) -> list:
+    def _send(self, trajectory, sim_s: float, guarded_stop: bool = False, start_s: float | None = None) -> list:
+        """Command the trajectory: on receipt (its clock from sim_s), or from start_s (robot time) when given."""
         if not guarded_stop:
             check_trajectory(trajectory, self._limits, self._kin, self._cfg.table_z_m)
-        self._motion = _Motion(trajectory, sim_s, guarded_stop)
+        self._motion = _Motion(trajectory, sim_s if start_s is None else start_s, guarded_stop)
         self._still_since_s = None
-        return [SendTrajectory(trajectory)]
+        return [SendTrajectory(trajectory, start_s)]
 
     def _line_to(self, target_p: np.ndarray, speed_mps: float, sim_s: float) -> list:
         q = self._obs.state.q_rad
@@ -375,14 +381,62 @@ class PickPlaceSequence(SqueezePhase):
         target = self._kin.fk(self._obs.state.q_rad)[:3, 3] + [0.0, 0.0, height_m]
         return self._line_to(target, self._cfg.line_speed_mps, sim_s)
 
-    def _stop_motion(self, sim_s: float) -> list:
-        """Jerk-limited stop from where the arm is along the commanded motion (checked: plan_checked_stop)."""
-        q, qd, qdd = matched_state(self._motion.trajectory, self._obs.state.q_rad)
-        stop, breach = plan_checked_stop(q, qd, qdd, self._limits, self._kin, self._cfg.table_z_m,
-                                         self._cfg.sample_dt_s)
+    def _stop_motion(self, sim_s: float, at_once: bool = False) -> list:
+        """Stop the running motion (_planned_stop) and end this motion once the arm is still."""
+        stop, start_s, breach = self._planned_stop(sim_s, at_once)
         if breach:
             self._recovery_log.append(breach)   # in Outcome.recovery: the operator must hear of it
-        return self._send(stop, sim_s, guarded_stop=True)
+        return self._send(stop, sim_s, guarded_stop=True, start_s=start_s)
+
+    def stop_now(self, sim_s: float):
+        """(stop trajectory, start_s robot time or None: on receipt) that stops the running motion as a cancel
+        would, for the owner's own stop (the executor on its way out); None without a motion or a joint state.
+        The sequence does not change."""
+        if self._motion is None or self._obs.state is None:
+            return None
+        stop, start_s, _ = self._planned_stop(sim_s, at_once=False)
+        return stop, start_s
+
+    def _planned_stop(self, sim_s: float, at_once: bool):
+        """(jerk-limited stop, start_s, breach) (checked: plan_checked_stop). While the arm follows the commanded
+        motion: from that motion's state STOP_LEAD_S from now, stamped to start then, so the controller blends
+        from wherever the arm is at receipt into it (however late the goal arrives, up to the lead); a stop planned
+        from the last joint state and started on receipt began behind the moving arm by the state's age and the
+        goal's latency, and the controller pulled the arm back to it (a cancel in a transfer: up to 51 mrad back,
+        3.4 rad/s). A stop on contact (at_once: every lead is more press), or an arm not following the command
+        (held by a contact, or a stop already running): from the measured position with the commanded velocity
+        there (matched_state), on receipt (start_s None)."""
+        m, state = self._motion, self._obs.state
+        ahead = None if at_once or m.guarded_stop else self._state_ahead(sim_s)
+        if ahead is None:
+            (q, qd, qdd), start_s = matched_state(m.trajectory, state.q_rad), None
+        else:
+            (q, qd, qdd), start_s = ahead
+        stop, breach = plan_checked_stop(q, qd, qdd, self._limits, self._kin, self._cfg.table_z_m,
+                                         self._cfg.sample_dt_s)
+        return stop, start_s, breach
+
+    def _state_ahead(self, sim_s: float):
+        """((q, qd, qdd), robot time) of the commanded motion's first sample STOP_LEAD_S or more from now, on the
+        controller's clock for that motion: the last joint state's stamp minus the time of the sample nearest it
+        (the motion started when the goal arrived, not when it was sent). None when the arm does not follow the
+        motion (further than FOLLOWING_TOLERANCE_RAD from its nearest sample) or the state has no stamp."""
+        traj, state = self._motion.trajectory, self._obs.state
+        nearest = int(np.argmin(np.max(np.abs(traj.q_rad - state.q_rad), axis=1)))
+        if not np.isfinite(state.stamp_s) or \
+                np.max(np.abs(traj.q_rad[nearest] - state.q_rad)) > FOLLOWING_TOLERANCE_RAD:
+            return None
+        # between samples: the offset along the commanded velocity there (samples are sample_dt_s apart)
+        speed2 = float(traj.qd_radps[nearest] @ traj.qd_radps[nearest])
+        between_s = float((state.q_rad - traj.q_rad[nearest]) @ traj.qd_radps[nearest]) / speed2 if speed2 > 1e-12 \
+            else 0.0
+        started_s = state.stamp_s - (traj.times_s[nearest] + np.clip(between_s, -self._cfg.sample_dt_s,
+                                                                     self._cfg.sample_dt_s))
+        k = int(np.searchsorted(traj.times_s, sim_s + STOP_LEAD_S - started_s))
+        if k >= len(traj.times_s):   # the motion ends within the lead: at rest at its end
+            return (traj.q_rad[-1].copy(), np.zeros(7), np.zeros(7)), max(started_s + traj.duration_s,
+                                                                           sim_s + STOP_LEAD_S)
+        return (traj.q_rad[k].copy(), traj.qd_radps[k].copy(), traj.qdd_radps2[k].copy()), started_s + traj.times_s[k]
 
     def _arrived(self, sim_s: float) -> bool:
         m, state = self._motion, self._obs.state
@@ -496,7 +550,7 @@ class PickPlaceSequence(SqueezePhase):
         force = float(np.linalg.norm(self._obs.force_n - self._obs.force_bias_n))
         if not self._motion.guarded_stop and force > self._cfg.contact_force_threshold_n:
             self.outcome.contact_detected = True
-            return self._stop_motion(sim_s)
+            return self._stop_motion(sim_s, at_once=True)
         if not self._arrived(sim_s):
             return []
         self.outcome.contact_height_m = self._tcp_z_m()
@@ -627,7 +681,7 @@ class PickPlaceSequence(SqueezePhase):
     def _tick_place(self, sim_s: float) -> list:
         if not self._placed_open_sent and self._touched():
             self.place_contact_z_m = self._tcp_z_m()   # the object stands on something: release it here
-            return self._stop_motion(sim_s)
+            return self._stop_motion(sim_s, at_once=True)
         if not self._placed_open_sent:
             # Held while lowering: an object lost late in the transfer shows only now (force-closed fingers
             # close on nothing at 20-50 mm/s), and one lost in the lowering may be outside the bin.
@@ -769,7 +823,7 @@ class PickPlaceSequence(SqueezePhase):
         else:
             if self._guarded_lowering and self._touched():
                 self._recovery_log.append(f"touched down at TCP z {self._tcp_z_m():.3f} m")
-                return self._stop_motion(sim_s)
+                return self._stop_motion(sim_s, at_once=True)
             if self._holding_step:
                 self._check_held()
             if not self._arrived(sim_s):

@@ -176,12 +176,14 @@ class ArmState:
     q_rad: np.ndarray
     qd_radps: np.ndarray
     gripper_width_m: float
+    stamp_s: float = math.nan     # robot time it was measured (the joint state's stamp); NaN: not known
 
 
 # --- commands for the owner to carry out ------------------------------------
 @dataclass(frozen=True)
 class SendTrajectory:
     trajectory: SampledTrajectory
+    start_s: float | None = None   # robot time its time 0 applies (the goal's header.stamp); None: on receipt
 
 
 @dataclass(frozen=True)

@@ -67,7 +67,7 @@ class ArmCommands:
         """Execute the sequence's commands (called with the lock held)."""
         for command in commands:
             if isinstance(command, SendTrajectory):
-                self._send_arm(command.trajectory)
+                self._send_arm(command.trajectory, command.start_s)
             elif isinstance(command, MoveGripper):
                 goal = Move.Goal(width=command.width_m, speed=command.speed_mps)
                 self._send_gripper(sequence, self._move_client, goal)
@@ -83,18 +83,19 @@ class ArmCommands:
                     self._gripper_goal.cancel_goal_async()
                     self._gripper_goal = None
 
-    def _send_arm(self, trajectory) -> None:
+    def _send_arm(self, trajectory, start_s: float | None = None) -> None:
         """Send a trajectory as a FollowJointTrajectory goal (lock held); it replaces the running one.
 
-        The joint_trajectory_controller starts a goal stamped 0 on receipt and blends it from where the
-        arm is, so each new command replaces the previous goal there. The sequence watches the joint
+        The joint_trajectory_controller starts a goal stamped 0 on receipt (start_s None), else at start_s
+        (robot time), and blends it from where the arm is into its first point while that is ahead, so each new
+        command replaces the previous goal there. The sequence watches the joint
         states for arrival; a rejected or aborted goal is logged here (the sequence then fails on its
         settle timeout, naming the phase).
         """
         self._arm_goal_serial += 1
         serial = self._arm_goal_serial
         goal = FollowJointTrajectory.Goal(
-            trajectory=trajectory_to_msg(trajectory, self._params()["base_frame"], self._arm_joints))
+            trajectory=trajectory_to_msg(trajectory, self._params()["base_frame"], self._arm_joints, start_s))
 
         def on_result(future):
             result = future.result().result
@@ -151,9 +152,20 @@ class ArmCommands:
             self._cancel_arm_goal(running)
 
     def _stopping_hold(self):
-        """The hold trajectory from the last joint state (None without one, or without finite positions)."""
+        """The trajectory that stops the arm (None without a joint state, or without finite positions): the
+        running sequence's stop (stamped ahead along its commanded motion: whenever it arrives, the controller
+        blends into it from where the arm is), else a one-point hold from the last joint state."""
         if self._last_state is None:
             return None
+        frame = self._params()["base_frame"]
+        if self._sequence is not None:
+            try:
+                stop = self._sequence.stop_now(self._clocks()[0])
+            except ValueError as error:   # a stop Ruckig or the checks refuse: the one-point hold below instead
+                self.get_logger().error(f"the sequence's stop could not be planned: {error}")
+                stop = None
+            if stop is not None:
+                return trajectory_to_msg(stop[0], frame, self._arm_joints, stop[1])
         state, received_s = self._last_state
         limits = arm_limits(self._kin.arm, 1.0)
         try:
@@ -163,7 +175,7 @@ class ArmCommands:
         except ValueError as error:
             self.get_logger().error(f"no hold trajectory: {error}")
             return None
-        return hold_trajectory_msg(q_hold, self._params()["base_frame"], self._arm_joints, blend_s)
+        return hold_trajectory_msg(q_hold, frame, self._arm_joints, blend_s)
 
     def _on_hold_answer(self, future, running) -> None:
         """A hold the controller refused (or could not be asked): cancel the goal it was to preempt instead."""

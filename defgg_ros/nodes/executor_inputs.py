@@ -89,7 +89,7 @@ class RobotInputs:
                     watch.heard()   # either arm topic: the fallback's subscription shares this callback
             if math.isfinite(state.gripper_width_m):
                 self._finger_widths["joint_states"] = (state.gripper_width_m, time.monotonic())
-            state = dataclasses.replace(state, gripper_width_m=self._gripper_width_m())
+            state = dataclasses.replace(state, gripper_width_m=self._gripper_width_m(), stamp_s=stamp_ns * 1e-9)
             if len(msg.velocity) != len(msg.name):   # a driver without velocities: zeros would read "at rest"
                 qd = self._velocity_estimate.update(state.q_rad, stamp_ns * 1e-9)
                 state = dataclasses.replace(state, qd_radps=qd)

@@ -30,10 +30,15 @@ class RobotRestarted(GoalError):
 DEFAULT_NAMES = topics.robot_names()
 
 
-def trajectory_to_msg(trajectory, frame_id: str, joint_names=DEFAULT_NAMES["joints"]) -> JointTrajectory:
-    """The trajectory (arm joints 1..7 in order) for a joint_trajectory_controller; stamp 0 = start on receipt."""
+def trajectory_to_msg(trajectory, frame_id: str, joint_names=DEFAULT_NAMES["joints"],
+                      start_s: float | None = None) -> JointTrajectory:
+    """The trajectory (arm joints 1..7 in order) for a joint_trajectory_controller; stamp 0 = start on receipt,
+    else start_s (robot time, s)."""
     msg = JointTrajectory()
     msg.header.frame_id = frame_id
+    if start_s is not None:
+        sec, nanosec = divmod(int(round(start_s * 1e9)), 1_000_000_000)
+        msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nanosec
     msg.joint_names = list(joint_names)
     for t, q, qd, qdd in zip(trajectory.times_s, trajectory.q_rad, trajectory.qd_radps, trajectory.qdd_radps2):
         # Split whole nanoseconds, so rounding can never carry into a wrong second.

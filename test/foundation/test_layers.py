@@ -3,8 +3,8 @@ those inside functions) fails on an import between two packages that MAY_IMPORT 
 table does not place, on a cycle in the table itself, on an import cycle between packages or between modules,
 and on a core package or a root module importing rclpy.
 
-The layers, bottom up: the root modules (constants, errors, rotations, atomic, cli_help, stiffness, grip_force,
-hertz, section_model, squeeze; every package may import them); the cores, no rclpy (grasping, control, perception,
+The layers, bottom up: the root modules (constants, errors, rotations, atomic, cli_help, provenance, stiffness,
+grip_force, hertz, section_model, squeeze; every package may import them); the cores, no rclpy (grasping, control, perception,
 model, sim, data, planning); offline above them (train, evaluation); the ROS side (ros: rclpy helpers and names;
 nodes: thin adapters; bringup: the process launcher; sessions: record/replay; demo). A package added to defgg_ros
 fails here until it has a row.
@@ -18,13 +18,14 @@ pytestmark = pytest.mark.unit
 
 PACKAGE_DIR = Path(__file__).resolve().parents[2] / "defgg_ros"
 ROOT_MODULES = {"constants", "errors", "rotations", "atomic", "cli_help", "stiffness", "grip_force", "hertz",
-                "section_model", "squeeze"}
+                "section_model", "squeeze", "provenance"}
 CORES = ("model", "grasping", "perception", "control", "sim", "data", "planning")
 ROS_MODULES = ("rclpy", "rosidl_runtime_py", "rosbag2_py")
 # Which package may import which (besides the root modules). Read a row as "<package> stands on these".
 MAY_IMPORT = {
     # root modules among themselves
     "__init__": set(), "constants": set(), "errors": set(), "rotations": set(), "atomic": set(), "cli_help": set(),
+    "provenance": set(),
     "stiffness": {"constants"}, "grip_force": {"constants"}, "hertz": set(), "section_model": {"constants", "hertz"},
     "squeeze": {"constants", "hertz", "section_model"},
     # cores

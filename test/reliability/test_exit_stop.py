@@ -232,3 +232,36 @@ def test_sigint_to_every_process_at_once_still_stops_the_arm_and_both_confirm(tm
     assert codes == [0, 0], (codes, text[-3000:])
     assert "the arm is at rest" in text and "the simulated arm is held at rest" in text, text[-3000:]
     assert after and after[-1][1] <= REST_SPEED_RADPS, (after[-5:], text[-3000:])
+
+
+def _until_first_rest(states) -> list:
+    """The joint states from the first (the signal's) until the arm first rests (every joint <= REST_SPEED_RADPS):
+    what the stop did, before a recovery moves the arm on purpose."""
+    for i, state in enumerate(states):
+        if i and float(np.max(np.abs(_arm(state)[1]))) <= REST_SPEED_RADPS:
+            return states[:i + 1]
+    return states
+
+
+@pytest.mark.parametrize("phase", ["lift", "transfer"])
+def test_a_cancel_mid_motion_slows_the_arm_to_rest_without_turning_it_back(phase, tmp_path, executor, spin):
+    """A cancel stops the arm with the sequence's jerk-limited stop trajectory, planned from the state the
+    commanded motion has reached. That stop must only slow the arm: a stop planned from a late joint state starts
+    behind the moving arm, and the controller (blending from the measured state) pulls it back."""
+    log_path = tmp_path / "cell.log"
+    with open(log_path, "w") as log, Bringup(_cell_set(tmp_path), out=log):
+        probe, joints, feedback, handle = _start_pick(executor, spin, "cancel_stop_probe")
+        result = handle.get_result_async()
+        spin(executor, lambda: result.done() or _in_phase(phase, feedback, joints), 240.0, f"the {phase} phase")
+        assert not result.done(), ("the pick ended before the phase", result.result().result.failure_reason)
+        signal_s = _stamp_s(joints[-1])
+        spin(executor, handle.cancel_goal_async(), 30.0, "the cancel's answer")
+        spin(executor, lambda: _stamp_s(joints[-1]) > signal_s + WATCH_AFTER_S, 60.0, "joint states after it")
+        executor.remove_node(probe)
+    stop = _until_first_rest([j for j in joints if _stamp_s(j) >= signal_s])
+    turned_back_rad, sped_up_radps = _turned_back_rad(stop), _sped_up_again_radps(stop)
+    print(f"cancel in {phase}: at rest {_stamp_s(stop[-1]) - signal_s:.3f} s after (sim), speed at the cancel "
+          f"{float(np.max(np.abs(_arm(stop[0])[1]))):.3f} rad/s; turned back {turned_back_rad * 1e3:.2f} mrad, "
+          f"sped up again by {sped_up_radps:.3f} rad/s")
+    assert turned_back_rad <= TURN_BACK_TOLERANCE_RAD, f"the stop turned a joint back {turned_back_rad * 1e3:.2f} mrad"
+    assert sped_up_radps <= SPEED_UP_TOLERANCE_RADPS, f"the stop sped a joint up again by {sped_up_radps} rad/s"
