@@ -4,10 +4,10 @@ table does not place, on a cycle in the table itself, on an import cycle between
 and on a core package or a root module importing rclpy.
 
 The layers, bottom up: the root modules (constants, errors, rotations, atomic, cli_help, provenance, stiffness,
-grip_force, hertz, section_model, squeeze; every package may import them); the cores, no rclpy (grasping, control, perception,
-model, sim, data, planning); offline above them (train, evaluation); the ROS side (ros: rclpy helpers and names;
-nodes: thin adapters; bringup: the process launcher; sessions: record/replay; demo). A package added to defgg_ros
-fails here until it has a row.
+grip_force, hertz, section_model, squeeze; every package may import them); the cores, no rclpy (grasping, control,
+perception, model, sim, data, planning); offline above them (train, evaluation); the ROS side (ros: rclpy helpers
+and names; nodes: thin adapters; bringup: the process launcher; sessions: record/replay; demo). A package added to
+defgg_ros fails here until it has a row.
 """
 import ast
 from pathlib import Path

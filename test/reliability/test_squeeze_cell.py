@@ -16,6 +16,7 @@ from defgg_interfaces.msg import PerceivedObjects
 from defgg_interfaces.srv import PlanGrasp
 from geometry_msgs.msg import PoseArray
 from rclpy.node import Node
+from sensor_msgs.msg import JointState
 
 from defgg_ros.bringup.node_set import load_node_set
 from defgg_ros.bringup.supervisor import Bringup
@@ -46,9 +47,12 @@ def _soft_box_cell(log_path, executor, spin, probe_name: str):
         probe = Node(probe_name, context=executor.context)
         perceived = []
         probe.create_subscription(PerceivedObjects, "/defgg/perceived_objects", perceived.append, 1)
+        joints = []
+        probe.create_subscription(JointState, topics.JOINT_STATES, joints.append, qos.STATE)
         client = ActionClient(probe, PickAndPlace, topics.PICK_AND_PLACE_ACTION)
         executor.add_node(probe)
         spin(executor, client.server_is_ready, 60.0, "the pick-and-place action server")
+        spin(executor, lambda: len(joints) > 10, 60.0, "joint states from the driver")   # the executor's too, by now
         yield bringup, probe, perceived, client
 
 
