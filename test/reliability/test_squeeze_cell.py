@@ -56,6 +56,16 @@ def _soft_box_cell(log_path, executor, spin, probe_name: str):
         yield bringup, probe, perceived, client
 
 
+def _run_goal(executor, spin, client, goal):
+    """(result, the phases its feedback named, in order) of one PickAndPlace goal."""
+    feedback = []
+    handle = spin(executor, client.send_goal_async(goal, feedback_callback=lambda f: feedback.append(f.feedback)),
+                  30.0, "the goal response")
+    assert handle.accepted
+    result = spin(executor, handle.get_result_async(), GOAL_TIMEOUT_S, "the goal's result").result
+    return result, list(dict.fromkeys(f.phase for f in feedback))
+
+
 def test_measure_only_then_the_next_plan_uses_the_measured_modulus(tmp_path, executor, spin):
     log_path = tmp_path / "cell.log"
     with _soft_box_cell(log_path, executor, spin, "squeeze_cell_probe") as (bringup, probe, perceived, client):
@@ -64,14 +74,8 @@ def test_measure_only_then_the_next_plan_uses_the_measured_modulus(tmp_path, exe
         planner = probe.create_client(PlanGrasp, "/defgg/plan_grasp")
         spin(executor, lambda: len(poses) > 0, 60.0, "object poses")
         block_before = poses[-1].poses[0].position
-        feedback = []
-        handle = spin(executor, client.send_goal_async(PickAndPlace.Goal(plan_grasp=True, measure_only=True),
-                                                       feedback_callback=lambda f: feedback.append(f.feedback)),
-                      30.0, "the goal response")
-        assert handle.accepted
-        result = spin(executor, handle.get_result_async(), GOAL_TIMEOUT_S, "the measurement").result
+        result, phases = _run_goal(executor, spin, client, PickAndPlace.Goal(plan_grasp=True, measure_only=True))
         log_tail = log_path.read_text()[-4000:]
-        phases = list(dict.fromkeys(f.phase for f in feedback))
         print(f"measured {result.measured_youngs_modulus_pa:.3g} Pa ({result.measured_modulus_low_pa:.3g} .. "
               f"{result.measured_modulus_high_pa:.3g}); forces {list(result.squeeze_forces_n)} N, widths "
               f"{[round(w * 1e3, 3) for w in result.squeeze_widths_m]} mm; {result.stiffness_update}", flush=True)
@@ -128,13 +132,8 @@ def test_measure_then_pick_reports_the_estimate_and_sends_nothing_for_the_object
     node is not told: its entries address an image region, and the object has left it for the bin."""
     log_path = tmp_path / "cell.log"
     with _soft_box_cell(log_path, executor, spin, "squeeze_pick_probe") as (bringup, _probe, perceived, client):
-        feedback = []
-        handle = spin(executor, client.send_goal_async(PickAndPlace.Goal(plan_grasp=True, measure_stiffness=True),
-                                                       feedback_callback=lambda f: feedback.append(f.feedback)),
-                      30.0, "the goal response")
-        assert handle.accepted
-        result = spin(executor, handle.get_result_async(), GOAL_TIMEOUT_S, "the pick").result
-        phases = list(dict.fromkeys(f.phase for f in feedback))
+        result, phases = _run_goal(executor, spin, client,
+                                   PickAndPlace.Goal(plan_grasp=True, measure_stiffness=True))
         assert result.success, (result.failure_reason, phases, log_path.read_text()[-4000:])
         assert phases.index("squeeze") < phases.index("transfer"), phases
         assert result.stiffness_measured and result.held_after_lift
