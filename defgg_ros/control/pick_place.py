@@ -104,6 +104,9 @@ TOUCHDOWN_MARGIN_M = 0.02
 STOP_LEAD_S = 0.15
 # An arm further than this from the commanded path (a contact holds it) does not follow it: stop from where it is.
 FOLLOWING_TOLERANCE_RAD = 0.02
+# Joint states stamped further than this from our clock: the clocks differ (or the state is stale), a stamped stop
+# would start at the wrong time: stop at once instead (the executor warns; docs/real_cell.md).
+MAX_STAMP_SKEW_S = 0.5
 OWN_STALL_S = 0.5
 
 
@@ -420,12 +423,13 @@ class PickPlaceSequence(SqueezePhase):
         """((q, qd, qdd), robot time) of the commanded motion's first sample STOP_LEAD_S or more from now, on the
         controller's clock for that motion: the last joint state's stamp minus the time of the sample nearest it
         (the motion started when the goal arrived, not when it was sent). None when the arm does not follow the
-        motion (further than FOLLOWING_TOLERANCE_RAD from its nearest sample) or the state has no stamp."""
+        motion (further than FOLLOWING_TOLERANCE_RAD from its nearest sample), the state has no stamp, or its stamp
+        is further than MAX_STAMP_SKEW_S from sim_s (another clock)."""
         traj, state = self._motion.trajectory, self._obs.state
         nearest = int(np.argmin(np.max(np.abs(traj.q_rad - state.q_rad), axis=1)))
-        if not np.isfinite(state.stamp_s) or \
+        if not np.isfinite(state.stamp_s) or abs(sim_s - state.stamp_s) > MAX_STAMP_SKEW_S or \
                 np.max(np.abs(traj.q_rad[nearest] - state.q_rad)) > FOLLOWING_TOLERANCE_RAD:
-            return None
+            return None   # no stamp, a clock the controller does not share, or an arm off its path: at once
         # between samples: the offset along the commanded velocity there (samples are sample_dt_s apart)
         speed2 = float(traj.qd_radps[nearest] @ traj.qd_radps[nearest])
         between_s = float((state.q_rad - traj.q_rad[nearest]) @ traj.qd_radps[nearest]) / speed2 if speed2 > 1e-12 \

@@ -488,3 +488,37 @@ def test_the_rest_the_retreat_arrival_waited_for_is_not_waited_for_again(kin):
     assert sequence.outcome.success and sequence.outcome.arm_state == "at_rest"
     ticks_after_done = round((robot.sim_s - done_at[0]) / 0.01)
     assert ticks_after_done <= 1, f"ended {ticks_after_done} ticks after the arrival at rest"
+
+
+def _mid_transfer(kin):
+    sequence, robot = make(kin), FakeRobot(kin, World(object_width_m=0.045))
+    run(sequence, robot, until=lambda r, s: s.phase == "transfer" and r.sim_s - r.trajectory_start_s > 0.3)
+    return sequence, robot
+
+
+def test_a_cancel_stops_from_a_lead_along_the_commanded_motion_stamped_on_its_clock(kin):
+    """The controller takes a new goal from the measured state: a stop planned from the last joint state and started
+    on receipt began behind the moving arm by the state's age and the goal's latency. The stop starts STOP_LEAD_S
+    ahead along the commanded motion, at the time the joint state's stamp puts it on the controller's clock."""
+    from defgg_ros.control.pick_place import STOP_LEAD_S
+
+    sequence, robot = _mid_transfer(kin)
+    motion, age_s, latency_s = robot.trajectory, 0.03, 0.02   # the transfer started `latency_s` after it was sent
+    started_s = robot.trajectory_start_s + latency_s
+    stamp_s = robot.sim_s - age_s
+    q, qd, _ = motion.state_at(stamp_s - started_s)
+    sequence.on_joint_state(ArmState(q, qd, robot.width_m, stamp_s), robot.wall_s)
+    (stop,) = [c for c in sequence.cancel(robot.sim_s, robot.wall_s) if isinstance(c, SendTrajectory)]
+    assert stop.start_s == pytest.approx(robot.sim_s + STOP_LEAD_S, abs=0.011)   # the first sample past the lead
+    q_then, qd_then, _ = motion.state_at(stop.start_s - started_s)
+    np.testing.assert_allclose(stop.trajectory.q_rad[0], q_then, atol=2e-4)   # where the arm will be then
+    np.testing.assert_allclose(stop.trajectory.qd_radps[0], qd_then, atol=2e-2)
+
+
+def test_a_state_stamped_on_another_clock_or_without_a_stamp_stops_at_once(kin):
+    sequence, robot = _mid_transfer(kin)
+    q, qd = robot.q.copy(), robot.qd.copy()
+    sequence.on_joint_state(ArmState(q, qd, robot.width_m, robot.sim_s - 2.0), robot.wall_s)   # 2 s off
+    (stop,) = [c for c in sequence.cancel(robot.sim_s, robot.wall_s) if isinstance(c, SendTrajectory)]
+    assert stop.start_s is None
+    np.testing.assert_allclose(stop.trajectory.q_rad[0], q)   # from the measured position, on receipt
