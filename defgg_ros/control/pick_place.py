@@ -104,9 +104,8 @@ TOUCHDOWN_MARGIN_M = 0.02
 STOP_LEAD_S = 0.15
 # An arm further than this from the commanded path (a contact holds it) does not follow it: stop from where it is.
 FOLLOWING_TOLERANCE_RAD = 0.02
-# Joint states stamped further than this from our clock: the clocks differ (or the state is stale), a stamped stop
-# would start at the wrong time: stop at once instead (the executor warns; docs/real_cell.md).
-MAX_STAMP_SKEW_S = 0.5
+# A joint state's arrival is carried on to now for at most this long (the controller's clock: its stamp + that).
+MAX_STATE_AGE_S = 0.1
 OWN_STALL_S = 0.5
 
 
@@ -371,7 +370,7 @@ class PickPlaceSequence(SqueezePhase):
         """Command the trajectory: on receipt (its clock from sim_s), or from start_s (robot time) when given."""
         if not guarded_stop:
             check_trajectory(trajectory, self._limits, self._kin, self._cfg.table_z_m)
-        self._motion = _Motion(trajectory, sim_s if start_s is None else start_s, guarded_stop)
+        self._motion = _Motion(trajectory, sim_s if start_s is None else start_s, guarded_stop, start_s)
         self._still_since_s = None
         return [SendTrajectory(trajectory, start_s)]
 
@@ -395,8 +394,11 @@ class PickPlaceSequence(SqueezePhase):
         """(stop trajectory, start_s robot time or None: on receipt) that stops the running motion as a cancel
         would, for the owner's own stop (the executor on its way out); None without a motion or a joint state.
         The sequence does not change."""
-        if self._motion is None or self._obs.state is None:
+        m = self._motion
+        if m is None or self._obs.state is None:
             return None
+        if m.guarded_stop:   # a stop runs: the same again if it was stamped (continuous), else the owner's own hold
+            return (m.trajectory, m.stamped_start_s) if m.stamped_start_s is not None else None
         stop, start_s, _ = self._planned_stop(sim_s, at_once=False)
         return stop, start_s
 
@@ -410,7 +412,7 @@ class PickPlaceSequence(SqueezePhase):
         (held by a contact, or a stop already running): from the measured position with the commanded velocity
         there (matched_state), on receipt (start_s None)."""
         m, state = self._motion, self._obs.state
-        ahead = None if at_once or m.guarded_stop else self._state_ahead(sim_s)
+        ahead = None if at_once or m.guarded_stop else self._state_ahead()
         if ahead is None:
             (q, qd, qdd), start_s = matched_state(m.trajectory, state.q_rad), None
         else:
@@ -419,27 +421,30 @@ class PickPlaceSequence(SqueezePhase):
                                          self._cfg.sample_dt_s)
         return stop, start_s, breach
 
-    def _state_ahead(self, sim_s: float):
+    def _state_ahead(self):
         """((q, qd, qdd), robot time) of the commanded motion's first sample STOP_LEAD_S or more from now, on the
         controller's clock for that motion: the last joint state's stamp minus the time of the sample nearest it
         (the motion started when the goal arrived, not when it was sent). None when the arm does not follow the
-        motion (further than FOLLOWING_TOLERANCE_RAD from its nearest sample), the state has no stamp, or its stamp
-        is further than MAX_STAMP_SKEW_S from sim_s (another clock)."""
-        traj, state = self._motion.trajectory, self._obs.state
+        motion (further than FOLLOWING_TOLERANCE_RAD from its nearest sample) or the state has no stamp. Every time
+        is the controller's (the state's stamp), so an offset between its clock and ours does not matter."""
+        traj, state, obs = self._motion.trajectory, self._obs.state, self._obs
         nearest = int(np.argmin(np.max(np.abs(traj.q_rad - state.q_rad), axis=1)))
-        if not np.isfinite(state.stamp_s) or abs(sim_s - state.stamp_s) > MAX_STAMP_SKEW_S or \
+        if not np.isfinite(state.stamp_s) or \
                 np.max(np.abs(traj.q_rad[nearest] - state.q_rad)) > FOLLOWING_TOLERANCE_RAD:
-            return None   # no stamp, a clock the controller does not share, or an arm off its path: at once
+            return None   # no stamp, or an arm off its path: at once
+        # The controller's now: the state's stamp plus how long ago it arrived (never our clock, which may differ).
+        since_s = min(max((obs.last_tick_wall_s or obs.state_wall_s) - obs.state_wall_s, 0.0), MAX_STATE_AGE_S)
+        controller_now_s = state.stamp_s + since_s
         # between samples: the offset along the commanded velocity there (samples are sample_dt_s apart)
         speed2 = float(traj.qd_radps[nearest] @ traj.qd_radps[nearest])
         between_s = float((state.q_rad - traj.q_rad[nearest]) @ traj.qd_radps[nearest]) / speed2 if speed2 > 1e-12 \
             else 0.0
         started_s = state.stamp_s - (traj.times_s[nearest] + np.clip(between_s, -self._cfg.sample_dt_s,
                                                                      self._cfg.sample_dt_s))
-        k = int(np.searchsorted(traj.times_s, sim_s + STOP_LEAD_S - started_s))
+        k = int(np.searchsorted(traj.times_s, controller_now_s + STOP_LEAD_S - started_s))
         if k >= len(traj.times_s):   # the motion ends within the lead: at rest at its end
             return (traj.q_rad[-1].copy(), np.zeros(7), np.zeros(7)), max(started_s + traj.duration_s,
-                                                                           sim_s + STOP_LEAD_S)
+                                                                           controller_now_s + STOP_LEAD_S)
         return (traj.q_rad[k].copy(), traj.qd_radps[k].copy(), traj.qdd_radps2[k].copy()), started_s + traj.times_s[k]
 
     def _arrived(self, sim_s: float) -> bool:

@@ -236,6 +236,7 @@ class _Motion:
     trajectory: SampledTrajectory
     start_s: float
     guarded_stop: bool = False   # ends when the arm is still, wherever that is
+    stamped_start_s: float | None = None   # the start sent with it (controller's clock); None: on receipt
 
 
 @dataclass

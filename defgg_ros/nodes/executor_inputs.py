@@ -12,7 +12,6 @@ from geometry_msgs.msg import WrenchStamped
 from rclpy.clock import Clock, ClockType
 from sensor_msgs.msg import JointState
 
-from defgg_ros.control.pick_place import MAX_STAMP_SKEW_S
 from defgg_ros.nodes.executor_messages import GoalError, joint_state_to_arm
 from defgg_ros.nodes.topic_watch import TopicWatch
 from defgg_ros.ros import qos
@@ -83,13 +82,7 @@ class RobotInputs:
         except (GoalError, IndexError) as error:
             self.get_logger().warning(f"ignoring joint state: {error}", throttle_duration_sec=2.0)
             return
-        now_ns = self.get_clock().now().nanoseconds
-        stamp_ns = stamp_to_ns(msg.header.stamp) or now_ns
-        if abs(now_ns - stamp_ns) * 1e-9 > MAX_STAMP_SKEW_S:   # stops are stamped on the controller's clock
-            self.get_logger().warning(
-                f"joint states are stamped {(stamp_ns - now_ns) * 1e-9:+.2f} s from this node's clock: stops are "
-                "then sent to start at once, not blended ahead (docs/real_cell.md: synchronise the clocks, "
-                "use_sim_time with a simulator)", throttle_duration_sec=10.0)
+        stamp_ns = stamp_to_ns(msg.header.stamp) or self.get_clock().now().nanoseconds
         with self._lock:
             for watch in self._input_watches():
                 if watch is not self._wrench_watch:

@@ -509,16 +509,41 @@ def test_a_cancel_stops_from_a_lead_along_the_commanded_motion_stamped_on_its_cl
     q, qd, _ = motion.state_at(stamp_s - started_s)
     sequence.on_joint_state(ArmState(q, qd, robot.width_m, stamp_s), robot.wall_s)
     (stop,) = [c for c in sequence.cancel(robot.sim_s, robot.wall_s) if isinstance(c, SendTrajectory)]
-    assert stop.start_s == pytest.approx(robot.sim_s + STOP_LEAD_S, abs=0.011)   # the first sample past the lead
+    # on the controller's clock: the state's stamp (it arrived just now), plus the lead, at the next sample
+    assert stop.start_s == pytest.approx(stamp_s + STOP_LEAD_S, abs=0.011)
     q_then, qd_then, _ = motion.state_at(stop.start_s - started_s)
     np.testing.assert_allclose(stop.trajectory.q_rad[0], q_then, atol=2e-4)   # where the arm will be then
     np.testing.assert_allclose(stop.trajectory.qd_radps[0], qd_then, atol=2e-2)
 
 
-def test_a_state_stamped_on_another_clock_or_without_a_stamp_stops_at_once(kin):
+def test_the_stop_is_stamped_on_the_controllers_clock_whatever_ours_reads(kin):
+    """A controller whose clock runs 0.3 s ahead of ours: a stop stamped from our clock plus the lead lay in the
+    controller's past (it then samples straight into the stop and pulls the arm back). Every time is taken from
+    the joint state's stamp."""
+    from defgg_ros.control.pick_place import STOP_LEAD_S
+
+    sequence, robot = _mid_transfer(kin)
+    ahead_s, started_s = 0.3, robot.trajectory_start_s      # the controller's clock - ours
+    q, qd, _ = robot.trajectory.state_at(robot.sim_s - started_s)
+    stamp_s = robot.sim_s + ahead_s
+    sequence.on_joint_state(ArmState(q, qd, robot.width_m, stamp_s), robot.wall_s)
+    (stop,) = [c for c in sequence.cancel(robot.sim_s, robot.wall_s) if isinstance(c, SendTrajectory)]
+    assert stop.start_s == pytest.approx(stamp_s + STOP_LEAD_S, abs=0.011)
+    q_then, _, _ = robot.trajectory.state_at(stop.start_s - ahead_s - started_s)
+    np.testing.assert_allclose(stop.trajectory.q_rad[0], q_then, atol=2e-4)
+
+
+def test_a_state_without_a_stamp_stops_at_once_and_the_owners_stop_repeats_a_stamped_stop(kin):
     sequence, robot = _mid_transfer(kin)
     q, qd = robot.q.copy(), robot.qd.copy()
-    sequence.on_joint_state(ArmState(q, qd, robot.width_m, robot.sim_s - 2.0), robot.wall_s)   # 2 s off
+    sequence.on_joint_state(ArmState(q, qd, robot.width_m), robot.wall_s)    # no stamp (NaN)
     (stop,) = [c for c in sequence.cancel(robot.sim_s, robot.wall_s) if isinstance(c, SendTrajectory)]
     assert stop.start_s is None
     np.testing.assert_allclose(stop.trajectory.q_rad[0], q)   # from the measured position, on receipt
+    assert sequence.stop_now(robot.sim_s) is None             # a stop on receipt runs: the owner's own hold
+
+    sequence, robot = _mid_transfer(kin)
+    sequence.on_joint_state(ArmState(robot.q.copy(), robot.qd.copy(), robot.width_m, robot.sim_s), robot.wall_s)
+    (stop,) = [c for c in sequence.cancel(robot.sim_s, robot.wall_s) if isinstance(c, SendTrajectory)]
+    again = sequence.stop_now(robot.sim_s + 0.05)            # the executor's exit during that stop: the same stop
+    assert again is not None and again[1] == stop.start_s and again[0] is stop.trajectory
