@@ -63,10 +63,12 @@ from defgg_ros.control.sequence_types import (
     _Plan,
 )
 from defgg_ros.control.squeeze_phase import SqueezePhase
+from defgg_ros.control.stopping import MAX_STATE_AGE_S  # a joint state carried on to now at most this long
 from defgg_ros.control.trajectories import (
     arm_limits,
     check_trajectory,
     matched_state,
+    nearest_sample,
     plan_checked_stop,
     plan_joint_motion,
     plan_joint_via,
@@ -96,16 +98,14 @@ TRANSFER_RETIMING_TRIES = 3
 # The place lowering watches the hold until the held object's bottom (assumed on the table at the grasp) comes
 # this close to the table: touching down pushes an object up between the fingers, which can read as a drop.
 TOUCHDOWN_MARGIN_M = 0.02
-# A gap between two ticks longer than this is the owner's own stall, not silence of the driver (the owner ticks
-# every control period, 10 ms): a cell whose processes were all suspended for a minute (SIGSTOP) aborted its
-# pick as "driver silent" on resume, before the first joint state after the pause could arrive (2026-11-29).
 # A stop starts this far ahead along the commanded motion, stamped to start then (_stop_motion): longer than a
 # goal's usual latency to the controller (under load in the simulated cell up to ~0.13 s of robot time).
 STOP_LEAD_S = 0.15
 # An arm further than this from the commanded path (a contact holds it) does not follow it: stop from where it is.
 FOLLOWING_TOLERANCE_RAD = 0.02
-# A joint state's arrival is carried on to now for at most this long (the controller's clock: its stamp + that).
-MAX_STATE_AGE_S = 0.1
+# A gap between two ticks longer than this is the owner's own stall, not silence of the driver (the owner ticks
+# every control period, 10 ms): a cell whose processes were all suspended for a minute (SIGSTOP) aborted its
+# pick as "driver silent" on resume, before the first joint state after the pause could arrive (2026-11-29).
 OWN_STALL_S = 0.5
 
 
@@ -385,12 +385,12 @@ class PickPlaceSequence(SqueezePhase):
 
     def _stop_motion(self, sim_s: float, at_once: bool = False) -> list:
         """Stop the running motion (_planned_stop) and end this motion once the arm is still."""
-        stop, start_s, breach = self._planned_stop(sim_s, at_once)
+        stop, start_s, breach = self._planned_stop(at_once)
         if breach:
             self._recovery_log.append(breach)   # in Outcome.recovery: the operator must hear of it
         return self._send(stop, sim_s, guarded_stop=True, start_s=start_s)
 
-    def stop_now(self, sim_s: float):
+    def stop_now(self):
         """(stop trajectory, start_s robot time or None: on receipt) that stops the running motion as a cancel
         would, for the owner's own stop (the executor on its way out); None without a motion or a joint state.
         The sequence does not change."""
@@ -399,10 +399,10 @@ class PickPlaceSequence(SqueezePhase):
             return None
         if m.guarded_stop:   # a stop runs: the same again if it was stamped (continuous), else the owner's own hold
             return (m.trajectory, m.stamped_start_s) if m.stamped_start_s is not None else None
-        stop, start_s, _ = self._planned_stop(sim_s, at_once=False)
+        stop, start_s, _ = self._planned_stop(at_once=False)
         return stop, start_s
 
-    def _planned_stop(self, sim_s: float, at_once: bool):
+    def _planned_stop(self, at_once: bool):
         """(jerk-limited stop, start_s, breach) (checked: plan_checked_stop). While the arm follows the commanded
         motion: from that motion's state STOP_LEAD_S from now, stamped to start then, so the controller blends
         from wherever the arm is at receipt into it (however late the goal arrives, up to the lead); a stop planned
@@ -428,7 +428,7 @@ class PickPlaceSequence(SqueezePhase):
         motion (further than FOLLOWING_TOLERANCE_RAD from its nearest sample) or the state has no stamp. Every time
         is the controller's (the state's stamp), so an offset between its clock and ours does not matter."""
         traj, state, obs = self._motion.trajectory, self._obs.state, self._obs
-        nearest = int(np.argmin(np.max(np.abs(traj.q_rad - state.q_rad), axis=1)))
+        nearest = nearest_sample(traj, state.q_rad)
         if not np.isfinite(state.stamp_s) or \
                 np.max(np.abs(traj.q_rad[nearest] - state.q_rad)) > FOLLOWING_TOLERANCE_RAD:
             return None   # no stamp, or an arm off its path: at once

@@ -142,8 +142,13 @@ def matched_state(trajectory: SampledTrajectory, q_measured_rad) -> tuple[np.nda
     running faster than real time).
     """
     q = np.asarray(q_measured_rad, dtype=float)
-    k = int(np.argmin(np.max(np.abs(trajectory.q_rad - q), axis=1)))
+    k = nearest_sample(trajectory, q)
     return q.copy(), trajectory.qd_radps[k].copy(), trajectory.qdd_radps2[k].copy()
+
+
+def nearest_sample(trajectory: SampledTrajectory, q_rad) -> int:
+    """Index of the sample nearest q_rad (the largest joint difference)."""
+    return int(np.argmin(np.max(np.abs(trajectory.q_rad - np.asarray(q_rad, dtype=float)), axis=1)))
 
 
 def hold(q_rad) -> SampledTrajectory:

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from defgg_ros.atomic import read_jsonl, write_text_atomic
-from defgg_ros.evaluation.paired import Paired, count_pairs, sign_flip_p, sign_test_p
+from defgg_ros.evaluation.paired import Paired, count_pairs, object_nets, sign_flip_p, sign_test_p
 
 CASES = ("correct", "rigid", "soft")
 MEASURED = "measured"
@@ -123,12 +123,6 @@ def paired_by_object(records, case_a: str, case_b: str) -> dict:
 
 
 MIN_OBJECTS_WITH_A_DIFFERENCE = 5
-
-
-def object_nets(by_object: dict) -> tuple:
-    """Per object (sorted by name): picks only A held minus picks only B held."""
-    return tuple(sum(a and not b for a, b in pairs) - sum(b and not a for a, b in pairs)
-                 for _, pairs in sorted(by_object.items()))
 
 
 def bootstrap_margin_ci(by_object: dict, resamples: int = BOOTSTRAP_RESAMPLES, seed: int = BOOTSTRAP_SEED):

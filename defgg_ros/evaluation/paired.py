@@ -139,6 +139,12 @@ def bootstrap_interval(units: list, statistic, resamples: int = BOOTSTRAP_RESAMP
     return draws[int(0.025 * (len(draws) - 1))], draws[int(round(0.975 * (len(draws) - 1)))]
 
 
+def object_nets(by_object: dict) -> tuple:
+    """Per object (sorted by name) of {object: [(a held, b held)]}: pairs only A held minus pairs only B held."""
+    return tuple(sum(a and not b for a, b in pairs) - sum(b and not a for a, b in pairs)
+                 for _, pairs in sorted(by_object.items()))
+
+
 def count_pairs(pairs) -> Paired:
     """Paired counts of (A succeeded, B succeeded) tuples."""
     c = {"both": 0, "a_only": 0, "b_only": 0, "neither": 0}

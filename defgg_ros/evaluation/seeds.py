@@ -18,7 +18,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from defgg_ros.evaluation.paired import Paired, bootstrap_interval, count_pairs, sign_flip_p, sign_test_p
+from defgg_ros.evaluation.paired import (
+    Paired,
+    bootstrap_interval,
+    count_pairs,
+    object_nets,
+    sign_flip_p,
+    sign_test_p,
+)
 from defgg_ros.evaluation.tables import is_graded, is_main_correct_input
 
 BOOTSTRAP_RESAMPLES = 2000
@@ -102,9 +109,7 @@ def summarise(seed_records: dict, object_set: str, task: str = "shake", model_a:
     mean = _mean_margin(list(per_seed.values()), objects)
     interval = bootstrap_interval(objects, lambda drawn: _mean_margin(list(per_seed.values()), drawn), resamples,
                                   BOOTSTRAP_SEED)
-    nets = tuple(sum(a and not b for by_object in per_seed.values() for a, b in by_object.get(o, []))
-                 - sum(b and not a for by_object in per_seed.values() for a, b in by_object.get(o, []))
-                 for o in objects)
+    nets = object_nets({o: [p for by_object in per_seed.values() for p in by_object.get(o, [])] for o in objects})
     return SeedSummary(object_set, rows, mean, interval, pooled, len(objects), None if keep is None else len(keep),
                        nets)
 

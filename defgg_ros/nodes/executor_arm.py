@@ -1,8 +1,9 @@
 """The executor node's commands to the arm and the hand, and its stop before the process exits.
 
 FollowJointTrajectory goals to the arm's joint_trajectory_controller, franka_msgs Move/Grasp goals to
-franka_gripper (docs/real_cell.md); a hold (cancel, then a one-point trajectory to rest) on every
-way out (docs/reliability.md). Only the newest goal of each kind answers the sequence.
+franka_gripper (docs/real_cell.md); a stop that preempts the running goal (the sequence's, else a one-point
+hold to rest; a cancel only if refused) on every way out (docs/reliability.md). Only the newest goal of each
+kind answers the sequence.
 """
 import time
 
@@ -25,8 +26,8 @@ class ArmCommands:
 
     def stop_for_exit(self, spin_once) -> str:
         """Before the process tears anything down (run_node calls this on SIGINT/SIGTERM or a callback's
-        exception): end the control loop, cancel the trajectory goal and command a hold that decelerates the
-        arm to rest ahead of it (_hold_arm), then keep spinning (spin_once(timeout_s)) until joint states
+        exception): end the control loop, command a stop that preempts the trajectory goal and slows the arm to
+        rest ahead of it (_hold_arm), then keep spinning (spin_once(timeout_s)) until joint states
         confirm the arm at rest and the running goal is answered. Returns '' when the arm is confirmed at rest
         (or this node never moved it), else why not (the process then exits 1)."""
         p = self._params()
@@ -160,7 +161,7 @@ class ArmCommands:
         frame = self._params()["base_frame"]
         if self._sequence is not None:
             try:
-                stop = self._sequence.stop_now(self._clocks()[0])
+                stop = self._sequence.stop_now()
             except ValueError as error:   # a stop Ruckig or the checks refuse: the one-point hold below instead
                 self.get_logger().error(f"the sequence's stop could not be planned: {error}")
                 stop = None

@@ -540,10 +540,10 @@ def test_a_state_without_a_stamp_stops_at_once_and_the_owners_stop_repeats_a_sta
     (stop,) = [c for c in sequence.cancel(robot.sim_s, robot.wall_s) if isinstance(c, SendTrajectory)]
     assert stop.start_s is None
     np.testing.assert_allclose(stop.trajectory.q_rad[0], q)   # from the measured position, on receipt
-    assert sequence.stop_now(robot.sim_s) is None             # a stop on receipt runs: the owner's own hold
+    assert sequence.stop_now() is None             # a stop on receipt runs: the owner's own hold
 
     sequence, robot = _mid_transfer(kin)
     sequence.on_joint_state(ArmState(robot.q.copy(), robot.qd.copy(), robot.width_m, robot.sim_s), robot.wall_s)
     (stop,) = [c for c in sequence.cancel(robot.sim_s, robot.wall_s) if isinstance(c, SendTrajectory)]
-    again = sequence.stop_now(robot.sim_s + 0.05)            # the executor's exit during that stop: the same stop
+    again = sequence.stop_now()            # the executor's exit during that stop: the same stop
     assert again is not None and again[1] == stop.start_s and again[0] is stop.trajectory
