@@ -118,6 +118,14 @@ CAMERA_FX_PX = 385.0
 CAMERA_FY_PX = 385.0
 CAMERA_HEIGHT_ABOVE_TABLE_M = 0.40
 CAMERA_NEAR_M = 0.05
+# The D435's colour stream at 640x480 (what the simulated driver renders with publish_color): the D400 datasheet's
+# RGB field of view is 69 deg horizontal at 16:9 (1920 px), fx = 960 / tan(34.5 deg) = 1397 px; 640x480 is the
+# sensor's 4:3 middle scaled by 4/9: 621 px. The colour camera sits 15 mm along camera_link's +y from the depth
+# origin (realsense2_description's _d435.urdf.xacro, d435_cam_depth_to_color_offset; a device's own extrinsics
+# differ by a fraction of a mm and a fraction of a degree).
+COLOR_FX_PX = 621.0
+COLOR_FY_PX = 621.0
+LINK_COLOR_OFFSET_M = (0.0, 0.015, 0.0)
 CAMERA_FAR_M = 2.0
 
 # --- Franka Panda kinematics (Franka's datasheet / franka_ros defaults) ----

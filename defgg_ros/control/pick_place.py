@@ -107,6 +107,12 @@ FOLLOWING_TOLERANCE_RAD = 0.02
 # every control period, 10 ms): a cell whose processes were all suspended for a minute (SIGSTOP) aborted its
 # pick as "driver silent" on resume, before the first joint state after the pause could arrive (2026-11-29).
 OWN_STALL_S = 0.5
+# A release blocked at the place (the fingers could not open) is tried once more after lifting the hand this far:
+# a touch-down stopped late (an executor starved of CPU: one replay in CI, 2026-12-01) pressed the object, and
+# the finger tips with it, on the floor, and the floor's friction held the fingers ('fingers blocked at 47.5 mm
+# before reaching 57.1 mm'). Lifted off, the opening fingers no longer drag on it; a neighbour or a wall beside
+# the fingers blocks them again and the place fails as before.
+RELEASE_RELIEF_LIFT_M = 0.01
 
 
 def _finite(name: str, values) -> np.ndarray:
@@ -130,6 +136,7 @@ class PickPlaceSequence(SqueezePhase):
         self._checked: tuple[np.ndarray, _Plan] | None = None   # (q it was planned from, plan_failure's plan)
         self._phase = "idle"
         self._placed_open_sent = False
+        self._release_relief: str | None = None   # None, "lifting", "reopened": RELEASE_RELIEF_LIFT_M
         self.released_at_place = False          # the hand opened at the goal's place target (not in a recovery)
         self.place_contact_z_m = float("nan")   # TCP height where a guarded lowering touched down (nan: it did not)
         self._drop_M: np.ndarray | None = None  # a recovery's put-down pose (recovery_drop_xy_m), once planned
@@ -688,6 +695,11 @@ class PickPlaceSequence(SqueezePhase):
         return self._tcp_z_m() - hang_m < self._cfg.table_z_m + TOUCHDOWN_MARGIN_M
 
     def _tick_place(self, sim_s: float) -> list:
+        if self._release_relief == "lifting":
+            if not self._arrived(sim_s):
+                return []
+            self._release_relief = "reopened"
+            return self._send_gripper(MoveGripper(self._release_width_m(), OPENING_SPEED_MPS), sim_s)
         if not self._placed_open_sent and self._touched():
             self.place_contact_z_m = self._tcp_z_m()   # the object stands on something: release it here
             return self._stop_motion(sim_s, at_once=True)
@@ -704,9 +716,19 @@ class PickPlaceSequence(SqueezePhase):
         if result is None:
             return []
         if not result[0]:
-            raise SequenceFailure(f"gripper could not release the object: {result[2] or 'no reason given'}")
+            return self._relieve_blocked_release(result[2] or "no reason given", sim_s)
         self._phase = "retreat"
         return self._line_up(max(0.0, float(self._plan.place_approach_M[2, 3]) - self._tcp_z_m()), sim_s)
+
+    def _relieve_blocked_release(self, reason: str, sim_s: float) -> list:
+        """The first blocked release lifts the hand RELEASE_RELIEF_LIFT_M and opens again; a second one fails."""
+        if self._release_relief is not None:
+            raise SequenceFailure(f"gripper could not release the object: {reason} (again after lifting "
+                                  f"{RELEASE_RELIEF_LIFT_M * 1000:.0f} mm)")
+        self._release_relief = "lifting"
+        self._recovery_log.append(f"release blocked ({reason}): lifted {RELEASE_RELIEF_LIFT_M * 1000:.0f} mm "
+                                  "and opened again")
+        return self._line_up(RELEASE_RELIEF_LIFT_M, sim_s)
 
     def _tick_retreat(self, sim_s: float) -> list:
         if not self._arrived(sim_s):

@@ -17,7 +17,10 @@ from defgg_ros.control.sequence_types import CancelGripper, GraspGripper, MoveGr
 from defgg_ros.control.stopping import stopping_hold
 from defgg_ros.control.trajectories import arm_limits
 from defgg_ros.nodes.executor_messages import hold_trajectory_msg, trajectory_to_msg
-from defgg_ros.ros.action import ActionClient
+from defgg_ros.ros.action import ActionClient, in_executor
+
+# A hold's acceptance normally comes in milliseconds; one this late is treated as refused (a response can be lost).
+HOLD_ANSWER_TIMEOUT_S = 1.0
 
 
 class ArmCommands:
@@ -42,10 +45,11 @@ class ArmCommands:
             return ""
         rest = RestWatch(float(p["still_speed_radps"]), hold_s, since_s=started)
         deadline = started + timeout_s
-        while time.monotonic() < deadline and not (rest.confirmed and not self._busy):
+        while time.monotonic() < deadline and not (rest.confirmed and not self._busy and self._stop_answered()):
             spin_once(0.01)
             with self._lock:
                 rest.update(self._last_state)
+                self._expire_hold_answer()
         took = time.monotonic() - started
         if rest.confirmed:
             self.get_logger().info(f"stopping: the arm is at rest ({took:.2f} s after the stop was commanded)")
@@ -53,16 +57,23 @@ class ArmCommands:
         return (f"could not confirm that the arm stopped within {timeout_s:.1f} s: {rest.describe()}; "
                 "check the arm")
 
+    def _stop_answered(self) -> bool:
+        """Every goal sent is answered and the hold accepted, refused or given up on (after HOLD_ANSWER_TIMEOUT_S):
+        an arm at rest before a late goal starts is not yet stopped."""
+        with self._lock:
+            return self._arm_goals_unanswered == 0 and self._hold_answer != "pending"
+
     def _wait_for_rest(self) -> None:
         """After a hold: answer only once joint states show the arm at rest (at most stop_timeout_s, wall clock;
         the result's arm_state then says 'moving'), so no motion follows a terminal result."""
         config = self._config
         rest = RestWatch(config.still_speed_radps, config.rest_hold_s, since_s=time.monotonic())
         deadline = time.monotonic() + config.stop_timeout_s
-        while not rest.confirmed and time.monotonic() < deadline:
+        while not (rest.confirmed and self._stop_answered()) and time.monotonic() < deadline:
             time.sleep(0.01)
             with self._lock:
                 rest.update(self._last_state)
+                self._expire_hold_answer()
 
     def _carry_out(self, sequence: PickPlaceSequence, commands):
         """Execute the sequence's commands (called with the lock held)."""
@@ -118,11 +129,11 @@ class ArmCommands:
                 if serial == self._arm_goal_serial:
                     self._arm_goal = handle
                 elif self._held_serial == self._arm_goal_serial:
-                    handle.cancel_goal_async()  # accepted after a stop was requested: it must not run
+                    self._stop_late_goal(handle)   # accepted after a stop was requested: it must not run
             handle.get_result_async().add_done_callback(on_result)
 
         self._arm_goals_unanswered += 1
-        self._arm_client.send_goal_async(goal).add_done_callback(on_goal)
+        self._arm_client.send_goal_async(goal).add_done_callback(in_executor(self, on_goal))
 
     def _arm_may_move(self) -> bool:
         """Could a trajectory of this node's still move the arm (lock held)? A goal runs, a sent one is not yet
@@ -137,20 +148,51 @@ class ArmCommands:
         measured position at once (set_hold_position) and the hold would then set the arm moving again (stop, then
         go); the cancel is the fallback when no hold can be made or the controller does not accept it. A failed
         send is logged, never raised: the caller is on its way out."""
-        moving = self._arm_may_move()
+        carried = self._goals_the_hold_stops if self._hold_answer == "pending" else []
+        moving = self._arm_may_move() or bool(carried)
         self._arm_goal_serial += 1
-        self._held_serial = self._arm_goal_serial
+        self._held_serial = serial = self._arm_goal_serial
         running, self._arm_goal = self._arm_goal, None
+        # What the previous hold, still unanswered, was to stop is this one's now: its answer will be stale.
+        self._goals_the_hold_stops = [handle for handle in (*carried, running) if handle is not None]
+        self._hold_answer = "none"
         try:
             hold = self._stopping_hold() if moving else None
             if hold is None:
-                self._cancel_arm_goal(running)
+                self._cancel_goals_the_hold_stops()
                 return
             future = self._arm_client.send_goal_async(FollowJointTrajectory.Goal(trajectory=hold))
-            future.add_done_callback(lambda answer: self._on_hold_answer(answer, running))
+            self._hold_answer, self._hold_sent_s = "pending", time.monotonic()
+            future.add_done_callback(in_executor(self, lambda answer: self._on_hold_answer(answer, serial)))
         except Exception as error:  # noqa: BLE001 - rclpy raises RCLError/InvalidHandle once torn down
             self.get_logger().error(f"could not command the arm to stop: {error!r}")
-            self._cancel_arm_goal(running)
+            self._hold_answer = "none"
+            self._cancel_goals_the_hold_stops()
+
+    def _stop_late_goal(self, handle) -> None:
+        """A trajectory goal sent before the stop and accepted after it (lock held). Goals from this client reach
+        the controller in the order sent, so a hold sent after it preempts it there: no cancel then, since a cancel
+        that reached the controller first would make it hold the measured position at once and the hold behind it
+        would set the arm moving again (stop, then go). Canceled when no hold went out or the controller refused
+        it; kept with the hold's other goals while its answer is pending."""
+        if self._hold_answer == "pending":
+            self._goals_the_hold_stops.append(handle)
+        elif self._hold_answer != "accepted":
+            self._cancel_arm_goal(handle)
+
+    def _expire_hold_answer(self) -> None:
+        """A hold unanswered after HOLD_ANSWER_TIMEOUT_S (lock held; a response can be lost) counts as refused: the
+        goals it was to preempt are canceled."""
+        if self._hold_answer == "pending" and time.monotonic() - self._hold_sent_s > HOLD_ANSWER_TIMEOUT_S:
+            self.get_logger().error(f"no answer to the hold trajectory within {HOLD_ANSWER_TIMEOUT_S:g} s: "
+                                    "canceling the goals it was to preempt")
+            self._hold_answer = "refused"
+            self._cancel_goals_the_hold_stops()
+
+    def _cancel_goals_the_hold_stops(self) -> None:
+        goals, self._goals_the_hold_stops = self._goals_the_hold_stops, []
+        for handle in goals:
+            self._cancel_arm_goal(handle)
 
     def _stopping_hold(self):
         """The trajectory that stops the arm (None without a joint state, or without finite positions): the
@@ -178,16 +220,24 @@ class ArmCommands:
             return None
         return hold_trajectory_msg(q_hold, frame, self._arm_joints, blend_s)
 
-    def _on_hold_answer(self, future, running) -> None:
-        """A hold the controller refused (or could not be asked): cancel the goal it was to preempt instead."""
+    def _on_hold_answer(self, future, serial: int) -> None:
+        """A hold the controller refused (or could not be asked): cancel the goals it was to preempt instead. An
+        older hold's answer changes nothing: the newest hold carries its goals."""
         try:
             accepted = future.result().accepted
         except Exception as error:  # noqa: BLE001 - any failure of the request means no hold
             accepted = False
             self.get_logger().error(f"the hold trajectory was not delivered: {error!r}")
         if not accepted:
-            self.get_logger().error("the controller refused the hold trajectory: canceling the running goal")
-            self._cancel_arm_goal(running)
+            self.get_logger().error("the controller refused the hold trajectory")
+        with self._lock:
+            if serial != self._held_serial or self._hold_answer != "pending":
+                return
+            self._hold_answer = "accepted" if accepted else "refused"
+            if accepted:
+                self._goals_the_hold_stops = []
+            else:
+                self._cancel_goals_the_hold_stops()
 
     def _cancel_arm_goal(self, handle) -> None:
         if handle is None:
@@ -230,4 +280,4 @@ class ArmCommands:
                     self._gripper_goal = handle
             handle.get_result_async().add_done_callback(on_result)
 
-        client.send_goal_async(goal, feedback_callback=on_feedback).add_done_callback(on_goal)
+        client.send_goal_async(goal, feedback_callback=on_feedback).add_done_callback(in_executor(self, on_goal))

@@ -23,6 +23,8 @@ INPUT_CHECK_PERIOD_S = 1.0
 # 15 Hz; the simulated one at 15 Hz of sim time, and its clock stalls up to ~2 s while a frame renders: a shorter
 # limit handed the width to the MoveIt launch's constant 0.0 in joint_states meanwhile.
 FINGER_SOURCE_FRESH_S = 3.0
+# How often a goal waiting for the first input message looks again (wall clock, s).
+FIRST_INPUT_POLL_S = 0.05
 
 class RobotInputs:
     """Joint states, the fingers and the external wrench in (mixed into ExecutorNode)."""
@@ -121,6 +123,23 @@ class RobotInputs:
             if self._sequence is not None:
                 self._sequence.on_force(force, self._last_force_wall_s)
 
+    def _wait_for_first_inputs(self, timeout_s: float) -> None:
+        """A goal that comes before the first joint state, wrench or (use_sim_time) clock message, right after
+        the cell started (discovery, a controller still coming up, a simulated driver rendering its first frame),
+        waits up to timeout_s for them; _check_inputs then judges. An input heard before and silent now is not
+        waited for: its driver stopped. (CI, 2026-12-01: a goal sent as soon as the bringup was ready found no
+        joint state 3.3 s after the executor started and was refused, though the driver was up.)"""
+        deadline_s = time.monotonic() + timeout_s
+        while time.monotonic() < deadline_s and (any(w.last_s is None for w in self._input_watches())
+                                                 or self._waiting_for_sim_clock()):
+            if self._shutdown.wait(FIRST_INPUT_POLL_S):
+                raise GoalError("executor is shutting down")
+
+    def _waiting_for_sim_clock(self) -> bool:
+        """use_sim_time and no /clock message yet: the robot clock reads 0, and a sequence started on it would
+        see its first tick jump to the simulator's time."""
+        return bool(self.get_parameter("use_sim_time").value) and self.get_clock().now().nanoseconds == 0
+
     def _check_inputs(self, p: dict) -> None:
         """GoalError unless joint states and an external wrench arrived within watchdog_timeout_s, saying which
         topic is silent and what the graph shows (TopicWatch.diagnosis). Without the wrench the descent would
@@ -130,6 +149,9 @@ class RobotInputs:
         joints = self._joint_states_diagnosis(timeout_s)
         if joints:
             raise GoalError(f"no joint states: {joints}")
+        if self._waiting_for_sim_clock():
+            raise GoalError("no clock: use_sim_time is true and no message arrived on /clock (is the simulator "
+                            "publishing it, in this ROS domain?)")
         if self._wrench_watch.silent_s() > timeout_s:
             raise GoalError(f"no external wrench, the descent's contact guard would be blind: "
                             f"{self._wrench_watch.diagnosis()}; check franka_robot_state_broadcaster")

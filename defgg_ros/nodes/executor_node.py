@@ -99,6 +99,9 @@ class ExecutorNode(RobotInputs, ArmCommands, GraspPlanning, Node):
         self._arm_goal = None       # handle of the running FollowJointTrajectory goal
         self._arm_goal_serial = 0   # the newest goal sent; a result of an older one is ignored
         self._held_serial = -1      # _arm_goal_serial when the arm was last told to hold
+        self._hold_answer = "none"  # that hold: "none" (not sent), "pending", "accepted" or "refused"
+        self._hold_sent_s = 0.0     # when it was sent (monotonic)
+        self._goals_the_hold_stops = []   # goals sent before it that may run until it is accepted
         self._arm_goals_unanswered = 0   # trajectory goals sent whose acceptance has not come back yet
         self._gripper_feedback_width_m = float("nan")
         self._arm_client = ActionClient(self, FollowJointTrajectory, p["arm_trajectory_action"],
@@ -191,7 +194,8 @@ class ExecutorNode(RobotInputs, ArmCommands, GraspPlanning, Node):
         result = PickAndPlace.Result()
         try:
             self._take_parameters()
-            if goal_handle.request.plan_grasp:
+            if goal_handle.request.plan_grasp:   # the observation move comes first: the arm must be ready for it
+                self._ready_to_move(self._params())
                 moved = self._observe_before_planning(goal_handle)
                 if moved is not None and not moved.success:
                     return self._finish(goal_handle, moved, result)
@@ -201,8 +205,7 @@ class ExecutorNode(RobotInputs, ArmCommands, GraspPlanning, Node):
             sequence = self._sequence_for(grasp, place, p, self._squeeze_for(goal_handle.request, p))
             if goal_handle.request.plan_grasp and p["plan_grasp_alternatives"] > 1:
                 result.grasp_used, sequence = self._reachable_alternative(grasp, sequence, place, p)
-            self._wait_for_servers(p["server_wait_s"])
-            self._check_inputs(p)
+            self._ready_to_move(p)
             return self._run(goal_handle, sequence, result)
         except (GoalError, ValueError) as error:
             with self._lock:   # raised while a sequence drove the arm (shutdown, a stop it could not plan):
@@ -225,6 +228,13 @@ class ExecutorNode(RobotInputs, ArmCommands, GraspPlanning, Node):
         finally:
             with self._lock:
                 self._sequence, self._busy = None, False
+
+    def _ready_to_move(self, p: dict) -> None:
+        """GoalError unless the arm's and the gripper's actions are up and joint states, the wrench and (with
+        use_sim_time) the clock arrive; right after start each is waited for up to server_wait_s."""
+        self._wait_for_servers(p["server_wait_s"])
+        self._wait_for_first_inputs(p["server_wait_s"])
+        self._check_inputs(p)
 
     def _abort(self, goal_handle, result, reason: str, started: float):
         result.success, result.failure_reason = False, reason
@@ -277,6 +287,8 @@ class ExecutorNode(RobotInputs, ArmCommands, GraspPlanning, Node):
         """Run the control loop until the sequence finishes (a cancel request goes to the sequence)."""
         period = float(self._params()["control_period_s"])
         with self._lock:
+            if self._shutdown.is_set():   # the exit's stop found nothing moving: nothing may start after it
+                raise GoalError("executor is shutting down")
             self._sequence = sequence
             if self._last_state is not None:
                 sequence.on_joint_state(*self._last_state)

@@ -9,13 +9,17 @@ PATH_TOLERANCE_VIOLATED / GOAL_TOLERANCE_VIOLATED (the arm then holds where it i
 (INVALID_GOAL), a cancel holds the arm. A goal's tolerances stay active for later topic trajectories, as on the
 controller.
 
-Threads: ROS callbacks start trajectories and wait for their verdicts; `control_period` runs in the sim thread with
+Goals start in the order they arrive, at acceptance (the controller's goal_accepted_callback): the action server's
+requests are handled one at a time (its own mutually exclusive callback group) and the trajectory starts in the
+accepted callback; only the waiting for a verdict runs as the goal's execute task. Threads: ROS callbacks start
+trajectories and wait for their verdicts; `control_period` runs in the sim thread with
 the driver's lock held. Nothing here reads the ROS clock: sim time is the cell's.
 """
 import time
 
 from control_msgs.action import FollowJointTrajectory
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from std_msgs.msg import Header
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
@@ -32,7 +36,7 @@ from defgg_ros.sim.cell.tolerances import (
 )
 from defgg_ros.sim.cell.trajectory import TrajectoryError, make_waypoints
 
-FEEDBACK_PERIOD_S = 0.1       # FollowJointTrajectory feedback while a goal runs (wall clock)
+FEEDBACK_PERIOD_S = 1 / 20.0  # FollowJointTrajectory feedback while a goal runs (wall clock): action_monitor_rate
 # A trajectory stamp further than this from sim time is a wall-clock stamp
 # from a node without use_sim_time: start it now instead of never/at once.
 MAX_STAMP_OFFSET_S = 1.0
@@ -67,11 +71,15 @@ class FakeArmController:
         self._goal_id = 0                 # id of the newest goal
         self._running_goal = None         # id of the goal the running trajectory answers; None: no goal
         self._verdicts = {}               # goal id -> Verdict, set by the sim thread
+        self._started = {}                # goal uuid -> (goal id or None, error text): set at acceptance
+        self._goal_ids = {}               # goal uuid -> goal id, while its execute task runs
+        self._canceled_running = set()    # goal ids canceled while they ran (the arm then held)
         driver.create_subscription(JointTrajectory, cfg["joint_trajectory_topic"], self._on_trajectory, qos.COMMAND,
                                    callback_group=callback_group)
         ActionServer(driver, FollowJointTrajectory, cfg["arm_trajectory_action"], execute_callback=self._execute,
-                     callback_group=callback_group, goal_callback=self._on_goal,
-                     cancel_callback=lambda _goal: CancelResponse.ACCEPT)
+                     callback_group=MutuallyExclusiveCallbackGroup(), goal_callback=self._on_goal,
+                     handle_accepted_callback=self._on_accepted, cancel_callback=self._on_cancel)
+        self.cancel_requests = 0          # cancel requests received (the controller logs each one)
 
     # ---- the sim thread (lock held) ------------------------------------------
     def control_period(self, now_s: float) -> None:
@@ -133,15 +141,30 @@ class FakeArmController:
             return GoalResponse.REJECT
         return GoalResponse.ACCEPT
 
-    def _execute(self, goal_handle):
-        """Follow the goal's trajectory in sim time until the sim thread's verdict; a newer goal preempts it, a
-        cancel holds the arm."""
-        request, result = goal_handle.request, FollowJointTrajectory.Result()
+    def _on_cancel(self, goal_handle) -> CancelResponse:
+        """goal_cancelled_callback: a cancel for the running goal holds the measured position at once and ends it
+        canceled; for any other goal (one already preempted) it changes nothing."""
+        self.cancel_requests += 1
+        self._logger.info("Got request to cancel goal")   # the controller's line
+        goal_id = self._goal_ids.get(bytes(goal_handle.goal_id.uuid))
+        with self._lock:
+            if goal_id is not None and self._running_goal == goal_id:
+                self._running_goal = None
+                self._canceled_running.add(goal_id)
+                if self._driver._running:
+                    self._hold()
+        return CancelResponse.ACCEPT
+
+    def _on_accepted(self, goal_handle) -> None:
+        """goal_accepted_callback: the trajectory replaces the running one now, in the order goals arrive; then the
+        goal's execute task waits for its verdict."""
+        request = goal_handle.request
         tolerances, why = goal_tolerances(self.defaults, self._joints, _joint_tolerances(request.path_tolerance),
                                           _joint_tolerances(request.goal_tolerance),
                                           _seconds(request.goal_time_tolerance))
         if why:
             self._logger.error(why)
+        goal_id, error = None, ""
         try:
             points = self._trajectory_points(request.trajectory)
             with self._lock:
@@ -151,9 +174,33 @@ class FakeArmController:
                 goal_id = self._goal_id
                 self._start(points, request.trajectory.header.stamp, tolerances, goal_id)
         except (TrajectoryError, ValueError) as exc:
-            result.error_code, result.error_string = FollowJointTrajectory.Result.INVALID_GOAL, str(exc)
+            error = str(exc)
+        except Exception as exc:  # noqa: BLE001 - the goal must still end (rclpy guarded the execute callback)
+            error = f"the simulated controller failed: {exc!r}"
+            self._logger.error(error)
+        finally:
+            self._started[bytes(goal_handle.goal_id.uuid)] = (goal_id, error)
+            if goal_id is not None:
+                self._goal_ids[bytes(goal_handle.goal_id.uuid)] = goal_id
+            goal_handle.execute()
+
+    def _execute(self, goal_handle):
+        """Follow the goal's trajectory (started at acceptance) in sim time until the sim thread's verdict; a newer
+        goal preempts it, a cancel holds the arm."""
+        result = FollowJointTrajectory.Result()
+        uuid = bytes(goal_handle.goal_id.uuid)
+        goal_id, error = self._started.pop(uuid, (None, SHUTTING_DOWN_TEXT))
+        if goal_id is None:
+            result.error_code, result.error_string = FollowJointTrajectory.Result.INVALID_GOAL, error
             goal_handle.abort()
             return result
+        try:
+            return self._follow(goal_handle, goal_id, result)
+        finally:
+            self._goal_ids.pop(uuid, None)
+            self._canceled_running.discard(goal_id)
+
+    def _follow(self, goal_handle, goal_id: int, result):
         next_feedback = 0.0
         while True:
             with self._lock:
@@ -166,22 +213,20 @@ class FakeArmController:
                 else:
                     goal_handle.abort()
                 return result
-            if not running:
+            if goal_id in self._canceled_running:   # _on_cancel held the arm
+                if goal_handle.is_cancel_requested:   # rclpy marks it canceling once _on_cancel has returned
+                    goal_handle.canceled()
+                    return result
+            elif not running:
                 result.error_code, result.error_string = FollowJointTrajectory.Result.INVALID_GOAL, PREEMPTED_TEXT
                 goal_handle.abort()
                 return result
-            if goal_handle.is_cancel_requested or not self._driver._running:
+            if not self._driver._running:   # a goal can only be canceled on request: aborted, saying why
                 with self._lock:
                     if self._running_goal == goal_id:
-                        self._running_goal = None
-                        if self._driver._running:   # shutting down: the simulation is (being) closed
-                            self._hold()   # hold where the arm is, like the controller
-                if goal_handle.is_cancel_requested:
-                    goal_handle.canceled()
-                else:   # the driver shutting down: a goal can only be canceled on request
-                    result.error_code = FollowJointTrajectory.Result.INVALID_GOAL
-                    result.error_string = SHUTTING_DOWN_TEXT
-                    goal_handle.abort()
+                        self._running_goal = None   # no hold: the simulation is (being) closed
+                result.error_code, result.error_string = FollowJointTrajectory.Result.INVALID_GOAL, SHUTTING_DOWN_TEXT
+                goal_handle.abort()
                 return result
             if time.monotonic() >= next_feedback:
                 next_feedback = time.monotonic() + FEEDBACK_PERIOD_S

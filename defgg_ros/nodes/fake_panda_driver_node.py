@@ -50,7 +50,7 @@ from defgg_ros.ros.parameters import declare_parameters, load_schema
 from defgg_ros.ros.share import demo_scene_file
 from defgg_ros.ros.tf import transform_msg
 from defgg_ros.rotations import quaternion_xyzw_to_matrix
-from defgg_ros.sim.cell.camera import DepthNoise
+from defgg_ros.sim.cell.camera import DepthNoise, color_camera_matrix
 from defgg_ros.sim.cell.gripper import GripperCommandError
 from defgg_ros.sim.cell.sim_cell import CellSettings, SimCell
 from defgg_ros.sim.scene_spec import SceneError, load_scene, scene_warnings
@@ -65,10 +65,10 @@ HOMING_SPEED_MPS = 0.1        # franka_gripper's default speed
 EXIT_STILL_RADPS = 0.01
 EXIT_REST_S = 0.5
 EXIT_STOP_TIMEOUT_S = 3.0
-# Camera frames are published reliably (like realsense2_camera): best-effort
-# subscribers still match, and reliable ones (the cell's nodes pick reliable
-# for a reliable publisher, qos.SensorSubscription) get lost fragments repaired.
-IMAGE_QOS = qos.IMAGE_PUBLISH
+# realsense2_camera stamps each stream's frames with that stream's own capture time (enable_sync off, its default):
+# a depth frame and the colour frame taken with it never carry the same stamp. The simulated colour frame is
+# stamped one control period later, so a reader pairing them by exact stamp fails here as on the real camera.
+COLOR_STAMP_LAG_S = 1e-3
 
 
 # Names, types, defaults and bounds: defgg_ros/ros/params/fake_panda_driver.yaml.
@@ -161,9 +161,12 @@ class FakePandaDriver(Node):
         self.pub_wrench = self.create_publisher(WrenchStamped, cfg["external_wrench_topic"], qos.FRANKA_CONVENIENCE)
         self.pub_pose = self.create_publisher(PoseStamped, topics.CURRENT_POSE, qos.FRANKA_CONVENIENCE)
         self.pub_measured = self.create_publisher(JointState, topics.MEASURED_JOINT_STATES, qos.FRANKA_CONVENIENCE)
-        self.pub_depth = self.create_publisher(Image, cfg["depth_topic"], IMAGE_QOS)
-        self.pub_info = self.create_publisher(CameraInfo, cfg["camera_info_topic"], IMAGE_QOS)
-        self.pub_color = self.create_publisher(Image, cfg["color_topic"], IMAGE_QOS)
+        # realsense2_camera's publishers with their QoS (ros/qos.py REALSENSE_*)
+        self.pub_depth = self.create_publisher(Image, cfg["depth_topic"], qos.REALSENSE_IMAGE)
+        self.pub_info = self.create_publisher(CameraInfo, cfg["camera_info_topic"], qos.REALSENSE_CAMERA_INFO)
+        self.pub_color = self.create_publisher(Image, cfg["color_topic"], qos.REALSENSE_IMAGE)
+        self.pub_color_info = self.create_publisher(CameraInfo, cfg["color_camera_info_topic"],
+                                                    qos.REALSENSE_CAMERA_INFO)
         self.pub_poses = self.create_publisher(PoseArray, OBJECT_POSES_TOPIC, qos.STATE)
         self.pub_scene = self.create_publisher(String, SCENE_TOPIC, qos.LATCHED)
         self.pub_scene.publish(String(data=json.dumps(self._scene_description())))
@@ -239,8 +242,12 @@ class FakePandaDriver(Node):
                 with self._lock:  # franka_gripper's cancel: Gripper::stop, the grasp's force let go
                     self.cell.gripper_stop()
                     self._waiters.pop(token, None)
-                result.success, result.error = False, "canceled"
-                goal_handle.canceled()
+                if goal_handle.is_cancel_requested:
+                    result.success, result.error = False, "canceled"
+                    goal_handle.canceled()
+                else:   # shutting down: a goal ends canceled only on request (rclpy refuses it otherwise)
+                    result.success, result.error = False, "the simulated gripper is shutting down"
+                    goal_handle.abort()
                 return result
             goal_handle.publish_feedback(action_type.Feedback(current_width=self.cell.gripper_width_m()))
         outcome = waiter[1]
@@ -388,8 +395,10 @@ class FakePandaDriver(Node):
         self.pub_depth.publish(depth_metres_to_msg(depth_m, "16UC1", header))
         self.pub_info.publish(make_camera_info(self.cell.camera_k, CAMERA_WIDTH_PX, CAMERA_HEIGHT_PX, header))
         if rgb is not None:
-            color_header = self._stamp(now_s, self._camera_frames["color_optical"])
+            color_header = self._stamp(now_s + COLOR_STAMP_LAG_S, self._camera_frames["color_optical"])
             self.pub_color.publish(numpy_to_image(rgb, "rgb8", color_header))
+            self.pub_color_info.publish(make_camera_info(color_camera_matrix(), CAMERA_WIDTH_PX, CAMERA_HEIGHT_PX,
+                                                         color_header))
 
     def _publish_poses(self, now_s, poses):
         msg = PoseArray(header=self._stamp(now_s, self.cfg["base_frame"]))

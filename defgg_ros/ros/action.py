@@ -66,6 +66,22 @@ def result_of_goal(handle, timeout_s: float, what: str, wait_until, resend_every
                                                     f"({sends} requests)"))
 
 
+def in_executor(node, callback):
+    """A done-callback that hands `callback(future)` to the node's executor as a task.
+
+    rclpy runs a done-callback at once, in the thread that attaches it, when the future is already done: an
+    answer that arrives between send_goal_async and add_done_callback would run the callback inside a caller
+    that holds a lock the callback takes (the executor sends goals with its lock held), a deadlock. As a task it
+    runs after the caller has let go. With no executor (a node spun by hand) it runs at once."""
+    def schedule(future):
+        executor = node.executor
+        if executor is None:
+            callback(future)
+        else:
+            executor.create_task(callback, future)
+    return schedule
+
+
 def destroy_actions(node) -> None:
     """Destroy every action server and client of `node`.
 

@@ -20,7 +20,9 @@ This executor keeps the set of tasks that are queued or running and submits a ta
 in neither; when the wait loop offers a task that is still in flight, the spinning thread blocks
 until some task finishes (at most IN_FLIGHT_WAIT_S), which hands the GIL to the workers.
 """
+import sys
 import threading
+import traceback
 
 from rclpy.executors import (
     ConditionReachedException,
@@ -54,7 +56,12 @@ class ThreadedExecutor(MultiThreadedExecutor):
                 self._in_flight_changed.wait(IN_FLIGHT_WAIT_S)
                 return
             self._in_flight.add(handler)
-        self._futures.append(self._executor.submit(self._run, handler))
+        self._executor.submit(self._run, handler)
+        # The handler is an rclpy Task: it keeps what its callback raised (Task.__call__ stores the exception and
+        # returns), so the Task, not the pool's future, is what to ask, as rclpy's own executor does. Asking the
+        # pool's future re-raised nothing: a callback's exception was lost and the node spun on (run_node's stop
+        # and exit 1 on a callback's exception never came for a node with more than one thread).
+        self._futures.append(handler)
         for future in self._futures[:]:
             if future.done():
                 self._futures.remove(future)
@@ -67,3 +74,32 @@ class ThreadedExecutor(MultiThreadedExecutor):
             with self._in_flight_changed:
                 self._in_flight.discard(handler)
                 self._in_flight_changed.notify_all()
+
+
+class SpinThread:
+    """executor.spin() in a daemon thread for a tool (recorder, replayer) that waits on futures meanwhile. A
+    callback's exception ends spin(); unwatched, the thread died and every later wait ran into its timeout with
+    nothing said. Here it is printed with its traceback, kept in `errors`, and spinning goes on;
+    `raise_if_failed()` turns it into the tool's error."""
+
+    def __init__(self, executor):
+        self.executor, self.errors = executor, []
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while True:
+            try:
+                self.executor.spin()
+                return
+            except Exception as error:  # noqa: BLE001 - kept and reported; the tool decides
+                self.errors.append(error)
+                traceback.print_exc(file=sys.stderr)
+
+    def raise_if_failed(self) -> None:
+        if self.errors:
+            raise RuntimeError(f"a callback raised {self.errors[0]!r} ({len(self.errors)} in all; "
+                               "tracebacks above)")
+
+    def join(self, timeout_s: float) -> None:
+        self._thread.join(timeout=timeout_s)

@@ -2,10 +2,12 @@
 
 - SENSOR_DATA: best effort, keep last 5, volatile (rclpy's sensor-data
   profile), for readers that must match any image publisher (recorders).
-- IMAGE_PUBLISH: what the cell's own image publishers offer (the fake
-  camera, stiffness image, mask): reliable, keep last 2, volatile, like
-  realsense2_camera. Best-effort readers still match it, and reliable
-  readers get lost fragments of large frames repaired (see below).
+- REALSENSE_IMAGE, REALSENSE_CAMERA_INFO: realsense2_camera's (and the
+  simulated camera's) image and camera_info publishers (below).
+- IMAGE_PUBLISH: what the cell's own image publishers offer (stiffness
+  image, mask, perceived objects): reliable, keep last 2, volatile.
+  Best-effort readers still match it, and reliable readers get lost
+  fragments of large frames repaired (see below).
 - LATCHED: state that a late joiner must still get (stiffness assignments,
   the scene description): reliable + transient local, keep last 1 — the
   "latched topic" of ROS 1.
@@ -57,6 +59,14 @@ from rclpy.qos import (
 
 SENSOR_DATA = qos_profile_sensor_data
 
+# realsense2_camera 4.56 publishes its images with SYSTEM_DEFAULT (`<stream>_qos`, include/constants.h IMAGE_QOS):
+# whatever the middleware's writer defaults are (Fast DDS: reliable, transient local, keep last 1), and their
+# camera_info with DEFAULT (`<stream>_info_qos`): reliable, volatile, keep last 10. The simulated camera offers the
+# same, so a reader that works with it works with the real camera on the same middleware.
+REALSENSE_IMAGE = qos_profile_system_default
+REALSENSE_CAMERA_INFO = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                                   durability=DurabilityPolicy.VOLATILE)
+
 IMAGE_PUBLISH = QoSProfile(
     history=HistoryPolicy.KEEP_LAST,
     depth=2,
@@ -89,7 +99,8 @@ COMMAND = QoSProfile(
 # franka_robot_state_broadcaster's convenience topics, rclcpp::QoS(1).best_effort() since 3.3.0;
 FRANKA_CONVENIENCE = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT,
                                 durability=DurabilityPolicy.VOLATILE)
-# joint_state_broadcaster's joint_states, rclcpp::SystemDefaultsQoS() (reliable, volatile with Fast DDS);
+# joint_state_broadcaster's joint_states, rclcpp::SystemDefaultsQoS(): the writer defaults (Fast DDS: reliable,
+# transient local);
 FRANKA_SYSTEM_DEFAULT = qos_profile_system_default
 # joint_state_publisher's merged joint_states, create_publisher(..., 10): reliable, keep last 10;
 JOINT_STATE_PUBLISHER = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE,

@@ -19,6 +19,8 @@ Images and camera_info carry the optical frame of their stream (`<camera_name>_d
 """
 import numpy as np
 
+from defgg_ros.constants import LINK_COLOR_OFFSET_M
+
 DEFAULT_CAMERA_NAME = "camera"
 
 # <stream>_frame -> <stream>_optical_frame: columns are the optical axes in the stream's ROS frame
@@ -43,7 +45,8 @@ def calibrated_camera_tree(base_frame: str, base_T_depth_optical, camera_name: s
     """[(parent, child, parent_T_child 4x4)] of a calibrated cell whose depth optical frame sits at
     base_T_depth_optical: the calibration base -> `<camera_name>_link` first, then realsense2_camera's own static
     frames (link -> depth frame identity, depth frame -> depth optical frame; with_color: the colour stream's pair,
-    its extrinsics to the depth stream the identity, as a colour image rendered from the depth camera's viewpoint has).
+    its extrinsics to the depth stream a D435's, LINK_COLOR_OFFSET_M along the link's axes, where the simulated
+    colour camera renders from).
     """
     names = frame_ids(camera_name)
     link_T_optical = FRAME_T_OPTICAL                    # camera_link -> depth frame is the identity
@@ -52,6 +55,8 @@ def calibrated_camera_tree(base_frame: str, base_T_depth_optical, camera_name: s
             (names["link"], names["depth"], np.eye(4)),
             (names["depth"], names["depth_optical"], FRAME_T_OPTICAL)]
     if with_color:
-        tree += [(names["link"], names["color"], np.eye(4)),
+        link_T_color = np.eye(4)
+        link_T_color[:3, 3] = LINK_COLOR_OFFSET_M
+        tree += [(names["link"], names["color"], link_T_color),
                  (names["color"], names["color_optical"], FRAME_T_OPTICAL)]
     return tree

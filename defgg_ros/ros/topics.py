@@ -15,6 +15,7 @@ the whole graph: /clock (sim time), /tf and /tf_static (tf2); remap them explici
 DEPTH_IMAGE = "camera/camera/depth/image_rect_raw"           # 16UC1 mm or 32FC1 m
 DEPTH_CAMERA_INFO = "camera/camera/depth/camera_info"
 COLOR_IMAGE = "camera/camera/color/image_raw"
+COLOR_CAMERA_INFO = "camera/camera/color/camera_info"
 
 # Robot (franka_ros2 3.x on Jazzy, or the fake driver): the names a cell started with franka_bringup's
 # franka.launch.py (load_gripper:=true) and a JointTrajectoryController serves; docs/franka_contract.md

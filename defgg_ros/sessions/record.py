@@ -34,7 +34,7 @@ from defgg_ros.cli_help import HelpFormatter
 from defgg_ros.ros import qos
 from defgg_ros.ros.cell_client import CellCallError, CellClient
 from defgg_ros.ros.conversions import camera_info_to_k
-from defgg_ros.ros.executor import ThreadedExecutor
+from defgg_ros.ros.executor import SpinThread, ThreadedExecutor
 from defgg_ros.ros.launcher import watch_supervisor
 from defgg_ros.ros.transport import use_large_message_transport
 from defgg_ros.sessions import metadata as md
@@ -144,8 +144,7 @@ def record(args, log=print) -> Path:
     context = Context()
     rclpy.init(context=context)
     executor = ThreadedExecutor(num_threads=4, context=context)
-    spin_thread = threading.Thread(target=executor.spin, daemon=True)
-    spin_thread.start()
+    spin_thread = SpinThread(executor)
     writer = None
     try:
         probe = Node("defgg_session_probe", context=context)
@@ -165,7 +164,8 @@ def record(args, log=print) -> Path:
         writer = SessionWriter(args.out, meta, time.time_ns())
         recorder = SessionRecorder(writer, FrameSelector(topics.DEPTH_IMAGE, args.depth_period_s,
                                                          args.joint_state_period_s,
-                                                         frame_topics=(topics.DEPTH_CAMERA_INFO,)),
+                                                         frame_topics=(topics.DEPTH_CAMERA_INFO,),
+                                                         paired_topics=(topics.COLOR_IMAGE,)),
                                    record_color=not args.no_color, context=context)
         executor.add_node(recorder)
         try:
@@ -181,13 +181,13 @@ def record(args, log=print) -> Path:
         path = recorder.finish()
         writer = None
         log(f"wrote {path}: " + ", ".join(f"{t} x{n}" for t, n in sorted(recorder.counts.items())))
-        check_complete(path, recorder.errors)
+        check_complete(path, recorder.errors + [f"a callback raised {e!r}" for e in spin_thread.errors])
         return path
     finally:
         if writer is not None:
             writer.abort()
         executor.shutdown()
-        spin_thread.join(timeout=10.0)  # before the context goes, or rcl aborts at exit
+        spin_thread.join(10.0)  # before the context goes, or rcl aborts at exit
         context.try_shutdown()
 
 

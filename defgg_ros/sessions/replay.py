@@ -13,7 +13,6 @@ import argparse
 import math
 import sys
 import tempfile
-import threading
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -26,7 +25,7 @@ from tqdm import tqdm
 from defgg_ros.cli_help import HelpFormatter
 from defgg_ros.ros.cell_client import CellCallError, CellClient
 from defgg_ros.ros.domain import PRIVATE_DOMAIN_RANGE, SAFE_DOMAIN_RANGE, pick_private_domain
-from defgg_ros.ros.executor import ThreadedExecutor
+from defgg_ros.ros.executor import SpinThread, ThreadedExecutor
 from defgg_ros.ros.transport import use_large_message_transport
 from defgg_ros.sessions import metadata as md
 from defgg_ros.sessions import session_topics as st
@@ -46,8 +45,9 @@ EXIT_OK, EXIT_REGRESSION, EXIT_ERROR, EXIT_INTERRUPTED = 0, 1, 2, 130
 STARTUP_TIMEOUT_S = 90.0
 PICK_NODES = ("fake_panda_driver", "executor_node")
 # How long a replay listens to a candidate ROS domain for other nodes (discovery on localhost
-# takes well under a second, but a loaded machine once needed more than 1.5 s).
-DOMAIN_LISTEN_S = 3.0
+# takes well under a second, but a loaded machine once needed more than 1.5 s, and at a load of 8 on 2 cores
+# more than 3 s: the full test suite, 2026-12-02).
+DOMAIN_LISTEN_S = 5.0
 # Recorded from the driver; a replay without picks carries them over into an --update.
 DRIVER_TOPICS = (topics.JOINT_STATES, st.DRIVER_SCENE)
 
@@ -85,13 +85,13 @@ def nodes_in_domain(domain_id: int, listen_s: float = DOMAIN_LISTEN_S) -> list:
         context.try_shutdown()
 
 
-def pick_empty_domain(log=print, attempts: int = 5) -> int:
-    """A private domain where no other node answers discovery. CI once saw a replay's services
+def pick_empty_domain(log=print, attempts: int = 5, listen_s: float = DOMAIN_LISTEN_S) -> int:
+    """A private domain where no other node answers discovery within listen_s. CI once saw a replay's services
     'appear' 0.0 s after its nodes were launched and then never answer: another graph was there."""
     tried = []
     for _ in range(attempts):
         domain_id = pick_private_domain(exclude=tried)
-        others = nodes_in_domain(domain_id)
+        others = nodes_in_domain(domain_id, listen_s)
         if not others:
             return domain_id
         log(f"  ROS domain {domain_id} is in use ({', '.join(sorted(others)[:4])}); trying another")
@@ -121,14 +121,18 @@ class ReplayRun:
         self.client = CellClient(self.player)
         self.graph = NodeGraph(self.run_dir, self.domain_id)
         self._perception = None   # parameters of the running segmentation + inference nodes
-        self._spin_thread = threading.Thread(target=self.executor.spin, daemon=True)
-        self._spin_thread.start()
+        self._spin_thread = SpinThread(self.executor)
+
+    def _check_alive(self) -> None:
+        """Called while waiting: a node of the graph died, or a callback of ours raised (RuntimeError)."""
+        self.graph.check_alive()
+        self._spin_thread.raise_if_failed()
 
     def close(self) -> None:
         self.graph.stop_all()
         # Stop spinning and wait for the thread before the context goes (else rcl aborts at exit).
         self.executor.shutdown()
-        self._spin_thread.join(timeout=10.0)
+        self._spin_thread.join(10.0)
         self.context.try_shutdown()
 
     def _start_cell(self, specs: list, pick: bool) -> None:
@@ -143,7 +147,7 @@ class ReplayRun:
             if spec.name not in PERCEPTION_NODES:
                 self.graph.start(spec)
         started = time.monotonic()
-        self.client.wait_for_servers(STARTUP_TIMEOUT_S, pick, self.graph.check_alive)
+        self.client.wait_for_servers(STARTUP_TIMEOUT_S, pick, self._check_alive)
         self.log(f"  cell ready after {time.monotonic() - started:.1f} s (node logs in {self.run_dir})")
 
     def replay(self, path: Path) -> tuple[int, str]:
@@ -166,14 +170,14 @@ class ReplayRun:
             if args.update:
                 new_meta = md.updated_metadata(meta, model.path, model.use_stiffness, tolerances)
                 writer = SessionWriter(path, new_meta, time.time_ns(), overwrite=True)
-                recorder = SessionRecorder(writer, FrameSelector(topics.DEPTH_IMAGE), live=False,
-                                           context=self.context)
+                selector = FrameSelector(topics.DEPTH_IMAGE, paired_topics=(topics.COLOR_IMAGE,))
+                recorder = SessionRecorder(writer, selector, live=False, context=self.context)
                 self.executor.add_node(recorder)
                 if not pick:  # no driver runs: keep the recorded robot state and scene as they were
                     recorder.copy_messages([m for m in session.messages if m.topic in DRIVER_TOPICS])
             options = ReplayOptions(tolerances, pick=pick, grasp_timeout_s=args.timeout_s,
                                     pick_timeout_s=args.pick_timeout_s)
-            replay = Replay(session, self.player, self.client, options, self.graph.check_alive, log, recorder)
+            replay = Replay(session, self.player, self.client, options, self._check_alive, log, recorder)
             rows = replay.run()
             if recorder is not None:
                 recorder.finish()

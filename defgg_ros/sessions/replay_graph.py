@@ -34,6 +34,7 @@ DRIVER_CAMERA_REMAPS = {
     topics.DEPTH_IMAGE: "/defgg_replay/unused/depth",
     topics.DEPTH_CAMERA_INFO: "/defgg_replay/unused/depth_camera_info",
     topics.COLOR_IMAGE: "/defgg_replay/unused/color",
+    topics.COLOR_CAMERA_INFO: "/defgg_replay/unused/color_camera_info",
 }
 
 

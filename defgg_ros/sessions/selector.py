@@ -7,6 +7,10 @@ by their header stamp: a stamp is *kept* when a depth frame arrives at least
 (a planned grasp's header stamp). Messages of kept stamps are written; the
 others wait in a short buffer so that a later reference can still pull its
 frame in. Unstamped-rate topics (joint states) are decimated by period.
+
+A stream stamped by its own sensor (realsense2_camera's colour: with enable_sync off each stream carries its own
+capture time, never the depth frame's) is filed under the nearest depth stamp within PAIR_WINDOW_S
+(`paired_topics`); filed under its own stamp it waited for a reference that never came and was dropped.
 """
 import struct
 from collections import OrderedDict
@@ -15,6 +19,8 @@ DEFAULT_DEPTH_PERIOD_S = 2.0
 DEFAULT_JOINT_STATE_PERIOD_S = 0.1
 # Frames waiting for a possible reference: ~1 s of a 30 Hz camera.
 BUFFER_STAMPS = 40
+# A paired stream's frame belongs to the depth frame within this of its stamp: under half a 30 Hz frame period.
+PAIR_WINDOW_S = 0.015
 
 
 class StampError(ValueError):
@@ -47,7 +53,7 @@ class FrameSelector:
     """Decide what to write; every method returns [(topic, raw, log_time_ns)] to write now."""
 
     def __init__(self, depth_topic: str, depth_period_s: float = DEFAULT_DEPTH_PERIOD_S,
-                 joint_state_period_s: float = DEFAULT_JOINT_STATE_PERIOD_S, frame_topics=()):
+                 joint_state_period_s: float = DEFAULT_JOINT_STATE_PERIOD_S, frame_topics=(), paired_topics=()):
         if depth_period_s < 0 or joint_state_period_s < 0:
             raise ValueError("periods must be >= 0 s")
         self.depth_topic = depth_topic
@@ -61,21 +67,42 @@ class FrameSelector:
         self._kept = OrderedDict()       # stamp -> None (recent kept stamps)
         self._pending = OrderedDict()    # stamp -> [(topic, raw, log_time_ns)]
         self._written = OrderedDict()    # (topic, stamp) -> None: a re-sent frame is written once
+        self.paired_topics = tuple(paired_topics)
+        self._depth_stamps = OrderedDict()   # recent depth stamps, for the paired topics
 
     def offer_stamped(self, topic: str, raw: bytes, log_time_ns: int) -> list:
         stamp = header_stamp_ns(raw)
         item = (topic, raw, log_time_ns)
         if (topic, stamp) in self._written:
             return []
+        if topic in self.paired_topics:
+            stamp = self._nearest_depth_stamp(stamp)
         if stamp in self._kept:
             return self._mark([item])
-        if topic == self.depth_topic and (self._last_kept_depth_ns is None
-                                          or log_time_ns - self._last_kept_depth_ns >= self.depth_period_ns):
-            self._last_kept_depth_ns = log_time_ns
-            return self.keep(stamp) + self._mark([item])
+        if topic == self.depth_topic:
+            self._depth_stamps[stamp] = None
+            _trim(self._depth_stamps)
+            self._adopt_paired(stamp)
+            if self._last_kept_depth_ns is None or log_time_ns - self._last_kept_depth_ns >= self.depth_period_ns:
+                self._last_kept_depth_ns = log_time_ns
+                return self.keep(stamp) + self._mark([item])
         self._pending.setdefault(stamp, {})[topic] = item  # a re-sent message replaces the waiting one
         _trim(self._pending)
         return []
+
+    def _nearest_depth_stamp(self, stamp: int) -> int:
+        """The depth stamp within PAIR_WINDOW_S nearest `stamp`, else `stamp` (its depth frame not here yet)."""
+        window_ns = PAIR_WINDOW_S * 1e9
+        near = [s for s in self._depth_stamps if abs(s - stamp) <= window_ns]
+        return min(near, key=lambda s: abs(s - stamp)) if near else stamp
+
+    def _adopt_paired(self, depth_stamp: int) -> None:
+        """Paired messages that came before their depth frame wait under their own stamp: file them under it."""
+        window_ns = PAIR_WINDOW_S * 1e9
+        for stamp in [s for s in self._pending if s != depth_stamp and abs(s - depth_stamp) <= window_ns]:
+            waiting = self._pending[stamp]
+            if waiting and all(topic in self.paired_topics for topic in waiting):
+                self._pending.setdefault(depth_stamp, {}).update(self._pending.pop(stamp))
 
     def has_frame(self, stamp: int) -> bool:
         """Is the whole frame (depth + frame_topics) of this stamp written or still in the buffer?"""

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 from defgg_ros.sessions import session_topics as st
 from defgg_ros.sessions.bag import BagMessage, SessionBagError, read_bag
-from defgg_ros.sessions.selector import restamp
+from defgg_ros.sessions.selector import PAIR_WINDOW_S, restamp
 from defgg_ros.sessions.session_topics import topics  # absolute names (bag channels)
 
 # 2 (2026-11-29, one perceiver): PlanGrasp's request carries PerceivedObjects instead of a stiffness image, so a
@@ -100,6 +100,12 @@ def _camera_info_for(path, infos: dict, depth: BagMessage, stamp: int) -> BagMes
     return BagMessage(nearest.topic, nearest.msgtype, depth.log_time_ns, restamp(nearest.raw, stamp))
 
 
+def _nearest(by_stamp: dict, stamp: int, window_s: float):
+    """The message whose stamp is nearest `stamp` within window_s (a stream stamped by its own sensor), else None."""
+    near = [s for s in by_stamp if abs(s - stamp) <= window_s * 1e9]
+    return by_stamp[min(near, key=lambda s: abs(s - stamp))] if near else None
+
+
 def _frames(path, messages: list) -> list:
     infos = _by_stamp(messages, topics.DEPTH_CAMERA_INFO)
     colors = _by_stamp(messages, topics.COLOR_IMAGE)
@@ -113,7 +119,7 @@ def _frames(path, messages: list) -> list:
             continue
         seen.add(stamp)
         info = _camera_info_for(path, infos, m, stamp)
-        frame = Frame(len(events), stamp, m, info, colors.get(stamp), grasps.get(stamp))
+        frame = Frame(len(events), stamp, m, info, _nearest(colors, stamp, PAIR_WINDOW_S), grasps.get(stamp))
         events.append(Event("frame", m.log_time_ns, frame))
     return events
 

@@ -11,7 +11,7 @@ from support.control_fake_robot import FakeRobot, World, run
 
 from defgg_ros.constants import PANDA_READY_Q_RAD
 from defgg_ros.control.kinematics import PandaKinematics
-from defgg_ros.control.pick_place import PickPlaceSequence
+from defgg_ros.control.pick_place import RELEASE_RELIEF_LIFT_M, PickPlaceSequence
 from defgg_ros.control.sequence_types import GraspTarget, MoveGripper, PlaceTarget, SequenceConfig
 
 pytestmark = pytest.mark.unit
@@ -126,3 +126,25 @@ def test_a_cancel_after_the_release_does_not_open_the_hand_further(kin):
     assert _releases(kin, robot, sequence) == []
     out = sequence.outcome
     assert out.canceled and "opened the hand" not in out.recovery and out.arm_state == "observation_pose", out.recovery
+
+
+@pytest.mark.parametrize("blocked_above_m", [0.005, 0.03])
+def test_a_release_blocked_on_the_floor_lifts_the_hand_and_opens_again(kin, blocked_above_m):
+    """Finger tips pressed on the bin's floor (a touch-down stopped late): the opening fingers drag on it and stop.
+    The hand lifts RELEASE_RELIEF_LIFT_M and opens again; blocked still after that (a wall beside the fingers),
+    the place fails and says so."""
+    robot = FakeRobot(kin, World(object_width_m=0.045))
+    sequence = PickPlaceSequence(kin, CONFIG, GRASP, BIN)
+    run(sequence, robot, until=lambda r, s: s.phase == "place")
+    robot.world.contact_height_m = 0.09
+    robot.world.open_blocked_below_tcp_z_m = 0.09 + blocked_above_m
+    releases = _releases(kin, robot, sequence)
+    out = sequence.outcome
+    if blocked_above_m < RELEASE_RELIEF_LIFT_M:
+        assert out.success, out.failure_reason
+        assert "release blocked" in out.recovery and len(releases) == 2
+        assert releases[1][0][2] == pytest.approx(releases[0][0][2] + RELEASE_RELIEF_LIFT_M, abs=1e-3)
+        assert robot.width_m == pytest.approx(out.gripper_width_closed_m + CONFIG.place_release_opening_m)
+    else:
+        assert not out.success and "again after lifting" in out.failure_reason, out.failure_reason
+        assert [w for _, w in releases[:2]] == [releases[0][1]] * 2

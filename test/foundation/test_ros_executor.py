@@ -156,3 +156,60 @@ def test_a_lost_result_response_is_asked_for_again_and_arrives(executor, spin):
     server.result_requests = -100     # every request unanswered now: a clear timeout, not a hang
     with pytest.raises(ResultTimeout, match=r"waiting for the result \(\d+ requests\)"):
         result_of_goal(handle, 1.5, "the result", wait_until, resend_every_s=0.5)
+
+
+def test_a_done_callback_for_a_future_already_done_runs_later_not_in_the_callers_lock(executor, spin):
+    """rclpy runs a done-callback at once, in the attaching thread, when the future is already done. The executor node
+    attaches its goal-response callbacks with its lock held, and the callbacks take that lock: a response that came
+    before add_done_callback deadlocked it. in_executor hands the callback to the node's executor instead."""
+    from rclpy.task import Future
+
+    from defgg_ros.ros.action import in_executor
+
+    node = Node("in_executor_test", context=executor.context)
+    executor.add_node(node)
+    lock, ran = threading.Lock(), []
+
+    def callback(future):
+        with lock:    # what the executor node's on_goal does
+            ran.append((future.result(), threading.current_thread() is caller))
+
+    caller = threading.current_thread()
+    answered = Future()
+    answered.set_result("accepted")
+    with lock:
+        answered.add_done_callback(in_executor(node, callback))   # a plain callback would deadlock here
+        assert not ran
+    spin(executor, lambda: ran, 10.0, "the callback, run by the executor")
+    assert ran == [("accepted", False)]
+
+
+def test_a_tools_spin_thread_outlives_a_callbacks_exception_and_reports_it(rclpy_context):
+    """record/replay spin a ThreadedExecutor in a thread while they wait on futures. Now that the executor re-raises a
+    callback's exception, a bare spin thread died on it and every later wait timed out with nothing said (a review:
+    a timer raising once, 4 calls in 1 s after it instead of ~20). SpinThread keeps spinning and reports it."""
+    import time
+
+    from defgg_ros.ros.executor import SpinThread
+
+    ex = ThreadedExecutor(num_threads=2, context=rclpy_context)
+    node = Node("spin_thread_probe", context=rclpy_context)
+    calls = []
+
+    def tick():
+        calls.append(time.monotonic())
+        if len(calls) == 3:
+            raise RuntimeError("a bug in a callback")
+
+    node.create_timer(0.02, tick)
+    ex.add_node(node)
+    spinner = SpinThread(ex)
+    try:
+        time.sleep(1.0)
+        assert len(calls) > 20, f"{len(calls)} calls in 1 s: spinning stopped at the exception"
+        with pytest.raises(RuntimeError, match="a bug in a callback"):
+            spinner.raise_if_failed()
+    finally:
+        ex.shutdown()
+        spinner.join(5.0)
+        node.destroy_node()

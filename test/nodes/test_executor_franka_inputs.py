@@ -4,6 +4,7 @@ joint states when the merged ones lack the fingers or hold the MoveIt launch's c
 franka/joint_states when joint_states has no publisher; and a silent input named with what the graph shows.
 Real rclpy nodes over DDS; the publishers use the QoS franka_ros2 offers (docs/franka_contract.md)."""
 import pytest
+from builtin_interfaces.msg import Time
 from geometry_msgs.msg import WrenchStamped
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -131,3 +132,23 @@ def test_a_silent_input_is_reported_in_the_log(executor, spin):
         return any(f"no message on /{topics.EXTERNAL_WRENCH}" in line and "1 publisher(s)" in line for line in lines)
 
     spin(executor, reported, TIMEOUT_S, "the silent wrench in the executor's log")
+
+
+def test_with_use_sim_time_a_goal_waits_for_the_clock_and_is_refused_without_it(executor, spin):
+    """Joint states and the wrench arrive but no /clock yet: a sequence started at robot time 0 would see its
+    first tick jump to the simulator's time; the goal waits for the clock, then is refused naming it."""
+    from rosgraph_msgs.msg import Clock
+
+    node, franka = _start(executor, use_sim_time=True)
+    _publish_periodically(franka, JointState, topics.JOINT_STATES, qos.JOINT_STATE_PUBLISHER,
+                          lambda: _arm_state(0.04))
+    _publish_periodically(franka, WrenchStamped, topics.EXTERNAL_WRENCH, qos.FRANKA_CONVENIENCE, WrenchStamped)
+    spin(executor, lambda: node._last_state is not None and node._last_force_wall_s is not None, TIMEOUT_S,
+         "joint states and the wrench at the executor")
+    node._wait_for_first_inputs(0.3)   # no clock: it waits its time out, then the check names the clock
+    with pytest.raises(GoalError, match="no clock: use_sim_time is true"):
+        node._check_inputs({**node._params(), "watchdog_timeout_s": 5.0})
+    clock = franka.create_publisher(Clock, topics.CLOCK, qos.STATE)
+    spin(executor, lambda: clock.publish(Clock(clock=Time(sec=12))) or node.get_clock().now().nanoseconds > 0,
+         TIMEOUT_S, "the sim clock at the executor")
+    node._check_inputs({**node._params(), "watchdog_timeout_s": 5.0})

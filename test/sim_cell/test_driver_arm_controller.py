@@ -19,6 +19,7 @@ SCENES = Path(__file__).resolve().parents[2] / "sim_bringup" / "scenes"
 ARM_JOINTS = topics.robot_names()["joints"]
 TIMEOUT_S = 60.0
 JOINT7_UPPER_RAD = 2.9671   # the simulated Panda's joint 7 limit (PyBullet stops the joint there)
+PREEMPTED = "Current goal preempted by new incoming action."   # preempt_active_goal's text
 
 
 def _driver(executor, rclpy_context, max_real_time_factor):
@@ -247,3 +248,52 @@ def test_a_goal_running_when_the_driver_shuts_down_is_aborted_saying_so(executor
     response = spin(executor, future, TIMEOUT_S, "the goal's result")
     assert response.status == GoalStatus.STATUS_ABORTED
     assert response.result.error_string == "the simulated controller is shutting down"
+
+
+def test_goals_sent_back_to_back_run_in_the_order_sent(executor, rclpy_context, client, spin):
+    """The joint_trajectory_controller starts a goal's trajectory in its goal_accepted_callback, goals handled one
+    at a time in the order they arrive: of two goals sent back to back, the second preempts the first. The executor's
+    stop relies on it (a hold sent after a goal still in flight needs no cancel of that goal). The driver started a
+    trajectory in its execute task after converting it, two goals' tasks on different threads: of a long move (2,000
+    points) and a one-point hold sent after it, the hold started first and the move, converted later, preempted it
+    and ran to its end (3 of 3 runs on the old driver). 10 pairs: a move of joint 1 by 0.3 rad over 5 s, then a
+    hold where the arm is."""
+    from control_msgs.action import FollowJointTrajectory
+
+    driver = _driver(executor, rclpy_context, 1.0)
+    try:
+        arm = _action(client, executor, spin)
+        for pair in range(10):
+            _, q0, _ = _arm(driver)
+            move_points = [(t, q0 + 0.3 * t / 5.0) for t in np.linspace(0.0025, 5.0, 2000)]
+            move, hold = arm.send_goal_async(_goal(move_points)), arm.send_goal_async(_goal([(0.1, q0)]))
+            handles = [spin(executor, future, TIMEOUT_S, "acceptance") for future in (move, hold)]
+            assert all(handle.accepted for handle in handles)
+            moved, held = (spin(executor, handle.get_result_async(), TIMEOUT_S, "a result").result
+                           for handle in handles)
+            assert moved.error_string == PREEMPTED, f"pair {pair}: the move ended '{moved.error_string}'"
+            assert held.error_code == FollowJointTrajectory.Result.SUCCESSFUL, (pair, held.error_string)
+            _, q, qd = _arm(driver)
+            assert np.abs(q - q0).max() < 0.005 and np.abs(qd).max() < 0.01, f"pair {pair}: the move ran"
+    finally:
+        driver.shutdown()
+
+
+def test_feedback_comes_at_the_controllers_action_monitor_rate(executor, rclpy_context, client, spin):
+    """joint_trajectory_controller sends a running goal's feedback at `action_monitor_rate`, 20 Hz by default
+    (franka_ros2 leaves it); the driver sent it at 10 Hz. Median interval over a 1.5 s goal, wall clock."""
+    import time
+
+    driver = _driver(executor, rclpy_context, 1.0)
+    try:
+        arm = _action(client, executor, spin)
+        _, q0, _ = _arm(driver)
+        arrivals = []
+        _, future = _run(executor, spin, arm, _goal([(1.5, q0 + 0.1)]),
+                         feedback=lambda _f: arrivals.append(time.monotonic()))
+        spin(executor, future, TIMEOUT_S, "the goal's result")
+        intervals_s = np.diff(arrivals)
+        assert len(intervals_s) >= 10, f"{len(arrivals)} feedback messages"
+        assert 0.04 <= np.median(intervals_s) <= 0.065, f"median interval {np.median(intervals_s):.3f} s"
+    finally:
+        driver.shutdown()

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 import yaml
 from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
 
 from defgg_ros.ros import topics
 
@@ -46,6 +47,11 @@ def _collect(node, msg_type, topic, qos_profile):
     box = []
     node.create_subscription(msg_type, topic, box.append, qos_profile)
     return box
+
+
+def _publisher_of(driver, topic):
+    resolved = driver.resolve_topic_name(topic)
+    return next(p for p in driver.publishers if p.topic_name == resolved)
 
 
 def _scene_pose(spec) -> np.ndarray:
@@ -104,8 +110,10 @@ def test_the_camera_tree_is_realsenses_under_the_calibration(executor, spin, tmp
     assert depth[-1].header.frame_id == f"{n}_depth_optical_frame"
     if color:
         assert colour[-1].header.frame_id == f"{n}_color_optical_frame"
-        np.testing.assert_allclose(tree.lookup(f"{n}_depth_optical_frame", f"{n}_color_optical_frame"), np.eye(4),
-                                   atol=1e-9)   # rendered from the depth camera's viewpoint
+        # a D435's colour camera: 15 mm along camera_link's +y (realsense2_description), the optical frames' -x
+        depth_T_color = tree.lookup(f"{n}_depth_optical_frame", f"{n}_color_optical_frame")
+        np.testing.assert_allclose(depth_T_color[:3, :3], np.eye(3), atol=1e-9)
+        np.testing.assert_allclose(depth_T_color[:3, 3], [-0.015, 0.0, 0.0], atol=1e-9)
 
 
 def test_the_perception_node_finds_the_camera_through_realsenses_chain(executor, spin, tmp_path):
@@ -198,3 +206,61 @@ def test_current_pose_is_the_franka_hands_tcp(executor, spin):
         np.testing.assert_allclose([p.x, p.y, p.z], tcp.translation, atol=1e-4)   # panda_grasptarget: 1.6 mm off
         np.testing.assert_allclose(quaternion_xyzw_to_matrix([o.x, o.y, o.z, o.w]), tcp.rotation, atol=1e-4)
         assert pose_msg.header.frame_id == "base"
+
+
+def test_the_camera_streams_are_realsenses_qos_and_colour_is_its_own_camera(executor, spin):
+    """realsense2_camera 4.56: images with the middleware's default QoS (SYSTEM_DEFAULT; Fast DDS: reliable,
+    transient local, keep last 1), camera_info reliable, volatile, keep last 10; the colour stream has its own
+    camera_info (a D435's colour focal length, 621 px) and frame (15 mm beside the depth origin), and its frames
+    carry their own stamps. The driver offered reliable, volatile, keep last 2 on all three, published no colour
+    camera_info, rendered colour from the depth camera (identity extrinsics) and stamped both alike. The colour
+    image must agree with its own camera_info and TF: the box's top face, projected through them, is where the box
+    is in the image."""
+    from rclpy.qos import qos_profile_system_default
+    from sensor_msgs.msg import CameraInfo, Image
+    from tf2_msgs.msg import TFMessage
+
+    from defgg_ros.ros import qos
+    from defgg_ros.ros.conversions import image_to_numpy, stamp_to_ns
+    from defgg_ros.ros.tf import TransformTree, tf_qos
+
+    driver = _driver(executor, publish_color=True, depth_rate_hz=5.0)
+    probe = _probe(executor, "camera_contract_probe")
+    reference = probe.create_publisher(Image, "camera_contract_reference", qos_profile_system_default)
+    seen = {name: _collect(probe, kind, topic, qos.SENSOR_DATA if kind is Image else qos.REALSENSE_CAMERA_INFO)
+            for name, kind, topic in (("depth", Image, topics.DEPTH_IMAGE), ("colour", Image, topics.COLOR_IMAGE),
+                                      ("depth_info", CameraInfo, topics.DEPTH_CAMERA_INFO),
+                                      ("colour_info", CameraInfo, topics.COLOR_CAMERA_INFO))}
+    static = _collect(probe, TFMessage, topics.TF_STATIC, tf_qos(static=True))
+    try:
+        spin(executor, lambda: static and all(seen.values()), TIMEOUT_S, "a frame on every camera topic")
+        system_default = probe.get_publishers_info_by_topic("/camera_contract_reference")[0].qos_profile
+        del reference
+        for topic in (topics.DEPTH_IMAGE, topics.COLOR_IMAGE):
+            offered = probe.get_publishers_info_by_topic("/" + topic)[0].qos_profile
+            assert (offered.reliability, offered.durability) == (system_default.reliability,
+                                                                 system_default.durability), topic
+            assert _publisher_of(driver, topic).qos_profile.depth == qos_profile_system_default.depth, topic
+        for topic in (topics.DEPTH_CAMERA_INFO, topics.COLOR_CAMERA_INFO):
+            offered = probe.get_publishers_info_by_topic("/" + topic)[0].qos_profile
+            assert offered.reliability == ReliabilityPolicy.RELIABLE and offered.durability == DurabilityPolicy.VOLATILE
+            assert _publisher_of(driver, topic).qos_profile.depth == 10, topic
+        colour, info = seen["colour"][-1], seen["colour_info"][-1]
+        assert info.header == colour.header and info.header.frame_id == "camera_color_optical_frame"
+        assert info.k[0] == pytest.approx(621.0) and seen["depth_info"][-1].k[0] == pytest.approx(385.0)
+        assert stamp_to_ns(colour.header.stamp) != stamp_to_ns(seen["depth"][-1].header.stamp)
+        tree = TransformTree()
+        for msg in static:
+            tree.add_message(msg, static=True)
+        color_T_base = np.linalg.inv(tree.lookup("fer_link0", "camera_color_optical_frame"))
+        top_centre = color_T_base @ np.array([0.5, 0.05, 0.05, 1.0])   # rigid_box.yaml: the block's top face
+        pixel = (np.array(info.k).reshape(3, 3) @ top_centre[:3])[:2] / top_centre[2]
+        rgb = image_to_numpy(colour).astype(int)
+        table = np.median(rgb.reshape(-1, 3), axis=0)
+        box_v, box_u = np.nonzero(np.abs(rgb - table).sum(axis=2) > 60)
+        near = (np.abs(box_u - pixel[0]) < 60) & (np.abs(box_v - pixel[1]) < 60)
+        assert near.sum() > 500, f"no box around the projected top face at {pixel.round(1)}"
+        centroid = np.array([box_u[near].mean(), box_v[near].mean()])
+        assert np.abs(centroid - pixel).max() < 4.0, f"box centroid {centroid.round(1)}, projected {pixel.round(1)}"
+    finally:
+        driver.shutdown()

@@ -33,6 +33,7 @@ class World:
     gripper_report_delay_s: float = 0.0      # fingers report this long after they stopped (a slow squeeze)
     slip_below_tcp_z_m: float | None = None  # with slip_at_phase: the slip waits until the TCP is below this
     object_compliance_m_per_n: float = 0.0   # a grasp at force F stops at object_width_m - F * this (a squeeze)
+    open_blocked_below_tcp_z_m: float | None = None  # an opening move stops where it is while the TCP is below this
 
 
 class FakeRobot:
@@ -69,6 +70,12 @@ class FakeRobot:
         if self.gripper is None:
             return
         kind, target, speed = self.gripper
+        blocked_below = self.world.open_blocked_below_tcp_z_m
+        if kind == "move" and target > self.width_m and blocked_below is not None \
+                and self.kin.fk(self.q)[2, 3] < blocked_below:
+            self.gripper = None   # the finger tips pressed on the floor: friction holds them (franka_gripper's error)
+            sequence.on_gripper_result(False, self.width_m, f"fingers blocked at {self.width_m * 1000:.1f} mm")
+            return
         step = speed * TICK_S
         remaining = target - self.width_m
         self.width_m = target if abs(remaining) <= step else self.width_m + np.sign(remaining) * step

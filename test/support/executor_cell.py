@@ -15,6 +15,7 @@ import os
 import subprocess
 import sys
 import threading
+import time
 from pathlib import Path
 
 import numpy as np
@@ -59,8 +60,10 @@ NAMES = topics.robot_names()   # the default robot type's (fer)
 
 class InTestDriver(Node):
     def __init__(self, context, object_width_m=0.04, contact_height_m=-1.0, q0=PANDA_READY_Q_RAD,
-                 publish_velocities=True, position_noise_rad=0.0):
+                 publish_velocities=True, position_noise_rad=0.0, states_after_s=0.0):
         super().__init__("in_test_driver", context=context)
+        # joint states and the wrench start this long after the action servers (a driver still coming up)
+        self.states_from_s = time.monotonic() + states_after_s
         self.publish_velocities, self.position_noise_rad = publish_velocities, position_noise_rad
         self._rng = np.random.default_rng(0)
         self.object_width_m, self.contact_height_m = object_width_m, contact_height_m
@@ -133,6 +136,8 @@ class InTestDriver(Node):
     def step(self):
         self.step_arm()
         self.step_gripper()
+        if time.monotonic() < self.states_from_s:
+            return
         stamp = self.get_clock().now().to_msg()
         state = JointState(name=list(NAMES["joints"]) + list(NAMES["fingers"]))
         state.header.stamp = stamp

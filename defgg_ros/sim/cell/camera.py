@@ -1,7 +1,10 @@
 """The cell's RealSense-like depth camera rendered with PyBullet's TinyRenderer.
 
 640x480, fx = fy = CAMERA_FX_PX, principal point at the image centre, pose
-`base_T_camera` of the optical frame (z forward, x right, y down). Depth is
+`base_T_camera` of the optical frame (z forward, x right, y down). The colour
+image is a D435's colour stream: its own camera, 15 mm beside the depth origin
+with its own focal length (COLOR_FX_PX), as realsense2_camera publishes it
+(not pixel-aligned with the depth image). Depth is
 the z distance along the optical axis, recovered from the OpenGL depth buffer
 with z = far*near / (far - (far - near) * d). Optional realistic degradations
 (depth-dependent noise, dropped pixels at depth edges and at random) are off
@@ -19,6 +22,9 @@ from defgg_ros.constants import (
     CAMERA_HEIGHT_PX,
     CAMERA_NEAR_M,
     CAMERA_WIDTH_PX,
+    COLOR_FX_PX,
+    COLOR_FY_PX,
+    LINK_COLOR_OFFSET_M,
 )
 from defgg_ros.sim import physics
 
@@ -49,6 +55,29 @@ def camera_matrix() -> np.ndarray:
                      [0.0, 0.0, 1.0]])
 
 
+def color_camera_matrix() -> np.ndarray:
+    """K of the colour stream (the same 640x480, its own focal length)."""
+    return np.array([[COLOR_FX_PX, 0.0, (CAMERA_WIDTH_PX - 1) / 2.0],
+                     [0.0, COLOR_FY_PX, (CAMERA_HEIGHT_PX - 1) / 2.0],
+                     [0.0, 0.0, 1.0]])
+
+
+def color_offset_in_depth_optical_m() -> np.ndarray:
+    """Where the colour optical frame's origin sits in the depth optical frame (the two share their axes): camera_link's
+    +y is the optical frames' -x."""
+    x_link, y_link, z_link = LINK_COLOR_OFFSET_M
+    return np.array([-y_link, -z_link, x_link])
+
+
+def _view_and_projection(eye, rot, fy_px: float):
+    # OpenGL looks along -z with y up; the optical frame looks along +z with y down.
+    view = p.computeViewMatrix(eye.tolist(), (eye + rot[:, 2]).tolist(), (-rot[:, 1]).tolist())
+    fov_y_deg = np.degrees(2.0 * np.arctan(CAMERA_HEIGHT_PX / 2.0 / fy_px))
+    projection = p.computeProjectionMatrixFOV(fov_y_deg, CAMERA_WIDTH_PX / CAMERA_HEIGHT_PX, CAMERA_NEAR_M,
+                                              CAMERA_FAR_M)
+    return view, projection
+
+
 def buffer_to_depth_m(depth_buffer, near_m=CAMERA_NEAR_M, far_m=CAMERA_FAR_M) -> np.ndarray:
     """OpenGL depth buffer values in [0, 1] -> metric z along the optical axis."""
     return physics.depth_from_buffer_m(depth_buffer, near_m, far_m)
@@ -71,15 +100,13 @@ class DepthCamera:
         self._rng = np.random.default_rng(seed)
         rot = np.array(p.getMatrixFromQuaternion(base_quat_camera_xyzw)).reshape(3, 3)
         eye = np.asarray(base_xyz_camera_m, dtype=float)
-        # OpenGL looks along -z with y up; the optical frame looks along +z with y down.
-        self._view = p.computeViewMatrix(eye.tolist(), (eye + rot[:, 2]).tolist(), (-rot[:, 1]).tolist())
-        fov_y_deg = np.degrees(2.0 * np.arctan(CAMERA_HEIGHT_PX / 2.0 / CAMERA_FY_PX))
-        self._proj = p.computeProjectionMatrixFOV(fov_y_deg, CAMERA_WIDTH_PX / CAMERA_HEIGHT_PX,
-                                                  CAMERA_NEAR_M, CAMERA_FAR_M)
+        self._view, self._proj = _view_and_projection(eye, rot, CAMERA_FY_PX)
+        self._color_view, self._color_proj = _view_and_projection(eye + rot @ color_offset_in_depth_optical_m(), rot,
+                                                                  COLOR_FY_PX)
 
     def render(self, with_color: bool = False):
         """(depth_m float32 HxW with NaN = invalid, body-id mask int32 HxW, rgb uint8 HxWx3 or None)."""
-        _, _, rgba, depth_buffer, seg = p.getCameraImage(
+        _, _, _, depth_buffer, seg = p.getCameraImage(
             CAMERA_WIDTH_PX, CAMERA_HEIGHT_PX, self._view, self._proj, renderer=p.ER_TINY_RENDERER,
             physicsClientId=self._client)
         depth_m = buffer_to_depth_m(np.reshape(depth_buffer, (CAMERA_HEIGHT_PX, CAMERA_WIDTH_PX)))
@@ -88,7 +115,9 @@ class DepthCamera:
         mask = np.reshape(np.asarray(seg, dtype=np.int64), (CAMERA_HEIGHT_PX, CAMERA_WIDTH_PX))
         mask = np.where(mask >= 0, mask & ((1 << 24) - 1), -1).astype(np.int32)
         rgb = None
-        if with_color:
+        if with_color:   # a second render: the colour camera's own viewpoint and focal length
+            _, _, rgba, _, _ = p.getCameraImage(CAMERA_WIDTH_PX, CAMERA_HEIGHT_PX, self._color_view, self._color_proj,
+                                                renderer=p.ER_TINY_RENDERER, physicsClientId=self._client)
             rgb = np.reshape(np.asarray(rgba, dtype=np.uint8), (CAMERA_HEIGHT_PX, CAMERA_WIDTH_PX, 4))[..., :3].copy()
         if self.noise.enabled:
             depth_m = self._degrade(depth_m)
