@@ -113,6 +113,8 @@ OWN_STALL_S = 0.5
 # before reaching 57.1 mm'). Lifted off, the opening fingers no longer drag on it; a neighbour or a wall beside
 # the fingers blocks them again and the place fails as before.
 RELEASE_RELIEF_LIFT_M = 0.01
+# Only an opening whose fingers stopped more than this short of the release width counts as blocked.
+RELEASE_SHORT_TOLERANCE_M = 0.001
 
 
 def _finite(name: str, values) -> np.ndarray:
@@ -716,9 +718,17 @@ class PickPlaceSequence(SqueezePhase):
         if result is None:
             return []
         if not result[0]:
-            return self._relieve_blocked_release(result[2] or "no reason given", sim_s)
+            reason = result[2] or "no reason given"
+            if not self._fingers_stopped_short(result[1]):   # rejected, or no width: lifting would not help
+                raise SequenceFailure(f"gripper could not release the object: {reason}")
+            return self._relieve_blocked_release(reason, sim_s)
         self._phase = "retreat"
         return self._line_up(max(0.0, float(self._plan.place_approach_M[2, 3]) - self._tcp_z_m()), sim_s)
+
+    def _fingers_stopped_short(self, width_m: float) -> bool:
+        """A failed opening whose fingers stopped short of the release width: something held them (a rejected goal
+        or one that never ran reports no width, nan)."""
+        return math.isfinite(width_m) and width_m < self._release_width_m() - RELEASE_SHORT_TOLERANCE_M
 
     def _relieve_blocked_release(self, reason: str, sim_s: float) -> list:
         """The first blocked release lifts the hand RELEASE_RELIEF_LIFT_M and opens again; a second one fails."""

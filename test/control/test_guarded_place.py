@@ -148,3 +148,17 @@ def test_a_release_blocked_on_the_floor_lifts_the_hand_and_opens_again(kin, bloc
     else:
         assert not out.success and "again after lifting" in out.failure_reason, out.failure_reason
         assert [w for _, w in releases[:2]] == [releases[0][1]] * 2
+
+
+def test_a_rejected_release_fails_at_once_without_lifting(kin):
+    """Only fingers that stopped short of the release width were blocked: a rejected opening (the gripper's
+    server gone, no width) fails the place where it is, and the arm does not move for a second try."""
+    robot = FakeRobot(kin, World(object_width_m=0.045))
+    sequence = PickPlaceSequence(kin, CONFIG, GRASP, BIN)
+    run(sequence, robot, until=lambda r, s: s.phase == "place")
+    robot.world.opening_rejected = True
+    releases = _releases(kin, robot, sequence)
+    out = sequence.outcome
+    assert not out.success and "gripper goal rejected" in out.failure_reason, out.failure_reason
+    assert "again after lifting" not in out.failure_reason and "release blocked" not in out.recovery
+    assert len(releases) == 1

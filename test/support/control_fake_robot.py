@@ -34,6 +34,7 @@ class World:
     slip_below_tcp_z_m: float | None = None  # with slip_at_phase: the slip waits until the TCP is below this
     object_compliance_m_per_n: float = 0.0   # a grasp at force F stops at object_width_m - F * this (a squeeze)
     open_blocked_below_tcp_z_m: float | None = None  # an opening move stops where it is while the TCP is below this
+    opening_rejected: bool = False           # the gripper's server rejects every opening move (no width: nan)
 
 
 class FakeRobot:
@@ -71,6 +72,10 @@ class FakeRobot:
             return
         kind, target, speed = self.gripper
         blocked_below = self.world.open_blocked_below_tcp_z_m
+        if kind == "move" and target > self.width_m and self.world.opening_rejected:
+            self.gripper = None
+            sequence.on_gripper_result(False, float("nan"), "gripper goal rejected")
+            return
         if kind == "move" and target > self.width_m and blocked_below is not None \
                 and self.kin.fk(self.q)[2, 3] < blocked_below:
             self.gripper = None   # the finger tips pressed on the floor: friction holds them (franka_gripper's error)
