@@ -43,9 +43,15 @@ TURN_BACK_TOLERANCE_RAD = 5e-4
 SPEED_UP_TOLERANCE_RADPS = 0.02
 
 
+STARVED_WATCHDOG_S = 10.0
+
+
 def _cell_set(tmp_path):
-    # slow enough that each phase lasts over a second on a busy machine
-    return driver_and_executor_set(tmp_path, SCENE, {"descent_speed_mps": 0.01, "line_speed_mps": 0.05})
+    # Slow enough that each phase lasts over a second on a busy machine. The watchdog is not what these tests
+    # check (test_pick_faults.py does): with the full suite at a load of 8 on 2 cores (2026-12-02) the driver
+    # twice published no joint state for 2 s before the phase and the pick ended "driver silent".
+    return driver_and_executor_set(tmp_path, SCENE, {"descent_speed_mps": 0.01, "line_speed_mps": 0.05,
+                                                     "watchdog_timeout_s": STARVED_WATCHDOG_S})
 
 
 def _arm(state: JointState):
