@@ -101,6 +101,13 @@ TOUCHDOWN_MARGIN_M = 0.02
 # A stop starts this far ahead along the commanded motion, stamped to start then (_stop_motion): longer than a
 # goal's usual latency to the controller (under load in the simulated cell up to ~0.13 s of robot time).
 STOP_LEAD_S = 0.15
+# ... or, when the arm's goals were answered later than that, the longest round trip (send to the controller's
+# acceptance, robot time) of the last STOP_LEAD_WINDOW goals times STOP_LEAD_LATENCY_FACTOR, at most MAX_STOP_LEAD_S:
+# the full suite at a load of 8 on 2 cores once had a stop arrive ~0.13 s after its fixed lead, and the controller
+# sampling into a stop already behind the arm turned a joint back 2.6 mrad (2026-12-02).
+STOP_LEAD_WINDOW = 10
+STOP_LEAD_LATENCY_FACTOR = 1.5
+MAX_STOP_LEAD_S = 0.5
 # An arm further than this from the commanded path (a contact holds it) does not follow it: stop from where it is.
 FOLLOWING_TOLERANCE_RAD = 0.02
 # A gap between two ticks longer than this is the owner's own stall, not silence of the driver (the owner ticks
@@ -139,6 +146,7 @@ class PickPlaceSequence(SqueezePhase):
         self._phase = "idle"
         self._placed_open_sent = False
         self._release_relief: str | None = None   # None, "lifting", "reopened": RELEASE_RELIEF_LIFT_M
+        self._goal_latencies_s: list[float] = []   # the last STOP_LEAD_WINDOW arm goals' round trips (robot time)
         self.released_at_place = False          # the hand opened at the goal's place target (not in a recovery)
         self.place_contact_z_m = float("nan")   # TCP height where a guarded lowering touched down (nan: it did not)
         self._drop_M: np.ndarray | None = None  # a recovery's put-down pose (recovery_drop_xy_m), once planned
@@ -170,6 +178,25 @@ class PickPlaceSequence(SqueezePhase):
         self._obs.force_n = np.asarray(force_xyz_n, dtype=float)
         if wall_s is not None:
             self._obs.force_wall_s, self._obs.own_stall_force_s = wall_s, 0.0
+
+    def robot_now_s(self, wall_s: float) -> float:
+        """The controller's clock now: the last joint state's stamp plus its age (at most MAX_STATE_AGE_S); nan
+        without a stamped state."""
+        state = self._obs.state
+        if state is None or not np.isfinite(state.stamp_s):
+            return float("nan")
+        return state.stamp_s + min(max(wall_s - self._obs.state_wall_s, 0.0), MAX_STATE_AGE_S)
+
+    def on_goal_answered(self, latency_s: float) -> None:
+        """An arm goal's round trip from send to the controller's answer (robot time: robot_now_s at both ends)."""
+        if math.isfinite(latency_s) and latency_s >= 0.0:
+            self._goal_latencies_s = [*self._goal_latencies_s, float(latency_s)][-STOP_LEAD_WINDOW:]
+
+    @property
+    def stop_lead_s(self) -> float:
+        """How far ahead along the commanded motion a stop starts: STOP_LEAD_S, or the recent goals' latency."""
+        latency_s = max(self._goal_latencies_s, default=0.0) * STOP_LEAD_LATENCY_FACTOR
+        return min(max(STOP_LEAD_S, latency_s), MAX_STOP_LEAD_S)
 
     def on_gripper_result(self, success: bool, width_m: float, error: str = "") -> None:
         if self._pending.gripper:
@@ -413,7 +440,7 @@ class PickPlaceSequence(SqueezePhase):
 
     def _planned_stop(self, at_once: bool):
         """(jerk-limited stop, start_s, breach) (checked: plan_checked_stop). While the arm follows the commanded
-        motion: from that motion's state STOP_LEAD_S from now, stamped to start then, so the controller blends
+        motion: from that motion's state stop_lead_s from now, stamped to start then, so the controller blends
         from wherever the arm is at receipt into it (however late the goal arrives, up to the lead); a stop planned
         from the last joint state and started on receipt began behind the moving arm by the state's age and the
         goal's latency, and the controller pulled the arm back to it (a cancel in a transfer: up to 51 mrad back,
@@ -431,7 +458,7 @@ class PickPlaceSequence(SqueezePhase):
         return stop, start_s, breach
 
     def _state_ahead(self):
-        """((q, qd, qdd), robot time) of the commanded motion's first sample STOP_LEAD_S or more from now, on the
+        """((q, qd, qdd), robot time) of the commanded motion's first sample stop_lead_s or more from now, on the
         controller's clock for that motion: the last joint state's stamp minus the time of the sample nearest it
         (the motion started when the goal arrived, not when it was sent). None when the arm does not follow the
         motion (further than FOLLOWING_TOLERANCE_RAD from its nearest sample) or the state has no stamp. Every time
@@ -450,10 +477,11 @@ class PickPlaceSequence(SqueezePhase):
             else 0.0
         started_s = state.stamp_s - (traj.times_s[nearest] + np.clip(between_s, -self._cfg.sample_dt_s,
                                                                      self._cfg.sample_dt_s))
-        k = int(np.searchsorted(traj.times_s, controller_now_s + STOP_LEAD_S - started_s))
+        lead_s = self.stop_lead_s
+        k = int(np.searchsorted(traj.times_s, controller_now_s + lead_s - started_s))
         if k >= len(traj.times_s):   # the motion ends within the lead: at rest at its end
             return (traj.q_rad[-1].copy(), np.zeros(7), np.zeros(7)), max(started_s + traj.duration_s,
-                                                                           controller_now_s + STOP_LEAD_S)
+                                                                           controller_now_s + lead_s)
         return (traj.q_rad[k].copy(), traj.qd_radps[k].copy(), traj.qdd_radps2[k].copy()), started_s + traj.times_s[k]
 
     def _arrived(self, sim_s: float) -> bool:

@@ -79,7 +79,7 @@ class ArmCommands:
         """Execute the sequence's commands (called with the lock held)."""
         for command in commands:
             if isinstance(command, SendTrajectory):
-                self._send_arm(command.trajectory, command.start_s)
+                self._send_arm(command.trajectory, command.start_s, sequence)
             elif isinstance(command, MoveGripper):
                 goal = Move.Goal(width=command.width_m, speed=command.speed_mps)
                 self._send_gripper(sequence, self._move_client, goal)
@@ -95,15 +95,17 @@ class ArmCommands:
                     self._gripper_goal.cancel_goal_async()
                     self._gripper_goal = None
 
-    def _send_arm(self, trajectory, start_s: float | None = None) -> None:
+    def _send_arm(self, trajectory, start_s: float | None = None, sequence: PickPlaceSequence | None = None) -> None:
         """Send a trajectory as a FollowJointTrajectory goal (lock held); it replaces the running one.
 
         The joint_trajectory_controller starts a goal stamped 0 on receipt (start_s None), else at start_s
         (robot time), and blends it from where the arm is into its first point while that is ahead, so each new
         command replaces the previous goal there. The sequence watches the joint
         states for arrival; a rejected or aborted goal is logged here (the sequence then fails on its
-        settle timeout, naming the phase).
+        settle timeout, naming the phase). The sequence that sent it learns the goal's round trip (its stops lead
+        by at least that much).
         """
+        sent_robot_s = sequence.robot_now_s(time.monotonic()) if sequence is not None else float("nan")
         self._arm_goal_serial += 1
         serial = self._arm_goal_serial
         goal = FollowJointTrajectory.Goal(
@@ -122,6 +124,8 @@ class ArmCommands:
             handle = future.result()
             with self._lock:
                 self._arm_goals_unanswered -= 1
+                if sequence is not None:
+                    sequence.on_goal_answered(sequence.robot_now_s(time.monotonic()) - sent_robot_s)
             if not handle.accepted:
                 self.get_logger().error("the arm's trajectory controller rejected a trajectory goal")
                 return

@@ -516,6 +516,28 @@ def test_a_cancel_stops_from_a_lead_along_the_commanded_motion_stamped_on_its_cl
     np.testing.assert_allclose(stop.trajectory.qd_radps[0], qd_then, atol=2e-2)
 
 
+def test_the_stop_leads_by_the_arm_goals_measured_latency_when_that_is_longer(kin):
+    """Goals answered 0.25 s after they were sent (a loaded machine): a stop led by STOP_LEAD_S alone would arrive
+    after the time it is stamped for and the controller would sample straight into it, behind the arm. The lead is
+    STOP_LEAD_LATENCY_FACTOR times the longest recent round trip, capped at MAX_STOP_LEAD_S; STOP_LEAD_S stays the
+    least."""
+    from defgg_ros.control.pick_place import MAX_STOP_LEAD_S, STOP_LEAD_LATENCY_FACTOR, STOP_LEAD_S, STOP_LEAD_WINDOW
+
+    for latencies_s, lead_s in (([0.05], STOP_LEAD_S), ([0.05, 0.25, 0.1], 0.25 * STOP_LEAD_LATENCY_FACTOR),
+                                ([2.0], MAX_STOP_LEAD_S), ([0.25] + [0.01] * STOP_LEAD_WINDOW, STOP_LEAD_S)):
+        sequence, robot = _mid_transfer(kin)
+        for latency_s in latencies_s:
+            sequence.on_goal_answered(latency_s)
+        sequence.on_goal_answered(float("nan"))   # no stamped state at one end: not a measurement
+        q, qd, _ = robot.trajectory.state_at(robot.sim_s - robot.trajectory_start_s)
+        sequence.on_joint_state(ArmState(q, qd, robot.width_m, robot.sim_s), robot.wall_s)
+        (stop,) = [c for c in sequence.cancel(robot.sim_s, robot.wall_s) if isinstance(c, SendTrajectory)]
+        assert sequence.stop_lead_s == pytest.approx(lead_s)
+        assert robot.sim_s + lead_s <= stop.start_s <= robot.sim_s + lead_s + CONFIG.sample_dt_s + 1e-9, latencies_s
+        q_then, _, _ = robot.trajectory.state_at(stop.start_s - robot.trajectory_start_s)
+        np.testing.assert_allclose(stop.trajectory.q_rad[0], q_then, atol=2e-4)
+
+
 def test_the_stop_is_stamped_on_the_controllers_clock_whatever_ours_reads(kin):
     """A controller whose clock runs 0.3 s ahead of ours: a stop stamped from our clock plus the lead lay in the
     controller's past (it then samples straight into the stop and pulls the arm back). Every time is taken from

@@ -92,6 +92,28 @@ def test_busy_goal_is_rejected_and_cancel_stops_the_arm(executor_cell, spin):
     assert not KIN.fk(driver.q)[:3, 3] == pytest.approx(KIN.fk(node._kin.q_ready_rad)[:3, 3], abs=1e-3)
 
 
+def test_a_stop_leads_by_the_latency_of_the_controllers_answers(executor_cell, spin):
+    """A controller that answers trajectory goals 0.3 s after they arrive (a loaded machine): the stop that a cancel
+    sends is stamped to start at least 1.5 x that after the last joint state, not STOP_LEAD_S (0.15 s), so it does
+    not arrive after its own start and pull the arm back."""
+    from defgg_ros.control.pick_place import STOP_LEAD_LATENCY_FACTOR, STOP_LEAD_S
+
+    answer_s = 0.3
+    ex, node, client, start_driver = executor_cell
+    driver = start_driver(arm_goal_answer_s=answer_s)
+    wait_driver_ready(ex, spin, node)
+    node.set_parameters([Parameter("recover_after_failure", value=False)])
+    goal = send(ex, client, spin, PickAndPlace.Goal(grasp=grasp_msg()))
+    spin(ex, lambda: np.max(np.abs(driver.qd)) > 0.2, 20.0, "the arm moving towards the pre-grasp")
+    sent, state_s = len(driver.trajectory_msgs), driver.last_state_stamp_s
+    spin(ex, goal.cancel_goal_async(), 5.0, "cancel response")
+    spin(ex, lambda: len(driver.trajectory_msgs) > sent, 10.0, "the stop trajectory")
+    stamp = driver.trajectory_msgs[sent].header.stamp
+    lead_s = stamp.sec + 1e-9 * stamp.nanosec - state_s
+    assert lead_s >= answer_s * STOP_LEAD_LATENCY_FACTOR - 0.05 > STOP_LEAD_S, lead_s
+    assert result_of(ex, spin, goal).status == 5  # GoalStatus.STATUS_CANCELED
+
+
 def test_a_cancel_while_the_fingers_close_opens_the_hand_and_recovers(executor_cell, spin):
     """The grasp goal, not canceled by the gripper, is preempted by the recovery's opening and answers after it was
     sent: that late result must not be read as the opening's (it was: "the hand did not open: preempted by a newer

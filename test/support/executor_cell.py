@@ -26,7 +26,7 @@ from defgg_interfaces.msg import Grasp
 from franka_msgs.action import Grasp as GripperGrasp
 from franka_msgs.action import Move as GripperMove
 from geometry_msgs.msg import WrenchStamped
-from rclpy.action import ActionServer, CancelResponse
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -60,11 +60,13 @@ NAMES = topics.robot_names()   # the default robot type's (fer)
 
 class InTestDriver(Node):
     def __init__(self, context, object_width_m=0.04, contact_height_m=-1.0, q0=PANDA_READY_Q_RAD,
-                 publish_velocities=True, position_noise_rad=0.0, states_after_s=0.0):
+                 publish_velocities=True, position_noise_rad=0.0, states_after_s=0.0, arm_goal_answer_s=0.0):
         super().__init__("in_test_driver", context=context)
         # joint states and the wrench start this long after the action servers (a driver still coming up)
         self.states_from_s = time.monotonic() + states_after_s
         self.publish_velocities, self.position_noise_rad = publish_velocities, position_noise_rad
+        self.arm_goal_answer_s = arm_goal_answer_s   # a trajectory goal is answered this long after it arrives
+        self.last_state_stamp_s = float("nan")
         self._rng = np.random.default_rng(0)
         self.object_width_m, self.contact_height_m = object_width_m, contact_height_m
         self.kin = PandaKinematics()  # its own: one pinocchio Data is not for sharing across threads
@@ -79,7 +81,7 @@ class InTestDriver(Node):
         # as franka_robot_state_broadcaster (>= 3.3.0) offers it: best effort, depth 1
         self.wrench_pub = self.create_publisher(WrenchStamped, topics.EXTERNAL_WRENCH, qos.FRANKA_CONVENIENCE)
         ActionServer(self, FollowJointTrajectory, topics.ARM_TRAJECTORY_ACTION, self.on_follow, callback_group=group,
-                     cancel_callback=lambda _goal: CancelResponse.ACCEPT)
+                     goal_callback=self._answer_arm_goal, cancel_callback=lambda _goal: CancelResponse.ACCEPT)
         ActionServer(self, GripperMove, topics.GRIPPER_MOVE_ACTION, self.on_move, callback_group=group)
         ActionServer(self, GripperGrasp, topics.GRIPPER_GRASP_ACTION, self.on_grasp, callback_group=group)
         self.create_timer(DRIVER_PERIOD_S, self.step)
@@ -89,6 +91,10 @@ class InTestDriver(Node):
         # a "killed" driver whose gripper actions stay in the graph is not what a dead process looks like.
         destroy_actions(self)
         super().destroy_node()
+
+    def _answer_arm_goal(self, _goal) -> GoalResponse:
+        time.sleep(self.arm_goal_answer_s)   # a loaded machine: the goal's answer (and its start) come late
+        return GoalResponse.ACCEPT
 
     def now_s(self):
         return self.get_clock().now().nanoseconds * 1e-9
@@ -141,6 +147,7 @@ class InTestDriver(Node):
         stamp = self.get_clock().now().to_msg()
         state = JointState(name=list(NAMES["joints"]) + list(NAMES["fingers"]))
         state.header.stamp = stamp
+        self.last_state_stamp_s = stamp.sec + 1e-9 * stamp.nanosec
         noise = self.position_noise_rad * self._rng.standard_normal(7)
         state.position = (self.q + noise).tolist() + [self.width_m / 2] * 2
         state.velocity = self.qd.tolist() + [0.0, 0.0] if self.publish_velocities else []
