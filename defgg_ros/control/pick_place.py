@@ -104,10 +104,12 @@ STOP_LEAD_S = 0.15
 # ... or, when the arm's goals were answered later than that, the longest round trip (send to the controller's
 # acceptance, robot time) of the last STOP_LEAD_WINDOW goals times STOP_LEAD_LATENCY_FACTOR, at most MAX_STOP_LEAD_S:
 # the full suite at a load of 8 on 2 cores once had a stop arrive ~0.13 s after its fixed lead, and the controller
-# sampling into a stop already behind the arm turned a joint back 2.6 mrad (2026-12-02).
+# sampling into a stop already behind the arm turned a joint back 2.6 mrad (2026-12-02). The cap keeps the lead
+# plus the deceleration (~0.1 s) within the 0.5 s in which a stop must have the arm at rest (issue 48): with a
+# 0.5 s cap the same loaded suite once had the arm at 0.027 rad/s 0.5 s after the signal.
 STOP_LEAD_WINDOW = 10
 STOP_LEAD_LATENCY_FACTOR = 1.5
-MAX_STOP_LEAD_S = 0.5
+MAX_STOP_LEAD_S = 0.3
 # An arm further than this from the commanded path (a contact holds it) does not follow it: stop from where it is.
 FOLLOWING_TOLERANCE_RAD = 0.02
 # A gap between two ticks longer than this is the owner's own stall, not silence of the driver (the owner ticks
