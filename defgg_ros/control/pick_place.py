@@ -30,6 +30,7 @@ Every way of ending carries a reason a person can read.
 """
 
 import math
+from collections import deque
 
 import numpy as np
 
@@ -148,7 +149,7 @@ class PickPlaceSequence(SqueezePhase):
         self._phase = "idle"
         self._placed_open_sent = False
         self._release_relief: str | None = None   # None, "lifting", "reopened": RELEASE_RELIEF_LIFT_M
-        self._goal_latencies_s: list[float] = []   # the last STOP_LEAD_WINDOW arm goals' round trips (robot time)
+        self._goal_latencies_s = deque(maxlen=STOP_LEAD_WINDOW)   # the last arm goals' round trips (robot time)
         self.released_at_place = False          # the hand opened at the goal's place target (not in a recovery)
         self.place_contact_z_m = float("nan")   # TCP height where a guarded lowering touched down (nan: it did not)
         self._drop_M: np.ndarray | None = None  # a recovery's put-down pose (recovery_drop_xy_m), once planned
@@ -192,7 +193,7 @@ class PickPlaceSequence(SqueezePhase):
     def on_goal_answered(self, latency_s: float) -> None:
         """An arm goal's round trip from send to the controller's answer (robot time: robot_now_s at both ends)."""
         if math.isfinite(latency_s) and latency_s >= 0.0:
-            self._goal_latencies_s = [*self._goal_latencies_s, float(latency_s)][-STOP_LEAD_WINDOW:]
+            self._goal_latencies_s.append(float(latency_s))
 
     @property
     def stop_lead_s(self) -> float:
@@ -471,8 +472,7 @@ class PickPlaceSequence(SqueezePhase):
                 np.max(np.abs(traj.q_rad[nearest] - state.q_rad)) > FOLLOWING_TOLERANCE_RAD:
             return None   # no stamp, or an arm off its path: at once
         # The controller's now: the state's stamp plus how long ago it arrived (never our clock, which may differ).
-        since_s = min(max((obs.last_tick_wall_s or obs.state_wall_s) - obs.state_wall_s, 0.0), MAX_STATE_AGE_S)
-        controller_now_s = state.stamp_s + since_s
+        controller_now_s = self.robot_now_s(obs.last_tick_wall_s or obs.state_wall_s)
         # between samples: the offset along the commanded velocity there (samples are sample_dt_s apart)
         speed2 = float(traj.qd_radps[nearest] @ traj.qd_radps[nearest])
         between_s = float((state.q_rad - traj.q_rad[nearest]) @ traj.qd_radps[nearest]) / speed2 if speed2 > 1e-12 \

@@ -23,6 +23,12 @@ BUFFER_STAMPS = 40
 PAIR_WINDOW_S = 0.015
 
 
+def nearest_stamp(stamps, stamp: int, window_s: float) -> int | None:
+    """Of `stamps` (ns), the one nearest `stamp` within window_s, else None."""
+    near = [s for s in stamps if abs(s - stamp) <= window_s * 1e9]
+    return min(near, key=lambda s: abs(s - stamp)) if near else None
+
+
 class StampError(ValueError):
     """A message whose CDR bytes are too short to hold a header stamp."""
 
@@ -92,9 +98,8 @@ class FrameSelector:
 
     def _nearest_depth_stamp(self, stamp: int) -> int:
         """The depth stamp within PAIR_WINDOW_S nearest `stamp`, else `stamp` (its depth frame not here yet)."""
-        window_ns = PAIR_WINDOW_S * 1e9
-        near = [s for s in self._depth_stamps if abs(s - stamp) <= window_ns]
-        return min(near, key=lambda s: abs(s - stamp)) if near else stamp
+        nearest = nearest_stamp(self._depth_stamps, stamp, PAIR_WINDOW_S)
+        return stamp if nearest is None else nearest
 
     def _adopt_paired(self, depth_stamp: int) -> None:
         """Paired messages that came before their depth frame wait under their own stamp: file them under it."""

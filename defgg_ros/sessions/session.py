@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 from defgg_ros.sessions import session_topics as st
 from defgg_ros.sessions.bag import BagMessage, SessionBagError, read_bag
-from defgg_ros.sessions.selector import PAIR_WINDOW_S, restamp
+from defgg_ros.sessions.selector import PAIR_WINDOW_S, nearest_stamp, restamp
 from defgg_ros.sessions.session_topics import topics  # absolute names (bag channels)
 
 # 2 (2026-11-29, one perceiver): PlanGrasp's request carries PerceivedObjects instead of a stiffness image, so a
@@ -102,8 +102,8 @@ def _camera_info_for(path, infos: dict, depth: BagMessage, stamp: int) -> BagMes
 
 def _nearest(by_stamp: dict, stamp: int, window_s: float):
     """The message whose stamp is nearest `stamp` within window_s (a stream stamped by its own sensor), else None."""
-    near = [s for s in by_stamp if abs(s - stamp) <= window_s * 1e9]
-    return by_stamp[min(near, key=lambda s: abs(s - stamp))] if near else None
+    nearest = nearest_stamp(by_stamp, stamp, window_s)
+    return None if nearest is None else by_stamp[nearest]
 
 
 def _frames(path, messages: list) -> list:
