@@ -54,7 +54,7 @@ from defgg_ros.ros.conversions import (
     numpy_to_image,
 )
 from defgg_ros.ros.diagnostics import NodeDiagnostics
-from defgg_ros.ros.parameters import at_default, declare_parameters, load_schema
+from defgg_ros.ros.parameters import declare_parameters, load_schema
 from defgg_ros.ros.service import answer
 from defgg_ros.ros.tf import CameraPose
 
@@ -76,7 +76,7 @@ class SegmentationNode(Node):
         self._last_depth_m = None
         self._joint_positions = None    # name -> rad, for the self-filter
         p = self._params()
-        self._base_T_camera = transform_from_list(p["base_T_camera"])
+        self._base_T_camera = None if not any(p["base_T_camera"]) else transform_from_list(p["base_T_camera"])
         self._self_filter = RobotSelfFilter(float(p["self_filter_margin_m"])) if p["self_filter"] else None
         self._settings = self._settings_from(p)  # invalid start-up parameters raise here
         self._max_image_size_px = tuple(int(v) for v in p["max_image_size_px"])
@@ -90,12 +90,11 @@ class SegmentationNode(Node):
         self._stiffness_pub = self.create_publisher(Image, p["stiffness_topic"], qos.IMAGE_PUBLISH)
         self._mask_pub = self.create_publisher(Image, p["mask_topic"], qos.IMAGE_PUBLISH)
         self._assign_pub = self.create_publisher(StiffnessAssignment, p["assignments_topic"], qos.LATCHED)
-        # TF, the parameter as fallback, and a table frame when the parameter is still the schema's placeholder
-        # and finds no table (a configured pose is never second-guessed; one that disagrees with TF stops us).
-        unset = at_default(PARAMETERS, "base_T_camera", list(p["base_T_camera"]))
+        # TF, the parameter as fallback, and without either a table frame the executor refuses (a configured pose
+        # is never second-guessed; one that disagrees with TF stops us).
         self._camera_pose = CameraPose(self, self._base_T_camera,
-                                       PoseFromTable() if p["camera_pose_from_table"] and unset else None,
-                                       bool(p["publish_camera_tf"]), fallback_is_placeholder=unset)
+                                       PoseFromTable() if p["camera_pose_from_table"] else None,
+                                       bool(p["publish_camera_tf"]))
         self.diagnostics = NodeDiagnostics(self, self._diagnostic_status)
         # Newest frame wins: the subscription only hands frames to one worker thread.
         self._worker = LatestFrameWorker(self._perceive_stream_frame, 0.0, self._publish_perceived,

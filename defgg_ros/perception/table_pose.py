@@ -138,10 +138,11 @@ class PoseFromTable:
         self._decision = None            # (configured pose bytes, checked at, (pose, estimated))
 
     def pose_for(self, depth_m, camera_k, configured, config: TabletopConfig | None = None) -> tuple:
-        """(base_T_camera, estimated: bool). config: replaces the one given at construction (a node whose
-        workspace parameters changed). Raises TabletopError when the frame shows no plane to use."""
-        configured = np.asarray(configured, float)
-        key, now = configured.tobytes(), self._clock()
+        """(base_T_camera, estimated: bool). configured None: no pose to check, always the table frame. config:
+        replaces the one given at construction (a node whose workspace parameters changed). Raises TabletopError
+        when the frame shows no plane to use."""
+        configured = None if configured is None else np.asarray(configured, float)
+        key, now = (b"" if configured is None else configured.tobytes()), self._clock()
         with self._lock:
             if config is not None and config != self.config:
                 self.config, self.estimate, self._decision = config, None, None
@@ -149,7 +150,7 @@ class PoseFromTable:
                 return self._decision[2]
         normal, offset, _ = dominant_plane(camera_points(depth_m, camera_k))
         with self._lock:
-            if pose_fits_plane(configured, normal, offset, self.config):
+            if configured is not None and pose_fits_plane(configured, normal, offset, self.config):
                 decision = (configured, False)
             else:
                 if self.estimate is None or not pose_fits_plane(self.estimate, normal, offset, self.config):

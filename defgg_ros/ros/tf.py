@@ -206,6 +206,10 @@ class CameraPoseConflict(ValueError):
     """TF and the base_T_camera parameter give the same camera frame poses that disagree (message: both)."""
 
 
+class CameraPoseUnknown(ValueError):
+    """Neither TF nor a configured base_T_camera gives the camera's pose (the parameter is its placeholder)."""
+
+
 def pose_difference(a_T_b: np.ndarray, a_T_c: np.ndarray) -> tuple[float, float]:
     """(translation distance in m, rotation angle in degrees) between two 4x4 poses."""
     a, b = np.asarray(a_T_b, float), np.asarray(a_T_c, float)
@@ -228,37 +232,32 @@ def check_poses_agree(tf_pose: np.ndarray, parameter_pose: np.ndarray, base_fram
             f"base_T_camera parameter gives {_pose_text(parameter_pose)} ([x, y, z, qx, qy, qz, qw]); they differ by "
             f"{distance_m * 1e3:.1f} mm and {angle_deg:.2f} deg (allowed {POSE_AGREEMENT_M * 1e3:.0f} mm, "
             f"{POSE_AGREEMENT_DEG} deg). Planning stops until they agree: correct the calibration on TF (or stop "
-            "the node that publishes a stale one) or the parameter, or leave base_T_camera at its default to use TF")
+            "the node that publishes a stale one) or the parameter, or leave base_T_camera unset to use TF")
 
 
 class CameraPose:
     """A node's camera pose per frame: TF's base_frame -> the frame's camera frame (latest transform), else
-    a fallback (the base_T_camera parameter), else, when the parameter puts no table under the camera in the
-    frame and `table_poses` is given, a table frame estimated from the depth (perception/table_pose.py);
-    each change of source is logged once (the table frame as a warning: its grasps are not in the robot's
-    frame). A configured fallback (not a placeholder) that disagrees with TF by more than POSE_AGREEMENT_M or
-    POSE_AGREEMENT_DEG raises CameraPoseConflict for every frame until they agree (logged as an error).
+    the fallback (the base_T_camera parameter; None: not set). Without either, never the robot's frame: with
+    `table_poses` a table frame estimated from the depth (perception/table_pose.py), else CameraPoseUnknown.
+    Each change of source is logged once (the table frame as a warning: its grasps are not in the robot's
+    frame). A fallback that disagrees with TF by more than POSE_AGREEMENT_M or POSE_AGREEMENT_DEG raises
+    CameraPoseConflict for every frame until they agree (logged as an error).
 
     publish (parameter publish_camera_tf, off unless asked for: a camera driver or calibration publishes the
     camera on TF in a real cell): the pose in use goes on /tf_static, so RViz and other nodes see what the cell
     uses. A parameter pose as base_frame -> the root of the camera's TF tree (base -> camera_link when
     realsense2_camera publishes camera_link -> ... -> the optical frame; a frame has one parent, so never base
     -> optical frame then); a table frame as the camera frame's child `TABLE_FRAME_ID` (the grasps' frame
-    then). A fallback that is only a placeholder (fallback_is_placeholder: the parameter left at its default)
-    is not published as if it were a calibration. Once published, the node's own lookups find the pose on TF
-    (logged as such)."""
+    then). Once published, the node's own lookups find the pose on TF (logged as such)."""
 
-    def __init__(self, node, fallback: np.ndarray, table_poses=None, publish: bool = False,
-                 fallback_is_placeholder: bool = False):
+    def __init__(self, node, fallback: np.ndarray | None, table_poses=None, publish: bool = False):
         self._listener = TfListener(node)
-        self._fallback = np.asarray(fallback, dtype=float)
+        self._fallback = None if fallback is None else np.asarray(fallback, dtype=float)
         self._table_poses = table_poses
         self._logger = node.get_logger()
         self._source = None
         self._conflict = None           # the last CameraPoseConflict's text (logged once per change)
         self._static = TfBroadcaster(node, static=True) if publish else None
-        self._publish_fallback = not fallback_is_placeholder
-        self._check_agreement = not fallback_is_placeholder
         # A latched calibration (or the fake driver's pose) may reach the node a moment after the first frame:
         # the parameter is published only once TF had that long to say otherwise.
         self._publish_fallback_after = time.monotonic() + FALLBACK_PUBLISH_DELAY_S
@@ -271,26 +270,27 @@ class CameraPose:
         return "conflict" if self._conflict else (self._source or "")
 
     def lookup(self, base_frame: str, camera_frame: str) -> np.ndarray:
-        """TF, else the parameter (no look at the frame)."""
+        """TF, else the parameter (no look at the frame); CameraPoseUnknown without either."""
         return self.resolve(base_frame, camera_frame)[0]
 
     def resolve(self, base_frame: str, camera_frame: str, depth_m=None, camera_k=None, table_config=None) -> tuple:
-        """(base_T_camera, source: 'tf', 'parameter' or 'table'). With the frame's depth (m) and K, the parameter
-        is checked against the frame's table (table_config: the tabletop perception's current TabletopConfig).
-        Raises TabletopError when a table frame is needed and the depth shows no table."""
-        pose, source = base_T_camera(self._listener, base_frame, camera_frame, self._fallback)
-        if source == "tf" and self._check_agreement:
+        """(base_T_camera, source: 'tf', 'parameter' or 'table'). Without TF and a configured parameter, the table
+        frame from the frame's depth (m) and K (table_config: the tabletop perception's current TabletopConfig).
+        Raises TabletopError when a table frame is needed and the depth shows no table, CameraPoseUnknown when
+        one is needed and there is no depth or no table_poses."""
+        try:
+            pose, source = base_T_camera(self._listener, base_frame, camera_frame, self._fallback)
+        except LookupError:
+            pose, source = self._without_calibration(base_frame, camera_frame, depth_m, camera_k, table_config)
+        if source == "tf" and self._fallback is not None:
             self._check(pose, base_frame, camera_frame)
-        if source == "parameter" and self._table_poses is not None and depth_m is not None:
-            pose, estimated = self._table_poses.pose_for(depth_m, camera_k, pose, table_config)
-            source = "table" if estimated else source
         if source != self._source:
             self._source = source
             names = f"{base_frame} -> {camera_frame or '(no frame id)'}"
             if source == "table":
                 self._logger.warning(
-                    f"camera pose {names}: TF has none and the base_T_camera parameter puts no table under the "
-                    "camera in this frame, so a table frame estimated from the depth is used (the table at "
+                    f"camera pose {names}: TF has none (yet) and base_T_camera is at its default (a placeholder, "
+                    "not a calibration), so a table frame estimated from the depth is used (the table at "
                     "table_z_m, the view's centre at the workspace box's centre): grasps are NOT in the robot's "
                     f"frame and the self-filter is off. Publish {names} on TF or set base_T_camera.")
             else:
@@ -299,6 +299,16 @@ class CameraPose:
         if self._static is not None and camera_frame:
             self._publish(base_frame, camera_frame.lstrip("/"), pose, source)
         return pose, source
+
+    def _without_calibration(self, base_frame, camera_frame, depth_m, camera_k, table_config) -> tuple:
+        """Neither TF nor the parameter gives the pose: never the robot's frame (until 2026-12-02 the schema's
+        placeholder pose stood in; a camera mounted near it passed the table check and its grasps would have sent
+        the arm to the wrong place). The table frame, or the frame is refused."""
+        if self._table_poses is None or depth_m is None:
+            raise CameraPoseUnknown(
+                f"no camera pose {base_frame} -> {camera_frame or '(no frame id)'}: TF has none (yet) and "
+                "base_T_camera is not set. Publish the hand-eye calibration on TF (/tf_static) or set base_T_camera")
+        return self._table_poses.pose_for(depth_m, camera_k, None, table_config)[0], "table"
 
     def _check(self, tf_pose: np.ndarray, base_frame: str, camera_frame: str) -> None:
         try:
@@ -313,7 +323,7 @@ class CameraPose:
             self._logger.info(f"camera pose {base_frame} -> {camera_frame}: TF and base_T_camera agree again")
 
     def _publish(self, base_frame: str, camera_frame: str, pose: np.ndarray, source: str) -> None:
-        if source == "parameter" and self._publish_fallback and time.monotonic() >= self._publish_fallback_after:
+        if source == "parameter" and time.monotonic() >= self._publish_fallback_after:
             root, root_T_camera = self._listener.tree.root_of(camera_frame)
             parent, child, matrix = base_frame, root, pose @ np.linalg.inv(root_T_camera)
         elif source == "table":

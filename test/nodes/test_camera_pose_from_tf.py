@@ -4,31 +4,49 @@ import time
 import numpy as np
 import pytest
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from std_msgs.msg import Header
 
 from defgg_ros.nodes.segmentation_node import SegmentationNode
-from defgg_ros.ros.tf import TfBroadcaster, transform_msg
+from defgg_ros.ros.tf import CameraPoseUnknown, TfBroadcaster, transform_msg
 
 pytestmark = pytest.mark.ros
 
 
+def _has_pose(node, header) -> bool:
+    try:
+        node.base_T_camera_for(header)
+    except CameraPoseUnknown:
+        return False
+    return True
+
+
 def test_segmentation_node_uses_the_calibrated_camera_pose_on_tf(executor, spin):
-    node = SegmentationNode(context=executor.context)
+    node = SegmentationNode(context=executor.context)      # base_T_camera not set
     calibration = Node("calibration_publisher", context=executor.context)
     executor.add_node(node)
     executor.add_node(calibration)
     header = Header(frame_id="camera_depth_optical_frame")
-    parameter_pose = node.base_T_camera_for(header)      # nothing on TF yet: the parameter
+    with pytest.raises(CameraPoseUnknown, match="TF has none"):   # nothing on TF yet, and no parameter
+        node.base_T_camera_for(header)
     tilted = np.eye(4)
     tilted[:3, :3] = [[0.0, -0.8, 0.6], [-1.0, 0.0, 0.0], [0.0, -0.6, -0.8]]
     tilted[:3, 3] = [0.1, 0.05, 0.55]
     TfBroadcaster(calibration, static=True).send(transform_msg(node.get_parameter("base_frame").value,
                                                                "camera_depth_optical_frame", tilted))
-    spin(executor, lambda: not np.allclose(node.base_T_camera_for(header), parameter_pose), 10.0,
-         "the camera pose from /tf_static")
+    spin(executor, lambda: _has_pose(node, header), 10.0, "the camera pose from /tf_static")
     np.testing.assert_allclose(node.base_T_camera_for(header), tilted, atol=1e-9)
-    # a frame id TF does not know falls back to the parameter
-    np.testing.assert_allclose(node.base_T_camera_for(Header(frame_id="other_camera")), parameter_pose)
+    with pytest.raises(CameraPoseUnknown):                 # a frame id TF does not know
+        node.base_T_camera_for(Header(frame_id="other_camera"))
+
+
+def test_a_parameter_pose_stands_in_for_tf_only_when_set(executor, spin):
+    pose = [0.5, 0.0, 0.4, 1.0, 0.0, 0.0, 0.0]
+    node = SegmentationNode(context=executor.context, parameter_overrides=[Parameter("base_T_camera", value=pose)])
+    executor.add_node(node)
+    top_down = np.array([[1.0, 0, 0, 0.5], [0, -1.0, 0, 0.0], [0, 0, -1.0, 0.4], [0, 0, 0, 1.0]])
+    np.testing.assert_allclose(node.base_T_camera_for(Header(frame_id="camera_depth_optical_frame")), top_down,
+                               atol=1e-12)
 
 
 def _frame_request():
@@ -114,8 +132,7 @@ def test_the_table_frame_uses_the_nodes_own_table_height_and_workspace(executor)
     frame = ts.render(ts.cluttered_table(640, 480), seed=4)
     node = Node("table_frame_probe", context=executor.context)
     executor.add_node(node)
-    placeholder = np.array([[1.0, 0, 0, 0.5], [0, -1.0, 0, 0.0], [0, 0, -1.0, 0.4], [0, 0, 0, 1.0]])
-    poses = CameraPose(node, placeholder, table_poses=PoseFromTable(recheck_s=0.0), fallback_is_placeholder=True)
+    poses = CameraPose(node, None, table_poses=PoseFromTable(recheck_s=0.0))
     config = TabletopConfig(table_z_m=0.75, workspace=WorkspaceBox(x_m=(0.30, 0.50), y_m=(0.10, 0.40)))
     pose, source = poses.resolve("panda_link0", "camera_depth_optical_frame", frame.depth_m, frame.camera_k, config)
     assert source == "table"

@@ -88,6 +88,23 @@ def assert_valid_grasp(grasp: Grasp):
     np.testing.assert_allclose(rotation[:, 2], [0, 0, -1], atol=1e-6)
 
 
+def test_without_a_calibration_no_grasp_is_in_the_robots_frame(inference_service, executor, call):
+    """No pose on TF and base_T_camera not set, a camera looking straight down 0.40 m above the table: until
+    2026-12-02 the schema's placeholder pose (top-down at 0.40 m) found its table level there and the grasps came
+    in the robot's frame, so a camera mounted near that pose (or a frame before /tf_static) would have sent the arm
+    where nothing was measured. Now they are in the table frame, which the executor refuses; with
+    camera_pose_from_table off the frame is refused, saying why."""
+    _, _, client = inference_service("uncalibrated_client")
+    response = plan(executor, call, client, image_request(top_k=3))
+    assert response.success, response.message
+    assert {g.pose_base.header.frame_id for g in response.grasps} == {"defgg_table_estimate"}
+    _, _, strict = inference_service("uncalibrated_strict_client", camera_pose_from_table=False,
+                                     plan_grasp_service="/test/strict_plan", perceive_service="/test/strict_perceive")
+    refused = plan(executor, call, strict, image_request())
+    assert not refused.success and not refused.grasps
+    assert "no camera pose" in refused.message and "base_T_camera is not set" in refused.message, refused.message
+
+
 def test_a_request_with_its_depth_is_perceived_by_the_segmentation_node(cell, executor, call):
     node, _, client = cell
     response = plan(executor, call, client, image_request("32FC1", top_k=3))
