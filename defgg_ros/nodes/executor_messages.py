@@ -14,6 +14,7 @@ from defgg_ros.constants import ARM_MODELS
 from defgg_ros.control.poses import PoseError, top_down_yaw
 from defgg_ros.control.sequence_types import ArmState, GraspTarget, PlaceTarget
 from defgg_ros.control.stopping import HOLD_BLEND_S
+from defgg_ros.perception.table_pose import TABLE_FRAME_ID
 from defgg_ros.ros import topics
 from defgg_ros.ros.conversions import ConversionError, transform_from_pose
 
@@ -80,6 +81,10 @@ def joint_state_to_arm(msg: JointState, joint_names=DEFAULT_NAMES["joints"],
 
 def grasp_target(grasp, base_frame: str, default_modulus_pa: float) -> GraspTarget:
     frame = grasp.pose_base.header.frame_id
+    if frame == TABLE_FRAME_ID:
+        raise GoalError(f"grasp pose is in frame '{frame}', expected '{base_frame}': perception has no camera pose "
+                        f"(nothing on TF from {base_frame} to the camera, base_T_camera not set), so it planned in a "
+                        "table frame estimated from the depth; publish the hand-eye calibration on /tf_static")
     if frame not in ("", base_frame):
         raise GoalError(f"grasp pose is in frame '{frame}', expected '{base_frame}'")
     try:

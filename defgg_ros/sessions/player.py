@@ -13,13 +13,16 @@ from dataclasses import dataclass
 from defgg_interfaces.action import PickAndPlace
 from defgg_interfaces.msg import Grasp, StiffnessAssignment
 from defgg_interfaces.srv import PlanGrasp
+from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image, JointState
+from tf2_msgs.msg import TFMessage
 
 from defgg_ros.ros import qos
 from defgg_ros.ros.cell_client import CellCallError
 from defgg_ros.ros.conversions import ns_to_stamp
+from defgg_ros.ros.tf import tf_qos
 from defgg_ros.sessions.compare import GraspSummary, PickOutcome, Tolerances, grasp_problems, pick_problems
 from defgg_ros.sessions.live_message import live_message
 from defgg_ros.sessions.report import Row, diff_text
@@ -54,6 +57,7 @@ class SessionPlayer(Node):
         self._depth_pub = self.create_publisher(Image, topics.DEPTH_IMAGE, FRAME_QOS)
         self._info_pub = self.create_publisher(CameraInfo, topics.DEPTH_CAMERA_INFO, FRAME_QOS)
         self._color_pub = self.create_publisher(Image, topics.COLOR_IMAGE, FRAME_QOS)
+        self._static_pub = self.create_publisher(TFMessage, topics.TF_STATIC, tf_qos(static=True))
         self._grasps = {}
         self._changed = threading.Condition()
         self.create_subscription(Grasp, topics.BEST_GRASP, self._on_grasp, qos.STATE)
@@ -65,6 +69,19 @@ class SessionPlayer(Node):
         with self._changed:
             self._grasps[stamp_ns(msg.header.stamp)] = msg
             self._changed.notify_all()
+
+    def publish_static_transforms(self, messages, ack_timeout_s: float = 5.0) -> int:
+        """Latch the session's recorded /tf_static transforms as one message (a latched publisher keeps only its
+        last; the newest transform per parent -> child wins); returns how many. The perception nodes' camera
+        pose comes from them, as it did in the recorded cell."""
+        latest = {}
+        for message in messages:
+            for transform in live_message(message, TFMessage).transforms:
+                latest[(transform.header.frame_id, transform.child_frame_id)] = transform
+        if latest:
+            self._static_pub.publish(TFMessage(transforms=list(latest.values())))
+            self._static_pub.wait_for_all_acked(Duration(seconds=ack_timeout_s))
+        return len(latest)
 
     def _send(self, frame: Frame) -> int:
         """Publish the frame under a new replay stamp; returns it."""

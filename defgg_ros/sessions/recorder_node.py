@@ -12,8 +12,10 @@ from rclpy.node import Node
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import CameraInfo, Image, JointState
 from std_msgs.msg import String
+from tf2_msgs.msg import TFMessage
 
 from defgg_ros.ros import qos
+from defgg_ros.ros.tf import tf_qos
 from defgg_ros.sessions import session_topics as st
 from defgg_ros.sessions.selector import FrameSelector, StampError, header_stamp_ns
 from defgg_ros.sessions.session_topics import topics  # absolute names (bag channels)
@@ -61,6 +63,11 @@ class SessionRecorder(Node):
             latched.append((StiffnessAssignment, topics.STIFFNESS_ASSIGNMENTS))
         for msg_type, topic in latched:
             self.create_subscription(msg_type, topic, self._plain_callback(topic), qos.LATCHED, raw=True)
+        if live:
+            # The camera's pose: the perception takes it from TF (the cell's calibration on /tf_static), and a
+            # replay without it would have none. tf2's QoS: every latched publisher's message, not only the last.
+            self.create_subscription(TFMessage, topics.TF_STATIC, self._plain_callback(topics.TF_STATIC),
+                                     tf_qos(static=True), raw=True)
 
     # --- writing -------------------------------------------------------------
     def _write_all(self, items) -> None:

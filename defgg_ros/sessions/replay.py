@@ -166,6 +166,10 @@ class ReplayRun:
                 "(sim_bringup/config); a difference may be the cell's parameters, not a regression")
         writer = recorder = None
         try:
+            # Latched before the cell starts: the perception nodes hold the recorded camera pose before a frame.
+            transforms = self.player.publish_static_transforms(session.static_transforms)
+            if transforms:
+                log(f"  {transforms} recorded static transform(s) on {topics.TF_STATIC} (the camera's pose)")
             self._start_cell(graph_specs(meta, model, pick, self.run_dir), pick)
             if args.update:
                 new_meta = md.updated_metadata(meta, model.path, model.use_stiffness, tolerances)
@@ -173,6 +177,7 @@ class ReplayRun:
                 selector = FrameSelector(topics.DEPTH_IMAGE, paired_topics=(topics.COLOR_IMAGE,))
                 recorder = SessionRecorder(writer, selector, live=False, context=self.context)
                 self.executor.add_node(recorder)
+                recorder.copy_messages(session.static_transforms)
                 if not pick:  # no driver runs: keep the recorded robot state and scene as they were
                     recorder.copy_messages([m for m in session.messages if m.topic in DRIVER_TOPICS])
             options = ReplayOptions(tolerances, pick=pick, grasp_timeout_s=args.timeout_s,

@@ -74,6 +74,11 @@ class Session:
     def picks(self) -> list:
         return self.of_kind("pick")
 
+    @property
+    def static_transforms(self) -> list:
+        """The recorded /tf_static messages (BagMessages, in order): the camera's calibration among them."""
+        return [m for m in self.messages if m.topic == topics.TF_STATIC]
+
 
 def _by_stamp(messages: list, topic: str) -> dict:
     return {stamp_ns(m.decode().header.stamp): m for m in messages if m.topic == topic}

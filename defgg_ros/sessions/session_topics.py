@@ -40,6 +40,7 @@ TOPIC_TYPES = {
     topics.STIFFNESS_ASSIGNMENTS: "defgg_interfaces/msg/StiffnessAssignment",
     topics.BEST_GRASP: "defgg_interfaces/msg/Grasp",
     DRIVER_SCENE: "std_msgs/msg/String",
+    topics.TF_STATIC: "tf2_msgs/msg/TFMessage",     # the camera's calibration (and the camera's own frames)
     METADATA: "std_msgs/msg/String",
     PLAN_REQUEST: "defgg_interfaces/srv/PlanGrasp_Request",
     PLAN_RESPONSE: "defgg_interfaces/srv/PlanGrasp_Response",
@@ -49,4 +50,4 @@ TOPIC_TYPES = {
 }
 
 # Offered as transient-local in the bag so `ros2 bag play` re-latches them.
-LATCHED_TOPICS = frozenset({topics.STIFFNESS_ASSIGNMENTS, DRIVER_SCENE, METADATA})
+LATCHED_TOPICS = frozenset({topics.STIFFNESS_ASSIGNMENTS, DRIVER_SCENE, METADATA, topics.TF_STATIC})

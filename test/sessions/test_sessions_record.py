@@ -11,6 +11,7 @@ from support.session_synthetic_camera import SyntheticCamera
 from defgg_ros.nodes.grasp_inference_node import GraspInferenceNode
 from defgg_ros.nodes.segmentation_node import SegmentationNode
 from defgg_ros.ros.domain import pick_private_domain
+from defgg_ros.ros.parameters import defaults
 from defgg_ros.ros.transport import FASTDDS_PROFILE, FASTDDS_PROFILE_VARIABLE
 from defgg_ros.sessions import record
 from defgg_ros.sessions import session_topics as st
@@ -93,7 +94,14 @@ def test_a_fresh_recording_replays_clean(live_cell, tmp_path):
     assert record.main([str(out), "--plan", "1", "--depth-period-s", "1000", "--no-color"]) == 0
     # Driving, the recorder waits for the perception nodes' parameters even past --param-timeout-s (CI
     # once recorded none under load, and the replay ran the shipped YAML's contact_angle: true instead).
-    assert {"segmentation_node", "grasp_inference_node"} <= set(load_session(out).metadata["parameters"])
+    session = load_session(out)
+    assert {"segmentation_node", "grasp_inference_node"} <= set(session.metadata["parameters"])
+    # The camera's pose came from the cell's calibration on /tf_static (base_T_camera not set): the bag keeps it,
+    # and the replay latches it again (without it the replay's grasps came in the table frame, 90 mm away).
+    assert session.metadata["parameters"]["segmentation_node"]["base_T_camera"] == [0.0] * 7
+    assert any(t.child_frame_id == "camera_link" for m in session.static_transforms for t in m.decode().transforms)
+    assert {g.pose_base.header.frame_id for c in session.of_kind("plan") for g in c.response.decode().grasps} == {
+        defaults("segmentation_node")["base_frame"]}
     live_cell()
     code, text = run_replay(out)
     assert code == 0, text
