@@ -3,7 +3,8 @@
 A thin adapter over `defgg_ros.sim.cell.sim_cell.SimCell` (PyBullet). It serves franka_ros2 3.x's contract as
 a real cell started with franka_bringup's franka.launch.py (load_gripper:=true) and a
 JointTrajectoryController would, QoS and rates included (docs/franka_contract.md), plus
-realsense2_camera's depth + camera_info: the merged `joint_states` (joint_state_publisher, 30 Hz),
+realsense2_camera's depth + camera_info (stamped with the capture time and published depth_capture_latency_s
+later, as a real camera's frames arrive after their exposure): the merged `joint_states` (joint_state_publisher, 30 Hz),
 `franka/joint_states` (joint_state_broadcaster, arm only), `franka_gripper/joint_states` (fingers only,
 depth 1) and franka_gripper's franka_msgs/action/{Grasp, Move, Homing}, its `gripper_action` (GripperCommand) and
 `stop` (fake_gripper_interfaces.py), franka_robot_state_broadcaster's
@@ -22,6 +23,7 @@ under a lock. The sim thread never reads the ROS clock, because it is the
 clock. It is throttled to at most `max_real_time_factor` and, like a real arm, never catches up: time the
 simulation lost on a busy machine stays lost (`SimPacer`).
 """
+import collections
 import json
 import threading
 import time
@@ -267,6 +269,7 @@ class FakePandaDriver(Node):
         schedule = _Schedule({"clock": min(self.cfg["clock_rate_hz"], self.cfg["robot_state_rate_hz"]),
                               "joints": self.cfg["joint_state_rate_hz"], "gripper": self.cfg["gripper_state_rate_hz"]})
         next_depth_s = next_pose_s = 0.0
+        in_transit = collections.deque()    # (publish at s, captured at s, frame): depth_capture_latency_s
         wall0 = time.monotonic()
         pacer = SimPacer(self.cfg["max_real_time_factor"], wall0, self.cell.time_s)
         self._log_mark = (wall0, self.cell.time_s)
@@ -289,12 +292,14 @@ class FakePandaDriver(Node):
             if frame is not None:
                 self._capture_requested = False
                 next_depth_s = now_s + 1.0 / self.cfg["depth_rate_hz"]
+                in_transit.append((now_s + self.cfg["depth_capture_latency_s"], now_s, frame))
             if poses is not None:
                 next_pose_s = now_s + 1.0 / self.cfg["object_pose_rate_hz"]
             try:
                 self._publish_state(now_s, joints, force, torque, tcp, schedule.due(now_s))
-                if frame is not None:
-                    self._publish_frame(now_s, *frame)
+                while in_transit and in_transit[0][0] <= now_s:   # captured at stamp_s, arriving now
+                    _, stamp_s, captured = in_transit.popleft()
+                    self._publish_frame(stamp_s, *captured)
                 if poses is not None:
                     self._publish_poses(now_s, poses)
                     self._report_objects_off_the_table(poses)

@@ -264,3 +264,30 @@ def test_the_camera_streams_are_realsenses_qos_and_colour_is_its_own_camera(exec
         assert np.abs(centroid - pixel).max() < 4.0, f"box centroid {centroid.round(1)}, projected {pixel.round(1)}"
     finally:
         driver.shutdown()
+
+
+def test_a_frame_arrives_after_the_capture_it_is_stamped_with(executor, spin):
+    """realsense2_camera stamps a frame with its capture time and publishes it once the host has it: the stamp is
+    older than the clock at arrival. Stamped at publication (the driver until 2026-12-02), a reader that took a
+    frame's stamp for 'now' (its age, the robot's state at capture) was never put to the test."""
+    from rosgraph_msgs.msg import Clock
+    from sensor_msgs.msg import Image
+
+    from defgg_ros.ros import qos
+
+    latency_s = 0.4       # long beside the /clock period (10 ms), so that no delivery order between topics matters
+    _driver(executor, depth_capture_latency_s=latency_s, depth_rate_hz=2.0)
+    probe = _probe(executor)
+    clock_s, arrivals = [0.0], []
+
+    def on_clock(msg):
+        clock_s[0] = msg.clock.sec + 1e-9 * msg.clock.nanosec
+
+    def on_depth(msg):
+        arrivals.append((msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec, clock_s[0]))
+
+    probe.create_subscription(Clock, topics.CLOCK, on_clock, qos.STATE)
+    probe.create_subscription(Image, topics.DEPTH_IMAGE, on_depth, qos.SENSOR_DATA)
+    spin(executor, lambda: len(arrivals) >= 3, TIMEOUT_S, "three depth frames")
+    ages = [arrived - stamp for stamp, arrived in arrivals]   # the probe's /clock may trail by a few periods
+    assert all(age >= latency_s / 2 for age in ages) and latency_s - 0.02 <= max(ages) <= latency_s + 0.25, ages
