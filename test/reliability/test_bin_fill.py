@@ -15,7 +15,7 @@ import yaml
 from defgg_interfaces.action import PickAndPlace
 from geometry_msgs.msg import PoseArray
 from rclpy.node import Node
-from support.cell_sets import driver_and_executor_set
+from support.cell_sets import STARVED_WATCHDOG_S, driver_and_executor_set
 from support.executor_cell import grasp_msg
 
 from defgg_ros.bringup.supervisor import Bringup
@@ -59,7 +59,7 @@ def test_eight_picks_with_no_place_pose_fill_the_bin_without_collisions(tmp_path
     poses, report = [], []
     threshold_n = EXECUTOR["contact_force_threshold_n"]
     with open(log_path, "w") as log, Bringup(driver_and_executor_set(
-            tmp_path, _scene(tmp_path)), out=log) as bringup:
+            tmp_path, _scene(tmp_path), {"watchdog_timeout_s": STARVED_WATCHDOG_S}), out=log) as bringup:
         bringup.wait_ready(180.0)
         probe = Node("bin_fill_probe", context=executor.context)
         probe.create_subscription(PoseArray, topics.FAKE_OBJECT_POSES, poses.append, qos.STATE)

@@ -21,7 +21,7 @@ import pytest
 from defgg_interfaces.action import PickAndPlace
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
-from support.cell_sets import driver_and_executor_set
+from support.cell_sets import STARVED_WATCHDOG_S, driver_and_executor_set
 from support.executor_cell import grasp_msg
 
 from defgg_ros.bringup.node_set import config_dir
@@ -42,8 +42,6 @@ MOVING_RADPS = 0.02          # a joint this fast at the signal has a direction t
 TURN_BACK_TOLERANCE_RAD = 5e-4
 SPEED_UP_TOLERANCE_RADPS = 0.02
 
-
-STARVED_WATCHDOG_S = 10.0
 
 
 def _cell_set(tmp_path):

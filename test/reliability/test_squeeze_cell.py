@@ -17,6 +17,7 @@ from defgg_interfaces.srv import PlanGrasp
 from geometry_msgs.msg import PoseArray
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
+from support.cell_sets import STARVED_WATCHDOG_S
 
 from defgg_ros.bringup.node_set import load_node_set
 from defgg_ros.bringup.supervisor import Bringup
@@ -31,8 +32,6 @@ TRUE_MODULUS_PA = 2e5           # soft_box.yaml's foam block
 GOAL_TIMEOUT_S = 300.0
 DEFAULT_PA = defaults("segmentation_node")["default_youngs_modulus_pa"]
 
-
-STARVED_WATCHDOG_S = 10.0
 
 
 def _grows(items):
