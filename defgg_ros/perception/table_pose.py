@@ -1,17 +1,18 @@
-"""A camera pose from the table itself, for frames whose configured pose finds no table (no rclpy).
+"""A camera pose from the table itself, for frames without a calibrated one (no rclpy).
 
     pose = table_frame_pose(depth_m, camera_k, config)         # raises TabletopError: no plane
     poses = PoseFromTable(config)                              # the nodes' rule
-    base_T_camera, estimated = poses.pose_for(depth_m, camera_k, configured_base_T_camera)
+    base_T_camera, estimated = poses.pose_for(depth_m, camera_k, None)   # the nodes: no pose to check
 
-A cell before its hand-eye calibration, or a recorded frame replayed with the default `base_T_camera`,
-gives a pose under which the table is not where the tabletop perception looks for it (perception/
-tabletop.py: within table_z_tolerance_m of table_z_m, tilted at most 15 degrees). Rather than refuse every
-frame, the nodes may use a *table frame* instead: the frame's dominant plane facing the camera becomes the
-table at table_z_m, the point the optical axis meets on it lies at the workspace box's centre, and +x
-points towards the image's top (the camera's -y axis along the table). Objects are then segmented and
-grasped as usual, but the grasps are in that table frame, not in the robot's, and the robot self-filter
-cannot be placed: the nodes log it as a warning and say how to give the real pose (TF or base_T_camera).
+A cell before its hand-eye calibration, or a recorded frame replayed without one, has no camera pose (the
+nodes: nothing on TF and `base_T_camera` not set), and a given pose may put the table where the tabletop
+perception does not look for it (perception/tabletop.py: within table_z_tolerance_m of table_z_m, tilted at
+most 15 degrees). Rather than refuse every frame, the nodes may use a *table frame* instead: the frame's
+dominant plane facing the camera becomes the table at table_z_m, the point the optical axis meets on it lies
+at the workspace box's centre, and +x points towards the image's top (the camera's -y axis along the table).
+Objects are then segmented and grasped as usual, but the grasps are in that table frame, not in the robot's,
+and the robot self-filter cannot be placed: the nodes log it as a warning and say how to give the real pose
+(TF or base_T_camera).
 """
 from __future__ import annotations
 

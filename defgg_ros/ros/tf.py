@@ -207,7 +207,7 @@ class CameraPoseConflict(ValueError):
 
 
 class CameraPoseUnknown(ValueError):
-    """Neither TF nor a configured base_T_camera gives the camera's pose (the parameter is its placeholder)."""
+    """Neither TF nor a set base_T_camera gives the camera's pose, and no table frame can stand in."""
 
 
 def pose_difference(a_T_b: np.ndarray, a_T_c: np.ndarray) -> tuple[float, float]:
@@ -289,8 +289,8 @@ class CameraPose:
             names = f"{base_frame} -> {camera_frame or '(no frame id)'}"
             if source == "table":
                 self._logger.warning(
-                    f"camera pose {names}: TF has none (yet) and base_T_camera is at its default (a placeholder, "
-                    "not a calibration), so a table frame estimated from the depth is used (the table at "
+                    f"camera pose {names}: TF has none (yet) and base_T_camera is not set, "
+                    "so a table frame estimated from the depth is used (the table at "
                     "table_z_m, the view's centre at the workspace box's centre): grasps are NOT in the robot's "
                     f"frame and the self-filter is off. Publish {names} on TF or set base_T_camera.")
             else:

@@ -109,7 +109,8 @@ def test_the_configured_camera_pose_is_published_under_the_cameras_own_tree(infe
     assert listener.tree.root_of("camera_link")[0] == "fr3_link0"       # base -> camera_link, not -> optical
 
 
-def test_a_placeholder_pose_is_not_published_but_a_table_frame_is(inference_service, executor, spin, call):
+def test_without_a_pose_none_is_published_as_a_calibration_but_a_table_frame_is(inference_service, executor, spin,
+                                                                                call):
     request, _ = _frame_request()
     listener = _tf_probe(executor)
     _, _, client = inference_service("pose_publisher_probe", publish_camera_tf=True)   # base_T_camera: default
