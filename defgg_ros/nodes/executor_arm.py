@@ -14,13 +14,18 @@ from franka_msgs.msg import GraspEpsilon
 from defgg_ros.control.observation import RestWatch
 from defgg_ros.control.pick_place import PickPlaceSequence
 from defgg_ros.control.sequence_types import CancelGripper, GraspGripper, MoveGripper, SendTrajectory
-from defgg_ros.control.stopping import stopping_hold
+from defgg_ros.control.stopping import MAX_STATE_AGE_S, stopping_hold
 from defgg_ros.control.trajectories import arm_limits
 from defgg_ros.nodes.executor_messages import hold_trajectory_msg, trajectory_to_msg
 from defgg_ros.ros.action import ActionClient, in_executor
 
 # A hold's acceptance normally comes in milliseconds; one this late is treated as refused (a response can be lost).
 HOLD_ANSWER_TIMEOUT_S = 1.0
+# The stop on the way out waits this long (wall clock) at most for a joint state taken in after the stop was asked
+# for: a process starved of the CPU (a loaded machine) holds a state from before the starvation, the stop planned on
+# it is stamped on a stale clock and reaches the controller after its own end (on a loaded 2-core machine, a state
+# 0.54 s old: the controller, taking such a stop, pulled the arm back 1.1 rad). Joint states come at 100 Hz or more.
+FRESH_STATE_WAIT_S = 0.15
 
 
 class ArmCommands:
@@ -37,6 +42,10 @@ class ArmCommands:
         timeout_s, hold_s = float(p["exit_stop_timeout_s"]), float(p["rest_hold_s"])
         started = time.monotonic()
         self._shutdown.set()
+        with self._lock:
+            may_move = self._arm_may_move()
+        if may_move:
+            self._take_in_a_fresh_state(spin_once, started)
         with self._lock:
             moving = self._arm_may_move()
             self._hold_arm()
@@ -56,6 +65,20 @@ class ArmCommands:
             return ""
         return (f"could not confirm that the arm stopped within {timeout_s:.1f} s: {rest.describe()}; "
                 "check the arm")
+
+    def _take_in_a_fresh_state(self, spin_once, since_s: float) -> None:
+        """Spin until a joint state received after since_s (monotonic) is in, at most FRESH_STATE_WAIT_S; the stop
+        is then planned on it. Without one (the driver silent, or this process starved) _stopping_hold finds the last
+        one too old and cancels the goal instead."""
+        deadline = since_s + FRESH_STATE_WAIT_S
+        while not self._fresh_state_since(since_s) and time.monotonic() < deadline:
+            spin_once(0.005)
+        if not self._fresh_state_since(since_s):
+            self.get_logger().warning(f"stopping: no joint state within {FRESH_STATE_WAIT_S:g} s of the request")
+
+    def _fresh_state_since(self, since_s: float) -> bool:
+        with self._lock:
+            return self._last_state is not None and self._last_state[1] >= since_s
 
     def _stop_answered(self) -> bool:
         """Every goal sent is answered and the hold accepted, refused or given up on (after HOLD_ANSWER_TIMEOUT_S):
@@ -204,6 +227,13 @@ class ArmCommands:
         blends into it from where the arm is), else a one-point hold from the last joint state."""
         if self._last_state is None:
             return None
+        age_s = time.monotonic() - self._last_state[1]
+        if age_s > MAX_STATE_AGE_S:
+            self.get_logger().error(
+                f"the newest joint state is {age_s:.2f} s old: a stop planned on it would be stamped on a stale "
+                "clock (it could end before it arrives, or pull the arm back to where it was); canceling the arm's "
+                "goal instead, so the controller holds where the arm is")
+            return None
         frame = self._params()["base_frame"]
         if self._sequence is not None:
             try:
@@ -213,10 +243,10 @@ class ArmCommands:
                 stop = None
             if stop is not None:
                 return trajectory_to_msg(stop[0], frame, self._arm_joints, stop[1])
-        state, received_s = self._last_state
+        state = self._last_state[0]
         limits = arm_limits(self._kin.arm, 1.0)
         try:
-            q_hold, blend_s = stopping_hold(state.q_rad, state.qd_radps, time.monotonic() - received_s,
+            q_hold, blend_s = stopping_hold(state.q_rad, state.qd_radps, age_s,
                                             limits.qdd_max_radps2, limits.q_min_rad, limits.q_max_rad,
                                             self._last_acceleration)
         except ValueError as error:

@@ -214,8 +214,8 @@ class ExecutorNode(RobotInputs, ArmCommands, GraspPlanning, Node):
                     # The restarted controller holds its own state; a hold at the position measured before the
                     # restart would send the new arm there at once (30 rad/s in the safety soak's simulator).
                     self._last_state = None
-                if driving:
-                    self._hold_arm()
+                if driving and not self._shutdown.is_set():
+                    self._hold_arm()   # on shutdown its owner stops the arm (stop_for_exit: on a fresh state)
             if driving:
                 self._wait_for_rest()
             return self._abort(goal_handle, result, str(error), started)

@@ -37,8 +37,8 @@ from defgg_ros.sim.cell.tolerances import (
 from defgg_ros.sim.cell.trajectory import TrajectoryError, make_waypoints
 
 FEEDBACK_PERIOD_S = 1 / 20.0  # FollowJointTrajectory feedback while a goal runs (wall clock): action_monitor_rate
-# A trajectory stamp further than this from sim time is a wall-clock stamp
-# from a node without use_sim_time: start it now instead of never/at once.
+# A trajectory stamped further than this ahead of sim time is likely a wall-clock stamp from a node without
+# use_sim_time: the controller waits for it as it would for any stamp, and the log says why the arm does not move.
 MAX_STAMP_OFFSET_S = 1.0
 PREEMPTED_TEXT = "Current goal preempted by new incoming action."   # the controller's preempt_active_goal
 SHUTTING_DOWN_TEXT = "the simulated controller is shutting down"
@@ -124,6 +124,7 @@ class FakeArmController:
             return
         try:
             points = self._trajectory_points(msg)
+            self._check_not_over(msg)
             with self._lock:
                 self._start(points, msg.header.stamp, None)
         except (TrajectoryError, ValueError) as exc:
@@ -136,6 +137,7 @@ class FakeArmController:
             if not goal.trajectory.points:
                 raise TrajectoryError("the trajectory has no points")
             make_waypoints(self._trajectory_points(goal.trajectory), len(self._joints))
+            self._check_not_over(goal.trajectory)
         except (TrajectoryError, ValueError) as exc:
             self._logger.error(f"rejected FollowJointTrajectory goal: {exc}")
             return GoalResponse.REJECT
@@ -274,13 +276,23 @@ class FakeArmController:
         return [(_seconds(pt.time_from_start), pick(pt.positions), pick(pt.velocities), pick(pt.accelerations))
                 for pt in msg.points]
 
+    def _check_not_over(self, msg: JointTrajectory) -> None:
+        """validate_trajectory_msg: a trajectory with a start time (stamp != 0) that ends before now is refused
+        ("Received trajectory with non-zero start time (<s>) that ends in the past (<s>)"); one that started in the
+        past but ends later is taken and sampled from its stamp, so the arm is pulled to where it is due by now."""
+        start_s = _seconds(msg.header.stamp)
+        end_s = start_s + _seconds(msg.points[-1].time_from_start)
+        if start_s != 0.0 and end_s < self._cell.time_s:
+            raise TrajectoryError(f"Received trajectory with non-zero start time ({start_s:f}) that ends in the past "
+                                  f"({end_s:f}); sim time {self._cell.time_s:.3f} s")
+
     def _start_time_s(self, stamp) -> float:
-        stamp_s = stamp.sec + stamp.nanosec * 1e-9
+        stamp_s = _seconds(stamp)
         if stamp_s == 0.0:
             return self._cell.time_s
-        if abs(stamp_s - self._cell.time_s) > MAX_STAMP_OFFSET_S:
+        if stamp_s - self._cell.time_s > MAX_STAMP_OFFSET_S:
             self._logger.warning(
-                f"trajectory stamp {stamp_s:.3f} s is far from sim time {self._cell.time_s:.3f} s "
-                "(is the sender running with use_sim_time?): starting it now", throttle_duration_sec=5.0)
-            return self._cell.time_s
+                f"trajectory stamp {stamp_s:.3f} s is {stamp_s - self._cell.time_s:.1f} s ahead of sim time "
+                f"{self._cell.time_s:.3f} s: the arm waits for it (is the sender running with use_sim_time?)",
+                throttle_duration_sec=5.0)
         return stamp_s

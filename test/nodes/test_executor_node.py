@@ -93,12 +93,12 @@ def test_busy_goal_is_rejected_and_cancel_stops_the_arm(executor_cell, spin):
 
 
 def test_a_stop_leads_by_the_latency_of_the_controllers_answers(executor_cell, spin):
-    """A controller that answers trajectory goals 0.18 s after they arrive (a loaded machine): the stop that a cancel
-    sends is stamped to start about 1.5 x that after the last joint state, not STOP_LEAD_S (0.15 s), so it does
-    not arrive after its own start and pull the arm back."""
+    """A controller that answers trajectory goals 0.22 s after they arrive (a loaded machine): the stop that a cancel
+    sends is stamped to start about that long (STOP_LEAD_LATENCY_FACTOR x) after the last joint state, not
+    STOP_LEAD_S (0.15 s), so it does not arrive after its own start and pull the arm back."""
     from defgg_ros.control.pick_place import MAX_STOP_LEAD_S, STOP_LEAD_LATENCY_FACTOR, STOP_LEAD_S
 
-    answer_s = 0.18
+    answer_s = 0.22
     ex, node, client, start_driver = executor_cell
     driver = start_driver(arm_goal_answer_s=answer_s)
     wait_driver_ready(ex, spin, node)
@@ -112,6 +112,46 @@ def test_a_stop_leads_by_the_latency_of_the_controllers_answers(executor_cell, s
     lead_s = stamp.sec + 1e-9 * stamp.nanosec - state_s
     assert MAX_STOP_LEAD_S + 0.05 >= lead_s >= answer_s * STOP_LEAD_LATENCY_FACTOR - 0.05 > STOP_LEAD_S, lead_s
     assert result_of(ex, spin, goal).status == 5  # GoalStatus.STATUS_CANCELED
+
+
+def test_the_stop_on_the_way_out_is_planned_on_a_joint_state_that_came_after_the_signal(executor_cell, spin):
+    """An executor starved of the CPU for 0.4 s (a loaded machine) while the arm moves, then asked to stop (SIGTERM:
+    run_node calls stop_for_exit): the stop must start after it reaches the controller. Planned at once on
+    the old state, its stamp came from a stale clock (the state's stamp plus at most 0.1 s) and lay in the past on
+    arrival; the simulated controller then pulled the arm back to where the stale state had seen it."""
+    ex, node, client, start_driver = executor_cell
+    driver = start_driver()
+    wait_driver_ready(ex, spin, node)
+    send(ex, client, spin, PickAndPlace.Goal(grasp=grasp_msg()))
+    spin(ex, lambda: np.max(np.abs(driver.qd)) > 0.2, 20.0, "the arm moving towards the pre-grasp")
+    # 0.4 s in which this executor runs nothing; the driver, as if in its own process, moves and publishes on
+    starved_until = time.monotonic() + 0.4
+    while time.monotonic() < starved_until:
+        driver.step()
+        time.sleep(0.01)
+    sent, asked_s = len(driver.trajectory_msgs), driver.now_s()
+    assert node.stop_for_exit(lambda timeout_s: ex.spin_once(timeout_sec=timeout_s)) == ""
+    stamp = driver.trajectory_msgs[sent].header.stamp
+    assert stamp.sec + 1e-9 * stamp.nanosec > asked_s   # not before it was asked for (so not in the past on arrival)
+
+
+def test_without_a_fresh_joint_state_the_stop_on_the_way_out_is_a_cancel(executor_cell, spin):
+    """The driver's joint states stop coming (0.6 s) while the arm moves, then the executor is asked to stop: no
+    stop can be stamped on the controller's clock from a state that old, so the goal is canceled (the controller
+    holds where the arm is) and no trajectory goes out."""
+    ex, node, client, start_driver = executor_cell
+    driver = start_driver()
+    wait_driver_ready(ex, spin, node)
+    send(ex, client, spin, PickAndPlace.Goal(grasp=grasp_msg()))
+    spin(ex, lambda: np.max(np.abs(driver.qd)) > 0.2, 20.0, "the arm moving towards the pre-grasp")
+    driver.states_paused_until_s = time.monotonic() + 0.6
+    silent_until = time.monotonic() + 0.3
+    spin(ex, lambda: time.monotonic() > silent_until, 5.0, "0.3 s without joint states")
+    sent, running = len(driver.trajectory_msgs), driver.arm_goal
+    assert running is not None
+    assert node.stop_for_exit(lambda timeout_s: ex.spin_once(timeout_sec=timeout_s)) == ""
+    assert len(driver.trajectory_msgs) == sent
+    assert running[0].is_cancel_requested or running[1].result() == "canceled"
 
 
 def test_a_cancel_while_the_fingers_close_opens_the_hand_and_recovers(executor_cell, spin):

@@ -297,3 +297,39 @@ def test_feedback_comes_at_the_controllers_action_monitor_rate(executor, rclpy_c
         assert 0.04 <= np.median(intervals_s) <= 0.065, f"median interval {np.median(intervals_s):.3f} s"
     finally:
         driver.shutdown()
+
+
+def test_a_trajectory_that_ends_before_it_arrives_is_refused_and_the_arm_stays(executor, rclpy_context, client, spin):
+    """validate_trajectory_msg refuses a trajectory with a start time that ends in the past, as a goal and on the
+    topic, so a stop stamped on a stale clock and delivered late does not move the arm. The driver took such a
+    trajectory when its stamp was over 1 s old and started it on receipt: the arm went to its first point, where
+    the sender had seen the arm long before (a stop planned 0.6 s late pulled the arm back 1.1 rad, 33 rad/s)."""
+    from trajectory_msgs.msg import JointTrajectory
+
+    from defgg_ros.ros import qos
+
+    driver = _driver(executor, rclpy_context, 0.0)
+    try:
+        arm = _action(client, executor, spin)
+        spin(executor, lambda: _arm(driver)[0] > 3.0, TIMEOUT_S, "3 s of sim time")
+        now_s, q0, _ = _arm(driver)
+        away = q0 + 0.3
+        for ago_s in (0.6, 2.5):   # within and beyond the 1 s the driver used to treat as a wall-clock stamp
+            handle = spin(executor, arm.send_goal_async(_goal([(0.0, away), (0.5, away)], stamp_s=now_s - ago_s)),
+                          TIMEOUT_S, "the goal response")
+            assert not handle.accepted, ago_s
+        pub = client.create_publisher(JointTrajectory, topics.JOINT_TRAJECTORY, qos.COMMAND)
+        spin(executor, lambda: pub.get_subscription_count() > 0, TIMEOUT_S, "driver subscribed")
+        pub.publish(_goal([(0.0, away), (0.5, away)], stamp_s=_arm(driver)[0] - 2.5).trajectory)
+        later_s = _arm(driver)[0] + 1.0
+        spin(executor, lambda: _arm(driver)[0] > later_s, TIMEOUT_S, "1 s of sim time after the topic message")
+        assert np.max(np.abs(_arm(driver)[1] - q0)) < 1e-3
+        # one that started in the past but ends later is taken, sampled from its stamp
+        handle, result = _run(executor, spin, arm, _goal([(0.0, q0), (1.0, away)], stamp_s=_arm(driver)[0] - 0.5))
+        sent_s = _arm(driver)[0]
+        spin(executor, result, TIMEOUT_S, "its result")
+        ended_s, q_end, _ = _arm(driver)
+        assert np.max(np.abs(q_end - away)) < 0.03   # stopped there (joint 2 settles under gravity)
+        assert ended_s - sent_s < 0.9                 # half of it was over when it arrived
+    finally:
+        driver.shutdown()
