@@ -517,13 +517,13 @@ def test_a_cancel_stops_from_a_lead_along_the_commanded_motion_stamped_on_its_cl
 
 
 def test_the_stop_leads_by_the_arm_goals_measured_latency_when_that_is_longer(kin):
-    """Goals answered 0.2 s after they were sent (a loaded machine): a stop led by STOP_LEAD_S alone would arrive
+    """Goals answered 0.14 s after they were sent (a loaded machine): a stop led by STOP_LEAD_S alone would arrive
     after the time it is stamped for and the controller would sample straight into it, behind the arm. The lead is
     STOP_LEAD_LATENCY_FACTOR times the longest recent round trip, capped at MAX_STOP_LEAD_S; STOP_LEAD_S stays the
     least."""
     from defgg_ros.control.pick_place import MAX_STOP_LEAD_S, STOP_LEAD_LATENCY_FACTOR, STOP_LEAD_S, STOP_LEAD_WINDOW
 
-    for latencies_s, lead_s in (([0.05], STOP_LEAD_S), ([0.05, 0.2, 0.1], 0.2 * STOP_LEAD_LATENCY_FACTOR),
+    for latencies_s, lead_s in (([0.05], STOP_LEAD_S), ([0.05, 0.14, 0.1], 0.14 * STOP_LEAD_LATENCY_FACTOR),
                                 ([2.0], MAX_STOP_LEAD_S), ([0.25] + [0.01] * STOP_LEAD_WINDOW, STOP_LEAD_S)):
         sequence, robot = _mid_transfer(kin)
         for latency_s in latencies_s:

@@ -93,12 +93,12 @@ def test_busy_goal_is_rejected_and_cancel_stops_the_arm(executor_cell, spin):
 
 
 def test_a_stop_leads_by_the_latency_of_the_controllers_answers(executor_cell, spin):
-    """A controller that answers trajectory goals 0.22 s after they arrive (a loaded machine): the stop that a cancel
-    sends is stamped to start about that long (STOP_LEAD_LATENCY_FACTOR x) after the last joint state, not
-    STOP_LEAD_S (0.15 s), so it does not arrive after its own start and pull the arm back."""
+    """A controller that answers trajectory goals 0.14 s after they arrive (a loaded machine): the stop that a cancel
+    sends is stamped to start STOP_LEAD_LATENCY_FACTOR (1.5) x that after the last joint state, not STOP_LEAD_S
+    (0.15 s), so it does not arrive after its own start and pull the arm back."""
     from defgg_ros.control.pick_place import MAX_STOP_LEAD_S, STOP_LEAD_LATENCY_FACTOR, STOP_LEAD_S
 
-    answer_s = 0.22
+    answer_s = 0.14
     ex, node, client, start_driver = executor_cell
     driver = start_driver(arm_goal_answer_s=answer_s)
     wait_driver_ready(ex, spin, node)
