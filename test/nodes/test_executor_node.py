@@ -144,7 +144,7 @@ def test_without_a_fresh_joint_state_the_stop_on_the_way_out_is_a_cancel(executo
     wait_driver_ready(ex, spin, node)
     send(ex, client, spin, PickAndPlace.Goal(grasp=grasp_msg()))
     spin(ex, lambda: np.max(np.abs(driver.qd)) > 0.2, 20.0, "the arm moving towards the pre-grasp")
-    driver.states_paused_until_s = time.monotonic() + 0.6
+    driver.states_from_s = time.monotonic() + 0.6
     silent_until = time.monotonic() + 0.3
     spin(ex, lambda: time.monotonic() > silent_until, 5.0, "0.3 s without joint states")
     sent, running = len(driver.trajectory_msgs), driver.arm_goal

@@ -62,9 +62,9 @@ class InTestDriver(Node):
     def __init__(self, context, object_width_m=0.04, contact_height_m=-1.0, q0=PANDA_READY_Q_RAD,
                  publish_velocities=True, position_noise_rad=0.0, states_after_s=0.0, arm_goal_answer_s=0.0):
         super().__init__("in_test_driver", context=context)
-        # joint states and the wrench start this long after the action servers (a driver still coming up)
+        # joint states and the wrench start this long after the action servers (a driver still coming up); a test
+        # sets states_from_s (monotonic) later to silence them for a while
         self.states_from_s = time.monotonic() + states_after_s
-        self.states_paused_until_s = 0.0   # monotonic: no joint state or wrench before then (a reader starved of them)
         self.publish_velocities, self.position_noise_rad = publish_velocities, position_noise_rad
         self.arm_goal_answer_s = arm_goal_answer_s   # a trajectory goal is answered this long after it arrives
         self.last_state_stamp_s = float("nan")
@@ -143,7 +143,7 @@ class InTestDriver(Node):
     def step(self):
         self.step_arm()
         self.step_gripper()
-        if time.monotonic() < max(self.states_from_s, self.states_paused_until_s):
+        if time.monotonic() < self.states_from_s:
             return
         stamp = self.get_clock().now().to_msg()
         state = JointState(name=list(NAMES["joints"]) + list(NAMES["fingers"]))
