@@ -302,25 +302,28 @@ class ExecutorNode(RobotInputs, ArmCommands, GraspPlanning, Node):
         while not sequence.finished:
             if self._shutdown.wait(period):
                 raise GoalError("executor is shutting down")
-            robot_s = self._check_clock(robot_s)
             with self._lock:
                 if self._shutdown.is_set():   # the exit's hold went out while this waited for the lock
                     raise GoalError("executor is shutting down")
+                # One reading, checked, for everything this tick sends: a clock read again after the check could
+                # already be the restarted simulator's.
+                clocks = self._clocks()
+                robot_s = self._check_clock(robot_s, clocks[0])
                 if goal_handle.is_cancel_requested and not cancel_sent:
                     cancel_sent = True
-                    self._carry_out(sequence, sequence.cancel(*self._clocks()))
-                self._carry_out(sequence, sequence.tick(*self._clocks()))
-                feedback = sequence.feedback(self._clocks()[0])
+                    self._carry_out(sequence, sequence.cancel(*clocks))
+                self._carry_out(sequence, sequence.tick(*clocks))
+                feedback = sequence.feedback(clocks[0])
             goal_handle.publish_feedback(PickAndPlace.Feedback(
                 phase=feedback.phase, phase_progress=feedback.phase_progress,
                 gripper_width_m=feedback.gripper_width_m, external_force_n=feedback.external_force_n))
 
-    def _check_clock(self, before_s: float) -> float:
-        """The robot clock now; GoalError when it went back more than CLOCK_JUMP_BACK_S since before_s. A restarted
+    @staticmethod
+    def _check_clock(before_s: float, now_s: float) -> float:
+        """now_s, the robot clock; GoalError when it went back more than CLOCK_JUMP_BACK_S since before_s. A restarted
         simulator starts its /clock at 0 again: every motion and gripper wait of the sequence counts on the robot
         clock and would wait until it came back to where it was (the safety soak's goal hung 300 s, unanswered),
         while the new driver knows nothing of the goals the old one ran."""
-        now_s = self._clocks()[0]
         if now_s < before_s - CLOCK_JUMP_BACK_S:
             raise RobotRestarted(f"the robot clock jumped back from {before_s:.1f} s to {now_s:.1f} s (a restarted "
                             "driver or simulator): its trajectory and gripper goals are gone")
