@@ -16,6 +16,7 @@ from defgg_ros.nodes.executor_messages import GoalError, joint_state_to_arm
 from defgg_ros.nodes.topic_watch import TopicWatch
 from defgg_ros.ros import qos
 from defgg_ros.ros.conversions import stamp_to_ns
+from defgg_ros.ros.latest_reader import LatestMessageReader
 
 # How often the input topics' silence is checked (wall clock, s).
 INPUT_CHECK_PERIOD_S = 1.0
@@ -37,7 +38,8 @@ class RobotInputs:
         self._wrench_watch = TopicWatch(self, p["external_wrench_topic"], read)
         self._arm_topic_watch = None   # the arm's own joint states, subscribed when joint_states has no publisher
         self.create_subscription(JointState, p["joint_states_topic"], self._on_joint_state, read, callback_group=group)
-        self.create_subscription(WrenchStamped, p["external_wrench_topic"], self._on_wrench, read, callback_group=group)
+        # 1 kHz on a Franka: taken at the control ticks and input checks, not handed to a callback (LatestMessageReader)
+        self._wrench_reader = LatestMessageReader(self, WrenchStamped, p["external_wrench_topic"], read, "wrench")
         self.create_subscription(JointState, p["gripper_joint_states_topic"], self._on_gripper_joint_state, read,
                                  callback_group=group)
         self._input_warned_at_s = {}   # topic -> silence (s) at which it is reported next (doubling)
@@ -50,6 +52,7 @@ class RobotInputs:
     def _watch_inputs(self) -> None:
         """Say in the log which input topic is silent and why (TopicWatch.diagnosis); read the arm from
         arm_joint_states_topic when joint_states_topic has no publisher and that one has."""
+        self._take_wrench()
         p = self._params()
         silent_limit_s = float(p["silent_topic_s"])
         if (self._arm_topic_watch is None and self._joint_watch.silent_s() >= silent_limit_s
@@ -113,13 +116,20 @@ class RobotInputs:
             with self._lock:
                 self._finger_widths["gripper"] = (width_m, time.monotonic())
 
-    def _on_wrench(self, msg: WrenchStamped):
+    def _take_wrench(self) -> None:
+        """The newest external wrench, if one came since the last take (lock not held): the force the contact
+        guards read, when it arrived, and the wrench topic heard then."""
+        taken = self._wrench_reader.take()
+        if taken is None:
+            return
+        msg, age_s = taken
         force = np.array([msg.wrench.force.x, msg.wrench.force.y, msg.wrench.force.z])
         if not np.all(np.isfinite(force)):
             return
+        arrived_s = time.monotonic() - age_s
         with self._lock:
-            self._wrench_watch.heard()
-            self._last_force, self._last_force_wall_s = force, time.monotonic()
+            self._wrench_watch.heard(arrived_s)
+            self._last_force, self._last_force_wall_s = force, arrived_s
             if self._sequence is not None:
                 self._sequence.on_force(force, self._last_force_wall_s)
 
@@ -130,10 +140,12 @@ class RobotInputs:
         waited for: its driver stopped. (CI, 2026-12-01: a goal sent as soon as the bringup was ready found no
         joint state 3.3 s after the executor started and was refused, though the driver was up.)"""
         deadline_s = time.monotonic() + timeout_s
+        self._take_wrench()
         while time.monotonic() < deadline_s and (any(w.last_s is None for w in self._input_watches())
                                                  or self._waiting_for_sim_clock()):
             if self._shutdown.wait(FIRST_INPUT_POLL_S):
                 raise GoalError("executor is shutting down")
+            self._take_wrench()
 
     def _waiting_for_sim_clock(self) -> bool:
         """use_sim_time and no /clock message yet: the robot clock reads 0, and a sequence started on it would
@@ -146,6 +158,7 @@ class RobotInputs:
         read zeros and descend blind into the object or the table (a wrong topic, a QoS mismatch, a dead
         broadcaster); without joint states nothing can be planned from where the arm is."""
         timeout_s = float(p["watchdog_timeout_s"])
+        self._take_wrench()
         joints = self._joint_states_diagnosis(timeout_s)
         if joints:
             raise GoalError(f"no joint states: {joints}")

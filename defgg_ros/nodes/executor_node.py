@@ -178,6 +178,7 @@ class ExecutorNode(RobotInputs, ArmCommands, GraspPlanning, Node):
         with self._lock:   # torn down without stop_for_exit (an in-process owner): still command the stop
             self._hold_arm()
         destroy_actions(self)
+        self._wrench_reader.destroy()
         return super().destroy_node()
 
     # --- goals --------------------------------------------------------------
@@ -286,6 +287,7 @@ class ExecutorNode(RobotInputs, ArmCommands, GraspPlanning, Node):
     def _drive(self, goal_handle, sequence: PickPlaceSequence) -> None:
         """Run the control loop until the sequence finishes (a cancel request goes to the sequence)."""
         period = float(self._params()["control_period_s"])
+        self._take_wrench()
         with self._lock:
             if self._shutdown.is_set():   # the exit's stop found nothing moving: nothing may start after it
                 raise GoalError("executor is shutting down")
@@ -302,6 +304,7 @@ class ExecutorNode(RobotInputs, ArmCommands, GraspPlanning, Node):
         while not sequence.finished:
             if self._shutdown.wait(period):
                 raise GoalError("executor is shutting down")
+            self._take_wrench()   # the newest, for this tick's contact guards
             with self._lock:
                 if self._shutdown.is_set():   # the exit's hold went out while this waited for the lock
                     raise GoalError("executor is shutting down")

@@ -35,8 +35,9 @@ class TopicWatch:
         self.last_s = None
         self.messages = 0
 
-    def heard(self) -> None:
-        self.last_s = time.monotonic()
+    def heard(self, at_s: float | None = None) -> None:
+        """A message arrived at at_s (monotonic; now by default)."""
+        self.last_s = time.monotonic() if at_s is None else at_s
         self.messages += 1
 
     def silent_s(self) -> float:
