@@ -127,7 +127,6 @@ class FakePandaDriver(Node):
             self.get_logger().warning(f"scene {scene_path}: {warning}")
         self._lock = threading.Lock()
         self._waiters = {}           # gripper token -> [threading.Event, GripperOutcome | None]
-        self._advanced = threading.Condition()  # notified after every control period of the sim thread
         names = topics.robot_names(self.cfg["robot_type"])  # ValueError on an unknown robot_type
         self._arm_joints, self._finger_joints = names["joints"], names["fingers"]
         for key, name in (("base_frame", "base_frame"), ("arm_trajectory_action", "trajectory_action"),
@@ -288,8 +287,6 @@ class FakePandaDriver(Node):
                 frame = self.cell.render_depth(self.cfg["publish_color"]) if render else None
                 poses = self.cell.object_poses() if now_s >= next_pose_s else None
             self._finish_gripper(outcomes)
-            with self._advanced:
-                self._advanced.notify_all()
             if frame is not None:
                 self._capture_requested = False
                 next_depth_s = now_s + 1.0 / self.cfg["depth_rate_hz"]

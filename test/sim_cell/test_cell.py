@@ -60,6 +60,21 @@ def test_trajectory_tracking_reaches_the_commanded_joints(rigid_cell):
     assert state.names[0] == "panda_joint1" and state.names[-1] == "panda_finger_joint2"
 
 
+def test_the_joint_state_is_read_once_per_step_and_nobody_can_change_it(rigid_cell):
+    """The driver's publication and the controller's check of one period share one reading (read-only); a step
+    gives a new one, and the arm's state is what the physics says (not an old step's)."""
+    q0 = rigid_cell.arm_positions()
+    rigid_cell.command_trajectory([(0.5, q0 + 0.3, None, None)])
+    before = rigid_cell.joint_state()
+    assert rigid_cell.joint_state() is before
+    with pytest.raises(ValueError, match="read-only"):
+        before.positions[0] = 1.0
+    rigid_cell.advance(0.25)
+    after = rigid_cell.joint_state()
+    np.testing.assert_allclose(after.positions[:7], rigid_cell.arm_positions())
+    assert np.abs(after.positions[:7] - before.positions[:7]).max() > 0.05
+
+
 def test_new_trajectory_replaces_the_old_one_and_empty_holds(rigid_cell):
     q0 = rigid_cell.arm_positions()
     rigid_cell.command_trajectory([(2.0, q0 + 0.5, None, None)])

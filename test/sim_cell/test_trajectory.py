@@ -98,3 +98,35 @@ def test_a_new_trajectory_blends_from_the_measured_position_and_velocity():
     # positions only: the controller interpolates linearly, the measured velocity is not used
     tracker.replace(make_waypoints([(0.5, Q1, None, None)], 7), 0.0, Q0, v)
     np.testing.assert_allclose(tracker.sample(0.25)[1], (Q1 - Q0) / 0.5)
+
+
+def test_a_sample_at_the_time_just_sampled_follows_a_replaced_or_held_trajectory():
+    """The tracker keeps its last sample (the sim step and the controller's check ask for the same time); a new
+    trajectory or a hold at that same time must not get the old trajectory's answer."""
+    z = np.zeros(7)
+    tracker = TrajectoryTracker(Q0)
+    tracker.replace(make_waypoints([(0.0, Q0, z, z), (2.0, Q1, z, z)], 7), 0.0, Q0)
+    q_first, _ = tracker.sample(1.0)
+    tracker.replace(make_waypoints([(0.0, Q1, z, z), (2.0, -Q1, z, z)], 7), 0.0, Q1)
+    np.testing.assert_allclose(tracker.sample(1.0)[0], 0.0, atol=1e-9)
+    tracker.hold(Q1 * 3)
+    np.testing.assert_allclose(tracker.sample(1.0)[0], Q1 * 3)
+    assert not np.allclose(q_first, Q1 * 3)
+
+
+def test_a_sample_is_the_callers_own_and_repeats_exactly():
+    z, v = np.zeros(7), np.full(7, 0.2)
+    points = [(0.0, Q0, z, z), (0.7, Q1 / 2, v, z), (1.5, Q1, z, z)]
+    tracker = TrajectoryTracker(Q0)
+    tracker.replace(make_waypoints(points, 7), 0.0, Q0)
+    fresh = TrajectoryTracker(Q0)
+    fresh.replace(make_waypoints(points, 7), 0.0, Q0)
+    for t in np.linspace(0.0, 1.6, 41):
+        q, qd = tracker.sample(t)
+        q_again, qd_again = tracker.sample(t)
+        np.testing.assert_array_equal(q, q_again)
+        np.testing.assert_array_equal(qd, qd_again)
+        q += 1.0   # the caller's array: the tracker's next answer must not change
+        q_fresh, qd_fresh = fresh.sample(t)
+        np.testing.assert_allclose(tracker.sample(t)[0], q_fresh, atol=1e-12)
+        np.testing.assert_allclose(qd_again, qd_fresh, atol=1e-12)

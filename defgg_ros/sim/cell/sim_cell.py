@@ -92,6 +92,8 @@ class SimCell:
         self.scene = scene
         self.settings = settings or CellSettings()
         self.time_s = 0.0
+        self._steps = 0                     # physics steps taken: what the joint state memo is keyed by
+        self._joint_state_memo = (None, None)
         self._wall_per_sim = []
         self._gripper_token = 0
         self._pending_token = None
@@ -151,6 +153,7 @@ class SimCell:
             p.resetJointState(self.robot, j, q, 0.0, physicsClientId=c)
         for j in self.finger_joints:
             p.resetJointState(self.robot, j, GRIPPER_MAX_WIDTH_M / 2, 0.0, physicsClientId=c)
+        self._joint_state_memo = (None, None)
         physics.couple_fingers(c, self.robot, self.finger_joints[0], self.finger_joints[1], max_force_n=200,
                                erp=0.1)
         physics.set_friction(c, self.robot, self.finger_joints, cell_objects.MATERIAL.finger_friction)
@@ -261,6 +264,7 @@ class SimCell:
         self._drive_fingers(self.gripper.motor)
         p.stepSimulation(physicsClientId=c)
         self.time_s += self.time_step_s
+        self._steps += 1
         outcome = self.gripper.update(self.time_s, self.gripper_width_m())
         if outcome is not None and self._pending_token is not None:
             self._outcomes.append((self._pending_token, outcome))
@@ -305,11 +309,21 @@ class SimCell:
         return float(states[0][0] + states[1][0])
 
     def joint_state(self) -> JointState:
+        """The arm's and fingers' measured state (read-only arrays, one reading per physics step: the driver's
+        publication and the controller's check of a period share it)."""
+        steps, memo = self._joint_state_memo
+        if steps != self._steps:
+            memo = self._read_joint_state()
+            self._joint_state_memo = (self._steps, memo)
+        return memo
+
+    def _read_joint_state(self) -> JointState:
         joints = self.arm_joints + self.finger_joints
         states = p.getJointStates(self.robot, joints, physicsClientId=self.client)
-        return JointState(PANDA_JOINT_NAMES + PANDA_FINGER_JOINT_NAMES,
-                          np.array([s[0] for s in states]), np.array([s[1] for s in states]),
-                          np.array([s[3] for s in states]))
+        arrays = [np.array([s[i] for s in states]) for i in (0, 1, 3)]
+        for array in arrays:
+            array.flags.writeable = False   # shared by every reader of this step
+        return JointState(PANDA_JOINT_NAMES + PANDA_FINGER_JOINT_NAMES, *arrays)
 
     def tcp_pose(self):
         """(position xyz, quaternion xyzw) of the TCP link in the base frame."""

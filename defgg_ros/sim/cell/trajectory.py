@@ -56,8 +56,9 @@ def make_waypoints(points, n_joints: int) -> list:
     return out
 
 
-def _segment(t, t0, t1, a: Waypoint, b: Waypoint):
-    """Position and velocity at t within the segment a -> b (times t0 < t1)."""
+def _segment(t, t0, t1, a: Waypoint, b: Waypoint, quintic=None):
+    """Position and velocity at t within the segment a -> b (times t0 < t1); quintic: the segment's
+    _quintic_coefficients when both ends have accelerations (computed here if not given)."""
     dt = t1 - t0
     s = np.clip((t - t0) / dt, 0.0, 1.0)
     if a.velocities is None or b.velocities is None:
@@ -65,7 +66,10 @@ def _segment(t, t0, t1, a: Waypoint, b: Waypoint):
         return q, (b.positions - a.positions) / dt
     if a.accelerations is None or b.accelerations is None:
         return _hermite3(s, dt, a.positions, a.velocities, b.positions, b.velocities)
-    return _hermite5(s, dt, a, b)
+    c0, c1, c2, c3, c4, c5 = _quintic_coefficients(dt, a, b) if quintic is None else quintic
+    q = c0 + s * (c1 + s * (c2 + s * (c3 + s * (c4 + s * c5))))
+    qd = c1 + s * (2 * c2 + s * (3 * c3 + s * (4 * c4 + s * 5 * c5)))
+    return q, qd / dt
 
 
 def _hermite3(s, dt, q0, v0, q1, v1):
@@ -76,18 +80,15 @@ def _hermite3(s, dt, q0, v0, q1, v1):
     return q, qd
 
 
-def _hermite5(s, dt, a: Waypoint, b: Waypoint):
-    # Quintic with matching position, velocity and acceleration at both ends,
-    # in the normalised time s: coefficients of q(s) = sum c_k s^k.
+def _quintic_coefficients(dt, a: Waypoint, b: Waypoint) -> tuple:
+    """Quintic with matching position, velocity and acceleration at both ends, in the normalised time s:
+    the coefficients c0..c5 of q(s) = sum c_k s^k."""
     q0, v0, a0 = a.positions, a.velocities * dt, a.accelerations * dt**2
     q1, v1, a1 = b.positions, b.velocities * dt, b.accelerations * dt**2
-    c0, c1, c2 = q0, v0, a0 / 2
     c3 = 10 * (q1 - q0) - 6 * v0 - 4 * v1 - 1.5 * a0 + 0.5 * a1
     c4 = -15 * (q1 - q0) + 8 * v0 + 7 * v1 + 1.5 * a0 - a1
     c5 = 6 * (q1 - q0) - 3 * v0 - 3 * v1 - 0.5 * a0 + 0.5 * a1
-    q = c0 + s * (c1 + s * (c2 + s * (c3 + s * (c4 + s * c5))))
-    qd = c1 + s * (2 * c2 + s * (3 * c3 + s * (4 * c4 + s * 5 * c5)))
-    return q, qd / dt
+    return q0, v0, a0 / 2, c3, c4, c5
 
 
 class TrajectoryTracker:
@@ -98,6 +99,9 @@ class TrajectoryTracker:
         self._n = self._hold_q.size
         self._start_s = 0.0
         self._points: list = []
+        self._sampled = (None, None)   # (time_s, (q, qd)) of the last sample: the sim step and the controller's
+        # check of one period ask for the same time, and a sample of a 7-joint quintic costs ~25 us of Python
+        self._quintics = {}            # segment index -> its _quintic_coefficients (1 kHz samples, ~50 per segment)
 
     @property
     def n_joints(self) -> int:
@@ -107,6 +111,7 @@ class TrajectoryTracker:
         """Stop following any trajectory and hold q."""
         self._hold_q = np.asarray(q, dtype=float).copy()
         self._points = []
+        self._sampled = (None, None)
 
     def replace(self, waypoints: list, start_time_s: float, current_q, current_qd=None,
                 now_s: float | None = None) -> None:
@@ -128,7 +133,9 @@ class TrajectoryTracker:
                              np.zeros(self._n) if first.accelerations is not None else None)
             waypoints = [start] + list(waypoints)
         self._points = list(waypoints)
+        self._times_s = np.array([point.time_from_start_s for point in self._points])
         self._start_s = float(start_time_s)
+        self._sampled, self._quintics = (None, None), {}
         self._hold_q = self._points[-1].positions.copy()
 
     def end_time_s(self) -> float | None:
@@ -139,7 +146,13 @@ class TrajectoryTracker:
         return bool(self._points) and time_s - self._start_s < self._points[-1].time_from_start_s
 
     def sample(self, time_s: float):
-        """(positions, velocities) desired at sim time time_s."""
+        """(positions, velocities) desired at sim time time_s (arrays of the caller's own)."""
+        if self._sampled[0] != time_s:
+            self._sampled = (time_s, self._sample(time_s))
+        q, qd = self._sampled[1]
+        return q.copy(), qd.copy()
+
+    def _sample(self, time_s: float):
         if not self._points:
             return self._hold_q.copy(), np.zeros(self._n)
         t = time_s - self._start_s
@@ -149,6 +162,10 @@ class TrajectoryTracker:
             return first.positions.copy(), np.zeros(self._n) if first.velocities is None else first.velocities.copy()
         if t >= pts[-1].time_from_start_s:
             return pts[-1].positions.copy(), np.zeros(self._n)
-        times = np.array([p.time_from_start_s for p in pts])
+        times = self._times_s
         i = int(np.searchsorted(times, t, side="right")) - 1
-        return _segment(t, times[i], times[i + 1], pts[i], pts[i + 1])
+        a, b = pts[i], pts[i + 1]
+        if a.accelerations is not None and b.accelerations is not None and a.velocities is not None \
+                and b.velocities is not None and i not in self._quintics:
+            self._quintics[i] = _quintic_coefficients(times[i + 1] - times[i], a, b)
+        return _segment(t, times[i], times[i + 1], a, b, self._quintics.get(i))
