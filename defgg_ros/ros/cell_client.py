@@ -79,17 +79,28 @@ class CellClient:
     def wait_for_servers(self, timeout_s: float, pick: bool, alive=lambda: None) -> None:
         """Wait until the services (and the pick action) exist; `alive()` raises if a process died."""
         deadline = time.monotonic() + timeout_s
-        waits = [(self.plan_client.service_is_ready, topics.PLAN_GRASP_SERVICE),
-                 (self.stiffness_client.service_is_ready, topics.SET_STIFFNESS_SERVICE)]
+        waits = [(self.plan_client.service_is_ready, topics.PLAN_GRASP_SERVICE, False),
+                 (self.stiffness_client.service_is_ready, topics.SET_STIFFNESS_SERVICE, False)]
         if pick:
             # The driver loads its scene slower than the executor starts: wait for its gripper action too.
-            waits += [(self.gripper_client.server_is_ready, topics.GRIPPER_GRASP_ACTION),
-                      (self.pick_client.server_is_ready, topics.PICK_AND_PLACE_ACTION)]
-        for ready, name in waits:
+            waits += [(self.gripper_client.server_is_ready, topics.GRIPPER_GRASP_ACTION, True),
+                      (self.pick_client.server_is_ready, topics.PICK_AND_PLACE_ACTION, True)]
+        for ready, name, action in waits:
             while not self.wait_until(ready, 0.5):
                 alive()
                 if time.monotonic() > deadline:
-                    raise CellCallError(f"{name} did not appear within {timeout_s:g} s")
+                    raise CellCallError(f"{name} did not appear within {timeout_s:g} s; "
+                                        f"{self._graph_says(name, action)}")
+
+    def _graph_says(self, name: str, action: bool) -> str:
+        """What this node's graph shows of the cell: whether a server of that name is known (then discovery saw it
+        but its endpoints did not match) and which nodes it sees (none: another ROS domain, or no discovery)."""
+        resolved = self.node.resolve_service_name(name)
+        servers = self.node.count_services(f"{resolved}/_action/send_goal" if action else resolved)
+        nodes = sorted(f"{ns.rstrip('/')}/{n}" for n, ns in self.node.get_node_names_and_namespaces())
+        known = (f"the graph lists {servers} server(s) of {resolved} (not matched with this client yet)" if servers
+                 else f"the graph lists no server of {resolved}")
+        return f"{known}; {len(nodes)} node(s) seen: {', '.join(nodes[:12]) or 'none'}"
 
     # ---- calls ---------------------------------------------------------------
     def _call(self, client, request, timeout_s: float, what: str):

@@ -80,7 +80,10 @@ def test_recording_without_a_cell_fails_clearly(tmp_path, large_messages, capsys
     monkeypatch.setenv("ROS_DOMAIN_ID", str(pick_private_domain(exclude=(PRIVATE_DOMAIN,))))
     out = tmp_path / "session"
     assert record.main([str(out), "--plan", "1", "--wait-s", "1", "--param-timeout-s", "0.2"]) == 2
-    assert "did not appear" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    # what the graph showed: the next such failure says whether discovery saw the cell at all (CI, 2026-12-03)
+    assert "defgg/plan_grasp did not appear within 1 s; the graph lists no server of /defgg/plan_grasp; " in err, err
+    assert re.search(r"\d+ node\(s\) seen: ", err), err
     assert not out.exists()
 
 
