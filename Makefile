@@ -12,11 +12,12 @@ demo: bootstrap
 
 # Two workers (pytest-xdist), a test file per worker at a time: each worker has its own ROS domain
 # (test/conftest.py), and the e2e cells leave a core mostly idle, so the suite takes ~2/3 of the serial
-# time on 2 cores. TEST_WORKERS=0 runs it in this process, serially.
+# time on 2 cores. TEST_WORKERS=0 runs it in this process, serially. Files are taken heaviest first
+# (test/conftest.py's heaviest_files_first; --no-loadscope-reorder keeps that order).
 # The 25 slowest tests are listed at the end: where a slow machine's (or CI's) time went.
 TEST_WORKERS ?= 2
 test: bootstrap
-	$(PY) -m pytest -q -p no:cacheprovider -n $(TEST_WORKERS) --dist loadfile --durations=25 test
+	$(PY) -m pytest -q -p no:cacheprovider -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder --durations=25 test
 
 check: bootstrap
-	$(PY) -m pytest -q -p no:cacheprovider -n $(TEST_WORKERS) --dist loadfile -m "not e2e and not slow" test
+	$(PY) -m pytest -q -p no:cacheprovider -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder -m "not e2e and not slow" test

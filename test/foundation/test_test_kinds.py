@@ -59,3 +59,25 @@ def test_a_module_gets_its_kind_in_one_place():
 def test_every_table_entry_is_a_test_module():
     stale = sorted(m for m in conftest.MODULE_KINDS if not (TEST_ROOT / m).is_file())
     assert not stale, f"test/conftest.py's kind table lists modules that do not exist: {stale}"
+
+
+class _Item:
+    def __init__(self, path, name, marker=None):
+        self.path, self.name, self._marker = Path(path), name, marker
+
+    def get_closest_marker(self, name):
+        return name if name == self._marker else None
+
+
+def test_files_with_a_cell_go_first_then_slow_files_each_keeping_its_tests_order():
+    """The workers take files in collection order (make test: --no-loadscope-reorder): a one-test cell collected last
+    ran alone at the end of the suite."""
+    items = [_Item("a.py", "a1"), _Item("b.py", "b1", "slow"), _Item("a.py", "a2"), _Item("c.py", "c1"),
+             _Item("c.py", "c2", "e2e"), _Item("b.py", "b2"), _Item("d.py", "d1", "e2e")]
+    assert [i.name for i in conftest.heaviest_files_first(items)] == ["c1", "c2", "d1", "b1", "b2", "a1", "a2"]
+
+
+def test_make_test_and_check_keep_that_order():
+    makefile = (TEST_ROOT.parent / "Makefile").read_text()
+    runs = [line for line in makefile.splitlines() if "-m pytest" in line and "-n $(TEST_WORKERS)" in line]
+    assert len(runs) == 2 and all("--dist loadfile --no-loadscope-reorder" in line for line in runs), runs
