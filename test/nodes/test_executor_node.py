@@ -110,7 +110,9 @@ def test_a_stop_leads_by_the_latency_of_the_controllers_answers(executor_cell, s
     spin(ex, lambda: len(driver.trajectory_msgs) > sent, 10.0, "the stop trajectory")
     stamp = driver.trajectory_msgs[sent].header.stamp
     lead_s = stamp.sec + 1e-9 * stamp.nanosec - state_s
-    assert MAX_STOP_LEAD_S + 0.05 >= lead_s >= answer_s * STOP_LEAD_LATENCY_FACTOR - 0.05 > STOP_LEAD_S, lead_s
+    # lead_s counts from a state taken before the cancel, so it is at least the lead (0.21 s here, 0.26 measured);
+    # with the old bound (-0.05) a lead fixed at STOP_LEAD_S passed too (0.164 measured, 2026-12-03)
+    assert MAX_STOP_LEAD_S + 0.05 >= lead_s >= answer_s * STOP_LEAD_LATENCY_FACTOR - 0.02 > STOP_LEAD_S, lead_s
     assert result_of(ex, spin, goal).status == 5  # GoalStatus.STATUS_CANCELED
 
 
