@@ -95,25 +95,39 @@ def test_busy_goal_is_rejected_and_cancel_stops_the_arm(executor_cell, spin):
 def test_a_stop_leads_by_the_latency_of_the_controllers_answers(executor_cell, spin):
     """A controller that answers trajectory goals 0.14 s after they arrive (a loaded machine): the stop that a cancel
     sends is stamped to start STOP_LEAD_LATENCY_FACTOR (1.5) x that after the last joint state, not STOP_LEAD_S
-    (0.15 s), so it does not arrive after its own start and pull the arm back."""
+    (0.15 s), so it does not arrive after its own start and pull the arm back.
+
+    A cancel the executor handles after the first motion's planned end (0.84 s; a starved machine) stops no motion
+    and sends no trajectory (pick_place._fail): that attempt says nothing of the lead, and it is tried again from the
+    start pose (at most 3 times). The full suite once waited 10 s for a stop that could not come (2026-12-03)."""
     from defgg_ros.control.pick_place import MAX_STOP_LEAD_S, STOP_LEAD_LATENCY_FACTOR, STOP_LEAD_S
 
     answer_s = 0.14
     ex, node, client, start_driver = executor_cell
     driver = start_driver(arm_goal_answer_s=answer_s)
+    start_q = driver.q.copy()
     wait_driver_ready(ex, spin, node)
     node.set_parameters([Parameter("recover_after_failure", value=False)])
-    goal = send(ex, client, spin, PickAndPlace.Goal(grasp=grasp_msg()))
-    spin(ex, lambda: np.max(np.abs(driver.qd)) > 0.2, 20.0, "the arm moving towards the pre-grasp")
-    sent, state_s = len(driver.trajectory_msgs), driver.last_state_stamp_s
-    spin(ex, goal.cancel_goal_async(), 5.0, "cancel response")
-    spin(ex, lambda: len(driver.trajectory_msgs) > sent, 10.0, "the stop trajectory")
+    for _attempt in range(3):
+        driver.q, driver.qd = start_q.copy(), np.zeros(7)   # the in-test arm back at the start, at rest
+        goal = send(ex, client, spin, PickAndPlace.Goal(grasp=grasp_msg()))
+        spin(ex, lambda: np.max(np.abs(driver.qd)) > 0.2, 20.0, "the arm moving towards the pre-grasp")
+        sent, state_s = len(driver.trajectory_msgs), driver.last_state_stamp_s
+        spin(ex, goal.cancel_goal_async(), 5.0, "cancel response")
+        result = goal.get_result_async()
+        spin(ex, lambda sent=sent, result=result: len(driver.trajectory_msgs) > sent or result.done(), 10.0,
+             "the stop trajectory (or the result of a cancel that came after the motion)")
+        stopped = len(driver.trajectory_msgs) > sent
+        assert result_of(ex, spin, goal).status == 5  # GoalStatus.STATUS_CANCELED
+        if stopped:
+            break
+    else:
+        raise AssertionError("three cancels in a row came after the first motion's end: no stop to check")
     stamp = driver.trajectory_msgs[sent].header.stamp
     lead_s = stamp.sec + 1e-9 * stamp.nanosec - state_s
     # lead_s counts from a state taken before the cancel, so it is at least the lead (0.21 s here, 0.26 measured);
     # with the old bound (-0.05) a lead fixed at STOP_LEAD_S passed too (0.164 measured, 2026-12-03)
     assert MAX_STOP_LEAD_S + 0.05 >= lead_s >= answer_s * STOP_LEAD_LATENCY_FACTOR - 0.02 > STOP_LEAD_S, lead_s
-    assert result_of(ex, spin, goal).status == 5  # GoalStatus.STATUS_CANCELED
 
 
 def test_the_stop_on_the_way_out_is_planned_on_a_joint_state_that_came_after_the_signal(executor_cell, spin):
