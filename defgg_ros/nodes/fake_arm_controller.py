@@ -112,11 +112,11 @@ class FakeArmController:
         """Hold the arm where it is (lock held); a running goal ends, as preempted."""
         self._running_goal = None
         self._hold()
+        self._goals_changed()
 
     def _hold(self) -> None:
         self._cell.command_trajectory([])
         self._monitor.hold()
-        self._goals_changed()
 
     def _goals_changed(self) -> None:
         """Wake the goals' tasks (lock held)."""

@@ -56,20 +56,25 @@ def make_waypoints(points, n_joints: int) -> list:
     return out
 
 
-def _segment(t, t0, t1, a: Waypoint, b: Waypoint, quintic=None):
+def _segment(t, t0, t1, a: Waypoint, b: Waypoint, quintic):
     """Position and velocity at t within the segment a -> b (times t0 < t1); quintic: the segment's
-    _quintic_coefficients when both ends have accelerations (computed here if not given)."""
+    _quintic_coefficients when it is one (_is_quintic), else None."""
     dt = t1 - t0
     s = np.clip((t - t0) / dt, 0.0, 1.0)
+    if quintic is not None:
+        c0, c1, c2, c3, c4, c5 = quintic
+        q = c0 + s * (c1 + s * (c2 + s * (c3 + s * (c4 + s * c5))))
+        qd = c1 + s * (2 * c2 + s * (3 * c3 + s * (4 * c4 + s * 5 * c5)))
+        return q, qd / dt
     if a.velocities is None or b.velocities is None:
         q = a.positions + s * (b.positions - a.positions)
         return q, (b.positions - a.positions) / dt
-    if a.accelerations is None or b.accelerations is None:
-        return _hermite3(s, dt, a.positions, a.velocities, b.positions, b.velocities)
-    c0, c1, c2, c3, c4, c5 = _quintic_coefficients(dt, a, b) if quintic is None else quintic
-    q = c0 + s * (c1 + s * (c2 + s * (c3 + s * (c4 + s * c5))))
-    qd = c1 + s * (2 * c2 + s * (3 * c3 + s * (4 * c4 + s * 5 * c5)))
-    return q, qd / dt
+    return _hermite3(s, dt, a.positions, a.velocities, b.positions, b.velocities)
+
+
+def _is_quintic(a: Waypoint, b: Waypoint) -> bool:
+    """Both ends give velocities and accelerations: the segment is the quintic through them."""
+    return all(v is not None for v in (a.velocities, a.accelerations, b.velocities, b.accelerations))
 
 
 def _hermite3(s, dt, q0, v0, q1, v1):
@@ -101,7 +106,8 @@ class TrajectoryTracker:
         self._points: list = []
         self._sampled = (None, None)   # (time_s, (q, qd)) of the last sample: the sim step and the controller's
         # check of one period ask for the same time, and a sample of a 7-joint quintic costs ~25 us of Python
-        self._quintics = {}            # segment index -> its _quintic_coefficients (1 kHz samples, ~50 per segment)
+        self._quintics = {}            # segment index -> _quintic_coefficients, or None: not a quintic segment
+        self._times_s = np.empty(0)    # the points' times from start
 
     @property
     def n_joints(self) -> int:
@@ -165,7 +171,6 @@ class TrajectoryTracker:
         times = self._times_s
         i = int(np.searchsorted(times, t, side="right")) - 1
         a, b = pts[i], pts[i + 1]
-        if a.accelerations is not None and b.accelerations is not None and a.velocities is not None \
-                and b.velocities is not None and i not in self._quintics:
-            self._quintics[i] = _quintic_coefficients(times[i + 1] - times[i], a, b)
-        return _segment(t, times[i], times[i + 1], a, b, self._quintics.get(i))
+        if i not in self._quintics:
+            self._quintics[i] = _quintic_coefficients(times[i + 1] - times[i], a, b) if _is_quintic(a, b) else None
+        return _segment(t, times[i], times[i + 1], a, b, self._quintics[i])
