@@ -105,7 +105,7 @@ class TrajectoryTracker:
         self._start_s = 0.0
         self._points: list = []
         self._sampled = (None, None)   # (time_s, (q, qd)) of the last sample: the sim step and the controller's
-        # check of one period ask for the same time, and a sample of a 7-joint quintic costs ~25 us of Python
+        # check of one period ask for the same time
         self._quintics = {}            # segment index -> _quintic_coefficients, or None: not a quintic segment
         self._times_s = np.empty(0)    # the points' times from start
 
