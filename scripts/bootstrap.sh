@@ -64,15 +64,16 @@ if ! fresh interfaces "$msg_stamp" || ! "$venv/bin/python" -c "import defgg_inte
   mark interfaces "$msg_stamp"
 fi
 
-# The real cell's interface packages (franka_msgs, control_msgs, tf2_msgs) are not on PyPI: their
-# definitions in vendor_interfaces/ are built here for the venv only (colcon ignores that folder,
+# The real cell's interface packages (franka_msgs, control_msgs, controller_manager_msgs, tf2_msgs) are not on
+# PyPI: their definitions in vendor_interfaces/ are built here for the venv only (colcon ignores that folder,
 # a ROS install uses the real packages; see vendor_interfaces/README.md).
 vendor_stamp=$(cd "$root" && stamp_of vendor_interfaces/*/CMakeLists.txt vendor_interfaces/*/package.xml \
   vendor_interfaces/*/*/*)
 if ! fresh vendor_interfaces "$vendor_stamp" \
-    || ! "$venv/bin/python" -c "from franka_msgs.action import Grasp; from control_msgs.action import \
-FollowJointTrajectory, GripperCommand; from tf2_msgs.msg import TFMessage" 2>/dev/null; then
-  for package in tf2_msgs control_msgs franka_msgs; do
+    || ! "$venv/bin/python" -c "from franka_msgs.action import ErrorRecovery, Grasp; from control_msgs.action \
+import FollowJointTrajectory, GripperCommand; from controller_manager_msgs.srv import SwitchController; \
+from tf2_msgs.msg import TFMessage" 2>/dev/null; then
+  for package in tf2_msgs control_msgs controller_manager_msgs franka_msgs; do
     build_interfaces "vendor_interfaces/$package"
   done
   mark vendor_interfaces "$vendor_stamp"

@@ -31,7 +31,8 @@ ROSDEP_RULES = {"python3-torch", "python3-numpy", "python3-opencv", "python3-yam
 # ... and jazzy/distribution.yaml (released ROS packages resolve by name)
 JAZZY_RELEASED = {"rclpy", "rcl_interfaces", "rosgraph_msgs", "ament_index_python", "std_msgs", "sensor_msgs",
                   "geometry_msgs", "trajectory_msgs", "visualization_msgs", "std_srvs", "builtin_interfaces",
-                  "action_msgs", "tf2_msgs", "control_msgs", "diagnostic_msgs", "pinocchio", "ruckig"}
+                  "action_msgs", "tf2_msgs", "control_msgs", "controller_manager_msgs", "lifecycle_msgs",
+                  "diagnostic_msgs", "pinocchio", "ruckig"}
 # Built from source in the same workspace: franka_ros2 (not released for Jazzy) and msg_defs/
 WORKSPACE_PACKAGES = {"franka_msgs", "defgg_interfaces"}
 # franka_ros2's own skip (its README's rosdep command)
