@@ -25,7 +25,9 @@ RECOVER_PHASE = "recover"
 #   at_rest           at rest elsewhere (after a success: above the place pose; else where it stopped)
 #   moving            did not come to rest within stop_timeout_s of the stop (a failure of its own)
 #   unknown           no joint states (driver silent): nobody can tell
-ARM_STATES = ("observation_pose", "at_rest", "moving", "unknown")
+#   robot_error       the robot stopped itself and its controller was deactivated (a reflex or another FCI
+#                     error): no goal moves it until the recovery (docs/real_cell.md, "After a robot error")
+ARM_STATES = ("observation_pose", "at_rest", "moving", "unknown", "robot_error")
 
 @dataclass(frozen=True)
 class SequenceConfig:

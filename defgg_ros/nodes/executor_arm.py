@@ -16,7 +16,8 @@ from defgg_ros.control.pick_place import PickPlaceSequence
 from defgg_ros.control.sequence_types import CancelGripper, GraspGripper, MoveGripper, SendTrajectory
 from defgg_ros.control.stopping import MAX_STATE_AGE_S, stopping_hold
 from defgg_ros.control.trajectories import arm_limits
-from defgg_ros.nodes.executor_messages import hold_trajectory_msg, trajectory_to_msg
+from defgg_ros.nodes.executor_messages import ROBOT_ERROR, hold_trajectory_msg, trajectory_to_msg
+from defgg_ros.ros import topics
 from defgg_ros.ros.action import ActionClient, in_executor
 
 # A hold's acceptance normally comes in milliseconds; one this late is treated as refused (a response can be lost).
@@ -139,7 +140,10 @@ class ArmCommands:
             with self._lock:
                 if serial == self._arm_goal_serial:
                     self._arm_goal = None   # ended: nothing left to cancel
-            if serial == self._arm_goal_serial and result.error_code != FollowJointTrajectory.Result.SUCCESSFUL:
+            if (result.error_code, result.error_string) == (FollowJointTrajectory.Result.INVALID_GOAL,
+                                                            topics.CONTROLLER_DEACTIVATED_TEXT):
+                self._on_robot_error(sequence)
+            elif serial == self._arm_goal_serial and result.error_code != FollowJointTrajectory.Result.SUCCESSFUL:
                 self.get_logger().error(f"arm trajectory failed (error_code {result.error_code}): "
                                         f"{result.error_string}")
 
@@ -149,8 +153,9 @@ class ArmCommands:
                 self._arm_goals_unanswered -= 1
                 if sequence is not None:
                     sequence.on_goal_answered(sequence.robot_now_s(time.monotonic()) - sent_robot_s)
-            if not handle.accepted:
-                self.get_logger().error("the arm's trajectory controller rejected a trajectory goal")
+            if not handle.accepted:   # an inactive controller rejects every goal: after a robot error until recovered
+                self.get_logger().error("the arm's trajectory controller rejected a trajectory goal (is it active? "
+                                        "ros2 control list_controllers)")
                 return
             with self._lock:
                 if serial == self._arm_goal_serial:
@@ -161,6 +166,15 @@ class ArmCommands:
 
         self._arm_goals_unanswered += 1
         self._arm_client.send_goal_async(goal).add_done_callback(in_executor(self, on_goal))
+
+    def _on_robot_error(self, sequence: PickPlaceSequence | None) -> None:
+        """The controller's deactivation aborted a goal of ours: the run ends at once, sending nothing (every goal
+        is refused now), and goals are refused until the robot is recovered (_check_inputs)."""
+        with self._lock:
+            self._robot_error_wall_s = time.monotonic()
+            if sequence is not None:
+                sequence.on_controller_lost(f"{ROBOT_ERROR}; recover it: {topics.RECOVERY_STEPS}", robot_error=True)
+        self.get_logger().error(f"{ROBOT_ERROR}. Recover it (docs/real_cell.md): {topics.RECOVERY_STEPS}")
 
     def _arm_may_move(self) -> bool:
         """Could a trajectory of this node's still move the arm (lock held)? A goal runs, a sent one is not yet

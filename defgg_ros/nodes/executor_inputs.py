@@ -12,9 +12,9 @@ from geometry_msgs.msg import WrenchStamped
 from rclpy.clock import Clock, ClockType
 from sensor_msgs.msg import JointState
 
-from defgg_ros.nodes.executor_messages import GoalError, joint_state_to_arm
+from defgg_ros.nodes.executor_messages import ROBOT_ERROR, GoalError, joint_state_to_arm
 from defgg_ros.nodes.topic_watch import TopicWatch
-from defgg_ros.ros import qos
+from defgg_ros.ros import qos, topics
 from defgg_ros.ros.conversions import stamp_to_ns
 from defgg_ros.ros.latest_reader import LatestMessageReader
 
@@ -165,9 +165,22 @@ class RobotInputs:
         if self._waiting_for_sim_clock():
             raise GoalError("no clock: use_sim_time is true and no message arrived on /clock (is the simulator "
                             "publishing it, in this ROS domain?)")
+        with self._lock:
+            robot_error = self._in_robot_error()
+        if robot_error:
+            raise GoalError(f"{ROBOT_ERROR} {time.monotonic() - self._robot_error_wall_s:.0f} s ago, and "
+                            f"franka_robot_state_broadcaster has been quiet since: recover the robot first "
+                            f"({topics.RECOVERY_STEPS}; docs/real_cell.md)")
         if self._wrench_watch.silent_s() > timeout_s:
             raise GoalError(f"no external wrench, the descent's contact guard would be blind: "
-                            f"{self._wrench_watch.diagnosis()}; check franka_robot_state_broadcaster")
+                            f"{self._wrench_watch.diagnosis()}; check franka_robot_state_broadcaster (inactive "
+                            "after a robot error: ros2 control list_controllers)")
+
+    def _in_robot_error(self) -> bool:
+        """Lock held: the arm's controller was deactivated under a goal and no wrench came since (the robot state
+        broadcaster, deactivated with it, publishes again once the robot is recovered)."""
+        since_s = self._robot_error_wall_s
+        return since_s is not None and (self._last_force_wall_s is None or self._last_force_wall_s < since_s)
 
     def _gripper_width_m(self) -> float:
         """The finger width now (lock held), from the first source that has spoken within FINGER_SOURCE_FRESH_S:

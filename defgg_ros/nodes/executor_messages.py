@@ -18,6 +18,11 @@ from defgg_ros.perception.table_pose import TABLE_FRAME_ID
 from defgg_ros.ros import topics
 from defgg_ros.ros.conversions import ConversionError, transform_from_pose
 
+# A trajectory goal aborted with the joint_trajectory_controller's deactivation text: franka_ros2 deactivates every
+# controller on the arm's hardware on an FCI error (docs/franka_contract.md, "Robot errors").
+ROBOT_ERROR = ("robot error: the arm's trajectory controller was deactivated under a goal (franka_ros2 does so on an "
+               "FCI error such as a collision reflex; the robot stopped itself)")
+
 
 class GoalError(ValueError):
     """A goal the executor cannot work with (the message says why)."""

@@ -93,6 +93,7 @@ class ExecutorNode(RobotInputs, ArmCommands, GraspPlanning, Node):
         self._last_acceleration = None
         self._last_force = np.zeros(3)
         self._last_force_wall_s = None   # when the last external wrench arrived (monotonic)
+        self._robot_error_wall_s = None  # when the arm's controller was deactivated under a goal (monotonic)
         names = topics.robot_names(p["robot_type"])
         self._arm_joints, self._finger_joints = names["joints"], names["fingers"]
         self._finger_widths = {}    # finger width source -> (width m, monotonic s): see _gripper_width_m
@@ -243,9 +244,10 @@ class ExecutorNode(RobotInputs, ArmCommands, GraspPlanning, Node):
         result.duration_s = time.monotonic() - started
         with self._lock:  # the arm did not move for this goal (or a bug stopped it): say how it is now
             state = self._last_state[0] if self._last_state is not None else None
-        result.arm_state = arm_state_of(state.q_rad if state else None, state.qd_radps if state else None,
-                                        self._watch.observation_q_rad, self._config.observation_tolerance_rad,
-                                        self._config.still_speed_radps)
+            robot_error = self._in_robot_error()
+        result.arm_state = "robot_error" if robot_error else arm_state_of(
+            state.q_rad if state else None, state.qd_radps if state else None, self._watch.observation_q_rad,
+            self._config.observation_tolerance_rad, self._config.still_speed_radps)
         self.get_logger().warning(f"pick-and-place aborted: {reason}")
         goal_handle.abort()
         return result

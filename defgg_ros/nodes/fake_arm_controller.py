@@ -7,7 +7,8 @@ running one is checked against the active tolerances (sim/cell/tolerances.py). A
 time, every joint is inside its goal tolerance (velocity below `stopped_velocity_tolerance`), and aborts with
 PATH_TOLERANCE_VIOLATED / GOAL_TOLERANCE_VIOLATED (the arm then holds where it is); a newer goal preempts it
 (INVALID_GOAL), a cancel holds the arm. A goal's tolerances stay active for later topic trajectories, as on the
-controller.
+controller. Deactivated (a robot error: fake_franka_errors.py) it aborts the running goal, holds, rejects goals and
+drops topic trajectories until it is activated again, when it holds where the arm is.
 
 Goals start in the order they arrive, at acceptance (the controller's goal_accepted_callback): the action server's
 requests are handled one at a time (its own mutually exclusive callback group) and the trajectory starts in the
@@ -24,7 +25,7 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from std_msgs.msg import Header
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from defgg_ros.ros import qos
+from defgg_ros.ros import qos, topics
 from defgg_ros.ros.conversions import seconds_to_stamp
 from defgg_ros.sim.cell.tolerances import (
     FLOAT32_EPSILON,
@@ -44,6 +45,8 @@ CANCEL_POLL_S = 0.002
 # use_sim_time: the controller waits for it as it would for any stamp, and the log says why the arm does not move.
 MAX_STAMP_OFFSET_S = 1.0
 PREEMPTED_TEXT = "Current goal preempted by new incoming action."   # the controller's preempt_active_goal
+DEACTIVATED_TEXT = topics.CONTROLLER_DEACTIVATED_TEXT   # on_deactivate, INVALID_GOAL
+INACTIVE_TEXT = "Can't accept new action goals. Controller is not running."   # goal_received_callback
 SHUTTING_DOWN_TEXT = "the simulated controller is shutting down"
 RESULT_CODES = {SUCCEEDED: FollowJointTrajectory.Result.SUCCESSFUL,
                 PATH_VIOLATED: FollowJointTrajectory.Result.PATH_TOLERANCE_VIOLATED,
@@ -77,6 +80,9 @@ class FakeArmController:
         self._started = {}                # goal uuid -> (goal id or None, error text): set at acceptance
         self._goal_ids = {}               # goal uuid -> goal id, while its execute task runs
         self._canceled_running = set()    # goal ids canceled while they ran (the arm then held)
+        self._deactivated_running = set()  # goal ids aborted by a deactivation while they ran
+        self.active = True                # the controller's lifecycle state is active (not inactive)
+        self.rejected_while_inactive = 0  # goals rejected because it was inactive
         # Notified (lock held) when a goal's standing changes: a verdict, a cancel, a preempt, a hold. A goal's task
         # sleeps on it instead of waking every control period (1 kHz): with a goal running, the driver's capacity went
         # from 0.84-0.95 to 1.22-1.39 x real time with the tracker's caches (bench/bench_franka_rates.py --moving).
@@ -92,7 +98,7 @@ class FakeArmController:
     # ---- the sim thread (lock held) ------------------------------------------
     def control_period(self, now_s: float) -> None:
         """The controller's checks of this period: a verdict ends the running goal; a violation holds the arm."""
-        if not self._monitor.running:
+        if not self._monitor.running or not self.active:
             return
         joints = self._cell.joint_state()
         q_desired, qd_desired = self._cell.tracker.sample(now_s)
@@ -115,6 +121,21 @@ class FakeArmController:
         self._hold()
         self._goals_changed()
 
+    def deactivate(self) -> None:
+        """on_deactivate (lock held): the running goal aborts (INVALID_GOAL, DEACTIVATED_TEXT), the command holds the
+        measured position, and goals and topic trajectories are refused until activate()."""
+        if self._running_goal is not None:
+            self._deactivated_running.add(self._running_goal)
+            self._running_goal = None
+        self.active = False
+        self._hold()
+        self._goals_changed()
+
+    def activate(self) -> None:
+        """on_activate (lock held): hold the measured position (set_hold_position) and take goals again."""
+        self.active = True
+        self._hold()
+
     def _hold(self) -> None:
         self._cell.command_trajectory([])
         self._monitor.hold()
@@ -135,6 +156,8 @@ class FakeArmController:
         self._monitor.start(self._cell.tracker.end_time_s(), self._active)
 
     def _on_trajectory(self, msg: JointTrajectory):
+        if not self.active:   # subscriber_is_active_ false: the controller drops it without a word
+            return
         if not msg.points:   # the joint_trajectory_controller drops it ("Empty trajectory received"): no stop
             self._logger.error("rejected joint trajectory: Empty trajectory received (it does not stop the arm)")
             return
@@ -148,7 +171,11 @@ class FakeArmController:
 
     def _on_goal(self, goal) -> GoalResponse:
         """Reject what the joint_trajectory_controller rejects (validate_trajectory_msg): no points, unknown or
-        missing joints, times not strictly increasing, sizes that do not match."""
+        missing joints, times not strictly increasing, sizes that do not match; every goal while inactive."""
+        if not self.active:
+            self.rejected_while_inactive += 1
+            self._logger.error(INACTIVE_TEXT)
+            return GoalResponse.REJECT
         try:
             if not goal.trajectory.points:
                 raise TrajectoryError("the trajectory has no points")
@@ -189,6 +216,8 @@ class FakeArmController:
             with self._lock:
                 if not self._driver._running:   # accepted as the driver shut down: its simulation is gone
                     raise ValueError(SHUTTING_DOWN_TEXT)
+                if not self.active:   # deactivated between the goal's check and its acceptance
+                    raise ValueError(DEACTIVATED_TEXT)
                 self._goal_id += 1
                 goal_id = self._goal_id
                 self._start(points, request.trajectory.header.stamp, tolerances, goal_id)
@@ -218,6 +247,7 @@ class FakeArmController:
         finally:
             self._goal_ids.pop(uuid, None)
             self._canceled_running.discard(goal_id)
+            self._deactivated_running.discard(goal_id)
 
     def _follow(self, goal_handle, goal_id: int, result):
         next_feedback = 0.0
@@ -225,6 +255,7 @@ class FakeArmController:
             with self._lock:
                 verdict = self._verdicts.pop(goal_id, None)
                 running = self._running_goal == goal_id
+                deactivated = goal_id in self._deactivated_running
                 seen_events = self._goal_events
             if verdict is not None:
                 result.error_code, result.error_string = RESULT_CODES[verdict.outcome], verdict.text
@@ -234,6 +265,10 @@ class FakeArmController:
                     goal_handle.abort()
                 return result
             canceled = goal_id in self._canceled_running   # _on_cancel held the arm
+            if deactivated:
+                result.error_code, result.error_string = FollowJointTrajectory.Result.INVALID_GOAL, DEACTIVATED_TEXT
+                goal_handle.abort()
+                return result
             if canceled:
                 if goal_handle.is_cancel_requested:   # rclpy marks it canceling once _on_cancel has returned
                     goal_handle.canceled()

@@ -10,7 +10,9 @@ depth 1) and franka_gripper's franka_msgs/action/{Grasp, Move, Homing}, its `gri
 `stop` (fake_gripper_interfaces.py), franka_robot_state_broadcaster's
 convenience topics (external wrench, current pose, measured joint states; best effort, depth 1), the
 arm's `<robot_type>_arm_controller` (control_msgs/action/FollowJointTrajectory and its JointTrajectory
-topic, with the controller's tolerances and ends of a goal: fake_arm_controller.py), and the static frames of a
+topic, with the controller's tolerances and ends of a goal: fake_arm_controller.py), a reflex above
+`reflex_force_n` and franka_ros2's error recovery (the controller manager's services, fake_franka_errors.py), and
+the static frames of a
 calibrated cell on /tf_static (the calibration base -> camera_link, then realsense2_camera's camera_link ->
 camera_depth_frame -> camera_depth_optical_frame, and robot_state_publisher's franka_description root `base` ->
 base); plus sim time on /clock and ground truth (fake_panda/object_poses, fake_panda/scene).
@@ -43,6 +45,7 @@ from tf2_msgs.msg import TFMessage
 
 from defgg_ros.constants import CAMERA_HEIGHT_PX, CAMERA_WIDTH_PX, GRIPPER_MAX_WIDTH_M
 from defgg_ros.nodes.fake_arm_controller import FakeArmController
+from defgg_ros.nodes.fake_franka_errors import FakeControllerManager
 from defgg_ros.nodes.fake_gripper_interfaces import serve_gripper_interfaces
 from defgg_ros.nodes.node_main import run_node
 from defgg_ros.ros import qos, realsense_frames, topics
@@ -173,6 +176,9 @@ class FakePandaDriver(Node):
         self.pub_scene.publish(String(data=json.dumps(self._scene_description())))
         # The arm's joint_trajectory_controller: the action (what the executor uses) and its topic.
         self.arm = FakeArmController(self, self._arm_joints, group)
+        self.controller_manager = FakeControllerManager(self, self.arm, _controller_name(cfg["arm_trajectory_action"]),
+                                                        group)
+        self._last_arm_state = None   # what joint_state_publisher last received from joint_state_broadcaster
         self.create_service(Trigger, CAPTURE_SERVICE, self._on_capture, callback_group=group)
         for action_type, name, execute in ((Move, cfg["gripper_move_action"], self._execute_move),
                                            (Grasp, cfg["gripper_grasp_action"], self._execute_grasp),
@@ -280,6 +286,7 @@ class FakePandaDriver(Node):
                 now_s = self.cell.time_s
                 self.arm.control_period(now_s)   # the trajectory controller's checks of this period
                 joints, (force, torque) = self.cell.joint_state(), self.cell.external_wrench()
+                self.controller_manager.check_reflex(force)
                 # current_pose: libfranka's O_T_EE, the Franka Hand's TCP (only computed for a reader)
                 tcp = self.cell.hand_tcp_pose() if is_read(self.pub_pose) else None
                 periodic = now_s >= next_depth_s and (self.cfg["render_while_moving"] or not self.cell.moving(now_s))
@@ -323,8 +330,11 @@ class FakePandaDriver(Node):
         self._log_mark = (wall_now, now_s)
         rtf = (now_s - sim_then) / max(wall_now - wall_then, 1e-9)
         active = self.cell.active_soft_objects()
+        with self._lock:   # how near the reflex the contacts came (a real cell's reflexes fire on such peaks)
+            peak_n, self.controller_manager.peak_force_n = self.controller_manager.peak_force_n, 0.0
         self.get_logger().info(f"sim time {now_s:.1f} s, real-time factor {rtf:.2f} "
-                               f"(simulation capacity {self.cell.real_time_factor():.2f})"
+                               f"(simulation capacity {self.cell.real_time_factor():.2f}), peak external force "
+                               f"{peak_n:.1f} N (reflex at {self.cfg['reflex_force_n']:g} N)"
                                f"{', FEM active: ' + ', '.join(active) if active else ''}")
 
     def _report_objects_off_the_table(self, poses):
@@ -357,16 +367,20 @@ class FakePandaDriver(Node):
         header = self._stamp(now_s, topics.FRANKA_STATE_FRAME)
         if "clock" in due:
             self.pub_clock.publish(Clock(clock=header.stamp))
+        broadcasters = self.controller_manager   # after a robot error both are inactive: their topics go quiet
         arm = JointState(header=self._stamp(now_s, topics.JOINT_STATE_BROADCASTER_FRAME), name=list(self._arm_joints),
                          position=joints.positions[:7].tolist(), velocity=joints.velocities[:7].tolist(),
                          effort=joints.efforts[:7].tolist())
-        self.pub_arm_joints.publish(arm)   # transient local: always, so a late joiner's first state is fresh
-        if is_read(self.pub_measured):
+        if broadcasters.publishes(topics.JOINT_STATE_BROADCASTER):
+            self.pub_arm_joints.publish(arm)   # transient local: always, so a late joiner's first state is fresh
+            self._last_arm_state = arm
+        robot_state = broadcasters.publishes(topics.ROBOT_STATE_BROADCASTER)
+        if robot_state and is_read(self.pub_measured):
             self.pub_measured.publish(JointState(header=header, name=arm.name, position=arm.position,
                                                  velocity=arm.velocity, effort=arm.effort))
-        if is_read(self.pub_wrench):
+        if robot_state and is_read(self.pub_wrench):
             self.pub_wrench.publish(franka_wrench_msg(header, force, torque))
-        if tcp is not None:
+        if robot_state and tcp is not None:
             pose = PoseStamped(header=header)
             pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = (float(v) for v in tcp[0])
             o = pose.pose.orientation
@@ -379,8 +393,8 @@ class FakePandaDriver(Node):
             self.pub_gripper_joints.publish(JointState(
                 header=self._stamp(now_s, ""), name=list(self._finger_joints), position=[half_m, half_m],
                 velocity=[0.0, 0.0], effort=[0.0, 0.0]))
-        if "joints" in due:
-            self.pub_joints.publish(self._merged_joint_state(self._stamp(now_s, ""), arm))
+        if "joints" in due and self._last_arm_state is not None:   # the arm's last state, stamped now
+            self.pub_joints.publish(self._merged_joint_state(self._stamp(now_s, ""), self._last_arm_state))
 
     def _merged_joint_state(self, header, arm: JointState) -> JointState:
         """joint_state_publisher's merge: the arm's latest state plus the fingers as joint_state_fingers says
@@ -449,6 +463,12 @@ class FakePandaDriver(Node):
         self.shutdown()  # the simulation thread first: it publishes through this node
         destroy_actions(self)  # the gripper actions must vanish with the driver (see destroy_actions)
         return super().destroy_node()
+
+
+def _controller_name(trajectory_action: str) -> str:
+    """The controller's name in its action's name (`<controller>/follow_joint_trajectory`)."""
+    parts = trajectory_action.strip("/").split("/")
+    return parts[-2] if len(parts) > 1 else parts[0]
 
 
 class _Schedule:

@@ -34,6 +34,21 @@ GRIPPER_GRASP_ACTION = "franka_gripper/grasp"                # franka_msgs/actio
 GRIPPER_HOMING_ACTION = "franka_gripper/homing"              # franka_msgs/action/Homing
 GRIPPER_COMMAND_ACTION = "franka_gripper/gripper_action"     # control_msgs/action/GripperCommand (MoveIt's)
 GRIPPER_STOP_SERVICE = "franka_gripper/stop"                 # std_srvs/srv/Trigger: Gripper::stop()
+# Robot errors (docs/franka_contract.md): franka_hardware's node `action_server` and the controller manager
+ERROR_RECOVERY_ACTION = "action_server/error_recovery"      # franka_msgs/action/ErrorRecovery
+LIST_CONTROLLERS_SERVICE = "controller_manager/list_controllers"              # controller_manager_msgs/srv/...
+SWITCH_CONTROLLER_SERVICE = "controller_manager/switch_controller"
+SET_HARDWARE_STATE_SERVICE = "controller_manager/set_hardware_component_state"
+FRANKA_HARDWARE_COMPONENT = "FrankaHardwareInterface"       # ros2_control's name of the arm's hardware (no prefix)
+JOINT_STATE_BROADCASTER = "joint_state_broadcaster"
+ROBOT_STATE_BROADCASTER = "franka_robot_state_broadcaster"
+# The joint_trajectory_controller's result text for the goal its deactivation aborts (INVALID_GOAL)
+CONTROLLER_DEACTIVATED_TEXT = "Current goal cancelled during deactivate transition."
+# What a person does after a robot error (franka_hardware's doc, "Error Recovery"; docs/real_cell.md)
+RECOVERY_STEPS = (f"ros2 action send_goal /{ERROR_RECOVERY_ACTION} franka_msgs/action/ErrorRecovery {{}}; "
+                  f"ros2 control set_hardware_component_state {FRANKA_HARDWARE_COMPONENT} active; ros2 control "
+                  f"switch_controllers --activate {JOINT_STATE_BROADCASTER} {ROBOT_STATE_BROADCASTER} "
+                  "<robot_type>_arm_controller")
 # franka_robot_state_broadcaster's convenience topics: best effort, depth 1 (franka_ros2 >= 3.3.0)
 EXTERNAL_WRENCH = "franka_robot_state_broadcaster/external_wrench_in_base_frame"  # geometry_msgs/WrenchStamped
 CURRENT_POSE = "franka_robot_state_broadcaster/current_pose"                       # geometry_msgs/PoseStamped

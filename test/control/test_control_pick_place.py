@@ -240,6 +240,34 @@ def test_a_wrench_that_goes_quiet_stops_the_run_within_the_watchdog_time(kin, ph
     assert out.recovery == "" and sequence.finished
 
 
+@pytest.mark.parametrize("phase", ["descend", "transfer"])
+def test_a_lost_controller_ends_the_run_at_once_and_sends_nothing(kin, phase):
+    """A robot error deactivated the arm's controller mid-run (franka_ros2's answer to a reflex): it refuses every
+    goal, so the run ends at its next tick with no stop, no recovery (an object held stays held) and no command on a
+    cancel; the arm's state says so."""
+    sequence, robot = make(kin, config=RECOVERING_CONFIG), FakeRobot(kin, World())
+    run(sequence, robot, until=lambda r, s: s.phase == phase and s._motion_active(r.sim_s))
+    sequence.on_controller_lost("robot error: the controller was deactivated", robot_error=True)
+    assert sequence.cancel(robot.sim_s, robot.wall_s) == []
+    assert sequence.tick(robot.sim_s, robot.wall_s) == []
+    out = sequence.outcome
+    assert sequence.finished and out.failure_reason == "robot error: the controller was deactivated"
+    assert (out.arm_state, out.phase_reached, out.recovery) == ("robot_error", phase, "")
+
+
+def test_a_lost_controller_during_a_recovery_keeps_the_failure_and_ends_the_recovery(kin):
+    sequence, robot = make(kin, config=RECOVERING_CONFIG), FakeRobot(kin, World())
+    run(sequence, robot, until=lambda r, s: s.phase == "descend" and s._motion_active(r.sim_s))
+    robot.apply(sequence.cancel(robot.sim_s, robot.wall_s), sequence)
+    while not (sequence.recovering and sequence._motion_active(robot.sim_s)) and robot.sim_s < 60.0:
+        robot.step(sequence)
+    sequence.on_controller_lost("robot error", robot_error=True)
+    assert sequence.tick(robot.sim_s, robot.wall_s) == []
+    out = sequence.outcome
+    assert sequence.finished and out.failure_reason == "canceled during descend" and out.arm_state == "robot_error"
+    assert out.recovery.endswith("stopped: robot error"), out.recovery
+
+
 def test_a_goal_is_refused_while_the_arm_still_moves_and_a_cancel_before_the_start_moves_nothing(kin):
     """Every motion is planned from rest: a goal after a result that left the arm moving would start its first
     trajectory behind the arm. A cancel that came while the goal was planned ends it without a command."""

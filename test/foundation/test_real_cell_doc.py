@@ -266,7 +266,8 @@ def interface_file(type_name: str) -> Path:
 def check_ros2_action_goal(argv):
     assert argv[2] == "send_goal", argv
     name, type_name, goal = argv[3], argv[4], yaml.safe_load(argv[5])
-    assert name[1:] in {topics.GRIPPER_HOMING_ACTION, topics.GRIPPER_MOVE_ACTION, topics.GRIPPER_GRASP_ACTION}
+    assert name[1:] in {topics.GRIPPER_HOMING_ACTION, topics.GRIPPER_MOVE_ACTION, topics.GRIPPER_GRASP_ACTION,
+                        topics.ERROR_RECOVERY_ACTION}
     assert interface_file(type_name).is_file() and isinstance(goal, dict), argv
 
 
@@ -279,12 +280,25 @@ def check_ros2_service(argv):
     assert set(request) <= fields, set(request) - fields
 
 
+def check_ros2_control(argv):
+    """A robot error's recovery: the hardware component by its franka_ros2 name, then every controller the error
+    deactivated (both broadcasters and one robot type's arm controller)."""
+    if argv[2] == "set_hardware_component_state":
+        assert list(argv[3:]) == [topics.FRANKA_HARDWARE_COMPONENT, "active"], argv
+        return
+    assert argv[2] == "switch_controllers" and argv[3] == "--activate", argv
+    arm_controllers = {topics.robot_names(t)["trajectory_action"].split("/")[0] for t in topics.ROBOT_TYPES}
+    names = set(argv[4:])
+    assert {topics.JOINT_STATE_BROADCASTER, topics.ROBOT_STATE_BROADCASTER} <= names, argv
+    assert len(names & arm_controllers) == 1 and len(names) == 3, argv
+
+
 def check_ros2(argv):
     verb = argv[1]
     if (verb, argv[2]) in ROS2_READ_ONLY:
         return
     handlers = {"run": check_ros2_run, "launch": check_ros2_launch, "topic": check_ros2_topic,
-                "param": check_ros2_param, "service": check_ros2_service}
+                "param": check_ros2_param, "service": check_ros2_service, "control": check_ros2_control}
     if verb == "action":
         check_ros2_action_goal(argv)
     else:
@@ -339,6 +353,10 @@ def test_the_checkers_refuse_what_is_wrong():
         check_bringup(("--set", "real_cell", "-p", "executor_node:arm_id:=fr3"))
     with pytest.raises(AssertionError):
         check_ros2_param(("ros2", "param", "set", "/executor_node", "robot_type", "fr3"))   # read-only
+    with pytest.raises(AssertionError):   # the broadcasters stay inactive after a robot error
+        check_ros2_control(("ros2", "control", "switch_controllers", "--activate", "fr3_arm_controller"))
+    with pytest.raises(AssertionError):
+        check_ros2_control(("ros2", "control", "set_hardware_component_state", "fr3_hardware", "active"))
     with pytest.raises(AssertionError):
         check_franka_launch(("ros2", "launch", "franka_bringup", "franka.launch.py", "arm_id:=fr3",
                              "robot_ip:=<robot-ip>"))

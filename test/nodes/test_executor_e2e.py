@@ -248,3 +248,45 @@ def test_a_stop_while_a_goal_is_in_flight_preempts_it_and_cancels_only_if_refuse
     assert executor_node._hold_answer == hold
     q = executor_node._last_state[0].q_rad
     assert np.abs(q - q0).max() < 0.03, f"the arm moved {np.abs(q - q0).max():.3f} rad (the move: 0.3 rad)"
+
+
+def test_a_reflex_in_the_descent_ends_the_pick_as_a_robot_error_and_only_the_recovery_brings_the_cell_back(
+        cell, spin):
+    """A descent onto the box's top with the executor's contact guard off (contact_force_threshold_n 1000 N) and the
+    driver's reflex at 15 N: franka_ros2 deactivates the arm's controllers, the pick ends at once as a robot error
+    with no stop and no recovery sent (each would be refused), a new goal is refused until a person recovers the
+    robot, and then the cell picks again."""
+    from rclpy.parameter import Parameter as RosParameter
+    from support.robot_recovery import RecoveryClient
+
+    ex, executor_node, client, _, _, _ = cell
+    driver = next(node for node in ex.get_nodes() if node.get_name() == "fake_panda_driver")
+    driver.controller_manager.reflex_force_n = 15.0
+    executor_node.set_parameters([RosParameter("contact_force_threshold_n", value=1000.0)])
+    recovery = RecoveryClient(executor_node, ex, spin)
+    fresh_state(ex, spin, executor_node)
+    onto_the_top = box_grasp()
+    onto_the_top.width_m = 0.01   # the fingers open to 1 cm above a 5 cm box: they land on its top face
+
+    result = spin(ex, send(ex, spin, client, PickAndPlace.Goal(grasp=onto_the_top)).get_result_async(), TIMEOUT_S,
+                  "the pick's result").result
+    assert driver.controller_manager.reflexes == 1
+    assert not result.success and result.failure_reason.startswith("robot error"), result.failure_reason
+    assert "error_recovery" in result.failure_reason   # it says how to recover
+    assert (result.phase_reached, result.arm_state, result.recovery) == ("descend", "robot_error", "")
+    assert driver.arm.rejected_while_inactive == 0, "the executor sent goals to the deactivated controller"
+
+    refused = spin(ex, send(ex, spin, client, PickAndPlace.Goal(grasp=box_grasp())).get_result_async(), TIMEOUT_S,
+                   "the refusal").result
+    assert not refused.success and "recover the robot first" in refused.failure_reason, refused.failure_reason
+    assert refused.arm_state == "robot_error"
+    assert driver.arm.rejected_while_inactive == 0
+
+    recovery.recover()   # the controller holds where the arm is: pressed on the box, it springs back a little
+    executor_node.set_parameters([RosParameter("contact_force_threshold_n", value=10.0)])
+    fresh_state(ex, spin, executor_node)
+    spin(ex, lambda: np.abs(executor_node._last_state[0].qd_radps).max() < 0.005, TIMEOUT_S, "the arm at rest")
+    again = spin(ex, send(ex, spin, client, PickAndPlace.Goal(grasp=box_grasp())).get_result_async(), TIMEOUT_S,
+                 "the pick after the recovery").result
+    assert again.success, again.failure_reason
+    assert driver.controller_manager.reflexes == 1
