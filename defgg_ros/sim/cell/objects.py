@@ -140,21 +140,25 @@ def poisson_ratio(spec: SceneObject) -> float | None:
     return MATERIAL.poisson_ratio if spec.poisson_ratio is None else spec.poisson_ratio
 
 
-def _force_on_a(c):
-    # contactNormalOnB points from B to A: the normal force pushes A along it.
-    return (c[9] * np.asarray(c[7]) + c[10] * np.asarray(c[11]) + c[12] * np.asarray(c[13]))
+def _force_on_a(c) -> tuple:
+    """The contact's force on body A (N, a tuple): contactNormalOnB points from B to A, the normal force pushes A
+    along it. Plain floats: the driver adds these up every 1 ms control period, where numpy's per-call cost on
+    3-vectors exceeded the arithmetic's."""
+    n, f1, f2 = c[7], c[11], c[13]
+    return tuple(c[9] * n[i] + c[10] * f1[i] + c[12] * f2[i] for i in range(3))
 
 
 def hand_contact_forces(client: int, robot: int, hand_links: list, active_soft_bodies: list) -> list:
-    """[(contact point on the robot, force on the robot)] for contacts on the hand and finger links."""
+    """[(contact point on the robot, force on the robot)] (tuples, m and N) for contacts on the hand and finger
+    links. A contact between the hand and an FEM body is reported by both queries (its mirror image), so it counts
+    twice: docs/pybullet_fem.md, "The hand's contact force" (kept as it was, measured 2026-12-03)."""
     out = []
     for link in hand_links:
         for c in p.getContactPoints(bodyA=robot, linkIndexA=link, physicsClientId=client):
             if c[2] != robot:
-                out.append((np.asarray(c[5]), _force_on_a(c)))
-    # Soft-body contacts are only reported with the soft body as A.
+                out.append((c[5], _force_on_a(c)))
     for body in active_soft_bodies:
         for c in p.getContactPoints(bodyA=body, bodyB=robot, physicsClientId=client):
             if c[4] in hand_links:
-                out.append((np.asarray(c[6]), -_force_on_a(c)))
+                out.append((c[6], tuple(-v for v in _force_on_a(c))))
     return out
