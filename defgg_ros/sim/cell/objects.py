@@ -6,7 +6,6 @@ the FEM library (`defgg_ros.sim.meshes`, `defgg_ros.sim.shapes`). Objects
 stiffer than MAX_SOFT_BODY_YOUNGS_MODULUS_PA are rigid bodies (FEM at
 E >= 2e7 Pa flung objects and forced the fingers open in the probe).
 """
-import numpy as np
 import pybullet as p
 
 from defgg_ros.sim import meshes, physics, shapes
