@@ -8,6 +8,7 @@ body A ("robot side"), with the FEM box as body A ("FEM side", mirrored), their 
 reports: objects.hand_contact_forces takes both queries), and what the box's own balance says the hand pushes with
 (its other contacts, the table's, plus its weight; a dynamic FEM body, so a rough check). Nothing is asserted.
 """
+import argparse
 import sys
 from pathlib import Path
 
@@ -41,6 +42,7 @@ def sides(cell, body: int) -> tuple:
 
 
 def main():
+    argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter).parse_args()
     cell = SimCell(load_scene(ROOT / "sim_bringup" / "scenes" / "soft_box.yaml"), CellSettings(soft_always_active=True))
     try:
         kinematics, q0 = PandaKinematics(), cell.joint_state().positions[:7].copy()

@@ -45,7 +45,7 @@ from tf2_msgs.msg import TFMessage
 
 from defgg_ros.constants import CAMERA_HEIGHT_PX, CAMERA_WIDTH_PX, GRIPPER_MAX_WIDTH_M
 from defgg_ros.nodes.fake_arm_controller import FakeArmController
-from defgg_ros.nodes.fake_franka_errors import FakeControllerManager
+from defgg_ros.nodes.fake_franka_errors import REFLEX_WINDOW_S, FakeControllerManager
 from defgg_ros.nodes.fake_gripper_interfaces import serve_gripper_interfaces
 from defgg_ros.nodes.node_main import run_node
 from defgg_ros.ros import qos, realsense_frames, topics
@@ -330,11 +330,14 @@ class FakePandaDriver(Node):
         self._log_mark = (wall_now, now_s)
         rtf = (now_s - sim_then) / max(wall_now - wall_then, 1e-9)
         active = self.cell.active_soft_objects()
+        manager = self.controller_manager
         with self._lock:   # how near the reflex the contacts came (a real cell's reflexes fire on such peaks)
-            peak_n, self.controller_manager.peak_force_n = self.controller_manager.peak_force_n, 0.0
+            peak_n, raw_n = manager.peak_force_n, manager.peak_raw_force_n
+            manager.peak_force_n = manager.peak_raw_force_n = 0.0
         self.get_logger().info(f"sim time {now_s:.1f} s, real-time factor {rtf:.2f} "
                                f"(simulation capacity {self.cell.real_time_factor():.2f}), peak external force "
-                               f"{peak_n:.1f} N (reflex at {self.cfg['reflex_force_n']:g} N)"
+                               f"{peak_n:.1f} N over {REFLEX_WINDOW_S * 1e3:g} ms, {raw_n:.1f} N in a step (reflex at "
+                               f"{self.cfg['reflex_force_n']:g} N)"
                                f"{', FEM active: ' + ', '.join(active) if active else ''}")
 
     def _report_objects_off_the_table(self, poses):
