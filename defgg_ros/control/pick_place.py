@@ -159,7 +159,7 @@ class PickPlaceSequence(SqueezePhase):
         self._stopping = False
         self._cancel_after_stop = False   # canceled while a failure's stop ran: no recovery after it
         self._wrench_lost = False         # the wrench went quiet: no recovery (its guarded lowering would be blind)
-        self._controller_lost: tuple[str, bool] | None = None   # (why, a robot error): on_controller_lost
+        self._robot_error: str | None = None   # why the arm's controller was deactivated: on_robot_error
         self._stop_began_s = 0.0
         self._still_since_s: float | None = None
         self._rest_confirmed_s: float | None = None   # when _arrived last found the arm at rest
@@ -185,12 +185,11 @@ class PickPlaceSequence(SqueezePhase):
         if wall_s is not None:
             self._obs.force_wall_s, self._obs.own_stall_force_s = wall_s, 0.0
 
-    def on_controller_lost(self, reason: str, robot_error: bool) -> None:
-        """The arm's trajectory controller took this run's goal away (robot_error: deactivated by a robot error,
-        franka_ros2's answer to a reflex) or refused one: nothing the run sends can move the arm, so the next tick
-        ends it without a stop or a recovery (each would be refused too)."""
-        if self._controller_lost is None:
-            self._controller_lost = (reason, robot_error)
+    def on_robot_error(self, reason: str) -> None:
+        """A robot error deactivated the arm's trajectory controller (franka_ros2's answer to a reflex): nothing the
+        run sends can move the arm, so the next tick ends it without a stop or a recovery (each would be refused)."""
+        if self._robot_error is None:
+            self._robot_error = reason
 
     def robot_now_s(self, wall_s: float) -> float:
         """The controller's clock now: the last joint state's stamp plus its age (at most MAX_STATE_AGE_S); nan
@@ -250,8 +249,8 @@ class PickPlaceSequence(SqueezePhase):
     def tick(self, sim_s: float, wall_s: float) -> list:
         if self.finished:
             return []
-        if self._controller_lost is not None:
-            return self._end_without_controller(sim_s)
+        if self._robot_error is not None:
+            return self._end_on_robot_error(sim_s)
         if self._stopping:
             return self._tick_stopping(sim_s, wall_s)
         if self._recovering:
@@ -268,7 +267,7 @@ class PickPlaceSequence(SqueezePhase):
         of it) follows the stop; the action forwards only one cancel, so it must not be lost."""
         if self.finished:
             return []
-        if self._controller_lost is not None:   # no stop to send: the next tick ends the run
+        if self._robot_error is not None:   # no stop to send: the next tick ends the run
             self.outcome.canceled = True
             return []
         if self._stopping:
@@ -821,9 +820,9 @@ class PickPlaceSequence(SqueezePhase):
             self._stopping, self._stop_began_s, self._still_since_s = True, sim_s, None
         return commands
 
-    def _end_without_controller(self, sim_s: float) -> list:
-        """End at once, sending nothing (on_controller_lost); a failure or recovery under way keeps its reason."""
-        reason, robot_error = self._controller_lost
+    def _end_on_robot_error(self, sim_s: float) -> list:
+        """End at once, sending nothing (on_robot_error); a failure or recovery under way keeps its reason."""
+        reason = self._robot_error
         if self._recovering:
             self._recovery_log.append(f"stopped: {reason}")
         elif self._stopping and self.outcome.failure_reason:
@@ -831,15 +830,7 @@ class PickPlaceSequence(SqueezePhase):
         else:
             self.outcome.failure_reason = reason
             self._failed_phase = self._phase
-        if robot_error:
-            arm_state = "robot_error"
-        elif self._obs.state is None:
-            arm_state = "unknown"
-        elif self._max_speed_radps() < self._cfg.still_speed_radps:
-            arm_state = self._rest_state()
-        else:
-            arm_state = "moving"
-        self._finish(sim_s, arm_state)
+        self._finish(sim_s, "robot_error")
         return []
 
     def _needs_recovery(self) -> bool:

@@ -173,7 +173,7 @@ class ArmCommands:
         with self._lock:
             self._robot_error_wall_s = time.monotonic()
             if sequence is not None:
-                sequence.on_controller_lost(f"{ROBOT_ERROR}; recover it: {topics.RECOVERY_STEPS}", robot_error=True)
+                sequence.on_robot_error(f"{ROBOT_ERROR}; recover it: {topics.RECOVERY_STEPS}")
         self.get_logger().error(f"{ROBOT_ERROR}. Recover it (docs/real_cell.md): {topics.RECOVERY_STEPS}")
 
     def _arm_may_move(self) -> bool:

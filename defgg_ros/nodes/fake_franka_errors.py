@@ -37,6 +37,7 @@ CONTROLLER_UPDATE_RATE_HZ = 1000   # franka_bringup/config/controllers.yaml upda
 REFLEX_WINDOW_S = 0.01
 STATE_LABELS = {State.PRIMARY_STATE_UNCONFIGURED: "unconfigured", State.PRIMARY_STATE_INACTIVE: "inactive",
                 State.PRIMARY_STATE_ACTIVE: "active", State.PRIMARY_STATE_FINALIZED: "finalized"}
+STATE_IDS = {label: state_id for state_id, label in STATE_LABELS.items()}
 
 
 class FakeControllerManager:
@@ -137,8 +138,7 @@ class FakeControllerManager:
         return response
 
     def _hardware_state_msg(self) -> State:
-        ids = {label: state_id for state_id, label in STATE_LABELS.items()}
-        return State(id=ids[self.hardware_state], label=self.hardware_state)
+        return State(id=STATE_IDS[self.hardware_state], label=self.hardware_state)
 
     def _on_switch(self, request, response):
         """switch_controller: STRICT fails on any problem; best effort (also strictness 0, the manager's default)

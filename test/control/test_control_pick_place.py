@@ -241,13 +241,13 @@ def test_a_wrench_that_goes_quiet_stops_the_run_within_the_watchdog_time(kin, ph
 
 
 @pytest.mark.parametrize("phase", ["descend", "transfer"])
-def test_a_lost_controller_ends_the_run_at_once_and_sends_nothing(kin, phase):
+def test_a_robot_error_ends_the_run_at_once_and_sends_nothing(kin, phase):
     """A robot error deactivated the arm's controller mid-run (franka_ros2's answer to a reflex): it refuses every
     goal, so the run ends at its next tick with no stop, no recovery (an object held stays held) and no command on a
     cancel; the arm's state says so."""
     sequence, robot = make(kin, config=RECOVERING_CONFIG), FakeRobot(kin, World())
     run(sequence, robot, until=lambda r, s: s.phase == phase and s._motion_active(r.sim_s))
-    sequence.on_controller_lost("robot error: the controller was deactivated", robot_error=True)
+    sequence.on_robot_error("robot error: the controller was deactivated")
     assert sequence.cancel(robot.sim_s, robot.wall_s) == []
     assert sequence.tick(robot.sim_s, robot.wall_s) == []
     out = sequence.outcome
@@ -255,13 +255,13 @@ def test_a_lost_controller_ends_the_run_at_once_and_sends_nothing(kin, phase):
     assert (out.arm_state, out.phase_reached, out.recovery) == ("robot_error", phase, "")
 
 
-def test_a_lost_controller_during_a_recovery_keeps_the_failure_and_ends_the_recovery(kin):
+def test_a_robot_error_during_a_recovery_keeps_the_failure_and_ends_the_recovery(kin):
     sequence, robot = make(kin, config=RECOVERING_CONFIG), FakeRobot(kin, World())
     run(sequence, robot, until=lambda r, s: s.phase == "descend" and s._motion_active(r.sim_s))
     robot.apply(sequence.cancel(robot.sim_s, robot.wall_s), sequence)
     while not (sequence.recovering and sequence._motion_active(robot.sim_s)) and robot.sim_s < 60.0:
         robot.step(sequence)
-    sequence.on_controller_lost("robot error", robot_error=True)
+    sequence.on_robot_error("robot error")
     assert sequence.tick(robot.sim_s, robot.wall_s) == []
     out = sequence.outcome
     assert sequence.finished and out.failure_reason == "canceled during descend" and out.arm_state == "robot_error"
