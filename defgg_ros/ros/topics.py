@@ -98,16 +98,18 @@ GRASP_FRAME = "defgg_grasp"                                  # the planned grasp
 
 def robot_names(robot_type: str = DEFAULT_ROBOT_TYPE) -> dict:
     """franka_ros2 3.x's names for robot type `robot_type` ("fer" or "fr3"): joints, fingers, base frame,
-    the JointTrajectoryController's action and topic, and the joint limits the executor plans within.
+    the JointTrajectoryController's name, action and topic, and the joint limits the executor plans within.
     ValueError for any other type (Jazzy has no "panda": the Panda is "fer")."""
     if robot_type not in ROBOT_TYPES:
         hint = " (franka_ros2 on Jazzy names the Panda 'fer')" if robot_type == "panda" else ""
         raise ValueError(f"robot_type must be one of {', '.join(ROBOT_TYPES)}{hint}, got {robot_type!r}")
+    arm_controller = f"{robot_type}_arm_controller"   # franka_bringup's controllers.yaml
     return {
         "joints": tuple(f"{robot_type}_joint{i}" for i in range(1, 8)),
         "fingers": (f"{robot_type}_finger_joint1", f"{robot_type}_finger_joint2"),
         "base_frame": f"{robot_type}_link0",
-        "trajectory_action": f"{robot_type}_arm_controller/follow_joint_trajectory",
-        "trajectory_topic": f"{robot_type}_arm_controller/joint_trajectory",
+        "arm_controller": arm_controller,
+        "trajectory_action": f"{arm_controller}/follow_joint_trajectory",
+        "trajectory_topic": f"{arm_controller}/joint_trajectory",
         "joint_limits": "panda" if robot_type == "fer" else robot_type,
     }

@@ -90,7 +90,7 @@ def test_the_broadcasters_franka_launch_spawns_are_declared_with_their_types():
 @pytest.mark.parametrize("robot_type", sorted(REAL_CELL_SETS))
 def test_one_effort_trajectory_controller_per_robot_type_with_frankas_gains(robot_type):
     raw = load_ros_parameter_file(CONTROLLERS)
-    name = f"{robot_type}_arm_controller"
+    name = topics.robot_names(robot_type)["arm_controller"]
     assert controller_manager_entries(raw)[name]["type"] == JTC
     params = raw["/**"][name]["ros__parameters"]
     joints = [f"{robot_type}_joint{i}" for i in range(1, 8)]

@@ -155,7 +155,7 @@ def check_franka_launch(argv):
     assert PLACEHOLDER.match(arguments["robot_ip"]), arguments
     controllers = resolve_share(arguments["controllers_yaml"])
     assert controllers == CONTROLLERS
-    assert f"{arguments['robot_type']}_arm_controller" in arm_controllers()
+    assert topics.robot_names(arguments["robot_type"])["arm_controller"] in arm_controllers()
 
 
 def check_moveit_launch(argv):
@@ -287,7 +287,7 @@ def check_ros2_control(argv):
         assert list(argv[3:]) == [topics.FRANKA_HARDWARE_COMPONENT, "active"], argv
         return
     assert argv[2] == "switch_controllers" and argv[3] == "--activate", argv
-    arm_controllers = {topics.robot_names(t)["trajectory_action"].split("/")[0] for t in topics.ROBOT_TYPES}
+    arm_controllers = {topics.robot_names(t)["arm_controller"] for t in topics.ROBOT_TYPES}
     names = set(argv[4:])
     assert {topics.JOINT_STATE_BROADCASTER, topics.ROBOT_STATE_BROADCASTER} <= names, argv
     assert len(names & arm_controllers) == 1 and len(names) == 3, argv

@@ -18,7 +18,7 @@ pytestmark = pytest.mark.ros
 
 SCENES = Path(__file__).resolve().parents[2] / "sim_bringup" / "scenes"
 ARM_JOINTS = topics.robot_names()["joints"]
-ARM_CONTROLLER = "fer_arm_controller"
+ARM_CONTROLLER = topics.robot_names("fer")["arm_controller"]
 TIMEOUT_S = 60.0
 REFLEX_FORCE_N = 15.0
 QUIET_S = 0.5          # wall time the broadcasters' topics must stay quiet after the error

@@ -11,7 +11,7 @@ TIMEOUT_S = 60.0
 
 
 class RecoveryClient:
-    def __init__(self, node, executor, spin, arm_controller: str = "fer_arm_controller"):
+    def __init__(self, node, executor, spin, arm_controller: str = topics.robot_names()["arm_controller"]):
         self.executor, self.spin = executor, spin
         self.controllers = (topics.JOINT_STATE_BROADCASTER, topics.ROBOT_STATE_BROADCASTER, arm_controller)
         self.recovery = ActionClient(node, ErrorRecovery, topics.ERROR_RECOVERY_ACTION)
