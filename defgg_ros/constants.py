@@ -61,6 +61,12 @@ PANDA_Q_MAX_RAD = (2.8973, 1.7628, 2.8973, -0.0698, 2.8973, 3.7525, 2.8973)
 PANDA_QD_MAX_RADPS = (2.1750, 2.1750, 2.1750, 2.1750, 2.6100, 2.6100, 2.6100)
 PANDA_QDD_MAX_RADPS2 = (15.0, 7.5, 10.0, 12.5, 15.0, 20.0, 20.0)
 PANDA_QDDD_MAX_RADPS3 = (7500.0, 3750.0, 5000.0, 6250.0, 7500.0, 10000.0, 10000.0)
+# The arm controller's PID gains (p N*m/rad, d N*m*s/rad; i = 0) per joint 1..7 on the effort interface:
+# franka_fr3_moveit_config/config/fr3_ros_controllers.yaml (franka_ros2 v3.4.0), as in
+# sim_bringup/config/franka/controllers.yaml. The robot adds its own gravity compensation (libfranka's torque
+# command excludes gravity), so these springs are all that holds the arm on its trajectory.
+FRANKA_JTC_GAINS_PD = ((600.0, 30.0), (600.0, 30.0), (600.0, 30.0), (600.0, 30.0), (250.0, 10.0), (150.0, 10.0),
+                       (50.0, 5.0))
 # --- Franka Research 3 (FR3) arm limits (Franka's FR3 datasheet, "Limits for Franka Research 3") ------
 # The same kinematic structure as the Panda, other ranges: joint 6 stays above 0.5445 rad, joint 4 below
 # -0.1518 rad. Near the ends of a joint's range the FR3's controller also lowers the velocity bound:

@@ -14,6 +14,7 @@ import yaml
 
 from defgg_ros.bringup.node_set import load_node_set
 from defgg_ros.bringup.shared_parameters import effective_parameters
+from defgg_ros.constants import FRANKA_JTC_GAINS_PD
 from defgg_ros.ros import topics
 
 pytestmark = pytest.mark.unit
@@ -26,9 +27,6 @@ JTC = "joint_trajectory_controller/JointTrajectoryController"
 # franka.launch.py (v3.4.0) spawns these two by name; their types as in franka_bringup/config/controllers.yaml
 BROADCASTERS = {"joint_state_broadcaster": "joint_state_broadcaster/JointStateBroadcaster",
                 "franka_robot_state_broadcaster": "franka_robot_state_broadcaster/FrankaRobotStateBroadcaster"}
-# franka_fr3_moveit_config/config/fr3_ros_controllers.yaml (v3.4.0): (p, d) per joint 1..7, i = 0
-FRANKA_GAINS_PD = ((600.0, 30.0), (600.0, 30.0), (600.0, 30.0), (600.0, 30.0), (250.0, 10.0), (150.0, 10.0),
-                   (50.0, 5.0))
 
 
 class _MergingLoader(yaml.SafeLoader):
@@ -98,7 +96,7 @@ def test_one_effort_trajectory_controller_per_robot_type_with_frankas_gains(robo
     assert params["command_interfaces"] == ["effort"]
     assert params["state_interfaces"] == ["position", "velocity"]
     assert list(params["gains"]) == joints
-    for joint, (p, d) in zip(joints, FRANKA_GAINS_PD):
+    for joint, (p, d) in zip(joints, FRANKA_JTC_GAINS_PD):
         gains = params["gains"][joint]
         assert (gains["p"], gains["d"], gains["i"]) == (p, d, 0.0), joint
 

@@ -18,6 +18,7 @@ import pybullet as p
 import pybullet_data
 
 from defgg_ros.constants import (
+    FRANKA_JTC_GAINS_PD,
     GRIPPER_MAX_WIDTH_M,
     OFF_TABLE_DEPTH_M,
     PANDA_FINGER_JOINT_NAMES,
@@ -38,10 +39,12 @@ from defgg_ros.sim.scene_spec import SceneSpec
 RIGID_TIME_STEP_S = 1e-3
 # Joint torque limits of the Panda (Franka datasheet), N*m; fingers: N.
 ARM_MAX_TORQUE_NM = (87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0)
-# Position/velocity gains of PyBullet's motor constraint, tuned so the arm
-# tracks a Ruckig trajectory within ~1 mrad at 1 ms steps.
-ARM_POSITION_GAIN = 0.3
-ARM_VELOCITY_GAIN = 1.0
+# The arm is driven as franka_bringup's <robot_type>_arm_controller drives a real one: joint torques of its PID
+# (FRANKA_JTC_GAINS_PD) plus the robot's gravity compensation, capped at the datasheet's torques. PyBullet's
+# position motor (gains 0.3 / 1.0, until 2026-12-03) held the hand 10-30x stiffer than those springs: a command
+# 1 mm past a rigid contact pressed 30-50 N instead of a few (bench/bench_hand_stiffness.py).
+ARM_KP_NM_PER_RAD = tuple(p_gain for p_gain, _ in FRANKA_JTC_GAINS_PD)
+ARM_KD_NMS_PER_RAD = tuple(d_gain for _, d_gain in FRANKA_JTC_GAINS_PD)
 FINGER_POSITION_GAIN = 0.2
 # A pressing finger that closed faster than the hand can (franka_gripper's top speed, per finger) over the last
 # finger_press.PRESS_SPEED_WINDOW_S has lost the object: speed-limited again (finger_press.finger_pushes). From
@@ -142,6 +145,8 @@ class SimCell:
             link_by_name[info[12].decode()] = j
         self.arm_joints = [by_name[n] for n in PANDA_JOINT_NAMES]
         self.finger_joints = [by_name[n] for n in PANDA_FINGER_JOINT_NAMES]
+        self._movable_joints = self.arm_joints + self.finger_joints   # calculateInverseDynamics wants every DoF
+        self._zero_dof = [0.0] * len(self._movable_joints)
         self.hand_links = [link_by_name[n] for n in HAND_LINK_NAMES]
         self.tcp_link = link_by_name[TCP_LINK_NAME]
         self.hand_link = link_by_name[HAND_LINK_NAME]
@@ -151,6 +156,9 @@ class SimCell:
         q0 = np.asarray(self.settings.initial_q_rad, dtype=float)
         for j, q in zip(self.arm_joints, q0):
             p.resetJointState(self.robot, j, q, 0.0, physicsClientId=c)
+        # torque-driven (_drive_arm): PyBullet's default velocity motor on each joint would brake it
+        p.setJointMotorControlArray(self.robot, self.arm_joints, p.VELOCITY_CONTROL, forces=[0.0] * 7,
+                                    physicsClientId=c)
         for j in self.finger_joints:
             p.resetJointState(self.robot, j, GRIPPER_MAX_WIDTH_M / 2, 0.0, physicsClientId=c)
         self._joint_state_memo = (None, None)
@@ -256,11 +264,7 @@ class SimCell:
 
     def _step(self):
         c = self.client
-        q_des, qd_des = self.tracker.sample(self.time_s)
-        p.setJointMotorControlArray(self.robot, self.arm_joints, p.POSITION_CONTROL, targetPositions=q_des,
-                                    targetVelocities=qd_des, forces=ARM_MAX_TORQUE_NM,
-                                    positionGains=[ARM_POSITION_GAIN] * 7, velocityGains=[ARM_VELOCITY_GAIN] * 7,
-                                    physicsClientId=c)
+        self._drive_arm(*self.tracker.sample(self.time_s))
         self._drive_fingers(self.gripper.motor)
         p.stepSimulation(physicsClientId=c)
         self.time_s += self.time_step_s
@@ -269,6 +273,23 @@ class SimCell:
         if outcome is not None and self._pending_token is not None:
             self._outcomes.append((self._pending_token, outcome))
             self._pending_token = None
+
+    def _drive_arm(self, q_des, qd_des) -> None:
+        """The arm controller's torques for this step: p * (q_des - q) + d * (qd_des - qd) per joint (ros2_controllers'
+        JTC on the effort interface, no velocity feed-forward) plus gravity at q (the robot's own compensation; Coriolis
+        is not compensated by a Franka either), capped at ARM_MAX_TORQUE_NM. Plain floats: this runs every physics
+        step."""
+        c = self.client
+        states = p.getJointStates(self.robot, self._movable_joints, physicsClientId=c)
+        q = [s[0] for s in states]
+        gravity = p.calculateInverseDynamics(self.robot, q, self._zero_dof, self._zero_dof, physicsClientId=c)
+        torques = []
+        for i in range(7):
+            tau = (ARM_KP_NM_PER_RAD[i] * (float(q_des[i]) - q[i])
+                   + ARM_KD_NMS_PER_RAD[i] * (float(qd_des[i]) - states[i][1]) + gravity[i])
+            limit = ARM_MAX_TORQUE_NM[i]
+            torques.append(-limit if tau < -limit else limit if tau > limit else tau)
+        p.setJointMotorControlArray(self.robot, self.arm_joints, p.TORQUE_CONTROL, forces=torques, physicsClientId=c)
 
     def _drive_fingers(self, motor) -> None:
         """Speed-limited position drive; on the object (motor.press) a force of finger_force_n per finger while
