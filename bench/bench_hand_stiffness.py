@@ -2,8 +2,8 @@
 
     .venv/bin/python bench/bench_hand_stiffness.py [--step-mm 0.5] [--depth-mm 3]
 
-The simulated cell's arm follows its trajectory with PyBullet's joint motor (position and velocity gains, the
-datasheet's torque limits): how hard does the hand press when the command goes a little below a rigid surface?
+How hard does the simulated hand press when the arm's command goes a little below a rigid surface, with each of the
+cell's arm drives (sim_cell.ARM_DRIVES: PyBullet's position motor, the cell's; franka's controller gains)?
 The closed fingers' ends are lowered onto the top of rigid_box.yaml's block in steps of --step-mm, each held until the
 arm is still; the force is the cell's external wrench (what franka_robot_state_broadcaster's topic carries),
 averaged over the last 100 ms of each step. Its slope past the first contact is the arm's stiffness at the hand
@@ -28,7 +28,7 @@ sys.path.insert(0, str(ROOT))
 
 from defgg_ros.constants import PANDA_FINGERTIP_BELOW_TCP_M  # noqa: E402
 from defgg_ros.control.kinematics import PandaKinematics  # noqa: E402
-from defgg_ros.sim.cell.sim_cell import CellSettings, SimCell  # noqa: E402
+from defgg_ros.sim.cell.sim_cell import ARM_DRIVES, CellSettings, SimCell  # noqa: E402
 from defgg_ros.sim.scene_spec import load_scene  # noqa: E402
 
 SCENE = ROOT / "sim_bringup" / "scenes" / "rigid_box.yaml"
@@ -65,9 +65,16 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--step-mm", type=float, default=0.5, help="how far each step lowers the command")
     parser.add_argument("--depth-mm", type=float, default=3.0, help="how far below the block's top to go")
+    parser.add_argument("--arm-drive", choices=ARM_DRIVES, action="append",
+                        help="the cell's arm drive (sim_cell.ARM_DRIVES; repeatable); default: each in turn")
     args = parser.parse_args()
+    for drive in args.arm_drive or ARM_DRIVES:
+        press(drive, args)
+
+
+def press(drive: str, args):
     kin, gains = PandaKinematics(), franka_joint_gains()
-    cell = SimCell(load_scene(SCENE), CellSettings())
+    cell = SimCell(load_scene(SCENE), CellSettings(arm_drive=drive))
     try:
         q = cell.joint_state().positions[:7].copy()
         (bx, by, bz), _ = cell.object_poses()[0]
@@ -75,8 +82,9 @@ def main():
         cell.gripper_move(0.0, 0.05)
         cell.advance(1.0)   # closed before it comes down
         heights_mm = np.arange(5.0, -args.depth_mm - 1e-9, -args.step_mm)
-        print(f"# bench_hand_stiffness: closed fingers on the top of a rigid block (top at z {top_z * 1e3:.1f} mm); "
-              f"command steps of {args.step_mm} mm, force averaged over {AVERAGE_S * 1e3:.0f} ms when still")
+        print(f"# bench_hand_stiffness, arm_drive {drive}: closed fingers on the top of a rigid block (top at z "
+              f"{top_z * 1e3:.1f} mm); command steps of {args.step_mm} mm, force averaged over "
+              f"{AVERAGE_S * 1e3:.0f} ms when still")
         print("# fingertips' command above the top (mm) | force z (N) | fingertips measured above the top (mm) | "
               "franka JTC stiffness at this q (N/mm)")
         rows = []
@@ -95,7 +103,7 @@ def main():
         pressed = [(h, f) for h, f, _, _ in rows if f > 1.0]
         if len(pressed) >= 2:
             slope = -np.polyfit([h for h, _ in pressed], [f for _, f in pressed], 1)[0]
-            print(f"simulated arm: {slope:.1f} N/mm along z past contact ({len(pressed)} steps pressing); "
+            print(f"simulated arm ({drive}): {slope:.1f} N/mm along z past contact ({len(pressed)} steps pressing); "
                   f"franka_bringup's gains at the same pose: {np.median([r[3] for r in rows]):.2f} N/mm")
         else:
             print("fewer than two pressing steps: no slope")

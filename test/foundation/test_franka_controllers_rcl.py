@@ -2,7 +2,9 @@
 node started with `--params-file`, as ros2_control_node and each controller read it): every node of the file
 gets its parameters under the `/**` wildcard, with the values test_franka_controllers.py checks."""
 import pytest
-from test_franka_controllers import CONTROLLERS, FRANKA_GAINS_PD, JTC
+from test_franka_controllers import CONTROLLERS, JTC
+
+from defgg_ros.constants import FRANKA_JTC_GAINS_PD
 
 pytestmark = pytest.mark.ros
 
@@ -34,7 +36,7 @@ def test_each_arm_controller_gets_its_joints_interfaces_and_gains(rclpy_context,
     assert list(params["joints"]) == joints
     assert list(params["command_interfaces"]) == ["effort"]
     assert list(params["state_interfaces"]) == ["position", "velocity"]
-    for joint, (p, d) in zip(joints, FRANKA_GAINS_PD):
+    for joint, (p, d) in zip(joints, FRANKA_JTC_GAINS_PD):
         assert (params[f"gains.{joint}.p"], params[f"gains.{joint}.d"]) == (p, d), joint
 
 

@@ -39,10 +39,15 @@ from defgg_ros.sim.scene_spec import SceneSpec
 RIGID_TIME_STEP_S = 1e-3
 # Joint torque limits of the Panda (Franka datasheet), N*m; fingers: N.
 ARM_MAX_TORQUE_NM = (87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0)
-# The arm is driven as franka_bringup's <robot_type>_arm_controller drives a real one: joint torques of its PID
-# (FRANKA_JTC_GAINS_PD) plus the robot's gravity compensation, capped at the datasheet's torques. PyBullet's
-# position motor (gains 0.3 / 1.0, until 2026-12-03) held the hand 10-30x stiffer than those springs: a command
-# 1 mm past a rigid contact pressed 30-50 N instead of a few (bench/bench_hand_stiffness.py).
+# How the arm follows its trajectory (CellSettings.arm_drive; docs/franka_contract.md, "How the arm follows it"):
+# "position_motor", the cell's: PyBullet's position motor, gains tuned so the arm tracks a Ruckig trajectory within
+# ~1 mrad at 1 ms steps; it holds the hand 10-30x stiffer than a real arm's controller (bench_hand_stiffness.py).
+# "franka_jtc": as franka_bringup's <robot_type>_arm_controller drives a real arm, joint torques of its PID
+# (FRANKA_JTC_GAINS_PD) plus the robot's gravity compensation, capped at the datasheet's torques; it lags and rings
+# as the real one would, and the executor's stop tests do not pass on it yet (2026-12-03).
+ARM_DRIVES = ("position_motor", "franka_jtc")
+ARM_POSITION_GAIN = 0.3
+ARM_VELOCITY_GAIN = 1.0
 ARM_KP_NM_PER_RAD = tuple(p_gain for p_gain, _ in FRANKA_JTC_GAINS_PD)
 ARM_KD_NMS_PER_RAD = tuple(d_gain for _, d_gain in FRANKA_JTC_GAINS_PD)
 FINGER_POSITION_GAIN = 0.2
@@ -78,6 +83,7 @@ class CellSettings:
     # False: soft objects sleep as static meshes until the hand comes near
     # (see cell_soft); True: always FEM (for benchmarks and render checks).
     soft_always_active: bool = False
+    arm_drive: str = "position_motor"    # one of ARM_DRIVES
 
 
 @dataclass(frozen=True)
@@ -94,6 +100,9 @@ class SimCell:
     def __init__(self, scene: SceneSpec, settings: CellSettings | None = None):
         self.scene = scene
         self.settings = settings or CellSettings()
+        if self.settings.arm_drive not in ARM_DRIVES:
+            raise ValueError(f"arm_drive must be one of {', '.join(ARM_DRIVES)}, got {self.settings.arm_drive!r}")
+        self._torque_driven = self.settings.arm_drive == "franka_jtc"
         self.time_s = 0.0
         self._steps = 0                     # physics steps taken: what the joint state memo is keyed by
         self._joint_state_memo = (None, None)
@@ -156,9 +165,9 @@ class SimCell:
         q0 = np.asarray(self.settings.initial_q_rad, dtype=float)
         for j, q in zip(self.arm_joints, q0):
             p.resetJointState(self.robot, j, q, 0.0, physicsClientId=c)
-        # torque-driven (_drive_arm): PyBullet's default velocity motor on each joint would brake it
-        p.setJointMotorControlArray(self.robot, self.arm_joints, p.VELOCITY_CONTROL, forces=[0.0] * 7,
-                                    physicsClientId=c)
+        if self._torque_driven:   # _drive_arm: PyBullet's default velocity motor on each joint would brake it
+            p.setJointMotorControlArray(self.robot, self.arm_joints, p.VELOCITY_CONTROL, forces=[0.0] * 7,
+                                        physicsClientId=c)
         for j in self.finger_joints:
             p.resetJointState(self.robot, j, GRIPPER_MAX_WIDTH_M / 2, 0.0, physicsClientId=c)
         self._joint_state_memo = (None, None)
@@ -264,7 +273,14 @@ class SimCell:
 
     def _step(self):
         c = self.client
-        self._drive_arm(*self.tracker.sample(self.time_s))
+        q_des, qd_des = self.tracker.sample(self.time_s)
+        if self._torque_driven:
+            self._drive_arm(q_des, qd_des)
+        else:
+            p.setJointMotorControlArray(self.robot, self.arm_joints, p.POSITION_CONTROL, targetPositions=q_des,
+                                        targetVelocities=qd_des, forces=ARM_MAX_TORQUE_NM,
+                                        positionGains=[ARM_POSITION_GAIN] * 7, velocityGains=[ARM_VELOCITY_GAIN] * 7,
+                                        physicsClientId=c)
         self._drive_fingers(self.gripper.motor)
         p.stepSimulation(physicsClientId=c)
         self.time_s += self.time_step_s
@@ -275,10 +291,9 @@ class SimCell:
             self._pending_token = None
 
     def _drive_arm(self, q_des, qd_des) -> None:
-        """The arm controller's torques for this step: p * (q_des - q) + d * (qd_des - qd) per joint (ros2_controllers'
-        JTC on the effort interface, no velocity feed-forward) plus gravity at q (the robot's own compensation; Coriolis
-        is not compensated by a Franka either), capped at ARM_MAX_TORQUE_NM. Plain floats: this runs every physics
-        step."""
+        """arm_drive "franka_jtc", this step's torques: p * (q_des - q) + d * (qd_des - qd) per joint (ros2_controllers'
+        JTC on the effort interface, no feed-forward) plus gravity at q (the robot's own compensation; a Franka does not
+        compensate Coriolis either), capped at ARM_MAX_TORQUE_NM. Plain floats: this runs every physics step."""
         c = self.client
         states = p.getJointStates(self.robot, self._movable_joints, physicsClientId=c)
         q = [s[0] for s in states]
