@@ -113,6 +113,8 @@ SLOW_MODULES = {
     "sim_cell/test_cell.py::test_a_grasp_presses_an_fem_body_with_its_force_not_with_its_closing_speed",
     "sim/test_sampler.py::test_the_first_stage_still_gives_fem_v5s_candidates",
     "sim/test_trial_hand_press.py::test_the_pressing_hand_squeezes_harder_with_more_force_and_the_speed_drive_does_not",
+    # two presses of the hand on a block, one per arm drive: ~15 s
+    "sim_cell/test_cell.py::test_the_franka_jtc_drive_presses_a_contact_with_frankas_joint_springs_and_the_motor_ten_times_harder",
 }
 
 
