@@ -247,7 +247,11 @@ def test_a_stop_while_a_goal_is_in_flight_preempts_it_and_cancels_only_if_refuse
     assert driver.arm.cancel_requests == (hold == "refused"), "a cancel went out beside an accepted hold"
     assert executor_node._hold_answer == hold
     q = executor_node._last_state[0].q_rad
-    assert np.abs(q - q0).max() < 0.03, f"the arm moved {np.abs(q - q0).max():.3f} rad (the move: 0.3 rad)"
+    # An accepted hold preempts the goal at the controller at once. A refused one stops it only by the cancel sent
+    # after the refusal, two round trips later: under the full suite's load the arm had moved 0.090 rad by then
+    # (2 of 5 runs over the 0.03 rad bound both cases had, 2026-12-03); a stop that never came leaves all 0.3 rad.
+    bound_rad = 0.03 if hold == "accepted" else 0.15
+    assert np.abs(q - q0).max() < bound_rad, f"the arm moved {np.abs(q - q0).max():.3f} rad (the move: 0.3 rad)"
 
 
 def test_a_reflex_in_the_descent_ends_the_pick_as_a_robot_error_and_only_the_recovery_brings_the_cell_back(
