@@ -7,6 +7,9 @@ the 25 mm descent, the 15 cm lift, the joint motion to a place pose over the bin
 many grasps plan, the median and 90th percentile of the summed motion time (grasps both plan), and the
 refusal reasons, and for the FR3 how much of its position-dependent velocity bound (constants.FR3_VELOCITY_ENVELOPE,
 unscaled: where the controller aborts) the motions use at most: above 1, the executor's check refuses the motion.
+Also how close the planned motions come to a joint's position limit: on franka's controller gains the arm lags and
+overshoots its command by up to ~15 mrad (bench_arm_tracking.py), so a plan ending nearer than that can take the
+joint past its limit (docs/franka_contract.md, "How the arm follows it").
 Kinematics only (no physics): what the limits change, not what the gripper or object does.
 """
 import argparse
@@ -61,6 +64,14 @@ def envelope_use(motions, limits) -> float:
     return use
 
 
+OVERSHOOT_RAD = 0.015   # franka_jtc: a stop's end 14.5 mrad off its command, a transfer's 8.7 (bench_arm_tracking.py)
+
+
+def limit_clearance_rad(motions, limits) -> float:
+    """The smallest distance of any sample of the motions from a joint's position limit (rad)."""
+    return min(float(np.min(np.minimum(m.q_rad - limits.q_min_rad, limits.q_max_rad - m.q_rad))) for m in motions)
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--grasps", type=int, default=100, help="random grasps (default 100)")
@@ -70,14 +81,15 @@ def main(argv=None) -> int:
     rng = np.random.default_rng(args.seed)
     grasps = [([rng.uniform(*WORKSPACE_X_M), rng.uniform(*WORKSPACE_Y_M), rng.uniform(*WORKSPACE_Z_M)],
                rng.uniform(-np.pi, np.pi)) for _ in range(args.grasps)]
-    durations, refusals, uses = {}, {}, []
+    durations, refusals, uses, clearances = {}, {}, [], {}
     for arm in ("panda", "fr3"):
         kin, limits = PandaKinematics(seed=args.seed, arm=arm), arm_limits(arm, args.limits_scale)
-        durations[arm], refusals[arm] = [], collections.Counter()
+        durations[arm], refusals[arm], clearances[arm] = [], collections.Counter(), []
         for xyz, yaw in grasps:
             try:
                 motions = pick_motions(kin, limits, xyz, yaw)
                 durations[arm].append(sum(m.duration_s for m in motions))
+                clearances[arm].append(limit_clearance_rad(motions, limits))
                 if arm == "fr3":
                     uses.append(envelope_use(motions, limits))
             except (KinematicsError, ValueError) as error:
@@ -94,6 +106,11 @@ def main(argv=None) -> int:
     uses = np.array(uses)
     print(f"fr3 position-dependent velocity bound, most used per grasp: median {np.median(uses):.3f}, "
           f"max {uses.max():.3f}; over it (refused): {(uses > 1 + 1e-6).sum()} of {len(uses)}")
+    for arm in ("panda", "fr3"):
+        c = np.array(clearances[arm]) * 1e3
+        print(f"{arm} closest to a joint's position limit per grasp (mrad): median {np.median(c):.0f}, "
+              f"min {c.min():.1f}; within {OVERSHOOT_RAD * 1e3:.0f} mrad: {(c < OVERSHOOT_RAD * 1e3).sum()} of "
+              f"{len(c)}")
     for arm in ("panda", "fr3"):
         for reason, n in refusals[arm].most_common():
             print(f"refused ({arm}): {n} x {reason}")
