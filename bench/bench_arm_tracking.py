@@ -56,12 +56,17 @@ def run(cell, trajectory) -> dict:
             "end_radps": at_end[1], "stopped_after_ms": None if stopped_after_s is None else stopped_after_s * 1e3}
 
 
+def above_bin_q(kin, cfg, seed_q):
+    """Joint positions with the TCP 25 cm above the centre of the executor's bin (bin_inner_m), pointing down."""
+    x_min, x_max, y_min, y_max = cfg["bin_inner_m"]
+    solution, _ = kin.top_down_ik([(x_min + x_max) / 2, (y_min + y_max) / 2, 0.25], 0.0, seed_q)
+    return solution.q_rad
+
+
 def stop_halfway(cell, kin, limits, cfg) -> dict:
     """A transfer back to above the bin, stopped halfway with the stop planned from its commanded state there."""
     q0 = cell.joint_state().positions[:7].copy()
-    x_min, x_max, y_min, y_max = cfg["bin_inner_m"]
-    goal, _ = kin.top_down_ik([(x_min + x_max) / 2, (y_min + y_max) / 2, 0.25], 0.0, q0)
-    transfer = plan_joint_motion(q0, goal.q_rad, limits, dt_s=cfg["trajectory_sample_dt_s"])
+    transfer = plan_joint_motion(q0, above_bin_q(kin, cfg, q0), limits, dt_s=cfg["trajectory_sample_dt_s"])
     send(cell, transfer)
     cell.advance(transfer.duration_s / 2)
     return run(cell, plan_stop(*transfer.state_at(transfer.duration_s / 2), limits))
@@ -81,10 +86,7 @@ def print_drive(drive: str):
     cell = SimCell(load_scene(SCENE), CellSettings(arm_drive=drive))
     try:
         q0 = cell.joint_state().positions[:7].copy()
-        x_min, x_max, y_min, y_max = cfg["bin_inner_m"]
-        bin_xy = ((x_min + x_max) / 2, (y_min + y_max) / 2)
-        above_bin, _ = kin.top_down_ik([bin_xy[0], bin_xy[1], 0.25], 0.0, q0)
-        rows = [("transfer to above the bin", run(cell, plan_joint_motion(q0, above_bin.q_rad, limits,
+        rows = [("transfer to above the bin", run(cell, plan_joint_motion(q0, above_bin_q(kin, cfg, q0), limits,
                                                                           dt_s=cfg["trajectory_sample_dt_s"])))]
         above_table, _ = kin.top_down_ik([0.5, -0.15, 0.15], 0.0, cell.joint_state().positions[:7])
         rows.append(("move above the table", run(cell, plan_joint_motion(cell.joint_state().positions[:7],

@@ -9,8 +9,8 @@ arm is still; the force is the cell's external wrench (what franka_robot_state_b
 averaged over the last 100 ms of each step. Its slope past the first contact is the arm's stiffness at the hand
 along z (N/mm).
 
-A real arm under `<robot_type>_arm_controller` (effort interface; sim_bringup/config/franka/controllers.yaml: p of
-600, 600, 600, 600, 250, 150, 50 N*m/rad) is a joint spring of those gains on top of the robot's own gravity
+A real arm under `<robot_type>_arm_controller` (effort interface; constants.FRANKA_JTC_GAINS_PD, as in
+sim_bringup/config/franka/controllers.yaml: p of 600, 600, 600, 600, 250, 150, 50 N*m/rad) is a joint spring of those gains on top of the robot's own gravity
 compensation, so its stiffness at the TCP along z at the same joint positions is 1 / (J K^-1 J^T)_zz (J the TCP's
 translational Jacobian, K the diagonal of p). That is the press a given overshoot of the command makes, and what a
 force reflex (docs/franka_contract.md, "Robot errors") sees. Nothing is asserted.
@@ -21,25 +21,20 @@ from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
-import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from defgg_ros.constants import PANDA_FINGERTIP_BELOW_TCP_M  # noqa: E402
+from defgg_ros.constants import FRANKA_JTC_GAINS_PD, PANDA_FINGERTIP_BELOW_TCP_M  # noqa: E402
 from defgg_ros.control.kinematics import PandaKinematics  # noqa: E402
 from defgg_ros.sim.cell.sim_cell import ARM_DRIVES, CellSettings, SimCell  # noqa: E402
 from defgg_ros.sim.scene_spec import load_scene  # noqa: E402
 
 SCENE = ROOT / "sim_bringup" / "scenes" / "rigid_box.yaml"
-CONTROLLERS = ROOT / "sim_bringup" / "config" / "franka" / "controllers.yaml"
 FIRST_MOVE_S, STEP_S, SETTLE_S, AVERAGE_S, PERIOD_S = 2.0, 0.2, 0.6, 0.1, 0.001
 
 
-def franka_joint_gains() -> np.ndarray:
-    """p of fer_arm_controller's seven joints (the file's gains, N*m/rad)."""
-    params = yaml.safe_load(CONTROLLERS.read_text())["/**"]["fer_arm_controller"]["ros__parameters"]
-    return np.array([params["gains"][joint]["p"] for joint in params["joints"]], dtype=float)
+FRANKA_P_NM_PER_RAD = np.array([p_gain for p_gain, _ in FRANKA_JTC_GAINS_PD])   # the controllers file's p
 
 
 def controller_stiffness_z_n_per_mm(kin: PandaKinematics, q_rad, gains) -> float:
@@ -73,7 +68,7 @@ def main():
 
 
 def press(drive: str, args):
-    kin, gains = PandaKinematics(), franka_joint_gains()
+    kin, gains = PandaKinematics(), FRANKA_P_NM_PER_RAD
     cell = SimCell(load_scene(SCENE), CellSettings(arm_drive=drive))
     try:
         q = cell.joint_state().positions[:7].copy()
