@@ -11,9 +11,10 @@ along z (N/mm).
 
 A real arm under `<robot_type>_arm_controller` (effort interface; constants.FRANKA_JTC_GAINS_PD, as in
 sim_bringup/config/franka/controllers.yaml: p of 600, 600, 600, 600, 250, 150, 50 N*m/rad) is a joint spring of
-those gains on top of the robot's own gravity compensation, so its stiffness at the TCP along z at the same joint positions is 1 / (J K^-1 J^T)_zz (J the TCP's
-translational Jacobian, K the diagonal of p). That is the press a given overshoot of the command makes, and what a
-force reflex (docs/franka_contract.md, "Robot errors") sees. Nothing is asserted.
+those gains on top of the robot's own gravity compensation, so its stiffness at the TCP along z at the same joint
+positions is 1 / (J K^-1 J^T)_zz (J the TCP's translational Jacobian, K the diagonal of p). That is the press a
+given overshoot of the command makes, and what a force reflex (docs/franka_contract.md, "Robot errors") sees.
+Nothing is asserted.
 """
 import argparse
 import sys
